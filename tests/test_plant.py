@@ -1,0 +1,209 @@
+"""Tests of toolkit.plant: validation, signals and the force helpers shared by every method."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from toolkit.contacts import ContactSet
+from toolkit.errors import ParameterError, ParameterTypeError
+from toolkit.plant import STRIBECK_PEAK, Motors, PiecewiseConstant, Plant
+
+
+# -- PiecewiseConstant ----------------------------------------------------------------------
+def test_piecewise_scalar_values_and_right_continuity():
+    u = PiecewiseConstant([1.0, 2.0], [0.0, 3.0, -1.0])
+    assert u(0.5) == 0.0 and u(1.0) == 3.0 and u(1.999) == 3.0 and u(2.0) == -1.0
+    np.testing.assert_array_equal(u(np.array([-5.0, 1.0, 7.0])), [0.0, 3.0, -1.0])
+    assert u.width is None
+
+
+def test_piecewise_vector_and_breakpoints():
+    u = PiecewiseConstant([0.5, 1.5, 2.5], [[0, 0], [1, 2], [3, 4], [5, 6]])
+    assert u.width == 2
+    np.testing.assert_array_equal(u(1.5), [3.0, 4.0])
+    np.testing.assert_array_equal(u.breakpoints_in(0.5, 2.5), [1.5, 2.5])   # (t0, t1]
+    np.testing.assert_array_equal(u.breakpoints_in(0.0, 0.4), [])
+    assert u.next_switch(0.5) == 1.5 and u.next_switch(3.0) == float("inf")
+
+
+def test_piecewise_constant_without_switches():
+    u = PiecewiseConstant([], [2.5])
+    assert u(-1e9) == 2.5 and u(1e9) == 2.5
+
+
+@pytest.mark.parametrize("times, values, error", [
+    ([1.0, 1.0], [0, 1, 2], ParameterError),            # not strictly increasing
+    ([1.0, np.inf], [0, 1, 2], ParameterError),         # not finite
+    ([1.0], [0, 1, 2], ParameterError),                 # wrong number of rows
+    ([1.0], [0, np.nan], ParameterError),
+    ([1.0], "ab", ParameterTypeError),
+])
+def test_piecewise_refuses_bad_input(times, values, error):
+    with pytest.raises(error):
+        PiecewiseConstant(times, values)
+
+
+def test_piecewise_arrays_are_read_only():
+    u = PiecewiseConstant([1.0], [0.0, 1.0])
+    with pytest.raises(ValueError):
+        u.values[0] = 5.0
+
+
+# -- Motors ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("kwargs", [
+    {"lag": -0.1}, {"rate_limit": 0.0}, {"compliance": -1.0},
+    {"speed_limits": (1.0, -1.0)}, {"speed_limits": (np.inf, np.inf)}, {"lag": np.nan},
+])
+def test_motors_refuse_bad_values(kwargs):
+    with pytest.raises(ParameterError):
+        Motors(**kwargs)
+
+
+def test_motors_refuse_bad_types():
+    with pytest.raises(ParameterTypeError):
+        Motors(speed_limits=0.3)
+    with pytest.raises(ParameterTypeError):
+        Motors(lag="fast")
+
+
+def test_motors_dynamic_flag():
+    assert not Motors().dynamic and not Motors(compliance=0.1).dynamic
+    assert Motors(lag=0.03).dynamic and Motors(rate_limit=10.0).dynamic
+
+
+# -- Plant validation -----------------------------------------------------------------------
+def test_plant_refuses_bad_input():
+    cs = ContactSet([0.0, 1.0])
+    with pytest.raises(ParameterTypeError):
+        Plant([0.0, 1.0], 1.0)
+    with pytest.raises(ParameterError):
+        Plant(cs, 0.0)
+    with pytest.raises(ParameterError):
+        Plant(cs, 1.0, damping=-1.0)
+    with pytest.raises(ParameterTypeError):
+        Plant(cs, 1.0, motors="ideal")
+    with pytest.raises(ParameterError, match="one column per contact"):
+        Plant(cs, 1.0, commands=PiecewiseConstant([1.0], [[0, 1, 2], [0, 1, 2]]))
+    with pytest.raises(ParameterError, match="scalar signal"):
+        Plant(cs, 1.0, external_force=PiecewiseConstant([1.0], [[0, 1], [0, 1]]))
+    with pytest.raises(ParameterTypeError):
+        Plant(cs, 1.0, commands=[[0, 1]])
+
+
+def test_command_clipping_and_schedule():
+    cs = ContactSet([-0.5, 0.1, 0.5])
+    plant = Plant(cs, 1.0, motors=Motors(speed_limits=(-0.35, 0.35)),
+                  commands=PiecewiseConstant([1.0], [[-0.5, 0.1, 0.5], [0.2, 0.9, -0.9]]))
+    np.testing.assert_array_equal(plant.command(0.0), [-0.35, 0.1, 0.35])
+    np.testing.assert_array_equal(plant.command(1.0), [0.2, 0.35, -0.35])
+    np.testing.assert_array_equal(plant.final_command(), [0.2, 0.35, -0.35])
+    np.testing.assert_array_equal(plant.initial_speeds(), [-0.35, 0.1, 0.35])
+    np.testing.assert_array_equal(Plant(cs, 1.0).command(3.0), cs.speeds)
+
+
+def test_switching_times_union():
+    cs = ContactSet([0.0, 1.0])
+    plant = Plant(cs, 1.0, external_force=PiecewiseConstant([0.5, 2.0], [0, 1, 0]),
+                  commands=PiecewiseConstant([1.0, 2.0], [[0, 1]] * 3))
+    np.testing.assert_array_equal(plant.switching_times(), [0.5, 1.0, 2.0])
+    assert plant.external(0.7) == 1.0 and Plant(cs, 1.0, external_force=2).external(9.0) == 2.0
+
+
+# -- motor_rate -----------------------------------------------------------------------------
+def test_motor_rate_lag_rate_limit_and_ideal():
+    cs = ContactSet([1.0, -1.0, 0.0])
+    v = np.array([0.0, 0.0, 0.0])
+    # Ideal motors: speeds are the commands, no dynamics.
+    np.testing.assert_array_equal(Plant(cs, 1.0).motor_rate(0.0, v), [0, 0, 0])
+    # Lag tau = 0.5: (u - v)/tau exactly (binary fractions, so exact).
+    lagged = Plant(cs, 1.0, motors=Motors(lag=0.5))
+    np.testing.assert_array_equal(lagged.motor_rate(0.0, v), [2.0, -2.0, 0.0])
+    # Lag with a rate limit: clipped to +-1.5.
+    both = Plant(cs, 1.0, motors=Motors(lag=0.5, rate_limit=1.5))
+    np.testing.assert_array_equal(both.motor_rate(0.0, v), [1.5, -1.5, 0.0])
+    # Pure rate limit: ramps at the limit toward the command, 0 once there.
+    ramp = Plant(cs, 1.0, motors=Motors(rate_limit=3.0))
+    np.testing.assert_array_equal(ramp.motor_rate(0.0, v), [3.0, -3.0, 0.0])
+
+
+# -- contact forces -------------------------------------------------------------------------
+def test_contact_forces_sign_with_tie_convention():
+    cs = ContactSet([-1.0, 0.0, 2.0], [0.5, 1.0, 2.0])
+    plant = Plant(cs, 1.0)
+    np.testing.assert_array_equal(plant.contact_forces(0.0, cs.speeds), [-0.5, 0.0, 2.0])
+    # Identity: the summed Coulomb forces equal ContactSet.force (same sign(0) = 0 convention).
+    for V in (-2.0, -1.0, -0.3, 0.0, 1.0, 2.0, 3.0):
+        assert np.sum(plant.contact_forces(V, cs.speeds)) == pytest.approx(
+            float(cs.force(V)), rel=0, abs=1e-15)   # exact sums of binary fractions
+
+
+def test_contact_forces_smoothed_laws():
+    cs = ContactSet([0.0, 1.0], [1.0, 2.0])
+    plant = Plant(cs, 1.0)
+    eps = 1e-2
+    V = 0.995
+    expected = np.array([1.0 * np.tanh(-V / eps), 2.0 * np.tanh((1 - V) / eps)])
+    np.testing.assert_allclose(plant.contact_forces(V, cs.speeds, friction="tanh", epsilon=eps),
+                               expected, rtol=1e-15, atol=0)   # same formula, rounding only
+    stribeck = plant.contact_forces(V, cs.speeds, friction="stribeck", epsilon=eps)
+    # Far from the tie the hump has decayed (exp(-(0.995/0.03)^2) ~ 1e-478): Coulomb level.
+    assert stribeck[0] == pytest.approx(-1.0, rel=1e-15, abs=0)
+    # Near the tie the hump is above tanh, below the peak ratio.
+    assert abs(expected[1]) < abs(stribeck[1]) < STRIBECK_PEAK * 2.0
+    with pytest.raises(ParameterError):
+        plant.contact_forces(V, cs.speeds, friction="tanh", epsilon=0.0)
+    with pytest.raises(ParameterError, match="Did you mean 'tanh'"):
+        plant.contact_forces(V, cs.speeds, friction="tahn", epsilon=eps)
+
+
+def test_contact_forces_compliance_is_saturated_linear():
+    cs = ContactSet([0.0, 1.0, 3.0], [1.0, 2.0, 0.0])
+    plant = Plant(cs, 1.0, motors=Motors(compliance=0.25))
+    # V = -0.25: contact 0 has slip 0.25 = k f -> 1 * clip(1) = 1; contact 1 slip 1.25 > k f
+    # = 0.5 saturates at 2; the lifted contact (f = 0) gives 0.
+    np.testing.assert_array_equal(plant.contact_forces(-0.25, cs.speeds), [1.0, 2.0, 0.0])
+    # V = 0.75: contact 0 slip -0.75 saturates at -1; contact 1 slip 0.25 -> 2 * 0.25/0.5 = 1.
+    np.testing.assert_array_equal(plant.contact_forces(0.75, cs.speeds), [-1.0, 1.0, 0.0])
+
+
+def test_net_force_adds_external_and_drag():
+    cs = ContactSet([1.0, 2.0])
+    plant = Plant(cs, 1.0, damping=0.5, external_force=PiecewiseConstant([1.0], [0.0, 4.0]))
+    assert plant.net_force(0.0, 0.0, cs.speeds) == 2.0
+    assert plant.net_force(1.0, 1.5, cs.speeds) == 0.0 + 4.0 - 0.75
+
+
+# -- equilibrium ----------------------------------------------------------------------------
+def test_equilibrium_uses_final_command():
+    cs = ContactSet([0.0, 1.0, 2.0])
+    plant = Plant(cs, 1.0, commands=PiecewiseConstant([1.0], [[0, 1, 2], [5, 6, 7]]))
+    assert plant.equilibrium() == (6.0, 6.0)
+    assert Plant(ContactSet([0, 1, 2, 3]), 1.0).equilibrium() == (1.0, 2.0)
+
+
+def test_compliant_equilibrium_closed_forms():
+    # Odd, well separated: the median contact balances, point at the median.
+    assert Plant(ContactSet([0, 1, 2]), 1.0, motors=Motors(compliance=0.1)).equilibrium() == \
+        pytest.approx((1.0, 1.0), rel=0, abs=1e-15)
+    # Even: zero band shrinks by k f at each side: [1 + 0.1, 2 - 0.1].
+    lo, hi = Plant(ContactSet([0, 1, 2, 3]), 1.0, motors=Motors(compliance=0.1)).equilibrium()
+    assert (lo, hi) == pytest.approx((1.1, 1.9), rel=1e-14, abs=0)   # rounding of v +- k f
+    # Two contacts at 0 and 1 with f = (1, 3), k = 1: lines 1 - V ... solve
+    # clip(-V/1) * 1 + 3 clip((1 - V)/3): for V in [0, 1]: -V + (1 - V) = 0 -> V = 1/2.
+    lo, hi = Plant(ContactSet([0, 1], [1, 3]), 1.0, motors=Motors(compliance=1.0)).equilibrium()
+    assert lo == hi == pytest.approx(0.5, rel=1e-15, abs=0)
+
+
+@settings(deadline=None, max_examples=40)
+@given(st.lists(st.floats(-1, 1), min_size=1, max_size=9),
+       st.floats(1e-3, 1.0))
+def test_compliant_equilibrium_is_a_zero_of_the_force(speeds, k):
+    cs = ContactSet(speeds)
+    plant = Plant(cs, 1.0, motors=Motors(compliance=k))
+    lo, hi = plant.equilibrium()
+    for V in (lo, hi):
+        # Zero to the rounding of a sum of n slopes of size 1/k over spans <= 2 + 2 k n.
+        assert abs(np.sum(plant.contact_forces(V, cs.speeds))) <= 1e-12 * cs.n * (1 + 1 / k)

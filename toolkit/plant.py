@@ -1,0 +1,386 @@
+"""The plant: a body of mass ``m`` driven by active contacts, their motors and outside forces.
+
+The body obeys the differential inclusion (PHYSICS.md section 2)
+
+    m dV/dt in sum_i f_i Sign(v_i(t) - V) + F_ext(t) - c V
+
+where ``v_i(t)`` are the contact speeds. With ideal motors the contact speeds equal the
+(clipped) commands; with a :class:`Motors` model they follow the commands through a
+first-order lag and/or a rate limit, and a compliant motor makes each contact force the
+saturated linear function ``f_i clip((v_i - V) / (k f_i), -1, 1)`` of slip.
+
+Everything here is data plus pure helpers that every simulation method shares
+(:mod:`toolkit.simulation`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ._validation import as_float, as_float_array, check_option
+from .contacts import ContactSet
+from .errors import ParameterError, ParameterTypeError, parameter_message
+
+__all__ = ["PiecewiseConstant", "Motors", "Plant", "FRICTION_MODELS"]
+
+#: Friction laws accepted by :meth:`Plant.contact_forces`.
+FRICTION_MODELS = ("sign", "tanh", "stribeck")
+
+#: Smoothed Stribeck law: peak (breakaway) force over the Coulomb force ...
+STRIBECK_PEAK = 1.5
+#: ... and Stribeck speed in units of the smoothing width ``epsilon``.
+STRIBECK_SPEED = 3.0
+
+
+@dataclass(frozen=True, eq=False)
+class PiecewiseConstant:
+    """A signal that is ``values[0]`` before ``times[0]``, ``values[j]`` on
+    ``[times[j-1], times[j])`` and ``values[-1]`` from ``times[-1]`` on.
+
+    Parameters
+    ----------
+    times : array_like of shape (k,), s
+        Switching times, strictly increasing and finite (``k = 0`` gives a constant).
+    values : array_like of shape (k + 1,) or (k + 1, n)
+        The value on each piece: scalars (a scalar signal, e.g. a force in N) or rows of
+        ``n`` values (a vector signal, e.g. contact speed commands in m/s). Finite.
+
+    Examples
+    --------
+    >>> u = PiecewiseConstant([1.0, 2.0], [0.0, 3.0, -1.0])
+    >>> u(0.5), u(1.0), u(5.0)
+    (0.0, 3.0, -1.0)
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+
+    def __post_init__(self) -> None:
+        owner = "PiecewiseConstant"
+        times = as_float_array(self.times, "times", owner, allow_empty=True)
+        if np.any(np.diff(times) <= 0):
+            raise ParameterError(parameter_message(
+                "times", owner, "be strictly increasing", times.tolist()))
+        try:
+            ndim = 2 if np.ndim(self.values) >= 2 else 1
+        except ValueError:                   # ragged nested lists
+            ndim = 2
+        values = as_float_array(self.values, "values", owner, ndim=ndim)
+        if values.shape[0] != times.size + 1:
+            raise ParameterError(parameter_message(
+                "values", owner, f"have one more row than 'times' ({times.size + 1})",
+                f"an array of shape {values.shape}"))
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "values", values)
+
+    @property
+    def width(self) -> int | None:
+        """Number of components of a vector signal, ``None`` for a scalar signal."""
+        return None if self.values.ndim == 1 else int(self.values.shape[1])
+
+    def __call__(self, t: Any) -> Any:
+        """The value at time(s) ``t`` (s).
+
+        Returns
+        -------
+        float, ndarray of shape (n,), or ndarray of shape ``t.shape`` (+ ``(n,)``)
+            A float for a scalar signal at a scalar time; a row for a vector signal.
+        """
+        query = np.asarray(t, dtype=float)
+        index = np.searchsorted(self.times, query, side="right")
+        result = self.values[index]
+        if query.ndim == 0 and self.values.ndim == 1:
+            return float(result)
+        return np.array(result)
+
+    def breakpoints_in(self, t0: float, t1: float) -> np.ndarray:
+        """The switching times in the half-open interval ``(t0, t1]``, s, ascending."""
+        lo = np.searchsorted(self.times, t0, side="right")
+        hi = np.searchsorted(self.times, t1, side="right")
+        return self.times[lo:hi].copy()
+
+    def next_switch(self, t: float) -> float:
+        """The first switching time strictly after ``t`` (s), ``inf`` if there is none."""
+        index = int(np.searchsorted(self.times, t, side="right"))
+        return float(self.times[index]) if index < self.times.size else float("inf")
+
+
+@dataclass(frozen=True)
+class Motors:
+    """A motor model shared by all contacts.
+
+    Parameters
+    ----------
+    lag : float, s
+        First-order time constant ``tau``: ``dv/dt = (u - v) / tau``; ``0`` = no lag.
+    rate_limit : float, m/s^2
+        Bound on ``|dv/dt|`` (``inf`` = none). With ``lag = 0`` a finite rate limit makes
+        the speed ramp to each new command at exactly this rate.
+    speed_limits : tuple of float, m/s
+        ``(low, high)``: commands are clipped to this range (``low <= high``).
+    compliance : float, (m/s)/N
+        Slope ``k`` of the motor's torque-speed line: the contact's actual speed droops by
+        ``k`` times its contact force, so the contact force becomes the saturated linear
+        function ``f_i clip((v_i - V) / (k f_i), -1, 1)``; ``0`` = stiff motor (Coulomb law).
+    """
+
+    lag: float = 0.0
+    rate_limit: float = float("inf")
+    speed_limits: tuple[float, float] = (float("-inf"), float("inf"))
+    compliance: float = 0.0
+
+    def __post_init__(self) -> None:
+        owner = "Motors"
+        object.__setattr__(self, "lag", as_float(self.lag, "lag", owner, low=0.0))
+        object.__setattr__(self, "rate_limit", as_float(
+            self.rate_limit, "rate_limit", owner, low=0.0, low_open=True, finite=False))
+        object.__setattr__(self, "compliance", as_float(
+            self.compliance, "compliance", owner, low=0.0))
+        limits = self.speed_limits
+        if isinstance(limits, (str, bytes)) or not hasattr(limits, "__len__") or len(limits) != 2:
+            raise ParameterTypeError(parameter_message(
+                "speed_limits", owner, "be a pair (low, high) of speeds", limits))
+        low = as_float(limits[0], "speed_limits", owner, finite=False)
+        high = as_float(limits[1], "speed_limits", owner, finite=False)
+        if not low <= high or low == float("inf") or high == float("-inf"):
+            raise ParameterError(parameter_message(
+                "speed_limits", owner, "satisfy low <= high with low < inf and high > -inf",
+                limits))
+        object.__setattr__(self, "speed_limits", (low, high))
+
+    @property
+    def dynamic(self) -> bool:
+        """True when contact speeds lag behind the commands (a lag or a finite rate limit)."""
+        return self.lag > 0 or np.isfinite(self.rate_limit)
+
+
+def _nonneg_float(value: Any, name: str) -> float:
+    return as_float(value, name, "Plant", low=0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Plant:
+    """A body on active contacts: what every simulation method integrates.
+
+    Parameters
+    ----------
+    contacts : ContactSet
+        The friction magnitudes ``f_i`` (N) and the commanded contact speeds at ``t = 0``
+        (m/s). When ``commands`` is given it overrides these speeds.
+    mass : float, kg
+        Moving inertia ``m > 0`` (for the carousel ``I / L^2``).
+    damping : float, N s/m
+        Bearing drag ``c >= 0``; the body feels ``-c V``.
+    external_force : float or PiecewiseConstant (scalar), N
+        Outside force ``F_ext(t)``.
+    motors : Motors or None
+        ``None`` = ideal motors: contact speeds equal the clipped commands at every instant.
+    commands : PiecewiseConstant (vector of width n) or None
+        Commanded contact speeds over time, m/s; ``None`` = constant ``contacts.speeds``.
+
+    Notes
+    -----
+    Motors start settled: the contact speeds at ``t = 0`` are :meth:`command` ``(0)``.
+    """
+
+    contacts: ContactSet
+    mass: float
+    damping: float = 0.0
+    external_force: float | PiecewiseConstant = 0.0
+    motors: Motors | None = None
+    commands: PiecewiseConstant | None = None
+    _limits: tuple[float, float] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.contacts, ContactSet):
+            raise ParameterTypeError(parameter_message(
+                "contacts", "Plant", "be a ContactSet", self.contacts))
+        object.__setattr__(self, "mass", as_float(self.mass, "mass", "Plant", low=0.0, low_open=True))
+        object.__setattr__(self, "damping", _nonneg_float(self.damping, "damping"))
+        ext = self.external_force
+        if isinstance(ext, PiecewiseConstant):
+            if ext.width is not None:
+                raise ParameterError(parameter_message(
+                    "external_force", "Plant", "be a scalar signal (values of shape (k + 1,))",
+                    f"values of shape {ext.values.shape}"))
+        else:
+            object.__setattr__(self, "external_force", as_float(ext, "external_force", "Plant"))
+        if self.motors is not None and not isinstance(self.motors, Motors):
+            raise ParameterTypeError(parameter_message(
+                "motors", "Plant", "be a Motors instance or None", self.motors))
+        if self.commands is not None:
+            if not isinstance(self.commands, PiecewiseConstant):
+                raise ParameterTypeError(parameter_message(
+                    "commands", "Plant", "be a PiecewiseConstant or None", self.commands))
+            if self.commands.width != self.contacts.n:
+                raise ParameterError(parameter_message(
+                    "commands", "Plant",
+                    f"have values of shape (k + 1, {self.contacts.n}) (one column per contact)",
+                    f"values of shape {self.commands.values.shape}"))
+        limits = self.motors.speed_limits if self.motors is not None else (-np.inf, np.inf)
+        object.__setattr__(self, "_limits", limits)
+
+    # -- properties ---------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of contacts."""
+        return self.contacts.n
+
+    @property
+    def compliance(self) -> float:
+        """Motor compliance ``k`` ((m/s)/N), 0 for stiff or ideal motors."""
+        return 0.0 if self.motors is None else self.motors.compliance
+
+    @property
+    def dynamic_motors(self) -> bool:
+        """True when contact speeds are states (a motor lag or a finite rate limit)."""
+        return self.motors is not None and self.motors.dynamic
+
+    def switching_times(self) -> np.ndarray:
+        """All times (s) at which the commands or the external force switch, ascending."""
+        parts = [np.empty(0)]
+        if self.commands is not None:
+            parts.append(self.commands.times)
+        if isinstance(self.external_force, PiecewiseConstant):
+            parts.append(self.external_force.times)
+        return np.unique(np.concatenate(parts))
+
+    # -- helpers shared by every method ---------------------------------------------------
+    def command(self, t: float) -> np.ndarray:
+        """Commanded contact speeds at time ``t`` (s), clipped to the motor speed limits.
+
+        Returns
+        -------
+        ndarray of shape (n,), m/s
+        """
+        raw = self.contacts.speeds if self.commands is None else self.commands(t)
+        return np.clip(raw, *self._limits)
+
+    def initial_speeds(self) -> np.ndarray:
+        """Contact speeds at ``t = 0`` (motors start settled on ``command(0)``), m/s, shape (n,)."""
+        return self.command(0.0)
+
+    def final_command(self) -> np.ndarray:
+        """The last commanded speeds (after every switch), clipped, m/s, shape (n,)."""
+        raw = self.contacts.speeds if self.commands is None else self.commands.values[-1]
+        return np.clip(raw, *self._limits)
+
+    def external(self, t: float) -> float:
+        """External force ``F_ext(t)``, N."""
+        ext = self.external_force
+        return ext(t) if isinstance(ext, PiecewiseConstant) else float(ext)
+
+    def motor_rate(self, t: float, speeds: Any) -> np.ndarray:
+        """``dv_i/dt`` of the motor model at time ``t`` for contact speeds ``speeds``.
+
+        Parameters
+        ----------
+        t : float, s
+        speeds : array_like of shape (n,), m/s
+
+        Returns
+        -------
+        ndarray of shape (n,), m/s^2
+            ``clip((u - v) / tau, -r, r)`` with a lag ``tau > 0``; ``r sign(u - v)`` with only
+            a rate limit ``r``; zeros for ideal motors (their speeds jump with the commands).
+        """
+        v = np.asarray(speeds, dtype=float)
+        motors = self.motors
+        if motors is None or not motors.dynamic:
+            return np.zeros_like(v)
+        gap = self.command(t) - v
+        if motors.lag > 0:
+            return np.clip(gap / motors.lag, -motors.rate_limit, motors.rate_limit)
+        return motors.rate_limit * np.sign(gap)
+
+    def contact_forces(self, V: float, speeds: Any, *, friction: str = "sign",
+                       epsilon: float = 0.0) -> np.ndarray:
+        """Force of each contact on the body at body speed ``V``.
+
+        Parameters
+        ----------
+        V : float, m/s
+            Body speed.
+        speeds : array_like of shape (n,), m/s
+            Contact speeds ``v_i``.
+        friction : {"sign", "tanh", "stribeck"}
+            ``"sign"``: Coulomb ``f_i sign(v_i - V)`` with ``sign(0) = 0`` at a tie (the
+            set-valued force there is ``[-f_i, f_i]``; the exact method resolves it).
+            ``"tanh"``: ``f_i tanh(s / epsilon)`` with slip ``s = v_i - V``.
+            ``"stribeck"``: ``f_i tanh(s / epsilon) (1 + (P - 1) exp(-(s / (S epsilon))^2))``
+            with peak ratio ``P = STRIBECK_PEAK`` and Stribeck speed ``S epsilon``
+            (``S = STRIBECK_SPEED``): a breakaway hump above the Coulomb level.
+        epsilon : float, m/s
+            Smoothing width, ``> 0`` for ``"tanh"`` and ``"stribeck"``.
+
+        Returns
+        -------
+        ndarray of shape (n,), N
+
+        Notes
+        -----
+        With motor compliance ``k > 0`` every friction option gives the saturated linear law
+        ``f_i clip(s / (k f_i), -1, 1)``: it is already Lipschitz, there is nothing to smooth.
+        """
+        check_option(friction, "friction", "Plant.contact_forces", FRICTION_MODELS)
+        slip = np.asarray(speeds, dtype=float) - V
+        f = self.contacts.forces
+        k = self.compliance
+        if k > 0:
+            scale = k * f
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.where(scale > 0, slip / np.where(scale > 0, scale, 1.0), 0.0)
+            return f * np.clip(ratio, -1.0, 1.0)
+        if friction == "sign":
+            return f * np.sign(slip)
+        eps = as_float(epsilon, "epsilon", "Plant.contact_forces", low=0.0, low_open=True)
+        smooth = np.tanh(slip / eps)
+        if friction == "tanh":
+            return f * smooth
+        return f * smooth * (1.0 + (STRIBECK_PEAK - 1.0) * np.exp(-(slip / (STRIBECK_SPEED * eps)) ** 2))
+
+    def net_force(self, t: float, V: float, speeds: Any, *, friction: str = "sign",
+                  epsilon: float = 0.0) -> float:
+        """Net force on the body, ``sum_i contact_forces + F_ext(t) - c V``, N."""
+        contact = self.contact_forces(V, speeds, friction=friction, epsilon=epsilon)
+        return float(np.sum(contact) + self.external(t) - self.damping * V)
+
+    def equilibrium(self) -> tuple[float, float]:
+        """Equilibrium set of the final constant commands, without external force or drag.
+
+        Returns
+        -------
+        (lo, hi) : tuple of float, m/s
+            The weighted median set of :meth:`final_command` (``lo == hi`` for a point,
+            ``lo < hi`` for a zero-force band). With motor compliance ``k > 0`` the zero set
+            of the continuous piecewise-linear force ``sum f_i clip((v_i - V)/(k f_i), -1, 1)``.
+        """
+        speeds = self.final_command()
+        if self.compliance == 0:
+            return self.contacts.with_speeds(speeds).equilibrium()
+        return _compliant_zero_set(speeds, self.contacts.forces, self.compliance)
+
+
+def _compliant_zero_set(speeds: np.ndarray, forces: np.ndarray, k: float) -> tuple[float, float]:
+    """Zero set of ``F(V) = sum f_i clip((v_i - V)/(k f_i), -1, 1)`` (continuous, non-increasing)."""
+    active = forces > 0
+    v, f = speeds[active], forces[active]
+    points = np.concatenate((v - k * f, v + k * f))
+    slope_change = np.concatenate((np.full(v.size, -1.0 / k), np.full(v.size, 1.0 / k)))
+    order = np.argsort(points, kind="stable")
+    points, slope_change = points[order], slope_change[order]
+    slopes = np.cumsum(slope_change)[:-1]              # slope on (points[j], points[j+1])
+    total = float(np.sum(f))
+    values = total + np.concatenate(([0.0], np.cumsum(slopes * np.diff(points))))
+    tol = 4.0 * points.size * np.finfo(float).eps * total
+    values = np.where(np.abs(values) <= tol, 0.0, values)
+    zero = np.flatnonzero(values == 0.0)
+    if zero.size:
+        return float(points[zero[0]]), float(points[zero[-1]])
+    j = int(np.flatnonzero(values < 0.0)[0])           # F(points[j-1]) > 0 > F(points[j])
+    share = values[j - 1] / (values[j - 1] - values[j])
+    point = float(points[j - 1] + share * (points[j] - points[j - 1]))
+    return point, point

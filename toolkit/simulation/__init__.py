@@ -1,0 +1,112 @@
+"""Simulate a body on active contacts: one verb, :func:`simulate`, over interchangeable methods.
+
+Methods (``method=``):
+
+- ``"exact"`` (default): event-driven, closed-form segments, Filippov sliding modes; exact
+  to rounding for the Coulomb model (:mod:`toolkit.simulation._exact`).
+- ``"rk45"``, ``"lsoda"``, ``"radau"``, ``"bdf"``: ``scipy.integrate.solve_ivp`` on the
+  ``sign``, ``tanh`` or ``stribeck`` friction law (options ``friction``, ``epsilon``,
+  ``rtol``, ``atol``).
+- ``"moreau"``: Moreau-Jean time stepping, the set-valued force resolved exactly each step
+  (option ``step``).
+- ``"casadi"``: a casadi CVODES/IDAS integrator on the smoothed model (options
+  ``integrator``, ``friction``, ``epsilon``, ``rtol``, ``atol``).
+
+:func:`simulate_batch` runs many constant-speed startup scenes at once (vectorized exact
+method) and returns their final speeds.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, as_float_array, check_option, suggestion
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..plant import Plant
+from ._result import Budget, Event, SimulationResult, Status
+
+__all__ = ["simulate", "Status", "Budget", "Event", "SimulationResult", "METHODS"]
+
+_SCIPY_OPTIONS = ("friction", "epsilon", "rtol", "atol")
+
+# method -> (module, function, fixed keyword arguments, accepted option names)
+_DISPATCH: dict[str, tuple[str, str, dict[str, Any], tuple[str, ...]]] = {
+    "exact": ("_exact", "simulate_exact", {}, ()),
+    "rk45": ("_scipy", "simulate_scipy", {"solver": "rk45"}, _SCIPY_OPTIONS),
+    "lsoda": ("_scipy", "simulate_scipy", {"solver": "lsoda"}, _SCIPY_OPTIONS),
+    "radau": ("_scipy", "simulate_scipy", {"solver": "radau"}, _SCIPY_OPTIONS),
+    "bdf": ("_scipy", "simulate_scipy", {"solver": "bdf"}, _SCIPY_OPTIONS),
+    "moreau": ("_moreau", "simulate_moreau", {}, ("step",)),
+    "casadi": ("_casadi", "simulate_casadi", {}, ("integrator", *_SCIPY_OPTIONS)),
+}
+
+#: Names accepted by ``simulate(..., method=...)``.
+METHODS: tuple[str, ...] = tuple(_DISPATCH)
+
+
+def _check_t_eval(t_eval: Any, t_end: float) -> np.ndarray | None:
+    if t_eval is None:
+        return None
+    times = as_float_array(t_eval, "t_eval", "simulate")
+    if np.any(np.diff(times) < 0) or times[0] < 0 or times[-1] > t_end:
+        raise ParameterError(parameter_message(
+            "t_eval", "simulate", f"be non-decreasing times within [0, t_end = {t_end:g}]",
+            times.tolist() if times.size <= 8 else f"[{times.min():g} .. {times.max():g}]"))
+    return times
+
+
+def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exact",
+             t_eval: Any = None, budget: Budget | None = None, **options: Any) -> SimulationResult:
+    """Simulate the body speed ``V(t)`` of a plant from ``V(0) = v0`` to ``t_end``.
+
+    Parameters
+    ----------
+    plant : Plant
+    t_end : float, s
+        Horizon, ``> 0``.
+    v0 : float, m/s
+        Initial body speed.
+    method : str
+        One of :data:`METHODS`; see the module docstring.
+    t_eval : array_like of shape (T,), s, optional
+        Non-decreasing times in ``[0, t_end]`` at which to report ``V``. ``None``: the exact
+        method reports its event times (plus 0 and ``t_end``), the others their own steps.
+    budget : Budget, optional
+        Wall-clock, step and event-rate limits (default ``Budget()``).
+    **options
+        Method options (see the module docstring); unknown names are refused.
+
+    Returns
+    -------
+    SimulationResult
+        Always returned, also when a budget stops the run (see ``status``).
+
+    Examples
+    --------
+    >>> from toolkit import ContactSet
+    >>> plant = Plant(ContactSet([-1.0, 0.5, 2.0]), mass=1.0)
+    >>> result = simulate(plant, 2.0)
+    >>> float(result.V[-1])
+    0.5
+    """
+    if not isinstance(plant, Plant):
+        raise ParameterTypeError(parameter_message("plant", "simulate", "be a Plant", plant))
+    t_end = as_float(t_end, "t_end", "simulate", low=0.0, low_open=True)
+    v0 = as_float(v0, "v0", "simulate")
+    check_option(method, "method", "simulate", METHODS)
+    budget = Budget() if budget is None else budget
+    if not isinstance(budget, Budget):
+        raise ParameterTypeError(parameter_message("budget", "simulate", "be a Budget", budget))
+    module, function, fixed, accepted = _DISPATCH[method]
+    for name in options:
+        if name not in accepted:
+            rule = (f"only name the options {list(accepted)} of method {method!r}" if accepted
+                    else f"be empty: method {method!r} takes no options")
+            raise ParameterError(parameter_message("options", "simulate", rule, name)
+                                 + suggestion(name, accepted))
+    fn = getattr(importlib.import_module(f"{__name__}.{module}"), function)
+    return fn(plant, t_end, v0=v0, t_eval=_check_t_eval(t_eval, t_end), budget=budget,
+              **fixed, **options)

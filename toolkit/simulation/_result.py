@@ -1,0 +1,195 @@
+"""Value objects shared by every simulation method: status, budget, events and the result."""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, as_int, check_option
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+
+__all__ = ["Status", "Budget", "Event", "SimulationResult", "EVENT_KINDS", "status_message"]
+
+#: The kinds of :class:`Event`.
+EVENT_KINDS = ("cross", "stick", "release", "command")
+
+
+class Status(enum.Enum):
+    """How a simulation ended; the value is a message a user can act on."""
+
+    SUCCESS = "finished: reached t_end"
+    ZENO = ("stopped: too many events per unit time (Zeno behaviour); "
+            "raise max_event_rate or smooth the model")
+    WALL_TIME = "stopped: wall-clock budget exhausted"
+    MAX_STEPS = "stopped: step budget exhausted"
+    FAILED = "stopped: the integrator failed"
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Limits under which every method runs, so that a stalled method returns a status.
+
+    Parameters
+    ----------
+    wall_time : float, s
+        Wall-clock budget (``> 0``; ``inf`` allowed).
+    max_steps : int
+        Steps, events or right-hand-side evaluations, whichever the method counts (``>= 1``).
+    max_event_rate : float, 1/s
+        Zeno guard of the exact method: more events than ``max_event_rate`` per simulated
+        second, counted over the run so far (and at least 1000 events), stops the run.
+    """
+
+    wall_time: float = 60.0
+    max_steps: int = 10**7
+    max_event_rate: float = 1e6
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "wall_time", as_float(
+            self.wall_time, "wall_time", "Budget", low=0.0, low_open=True, finite=False))
+        object.__setattr__(self, "max_steps", as_int(self.max_steps, "max_steps", "Budget", low=1))
+        object.__setattr__(self, "max_event_rate", as_float(
+            self.max_event_rate, "max_event_rate", "Budget", low=0.0, low_open=True, finite=False))
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something that happened at one instant of a simulation.
+
+    Parameters
+    ----------
+    time : float, s
+    kind : {"cross", "stick", "release", "command"}
+        ``cross``: the body passed a contact speed; ``stick``: it locked onto one (sliding
+        mode); ``release``: it left a contact speed it was stuck to; ``command``: a command
+        or the external force switched.
+    contact : int or None
+        Index of the contact involved (the lowest index among coincident ones), ``None``
+        for ``command`` events.
+    speed : float, m/s
+        Body speed at the event.
+    """
+
+    time: float
+    kind: str
+    contact: int | None
+    speed: float
+
+    def __post_init__(self) -> None:
+        check_option(self.kind, "kind", "Event", EVENT_KINDS)
+        object.__setattr__(self, "time", float(self.time))
+        object.__setattr__(self, "speed", float(self.speed))
+        if self.contact is not None:
+            object.__setattr__(self, "contact", as_int(self.contact, "contact", "Event", low=0))
+
+
+def _frozen(value: Any, name: str, ndim: int) -> np.ndarray:
+    array = np.array(value, dtype=float)
+    if array.ndim != ndim:
+        raise ParameterError(parameter_message(
+            name, "SimulationResult", f"be {ndim}-dimensional", f"an array of shape {array.shape}"))
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """The outcome of :func:`toolkit.simulation.simulate`.
+
+    Attributes
+    ----------
+    method, setting : str
+        Method name (``"exact"``, ``"rk45"``, ...) and its setting in words
+        (e.g. ``"sign rtol=1e-6"``).
+    t : ndarray of shape (T,), s
+        Sample times.
+    V : ndarray of shape (T,), m/s
+        Body speed at ``t``.
+    contact_speeds : ndarray of shape (T, n), m/s
+        Contact speeds at ``t``.
+    force : ndarray of shape (T,), N
+        Net force on the body at ``t`` (for the exact method, the force actually applied,
+        i.e. ``m dV/dt`` from the right; inside a sliding mode the Filippov value).
+    events : tuple of Event
+    status : Status
+    message : str
+        ``status.value`` plus specifics.
+    n_events, n_evaluations, n_steps : int
+        Events, right-hand-side (or closed-form) evaluations, and steps taken.
+    wall_time : float, s
+    dense : callable or None
+        ``dense(times) -> V`` at any times in ``[0, t_end]`` (exact for the exact method).
+    """
+
+    method: str
+    setting: str
+    t: np.ndarray
+    V: np.ndarray
+    contact_speeds: np.ndarray
+    force: np.ndarray
+    events: tuple[Event, ...]
+    status: Status
+    message: str
+    n_events: int
+    n_evaluations: int
+    n_steps: int
+    wall_time: float
+    dense: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        t = _frozen(self.t, "t", 1)
+        for name, ndim in (("V", 1), ("force", 1), ("contact_speeds", 2)):
+            array = _frozen(getattr(self, name), name, ndim)
+            if array.shape[0] != t.size:
+                raise ParameterError(parameter_message(
+                    name, "SimulationResult", f"have {t.size} rows (one per sample time)",
+                    f"an array of shape {array.shape}"))
+            object.__setattr__(self, name, array)
+        object.__setattr__(self, "t", t)
+        if not isinstance(self.status, Status):
+            raise ParameterTypeError(parameter_message(
+                "status", "SimulationResult", "be a Status", self.status))
+        object.__setattr__(self, "events", tuple(self.events))
+        for name in ("n_events", "n_evaluations", "n_steps"):
+            object.__setattr__(self, name, as_int(getattr(self, name), name, "SimulationResult", low=0))
+
+    @property
+    def success(self) -> bool:
+        """True when the run reached ``t_end``."""
+        return self.status is Status.SUCCESS
+
+    @property
+    def t_final(self) -> float:
+        """Last simulated time, s (``t_end`` on success)."""
+        return float(self.t[-1]) if self.t.size else 0.0
+
+    def speed_at(self, times: Any) -> np.ndarray:
+        """Body speed at ``times`` (s): the dense output if present, else linear interpolation.
+
+        Returns
+        -------
+        ndarray of the shape of ``times``, m/s
+        """
+        query = np.asarray(times, dtype=float)
+        if not np.all(np.isfinite(query)):
+            raise ParameterError(parameter_message(
+                "times", "SimulationResult.speed_at", "be finite", times))
+        if self.dense is not None:
+            return np.asarray(self.dense(query), dtype=float).reshape(query.shape)
+        return np.interp(query, self.t, self.V)
+
+    def __repr__(self) -> str:
+        final = f"{self.V[-1]:.6g} m/s" if self.V.size else "n/a"
+        return (f"SimulationResult(method={self.method!r}, setting={self.setting!r}, "
+                f"status={self.status.name}, t_final={self.t_final:.6g} s, V_final={final}, "
+                f"events={self.n_events}, steps={self.n_steps}, wall_time={self.wall_time:.3g} s)")
+
+
+def status_message(status: Status, detail: str = "") -> str:
+    """``status.value`` followed by ``detail`` (a sentence of specifics), if any."""
+    return status.value if not detail else f"{status.value} ({detail})"
+

@@ -1,6 +1,8 @@
 """Active Contacts Toolkit: controllable friction from contacts that move at their own speeds.
 
-The public API is what this module exports; everything else is private.
+The public API is what this module exports; everything else is private. Importing it loads
+numpy and scipy only: casadi, cvxpy, filterpy and matplotlib are imported by the stages
+that need them.
 """
 
 from __future__ import annotations
@@ -14,19 +16,25 @@ from .errors import (
     SolverError,
     ToolkitError,
 )
+from .plant import Motors, PiecewiseConstant, Plant
+from .scene import Scene, dumps_scene, load_scene
+from .sensors import Encoder
+from .simulation import Budget, Event, SimulationResult, Status, simulate
+from .study import ForceCurve, StudyResult, force_curve, run_study
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "ContactDistribution",
-    "ContactModel",
-    "ContactSet",
-    "Staircase",
-    "ParameterError",
-    "ParameterTypeError",
-    "SceneError",
-    "SceneFileNotFoundError",
-    "SolverError",
+    # contact model
+    "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "ForceCurve", "force_curve",
+    # plant and simulation
+    "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "Status", "Budget", "Event",
+    # sensors
+    "Encoder",
+    # scenes and studies
+    "Scene", "load_scene", "dumps_scene", "StudyResult", "run_study",
+    # errors
+    "ParameterError", "ParameterTypeError", "SceneError", "SceneFileNotFoundError", "SolverError",
     "ToolkitError",
     "__version__",
 ]

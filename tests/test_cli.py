@@ -1,0 +1,82 @@
+"""The command line: exit codes, JSON output, error lines without tracebacks, written files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from toolkit import __version__
+from toolkit.cli import main
+from toolkit.scene import load_scene
+
+ROOT = Path(__file__).parents[1]
+DESIGNS = sorted((ROOT / "designs").glob("*.toml"))
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "toolkit.cli", *args], capture_output=True,
+                          text=True, cwd=ROOT)
+
+
+@pytest.mark.parametrize("path", DESIGNS, ids=lambda p: p.stem)
+def test_run_succeeds_on_every_design(path, tmp_path, capsys):
+    assert main(["run", str(path), "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "wrote" in out
+    result = json.loads((tmp_path / "result.json").read_text())
+    scene = load_scene(path)
+    assert result["curve"]["equilibrium"] == list(scene.contact_set().equilibrium())
+    if scene.report is not None and scene.report.plots:
+        assert (tmp_path / "force_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_curve_json_has_the_documented_keys(capsys):
+    assert main(["curve", str(ROOT / "designs" / "five_five.toml"), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert set(data) == {"speeds", "force", "equilibrium", "total_force"}
+    assert data["equilibrium"] == [-0.35, 0.35]
+    assert data["total_force"] == 10.0
+    speeds, force = np.array(data["speeds"]), np.array(data["force"])
+    # Closed form of the five-against-five curve: +10 below -0.35, 0 inside, -10 above 0.35.
+    np.testing.assert_array_equal(force[(speeds > -0.35) & (speeds < 0.35)], 0.0)
+    np.testing.assert_array_equal(force[speeds < -0.35], 10.0)
+    np.testing.assert_array_equal(force[speeds > 0.35], -10.0)
+
+
+def test_version_and_help():
+    done = cli("--version")
+    assert done.returncode == 0 and __version__ in done.stdout
+    done = cli("--help")
+    assert done.returncode == 0 and "run" in done.stdout and "curve" in done.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["run", "designs/nope.toml"], "does not exist"),
+        (["curve", "designs/nope.toml", "--json"], "does not exist"),
+        (["curve", "designs/carousel.toml", "--points", "1"], "--points"),
+        (["fly"], "invalid choice"),
+    ],
+)
+def test_user_errors_exit_2_with_one_line_and_no_traceback(args, fragment):
+    done = cli(*args)
+    assert done.returncode == 2
+    assert fragment in done.stderr
+    assert "Traceback" not in done.stderr
+    assert done.stdout == ""
+
+
+def test_bad_scene_writes_nothing(tmp_path):
+    scene = tmp_path / "bad.toml"
+    scene.write_text("[contacts]\nspeeds = [0.1, 0.2]\nforcez = 1.0\n")
+    out = tmp_path / "out"
+    done = cli("run", str(scene), "--out", str(out))
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and "Did you mean 'forces'?" in done.stderr
+    assert not out.exists()

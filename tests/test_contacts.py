@@ -1,0 +1,259 @@
+"""Tests of the contact model against closed forms, identities and brute force.
+
+Tolerances: the model computes every force from prefix sums of at most N magnitudes, so
+its rounding error is below N * eps * F_tot; ``atol=1e-12`` (in newtons, for F_tot of
+order 1-100 N and N <= 60) is several orders above that and far below any physical step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+from toolkit import ContactDistribution, ContactSet, ParameterError, ParameterTypeError
+
+SPEED = st.floats(-1.0, 1.0, allow_nan=False).map(lambda v: round(v, 3))
+MAGNITUDE = st.floats(0.01, 10.0, allow_nan=False)
+
+
+@st.composite
+def contact_sets(draw, min_size=1, max_size=25, equal=False):
+    n = draw(st.integers(min_size, max_size))
+    speeds = draw(st.lists(SPEED, min_size=n, max_size=n))
+    forces = None if equal else draw(st.lists(MAGNITUDE, min_size=n, max_size=n))
+    return ContactSet(speeds, forces)
+
+
+def brute_force(cs: ContactSet, V: np.ndarray) -> np.ndarray:
+    """The N x M definition ``sum f_i sign(v_i - V)``: the second method."""
+    return np.sum(cs.forces[:, None] * np.sign(cs.speeds[:, None] - V[None, :]), axis=0)
+
+
+def probes(cs: ContactSet) -> np.ndarray:
+    """Every contact speed, the midpoints between them, and points beyond both ends."""
+    levels = np.unique(cs.speeds)
+    mids = 0.5 * (levels[1:] + levels[:-1])
+    return np.concatenate((levels, mids, [levels[0] - 1.0, levels[-1] + 1.0]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(contact_sets())
+def test_force_matches_brute_force(cs):
+    V = probes(cs)
+    np.testing.assert_allclose(cs.force(V), brute_force(cs, V), rtol=0, atol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(contact_sets())
+def test_force_is_nonincreasing_and_spans_total(cs):
+    V = np.sort(np.concatenate((probes(cs), np.linspace(-2, 2, 101))))
+    F = cs.force(V)
+    assert np.all(np.diff(F) <= 0.0)
+    np.testing.assert_allclose(cs.force([-np.inf, -5.0]), cs.total_force, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(cs.force([5.0, np.inf]), -cs.total_force, rtol=1e-15, atol=0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(contact_sets())
+def test_zero_in_bounds_exactly_on_equilibrium_set(cs):
+    lo, hi = cs.equilibrium()
+    V = np.unique(np.concatenate((probes(cs), np.linspace(lo, hi, 7))))
+    lower, upper = cs.force_bounds(V)
+    contains_zero = (lower <= 0.0) & (0.0 <= upper)
+    in_set = (V >= lo) & (V <= hi)
+    np.testing.assert_array_equal(contains_zero, in_set)
+
+
+@settings(max_examples=100, deadline=None)
+@given(contact_sets(), st.randoms(use_true_random=False))
+def test_invariant_under_permutation(cs, rng):
+    order = list(range(cs.n))
+    rng.shuffle(order)
+    shuffled = ContactSet(cs.speeds[order], cs.forces[order])
+    V = probes(cs)
+    assert shuffled.equilibrium() == cs.equilibrium()
+    np.testing.assert_allclose(shuffled.force(V), cs.force(V), rtol=0, atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(contact_sets(), st.floats(1e-3, 1e3))
+def test_scaling_magnitudes_keeps_equilibrium(cs, scale):
+    assert ContactSet(cs.speeds, cs.forces * scale).equilibrium() == cs.equilibrium()
+
+
+@settings(max_examples=200, deadline=None)
+@given(contact_sets(equal=True))
+def test_equal_magnitudes_give_median_or_band(cs):
+    ordered = np.sort(cs.speeds)
+    n = cs.n
+    lo, hi = cs.equilibrium()
+    if n % 2:
+        assert lo == hi == np.median(cs.speeds)
+    else:
+        assert (lo, hi) == (ordered[n // 2 - 1], ordered[n // 2])
+
+
+def test_five_against_five_is_an_exact_zero_band():
+    cs = ContactSet([-0.35] * 5 + [0.35] * 5, np.full(10, 0.1))   # 0.1 is not a dyadic number
+    assert cs.equilibrium() == (-0.35, 0.35)
+    assert cs.zero_force_band() == (-0.35, 0.35)
+    np.testing.assert_array_equal(cs.force(np.linspace(-0.34, 0.34, 11)), 0.0)
+
+
+def test_decimal_loads_that_cancel_give_a_band():
+    # 0.1 + 0.2 != 0.3 in binary floating point; the tie tolerance makes the band exact.
+    cs = ContactSet([0.1, 0.2, 0.3], [0.1, 0.2, 0.3])
+    assert cs.equilibrium() == (0.2, 0.3)
+
+
+def test_tie_value_is_interval_midpoint():
+    cs = ContactSet([0.0, 0.0, 1.0], [1.0, 2.0, 4.0])
+    lower, upper = cs.force_bounds(0.0)
+    assert (float(lower), float(upper)) == (1.0, 7.0)   # 4 from above, +-3 stiction
+    assert float(cs.force(0.0)) == 4.0
+
+
+def test_cdf_identity_away_from_ties():
+    cs = ContactSet([0.3, -0.1, 0.2, 0.05], [1.0, 2.0, 0.5, 3.0])
+    V = np.array([-1.0, 0.0, 0.1, 0.25, 1.0])
+    np.testing.assert_allclose(cs.force(V), cs.total_force * (1 - 2 * cs.cdf(V)), rtol=0, atol=1e-12)
+
+
+def test_uniform_spacing_has_average_viscosity():
+    # Average slope 2 F_tot / (N s) over the staircase (PHYSICS.md section 4).
+    n, spacing = 10, 0.07
+    cs = ContactSet(np.arange(n) * spacing, np.full(n, 0.3))
+    stairs = cs.staircase()
+    # N - 1 steps of 2 f between the first and the last level, N - 1 spacings apart.
+    slope = (stairs.plateaus[1] - stairs.plateaus[-1]) / (stairs.levels[-1] - stairs.levels[0])
+    np.testing.assert_allclose(slope, 2 * cs.total_force / (n * spacing), rtol=1e-12)
+
+
+def test_lifted_contacts_do_not_count():
+    cs = ContactSet([-1.0, 0.0, 5.0], [1.0, 1.0, 0.0])
+    assert cs.equilibrium() == (-1.0, 0.0)
+    assert cs.total_force == 2.0
+
+
+def test_from_friction_multiplies():
+    cs = ContactSet.from_friction([0.1, 0.2], mu=0.5, normal_loads=[2.0, 4.0])
+    np.testing.assert_array_equal(cs.forces, [1.0, 2.0])
+
+
+def test_large_sets_are_handled_without_a_matrix():
+    rng = np.random.default_rng(7)
+    cs = ContactSet(rng.uniform(-1, 1, 100_000))
+    F = cs.force(rng.uniform(-1, 1, 200_000))
+    assert F.shape == (200_000,)
+    lo, hi = cs.equilibrium()
+    ordered = np.sort(cs.speeds)
+    assert (lo, hi) == (ordered[49_999], ordered[50_000])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "fragment"),
+    [
+        ({"speeds": [0.1, np.nan]}, ParameterError, "'speeds' parameter of ContactSet must be finite"),
+        ({"speeds": [0.1, np.inf]}, ParameterError, "must be finite"),
+        ({"speeds": [0.1], "forces": [np.nan]}, ParameterError, "'forces'"),
+        ({"speeds": [0.1, 0.2], "forces": [1.0, -0.2]}, ParameterError, "must be >= 0. Got -0.2"),
+        ({"speeds": []}, ParameterError, "must not be empty"),
+        ({"speeds": [0.1, 0.2], "forces": [1.0]}, ParameterError, "same length as 'speeds' (2)"),
+        ({"speeds": [0.1, 0.2], "forces": [0.0, 0.0]}, ParameterError, "positive sum"),
+        ({"speeds": "fast"}, ParameterTypeError, "array of numbers"),
+        ({"speeds": [[0.1, 0.2]]}, ParameterError, "1-dimensional"),
+        ({"speeds": ["a", "b"]}, ParameterTypeError, "array of numbers"),
+    ],
+)
+def test_bad_input_is_refused_with_a_clear_message(kwargs, error, fragment):
+    with pytest.raises(error) as info:
+        ContactSet(**kwargs)
+    assert fragment in str(info.value)
+
+
+def test_errors_subclass_builtins():
+    with pytest.raises(ValueError):
+        ContactSet([0.1], [-1.0])
+    with pytest.raises(TypeError):
+        ContactSet(None)
+
+
+def test_nan_query_is_refused():
+    with pytest.raises(ParameterError, match="'V'"):
+        ContactSet([0.0]).force([0.0, np.nan])
+
+
+def test_arrays_are_read_only():
+    cs = ContactSet([0.1, 0.2])
+    with pytest.raises(ValueError):
+        cs.speeds[0] = 1.0
+
+
+# -- continuous distributions ------------------------------------------------------------
+
+def test_uniform_patch_is_a_straight_line():
+    # Uniform density on [a, b]: F(V) = F_tot (1 - 2 (V - a) / (b - a)); slope -2 F_tot / (b - a).
+    a, b, total = -0.35, 0.35, 5.0
+    patch = ContactDistribution(stats.uniform(a, b - a), total)
+    V = np.linspace(a, b, 9)
+    np.testing.assert_allclose(patch.force(V), total * (1 - 2 * (V - a) / (b - a)), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(patch.density(0.0), 1 / (b - a), rtol=1e-14)
+    assert patch.equilibrium() == pytest.approx((0.0, 0.0), abs=1e-15)
+
+
+def test_normal_patch_is_an_erf():
+    # F(V) = -F_tot erf((V - mu) / (sigma sqrt 2)): a closed form independent of scipy's cdf.
+    from math import erf, sqrt
+
+    mu, sigma, total = 0.1, 0.2, 3.0
+    patch = ContactDistribution(stats.norm(mu, sigma), total)
+    V = np.array([-0.3, 0.0, 0.1, 0.25, 0.6])
+    expected = [-total * erf((v - mu) / (sigma * sqrt(2))) for v in V]
+    np.testing.assert_allclose(patch.force(V), expected, rtol=0, atol=1e-14)
+    assert patch.equilibrium() == pytest.approx((mu, mu), abs=1e-14)
+
+
+def test_histogram_patch_with_gap_has_median_interval():
+    patch = ContactDistribution.from_histogram([0.0, 1.0, 2.0, 3.0], [1.0, 0.0, 1.0], 2.0)
+    assert patch.equilibrium() == (1.0, 2.0)
+    np.testing.assert_allclose(patch.force([0.5, 1.5, 2.5]), [1.0, 0.0, -1.0], rtol=0, atol=1e-14)
+
+
+def test_histogram_median_inside_a_bin():
+    # Weights 1, 2, 1 on unit bins: CDF(1.5) = 0.25 + 0.5 * 0.5 = 0.5.
+    patch = ContactDistribution.from_histogram([0.0, 1.0, 2.0, 3.0], [1.0, 2.0, 1.0], 2.0)
+    assert patch.equilibrium() == (1.5, 1.5)
+
+
+def test_fine_histogram_matches_discrete_set():
+    # A set of equal contacts and a histogram with one narrow bin around each: same force
+    # away from the bins (identity of the two representations).
+    speeds = np.array([-0.2, 0.0, 0.1, 0.3])
+    width = 1e-6
+    edges = np.sort(np.concatenate((speeds - width, speeds + width)))
+    weights = np.zeros(edges.size - 1)
+    weights[::2] = 1.0
+    patch = ContactDistribution.from_histogram(edges, weights, 4.0)
+    V = np.array([-0.5, -0.1, 0.05, 0.2, 0.5])
+    np.testing.assert_allclose(patch.force(V), ContactSet(speeds).force(V), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "fragment"),
+    [
+        (lambda: ContactDistribution("uniform", 1.0), ParameterTypeError, "'distribution'"),
+        (lambda: ContactDistribution(stats.uniform(0, 1), -1.0), ParameterError, "'total_force'"),
+        (lambda: ContactDistribution.from_histogram([0, 1], [1, 2], 1.0), ParameterError, "'edges'"),
+        (lambda: ContactDistribution.from_histogram([0, 1, 0.5], [1, 2], 1.0), ParameterError,
+         "strictly increasing"),
+        (lambda: ContactDistribution.from_histogram([0, 1, 2], [0, 0], 1.0), ParameterError,
+         "positive sum"),
+    ],
+)
+def test_distribution_bad_input(call, error, fragment):
+    with pytest.raises(error) as info:
+        call()
+    assert fragment in str(info.value)

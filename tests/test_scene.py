@@ -1,0 +1,127 @@
+"""Scene files: validation, refusals with suggestions, round trips, and lazy imports."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from toolkit import SceneError, SceneFileNotFoundError
+from toolkit.scene import dumps_scene, load_scene, loads_scene
+
+DESIGNS = sorted((Path(__file__).parents[1] / "designs").glob("*.toml"))
+MINIMAL = '[contacts]\nspeeds = [0.1, 0.2, 0.3]\n'
+
+
+@pytest.mark.parametrize("path", DESIGNS, ids=lambda p: p.stem)
+def test_every_design_loads_and_round_trips(path):
+    scene = load_scene(path)
+    again = loads_scene(dumps_scene(scene), name=scene.name)
+    assert again == scene
+    np.testing.assert_array_equal(again.contact_set().speeds, scene.contact_set().speeds)
+
+
+def test_carousel_has_the_papers_hardware():
+    scene = load_scene(Path(__file__).parents[1] / "designs" / "carousel.toml")
+    contacts = scene.contact_set()
+    assert contacts.n == 10
+    assert np.all(np.abs(contacts.speeds) <= 0.35)
+    assert scene.motors.speed_limits == (-0.35, 0.35)
+    # F_tot / m = 2 m/s^2 (PHYSICS.md section 4): I / L^2 = 0.35378 / 0.266^2 = 5.0 kg.
+    np.testing.assert_allclose(contacts.total_force / scene.body.moving_mass, 2.0, rtol=1e-5)
+
+
+def test_random_contacts_are_reproducible():
+    text = '[contacts]\nrandom = { n = 5, low = -0.3, high = 0.3, seed = 4 }\n'
+    a, b = loads_scene(text).contact_set(), loads_scene(text).contact_set()
+    np.testing.assert_array_equal(a.speeds, b.speeds)
+    np.testing.assert_array_equal(a.speeds, np.random.default_rng(4).uniform(-0.3, 0.3, 5))
+
+
+def test_mu_and_normal_loads_give_forces():
+    scene = loads_scene('[contacts]\nspeeds = [0.1, 0.2]\nmu = 0.5\nnormal_loads = [2.0, 4.0]\n')
+    np.testing.assert_array_equal(scene.contact_set().forces, [1.0, 2.0])
+
+
+def test_missing_sections_mean_no_stage():
+    scene = loads_scene(MINIMAL)
+    assert scene.stages == ("curve",)
+    assert scene.body is None and scene.simulation is None and scene.target is None
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("[contacts]\nspeds = [0.1]\n", "Did you mean 'speeds'?"),
+        (MINIMAL + "[bodi]\nmass = 1.0\n", "Did you mean 'body'?"),
+        (MINIMAL + "[body]\nmas = 1.0\n", "Did you mean 'mass'?"),
+        (MINIMAL + "[motors]\nspeed_limit = -0.3\n", "'motors.speed_limit' value in the scene must be > 0"),
+        ("[contacts]\nspeeds = [0.1, nan]\n", "'contacts.speeds[1]' value in the scene must be finite"),
+        ("[contacts]\nspeeds = [0.1, 0.2]\nforces = [1.0, -1.0]\n", "must be >= 0"),
+        ("[contacts]\nspeeds = [0.1, 0.2]\nforces = [1.0]\n", "same length as 'speeds'"),
+        ("[contacts]\nspeeds = [0.1, 0.2]\nforces = 0.0\n", "positive sum"),
+        ("[contacts]\nspeeds = []\n", "non-empty array"),
+        ('[contacts]\nspeeds = "fast"\n', "array of numbers"),
+        ("[contacts]\nspeeds = [true]\n", "be a number"),
+        ("[body]\nmass = 1.0\n", "needs a [contacts] section"),
+        (MINIMAL + "[body]\ninertia = 1.0\n", "'contact_radius'"),
+        (MINIMAL + "[simulation]\nt_end = 1.0\n", "needs a [body] section"),
+        (MINIMAL + "[target]\nkind = \"viscosty\"\n", "Did you mean 'viscosity'?"),
+        (MINIMAL + "[target]\nkind = \"viscosity\"\nslope = 1.0\n", "needs the key 'center'"),
+        (MINIMAL + "[estimator]\nkind = \"kalman\"\n", "not supported by this version"),
+        ("[contacts\n", "not valid TOML"),
+        (MINIMAL + "[body]\nmass = 1.0\nexternal_force = { times = [1.0, 0.5], values = [0, 1, 2] }\n",
+         "strictly increasing"),
+    ],
+)
+def test_bad_scenes_are_refused_with_a_clear_message(text, fragment):
+    with pytest.raises(SceneError) as info:
+        loads_scene(text)
+    assert fragment in str(info.value)
+
+
+def test_missing_file():
+    with pytest.raises(SceneFileNotFoundError, match="does not exist"):
+        load_scene("designs/no-such-scene.toml")
+    with pytest.raises(FileNotFoundError):
+        load_scene("designs/no-such-scene.toml")
+
+
+def test_scene_is_frozen():
+    scene = loads_scene(MINIMAL)
+    with pytest.raises(AttributeError):
+        scene.name = "other"  # type: ignore[misc]
+
+
+LAZY = ("casadi", "cvxpy", "filterpy", "matplotlib")
+
+
+def _modules_after_run(scene_text: str, tmp_path: Path) -> dict[str, bool]:
+    path = tmp_path / "scene.toml"
+    path.write_text(scene_text)
+    code = (
+        "import json, sys\n"
+        "from toolkit.scene import load_scene\n"
+        "from toolkit.study import run_study\n"
+        "from toolkit.report import write_study\n"
+        f"write_study(run_study(load_scene({str(path)!r})), {str(tmp_path / 'out')!r})\n"
+        f"print(json.dumps({{m: m in sys.modules for m in {LAZY!r}}}))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return json.loads(done.stdout)
+
+
+def test_undeclared_stages_import_nothing_they_need(tmp_path):
+    loaded = _modules_after_run(MINIMAL, tmp_path)
+    assert loaded == dict.fromkeys(LAZY, False)
+
+
+def test_declared_report_does_import_matplotlib(tmp_path):
+    # The positive control: the same check sees matplotlib once plots are declared.
+    loaded = _modules_after_run(MINIMAL + "[report]\nplots = true\n", tmp_path)
+    assert loaded["matplotlib"] is True
+    assert (loaded["casadi"], loaded["cvxpy"], loaded["filterpy"]) == (False, False, False)

@@ -1,0 +1,90 @@
+"""Figures. Each function takes computed results and an optional ``ax`` and only draws.
+
+matplotlib is imported here and nowhere else; importing :mod:`toolkit` does not load it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["plot_force_curve", "plot_simulation", "plot_precision", "figure_png"]
+
+
+def _axes(ax: Any):
+    if ax is not None:
+        return ax
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    _, ax = plt.subplots(figsize=(6.0, 4.0), layout="constrained")
+    return ax
+
+
+def plot_force_curve(curve: Any, ax: Any = None, *, label: str | None = None):
+    """Draw a :class:`toolkit.study.ForceCurve`: the staircase, its set-valued steps, the equilibrium.
+
+    Returns the axes.
+    """
+    ax = _axes(ax)
+    # Exact staircase: at every sample the vertical from the upper to the lower end of the
+    # set-valued force (a zero-length segment away from contact speeds).
+    x = np.repeat(curve.speeds, 2)
+    y = np.column_stack((curve.upper, curve.lower)).ravel()
+    ax.plot(x, y, color="C0", label=label or "F(V) (vertical: stiction interval)")
+    lo, hi = curve.equilibrium
+    ax.axvspan(lo, hi, color="C2", alpha=0.3) if hi > lo else ax.axvline(lo, color="C2")
+    ax.plot([], [], color="C2", label=f"equilibrium [{lo:.4g}, {hi:.4g}] m/s")
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.set_xlabel("body speed V (m/s)")
+    ax.set_ylabel("net contact force F (N)")
+    ax.legend(loc="upper right", fontsize="small")
+    return ax
+
+
+def plot_simulation(result: Any, ax: Any = None):
+    """Draw body speed V(t) over the contact speeds v_i(t) of a simulation result. Returns the axes."""
+    ax = _axes(ax)
+    t = np.asarray(result.t)
+    speeds = np.asarray(result.contact_speeds)
+    if speeds.ndim == 2 and speeds.shape[1] <= 50:
+        ax.plot(t, speeds, color="0.6", lw=0.8, drawstyle="default")
+        ax.plot([], [], color="0.6", lw=0.8, label="contact speeds v_i")
+    ax.plot(t, result.V, color="k", lw=1.6, label="body speed V")
+    ax.set_xlabel("time t (s)")
+    ax.set_ylabel("speed (m/s)")
+    ax.set_title(f"{result.method}: {result.status.value}", fontsize="small")
+    ax.legend(loc="best", fontsize="small")
+    return ax
+
+
+def plot_precision(rows: Any, ax: Any = None):
+    """Log-log error against wall time, one series per method, from precision-report rows."""
+    ax = _axes(ax)
+    by_method: dict[str, list[tuple[float, float]]] = {}
+    for row in rows:
+        row = row if isinstance(row, dict) else row.to_dict()
+        if np.isfinite(row["max_error"]) and row["wall_time"] > 0:
+            by_method.setdefault(row["method"], []).append((row["wall_time"], max(row["max_error"], 1e-17)))
+    for method, points in sorted(by_method.items()):
+        points.sort()
+        ax.loglog(*zip(*points), marker="o", label=method)
+    ax.set_xlabel("wall time (s)")
+    ax.set_ylabel("max |V error| (m/s)")
+    ax.legend(fontsize="small")
+    return ax
+
+
+def figure_png(ax: Any) -> bytes:
+    """Render the figure of ``ax`` to PNG bytes and close it."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    ax.figure.savefig(buffer, format="png", dpi=120)
+    plt.close(ax.figure)
+    return buffer.getvalue()

@@ -1,0 +1,107 @@
+"""Turn study results into JSON and PNG files (the I/O side of :mod:`toolkit.study`).
+
+Everything is rendered in memory first and then each file is written atomically, so a
+failure leaves no half-written output.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._io import atomic_write_bytes, atomic_write_text
+from .study import StudyResult
+
+__all__ = ["study_summary", "study_to_dict", "write_study", "to_json"]
+
+
+def _clean(value: Any) -> Any:
+    """Make a value JSON-able: arrays to lists, non-finite floats to strings."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _clean(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        value = float(value)
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if hasattr(value, "value") and hasattr(value, "name"):  # enums: their human message
+        return value.value
+    return value
+
+
+def to_json(data: Any) -> str:
+    """Serialize with :func:`_clean` applied, indented, newline-terminated."""
+    return json.dumps(_clean(data), indent=2) + "\n"
+
+
+def _simulation_dict(sim: Any) -> dict[str, Any]:
+    return {"method": sim.method, "status": sim.status, "message": sim.message,
+            "final_speed": float(sim.V[-1]), "n_events": sim.n_events, "wall_time": sim.wall_time,
+            "t": sim.t, "V": sim.V}
+
+
+def study_to_dict(result: StudyResult) -> dict[str, Any]:
+    """Everything the study computed, JSON-able."""
+    out: dict[str, Any] = {"scene": result.scene.name, "stages": list(result.stages),
+                           "curve": result.curve.to_dict(), "contacts": {
+                               "speeds": result.contacts.speeds, "forces": result.contacts.forces}}
+    if result.sensors is not None:
+        out["sensors"] = result.sensors
+    if result.allocation is not None:
+        out["allocation"] = result.allocation.to_dict()
+    if result.simulation is not None:
+        out["simulation"] = _simulation_dict(result.simulation)
+    return out
+
+
+def study_summary(result: StudyResult) -> list[str]:
+    """A few human lines on what the study found."""
+    lo, hi = result.curve.equilibrium
+    eq = f"{lo:.6g} m/s" if lo == hi else f"[{lo:.6g}, {hi:.6g}] m/s (zero-force band)"
+    lines = [f"scene {result.scene.name}: {result.contacts.n} contacts, "
+             f"F_tot = {result.curve.total_force:.6g} N, equilibrium {eq}"]
+    for name, enc in (result.sensors or {}).items():
+        lines.append(f"{name} encoder: {enc['distance_per_count'] * 1e6:.1f} um/count, "
+                     f"{enc['speed_step'] * 1e3:.1f} mm/s per count at {enc['rate']:g} Hz"
+                     + (f", backlash {enc['backlash_speed_step'] * 1e3:.0f} mm/s" if enc["backlash_speed_step"] else ""))
+    if result.allocation is not None:
+        a = result.allocation
+        lines.append(f"allocation ({a.method}): sup error {a.error_sup:.4g} N, bound {a.bound:.4g} N, "
+                     f"gap {a.gap:.2g} N; {a.status.value}")
+    if result.simulation is not None:
+        s = result.simulation
+        lines.append(f"simulation ({s.method}): V({s.t[-1]:g} s) = {s.V[-1]:.6g} m/s after "
+                     f"{s.n_events} events in {s.wall_time * 1e3:.1f} ms; {s.status.value}")
+    return lines
+
+
+def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
+    """Write ``result.json`` and, when the scene's ``[report]`` asks for plots, PNG figures.
+
+    Returns the paths written. All content is rendered before the first file is written.
+    """
+    out = Path(out_dir)
+    payload: dict[str, bytes] = {"result.json": to_json(study_to_dict(result)).encode()}
+    report = result.scene.report
+    if report is not None and report.plots:
+        from . import plots
+
+        payload["force_curve.png"] = plots.figure_png(plots.plot_force_curve(result.curve))
+        if result.simulation is not None:
+            payload["simulation.png"] = plots.figure_png(plots.plot_simulation(result.simulation))
+    return [atomic_write_bytes(out / name, data) for name, data in payload.items()]
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write one text file atomically (CSV, JSON)."""
+    return atomic_write_text(path, text)

@@ -1,0 +1,560 @@
+"""Scene files: TOML documents that declare what a study needs (the only module that reads them).
+
+A scene declares only the stages it needs. ``[contacts]`` is required; every other section
+is optional and its absence leaves its stage out (and the packages only that stage needs
+unimported). All values are SI: m/s, N, kg, s, N s/m.
+
+::
+
+    [scene]          name, description
+    [contacts]       speeds | random, and forces | (mu, normal_loads)        (required)
+    [body]           mass | (inertia, contact_radius); damping; external_force
+    [motors]         speed_limit | speed_limits; lag; rate_limit; compliance
+    [sensors]        rate; wheel_counts_per_rev; wheel_radius; wheel_backlash;
+                     central_counts_per_rev; contact_radius
+    [target]         kind = force_curve | viscosity | friction_fraction | equilibrium_speed,
+                     its parameters, method, strict
+    [simulation]     t_end; v0; method; options; commands
+    [report]         plots; curve_points
+
+:func:`load_scene` validates every value and refuses unknown keys with a suggestion;
+:func:`dumps_scene` writes a scene back (round trip: ``load(dump(s)) == s``).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from ._validation import suggestion
+from .errors import SceneError, SceneFileNotFoundError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+__all__ = [
+    "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec",
+    "SimulationSpec", "ReportSpec", "load_scene", "loads_scene", "dumps_scene",
+]
+
+TARGET_KINDS = ("force_curve", "viscosity", "friction_fraction", "equilibrium_speed")
+PLANNED_SECTIONS = ("estimator", "controller")
+
+
+# -- value checks: each returns the cleaned value or raises SceneError ------------------------
+
+def _fail(where: str, rule: str, value: Any) -> SceneError:
+    return SceneError(f"The {where!r} value in the scene must {rule}. Got {value!r} instead.")
+
+
+def _number(where: str, value: Any, *, low: float | None = None, low_open: bool = False,
+            allow_inf: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _fail(where, "be a number", value)
+    value = float(value)
+    if math.isnan(value) or (not allow_inf and math.isinf(value)):
+        raise _fail(where, "be finite", value)
+    if low is not None and (value <= low if low_open else value < low):
+        raise _fail(where, f"be {'>' if low_open else '>='} {low:g}", value)
+    return value
+
+
+def _integer(where: str, value: Any, *, low: int = 0) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise _fail(where, f"be an integer >= {low}", value)
+    return value
+
+
+def _numbers(where: str, value: Any, *, low: float | None = None) -> tuple[float, ...]:
+    if not isinstance(value, list) or not value:
+        raise _fail(where, "be a non-empty array of numbers", value)
+    return tuple(_number(f"{where}[{i}]", item, low=low) for i, item in enumerate(value))
+
+
+def _scalar_or_numbers(where: str, value: Any, *, low: float | None = None) -> float | tuple[float, ...]:
+    return _numbers(where, value, low=low) if isinstance(value, list) else _number(where, value, low=low)
+
+
+def _text(where: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise _fail(where, "be a string", value)
+    return value
+
+
+def _flag(where: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise _fail(where, "be true or false", value)
+    return value
+
+
+def _table(where: str, value: Any) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise _fail(where, "be a table", value)
+    return value
+
+
+def _check_keys(where: str, table: Mapping[str, Any], allowed: tuple[str, ...]) -> None:
+    for key in table:
+        if key not in allowed:
+            hint = suggestion(key, allowed) or f" Valid keys: {', '.join(allowed)}."
+            raise SceneError(f"Unknown key {key!r} in [{where}].{hint}")
+
+
+def _require(where: str, table: Mapping[str, Any], key: str) -> Any:
+    if key not in table:
+        raise SceneError(f"The [{where}] section needs the key {key!r}.")
+    return table[key]
+
+
+def _exclusive(where: str, table: Mapping[str, Any], *keys: str) -> None:
+    given = [k for k in keys if k in table]
+    if len(given) > 1:
+        raise SceneError(f"In [{where}] give only one of {', '.join(map(repr, keys))}; got {given}.")
+
+
+def _signal(where: str, value: Any, *, vector: bool = False) -> float | dict[str, Any]:
+    """A constant, or a piecewise-constant table ``{times = [...], values = [...]}``."""
+    if not isinstance(value, dict):
+        return _number(where, value)
+    _check_keys(where, value, ("times", "values"))
+    times = _numbers(f"{where}.times", _require(where, value, "times"))
+    if any(b <= a for a, b in zip(times, times[1:])):
+        raise _fail(f"{where}.times", "be strictly increasing", list(times))
+    raw = _require(where, value, "values")
+    if not isinstance(raw, list) or len(raw) != len(times) + 1:
+        raise _fail(f"{where}.values", f"have len(times) + 1 = {len(times) + 1} entries", raw)
+    values: list[Any] = []
+    for i, item in enumerate(raw):
+        values.append(_numbers(f"{where}.values[{i}]", item) if vector else _number(f"{where}.values[{i}]", item))
+    return {"times": times, "values": tuple(values)}
+
+
+# -- sections --------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ContactsSpec:
+    """``[contacts]``: speeds (m/s) and friction magnitudes (N).
+
+    ``speeds`` or ``random = {n, low, high, seed}`` (uniform speeds drawn with NumPy's
+    default generator from ``seed``); ``forces`` (N, scalar or per contact) or ``mu`` and
+    ``normal_loads`` (N) with ``f_i = mu_i N_i``; neither means 1 N each.
+    """
+
+    speeds: tuple[float, ...] | None = None
+    random: dict[str, Any] | None = None
+    forces: float | tuple[float, ...] | None = None
+    mu: float | tuple[float, ...] | None = None
+    normal_loads: float | tuple[float, ...] | None = None
+
+    KEYS = ("speeds", "random", "forces", "mu", "normal_loads")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> ContactsSpec:
+        _check_keys("contacts", table, cls.KEYS)
+        _exclusive("contacts", table, "speeds", "random")
+        _exclusive("contacts", table, "forces", "mu")
+        if "speeds" not in table and "random" not in table:
+            raise SceneError("The [contacts] section needs 'speeds' (m/s) or 'random' = {n, low, high, seed}.")
+        if ("mu" in table) != ("normal_loads" in table):
+            raise SceneError("In [contacts] 'mu' and 'normal_loads' go together (f_i = mu_i * N_i).")
+        random = None
+        if "random" in table:
+            raw = _table("contacts.random", table["random"])
+            _check_keys("contacts.random", raw, ("n", "low", "high", "seed"))
+            random = {"n": _integer("contacts.random.n", _require("contacts.random", raw, "n"), low=1),
+                      "low": _number("contacts.random.low", _require("contacts.random", raw, "low")),
+                      "high": _number("contacts.random.high", _require("contacts.random", raw, "high")),
+                      "seed": _integer("contacts.random.seed", raw.get("seed", 0))}
+            if random["high"] < random["low"]:
+                raise _fail("contacts.random.high", f"be >= low ({random['low']:g})", random["high"])
+        spec = cls(
+            speeds=_numbers("contacts.speeds", table["speeds"]) if "speeds" in table else None,
+            random=random,
+            forces=_scalar_or_numbers("contacts.forces", table["forces"], low=0.0) if "forces" in table else None,
+            mu=_scalar_or_numbers("contacts.mu", table["mu"], low=0.0) if "mu" in table else None,
+            normal_loads=(_scalar_or_numbers("contacts.normal_loads", table["normal_loads"], low=0.0)
+                          if "normal_loads" in table else None),
+        )
+        spec.build()  # lengths, positive total: refused here, at load time
+        return spec
+
+    def build(self):
+        """The :class:`~toolkit.ContactSet` this section declares."""
+        import numpy as np
+
+        from .contacts import ContactSet
+        from .errors import ParameterError
+
+        if self.random is not None:
+            rng = np.random.default_rng(self.random["seed"])
+            speeds = rng.uniform(self.random["low"], self.random["high"], self.random["n"])
+        else:
+            speeds = np.asarray(self.speeds)
+        try:
+            if self.mu is not None:
+                return ContactSet.from_friction(speeds, self.mu, self.normal_loads)
+            forces = self.forces
+            if isinstance(forces, float):
+                forces = np.full(speeds.shape, forces)
+            return ContactSet(speeds, forces)
+        except (ParameterError, ValueError) as error:
+            raise SceneError(f"In [contacts]: {error}") from None
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """``[body]``: moving inertia ``mass`` (kg) or ``inertia`` (kg m^2) with ``contact_radius``
+    (m, ``mass = inertia / contact_radius**2``); ``damping`` (N s/m); ``external_force`` (N,
+    a constant or ``{times, values}`` piecewise constant)."""
+
+    mass: float | None = None
+    inertia: float | None = None
+    contact_radius: float | None = None
+    damping: float = 0.0
+    external_force: float | dict[str, Any] = 0.0
+
+    KEYS = ("mass", "inertia", "contact_radius", "damping", "external_force")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> BodySpec:
+        _check_keys("body", table, cls.KEYS)
+        _exclusive("body", table, "mass", "inertia")
+        if "mass" not in table and "inertia" not in table:
+            raise SceneError("The [body] section needs 'mass' (kg) or 'inertia' (kg m^2) with 'contact_radius' (m).")
+        if "inertia" in table and "contact_radius" not in table:
+            raise SceneError("In [body] 'inertia' needs 'contact_radius' (m): mass = inertia / contact_radius**2.")
+        get = table.get
+        return cls(
+            mass=_number("body.mass", table["mass"], low=0.0, low_open=True) if "mass" in table else None,
+            inertia=_number("body.inertia", table["inertia"], low=0.0, low_open=True) if "inertia" in table else None,
+            contact_radius=(_number("body.contact_radius", table["contact_radius"], low=0.0, low_open=True)
+                            if "contact_radius" in table else None),
+            damping=_number("body.damping", get("damping", 0.0), low=0.0),
+            external_force=_signal("body.external_force", get("external_force", 0.0)),
+        )
+
+    @property
+    def moving_mass(self) -> float:
+        """Moving inertia at the contacts, kg."""
+        if self.mass is not None:
+            return self.mass
+        return self.inertia / self.contact_radius**2  # type: ignore[operator]
+
+
+@dataclass(frozen=True)
+class MotorsSpec:
+    """``[motors]``: ``speed_limit`` (m/s, symmetric) or ``speed_limits = [lo, hi]``; ``lag``
+    (s, first-order time constant); ``rate_limit`` (m/s^2); ``compliance`` ((m/s)/N, speed
+    droop per newton of contact force)."""
+
+    speed_limits: tuple[float, float] = (-math.inf, math.inf)
+    lag: float = 0.0
+    rate_limit: float = math.inf
+    compliance: float = 0.0
+
+    KEYS = ("speed_limit", "speed_limits", "lag", "rate_limit", "compliance")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> MotorsSpec:
+        _check_keys("motors", table, cls.KEYS)
+        _exclusive("motors", table, "speed_limit", "speed_limits")
+        limits: tuple[float, float] = (-math.inf, math.inf)
+        if "speed_limit" in table:
+            v_max = _number("motors.speed_limit", table["speed_limit"], low=0.0, low_open=True)
+            limits = (-v_max, v_max)
+        elif "speed_limits" in table:
+            pair = _numbers("motors.speed_limits", table["speed_limits"])
+            if len(pair) != 2 or not pair[0] < pair[1]:
+                raise _fail("motors.speed_limits", "be [lo, hi] with lo < hi", list(pair))
+            limits = (pair[0], pair[1])
+        return cls(
+            speed_limits=limits,
+            lag=_number("motors.lag", table.get("lag", 0.0), low=0.0),
+            rate_limit=_number("motors.rate_limit", table.get("rate_limit", math.inf), low=0.0,
+                               low_open=True, allow_inf=True),
+            compliance=_number("motors.compliance", table.get("compliance", 0.0), low=0.0),
+        )
+
+
+@dataclass(frozen=True)
+class SensorsSpec:
+    """``[sensors]``: encoders sampled at ``rate`` (Hz). Wheel encoders: ``wheel_counts_per_rev``
+    at ``wheel_radius`` (m) with gearbox ``wheel_backlash`` (m at the contact); the central
+    encoder: ``central_counts_per_rev`` at ``contact_radius`` (m)."""
+
+    rate: float = 50.0
+    wheel_counts_per_rev: float | None = None
+    wheel_radius: float | None = None
+    wheel_backlash: float = 0.0
+    central_counts_per_rev: float | None = None
+    contact_radius: float | None = None
+
+    KEYS = ("rate", "wheel_counts_per_rev", "wheel_radius", "wheel_backlash",
+            "central_counts_per_rev", "contact_radius")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> SensorsSpec:
+        _check_keys("sensors", table, cls.KEYS)
+        for a, b in (("wheel_counts_per_rev", "wheel_radius"), ("central_counts_per_rev", "contact_radius")):
+            if (a in table) != (b in table):
+                raise SceneError(f"In [sensors] {a!r} and {b!r} go together.")
+        def optional(key: str) -> float | None:
+            return _number(f"sensors.{key}", table[key], low=0.0, low_open=True) if key in table else None
+        return cls(
+            rate=_number("sensors.rate", table.get("rate", 50.0), low=0.0, low_open=True),
+            wheel_counts_per_rev=optional("wheel_counts_per_rev"),
+            wheel_radius=optional("wheel_radius"),
+            wheel_backlash=_number("sensors.wheel_backlash", table.get("wheel_backlash", 0.0), low=0.0),
+            central_counts_per_rev=optional("central_counts_per_rev"),
+            contact_radius=optional("contact_radius"),
+        )
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    """``[target]``: what the allocation stage should realize.
+
+    ``kind = "force_curve"``: ``speeds`` (m/s), ``forces`` (N), optional ``weights``;
+    ``kind = "viscosity"``: ``slope`` (N s/m), ``center`` (m/s), ``band`` (m/s, half-width);
+    ``kind = "friction_fraction"``: ``fraction`` (mu/mu0 in [0, 1]), ``band`` (m/s);
+    ``kind = "equilibrium_speed"``: ``speed`` (m/s), ``margin`` (contacts that may fail).
+    ``method`` (optional solver name) and ``strict`` (refuse instead of project).
+    """
+
+    kind: str
+    params: dict[str, Any] = field(default_factory=dict)
+    method: str | None = None
+    strict: bool = False
+
+    _KIND_KEYS = {
+        "force_curve": ("speeds", "forces", "weights"),
+        "viscosity": ("slope", "center", "band"),
+        "friction_fraction": ("fraction", "band"),
+        "equilibrium_speed": ("speed", "margin"),
+    }
+    _REQUIRED = {
+        "force_curve": ("speeds", "forces"),
+        "viscosity": ("slope", "center", "band"),
+        "friction_fraction": ("fraction", "band"),
+        "equilibrium_speed": ("speed",),
+    }
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> TargetSpec:
+        kind = _text("target.kind", _require("target", table, "kind"))
+        if kind not in cls._KIND_KEYS:
+            raise SceneError(f"The 'target.kind' value in the scene must be one of {list(TARGET_KINDS)}. "
+                             f"Got {kind!r} instead.{suggestion(kind, TARGET_KINDS)}")
+        _check_keys("target", table, ("kind", "method", "strict", *cls._KIND_KEYS[kind]))
+        for key in cls._REQUIRED[kind]:
+            _require("target", table, key)
+        params: dict[str, Any] = {}
+        for key in cls._KIND_KEYS[kind]:
+            if key not in table:
+                continue
+            where = f"target.{key}"
+            if key in ("speeds", "forces"):
+                params[key] = _numbers(where, table[key])
+            elif key == "weights":
+                params[key] = _numbers(where, table[key], low=0.0)
+            elif key == "margin":
+                params[key] = _integer(where, table[key])
+            elif key == "band":
+                params[key] = _scalar_or_numbers(where, table[key])
+            else:
+                params[key] = _number(where, table[key])
+        return cls(kind=kind, params=params,
+                   method=_text("target.method", table["method"]) if "method" in table else None,
+                   strict=_flag("target.strict", table.get("strict", False)))
+
+
+@dataclass(frozen=True)
+class SimulationSpec:
+    """``[simulation]``: ``t_end`` (s), ``v0`` (m/s), ``method`` (default ``"exact"``),
+    ``options`` (a table passed to :func:`toolkit.simulate`), ``commands`` (piecewise-constant
+    contact-speed commands ``{times, values}``, each value a list of n speeds in m/s)."""
+
+    t_end: float
+    v0: float = 0.0
+    method: str = "exact"
+    options: dict[str, Any] = field(default_factory=dict)
+    commands: dict[str, Any] | None = None
+
+    KEYS = ("t_end", "v0", "method", "options", "commands")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> SimulationSpec:
+        _check_keys("simulation", table, cls.KEYS)
+        commands = None
+        if "commands" in table:
+            commands = _signal("simulation.commands", _table("simulation.commands", table["commands"]), vector=True)
+        return cls(
+            t_end=_number("simulation.t_end", _require("simulation", table, "t_end"), low=0.0, low_open=True),
+            v0=_number("simulation.v0", table.get("v0", 0.0)),
+            method=_text("simulation.method", table.get("method", "exact")),
+            options=dict(_table("simulation.options", table.get("options", {}))),
+            commands=commands,  # type: ignore[arg-type]
+        )
+
+
+@dataclass(frozen=True)
+class ReportSpec:
+    """``[report]``: ``plots`` (write PNG figures; needs matplotlib), ``curve_points`` (samples of
+    the force-speed curve in the JSON output)."""
+
+    plots: bool = True
+    curve_points: int = 801
+
+    KEYS = ("plots", "curve_points")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> ReportSpec:
+        _check_keys("report", table, cls.KEYS)
+        return cls(plots=_flag("report.plots", table.get("plots", True)),
+                   curve_points=_integer("report.curve_points", table.get("curve_points", 801), low=2))
+
+
+_SECTIONS: dict[str, Callable[[dict[str, Any]], Any]] = {
+    "contacts": ContactsSpec.parse, "body": BodySpec.parse, "motors": MotorsSpec.parse,
+    "sensors": SensorsSpec.parse, "target": TargetSpec.parse, "simulation": SimulationSpec.parse,
+    "report": ReportSpec.parse,
+}
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated, frozen scene. Absent sections are ``None`` and their stages are left out.
+
+    Attributes
+    ----------
+    name, description : str
+    contacts : ContactsSpec
+    body, motors, sensors, target, simulation, report : section spec or None
+    """
+
+    name: str
+    contacts: ContactsSpec
+    description: str = ""
+    body: BodySpec | None = None
+    motors: MotorsSpec | None = None
+    sensors: SensorsSpec | None = None
+    target: TargetSpec | None = None
+    simulation: SimulationSpec | None = None
+    report: ReportSpec | None = None
+
+    @property
+    def stages(self) -> tuple[str, ...]:
+        """The stages this scene declares, in the order ``run`` executes them."""
+        order = ("sensors", "target", "simulation", "report")
+        return ("curve",) + tuple(s for s in order if getattr(self, s) is not None)
+
+    def contact_set(self):
+        """The declared :class:`~toolkit.ContactSet`."""
+        return self.contacts.build()
+
+
+def loads_scene(text: str, *, name: str = "scene") -> Scene:
+    """Parse and validate a scene from TOML text; see :func:`load_scene`."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"The scene {name!r} is not valid TOML: {error}.") from None
+    allowed = ("scene", *_SECTIONS)
+    for key, value in data.items():
+        if key in PLANNED_SECTIONS:
+            raise SceneError(f"The [{key}] section is not supported by this version of the toolkit; "
+                             f"remove it. Supported sections: {', '.join(allowed)}.")
+        if key not in allowed:
+            hint = suggestion(key, allowed) or f" Valid sections: {', '.join(allowed)}."
+            raise SceneError(f"Unknown section [{key}] in scene {name!r}.{hint}")
+        if not isinstance(value, dict):
+            raise SceneError(f"[{key}] in scene {name!r} must be a table (a [section]), got {value!r}.")
+    meta = data.get("scene", {})
+    _check_keys("scene", meta, ("name", "description"))
+    if "contacts" not in data:
+        raise SceneError(f"The scene {name!r} needs a [contacts] section.")
+    sections = {key: _SECTIONS[key](value) for key, value in data.items() if key in _SECTIONS}
+    if "simulation" in sections and "body" not in sections:
+        raise SceneError("A [simulation] section needs a [body] section (the moving inertia).")
+    return Scene(name=_text("scene.name", meta.get("name", name)),
+                 description=_text("scene.description", meta.get("description", "")), **sections)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read, validate and freeze a scene file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A TOML scene file (see the module docstring for the sections; SI units).
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    SceneFileNotFoundError
+        The file does not exist.
+    SceneError
+        Invalid TOML, an unknown section or key (with a suggestion), or a bad value.
+    """
+    file = Path(path)
+    if not file.is_file():
+        raise SceneFileNotFoundError(f"The scene file {str(file)!r} does not exist.")
+    return loads_scene(file.read_text(encoding="utf-8"), name=file.stem)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
+def _section_table(spec: Any) -> dict[str, Any]:
+    table: dict[str, Any] = {}
+    defaults = type(spec)() if type(spec) in (MotorsSpec, SensorsSpec, ReportSpec) else None
+    for item in fields(spec):
+        if not item.init:
+            continue
+        value = getattr(spec, item.name)
+        if value is None or (defaults is not None and value == getattr(defaults, item.name)):
+            continue
+        if isinstance(value, float) and math.isinf(value):
+            continue
+        table[item.name] = _plain(value)
+    return table
+
+
+def dumps_scene(scene: Scene) -> str:
+    """Write a scene as TOML text that :func:`loads_scene` reads back to an equal scene."""
+    import tomli_w
+
+    data: dict[str, Any] = {"scene": {"name": scene.name}}
+    if scene.description:
+        data["scene"]["description"] = scene.description
+    for key in _SECTIONS:
+        spec = getattr(scene, key)
+        if spec is None:
+            continue
+        if key == "target":
+            table = {"kind": spec.kind, **_plain(spec.params), "strict": spec.strict}
+            if spec.method is not None:
+                table["method"] = spec.method
+        elif key == "motors":
+            table = _section_table(spec)
+            limits = table.pop("speed_limits", None)
+            if limits is not None and all(math.isfinite(x) for x in limits):
+                table["speed_limits"] = limits
+        else:
+            table = _section_table(spec)
+        data[key] = table
+    return tomli_w.dumps(data)

@@ -17,6 +17,7 @@ from .errors import (
     ToolkitError,
 )
 from .plant import Motors, PiecewiseConstant, Plant
+from .plots import plot_force_curve, plot_precision, plot_simulation
 from .scene import Scene, dumps_scene, load_scene
 from .sensors import Encoder
 from .simulation import Budget, Event, SimulationResult, Status, simulate
@@ -31,6 +32,8 @@ __all__ = [
     "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "Status", "Budget", "Event",
     # sensors
     "Encoder",
+    # plots (matplotlib is imported when one is drawn)
+    "plot_force_curve", "plot_simulation", "plot_precision",
     # scenes and studies
     "Scene", "load_scene", "dumps_scene", "StudyResult", "run_study",
     # errors

@@ -24,7 +24,7 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
 from __future__ import annotations
 
 import math
-import sys
+import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -32,11 +32,6 @@ from typing import Any
 
 from ._validation import suggestion
 from .errors import SceneError, SceneFileNotFoundError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - exercised on Python 3.10 only
-    import tomli as tomllib
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec",

@@ -1,0 +1,119 @@
+"""Allocation: choose contact speeds that realize a target force-speed behaviour.
+
+One verb, :func:`allocate`, over small frozen target objects
+(:class:`ForceCurve`, :class:`Viscosity`, :class:`FrictionFraction`,
+:class:`EquilibriumSpeed`). Methods, one module each:
+
+- ``"quantile"`` (:mod:`._quantile`): the exact construction for equal magnitudes sharing
+  one speed box (PHYSICS.md section 6), with its closed-form optimal error.
+- ``"milp"`` (:mod:`._milp`): a mixed-integer program (cvxpy + HiGHS) for unequal
+  magnitudes, per-contact boxes, rate limits, fixed/failed and liftable contacts.
+- ``"casadi"`` (:mod:`._smooth`): compliant contacts and continuous distributions.
+
+Every result reports its error (evaluated on the achieved contacts), a certified lower
+bound on the best achievable error, and the gap.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from .._validation import check_option
+from ..contacts import ContactDistribution
+from ._problem import (
+    AllocationProblem,
+    AllocationResult,
+    AllocationStatus,
+    Projection,
+    build_problem,
+)
+from .targets import EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
+
+__all__ = ["allocate", "AllocationProblem", "AllocationResult", "AllocationStatus",
+           "Projection", "ForceCurve", "Viscosity", "FrictionFraction", "EquilibriumSpeed",
+           "METHODS", "choose_method"]
+
+METHODS = ("quantile", "milp", "casadi")
+
+
+def choose_method(problem: AllocationProblem) -> str:
+    """The method ``allocate(method=None)`` uses for ``problem``.
+
+    ``"casadi"`` for a continuous :class:`~toolkit.contacts.ContactDistribution`;
+    ``"quantile"`` when every contact has the same magnitude and the same speed box and
+    none is fixed, failed or liftable; ``"milp"`` otherwise.
+    """
+    if isinstance(problem.contacts, ContactDistribution):
+        return "casadi"
+    from ._quantile import quantile_applies
+
+    return "quantile" if quantile_applies(problem) else "milp"
+
+
+def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit: Any = None,
+             dt: Any = None, fixed: Any = None, failed: Any = None, liftable: Any = None,
+             method: str | None = None, strict: bool = False,
+             time_limit: float = 30.0) -> AllocationResult:
+    """Choose contact speeds that realize ``target`` as closely as possible (sup norm).
+
+    Parameters
+    ----------
+    target : ForceCurve, Viscosity, FrictionFraction or EquilibriumSpeed
+        The requested force-speed behaviour.
+    contacts : ContactSet
+        Friction magnitudes ``f_i`` (N) and current speeds ``v0_i`` (m/s), shape (n,). A
+        :class:`~toolkit.contacts.ContactDistribution` goes to the ``"casadi"`` method.
+    speed_limits : pair of (float or array_like of shape (n,)), m/s, optional
+        Motor limits ``(lo, hi)``, per contact or shared; possibly asymmetric.
+    rate_limit : float or array_like of shape (n,), m/s^2, optional
+        Largest ``|dv_i/dt|``; with ``dt`` (s) each contact may move at most
+        ``rate_limit * dt`` from its current speed.
+    dt : float, s, optional
+    fixed, failed : boolean mask of shape (n,) or list of indices, optional
+        Contacts that keep their current speed (and still push).
+    liftable : boolean mask of shape (n,) or list of indices, optional
+        Contacts that may be lifted (magnitude 0).
+    method : {"quantile", "milp", "casadi"} or None
+        None picks one (:func:`choose_method`); the result says which.
+    strict : bool
+        Refuse unrealizable targets with :class:`~toolkit.errors.ParameterError` instead of
+        projecting them.
+    time_limit : float, s
+        Budget for the MILP; past it the best allocation is returned with its gap.
+
+    Returns
+    -------
+    AllocationResult
+
+    Examples
+    --------
+    >>> from toolkit import ContactSet
+    >>> result = allocate(FrictionFraction(0.4, 0.35), ContactSet([0.0] * 10),
+    ...                   speed_limits=(-0.35, 0.35))
+    >>> sorted(result.speeds.tolist()) == [-0.35] * 7 + [0.35] * 3
+    True
+    """
+    start = time.perf_counter()
+    if method is not None:
+        check_option(method, "method", "allocate", METHODS)
+    problem = build_problem(target, contacts, speed_limits=speed_limits, rate_limit=rate_limit,
+                            dt=dt, fixed=fixed, failed=failed, liftable=liftable, strict=strict,
+                            time_limit=time_limit)
+    chosen = method if method is not None else choose_method(problem)
+    if chosen == "casadi":
+        from ._smooth import allocate_smooth
+
+        return allocate_smooth(problem)
+    if isinstance(problem.contacts, ContactDistribution):
+        from ..errors import ParameterError, parameter_message
+
+        raise ParameterError(parameter_message(
+            "method", "allocate", "be 'casadi' (or None) for a ContactDistribution", chosen))
+    if chosen == "quantile":
+        from ._quantile import allocate_quantile
+
+        return allocate_quantile(problem, start)
+    from ._milp import allocate_milp
+
+    return allocate_milp(problem, start)

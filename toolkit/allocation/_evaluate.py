@@ -1,0 +1,243 @@
+"""Exact error evaluation of an allocation and projection of unrealizable targets (private).
+
+Error definitions (used for every result, whatever the method):
+
+- The target is the piecewise-linear curve through its samples; at a repeated speed it is
+  the interval between the two forces (a vertical step).
+- The achieved force is the staircase of the achieved :class:`~toolkit.contacts.ContactSet`;
+  at a contact speed it is the interval :meth:`~toolkit.contacts.ContactSet.force_bounds`.
+- ``error_sup = sup_V dist(target(V), achieved(V))`` over the band, with ``dist`` the
+  distance between the two intervals (0 when they meet).
+- ``error_l1 = integral |achieved - target| dV`` over the band.
+
+Both are computed exactly: between consecutive breakpoints (target samples and contact
+speeds) the achieved force is a constant ``c`` and the target is linear, so the sup over the
+open piece is ``max(|T(x0+) - c|, |T(x1-) - c|)`` and the integral of ``|T - c|`` is a
+trapezoid or two triangles. No sampling and no quadrature error.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..contacts import ContactSet
+from ..errors import ParameterError, parameter_message
+from .targets import EquilibriumSpeed, ForceCurve
+
+if TYPE_CHECKING:
+    from ._problem import AllocationProblem, Projection
+
+__all__ = ["evaluate_errors", "abs_integral", "realizable_curve", "failure_margin",
+           "margin_requirement"]
+
+
+def abs_integral(d0: np.ndarray, d1: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """Exact ``integral |d(u)| du`` over pieces where ``d`` is linear from ``d0`` to ``d1``.
+
+    Parameters
+    ----------
+    d0, d1 : ndarray of shape (m,)
+        Values at the ends of each piece.
+    width : ndarray of shape (m,)
+        Lengths of the pieces (>= 0).
+    """
+    a0, a1 = np.abs(d0), np.abs(d1)
+    same = d0 * d1 >= 0
+    total = a0 + a1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        crossing = np.where(total > 0, (d0 * d0 + d1 * d1) / (2.0 * np.where(total > 0, total, 1.0)),
+                            0.0)
+    return width * np.where(same, 0.5 * total, crossing)
+
+
+def _interval_distance(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray,
+                       hi2: np.ndarray) -> np.ndarray:
+    return np.maximum(0.0, np.maximum(lo1 - hi2, lo2 - hi1))
+
+
+def evaluate_errors(curve: ForceCurve, contacts: ContactSet) -> tuple[float, float]:
+    """``(error_sup, error_l1)`` of ``contacts`` against ``curve`` over its band (N, N m/s).
+
+    See the module docstring for the definitions; both are exact. With ``curve.weights``,
+    ``error_l1`` is ``sum_k weights[k] * dist(target_k, achieved(V_k))`` instead of the
+    integral. Cost ``O((n + k) log(n + k))`` for ``n`` contacts and ``k`` samples.
+    """
+    xs, ys = curve.speeds, curve.forces
+    lo, hi = curve.band
+    stairs = contacts.staircase()
+    levels = stairs.levels
+    inner = levels[(levels > lo) & (levels < hi)]
+    points = np.unique(np.concatenate((xs, inner)))
+    # Pointwise distance at every breakpoint (target interval vs achieved interval).
+    t_left, t_right = curve.value_left(points), curve.value_right(points)
+    a_lo, a_hi = contacts.force_bounds(points)
+    point_err = _interval_distance(np.minimum(t_left, t_right), np.maximum(t_left, t_right),
+                                   a_lo, a_hi)
+    sup = float(point_err.max())
+    l1 = 0.0
+    if points.size >= 2:
+        x0, x1 = points[:-1], points[1:]
+        plateau = stairs.plateaus[np.searchsorted(levels, x0, side="right")]
+        d0 = curve.value_right(x0) - plateau
+        d1 = curve.value_left(x1) - plateau
+        sup = max(sup, float(np.max(np.maximum(np.abs(d0), np.abs(d1)))))
+        l1 = float(np.sum(abs_integral(d0, d1, x1 - x0)))
+    if curve.weights is not None:
+        a_lo, a_hi = contacts.force_bounds(xs)
+        l1 = float(np.sum(curve.weights * _interval_distance(ys, ys, a_lo, a_hi)))
+    return sup, l1
+
+
+# -- robustness of an equilibrium ---------------------------------------------------------------
+def margin_requirement(forces: np.ndarray, margin: int) -> float:
+    """``2 * (sum of the margin largest magnitudes)`` (N): the slack ``m`` failures can eat."""
+    if margin <= 0:
+        return 0.0
+    return 2.0 * float(np.sum(np.sort(np.asarray(forces))[::-1][:margin]))
+
+
+def failure_margin(contacts: ContactSet, speed: float) -> int:
+    """Largest ``m`` with ``W >= |U - L| + 2 * (sum of the m largest magnitudes)``.
+
+    ``W``, ``L``, ``U``: total magnitude at, below and above ``speed``. Any ``m`` contacts
+    may then stop at any speed and ``speed`` stays in the equilibrium set. Returns -1 when
+    ``speed`` is not even an equilibrium (``W < |U - L|``).
+    """
+    below, above, at = (float(x) for x in contacts._parts(speed))  # noqa: SLF001
+    slack = at - abs(above - below)
+    tol = contacts.tie_tolerance
+    if slack < -tol:
+        return -1
+    ordered = np.sort(contacts.forces[contacts.forces > 0])[::-1]
+    used = 2.0 * np.cumsum(ordered)
+    return int(np.searchsorted(used, slack + tol, side="right"))
+
+
+# -- projection onto the realizable set ---------------------------------------------------------
+def _insert_crossings(xs: np.ndarray, ys: np.ndarray, level: float
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    d0, d1 = ys[:-1] - level, ys[1:] - level
+    cross = np.flatnonzero((d0 * d1 < 0) & (xs[1:] > xs[:-1]))
+    if cross.size == 0:
+        return xs, ys
+    share = d0[cross] / (d0[cross] - d1[cross])
+    new_x = xs[cross] + share * (xs[cross + 1] - xs[cross])
+    return (np.insert(xs, cross + 1, new_x), np.insert(ys, cross + 1, np.full(cross.size, level)))
+
+
+def _trapezoid_weights(xs: np.ndarray) -> np.ndarray:
+    widths = np.diff(xs)
+    weights = np.zeros_like(xs)
+    weights[:-1] += 0.5 * widths
+    weights[1:] += 0.5 * widths
+    floor = 1e-9 * max(float(weights.max()), 1.0)
+    return np.maximum(weights, floor)
+
+
+def _refuse(name: str, rule: str, value: Any) -> ParameterError:
+    return ParameterError(parameter_message(name, "allocate", rule + " (strict=True)", value))
+
+
+def _reach(problem: AllocationProblem) -> tuple[float, float]:
+    lo, hi = problem.boxes()
+    return float(np.min(lo)), float(np.max(hi))
+
+
+def realizable_curve(problem: AllocationProblem) -> tuple[ForceCurve, Projection | None]:
+    """Reduce the problem's target to a realizable curve, projecting or refusing.
+
+    Rules (each refused with ``strict=True``, otherwise projected and listed in
+    ``Projection.reasons``):
+
+    - NaN forces: the samples are dropped (a curve with no finite sample is always refused);
+      ``+-inf`` forces are clipped to ``+-F_tot`` ("non-finite values").
+    - ``|F| > F_tot``: clipped to ``+-F_tot``, with the crossing speeds inserted so the
+      clipped curve is exactly the pointwise clip of the piecewise-linear one.
+    - Increasing anywhere: replaced by the weighted isotonic (non-increasing) regression of
+      the samples (trapezoid weights), ``scipy.optimize.isotonic_regression``.
+    - :class:`EquilibriumSpeed` with ``speed`` beyond every contact's reach: moved to the
+      nearest reachable speed.
+
+    A band that extends beyond the speeds the contacts can reach is *not* changed (the
+    force there can only be ``+-F_act``); it is refused with ``strict=True`` and otherwise
+    its forced error enters the certified bound.
+    """
+    from ._problem import Projection
+
+    total = problem.total_force
+    reasons: list[str] = []
+    target = problem.target
+    reach = _reach(problem) if problem.n else (-np.inf, np.inf)
+    if isinstance(target, EquilibriumSpeed):
+        speed = target.speed
+        if not reach[0] <= speed <= reach[1]:
+            if problem.strict:
+                raise _refuse("target", f"ask for an equilibrium speed the contacts can reach "
+                              f"[{reach[0]:g}, {reach[1]:g}] m/s", speed)
+            speed = float(np.clip(speed, *reach))
+            reasons.append("equilibrium speed beyond the limits")
+        limits = reach if np.all(np.isfinite(reach)) else None
+        if limits is None and problem.n:
+            v0 = problem.contacts.speeds
+            limits = (min(float(v0.min()), speed) - 1.0, max(float(v0.max()), speed) + 1.0)
+        requested = target.to_curve(total, limits)
+        curve = EquilibriumSpeed(speed, target.margin).to_curve(total, limits)
+        if not reasons:
+            return curve, None
+        # The two steps differ by 2 F_tot between the requested and the projected speed.
+        return curve, Projection(requested, curve, 2.0 * total,
+                                 2.0 * total * abs(speed - target.speed), tuple(reasons))
+    requested = target.to_curve(total, None)
+    lo, hi = requested.band
+    if problem.strict and problem.n and (lo < reach[0] or hi > reach[1]):
+        raise _refuse("target", f"have its band of speeds within the contacts' reach "
+                      f"[{reach[0]:g}, {reach[1]:g}] m/s", (lo, hi))
+    xs, ys = requested.speeds, requested.forces
+    nan = np.isnan(ys)
+    if np.all(nan):
+        raise ParameterError(parameter_message(
+            "target", "allocate", "have at least one finite force sample", ys.tolist()))
+    if np.any(~np.isfinite(ys)):
+        if problem.strict:
+            raise _refuse("target", "have finite forces",
+                          float(ys[~np.isfinite(ys)][0]))
+        reasons.append("non-finite values")
+        xs, ys = xs[~nan], ys[~nan]
+        ys = np.where(np.isinf(ys), np.sign(ys) * total, ys)
+    if np.any(np.abs(ys) > total):
+        if problem.strict:
+            raise _refuse("target", f"stay within +-F_tot = +-{total:g} N",
+                          float(ys[np.argmax(np.abs(ys))]))
+        reasons.append("forces beyond +-F_tot")
+        for level in (total, -total):
+            xs, ys = _insert_crossings(xs, ys, level)
+        ys = np.clip(ys, -total, total)
+    if np.any(np.diff(ys) > 0):
+        if problem.strict:
+            i = int(np.flatnonzero(np.diff(ys) > 0)[0])
+            raise _refuse("target", "be non-increasing in speed (a staircase of Coulomb "
+                          "contacts can only decrease)",
+                          f"F={ys[i]:g} N at V={xs[i]:g} m/s rising to {ys[i + 1]:g} N "
+                          f"at V={xs[i + 1]:g} m/s")
+        from scipy.optimize import isotonic_regression
+
+        reasons.append("increasing")
+        ys = isotonic_regression(ys, weights=_trapezoid_weights(xs), increasing=False).x
+    if not reasons:
+        return requested, None
+    curve = ForceCurve(xs, ys, requested.weights if xs.size == requested.speeds.size else None)
+    # Distances measured at the projected curve's samples (a superset of the finite
+    # requested samples), where both curves are linear in between.
+    with np.errstate(invalid="ignore"):
+        req_left, req_right = requested.value_left(xs), requested.value_right(xs)
+    diff = np.where(np.isnan(req_left), 0.0, req_left - ys)
+    sup = float(np.max(np.abs(np.where(np.isnan(requested.forces), 0.0,
+                                       requested.forces - curve.value_left(requested.speeds)))))
+    sup = max(sup, float(np.max(np.abs(diff))))
+    diff_r = np.where(np.isnan(req_right), 0.0, req_right - ys)
+    finite = np.isfinite(diff) & np.isfinite(diff_r)
+    l1 = float(np.sum(abs_integral(diff_r[:-1], diff[1:], np.diff(xs)))) if np.all(finite) \
+        else float("inf")
+    return curve, Projection(requested, curve, sup, l1, tuple(reasons))

@@ -1,0 +1,417 @@
+"""The allocation problem and result shared by every allocation method (private).
+
+:func:`build_problem` turns the arguments of :func:`toolkit.allocation.allocate` into a
+validated, frozen :class:`AllocationProblem`: per-contact speed boxes (motor limits
+intersected with what the rate limit allows from the current speeds), the masks of fixed,
+failed and liftable contacts, and the target reduced to a realizable
+:class:`~toolkit.allocation.targets.ForceCurve` (with the :class:`Projection` that got it
+there). Every method returns an :class:`AllocationResult` built by :func:`make_result`,
+which measures the errors by evaluating the achieved contacts, never by trusting a solver.
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, as_float_array
+from ..contacts import ContactDistribution, ContactSet
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+from .targets import EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
+
+__all__ = ["AllocationProblem", "AllocationResult", "AllocationStatus", "Projection",
+           "build_problem", "make_result"]
+
+_OWNER = "allocate"
+_TARGET_TYPES = (ForceCurve, Viscosity, FrictionFraction, EquilibriumSpeed)
+
+
+class AllocationStatus(enum.Enum):
+    """Outcome of an allocation; the value is the message shown to users."""
+
+    OPTIMAL = "optimal: the error equals the certified lower bound (gap within tolerance)"
+    FEASIBLE_WITH_GAP = ("feasible: the error exceeds the certified lower bound by the "
+                         "reported gap")
+    PROJECTED = ("the target was not realizable; it was projected onto the realizable set "
+                 "(see 'projection') and the projection was solved to optimality")
+    INFEASIBLE = "infeasible: no allocation within the constraints meets the requirement"
+    TIME_LIMIT = "the time limit was reached; the best allocation found is returned with its gap"
+    SOLVER_ERROR = "the numerical back end failed; see 'message'"
+
+
+@dataclass(frozen=True, eq=False)
+class Projection:
+    """How an unrealizable target was changed before solving.
+
+    Attributes
+    ----------
+    requested : ForceCurve
+        The target as requested (sampled), possibly with non-finite values.
+    curve : ForceCurve
+        The realizable curve that was solved (non-increasing, finite, within ``+-F_tot``).
+    distance_sup : float, N
+        ``max_k |requested_k - curve_k|`` over the requested samples (``inf`` when a
+        requested value is infinite; dropped NaN samples do not count).
+    distance_l1 : float, N m/s
+        Trapezoid integral of ``|requested - curve|`` over the finite samples.
+    reasons : tuple of str
+        What was wrong, e.g. ``"forces beyond +-F_tot"``, ``"increasing"``.
+    """
+
+    requested: ForceCurve
+    curve: ForceCurve
+    distance_sup: float
+    distance_l1: float
+    reasons: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary."""
+        return {"reasons": list(self.reasons), "distance_sup": _json_float(self.distance_sup),
+                "distance_l1": _json_float(self.distance_l1),
+                "speeds": self.curve.speeds.tolist(), "forces": self.curve.forces.tolist()}
+
+
+def _json_float(value: float) -> float | str:
+    return float(value) if np.isfinite(value) else str(value)
+
+
+@dataclass(frozen=True, eq=False)
+class AllocationProblem:
+    """A validated allocation problem (built by :func:`build_problem`).
+
+    Attributes
+    ----------
+    target : ForceCurve, Viscosity, FrictionFraction or EquilibriumSpeed
+        The request as given.
+    contacts : ContactSet or ContactDistribution
+        Friction magnitudes ``f_i`` (N) and current speeds ``v0_i`` (m/s).
+    lower, upper : ndarray of shape (n,), m/s
+        Motor speed limits per contact (``-inf``/``inf`` when unlimited).
+    max_change : ndarray of shape (n,) or None, m/s
+        Largest allowed ``|v_i - v0_i|`` (``rate_limit * dt``), or None.
+    fixed, failed, liftable : ndarray of shape (n,), bool
+        Fixed and failed contacts keep their current speeds and still push; liftable
+        contacts may be set to magnitude 0 (a fixed or failed contact is never lifted).
+    strict : bool
+        Refuse unrealizable targets instead of projecting them.
+    time_limit : float, s
+        Wall-clock budget for iterative solvers.
+    curve : ForceCurve
+        The realizable target curve the errors are measured against.
+    projection : Projection or None
+        How the request was changed to get ``curve`` (None if it was realizable).
+    notes : tuple of str
+        Non-fatal adjustments (e.g. a contact whose box was empty).
+    """
+
+    target: Any
+    contacts: Any
+    lower: np.ndarray
+    upper: np.ndarray
+    max_change: np.ndarray | None
+    fixed: np.ndarray
+    failed: np.ndarray
+    liftable: np.ndarray
+    strict: bool
+    time_limit: float
+    curve: ForceCurve
+    projection: Projection | None = None
+    notes: tuple[str, ...] = ()
+
+    @property
+    def n(self) -> int:
+        """Number of discrete contacts (0 for a continuous distribution)."""
+        return int(self.contacts.n) if isinstance(self.contacts, ContactSet) else 0
+
+    @property
+    def forces(self) -> np.ndarray:
+        """Friction magnitudes ``f_i`` (N), shape (n,)."""
+        return self.contacts.forces
+
+    @property
+    def total_force(self) -> float:
+        """``F_tot`` with every contact down, N."""
+        return float(self.contacts.total_force)
+
+    def boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-contact allowed speeds ``[lo_i, hi_i]`` (m/s), each of shape (n,).
+
+        Motor limits intersected with ``v0_i +- max_change_i``; fixed and failed contacts
+        get ``[v0_i, v0_i]``. A box that would be empty (current speed outside the limits
+        and too far to reach them) becomes the reachable point nearest to the limits.
+        """
+        v0 = self.contacts.speeds
+        lo, hi = self.lower.copy(), self.upper.copy()
+        if self.max_change is not None:
+            reach_lo, reach_hi = v0 - self.max_change, v0 + self.max_change
+            lo2, hi2 = np.maximum(lo, reach_lo), np.minimum(hi, reach_hi)
+            empty = lo2 > hi2
+            nearest = np.clip(np.clip(v0, self.lower, self.upper), reach_lo, reach_hi)
+            lo = np.where(empty, nearest, lo2)
+            hi = np.where(empty, nearest, hi2)
+        frozen = self.fixed | self.failed
+        lo = np.where(frozen, v0, lo)
+        hi = np.where(frozen, v0, hi)
+        return lo, hi
+
+    @property
+    def can_lift(self) -> np.ndarray:
+        """Contacts that may be lifted: liftable and neither fixed nor failed, shape (n,)."""
+        return self.liftable & ~self.fixed & ~self.failed
+
+
+@dataclass(frozen=True, eq=False)
+class AllocationResult:
+    """What an allocation achieved, with a certificate of how good it is.
+
+    Attributes
+    ----------
+    speeds : ndarray of shape (n,), m/s
+        Commanded contact speeds (lifted contacts keep their current speed).
+    contacts : ContactSet
+        The achieved contacts; lifted ones have magnitude 0.
+    active : ndarray of shape (n,), bool
+        False for lifted contacts.
+    error_sup : float, N
+        ``sup_V dist(F_target(V), F_achieved(V))`` over the target's band, where at a
+        contact speed the achieved force is the interval ``force_bounds(V)`` (and at a
+        vertical step of the target the target is an interval): the distance between the
+        target value and that interval. Computed exactly from the achieved contacts.
+    error_l1 : float, N m/s
+        ``integral |F_achieved - F_target| dV`` over the band, exact (or the weighted sum
+        at the samples when the target curve has weights).
+    bound : float, N
+        Certified lower bound on the best achievable ``error_sup`` under the constraints.
+    gap : float, N
+        ``error_sup - bound``.
+    method : str
+        The solver that produced the speeds.
+    status : AllocationStatus
+    message : str
+        Human explanation (status message plus details).
+    wall_time : float, s
+    projection : Projection or None
+    curve : ForceCurve or None
+        The realizable target curve the errors are measured against.
+    extra : dict
+        Method-specific JSON-able details (e.g. solver statistics).
+    """
+
+    speeds: np.ndarray
+    contacts: Any
+    active: np.ndarray
+    error_sup: float
+    error_l1: float
+    bound: float
+    gap: float
+    method: str
+    status: AllocationStatus
+    message: str
+    wall_time: float
+    projection: Projection | None = None
+    curve: ForceCurve | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("speeds", "active"):
+            array = np.array(getattr(self, name))
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary: ``speeds``, ``error_sup``, ``error_l1``, ``bound``, ``gap``,
+        ``method``, ``status``, ``wall_time``, ``message``, ``active``, ``forces``,
+        ``projection``, ``extra``."""
+        return {
+            "speeds": self.speeds.tolist(),
+            "active": self.active.tolist(),
+            "forces": np.asarray(getattr(self.contacts, "forces", [])).tolist(),
+            "error_sup": _json_float(self.error_sup),
+            "error_l1": _json_float(self.error_l1),
+            "bound": _json_float(self.bound),
+            "gap": _json_float(self.gap),
+            "method": self.method,
+            "status": self.status.name,
+            "message": self.message,
+            "wall_time": float(self.wall_time),
+            "projection": None if self.projection is None else self.projection.to_dict(),
+            "extra": self.extra,
+        }
+
+
+# -- building ----------------------------------------------------------------------------------
+def _per_contact(value: Any, name: str, n: int) -> np.ndarray:
+    array = as_float_array(value, name, _OWNER, finite=False)
+    if np.any(np.isnan(array)):
+        raise ParameterError(parameter_message(name, _OWNER, "not contain NaN", value))
+    if array.size == 1:
+        array = np.full(n, float(array[0]))
+    if array.size != n:
+        raise ParameterError(parameter_message(
+            name, _OWNER, f"be a scalar or have one entry per contact ({n})",
+            f"an array of length {array.size}"))
+    return array
+
+
+def _mask(value: Any, name: str, n: int) -> np.ndarray:
+    if value is None:
+        return np.zeros(n, dtype=bool)
+    array = np.asarray(value)
+    if array.dtype != bool:
+        # Accept index lists as well as boolean masks.
+        try:
+            index = np.asarray(value, dtype=int).ravel()
+        except (TypeError, ValueError):
+            raise ParameterTypeError(parameter_message(
+                name, _OWNER, "be a boolean mask or a list of contact indices", value)) from None
+        if np.any((index < 0) | (index >= n)):
+            raise ParameterError(parameter_message(
+                name, _OWNER, f"hold contact indices in [0, {n - 1}]", value))
+        mask = np.zeros(n, dtype=bool)
+        mask[index] = True
+        return mask
+    if array.shape != (n,):
+        raise ParameterError(parameter_message(
+            name, _OWNER, f"be a boolean mask of shape ({n},)", f"shape {array.shape}"))
+    return array.copy()
+
+
+def _limits(speed_limits: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
+    if speed_limits is None:
+        return np.full(n, -np.inf), np.full(n, np.inf)
+    if isinstance(speed_limits, (str, bytes)) or not hasattr(speed_limits, "__len__") \
+            or len(speed_limits) != 2:
+        raise ParameterTypeError(parameter_message(
+            "speed_limits", _OWNER, "be a pair (lo, hi) of scalars or per-contact arrays (m/s)",
+            speed_limits))
+    lower = _per_contact(speed_limits[0], "speed_limits", n)
+    upper = _per_contact(speed_limits[1], "speed_limits", n)
+    bad = ~(lower <= upper)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ParameterError(parameter_message(
+            "speed_limits", _OWNER, "satisfy lo <= hi for every contact",
+            f"lo={lower[i]:g} > hi={upper[i]:g} for contact {i}"))
+    return lower, upper
+
+
+def build_problem(target: Any, contacts: Any, *, speed_limits: Any = None,
+                  rate_limit: Any = None, dt: Any = None, fixed: Any = None,
+                  failed: Any = None, liftable: Any = None, strict: bool = False,
+                  time_limit: float = 30.0) -> AllocationProblem:
+    """Validate the arguments of :func:`~toolkit.allocation.allocate` into a problem.
+
+    Raises
+    ------
+    ParameterTypeError, ParameterError
+        Wrong types or values; with ``strict=True`` also unrealizable targets
+        (see :func:`toolkit.allocation._evaluate.realizable_curve`).
+    """
+    from ._evaluate import realizable_curve
+
+    if not isinstance(target, _TARGET_TYPES):
+        raise ParameterTypeError(parameter_message(
+            "target", _OWNER,
+            "be a ForceCurve, Viscosity, FrictionFraction or EquilibriumSpeed", target))
+    if not isinstance(contacts, (ContactSet, ContactDistribution)):
+        raise ParameterTypeError(parameter_message(
+            "contacts", _OWNER, "be a ContactSet (or a ContactDistribution)", contacts))
+    if not isinstance(strict, bool):
+        raise ParameterTypeError(parameter_message("strict", _OWNER, "be True or False", strict))
+    time_limit = as_float(time_limit, "time_limit", _OWNER, low=0.0, low_open=True)
+    n = contacts.n if isinstance(contacts, ContactSet) else 0
+    lower, upper = _limits(speed_limits, n)
+    max_change = None
+    if (rate_limit is None) != (dt is None):
+        missing = "dt" if dt is None else "rate_limit"
+        raise ParameterError(parameter_message(
+            missing, _OWNER, "be given together with "
+            + ("'rate_limit'" if missing == "dt" else "'dt'"), None))
+    if rate_limit is not None:
+        rate = _per_contact(rate_limit, "rate_limit", n)
+        if np.any(rate < 0):
+            raise ParameterError(parameter_message("rate_limit", _OWNER, "be >= 0",
+                                                   float(rate[rate < 0][0])))
+        step = as_float(dt, "dt", _OWNER, low=0.0, low_open=True)
+        max_change = rate * step
+    fixed_m, failed_m, lift_m = (_mask(fixed, "fixed", n), _mask(failed, "failed", n),
+                                 _mask(liftable, "liftable", n))
+    notes: list[str] = []
+    if n:
+        v0 = contacts.speeds
+        outside = (v0 < lower) | (v0 > upper)
+        if np.any(outside & (fixed_m | failed_m)):
+            i = int(np.flatnonzero(outside & (fixed_m | failed_m))[0])
+            notes.append(f"contact {i} is fixed/failed at {v0[i]:g} m/s, outside its limits")
+        if max_change is not None:
+            far = (np.maximum(lower - v0, v0 - upper) > max_change) & ~(fixed_m | failed_m)
+            if np.any(far):
+                i = int(np.flatnonzero(far)[0])
+                if strict:
+                    raise ParameterError(parameter_message(
+                        "rate_limit", _OWNER,
+                        "let every contact reach its speed limits within dt (strict=True)",
+                        f"contact {i} at {v0[i]:g} m/s cannot reach "
+                        f"[{lower[i]:g}, {upper[i]:g}]"))
+                notes.append(f"{int(far.sum())} contact(s) cannot reach their speed limits "
+                             "within dt; they go as near as the rate limit allows")
+    problem = AllocationProblem(target, contacts, lower, upper, max_change, fixed_m, failed_m,
+                                lift_m, strict, time_limit,
+                                ForceCurve([0.0], [0.0]), None, tuple(notes))
+    curve, projection = realizable_curve(problem)
+    return AllocationProblem(target, contacts, lower, upper, max_change, fixed_m, failed_m,
+                             lift_m, strict, time_limit, curve, projection, tuple(notes))
+
+
+def make_result(problem: AllocationProblem, speeds: np.ndarray, active: np.ndarray,
+                bound: float, method: str, start: float, *,
+                status: AllocationStatus | None = None, detail: str = "",
+                extra: dict[str, Any] | None = None,
+                gap_tolerance: float = 1e-9) -> AllocationResult:
+    """Evaluate an allocation and package it with its certificate.
+
+    Parameters
+    ----------
+    problem : AllocationProblem
+    speeds : ndarray of shape (n,), m/s
+        Proposed speeds; clipped into the boxes (solver tolerances) before evaluation.
+    active : ndarray of shape (n,), bool
+    bound : float, N
+        Certified lower bound on the optimal ``error_sup``.
+    method : str
+    start : float
+        ``time.perf_counter()`` when the method started.
+    status : AllocationStatus, optional
+        Forced status (e.g. ``TIME_LIMIT``); otherwise chosen from the gap.
+    detail : str
+        Appended to the message.
+    gap_tolerance : float
+        Relative (to ``F_tot``) gap under which the result counts as optimal.
+    """
+    from ._evaluate import evaluate_errors
+
+    lo, hi = problem.boxes()
+    speeds = np.clip(np.asarray(speeds, dtype=float), lo, hi)
+    active = np.asarray(active, dtype=bool)
+    forces = np.where(active, problem.forces, 0.0)
+    achieved = ContactSet(speeds, forces)
+    error_sup, error_l1 = evaluate_errors(problem.curve, achieved)
+    gap = error_sup - bound
+    if status is None:
+        if gap <= gap_tolerance * max(problem.total_force, 1.0):
+            status = (AllocationStatus.PROJECTED if problem.projection is not None
+                      else AllocationStatus.OPTIMAL)
+        else:
+            status = AllocationStatus.FEASIBLE_WITH_GAP
+    parts = [status.value]
+    if detail:
+        parts.append(detail)
+    parts.extend(problem.notes)
+    wall = time.perf_counter() - start
+    return AllocationResult(speeds, achieved, active, float(error_sup), float(error_l1),
+                            float(bound), float(gap), method, status, "; ".join(parts), wall,
+                            problem.projection, problem.curve, dict(extra or {}))

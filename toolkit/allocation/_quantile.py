@@ -1,0 +1,166 @@
+"""The exact quantile construction for equal magnitudes (private).
+
+With ``N`` contacts of equal magnitude ``f`` (``F_tot = N f``) the achieved force is
+``F_tot (1 - 2 k(V)/N)`` with ``k(V)`` the number of contacts below ``V``. Write the
+target as a CDF, ``G(V) = (1 - F*(V)/F_tot) / 2`` (non-decreasing once the target is
+realizable). Then:
+
+- Lower bound: ``k(V)`` is an integer, so at every ``V`` the error is at least
+  ``(2 F_tot / N) * dist(N G(V), Z)``. Where the speed box ``[L, H]`` stops contacts from
+  going, the force is forced: ``+F_tot`` for ``V < L`` and ``-F_tot`` for ``V > H``.
+- Construction: put contact ``i`` at the ``(i - 1/2)/N`` quantile of ``G``
+  (``v_i = inf {V : G(V) >= (i - 1/2)/N}``, clamped to the box). Then
+  ``k(V) = floor(N G(V) + 1/2)``, the nearest integer, which meets the bound at every ``V``.
+
+So the construction is optimal and the bound is its error; for a continuous target that
+spans ``[-F_tot, F_tot]`` the error is exactly ``F_tot / N`` (``N G`` crosses a half
+integer). On a piecewise-linear ``G``, ``sup dist(N G, Z)`` over a segment is ``1/2`` if the
+segment's range holds a half integer and the larger endpoint distance otherwise. Cost:
+``O(N log k)`` for ``k`` target samples.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..errors import ParameterError, parameter_message
+from ._evaluate import failure_margin
+from ._problem import AllocationProblem, AllocationResult, AllocationStatus, make_result
+from .targets import EquilibriumSpeed, ForceCurve
+
+__all__ = ["allocate_quantile", "quantile_applies", "quantile_speeds", "quantile_bound"]
+
+
+def quantile_applies(problem: AllocationProblem) -> bool:
+    """True when all magnitudes are equal and positive, all boxes equal, nothing fixed,
+    failed or liftable: the setting where the quantile construction is exact."""
+    if problem.n == 0:
+        return False
+    forces = problem.forces
+    lo, hi = problem.boxes()
+    return bool(forces[0] > 0 and np.all(forces == forces[0]) and np.all(lo == lo[0])
+                and np.all(hi == hi[0]) and not np.any(problem.fixed | problem.failed
+                                                      | problem.liftable))
+
+
+def _grid_distance(x: np.ndarray) -> np.ndarray:
+    return np.abs(x - np.round(x))
+
+
+def quantile_speeds(curve: ForceCurve, n: int, total_force: float) -> np.ndarray:
+    """Speeds at the ``(i - 1/2)/n`` quantiles of ``G = (1 - F*/F_tot)/2`` on ``curve``'s band.
+
+    Parameters
+    ----------
+    curve : ForceCurve
+        Realizable (non-increasing, within ``+-F_tot``) target, N vs m/s.
+    n : int
+    total_force : float, N
+
+    Returns
+    -------
+    ndarray of shape (n,), m/s, ascending; quantiles the band never reaches go to its ends.
+    """
+    xs = curve.speeds
+    g = np.clip(0.5 * (1.0 - curve.forces / total_force), 0.0, 1.0)
+    g = np.maximum.accumulate(g)       # guard against rounding in a flat realizable curve
+    p = (np.arange(1, n + 1) - 0.5) / n
+    k = np.searchsorted(g, p, side="left")
+    inner = (k > 0) & (k < xs.size)
+    kk = np.clip(k, 1, xs.size - 1)
+    x0, x1, g0, g1 = xs[kk - 1], xs[kk], g[kk - 1], g[kk]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(g1 > g0, (p - g0) / np.where(g1 > g0, g1 - g0, 1.0), 0.0)
+    speeds = np.where(inner, x0 + np.clip(share, 0.0, 1.0) * (x1 - x0),
+                      np.where(k == 0, xs[0], xs[-1]))
+    return speeds
+
+
+def quantile_bound(curve: ForceCurve, n: int, total_force: float,
+                   box: tuple[float, float]) -> float:
+    """Closed-form optimal sup error (N) for ``n`` equal contacts sharing ``box`` (m/s).
+
+    See the module docstring: the forced error outside the box and
+    ``(2 F_tot / n) sup dist(n G, Z)`` inside it.
+    """
+    lo, hi = curve.band
+    low, high = max(lo, box[0]), min(hi, box[1])
+    bound = 0.0
+    if low > hi:                                  # every contact above the band: F = +F_tot
+        return float(total_force - curve.value_left(hi))
+    if high < lo:                                 # every contact below the band: F = -F_tot
+        return float(curve.value_right(lo) + total_force)
+    if low > lo:
+        bound = max(bound, float(total_force - curve.value_left(low)))
+    if high < hi:
+        bound = max(bound, float(curve.value_right(high) + total_force))
+    inner = curve.restrict(low, high)
+    g = n * 0.5 * (1.0 - inner.forces / total_force)
+    xs = inner.speeds
+    wide = np.flatnonzero(xs[1:] > xs[:-1])
+    if wide.size:
+        g0, g1 = np.minimum(g[wide], g[wide + 1]), np.maximum(g[wide], g[wide + 1])
+        half = np.ceil(g0 - 0.5) <= g1 - 0.5          # a half integer in [g0, g1]
+        dist = np.where(half, 0.5, np.maximum(_grid_distance(g0), _grid_distance(g1)))
+        worst = float(dist.max())
+    else:                                          # a single speed: the target is an interval
+        g_lo, g_hi = float(g.min()), float(g.max())
+        worst = 0.0 if np.floor(g_hi) >= np.ceil(g_lo) else float(
+            min(_grid_distance(np.array([g_lo, g_hi]))))
+    return max(bound, 2.0 * total_force / n * worst)
+
+
+def allocate_quantile(problem: AllocationProblem, start: float | None = None) -> AllocationResult:
+    """Solve ``problem`` by the quantile construction (equal magnitudes, one shared box).
+
+    Raises
+    ------
+    ParameterError
+        When the problem is outside the construction's setting (see :func:`quantile_applies`).
+    """
+    start = time.perf_counter() if start is None else start
+    if not quantile_applies(problem):
+        raise ParameterError(parameter_message(
+            "method", "allocate", "be 'milp' (or None) unless all contacts have equal "
+            "magnitudes and one shared speed box and none is fixed, failed or liftable",
+            "quantile"))
+    n, total = problem.n, problem.total_force
+    curve = problem.curve
+    lo, hi = problem.boxes()
+    box = (float(lo[0]), float(hi[0]))
+    band_lo, band_hi = curve.band
+    low, high = max(band_lo, box[0]), min(band_hi, box[1])
+    if low > band_hi:
+        speeds = np.full(n, box[0])
+    elif high < band_lo:
+        speeds = np.full(n, box[1])
+    else:
+        speeds = quantile_speeds(curve.restrict(low, high), n, total)
+    bound = quantile_bound(curve, n, total, box)
+    # Quantile order is ascending; any assignment of the sorted speeds to equal contacts
+    # is the same ContactSet. Keep the current order of contacts (least movement).
+    order = np.argsort(problem.contacts.speeds, kind="stable")
+    assigned = np.empty(n)
+    assigned[order] = speeds
+    result = make_result(problem, assigned, np.ones(n, dtype=bool), bound, "quantile", start,
+                         gap_tolerance=1e-12)
+    return _check_margin(problem, result)
+
+
+def _check_margin(problem: AllocationProblem, result: AllocationResult) -> AllocationResult:
+    target = problem.target
+    if not isinstance(target, EquilibriumSpeed) or target.margin == 0:
+        return result
+    speed = float(problem.curve.speeds[np.argmax(np.diff(problem.curve.forces) < 0) + 1]) \
+        if problem.curve.speeds.size > 1 else float(problem.curve.speeds[0])
+    achieved = failure_margin(result.contacts, speed)
+    if achieved >= target.margin:
+        return result
+    from dataclasses import replace
+
+    detail = (f"the equilibrium at {speed:g} m/s survives {max(achieved, 0)} failure(s), "
+              f"fewer than the requested margin {target.margin}")
+    return replace(result, status=AllocationStatus.INFEASIBLE,
+                   message=f"{AllocationStatus.INFEASIBLE.value}; {detail}")

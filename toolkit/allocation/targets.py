@@ -1,0 +1,277 @@
+"""Allocation targets: what force-speed behaviour the contacts should produce.
+
+Four frozen value objects, validated when built:
+
+- :class:`ForceCurve`: an arbitrary curve given by samples ``(V_k, F_k)``, linear between
+  samples; a repeated speed is a vertical step (the target is set-valued there).
+- :class:`Viscosity`: ``F(V) = -slope (V - center)`` over a band of speeds.
+- :class:`FrictionFraction`: ``F(V) = -fraction * F_tot`` over a band of sliding speeds
+  (the paper's ``mu / mu0 = fraction`` against forward sliding).
+- :class:`EquilibriumSpeed`: the body should settle at ``speed`` even if ``margin``
+  contacts fail.
+
+Every target becomes a :class:`ForceCurve` over its band with :meth:`to_curve`; errors are
+always measured against that curve (:mod:`toolkit.allocation._evaluate`).
+
+A target is only a request: it may ask for forces beyond ``+-F_tot``, an increasing curve
+or non-finite values. :func:`toolkit.allocation.allocate` projects such targets onto the
+realizable set (and reports the projection) or refuses them when ``strict=True``.
+"""
+
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass
+from typing import Any, Protocol, Union, runtime_checkable
+
+import numpy as np
+
+from .._validation import as_float, as_float_array, as_int
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+
+__all__ = ["ForceCurve", "Viscosity", "FrictionFraction", "EquilibriumSpeed", "Target",
+           "parse_band"]
+
+
+def parse_band(band: Any, name: str, owner: str, center: float = 0.0) -> tuple[float, float]:
+    """Turn a half-width ``h`` (-> ``(center - h, center + h)``) or a pair ``(lo, hi)`` into a band.
+
+    Parameters
+    ----------
+    band : float or pair of float, m/s
+    name, owner : str
+        For error messages.
+    center : float, m/s
+        Centre of a band given as a half-width.
+
+    Returns
+    -------
+    (lo, hi) : tuple of float, m/s, with ``lo <= hi``
+    """
+    if isinstance(band, numbers.Real) and not isinstance(band, bool):
+        half = as_float(band, name, owner, low=0.0)
+        return center - half, center + half
+    if isinstance(band, (str, bytes)) or not hasattr(band, "__len__"):
+        raise ParameterTypeError(parameter_message(
+            name, owner, "be a half-width or a pair (lo, hi) in m/s", band))
+    pair = as_float_array(band, name, owner)
+    if pair.size != 2:
+        raise ParameterError(parameter_message(
+            name, owner, "be a half-width or a pair (lo, hi) in m/s", band))
+    lo, hi = float(pair[0]), float(pair[1])
+    if not lo <= hi:
+        raise ParameterError(parameter_message(name, owner, "satisfy lo <= hi", band))
+    return lo, hi
+
+
+@dataclass(frozen=True, eq=False)
+class ForceCurve:
+    """A target force-speed curve from samples, linear between them.
+
+    Parameters
+    ----------
+    speeds : array_like of shape (k,), m/s
+        Body speeds, finite and non-decreasing. The band of the target is
+        ``[speeds[0], speeds[-1]]``. A speed given twice is a vertical step: the target is
+        the whole interval between the two forces there (like a Coulomb contact).
+    forces : array_like of shape (k,), N
+        Target net force at each speed. Non-finite values are accepted here (a request can
+        be unrealizable); :func:`~toolkit.allocation.allocate` projects or refuses them.
+    weights : array_like of shape (k,), optional
+        Non-negative quadrature weights (m/s) for the L1 error: with weights,
+        ``error_l1 = sum_k weights[k] * |F_achieved(V_k) - F_target(V_k)|``; without,
+        ``error_l1`` is the exact integral over the band.
+
+    Examples
+    --------
+    >>> curve = ForceCurve([-0.35, 0.35], [3.0, -3.0])
+    >>> curve.band
+    (-0.35, 0.35)
+    """
+
+    speeds: np.ndarray
+    forces: np.ndarray
+    weights: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        owner = "ForceCurve"
+        speeds = as_float_array(self.speeds, "speeds", owner)
+        forces = as_float_array(self.forces, "forces", owner, finite=False)
+        if forces.shape != speeds.shape:
+            raise ParameterError(parameter_message(
+                "forces", owner, f"have the same length as 'speeds' ({speeds.size})",
+                f"an array of length {forces.size}"))
+        if np.any(np.diff(speeds) < 0):
+            raise ParameterError(parameter_message(
+                "speeds", owner, "be non-decreasing (sorted)", speeds.tolist()))
+        object.__setattr__(self, "speeds", speeds)
+        object.__setattr__(self, "forces", forces)
+        if self.weights is not None:
+            weights = as_float_array(self.weights, "weights", owner)
+            if weights.shape != speeds.shape:
+                raise ParameterError(parameter_message(
+                    "weights", owner, f"have the same length as 'speeds' ({speeds.size})",
+                    f"an array of length {weights.size}"))
+            if np.any(weights < 0):
+                raise ParameterError(parameter_message("weights", owner, "be >= 0",
+                                                       float(weights[weights < 0][0])))
+            object.__setattr__(self, "weights", weights)
+
+    @property
+    def band(self) -> tuple[float, float]:
+        """``(lo, hi)``: the range of body speeds the target covers, m/s."""
+        return float(self.speeds[0]), float(self.speeds[-1])
+
+    def to_curve(self, total_force: float, limits: tuple[float, float] | None = None
+                 ) -> ForceCurve:
+        """Return ``self`` (already a sampled curve)."""
+        return self
+
+    def value_right(self, V: Any) -> np.ndarray:
+        """Right limit ``F(V+)`` of the target at speeds inside the band (N)."""
+        return _interp(self.speeds, self.forces, np.asarray(V, dtype=float), "right")
+
+    def value_left(self, V: Any) -> np.ndarray:
+        """Left limit ``F(V-)`` of the target at speeds inside the band (N)."""
+        return _interp(self.speeds, self.forces, np.asarray(V, dtype=float), "left")
+
+    def restrict(self, lo: float, hi: float) -> ForceCurve:
+        """The same curve cut to ``[lo, hi]`` (inside the band), weights dropped."""
+        inner = (self.speeds > lo) & (self.speeds < hi)
+        speeds = np.concatenate(([lo], self.speeds[inner], [hi]))
+        forces = np.concatenate((self.value_right(lo)[None], self.forces[inner],
+                                 self.value_left(hi)[None]))
+        if lo == hi:
+            speeds, forces = np.array([lo, lo]), np.array([float(self.value_left(lo)),
+                                                           float(self.value_right(lo))])
+        return ForceCurve(speeds, forces)
+
+
+def _interp(xs: np.ndarray, ys: np.ndarray, x: np.ndarray, side: str) -> np.ndarray:
+    """Piecewise-linear interpolation with one-sided limits at repeated abscissae."""
+    if xs.size == 1:
+        return np.full_like(x, ys[0])
+    idx = np.searchsorted(xs, x, side=side)
+    # Use segment [idx-1, idx]; the one-sided limit is the sample nearest on that side.
+    idx = np.clip(idx, 1, xs.size - 1)
+    x0, x1, y0, y1 = xs[idx - 1], xs[idx], ys[idx - 1], ys[idx]
+    width = x1 - x0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(width > 0, (x - x0) / np.where(width > 0, width, 1.0), 0.0)
+    share = np.clip(share, 0.0, 1.0)
+    value = np.where(share <= 0.0, y0, np.where(share >= 1.0, y1, y0 + share * (y1 - y0)))
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class Viscosity:
+    """An effective viscosity: ``F(V) = -slope (V - center)`` over a band.
+
+    Parameters
+    ----------
+    slope : float, N s/m
+        ``|dF/dV|``, ``>= 0``.
+    center : float, m/s
+        Speed of zero force (the equilibrium).
+    band : float or pair of float, m/s
+        Half-width around ``center``, or ``(lo, hi)``: where the viscous law should hold.
+    """
+
+    slope: float
+    center: float
+    band: Any
+
+    def __post_init__(self) -> None:
+        owner = "Viscosity"
+        object.__setattr__(self, "slope", as_float(self.slope, "slope", owner, low=0.0))
+        object.__setattr__(self, "center", as_float(self.center, "center", owner))
+        object.__setattr__(self, "band", parse_band(self.band, "band", owner, self.center))
+
+    def to_curve(self, total_force: float, limits: tuple[float, float] | None = None
+                 ) -> ForceCurve:
+        """Two samples at the band ends (the law is linear)."""
+        lo, hi = self.band
+        speeds = np.array([lo, hi])
+        return ForceCurve(speeds, -self.slope * (speeds - self.center))
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionFraction:
+    """A reduced (or reversed) friction: ``F(V) = -fraction * F_tot`` over a band.
+
+    Parameters
+    ----------
+    fraction : float
+        ``mu / mu0``: 1 is full friction against forward sliding, 0 no net friction,
+        negative values push forward. ``|fraction| > 1`` is unrealizable and is projected
+        (or refused with ``strict=True``) by :func:`~toolkit.allocation.allocate`.
+    band : float or pair of float, m/s
+        Half-width around 0 (``v`` -> ``(-v, v)``) or ``(lo, hi)``: the sliding speeds.
+    """
+
+    fraction: float
+    band: Any
+
+    def __post_init__(self) -> None:
+        owner = "FrictionFraction"
+        object.__setattr__(self, "fraction", as_float(self.fraction, "fraction", owner))
+        object.__setattr__(self, "band", parse_band(self.band, "band", owner))
+
+    def to_curve(self, total_force: float, limits: tuple[float, float] | None = None
+                 ) -> ForceCurve:
+        """A constant ``-fraction * total_force`` over the band."""
+        lo, hi = self.band
+        level = -self.fraction * total_force
+        return ForceCurve([lo, hi], [level, level])
+
+
+@dataclass(frozen=True, eq=False)
+class EquilibriumSpeed:
+    """The body should settle at ``speed`` and stay there if ``margin`` contacts fail.
+
+    The sampled form is the stiffest restoring law, a Coulomb step
+    ``F(V) = F_tot sign(speed - V)`` over the speeds the contacts can reach: an allocation
+    that matches it puts every contact at ``speed``.
+
+    Parameters
+    ----------
+    speed : float, m/s
+    margin : int, ``>= 0``
+        Number of contacts that may fail (stop at any speed) without moving the equilibrium
+        off ``speed``. An allocation satisfies it when the magnitude ``W`` at ``speed``,
+        the magnitudes ``L`` below and ``U`` above it satisfy
+        ``W >= |U - L| + 2 * (sum of the margin largest magnitudes)``.
+    """
+
+    speed: float
+    margin: int = 0
+
+    def __post_init__(self) -> None:
+        owner = "EquilibriumSpeed"
+        object.__setattr__(self, "speed", as_float(self.speed, "speed", owner))
+        object.__setattr__(self, "margin", as_int(self.margin, "margin", owner, low=0))
+
+    def to_curve(self, total_force: float, limits: tuple[float, float] | None = None
+                 ) -> ForceCurve:
+        """The step ``F_tot sign(speed - V)`` over ``limits`` widened to include ``speed``.
+
+        ``limits`` defaults to ``speed +- 1 m/s``.
+        """
+        lo, hi = limits if limits is not None else (self.speed - 1.0, self.speed + 1.0)
+        lo, hi = min(lo, self.speed), max(hi, self.speed)
+        speeds = [lo, self.speed, self.speed, hi]
+        forces = [total_force, total_force, -total_force, -total_force]
+        if lo == self.speed:
+            speeds, forces = speeds[1:], forces[1:]
+        if hi == self.speed:
+            speeds, forces = speeds[:-1], forces[:-1]
+        return ForceCurve(speeds, forces)
+
+
+Target = Union[ForceCurve, Viscosity, FrictionFraction, EquilibriumSpeed]
+
+
+@runtime_checkable
+class _HasCurve(Protocol):
+    def to_curve(self, total_force: float, limits: tuple[float, float] | None = None
+                 ) -> ForceCurve: ...

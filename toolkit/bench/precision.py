@@ -1,0 +1,54 @@
+"""Work-precision benchmark: the exact method against every reference method, one run.
+
+Run ``python -m toolkit.bench precision [--seed S] [--repeats R] [--quick]``. On the carousel
+startup scene (11 random speeds in [-0.35, 0.35] m/s, F_tot/m = 2 m/s^2, from rest, 5 s) it
+prints the work-precision table and the ratio of the run time of the fastest reference method
+that reaches max |V error| <= 1e-6 m/s to the run time of the exact method, both measured in
+this run. Exit status 0 when the issue-3 criterion holds (exact error <= 1e-12 and ratio >= 100).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from toolkit.precision import carousel_startup_plant, default_settings, exact_speedup, precision_report
+
+
+def _format(value: float) -> str:
+    return f"{value:9.2e}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m toolkit.bench precision", description=__doc__)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random contact speeds")
+    parser.add_argument("--repeats", type=int, default=3, help="timing repeats (median)")
+    parser.add_argument("--t-end", type=float, default=5.0, help="horizon, s")
+    parser.add_argument("--quick", action="store_true", help="a few settings only")
+    args = parser.parse_args(argv)
+
+    plant = carousel_startup_plant(args.seed)
+    start = time.perf_counter()
+    report = precision_report(plant, args.t_end, repeats=args.repeats,
+                              settings=default_settings(quick=args.quick))
+    total = time.perf_counter() - start
+    print(f"{'method':7s} {'setting':46s} {'max err':>9s} {'final err':>9s} {'time ms':>9s} "
+          f"{'steps':>8s} {'status':10s} flags")
+    for row in report.rows:
+        flags = [name for name in ("chattering", "step_collapse", "creep", "stalled")
+                 if getattr(row, name)]
+        print(f"{row.method:7s} {row.setting:46s} {_format(row.max_error)} "
+              f"{_format(row.final_error)} {row.wall_time * 1e3:9.3f} {row.n_steps:8d} "
+              f"{row.status.name:10s} {','.join(flags)}")
+    speedup = exact_speedup(report, 1e-6)
+    exact = speedup.exact
+    print(f"report: {len(report.rows)} rows in {total:.1f} s")
+    print(f"exact: max error {exact.max_error:.2e} m/s (rational-arithmetic reference), "
+          f"{exact.wall_time * 1e6:.0f} us per run")
+    if speedup.reference is None:
+        print("no reference method reached max error <= 1e-6 m/s")
+        return 1
+    print(f"fastest reference with max error <= 1e-6 m/s: {speedup.reference.label} "
+          f"({speedup.reference.wall_time * 1e3:.2f} ms, error {speedup.reference.max_error:.1e})")
+    print(f"ratio reference / exact: {speedup.ratio:.1f}x")
+    return 0 if exact.max_error <= 1e-12 and speedup.ratio >= 100 else 1

@@ -1,0 +1,582 @@
+"""Work-precision report: every simulation method against the exact one, error versus run time.
+
+:func:`precision_report` runs each method of :mod:`toolkit.simulation` over a range of
+tolerances, step sizes and smoothing widths (:func:`default_settings`) on one plant, measures
+its error against the exact event-driven solution and its run time, and flags the failure
+modes that make plain integrators unfit for Coulomb contacts (see :class:`PrecisionRow` for the
+precise definitions). :func:`work_precision_curves` gives the data of the log-log plot (error
+against run time); :func:`exact_speedup` the speed ratio the acceptance criterion of issue 3
+asks for. :func:`carousel_startup_plant` is the reference scene.
+
+The exact method itself is checked against an independent solution computed in rational
+arithmetic (:func:`rational_trajectory`), so its error is measured, not assumed zero.
+
+Pure numerics: no files, no matplotlib.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+
+from ._validation import as_float, as_int
+from .contacts import ContactSet
+from .errors import ParameterError, ParameterTypeError, SolverError, parameter_message
+from .plant import Plant, PiecewiseConstant
+from .simulation import METHODS, Budget, SimulationResult, Status, simulate
+
+__all__ = [
+    "MethodSetting", "PrecisionRow", "PrecisionReport", "Speedup", "WorkPrecisionCurve",
+    "precision_report", "default_settings", "work_precision_curves", "exact_speedup",
+    "carousel_startup_plant", "rational_trajectory",
+    "CHATTER_MARGIN", "STEP_COLLAPSE_RATIO", "STEP_COLLAPSE_RUN", "CREEP_TOLERANCE",
+    "MOTION_FLOOR",
+]
+
+#: Speed increments at or below ``MOTION_FLOOR * max(1, max|V|)`` (m/s) count as no motion
+#: when direction reversals are counted (a few ulps of rounding are not chattering).
+MOTION_FLOOR = 1e-12
+#: ``chattering``: more direction reversals than the exact solution has at the same times, plus this.
+CHATTER_MARGIN = 3
+#: ``step_collapse``: an adaptive solver takes at least ``STEP_COLLAPSE_RUN`` consecutive steps ...
+STEP_COLLAPSE_RUN = 1000
+#: ... each shorter than this fraction of the horizon ``t_end``.
+STEP_COLLAPSE_RATIO = 1e-6
+#: Methods with adaptive step control, whose sample times are their steps when t_eval is None.
+_ADAPTIVE = ("rk45", "lsoda", "radau", "bdf")
+#: ``creep``: deviation (m/s) inside a zero-force band, where the exact solution is constant.
+CREEP_TOLERANCE = 1e-6
+#: Each timing repeat runs a method back to back until it has used at least this long (s).
+_MIN_REPEAT_TIME = 5e-3
+#: A first run at least this long (s) counts as a timing repeat.
+_WARM_RUN = 0.2
+#: Reference carousel: F_tot / m (m/s^2), from dT = 0.35 s for 2 v_max = 0.7 m/s (PHYSICS.md 4).
+CAROUSEL_ACCELERATION = 2.0
+#: Reference carousel: contact speed limit v_max (m/s), PHYSICS.md section 3.
+CAROUSEL_SPEED_LIMIT = 0.35
+
+_BUDGET_STALLING = Budget(wall_time=1.0, max_steps=300_000)
+_BUDGET_SMOOTH = Budget(wall_time=3.0, max_steps=2_000_000)
+
+
+# -- scene ------------------------------------------------------------------------------------
+def carousel_startup_plant(seed: int = 0, *, n: int = 11, mass: float = 1.0) -> Plant:
+    """The carousel startup scene of issue 3: ``n`` random speeds, equal loads, from rest.
+
+    Speeds are uniform in ``[-v_max, v_max]`` with ``v_max = 0.35`` m/s; the contacts carry
+    equal magnitudes with ``F_tot / m = 2`` m/s^2 (the paper's transition time, PHYSICS.md
+    section 4). Without drag or external force the motion depends on ``F_tot / m`` only, so
+    ``mass`` just sets the units of the forces.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of ``numpy.random.default_rng``.
+    n : int
+        Number of contacts, ``>= 1``.
+    mass : float, kg
+        Moving inertia, ``> 0``.
+
+    Returns
+    -------
+    Plant
+    """
+    seed = as_int(seed, "seed", "carousel_startup_plant", low=0)
+    n = as_int(n, "n", "carousel_startup_plant", low=1)
+    mass = as_float(mass, "mass", "carousel_startup_plant", low=0.0, low_open=True)
+    rng = np.random.default_rng(seed)
+    speeds = rng.uniform(-CAROUSEL_SPEED_LIMIT, CAROUSEL_SPEED_LIMIT, n)
+    forces = np.full(n, CAROUSEL_ACCELERATION * mass / n)
+    return Plant(ContactSet(speeds, forces), mass=mass)
+
+
+# -- independent exact reference -------------------------------------------------------------
+def _rational_supported(plant: Plant) -> bool:
+    return (plant.damping == 0.0 and plant.commands is None and plant.motors is None
+            and not isinstance(plant.external_force, PiecewiseConstant))
+
+
+def rational_trajectory(plant: Plant, v0: float, times: Any) -> np.ndarray:
+    """The exact Coulomb trajectory in rational arithmetic, rounded once to float at the end.
+
+    An event-driven solution written independently of :mod:`toolkit.simulation._exact`: the
+    speeds, magnitudes, mass, external force, ``v0`` and the query times are converted exactly
+    to :class:`fractions.Fraction`; forces are summed exactly (no tie snapping), so every
+    crossing and sticking time is an exact rational number.
+
+    Parameters
+    ----------
+    plant : Plant
+        Constant commands, ideal motors, no drag, constant external force.
+    v0 : float, m/s
+    times : array_like of shape (T,), s, ``>= 0``
+
+    Returns
+    -------
+    ndarray of shape (T,), m/s
+        ``V(times)``, each within half an ulp of the exact value.
+    """
+    if not _rational_supported(plant):
+        raise ParameterError(parameter_message(
+            "plant", "rational_trajectory",
+            "have constant commands, ideal motors, no drag and a constant external force", plant))
+    grouped: dict[Fraction, Fraction] = {}
+    for speed, force in zip(plant.contacts.speeds.tolist(), plant.contacts.forces.tolist()):
+        if force > 0:
+            key = Fraction(speed)
+            grouped[key] = grouped.get(key, Fraction(0)) + Fraction(force)
+    levels = sorted(grouped)
+    weights = [grouped[s] for s in levels]
+    mass, ext = Fraction(plant.mass), Fraction(float(plant.external_force))
+    query = np.asarray(times, dtype=float)
+    horizon = Fraction(float(query.max())) if query.size else Fraction(0)
+    # segments: (start time, start speed, acceleration), last one runs forever
+    segments: list[tuple[Fraction, Fraction, Fraction]] = []
+    t, V = Fraction(0), Fraction(float(v0))
+    while True:
+        below = sum((w for s, w in zip(levels, weights) if s < V), Fraction(0))
+        above = sum((w for s, w in zip(levels, weights) if s > V), Fraction(0))
+        at = sum((w for s, w in zip(levels, weights) if s == V), Fraction(0))
+        push = above - below + ext                      # force of everything not at V
+        if at > 0 and abs(push) <= at:
+            segments.append((t, V, Fraction(0)))         # sticks for ever
+            break
+        net = push - at if push > 0 else push + at if push < 0 else push
+        if net == 0:
+            segments.append((t, V, Fraction(0)))         # coasts in a zero-force band
+            break
+        ahead = [s for s in levels if (s > V if net > 0 else s < V)]
+        segments.append((t, V, net / mass))
+        if not ahead or t > horizon:
+            break
+        target = min(ahead) if net > 0 else max(ahead)
+        t, V = t + (target - V) * mass / net, target
+    starts = [s[0] for s in segments]
+    out = np.empty(query.size)
+    for i, tq in enumerate(query.tolist()):
+        tq_r = Fraction(tq)
+        j = max(k for k, start in enumerate(starts) if start <= tq_r) if tq_r >= 0 else 0
+        t0, V0, acc = segments[j]
+        out[i] = float(V0 + acc * (tq_r - t0))
+    return out
+
+
+# -- settings ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class MethodSetting:
+    """One method with one setting and the budget it runs under.
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`toolkit.simulation.METHODS`.
+    options : mapping of str to value
+        Method options (``rtol``, ``epsilon``, ``step``, ...), stored as sorted pairs.
+    budget : Budget
+    """
+
+    method: str
+    options: tuple[tuple[str, Any], ...] = ()
+    budget: Budget = field(default_factory=Budget)
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ParameterError(parameter_message(
+                "method", "MethodSetting", f"be one of {list(METHODS)}", self.method))
+        options = self.options
+        if isinstance(options, Mapping):
+            options = tuple(sorted(options.items()))
+        object.__setattr__(self, "options", tuple(tuple(pair) for pair in options))
+        if not isinstance(self.budget, Budget):
+            raise ParameterTypeError(parameter_message(
+                "budget", "MethodSetting", "be a Budget", self.budget))
+
+    @property
+    def kwargs(self) -> dict[str, Any]:
+        """The options as keyword arguments of :func:`toolkit.simulation.simulate`."""
+        return dict(self.options)
+
+
+def default_settings(*, quick: bool = False) -> tuple[MethodSetting, ...]:
+    """The tolerance, step-size and smoothing sweep of the report.
+
+    ``sign`` runs of the adaptive solvers get a 1 s budget (they are expected to stall);
+    the others 3 s. ``quick=True`` keeps one or two settings per method (for tests).
+    """
+    def s(method: str, budget: Budget = _BUDGET_SMOOTH, **options: Any) -> MethodSetting:
+        return MethodSetting(method, tuple(sorted(options.items())), budget)
+
+    stalling = _BUDGET_STALLING
+    if quick:
+        return (
+            s("exact"),
+            s("rk45", Budget(wall_time=0.3, max_steps=50_000), friction="sign", rtol=1e-6, atol=1e-9),
+            s("radau", friction="tanh", epsilon=1e-4, rtol=1e-8, atol=1e-12),
+            s("moreau", step=1e-3),
+            s("casadi", integrator="cvodes", friction="tanh", epsilon=1e-6, rtol=1e-10, atol=1e-12),
+        )
+    rows = [s("exact")]
+    for rtol in (1e-3, 1e-6, 1e-9):
+        rows.append(s("rk45", stalling, friction="sign", rtol=rtol, atol=rtol * 1e-3))
+    rows.append(s("lsoda", stalling, friction="sign", rtol=1e-6, atol=1e-9))
+    for eps in (1e-2, 1e-4):
+        rows.append(s("rk45", friction="tanh", epsilon=eps, rtol=1e-6, atol=1e-9))
+    for solver in ("lsoda", "radau", "bdf"):
+        for eps in (1e-4, 1e-6, 1e-8):
+            rows.append(s(solver, friction="tanh", epsilon=eps, rtol=1e-8, atol=1e-12))
+    rows.append(s("radau", friction="stribeck", epsilon=1e-6, rtol=1e-8, atol=1e-12))
+    for step in (1e-2, 1e-3, 1e-4, 1e-5):
+        rows.append(s("moreau", step=step))
+    for integrator in ("cvodes", "idas"):
+        for eps in (1e-4, 1e-6, 1e-8):
+            rows.append(s("casadi", integrator=integrator, friction="tanh", epsilon=eps,
+                          rtol=1e-10, atol=1e-12))
+    rows.append(s("casadi", integrator="cvodes", friction="stribeck", epsilon=1e-6,
+                  rtol=1e-10, atol=1e-12))
+    return tuple(rows)
+
+
+# -- rows, report -----------------------------------------------------------------------------
+def _json_float(value: float | None) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+@dataclass(frozen=True)
+class PrecisionRow:
+    """One method at one setting: its error, cost and failure flags.
+
+    Attributes
+    ----------
+    method, setting : str
+        As in :class:`~toolkit.simulation.SimulationResult` (``setting`` lists the options).
+    max_error : float, m/s
+        ``max |V - V_exact|`` over the method's own sample times (up to where it stopped).
+        For the exact method: against :func:`rational_trajectory` at its event times and on a
+        uniform grid of 1001 times (``nan`` when the plant is outside what that supports).
+    final_error : float, m/s
+        ``|V(t_end) - V_exact(t_end)|``; ``inf`` when the run stopped before ``t_end``.
+    wall_time : float, s
+        Median over the repeats of the run time of one call of ``simulate`` (each repeat
+        times back-to-back calls for at least 5 ms and divides, like ``timeit``). A run that
+        does not succeed is timed once.
+    n_steps, n_evaluations, n_events : int
+        From the result.
+    status : Status
+    message : str
+    chattering : bool
+        The body speed reverses direction (sign change between successive increments larger
+        than ``MOTION_FLOOR * max(1, max|V|)``) more than ``CHATTER_MARGIN`` times more often
+        than the exact solution sampled at the same times.
+    step_collapse : bool or None
+        The adaptive solver crawls: at least ``STEP_COLLAPSE_RUN`` (1000) consecutive steps
+        are each shorter than ``STEP_COLLAPSE_RATIO * t_end`` (1e-6 of the horizon). Short
+        steps that resolve a smoothing layer and then grow again do not count; a solver
+        stuck in a chattering loop does. ``None`` for methods without adaptive steps
+        (exact, moreau) or whose samples are not its steps (casadi reports on a grid).
+    creep : bool
+        Only for plants whose final contacts have a zero-force band and no drag, external
+        force, command schedule or compliance: the exact solution starts strictly inside the
+        band (by more than ``CREEP_TOLERANCE``) and stays there constant, and the method's
+        ``V`` departs from it by more than ``CREEP_TOLERANCE`` m/s. Otherwise ``False``.
+    stalled : bool
+        A budget stopped the run (``WALL_TIME``, ``MAX_STEPS`` or ``ZENO``).
+    reversals : int
+        Direction reversals counted for ``chattering``.
+    min_step : float or None, s
+        The smallest step of an adaptive solver.
+    """
+
+    method: str
+    setting: str
+    max_error: float
+    final_error: float
+    wall_time: float
+    n_steps: int
+    n_evaluations: int
+    n_events: int
+    status: Status
+    message: str
+    chattering: bool
+    step_collapse: bool | None
+    creep: bool
+    stalled: bool
+    reversals: int
+    min_step: float | None
+
+    @property
+    def label(self) -> str:
+        """``"method setting"``."""
+        return f"{self.method} {self.setting}".strip()
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: non-finite floats become ``None``, the status its name."""
+        return {
+            "method": self.method, "setting": self.setting,
+            "max_error": _json_float(self.max_error), "final_error": _json_float(self.final_error),
+            "wall_time": self.wall_time, "n_steps": self.n_steps,
+            "n_evaluations": self.n_evaluations, "n_events": self.n_events,
+            "status": self.status.name, "message": self.message,
+            "chattering": self.chattering, "step_collapse": self.step_collapse,
+            "creep": self.creep, "stalled": self.stalled, "reversals": self.reversals,
+            "min_step": _json_float(self.min_step),
+        }
+
+
+@dataclass(frozen=True)
+class Speedup:
+    """How much faster the exact method is than the fastest accurate reference method.
+
+    Attributes
+    ----------
+    ratio : float
+        ``reference.wall_time / exact.wall_time`` (``nan`` when no reference reaches the level).
+    error_level : float, m/s
+    exact, reference : PrecisionRow or None
+    """
+
+    ratio: float
+    error_level: float
+    exact: PrecisionRow
+    reference: PrecisionRow | None
+
+
+@dataclass(frozen=True)
+class WorkPrecisionCurve:
+    """The points of one method in the log-log plot of error against run time.
+
+    Attributes
+    ----------
+    method : str
+    settings : tuple of str
+    wall_time : ndarray of shape (k,), s
+    max_error : ndarray of shape (k,), m/s
+    success : ndarray of shape (k,), bool
+        False for runs a budget stopped (their error covers only the part they simulated).
+    """
+
+    method: str
+    settings: tuple[str, ...]
+    wall_time: np.ndarray
+    max_error: np.ndarray
+    success: np.ndarray
+
+
+@dataclass(frozen=True)
+class PrecisionReport:
+    """The work-precision table of one plant.
+
+    Attributes
+    ----------
+    rows : tuple of PrecisionRow
+    t_end : float, s
+    v0 : float, m/s
+    repeats : int
+    """
+
+    rows: tuple[PrecisionRow, ...]
+    t_end: float
+    v0: float
+    repeats: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"t_end", "v0", "repeats", "rows": [row.to_dict(), ...]}``, JSON-able."""
+        return {"t_end": self.t_end, "v0": self.v0, "repeats": self.repeats,
+                "rows": [row.to_dict() for row in self.rows]}
+
+    def row(self, method: str, setting: str | None = None) -> PrecisionRow:
+        """The first row of ``method`` (and ``setting``, if given)."""
+        for candidate in self.rows:
+            if candidate.method == method and (setting is None or candidate.setting == setting):
+                return candidate
+        raise ParameterError(parameter_message(
+            "method", "PrecisionReport.row", "name a row of the report",
+            method if setting is None else f"{method} {setting}"))
+
+
+# -- measurements -----------------------------------------------------------------------------
+def _reversals(V: np.ndarray) -> int:
+    """Sign changes between successive non-negligible increments of ``V``."""
+    if V.size < 3:
+        return 0
+    step = np.diff(V)
+    floor = MOTION_FLOOR * max(1.0, float(np.max(np.abs(V))))
+    signs = np.sign(step[np.abs(step) > floor])
+    return int(np.count_nonzero(signs[1:] != signs[:-1]))
+
+
+def _step_collapse(result: SimulationResult, t_end: float) -> tuple[bool | None, float | None]:
+    """``(step_collapse, min_step)`` of an adaptive method, ``(None, None)`` for the others."""
+    if result.method not in _ADAPTIVE or result.t.size < 2:
+        return None, None
+    steps = np.diff(result.t)
+    steps = steps[steps > 0]
+    if steps.size == 0:
+        return None, None
+    tiny = np.concatenate(([0], (steps < STEP_COLLAPSE_RATIO * t_end).astype(np.int8), [0]))
+    edges = np.flatnonzero(np.diff(tiny))            # starts and ends of runs of tiny steps
+    longest = int(np.max(edges[1::2] - edges[::2])) if edges.size else 0
+    return longest >= STEP_COLLAPSE_RUN, float(np.min(steps))
+
+
+def _creep(result: SimulationResult, reference: np.ndarray, plant: Plant, v0: float) -> bool:
+    if (plant.commands is not None or plant.damping != 0 or plant.compliance != 0
+            or isinstance(plant.external_force, PiecewiseConstant) or plant.external_force != 0):
+        return False
+    band = plant.contacts.zero_force_band()
+    if band is None or not band[0] + CREEP_TOLERANCE < v0 < band[1] - CREEP_TOLERANCE:
+        return False
+    inside = (reference > band[0] + CREEP_TOLERANCE) & (reference < band[1] - CREEP_TOLERANCE)
+    return bool(np.any(np.abs(result.V[inside] - reference[inside]) > CREEP_TOLERANCE))
+
+
+def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting,
+           repeats: int) -> tuple[SimulationResult, float]:
+    """Run once, then time ``repeats`` repeats (back-to-back calls of >= 5 ms each)."""
+    def call() -> SimulationResult:
+        return simulate(plant, t_end, v0=v0, method=setting.method, budget=setting.budget,
+                        **setting.kwargs)
+
+    start = time.perf_counter()
+    result = call()
+    first = time.perf_counter() - start
+    if not result.success or repeats <= 1 and first >= _MIN_REPEAT_TIME:
+        return result, first
+    number = max(1, math.ceil(_MIN_REPEAT_TIME / max(first, 1e-9)))
+    # a long first run (>= 0.2 s) counts as a repeat: import and warm-up costs are negligible
+    times = [first] if first >= _WARM_RUN else []
+    for _ in range(repeats - len(times)):
+        start = time.perf_counter()
+        for _ in range(number):
+            call()
+        times.append((time.perf_counter() - start) / number)
+    return result, statistics.median(times)
+
+
+def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: Plant,
+         t_end: float, v0: float, exact: SimulationResult) -> PrecisionRow:
+    if result.method == "exact":
+        if _rational_supported(plant):
+            times = np.union1d(result.t, np.linspace(0.0, t_end, 1001))
+            truth = rational_trajectory(plant, v0, times)
+            mine = result.speed_at(times)
+            max_error = float(np.max(np.abs(mine - truth)))
+            final_error = float(abs(mine[-1] - truth[-1])) if result.success else math.inf
+        else:
+            max_error = final_error = math.nan
+        reference = exact.speed_at(result.t)
+    else:
+        reference = exact.speed_at(result.t)
+        errors = np.abs(result.V - reference)
+        max_error = float(np.max(errors)) if errors.size else math.inf
+        final_error = float(errors[-1]) if result.success and errors.size else math.inf
+    reversals = _reversals(result.V)
+    chattering = reversals > _reversals(reference) + CHATTER_MARGIN
+    collapse, min_step = _step_collapse(result, t_end)
+    stalled = result.status in (Status.WALL_TIME, Status.MAX_STEPS, Status.ZENO)
+    return PrecisionRow(
+        method=result.method, setting=result.setting, max_error=max_error,
+        final_error=final_error, wall_time=float(wall), n_steps=result.n_steps,
+        n_evaluations=result.n_evaluations, n_events=result.n_events, status=result.status,
+        message=result.message, chattering=bool(chattering), step_collapse=collapse,
+        creep=_creep(result, reference, plant, v0), stalled=stalled, reversals=reversals,
+        min_step=min_step)
+
+
+def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: int = 3,
+                     settings: Sequence[MethodSetting] | None = None) -> PrecisionReport:
+    """Run every method and setting on one plant and measure error against run time.
+
+    Parameters
+    ----------
+    plant : Plant
+    t_end : float, s
+        Horizon, ``> 0``.
+    v0 : float, m/s
+        Initial body speed.
+    repeats : int
+        Timing repeats per successful run (median reported), ``>= 1``.
+    settings : sequence of MethodSetting, optional
+        Default :func:`default_settings`. Include ``"exact"`` to time the exact method.
+
+    Returns
+    -------
+    PrecisionReport
+        One row per setting, in order. The reference of every error is the exact method's
+        dense output (itself checked against :func:`rational_trajectory` in its row).
+
+    Raises
+    ------
+    SolverError
+        If the exact reference does not reach ``t_end`` under a 60 s budget.
+    """
+    if not isinstance(plant, Plant):
+        raise ParameterTypeError(parameter_message("plant", "precision_report", "be a Plant", plant))
+    t_end = as_float(t_end, "t_end", "precision_report", low=0.0, low_open=True)
+    v0 = as_float(v0, "v0", "precision_report")
+    repeats = as_int(repeats, "repeats", "precision_report", low=1)
+    chosen = default_settings() if settings is None else tuple(settings)
+    for item in chosen:
+        if not isinstance(item, MethodSetting):
+            raise ParameterTypeError(parameter_message(
+                "settings", "precision_report", "contain MethodSetting objects", item))
+    exact = simulate(plant, t_end, v0=v0, method="exact")
+    if not exact.success:
+        raise SolverError(f"The exact reference did not reach t_end = {t_end:g} s: {exact.message}")
+    rows = []
+    for setting in chosen:
+        result, wall = _timed(plant, t_end, v0, setting, repeats)
+        rows.append(_row(setting, result, wall, plant, t_end, v0, exact))
+    return PrecisionReport(rows=tuple(rows), t_end=t_end, v0=v0, repeats=repeats)
+
+
+# -- derived data (pure) ----------------------------------------------------------------------
+def exact_speedup(report: PrecisionReport, error: float = 1e-6) -> Speedup:
+    """Run time of the fastest reference method reaching ``max_error <= error`` over the exact one.
+
+    Parameters
+    ----------
+    report : PrecisionReport
+        Must contain an ``"exact"`` row.
+    error : float, m/s
+        Accuracy a reference run must reach (and finish) to count.
+
+    Returns
+    -------
+    Speedup
+    """
+    error = as_float(error, "error", "exact_speedup", low=0.0, low_open=True)
+    exact = report.row("exact")
+    accurate = [row for row in report.rows if row.method != "exact"
+                and row.status is Status.SUCCESS and row.max_error <= error]
+    if not accurate:
+        return Speedup(math.nan, error, exact, None)
+    fastest = min(accurate, key=lambda row: row.wall_time)
+    return Speedup(fastest.wall_time / exact.wall_time, error, exact, fastest)
+
+
+def work_precision_curves(report: PrecisionReport) -> tuple[WorkPrecisionCurve, ...]:
+    """The data of the log-log plot of ``max_error`` against ``wall_time``, one curve per method.
+
+    Points are sorted by run time; rows with a non-finite error are left out.
+    """
+    curves = []
+    for method in dict.fromkeys(row.method for row in report.rows):
+        rows = sorted((row for row in report.rows
+                       if row.method == method and math.isfinite(row.max_error)),
+                      key=lambda row: row.wall_time)
+        if not rows:
+            continue
+        arrays = [np.array([row.wall_time for row in rows]),
+                  np.array([row.max_error for row in rows]),
+                  np.array([row.status is Status.SUCCESS for row in rows])]
+        for array in arrays:
+            array.setflags(write=False)
+        curves.append(WorkPrecisionCurve(method, tuple(row.setting for row in rows), *arrays))
+    return tuple(curves)

@@ -1,0 +1,173 @@
+"""Reference method: a casadi SUNDIALS integrator (CVODES or IDAS) on the smoothed model.
+
+``simulate(plant, t_end, method="casadi", integrator="cvodes" | "idas", friction=..., ...)``.
+
+The smoothed friction laws are those of :meth:`toolkit.plant.Plant.contact_forces` written
+symbolically (``"tanh"`` and ``"stribeck"``; a compliant motor's saturated linear law when the
+plant has compliance). ``"sign"`` is refused: SUNDIALS' error control assumes a smooth
+right-hand side. The state is ``[V]`` or, with dynamic motors, ``[V, v_1, ..., v_n]``.
+
+One ``casadi.integrator`` is built over the whole output grid (the requested times, or 201
+uniform times when ``t_eval`` is None, plus every switching time of the commands and of the
+external force). Commands and ``F_ext`` enter as the integrator's controls ``u``, which casadi
+holds constant on each grid interval, so the integrator restarts exactly at every switch.
+
+Budget, as far as casadi allows:
+
+- ``budget.max_steps`` is passed as SUNDIALS' ``max_num_steps``, which bounds the steps **per
+  output interval**, not per run; the total is checked after the call (status ``MAX_STEPS``
+  if it is over budget or if SUNDIALS gave up with too much work).
+- The wall clock cannot interrupt a running casadi call: it is checked after the call
+  (status ``WALL_TIME`` if it overran; the trajectory is still returned).
+- When SUNDIALS fails, casadi returns no partial trajectory: the result holds ``t = 0`` only.
+
+``wall_time`` includes building the symbolic model and the integrator (as every call does).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, check_option
+from ..plant import STRIBECK_PEAK, STRIBECK_SPEED, Plant
+from ._reference import Meter, build_result, check_smoothing, format_setting
+from ._result import Budget, SimulationResult, Status
+
+__all__ = ["simulate_casadi", "CASADI_INTEGRATORS", "casadi_right_hand_side"]
+
+#: Integrators accepted by ``integrator=``.
+CASADI_INTEGRATORS = ("cvodes", "idas")
+
+#: Output times used when ``t_eval`` is None.
+_DEFAULT_SAMPLES = 201
+
+
+def casadi_right_hand_side(plant: Plant, friction: str, epsilon: float) -> tuple[Any, Any, Any]:
+    """The symbolic ODE of the smoothed plant.
+
+    Returns
+    -------
+    x : casadi.SX of shape (d, 1)
+        State ``[V]`` or ``[V, v_1..v_n]``.
+    u : casadi.SX of shape (n + 1, 1)
+        Controls: the commanded speeds (m/s) and ``F_ext`` (N).
+    ode : casadi.SX of shape (d, 1)
+        ``dx/dt``.
+    """
+    import casadi as ca
+
+    n = plant.n
+    dynamic = plant.dynamic_motors
+    x = ca.SX.sym("x", 1 + (n if dynamic else 0))
+    u = ca.SX.sym("u", n + 1)
+    V = x[0]
+    command, ext = u[:n], u[n]
+    speeds = x[1:] if dynamic else command
+    f = ca.DM(plant.contacts.forces)
+    slip = speeds - V
+    k = plant.compliance
+    if k > 0:
+        scale = np.where(plant.contacts.forces > 0, k * plant.contacts.forces, 1.0)
+        contact = f * ca.fmin(ca.fmax(slip / ca.DM(scale), -1.0), 1.0)
+    else:
+        contact = f * ca.tanh(slip / epsilon)
+        if friction == "stribeck":
+            contact = contact * (1.0 + (STRIBECK_PEAK - 1.0)
+                                 * ca.exp(-(slip / (STRIBECK_SPEED * epsilon)) ** 2))
+    dV = (ca.sum1(contact) + ext - plant.damping * V) / plant.mass
+    if not dynamic:
+        return x, u, dV
+    motors = plant.motors
+    gap = command - x[1:]
+    if motors.lag > 0:
+        rate = gap / motors.lag
+        if np.isfinite(motors.rate_limit):
+            rate = ca.fmin(ca.fmax(rate, -motors.rate_limit), motors.rate_limit)
+    else:
+        rate = motors.rate_limit * ca.sign(gap)
+    return x, u, ca.vertcat(dV, rate)
+
+
+def _output_grid(plant: Plant, t_end: float, t_eval: np.ndarray | None) -> np.ndarray:
+    base = np.linspace(0.0, t_end, _DEFAULT_SAMPLES) if t_eval is None else t_eval
+    switches = plant.switching_times()
+    grid = np.unique(np.concatenate((base, switches[(switches > 0) & (switches < t_end)], [t_end])))
+    return grid[grid > 0.0]
+
+
+def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray | None,
+                    budget: Budget, integrator: str = "cvodes", friction: str = "tanh",
+                    epsilon: float = 1e-3, rtol: float = 1e-8,
+                    atol: float = 1e-10) -> SimulationResult:
+    """Integrate the smoothed plant with casadi's CVODES or IDAS.
+
+    Parameters
+    ----------
+    plant : Plant
+    t_end : float, s
+    v0 : float, m/s
+    t_eval : ndarray of shape (T,) or None, s
+        Report times; ``None``: 201 uniform times (plus the switching times).
+    budget : Budget
+        See the module docstring for what casadi can and cannot enforce.
+    integrator : {"cvodes", "idas"}
+    friction : {"tanh", "stribeck"}
+    epsilon : float, m/s
+        Smoothing width, ``> 0``.
+    rtol, atol : float
+        SUNDIALS tolerances (``atol`` in m/s), ``> 0``.
+
+    Returns
+    -------
+    SimulationResult
+        ``n_steps`` and ``n_evaluations`` from the integrator's statistics.
+    """
+    import casadi as ca
+
+    owner = "simulate_casadi"
+    check_option(integrator, "integrator", owner, CASADI_INTEGRATORS)
+    epsilon = check_smoothing(friction, epsilon, owner, ("tanh", "stribeck"))
+    rtol = as_float(rtol, "rtol", owner, low=0.0, low_open=True)
+    atol = as_float(atol, "atol", owner, low=0.0, low_open=True)
+    meter = Meter(budget, counts="steps")
+    dynamic = plant.dynamic_motors
+    x, u, ode = casadi_right_hand_side(plant, friction, epsilon)
+    grid = _output_grid(plant, t_end, t_eval)
+    starts = np.concatenate(([0.0], grid[:-1]))          # u is held on (starts[k], grid[k]]
+    controls = np.array([np.concatenate((plant.command(s), [plant.external(s)])) for s in starts]).T
+    options = {"abstol": atol, "reltol": rtol, "max_num_steps": int(min(budget.max_steps, 2**31 - 1))}
+    function = ca.integrator("contacts", integrator, {"x": x, "u": u, "ode": ode}, 0.0,
+                             grid.tolist(), options)
+    x0 = np.concatenate(([v0], plant.initial_speeds() if dynamic else []))
+    status, detail = Status.SUCCESS, ""
+    try:
+        solution = function(x0=x0, u=controls)
+        states = np.array(solution["xf"]).reshape(x0.size, grid.size).T
+        t_out = np.concatenate(([0.0], grid))
+        y_out = np.vstack((x0, states))
+    except RuntimeError as error:
+        too_much = "TOO_MUCH_WORK" in str(error) or "too_much_work" in str(error).lower()
+        status = Status.MAX_STEPS if too_much else Status.FAILED
+        detail = f"{integrator}: {str(error).strip().splitlines()[-1][:200]}"
+        t_out, y_out = np.zeros(1), x0[None, :]
+    stats = function.stats()
+    meter.steps = int(stats.get("nsteps", 0))
+    meter.evaluations = int(stats.get("nfevals", 0))
+    if status is Status.SUCCESS:
+        if meter.steps > budget.max_steps:
+            status, detail = Status.MAX_STEPS, (f"{meter.steps} steps used of max_steps = "
+                                                f"{budget.max_steps} (checked after the call)")
+        elif meter.elapsed() > budget.wall_time:
+            status, detail = Status.WALL_TIME, (f"{meter.elapsed():.3g} s used of wall_time = "
+                                                f"{budget.wall_time:g} s (checked after the call)")
+    if t_eval is not None and status is Status.SUCCESS:
+        keep = np.searchsorted(t_out, t_eval)            # every t_eval is on the grid
+        t_out, y_out = t_out[keep], y_out[keep]
+    return build_result(
+        plant, method="casadi",
+        setting=format_setting(integrator=integrator, friction=friction, eps=epsilon,
+                               rtol=rtol, atol=atol),
+        t=t_out, V=y_out[:, 0], contact_speeds=y_out[:, 1:] if dynamic else None, force=None,
+        meter=meter, status=status, detail=detail, friction=friction, epsilon=epsilon)

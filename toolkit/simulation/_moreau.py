@@ -1,0 +1,239 @@
+"""Reference method: Moreau-Jean time stepping (implicit Euler with the set-valued force).
+
+``simulate(plant, t_end, method="moreau", step=1e-3)``.
+
+One step of length ``h`` from ``V`` solves the inclusion
+
+    m (W - V) / h  in  F(W) + F_ext - c W,        F(W) = sum_i f_i Sign(v_i - W)
+
+for the new speed ``W``, with the contact speeds ``v_i`` and ``F_ext`` of the step's end
+(implicit Euler). Writing ``a = m / h + c`` and ``b = m V / h + F_ext``, ``W`` is the zero of
+``g(W) = a W - b - F(W)``: since ``F`` is non-increasing (maximal monotone), ``g`` is strictly
+increasing, so the zero exists, is unique and is found exactly on the staircase of
+:meth:`toolkit.contacts.ContactSet.staircase` (levels ``s_k``, plateau forces ``P_k`` below
+``s_k`` and ``P_{k+1}`` above):
+
+- at a level, ``g(s_k) = [a s_k - b - P_k, a s_k - b - P_{k+1}]``; both ends increase with
+  ``k``, so a binary search finds the first level whose upper end is ``>= 0``;
+- if its lower end is ``<= 0`` the zero is the level itself: the body **sticks** at ``s_k``
+  (the contacts there supply the stiction force that balances the rest);
+- otherwise the zero lies on the open plateau before it: ``W = (b + P_k) / a``.
+
+So a body at an equilibrium stays there exactly (no chattering) and inside a zero-force band
+with ``c = 0`` it keeps its speed exactly (no creep). The method is first-order accurate: the
+error of the stick and crossing times is ``O(h)``; with drag, the exponential is approximated
+by ``(1 + c h / m)^(-k)``.
+
+Motor compliance makes ``F`` continuous and piecewise linear (kinks at ``v_i +- k f_i``); the
+zero of ``g`` is then found by binary search over the kinks and a linear solve between them.
+Dynamic motors are advanced first, by implicit Euler of ``dv/dt = clip((u - v) / tau, -r, r)``
+(or ``r sign(u - v)`` without a lag), which is exact in ``v_+`` (a monotone scalar equation
+per contact); their speeds then enter the body's step.
+
+Steps land exactly on every command or external-force switch; the step before a switch (and
+before ``t_end``) is shortened. ``budget.max_steps`` counts steps.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+
+import numpy as np
+
+from .._validation import as_float
+from ..contacts import ContactSet
+from ..plant import Plant
+from ._reference import (BudgetExceeded, Meter, build_result, format_setting,
+                         samples_from_steps, segment_edges)
+from ._result import Budget, SimulationResult, Status
+
+__all__ = ["simulate_moreau", "moreau_step_staircase"]
+
+
+def moreau_step_staircase(levels: np.ndarray, plateaus: np.ndarray, a: float,
+                          b: float) -> tuple[float, bool]:
+    """Solve ``a W - b in F(W)`` on a Coulomb staircase (one Moreau-Jean step).
+
+    Parameters
+    ----------
+    levels : ndarray of shape (K,), m/s
+        Distinct contact speeds, ascending.
+    plateaus : ndarray of shape (K + 1,), N
+        Force below ``levels[0]``, between consecutive levels, above ``levels[-1]``.
+    a : float, N s/m
+        ``m / h + c > 0``.
+    b : float, N
+        ``m V / h + F_ext``.
+
+    Returns
+    -------
+    W : float, m/s
+        The unique solution.
+    stuck : bool
+        True when ``W`` is a contact speed (the set-valued force was used).
+    """
+    upper = a * levels - plateaus[1:]            # increasing: a s_k - P_{k+1}
+    k = int(np.searchsorted(upper, b, side="left"))
+    return _resolve(levels, plateaus, a, b, k)
+
+
+def _resolve(levels: np.ndarray, plateaus: np.ndarray, a: float, b: float,
+             k: int) -> tuple[float, bool]:
+    if k < levels.size and a * levels[k] - plateaus[k] <= b:
+        return float(levels[k]), True
+    return float((b + plateaus[k]) / a), False
+
+
+def _compliant_step(plant: Plant, speeds: np.ndarray, a: float, b: float,
+                    meter: Meter) -> float:
+    """Solve ``a W - b = F(W)`` for the continuous piecewise-linear compliant force law."""
+    f = plant.contacts.forces
+    k = plant.compliance
+    kinks = np.sort(np.concatenate((speeds - k * f, speeds + k * f)))
+
+    def g(W: float) -> float:
+        meter.evaluation()
+        return a * W - b - float(np.sum(plant.contact_forces(W, speeds)))
+
+    total = plant.contacts.total_force
+    if g(float(kinks[0])) >= 0.0:                # F = +F_tot below every kink
+        return (b + total) / a
+    if g(float(kinks[-1])) <= 0.0:               # F = -F_tot above every kink
+        return (b - total) / a
+    lo, hi = 0, kinks.size - 1                   # g(kinks[lo]) < 0 < g(kinks[hi])
+    g_lo, g_hi = g(float(kinks[lo])), g(float(kinks[hi]))
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        g_mid = g(float(kinks[mid]))
+        if g_mid < 0.0:
+            lo, g_lo = mid, g_mid
+        elif g_mid > 0.0:
+            hi, g_hi = mid, g_mid
+        else:
+            return float(kinks[mid])
+    # g is linear on [kinks[lo], kinks[hi]]
+    return float(kinks[lo] - g_lo * (kinks[hi] - kinks[lo]) / (g_hi - g_lo))
+
+
+def _motor_step(plant: Plant, speeds: np.ndarray, command: np.ndarray, h: float) -> np.ndarray:
+    """Implicit Euler step of the motor model (exact solve of the monotone scalar equations)."""
+    motors = plant.motors
+    if motors.lag > 0:
+        ratio = h / motors.lag
+        target = (speeds + ratio * command) / (1.0 + ratio)
+    else:
+        target = command
+    reach = h * motors.rate_limit
+    return speeds + np.clip(target - speeds, -reach, reach)
+
+
+def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray | None,
+                    budget: Budget, step: float = 1e-3) -> SimulationResult:
+    """Moreau-Jean time stepping with the set-valued Coulomb force resolved exactly.
+
+    Parameters
+    ----------
+    plant : Plant
+    t_end : float, s
+    v0 : float, m/s
+    t_eval : ndarray of shape (T,) or None, s
+        Report times (linear interpolation between steps, the net force of the step that
+        ends at or after each time); ``None``: every step.
+    budget : Budget
+        ``max_steps`` counts steps.
+    step : float, s
+        Step length ``h > 0`` (shortened to land on switches and ``t_end``).
+
+    Returns
+    -------
+    SimulationResult
+        ``force`` is ``m (W - V) / h`` of each step (the net force actually applied, the
+        stiction force included); no events are reported.
+    """
+    h = as_float(step, "step", "simulate_moreau", low=0.0, low_open=True)
+    meter = Meter(budget, counts="steps")
+    dynamic = plant.dynamic_motors
+    speeds = plant.initial_speeds()
+    times, values, forces, rows = [0.0], [v0], [plant.net_force(0.0, v0, speeds)], [speeds]
+    status, detail = Status.SUCCESS, ""
+    V = v0
+    edges = segment_edges(plant, t_end)
+    try:
+        for t0, t1 in zip(edges[:-1], edges[1:]):
+            t0, t1 = float(t0), float(t1)
+            count = max(1, math.ceil((t1 - t0) / h * (1.0 - 1e-12)))
+            # (time at the end of the step, step length): nominal h, the last one shortened
+            grid = [(t0 + j * h, h) for j in range(1, count)]
+            grid.append((t1, t1 - (t0 + (count - 1) * h)))
+            if dynamic or plant.compliance > 0:
+                V, speeds = _general_segment(plant, t0, grid, V, speeds, meter,
+                                             times, values, forces, rows)
+            else:
+                V = _staircase_segment(plant, t0, grid, V, meter, times, values, forces)
+    except BudgetExceeded as stop:
+        status, detail = stop.status, stop.detail
+    step_t = np.array(times)
+    state = np.column_stack((values, forces))
+    if dynamic:
+        state = np.column_stack((state, np.array(rows[:len(times)])))
+    t_out, y_out = samples_from_steps(step_t, state, t_eval)
+    if t_eval is not None:                       # force of the step containing each time
+        index = np.minimum(np.searchsorted(step_t, t_out, side="left"), step_t.size - 1)
+        y_out[:, 1] = state[index, 1]
+    return build_result(
+        plant, method="moreau", setting=format_setting(h=h), t=t_out, V=y_out[:, 0],
+        contact_speeds=y_out[:, 2:] if dynamic else None, force=y_out[:, 1], meter=meter,
+        status=status, detail=detail)
+
+
+def _staircase_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V: float,
+                       meter: Meter,
+                       times: list[float], values: list[float], forces: list[float]) -> float:
+    """Steps over a segment with constant contact speeds: one staircase, binary searches."""
+    cs = plant.contacts.with_speeds(plant.command(t0))
+    stair = cs.staircase()
+    levels, plateaus = stair.levels, stair.plateaus
+    ext, m, c = plant.external(t0), plant.mass, plant.damping
+    cache: dict[float, tuple[float, list[float]]] = {}
+    for t_next, h in grid:
+        if h not in cache:
+            a = m / h + c
+            cache[h] = (a, (a * levels - plateaus[1:]).tolist())
+        a, upper = cache[h]
+        b = m * V / h + ext
+        W, _ = _resolve(levels, plateaus, a, b, bisect.bisect_left(upper, b))
+        meter.evaluations += 1
+        meter.step()
+        forces.append(m * (W - V) / h)
+        times.append(t_next)
+        values.append(W)
+        V = W
+    return V
+
+
+def _general_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V: float,
+                     speeds: np.ndarray, meter: Meter, times: list[float], values: list[float],
+                     forces: list[float], rows: list[np.ndarray]) -> tuple[float, np.ndarray]:
+    """Steps with dynamic motors and/or compliance: staircase or kinks rebuilt every step."""
+    command = plant.command(t0)
+    ext, m, c = plant.external(t0), plant.mass, plant.damping
+    for t_next, h in grid:
+        if plant.dynamic_motors:
+            speeds = _motor_step(plant, speeds, command, h)
+        else:
+            speeds = command
+        a, b = m / h + c, m * V / h + ext
+        if plant.compliance > 0:
+            W = _compliant_step(plant, speeds, a, b, meter)
+        else:
+            stair = ContactSet(speeds, plant.contacts.forces).staircase()
+            W, _ = moreau_step_staircase(stair.levels, stair.plateaus, a, b)
+            meter.evaluation()
+        meter.step()
+        forces.append(m * (W - V) / h)
+        times.append(t_next)
+        values.append(W)
+        rows.append(speeds)
+        V = W
+    return V, speeds

@@ -1,0 +1,197 @@
+"""Machinery shared by the reference (non-exact) integrators: budgets, segments, results.
+
+Private. The scipy, Moreau-Jean and casadi methods all
+
+- split ``[0, t_end]`` at the switching times of the commands and the external force, so
+  that within a segment the commanded speeds and ``F_ext`` are constants (the integrators
+  never step across a discontinuity of the right-hand side in time);
+- count their work with a :class:`Meter` that raises :class:`BudgetExceeded` as soon as the
+  wall-clock or step budget is spent, so a stalled method returns a status instead of hanging;
+- assemble a :class:`~toolkit.simulation._result.SimulationResult` with :func:`build_result`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, check_option
+from ..plant import FRICTION_MODELS, Plant
+from ._result import Budget, SimulationResult, Status, status_message
+
+__all__ = ["BudgetExceeded", "Meter", "segment_edges", "build_result", "check_smoothing",
+           "format_setting", "samples_from_steps", "ideal_speeds", "net_forces"]
+
+#: How often (in counted units) the wall clock is read; ``perf_counter`` costs ~50 ns.
+_CLOCK_EVERY = 16
+
+
+class BudgetExceeded(Exception):
+    """Raised inside an integrator to abort it when a budget is spent (never leaves a method)."""
+
+    def __init__(self, status: Status, detail: str) -> None:
+        super().__init__(detail)
+        self.status = status
+        self.detail = detail
+
+
+class Meter:
+    """Counts right-hand-side evaluations and steps against a :class:`Budget`.
+
+    Parameters
+    ----------
+    budget : Budget
+    counts : {"evaluations", "steps"}
+        Which counter is held against ``budget.max_steps``.
+    """
+
+    def __init__(self, budget: Budget, counts: str = "evaluations") -> None:
+        self.budget = budget
+        self.counts = counts
+        self.start = time.perf_counter()
+        self.evaluations = 0
+        self.steps = 0
+
+    def elapsed(self) -> float:
+        """Wall time since the meter was created, s."""
+        return time.perf_counter() - self.start
+
+    def _check(self, count: int) -> None:
+        if count > self.budget.max_steps:
+            raise BudgetExceeded(Status.MAX_STEPS,
+                                 f"{count - 1} {self.counts} used of max_steps = {self.budget.max_steps}")
+        if count % _CLOCK_EVERY == 0 and self.elapsed() > self.budget.wall_time:
+            raise BudgetExceeded(Status.WALL_TIME,
+                                 f"{self.elapsed():.3g} s used of wall_time = {self.budget.wall_time:g} s")
+
+    def evaluation(self, n: int = 1) -> None:
+        """Count ``n`` right-hand-side evaluations; raise :class:`BudgetExceeded` when over budget."""
+        self.evaluations += n
+        if self.counts == "evaluations":
+            self._check(self.evaluations)
+        elif self.evaluations % _CLOCK_EVERY == 0:
+            self.check_clock()
+
+    def step(self, n: int = 1) -> None:
+        """Count ``n`` accepted steps; raise :class:`BudgetExceeded` when over budget."""
+        self.steps += n
+        if self.counts == "steps":
+            self._check(self.steps)
+
+    def check_clock(self) -> None:
+        """Raise :class:`BudgetExceeded` if the wall-clock budget is spent."""
+        if self.elapsed() > self.budget.wall_time:
+            raise BudgetExceeded(Status.WALL_TIME,
+                                 f"{self.elapsed():.3g} s used of wall_time = {self.budget.wall_time:g} s")
+
+
+def segment_edges(plant: Plant, t_end: float) -> np.ndarray:
+    """``[0, t_1, ..., t_end]``: the switching times of the plant strictly inside ``(0, t_end)``.
+
+    Returns
+    -------
+    ndarray of shape (k + 2,), s
+        Within ``[edges[j], edges[j+1])`` the commands and ``F_ext`` are constant.
+    """
+    switches = plant.switching_times()
+    inside = switches[(switches > 0.0) & (switches < t_end)]
+    return np.concatenate(([0.0], inside, [t_end]))
+
+
+def check_smoothing(friction: str, epsilon: Any, owner: str,
+                    choices: tuple[str, ...] = FRICTION_MODELS) -> float:
+    """Validate the friction law and its smoothing width; return ``epsilon`` as a float (m/s)."""
+    check_option(friction, "friction", owner, choices)
+    return as_float(epsilon, "epsilon", owner, low=0.0, low_open=True)
+
+
+def format_setting(**parts: Any) -> str:
+    """``"tanh eps=1e-06 rtol=1e-08"``: a compact human description of a method's setting."""
+    words = []
+    for name, value in parts.items():
+        if value is None:
+            continue
+        if name in ("friction", "integrator"):
+            words.append(str(value))
+        else:
+            words.append(f"{name}={value:.3g}" if isinstance(value, float) else f"{name}={value}")
+    return " ".join(words)
+
+
+def samples_from_steps(step_t: np.ndarray, step_y: np.ndarray,
+                       t_eval: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Report the states of a stepping method at ``t_eval`` (linear interpolation) or its steps.
+
+    Parameters
+    ----------
+    step_t : ndarray of shape (S,), s
+        Step times, non-decreasing.
+    step_y : ndarray of shape (S, d)
+        States at the step times.
+    t_eval : ndarray of shape (T,) or None
+        Requested times; those beyond the last step (a run stopped by a budget) are dropped.
+
+    Returns
+    -------
+    t : ndarray of shape (T',), s
+    y : ndarray of shape (T', d)
+    """
+    if t_eval is None:
+        return step_t, step_y
+    keep = t_eval[t_eval <= step_t[-1]]
+    columns = [np.interp(keep, step_t, step_y[:, j]) for j in range(step_y.shape[1])]
+    return keep, np.stack(columns, axis=1) if columns else np.empty((keep.size, 0))
+
+
+def ideal_speeds(plant: Plant, t: np.ndarray) -> np.ndarray:
+    """Contact speeds of ideal motors (the clipped commands) at times ``t``, shape (T, n), m/s."""
+    if plant.commands is None:
+        return np.broadcast_to(plant.command(0.0), (t.size, plant.n)).copy()
+    limits = plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf)
+    return np.clip(plant.commands(t).reshape(t.size, plant.n), *limits)
+
+
+def net_forces(plant: Plant, t: np.ndarray, V: np.ndarray, speeds: np.ndarray, *,
+               friction: str = "sign", epsilon: float = 0.0) -> np.ndarray:
+    """Net force of a friction law at many samples at once, N, shape (T,).
+
+    The vectorized counterpart of :meth:`Plant.net_force`: ``Plant.contact_forces`` applied
+    to a column of body speeds against rows of contact speeds.
+    """
+    if t.size == 0:
+        return np.empty(0)
+    eps = epsilon if friction != "sign" else 0.0
+    contact = plant.contact_forces(V[:, None], speeds, friction=friction, epsilon=eps)
+    ext = plant.external_force
+    outside = ext(t) if callable(ext) else np.full(t.size, float(ext))
+    return np.sum(contact, axis=1) + outside - plant.damping * V
+
+
+def build_result(plant: Plant, *, method: str, setting: str, t: np.ndarray, V: np.ndarray,
+                 contact_speeds: np.ndarray | None, force: np.ndarray | None,
+                 meter: Meter, status: Status, detail: str = "", friction: str = "sign",
+                 epsilon: float = 0.0,
+                 dense: Callable[[np.ndarray], np.ndarray] | None = None) -> SimulationResult:
+    """Assemble the result of a reference method.
+
+    ``contact_speeds=None`` means ideal motors: the clipped commands at ``t``.
+    ``force=None`` means: the net force of the method's own friction law at each sample.
+    """
+    t = np.asarray(t, dtype=float)
+    V = np.asarray(V, dtype=float)
+    if contact_speeds is None:
+        contact_speeds = ideal_speeds(plant, t)
+    if force is None:
+        force = net_forces(plant, t, V, contact_speeds, friction=friction, epsilon=epsilon)
+    finite = bool(np.all(np.isfinite(V)))
+    if status is Status.SUCCESS and not finite:
+        status, detail = Status.FAILED, "the state became non-finite"
+    return SimulationResult(
+        method=method, setting=setting, t=t, V=V,
+        contact_speeds=np.asarray(contact_speeds, dtype=float).reshape(t.size, plant.n),
+        force=np.asarray(force, dtype=float).reshape(t.size), events=(), status=status,
+        message=status_message(status, detail), n_events=0, n_evaluations=meter.evaluations,
+        n_steps=meter.steps, wall_time=meter.elapsed(), dense=dense)

@@ -1,0 +1,173 @@
+"""Reference method: scipy's adaptive ODE solvers on the Coulomb or a smoothed friction law.
+
+``simulate(plant, t_end, method="rk45" | "lsoda" | "radau" | "bdf", friction=..., ...)``.
+
+The state is ``y = [V]`` with ideal motors and ``y = [V, v_1, ..., v_n]`` when the motors
+are dynamic (a lag or a rate limit), with
+
+    dV/dt   = (sum_i phi_i(v_i - V) + F_ext - c V) / m
+    dv_i/dt = Plant.motor_rate(t, v)
+
+where ``phi_i`` is the friction law of :meth:`toolkit.plant.Plant.contact_forces`:
+
+- ``"sign"``: ``f_i sign(s)`` (``sign(0) = 0``). A discontinuous right-hand side: adaptive
+  solvers chatter around the median and their step size collapses. This is the case the
+  budget exists for.
+- ``"tanh"``: ``f_i tanh(s / epsilon)``; Coulomb's law as ``epsilon -> 0`` for every ``s != 0``.
+  Stiff (slope ``f_i / epsilon``) and it makes the body creep inside zero-force bands.
+- ``"stribeck"``: ``f_i tanh(s / epsilon) (1 + (P - 1) exp(-(s / (S epsilon))^2))`` with
+  ``P = toolkit.plant.STRIBECK_PEAK`` (breakaway over Coulomb force, 1.5) and
+  ``S = toolkit.plant.STRIBECK_SPEED`` (Stribeck speed in units of ``epsilon``, 3). Both
+  widths scale with ``epsilon``, so the law tends to Coulomb's ``f_i sign(s)`` pointwise for
+  ``s != 0`` as ``epsilon -> 0``; the hump makes the force non-monotone in slip.
+
+The solver classes behind ``scipy.integrate.solve_ivp`` (``RK45``, ``LSODA``, ``Radau``,
+``BDF``) are stepped here exactly as ``solve_ivp`` steps them, one segment between command or
+external-force switches at a time (a fresh solver per segment, as a careful user restarts
+``solve_ivp`` at a discontinuity). Stepping by hand keeps the trajectory when a budget stops
+the run: every right-hand-side evaluation is counted and checked against
+``budget.max_steps`` and, every few calls, the wall clock; when a budget is spent a private
+exception aborts the solver and the accepted steps so far are returned with status
+``MAX_STEPS`` or ``WALL_TIME``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, check_option
+from ..plant import Plant
+from ._reference import (BudgetExceeded, Meter, build_result, check_smoothing, format_setting,
+                         samples_from_steps, segment_edges)
+from ._result import Budget, SimulationResult, Status
+
+__all__ = ["simulate_scipy", "SCIPY_SOLVERS"]
+
+#: Method name -> scipy solver class name.
+SCIPY_SOLVERS = {"rk45": "RK45", "lsoda": "LSODA", "radau": "Radau", "bdf": "BDF"}
+
+
+def _right_hand_side(plant: Plant, t0: float, friction: str, epsilon: float, meter: Meter,
+                     dynamic: bool) -> Any:
+    """The ODE right-hand side on a segment starting at ``t0`` (commands and F_ext frozen)."""
+    mass = plant.mass
+    # Within a segment nothing depends on t except through the (constant) commands and F_ext,
+    # so every evaluation uses t0: the solver may probe the segment's right end, where
+    # PiecewiseConstant already holds the next value.
+    if not dynamic:
+        speeds = plant.command(t0)
+
+        def rhs(t: float, y: np.ndarray) -> np.ndarray:
+            meter.evaluation()
+            return np.array([plant.net_force(t0, y[0], speeds, friction=friction,
+                                             epsilon=epsilon) / mass])
+        return rhs
+
+    def rhs_dynamic(t: float, y: np.ndarray) -> np.ndarray:
+        meter.evaluation()
+        speeds = y[1:]
+        out = np.empty_like(y)
+        out[0] = plant.net_force(t0, y[0], speeds, friction=friction, epsilon=epsilon) / mass
+        out[1:] = plant.motor_rate(t0, speeds)
+        return out
+    return rhs_dynamic
+
+
+def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray | None,
+                   budget: Budget, solver: str, friction: str = "sign", epsilon: float = 1e-3,
+                   rtol: float = 1e-6, atol: float = 1e-9) -> SimulationResult:
+    """Integrate the plant with one of scipy's ``solve_ivp`` solvers.
+
+    Parameters
+    ----------
+    plant : Plant
+    t_end : float, s
+    v0 : float, m/s
+    t_eval : ndarray of shape (T,) or None, s
+        Report times, evaluated with the solver's own dense output on the step that
+        contains each time; ``None``: every accepted step. A run stopped by a budget
+        reports only the times it reached.
+    budget : Budget
+        ``max_steps`` counts right-hand-side evaluations (finite-difference Jacobian
+        evaluations included).
+    solver : {"rk45", "lsoda", "radau", "bdf"}
+    friction : {"sign", "tanh", "stribeck"}
+    epsilon : float, m/s
+        Smoothing width of ``tanh``/``stribeck`` (ignored for ``sign``), ``> 0``.
+    rtol, atol : float
+        Solver tolerances (``atol`` in m/s), ``> 0``.
+
+    Returns
+    -------
+    SimulationResult
+        ``n_steps`` accepted steps, ``n_evaluations`` right-hand-side calls, no events.
+    """
+    import scipy.integrate
+
+    owner = "simulate_scipy"
+    check_option(solver, "solver", owner, tuple(SCIPY_SOLVERS))
+    epsilon = check_smoothing(friction, epsilon, owner)
+    rtol = as_float(rtol, "rtol", owner, low=0.0, low_open=True)
+    atol = as_float(atol, "atol", owner, low=0.0, low_open=True)
+    solver_class = getattr(scipy.integrate, SCIPY_SOLVERS[solver])
+    setting = format_setting(friction=friction,
+                             eps=epsilon if friction != "sign" else None, rtol=rtol, atol=atol)
+    dynamic = plant.dynamic_motors
+    meter = Meter(budget, counts="evaluations")
+    y = np.concatenate(([v0], plant.initial_speeds() if dynamic else []))
+    times, states = [0.0], [y.copy()]
+    dense_t: list[float] = []
+    dense_y: list[np.ndarray] = []
+    status, detail = Status.SUCCESS, ""
+    edges = segment_edges(plant, t_end)
+    try:
+        for t0, t1 in zip(edges[:-1], edges[1:]):
+            rhs = _right_hand_side(plant, float(t0), friction, epsilon, meter, dynamic)
+            stepper = solver_class(rhs, float(t0), y, float(t1), rtol=rtol, atol=atol)
+            while stepper.status == "running":
+                with np.errstate(divide="ignore"):   # Radau's step-size ratio at a zero error
+                    message = stepper.step()
+                if stepper.status == "failed":
+                    raise BudgetExceeded(Status.FAILED, f"{SCIPY_SOLVERS[solver]}: {message}")
+                meter.step()
+                if t_eval is not None:
+                    _sample_step(stepper, t_eval, dense_t, dense_y)
+                times.append(stepper.t)
+                states.append(stepper.y.copy())
+                meter.check_clock()
+            y = stepper.y.copy()
+    except BudgetExceeded as stop:
+        status, detail = stop.status, stop.detail
+    step_t, step_y = np.array(times), np.array(states)
+    if t_eval is None:
+        t_out, y_out = step_t, step_y
+    else:
+        t_out, y_out = _dense_samples(t_eval, step_t, step_y, dense_t, dense_y)
+    return build_result(
+        plant, method=solver, setting=setting, t=t_out, V=y_out[:, 0],
+        contact_speeds=y_out[:, 1:] if dynamic else None, force=None, meter=meter,
+        status=status, detail=detail, friction=friction, epsilon=epsilon)
+
+
+def _sample_step(stepper: Any, t_eval: np.ndarray, out_t: list[float],
+                 out_y: list[np.ndarray]) -> None:
+    """Evaluate the solver's dense output on its last step at the requested times inside it."""
+    lo, hi = stepper.t_old, stepper.t
+    inside = t_eval[(t_eval > lo) & (t_eval <= hi)]
+    if inside.size:
+        values = stepper.dense_output()(inside)
+        out_t.extend(inside.tolist())
+        out_y.extend(np.atleast_2d(values.T))
+
+
+def _dense_samples(t_eval: np.ndarray, step_t: np.ndarray, step_y: np.ndarray,
+                   dense_t: list[float], dense_y: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Merge the dense-output samples with the exact initial state (at t = 0 requests)."""
+    t_at0, y_at0 = samples_from_steps(step_t[:1], step_y[:1], t_eval[t_eval <= 0.0])
+    if not dense_t:
+        return t_at0, y_at0
+    t_all = np.concatenate((t_at0, np.array(dense_t)))
+    y_all = np.concatenate((y_at0, np.array(dense_y)), axis=0)
+    return t_all, y_all

@@ -11,7 +11,8 @@ from toolkit.contacts import ContactSet
 from toolkit.errors import ParameterError
 from toolkit.plant import Motors, PiecewiseConstant, Plant
 from toolkit.simulation import Budget, Status, simulate
-from toolkit.simulation._moreau import moreau_step_staircase
+from toolkit.simulation._moreau import _compliant_step, _staircase, moreau_step_staircase
+from toolkit.simulation._reference import Meter
 
 SCIPY = ("rk45", "lsoda", "radau", "bdf")
 
@@ -123,6 +124,37 @@ def test_moreau_step_solves_the_inclusion(rng: np.random.Generator) -> None:
         lo, hi = cs.force_bounds(W)
         assert lo - 1e-12 <= a * W - b <= hi + 1e-12
         assert stuck == bool(np.any(stair.levels == W))
+
+
+def test_moving_staircase_matches_contact_set(rng: np.random.Generator) -> None:
+    # The per-step staircase of moving contacts equals ContactSet.staircase (second method):
+    # same levels bit for bit; plateaus are sums of <= 8 terms of order 1 -> atol 1e-14 N.
+    for _ in range(300):
+        n = int(rng.integers(1, 9))
+        speeds = np.round(rng.uniform(-1, 1, n), 1)           # rounding makes ties common
+        forces = np.where(rng.random(n) < 0.2, 0.0, rng.uniform(0.1, 1.0, n))
+        if forces.sum() == 0:
+            continue
+        stair = ContactSet(speeds, forces).staircase()
+        levels, plateaus = _staircase(speeds, forces)
+        np.testing.assert_array_equal(levels, stair.levels)
+        np.testing.assert_allclose(plateaus, stair.plateaus, rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("n", [5, 70])      # 10 kinks (all evaluated) / 140 (binary search)
+def test_compliant_step_solves_the_equation(n: int, rng: np.random.Generator) -> None:
+    # Second method: scipy's brentq on a W - b - F(W) (strictly increasing, continuous).
+    from scipy.optimize import brentq
+
+    plant = Plant(ContactSet(rng.uniform(-0.3, 0.3, n), rng.uniform(0.1, 1.0, n)), mass=1.0,
+                  motors=Motors(compliance=0.02))
+    speeds = plant.contacts.speeds
+    for _ in range(20):
+        a, b = float(rng.uniform(1.0, 100.0)), float(rng.uniform(-40.0, 40.0))
+        W = _compliant_step(plant, speeds, a, b, Meter(Budget()))
+        g = lambda x: a * x - b - float(np.sum(plant.contact_forces(x, speeds)))  # noqa: E731
+        expected = brentq(g, -1e3, 1e3, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+        assert W == pytest.approx(expected, rel=1e-12, abs=1e-13)   # both exact to rounding
 
 
 def test_moreau_with_compliance_matches_smooth_solver() -> None:

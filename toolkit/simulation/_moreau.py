@@ -42,7 +42,6 @@ import math
 import numpy as np
 
 from .._validation import as_float
-from ..contacts import ContactSet
 from ..plant import Plant
 from ._reference import (BudgetExceeded, Meter, build_result, format_setting,
                          samples_from_steps, segment_edges)
@@ -85,33 +84,67 @@ def _resolve(levels: np.ndarray, plateaus: np.ndarray, a: float, b: float,
     return float((b + plateaus[k]) / a), False
 
 
+def _staircase(speeds: np.ndarray, forces_sorted_by: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Levels and plateau forces of contacts at ``speeds`` (the :meth:`ContactSet.staircase`
+    of moving contacts, rebuilt every step without the constructor's validation).
+
+    Plateau forces below ``4 (K + 1) eps F_tot`` are snapped to 0 as in
+    :attr:`ContactSet.tie_tolerance`, so an exactly balanced band stays force-free.
+    """
+    active = forces_sorted_by > 0
+    order = np.argsort(speeds[active], kind="stable")
+    s, w = speeds[active][order], forces_sorted_by[active][order]
+    starts = np.concatenate(([0], np.flatnonzero(np.diff(s) > 0) + 1))
+    levels, steps = s[starts], np.add.reduceat(w, starts)
+    below = np.concatenate(([0.0], np.cumsum(steps)))
+    total = below[-1]
+    plateaus = total - 2.0 * below
+    tolerance = 4.0 * (levels.size + 1) * np.finfo(float).eps * total
+    plateaus[np.abs(plateaus) <= tolerance] = 0.0
+    return levels, plateaus
+
+
 def _compliant_step(plant: Plant, speeds: np.ndarray, a: float, b: float,
                     meter: Meter) -> float:
-    """Solve ``a W - b = F(W)`` for the continuous piecewise-linear compliant force law."""
+    """Solve ``a W - b = F(W)`` for the continuous piecewise-linear compliant force law.
+
+    ``g(W) = a W - b - F(W)`` is strictly increasing and linear between the kinks
+    ``v_i +- k f_i``: evaluate it at the kinks (all at once for up to 64 contacts, by binary
+    search beyond), then solve the linear piece that holds the zero.
+    """
     f = plant.contacts.forces
     k = plant.compliance
     kinks = np.sort(np.concatenate((speeds - k * f, speeds + k * f)))
-
-    def g(W: float) -> float:
-        meter.evaluation()
-        return a * W - b - float(np.sum(plant.contact_forces(W, speeds)))
-
     total = plant.contacts.total_force
-    if g(float(kinks[0])) >= 0.0:                # F = +F_tot below every kink
-        return (b + total) / a
-    if g(float(kinks[-1])) <= 0.0:               # F = -F_tot above every kink
-        return (b - total) / a
-    lo, hi = 0, kinks.size - 1                   # g(kinks[lo]) < 0 < g(kinks[hi])
-    g_lo, g_hi = g(float(kinks[lo])), g(float(kinks[hi]))
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        g_mid = g(float(kinks[mid]))
-        if g_mid < 0.0:
-            lo, g_lo = mid, g_mid
-        elif g_mid > 0.0:
-            hi, g_hi = mid, g_mid
-        else:
-            return float(kinks[mid])
+
+    def g(W: np.ndarray) -> np.ndarray:
+        meter.evaluation(int(np.size(W)))
+        return a * W - b - np.sum(plant.contact_forces(W[..., None], speeds), axis=-1)
+
+    if kinks.size <= 128:
+        values = g(kinks)
+        j = int(np.searchsorted(values, 0.0))
+        if j == 0:                                   # F = +F_tot below every kink
+            return (b + total) / a
+        if j == kinks.size:                          # F = -F_tot above every kink
+            return (b - total) / a
+        lo, hi, g_lo, g_hi = j - 1, j, values[j - 1], values[j]
+    else:
+        ends = g(kinks[[0, -1]])
+        if ends[0] >= 0.0:
+            return (b + total) / a
+        if ends[1] <= 0.0:
+            return (b - total) / a
+        lo, hi, g_lo, g_hi = 0, kinks.size - 1, ends[0], ends[1]
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            g_mid = float(g(kinks[mid:mid + 1])[0])
+            if g_mid < 0.0:
+                lo, g_lo = mid, g_mid
+            else:
+                hi, g_hi = mid, g_mid
+    if g_hi == 0.0:
+        return float(kinks[hi])
     # g is linear on [kinks[lo], kinks[hi]]
     return float(kinks[lo] - g_lo * (kinks[hi] - kinks[lo]) / (g_hi - g_lo))
 
@@ -227,8 +260,8 @@ def _general_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V
         if plant.compliance > 0:
             W = _compliant_step(plant, speeds, a, b, meter)
         else:
-            stair = ContactSet(speeds, plant.contacts.forces).staircase()
-            W, _ = moreau_step_staircase(stair.levels, stair.plateaus, a, b)
+            levels, plateaus = _staircase(speeds, forces_sorted_by=plant.contacts.forces)
+            W, _ = moreau_step_staircase(levels, plateaus, a, b)
             meter.evaluation()
         meter.step()
         forces.append(m * (W - V) / h)

@@ -1,0 +1,75 @@
+"""Stability suite: every case finishes within budget, stays finite, bounded events, right state."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from toolkit.contacts import ContactSet
+from toolkit.plant import Motors, PiecewiseConstant, Plant
+from toolkit.simulation import simulate
+from toolkit.stability import StabilityReport, _case, _mirror, _Spec, stability_suite
+
+
+@pytest.fixture(scope="module")
+def report() -> StabilityReport:
+    return stability_suite()
+
+
+def test_suite_covers_the_issue_cases(report: StabilityReport) -> None:
+    names = " | ".join(case.name for case in report.cases)
+    for needle in ("odd N", "even N", "coincident", "N = 1 ", "N = 1e+05", "mass 1e-06",
+                   "mass 1e+06", "motor limits", "epsilon 1e-09", "horizon 1e4",
+                   "oscillating", "mirrored"):
+        assert needle in names + " "
+    assert {case.method for case in report.cases} >= {"exact", "moreau", "radau", "casadi"}
+
+
+def test_every_case_finishes_finite_bounded_and_ok(report: StabilityReport) -> None:
+    for case in report.cases:
+        assert case.finished, case
+        assert case.finite, case
+        assert case.events <= case.max_events, case
+        assert case.deviation <= case.tolerance, case
+        assert case.ok, case
+        # the budget is checked inside the run; assembling the result may add a little
+        assert case.wall_time <= case.budget + 0.5, case
+    assert report.all_ok
+
+
+def test_whole_suite_runs_under_a_minute(report: StabilityReport) -> None:
+    assert sum(case.wall_time for case in report.cases) < 60.0
+
+
+def test_to_dict_is_json(report: StabilityReport) -> None:
+    data = json.loads(json.dumps(report.to_dict()))
+    assert len(data["cases"]) == len(report.cases)
+    for case in data["cases"]:
+        assert {"name", "method", "finished", "finite", "events", "wall_time", "ok"} <= set(case)
+
+
+def test_check_fails_when_the_state_is_wrong() -> None:
+    # From rest the net force is (2 - 1) * 2/3 N = 2/3 N (m = 1 kg), so the body needs 0.45 s
+    # to reach the median 0.3 m/s: after 0.01 s it is at 2/3 * 0.01 m/s and the case must fail.
+    plant = Plant(ContactSet([-0.3, 0.3, 0.35], np.full(3, 2.0 / 3)), mass=1.0)
+    case = _case(_Spec("too short", plant, 0.01))
+    assert case.finished and case.finite and not case.ok
+    assert case.deviation == pytest.approx(0.3 - 2.0 / 3 * 0.01, rel=1e-12)
+
+
+def test_mirror_negates_everything() -> None:
+    plant = Plant(ContactSet([0.1, -0.2, 0.3], [1.0, 2.0, 0.5]), mass=2.0, damping=0.1,
+                  external_force=PiecewiseConstant([1.0], [0.5, -1.0]),
+                  motors=Motors(lag=0.02, speed_limits=(-0.25, 0.4)),
+                  commands=PiecewiseConstant([0.5], [[0.1, -0.2, 0.3], [0.3, 0.0, -0.5]]))
+    mirror = _mirror(plant)
+    for t in (0.0, 0.7, 1.5):
+        np.testing.assert_array_equal(mirror.command(t), -plant.command(t))
+        assert mirror.external(t) == -plant.external(t)
+    t_eval = np.linspace(0.0, 2.0, 41)
+    a = simulate(plant, 2.0, v0=0.2, t_eval=t_eval)
+    b = simulate(mirror, 2.0, v0=-0.2, t_eval=t_eval)
+    # the exact method is symmetric up to rounding of the event times: atol 1e-12 m/s
+    np.testing.assert_allclose(b.V, -a.V, rtol=0, atol=1e-12)

@@ -26,9 +26,11 @@ import numpy as np
 from .._validation import as_float, as_float_array, check_option, suggestion
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..plant import Plant
+from ._batch import BatchResult, simulate_batch
 from ._result import Budget, Event, SimulationResult, Status
 
-__all__ = ["simulate", "Status", "Budget", "Event", "SimulationResult", "METHODS"]
+__all__ = ["simulate", "simulate_batch", "BatchResult", "Status", "Budget", "Event",
+           "SimulationResult", "METHODS"]
 
 _SCIPY_OPTIONS = ("friction", "epsilon", "rtol", "atol")
 

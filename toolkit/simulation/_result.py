@@ -15,7 +15,7 @@ from ..errors import ParameterError, ParameterTypeError, parameter_message
 __all__ = ["Status", "Budget", "Event", "SimulationResult", "EVENT_KINDS", "status_message"]
 
 #: The kinds of :class:`Event`.
-EVENT_KINDS = ("cross", "stick", "release", "command")
+EVENT_KINDS = ("cross", "stick", "release", "command", "saturation")
 
 
 class Status(enum.Enum):
@@ -63,10 +63,11 @@ class Event:
     Parameters
     ----------
     time : float, s
-    kind : {"cross", "stick", "release", "command"}
+    kind : {"cross", "stick", "release", "command", "saturation"}
         ``cross``: the body passed a contact speed; ``stick``: it locked onto one (sliding
         mode); ``release``: it left a contact speed it was stuck to; ``command``: a command
-        or the external force switched.
+        or the external force switched; ``saturation``: a compliant contact's slip reached
+        ``+-k f_i`` (its force enters or leaves saturation).
     contact : int or None
         Index of the contact involved (the lowest index among coincident ones), ``None``
         for ``command`` events.
@@ -88,7 +89,9 @@ class Event:
 
 
 def _frozen(value: Any, name: str, ndim: int) -> np.ndarray:
-    array = np.array(value, dtype=float)
+    array = np.asarray(value, dtype=float)
+    if array.flags.writeable:            # copy what the caller could still change
+        array = array.copy()
     if array.ndim != ndim:
         raise ParameterError(parameter_message(
             name, "SimulationResult", f"be {ndim}-dimensional", f"an array of shape {array.shape}"))

@@ -1,0 +1,403 @@
+"""Tests of the exact event-driven method and of the simulation API (dispatch, result types).
+
+Every expected number comes from a closed form computed independently in the test. Unless
+said otherwise the tolerance is ``rtol = 1e-12``: the issue's target for the exact method;
+the closed forms involve a handful of operations, so rounding is ~1e-15.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import integrate, optimize, special
+
+from toolkit.contacts import ContactSet
+from toolkit.errors import ParameterError, ParameterTypeError
+from toolkit.plant import Motors, PiecewiseConstant, Plant
+from toolkit.simulation import METHODS, Budget, Event, SimulationResult, Status, simulate
+
+RTOL = 1e-12      # the issue's precision target for the exact method
+
+
+def _times(result: SimulationResult, kind: str) -> list[float]:
+    return [e.time for e in result.events if e.kind == kind]
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20260121)
+
+
+# -- API ------------------------------------------------------------------------------------
+def test_methods_table_and_option_refusal():
+    assert METHODS == ("exact", "rk45", "lsoda", "radau", "bdf", "moreau", "casadi")
+    plant = Plant(ContactSet([0.0, 1.0, 2.0]), 1.0)
+    with pytest.raises(ParameterError, match="Did you mean 'exact'"):
+        simulate(plant, 1.0, method="exakt")
+    with pytest.raises(ParameterError, match="takes no options"):
+        simulate(plant, 1.0, rtol=1e-3)
+    with pytest.raises(ParameterError, match="Did you mean 'rtol'"):
+        simulate(plant, 1.0, method="rk45", rtoll=1e-3)
+    with pytest.raises(ParameterError):
+        simulate(plant, 0.0)
+    with pytest.raises(ParameterError):
+        simulate(plant, 1.0, t_eval=[0.5, 0.2])
+    with pytest.raises(ParameterError):
+        simulate(plant, 1.0, t_eval=[0.5, 2.0])
+    with pytest.raises(ParameterTypeError):
+        simulate("plant", 1.0)
+    with pytest.raises(ParameterTypeError):
+        simulate(plant, 1.0, budget=5)
+
+
+def test_budget_event_and_result_validation():
+    with pytest.raises(ParameterError):
+        Budget(wall_time=0.0)
+    with pytest.raises(ParameterError):
+        Budget(max_steps=0)
+    with pytest.raises(ParameterError, match="Did you mean 'cross'"):
+        Event(0.0, "crss", 1, 0.0)
+    with pytest.raises(ParameterError):
+        SimulationResult("x", "", [0.0, 1.0], [0.0], np.zeros((2, 1)), [0.0, 0.0], (),
+                         Status.SUCCESS, "", 0, 0, 0, 0.0)
+    result = SimulationResult("x", "", [0.0, 1.0], [0.0, 2.0], np.zeros((2, 1)), [2.0, 2.0],
+                              (), Status.SUCCESS, "", 0, 0, 1, 0.0)
+    # No dense output: linear interpolation between samples (exact for this line).
+    np.testing.assert_allclose(result.speed_at([0.25, 0.5]), [0.5, 1.0], rtol=0, atol=0)
+    assert result.success and not result.V.flags.writeable
+    assert Status.ZENO.value.startswith("stopped") and Status.SUCCESS.value.startswith("finished")
+
+
+def test_t_eval_gives_exactly_those_times():
+    plant = Plant(ContactSet([1.0, 2.0, 3.0]), 2.0)
+    times = np.array([0.0, 0.3, 0.7, 1.0])
+    result = simulate(plant, 1.0, t_eval=times)
+    np.testing.assert_array_equal(result.t, times)
+    # Below every contact: F = F_tot = 3 N, V = 1.5 t until V = 1 at t = 2/3 (checked: the
+    # samples before that time, and the force m V' = 3 N there).
+    np.testing.assert_allclose(result.V[:2], 1.5 * times[:2], rtol=RTOL, atol=0)
+    np.testing.assert_allclose(result.force[:2], [3.0, 3.0], rtol=RTOL, atol=0)
+    assert result.contact_speeds.shape == (4, 3)
+
+
+# -- closed forms, ideal motors -----------------------------------------------------------------
+def test_constant_deceleration():
+    # All contacts below V: F = -F_tot, V(t) = v0 - F_tot t / m until the first contact speed.
+    speeds, forces, mass, v0 = [0.0, 0.5, 1.0], [1.0, 2.0, 3.0], 2.0, 2.0
+    plant = Plant(ContactSet(speeds, forces), mass)
+    result = simulate(plant, 1.0, v0=v0)
+    t_hit = (v0 - 1.0) * mass / 6.0
+    times = np.linspace(0.0, t_hit, 7)
+    np.testing.assert_allclose(result.speed_at(times), v0 - 6.0 * times / mass, rtol=RTOL, atol=0)
+    first = result.events[0]
+    assert first.contact == 2 and first.time == pytest.approx(t_hit, rel=RTOL, abs=0)
+    # At V = 1: others push -3 N, stiction W = 3 N: |G| <= W, the body sticks (tie rule).
+    assert first.kind == "stick" and result.V[-1] == 1.0
+
+
+def _startup_time(speeds: np.ndarray, forces: np.ndarray, mass: float, v0: float,
+                  stop: float) -> float:
+    """Sum of segment times m * dv / F over the plateaus from v0 up to `stop` (>= v0)."""
+    levels = np.unique(speeds)
+    points = np.concatenate(([v0], levels[(levels > v0) & (levels < stop)], [stop]))
+    total = 0.0
+    for lo, hi in zip(points[:-1], points[1:]):
+        middle = 0.5 * (lo + hi)
+        force = np.sum(forces * np.sign(speeds - middle))
+        total += mass * (hi - lo) / force
+    return total
+
+
+def test_startup_from_rest_to_the_median_odd(rng):
+    speeds = rng.uniform(0.05, 0.35, 11)
+    forces = np.ones(11)
+    plant = Plant(ContactSet(speeds, forces), 0.7)
+    result = simulate(plant, 5.0)
+    median = float(np.median(speeds))
+    arrival = _startup_time(speeds, forces, 0.7, 0.0, median)
+    assert result.V[-1] == median                                 # exactly the median speed
+    stick = _times(result, "stick")
+    assert len(stick) == 1 and stick[0] == pytest.approx(arrival, rel=RTOL, abs=0)
+    assert len(_times(result, "cross")) == 5                      # five speeds below it
+
+
+def test_even_n_stops_at_the_band_edge_reached_first(rng):
+    speeds = rng.uniform(0.05, 0.35, 10)
+    s = np.sort(speeds)
+    plant = Plant(ContactSet(speeds), 1.0)
+    up = simulate(plant, 5.0)                   # from rest, below: lower edge v_(5)
+    down = simulate(plant, 5.0, v0=0.5)         # from above: upper edge v_(6)
+    assert up.V[-1] == s[4] and down.V[-1] == s[5]
+    assert up.V[-1] != np.median(speeds)
+    arrival = _startup_time(speeds, np.ones(10), 1.0, 0.0, s[4])
+    assert _times(up, "stick")[0] == pytest.approx(arrival, rel=RTOL, abs=0)
+    # Started inside the zero-force band with no drag: the body coasts at constant speed.
+    inside = simulate(plant, 5.0, v0=0.5 * (s[4] + s[5]))
+    assert inside.V[-1] == 0.5 * (s[4] + s[5]) and inside.n_events == 0
+
+
+def test_exponential_approach_with_drag():
+    # Contacts far above: m V' = F_tot - c V, V = (F/c)(1 - exp(-c t / m)), F/c = 1.5 < 10.
+    plant = Plant(ContactSet([10.0, 11.0, 12.0], [1.0, 1.0, 1.0]), 2.0, damping=2.0)
+    result = simulate(plant, 3.0)
+    times = np.linspace(0.0, 3.0, 13)
+    expected = 1.5 * -np.expm1(-times)
+    np.testing.assert_allclose(result.speed_at(times), expected, rtol=RTOL, atol=1e-300)
+    assert result.n_events == 0
+
+
+def test_exponential_segments_with_drag_reach_contact_speed():
+    # From rest with drag below a contact at 1: time to reach 1 is -(m/c) log(1 - c/F).
+    plant = Plant(ContactSet([1.0, 5.0, 6.0]), 1.0, damping=0.5)
+    result = simulate(plant, 10.0)
+    t_hit = -2.0 * math.log1p(-0.5 / 3.0)
+    assert result.events[0].time == pytest.approx(t_hit, rel=RTOL, abs=0)
+    assert result.events[0].kind == "cross"      # others +2 - c = 1.5 > W = 1: passes
+
+
+def test_stick_and_release_under_piecewise_external_force():
+    # Median contact at 0.2 (W = 1); others cancel. External force steps 0 -> 0.8 -> 1.6 N.
+    speeds = [-0.3, 0.2, 0.9]
+    ext = PiecewiseConstant([1.0, 2.0], [0.0, 0.8, 1.6])
+    plant = Plant(ContactSet(speeds), 0.5, external_force=ext)
+    result = simulate(plant, 2.2, v0=0.2)
+    assert _times(result, "stick") == [0.0]
+    assert _times(result, "release") == [2.0]          # |G| = 1.6 > W = 1 only from t = 2
+    assert [e.kind for e in result.events if e.time == 2.0] == ["command", "release"]
+    # After release: m V' = 1.6 - 1 (contact below) - 1 + 1 ... = F_ext + (+1 - 1 - 1) = 0.6.
+    times = np.array([2.05, 2.1, 2.2])
+    np.testing.assert_allclose(result.speed_at(times), 0.2 + 0.6 / 0.5 * (times - 2.0),
+                               rtol=RTOL, atol=0)
+    np.testing.assert_array_equal(result.speed_at([0.5, 1.5, 1.99]), [0.2, 0.2, 0.2])
+
+
+def test_command_schedule_moves_the_median():
+    plant = Plant(ContactSet([0.0, 0.1, 0.2]), 1.0,
+                  commands=PiecewiseConstant([1.0], [[0.0, 0.1, 0.2], [0.3, 0.4, 0.5]]))
+    result = simulate(plant, 3.0, v0=0.1)
+    # After the switch all contacts are above: V' = 3 until V = 0.3 (t = 1 + 0.2/3), then
+    # +1 net until 0.4 (0.1 more s); the median 0.4 holds.
+    assert result.V[-1] == 0.4
+    assert _times(result, "stick")[-1] == pytest.approx(1.0 + 0.2 / 3.0 + 0.1, rel=RTOL, abs=0)
+    assert _times(result, "release") == [1.0]
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5])
+def test_braking_law(n):
+    # PHYSICS.md section 4: 5-n contacts at +v_max, 5+n at -v_max, from V = +v_max:
+    # dT = m 2 v_max / (F_tot n / 5).
+    v_max, mass, f = 0.35, 0.8, 0.2
+    speeds = [v_max] * (5 - n) + [-v_max] * (5 + n)
+    plant = Plant(ContactSet(speeds, [f] * 10), mass)
+    result = simulate(plant, 10.0, v0=v_max)
+    expected = mass * 2 * v_max / (10 * f * n / 5)
+    assert _times(result, "stick")[-1] == pytest.approx(expected, rel=RTOL, abs=0)
+    assert result.V[-1] == -v_max
+
+
+def test_braking_law_n0_never_moves():
+    plant = Plant(ContactSet([0.35] * 5 + [-0.35] * 5), 1.0)
+    result = simulate(plant, 10.0, v0=0.35)
+    assert result.V[-1] == 0.35 and _times(result, "stick") == [0.0]
+
+
+def test_coincident_speeds_stick_as_one_group():
+    # Three contacts at 0.1 (W = 3) and two above, one below: others push +2 - 1 = 1 <= 3.
+    plant = Plant(ContactSet([0.1, 0.1, 0.1, 0.5, 0.6, -0.4]), 1.0)
+    result = simulate(plant, 2.0, v0=-1.0)
+    assert result.V[-1] == 0.1
+    stick = [e for e in result.events if e.kind == "stick"]
+    assert stick[0].contact == 0                         # lowest index of the group
+
+
+def test_mirrored_sign_convention(rng):
+    speeds = rng.normal(size=9)
+    a = simulate(Plant(ContactSet(speeds), 1.3, damping=0.2), 4.0, v0=-0.4)
+    b = simulate(Plant(ContactSet(-speeds), 1.3, damping=0.2), 4.0, v0=0.4)
+    # Mirroring V -> -V maps the problem to itself; only rounding of sums differs.
+    np.testing.assert_allclose(a.V, -b.V, rtol=RTOL, atol=1e-15)
+    assert [e.kind for e in a.events] == [e.kind for e in b.events]
+
+
+@settings(deadline=None, max_examples=30)
+@given(st.lists(st.integers(-20, 20), min_size=1, max_size=12), st.integers(-30, 30))
+def test_final_state_is_in_the_equilibrium_set(grid, start):
+    # Without drag or external force the body ends in the weighted-median set (it gets
+    # there in finite time: t_end is far beyond the worst travel time 2 * 60 / 1).
+    cs = ContactSet(np.array(grid) / 10.0)
+    result = simulate(Plant(cs, 1.0), 200.0, v0=start / 10.0)
+    lo, hi = cs.equilibrium()
+    assert lo <= result.V[-1] <= hi
+
+
+def test_large_n_from_below_reaches_the_median(rng):
+    # Unit magnitudes keep every plateau force an exact integer; the arrival time is the
+    # sum of m dv / F over 5e4 segments, summed exactly here with math.fsum (the simulator
+    # sums its segment times with compensation).
+    n = 100_001
+    speeds = rng.uniform(-1.0, 1.0, n)
+    mass = float(n)
+    plant = Plant(ContactSet(speeds), mass)
+    result = simulate(plant, 20.0, v0=-1.5)
+    median = float(np.median(speeds))
+    assert result.success and result.V[-1] == median
+    assert len(_times(result, "cross")) == n // 2 and result.n_events == n // 2 + 1
+    s = np.concatenate(([-1.5], np.sort(speeds)[: n // 2 + 1]))
+    below = np.arange(n // 2 + 1)                      # contacts below each segment
+    arrival = math.fsum(mass * np.diff(s) / (n - 2.0 * below))
+    assert _times(result, "stick")[0] == pytest.approx(arrival, rel=RTOL, abs=0)
+
+
+# -- compliance -------------------------------------------------------------------------------
+def test_compliance_steady_state_and_trajectory():
+    # k = 2: every slip stays within k f = 2, all contacts linear: m V' = sum (v - V)/k + E - cV
+    # -> V(t) = V_inf (1 - exp(-b t / m)), b = 3/k + c, V_inf = (sum v / k + E) / b.
+    plant = Plant(ContactSet([0.0, 1.0, 2.0]), 1.0, damping=0.2, external_force=0.3,
+                  motors=Motors(compliance=2.0))
+    result = simulate(plant, 40.0)
+    b, v_inf = 1.5 + 0.2, (3.0 / 2.0 + 0.3) / 1.7
+    times = np.linspace(0.0, 40.0, 9)
+    np.testing.assert_allclose(result.speed_at(times), -v_inf * np.expm1(-b * times),
+                               rtol=RTOL, atol=1e-300)
+
+
+def test_compliance_saturation_events():
+    # k = 0.1: contact 0 leaves the linear band at V = 0.1 (slip -k f) after an exponential
+    # segment m V' = 2 - V / k: V = 0.2 (1 - exp(-10 t)) reaches 0.1 at t = ln(2) / 10.
+    plant = Plant(ContactSet([0.0, 1.0, 2.0]), 1.0, motors=Motors(compliance=0.1))
+    result = simulate(plant, 5.0)
+    first = result.events[0]
+    assert first.kind == "saturation" and first.contact == 0
+    assert first.time == pytest.approx(math.log(2.0) / 10.0, rel=RTOL, abs=0)
+    assert result.V[-1] == pytest.approx(plant.equilibrium()[0], rel=RTOL, abs=0)
+
+
+# -- dynamic motors -------------------------------------------------------------------------
+def test_crossing_with_first_order_lag_matches_lambert_w():
+    # Body from rest, contact A at 10 (f = 1) and contact B (f = 0.5) commanded 5 -> -5 at
+    # t_s = 0.5 with lag tau: before the crossing V = a t (a = 1.5), v_B = -5 + 10 e^{-(t-t_s)/tau}.
+    # a t + 5 = 10 e^{-(t - t_s)/tau} -> t = tau W(10 e^{(t_s + 5/a)/tau} / (a tau)) - 5/a.
+    tau, t_s, a = 0.2, 0.5, 1.5
+    plant = Plant(ContactSet([10.0, 5.0], [1.0, 0.5]), 1.0, motors=Motors(lag=tau),
+                  commands=PiecewiseConstant([t_s], [[10.0, 5.0], [10.0, -5.0]]))
+    result = simulate(plant, 2.0)
+    arg = 10.0 * math.exp((t_s + 5.0 / a) / tau) / (a * tau)
+    expected = tau * float(np.real(special.lambertw(arg))) - 5.0 / a
+    # Cross-check the Lambert-W closed form with brentq on the same equation.
+    check = optimize.brentq(lambda t: a * t + 5 - 10 * math.exp(-(t - t_s) / tau), t_s, 2.0,
+                            xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    assert expected == pytest.approx(check, rel=1e-13, abs=0)
+    cross = [e for e in result.events if e.kind == "cross"]
+    assert len(cross) == 1 and cross[0].contact == 1
+    assert cross[0].time == pytest.approx(expected, rel=RTOL, abs=0)
+    # After the crossing the net force is 1 - 0.5 = 0.5 N.
+    later = np.array([1.5, 2.0])
+    np.testing.assert_allclose(result.speed_at(later), a * expected + 0.5 * (later - expected),
+                               rtol=RTOL, atol=0)
+
+
+def test_crossing_with_rate_limit_ramp():
+    # Contact B ramps 5 -> -5 at r = 4 m/s^2 from t_s = 0.5: crossing a t = 5 - r (t - t_s).
+    r, t_s, a = 4.0, 0.5, 1.5
+    plant = Plant(ContactSet([10.0, 5.0], [1.0, 0.5]), 1.0, motors=Motors(rate_limit=r),
+                  commands=PiecewiseConstant([t_s], [[10.0, 5.0], [10.0, -5.0]]))
+    result = simulate(plant, 4.0)
+    cross = _times(result, "cross")
+    assert cross == [pytest.approx((5.0 + r * t_s) / (a + r), rel=RTOL, abs=0)]
+    np.testing.assert_allclose(result.contact_speeds[-1], [10.0, -5.0], rtol=0, atol=0)
+
+
+def test_stuck_body_follows_a_lagging_contact():
+    # The median contact moves 0 -> 0.1 with tau = 0.5; the outer contacts (f = 5) are far:
+    # G = 0 and m |dv/dt| <= 0.2 < W = 1: the body follows v(t) = 0.1 (1 - e^{-(t-1)/tau}).
+    plant = Plant(ContactSet([-1.0, 0.0, 1.0], [5.0, 1.0, 5.0]), 1.0, motors=Motors(lag=0.5),
+                  commands=PiecewiseConstant([1.0], [[-1.0, 0.0, 1.0], [-1.0, 0.1, 1.0]]))
+    result = simulate(plant, 3.0)
+    times = np.linspace(1.0, 3.0, 9)
+    np.testing.assert_allclose(result.speed_at(times), -0.1 * np.expm1(-(times - 1.0) / 0.5),
+                               rtol=RTOL, atol=1e-300)
+    assert _times(result, "release") == []
+
+
+def test_stuck_body_released_when_the_contact_accelerates_too_fast():
+    # Same scene, mass 10: at the switch m dv/dt = 10 * 0.2 = 2 > W = 1: release at t = 1;
+    # then m V' = +1 (the contact above), V = 0.1 x with x = t - 1, while the contact moves
+    # as v = 0.1 (1 - e^{-2x}). They meet again where x = 1 - e^{-2x}, i.e.
+    # x = 1 + W0(-2 e^{-2}) / 2 (Lambert W); there m dv/dt = 2 e^{-2x} < 1 = W: it sticks.
+    plant = Plant(ContactSet([-1.0, 0.0, 1.0], [5.0, 1.0, 5.0]), 10.0, motors=Motors(lag=0.5),
+                  commands=PiecewiseConstant([1.0], [[-1.0, 0.0, 1.0], [-1.0, 0.1, 1.0]]))
+    result = simulate(plant, 3.0)
+    assert _times(result, "release") == [1.0]
+    meet = 1.0 + float(np.real(special.lambertw(-2.0 * math.exp(-2.0)))) / 2.0
+    assert _times(result, "stick")[-1] == pytest.approx(1.0 + meet, rel=RTOL, abs=0)
+    later = np.array([1.2, 1.5, 1.0 + meet])
+    np.testing.assert_allclose(result.speed_at(later), 0.1 * (later - 1.0), rtol=RTOL, atol=0)
+    after = np.array([2.9, 3.0])
+    np.testing.assert_allclose(result.speed_at(after), -0.1 * np.expm1(-2.0 * (after - 1.0)),
+                               rtol=RTOL, atol=0)
+
+
+def test_dynamic_engine_equals_ideal_engine_when_motors_are_settled(rng):
+    # Constant commands: a lagging motor never moves, so both engines solve one problem.
+    speeds = rng.uniform(-0.35, 0.35, 9)
+    ideal = simulate(Plant(ContactSet(speeds), 0.6, damping=0.1), 3.0, v0=-0.5)
+    lagged = simulate(Plant(ContactSet(speeds), 0.6, damping=0.1, motors=Motors(lag=0.03)),
+                      3.0, v0=-0.5)
+    assert [e.kind for e in ideal.events] == [e.kind for e in lagged.events]
+    np.testing.assert_allclose([e.time for e in lagged.events], [e.time for e in ideal.events],
+                               rtol=RTOL, atol=0)
+    assert lagged.V[-1] == pytest.approx(ideal.V[-1], rel=RTOL, abs=0)
+
+
+def test_compliant_lagging_motors_against_a_tight_ode_solver():
+    # Compliance makes the model Lipschitz: a tight LSODA run on (V, v_1..v_n) is a second
+    # method. Its tolerance (rtol 1e-11) bounds the comparison, so compare at 1e-8.
+    speeds = np.array([-0.3, 0.1, 0.25, 0.4])
+    forces = np.array([1.0, 0.7, 1.2, 0.5])
+    new = np.array([0.2, -0.1, 0.3, 0.05])
+    motors = Motors(lag=0.05, compliance=0.08)
+    plant = Plant(ContactSet(speeds, forces), 0.3, damping=0.1, motors=motors,
+                  commands=PiecewiseConstant([0.4], [speeds, new]))
+    times = np.linspace(0.0, 1.5, 31)
+    exact = simulate(plant, 1.5, t_eval=times, v0=0.5)
+
+    def rhs(t, y):
+        V, v = y[0], y[1:]
+        return np.concatenate(([plant.net_force(t, V, v) / plant.mass], plant.motor_rate(t, v)))
+
+    ref = np.empty_like(times)
+    state = np.concatenate(([0.5], speeds))
+    for k, (lo, hi) in enumerate(((0.0, 0.4), (0.4, 1.5))):
+        part = times[(times >= lo) & (times <= hi)] if k else times[times < 0.4]
+        sol = integrate.solve_ivp(rhs, (lo, hi), state, method="LSODA", rtol=1e-11, atol=1e-13,
+                                  t_eval=np.append(part, hi) if k == 0 else part, dense_output=True)
+        ref[(times >= lo) & (times <= hi) if k else times < 0.4] = sol.sol(part)[0]
+        state = sol.sol(hi)
+    np.testing.assert_allclose(exact.V, ref, rtol=0, atol=1e-8)
+    assert any(e.kind == "saturation" for e in exact.events)
+
+
+# -- budgets ----------------------------------------------------------------------------------
+def test_zeno_guard_returns_zeno_status():
+    # 20 000 command switches within 2 ms: ~1e7 events per second > max_event_rate = 1e6.
+    times = np.linspace(1e-3, 3e-3, 20_000)
+    rows = np.where((np.arange(20_001) % 2)[:, None] == 0, [[0.0, 1.0, 2.0]], [[0.0, -1.0, 2.0]])
+    plant = Plant(ContactSet([0.0, 1.0, 2.0]), 1.0, commands=PiecewiseConstant(times, rows))
+    result = simulate(plant, 1.0, budget=Budget(max_event_rate=1e6))
+    assert result.status is Status.ZENO and not result.success
+    assert "Zeno" in result.message and result.t_final < 3e-3
+    assert np.isnan(result.speed_at(0.5))              # nothing is claimed past the stop
+
+
+def test_step_and_wall_time_budgets():
+    speeds = np.linspace(-1.0, 1.0, 2001)
+    plant = Plant(ContactSet(speeds), 1.0)
+    steps = simulate(plant, 100.0, v0=-2.0, budget=Budget(max_steps=50))
+    assert steps.status is Status.MAX_STEPS and steps.n_steps <= 51
+    wall = simulate(plant, 100.0, v0=-2.0, budget=Budget(wall_time=1e-9))
+    assert wall.status is Status.WALL_TIME
+    assert np.all(np.isfinite(wall.V))

@@ -1,0 +1,765 @@
+"""The exact event-driven method: closed-form segments between events, Filippov sliding modes.
+
+Between two events the body obeys a linear ODE with closed-form solution, and every segment
+is stored in the one form
+
+    V(t0 + s) = V0 + c1 s + B em(lam, s) + C em(mu, s) + D s exp(-mu s),
+    em(x, s) = (1 - exp(-x s)) / x     (em(0, s) = s),
+
+where ``lam = b / m`` is the body's own rate (drag, plus ``1/k`` per unsaturated compliant
+contact) and ``mu = 1 / tau`` the motor rate. Contact speeds take the same form with
+``c1 = q`` (ramp) and ``C = e`` (exponential approach).
+
+Two engines share that form:
+
+- **Ideal motors** (contact speeds piecewise constant in time): the force-speed map of the
+  current commands is a "landscape" of breakpoints (contact speeds for Coulomb contacts,
+  saturation limits ``v_i +- k f_i`` for compliant ones) with constant or linear force
+  between them. Locating ``V`` is a binary search; each event then costs ``O(1)``, so a
+  run from rest over ``N = 1e5`` contacts costs ``O(N)`` events of constant work.
+- **Dynamic motors** (lag, rate limit): contact speeds move between events. Every event
+  function (a crossing ``V(t) = v_i(t)``, a saturation limit, the end of a sliding mode) is
+  ``g(s) = alpha + beta s + gamma em(lam, s) + delta em(mu, s) + D s exp(-mu s)``, which has
+  at most three roots: the root of ``g''`` is explicit, the roots of ``g'`` and then of ``g``
+  are bracketed on monotone pieces and located by vectorized bisection to the last bit.
+
+Tie convention
+--------------
+At ``V = s`` with contacts of total magnitude ``W`` at ``s`` and ``G`` the rest of the force
+(other contacts, external force, drag; for a moving contact minus ``m dv/dt``), the body
+sticks when ``|G| <= W + tol`` and passes in the direction of ``sign(G)`` otherwise. ``tol``
+is ``4 (K + 1) eps (F_tot + |F_ext| + c |V|)``, a bound on the rounding of the prefix sums
+(the same rule as :attr:`ContactSet.tie_tolerance`), so that exactly balanced cases (an
+even-N zero band edge, ``|G| == W``) stick. Events name the lowest contact index among
+coincident contacts.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..plant import Plant
+from ._result import Budget, Event, SimulationResult, Status, status_message
+
+__all__ = ["simulate_exact"]
+
+_EPS = float(np.finfo(float).eps)
+_ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
+
+
+# -- closed forms ---------------------------------------------------------------------------
+def _em(rate: Any, s: Any) -> Any:
+    """``(1 - exp(-rate s)) / rate``, continuous at ``rate = 0`` (``= s``); vectorized."""
+    rate = np.asarray(rate, dtype=float)
+    s = np.asarray(s, dtype=float)
+    x = rate * s
+    safe = np.where(rate > 0, rate, 1.0)
+    return np.where(rate > 0, -np.expm1(-x) / safe, s)
+
+
+def _em1(rate: float, s: float) -> float:
+    """Scalar :func:`_em`."""
+    return -math.expm1(-rate * s) / rate if rate > 0 else s
+
+
+def _reach_time(V: float, r0: float, lam: float, target: float) -> float:
+    """Time for ``V + r0 em(lam, s)`` to reach ``target`` (``inf`` if it never does)."""
+    y = (target - V) / r0
+    if y < 0:
+        return math.inf
+    if lam == 0:
+        return y
+    x = lam * y
+    if x >= 1.0:
+        return math.inf
+    return -math.log1p(-x) / lam
+
+
+# -- segment store, events and guards ---------------------------------------------------------
+class _Recorder:
+    """Collects segments and events and enforces the budget (private, mutable while running)."""
+
+    def __init__(self, plant: Plant, budget: Budget, cascade: int, mu: float) -> None:
+        self.plant = plant
+        self.budget = budget
+        self.mu = mu
+        self.window = 2 * cascade + _ZENO_FLOOR
+        self.columns: list[list[float]] = [[] for _ in range(8)]   # t0 V0 c1 B lam C D end
+        self.events: list[Event] = []
+        self.event_times: list[float] = []
+        self.n_evaluations = 0
+        self.started = time.perf_counter()
+        self.status = Status.SUCCESS
+        self.detail = ""
+
+    def segment(self, t0: float, V0: float, B: float = 0.0, lam: float = 0.0, c1: float = 0.0,
+                C: float = 0.0, D: float = 0.0) -> None:
+        cols = self.columns
+        if cols[0] and cols[0][-1] == t0:        # a zero-length segment is superseded
+            for col in cols:
+                col.pop()
+        for col, value in zip(cols, (t0, V0, c1, B, lam, C, D)):
+            col.append(value)
+
+    def event(self, t: float, kind: str, contact: int | None, V: float) -> None:
+        self.events.append(Event(t, kind, contact, V))
+        self.event_times.append(t)
+
+    def stop(self, t: float) -> bool:
+        """Check the budget at simulated time ``t``; True when the run must stop."""
+        budget = self.budget
+        if len(self.columns[0]) > budget.max_steps:
+            self.status, self.detail = Status.MAX_STEPS, f"{budget.max_steps} segments at t = {t:.6g} s"
+        elif time.perf_counter() - self.started > budget.wall_time:
+            self.status, self.detail = Status.WALL_TIME, f"{budget.wall_time:g} s at t = {t:.6g} s"
+        else:
+            times, w = self.event_times, self.window
+            if len(times) > w and (times[-1] - times[-1 - w]) * budget.max_event_rate < w:
+                self.status = Status.ZENO
+                self.detail = (f"{w} events within {times[-1] - times[-1 - w]:.3g} s "
+                               f"before t = {t:.6g} s")
+        return self.status is not Status.SUCCESS
+
+    # -- output -----------------------------------------------------------------------------
+    def dense(self, t_stop: float, success: bool) -> Callable[[np.ndarray], np.ndarray]:
+        cols = [np.array(col, dtype=float) for col in self.columns[:7]]
+        for col in cols:
+            col.setflags(write=False)
+        return _Dense(*cols, mu=self.mu, t_stop=t_stop, success=success)
+
+
+@dataclass(frozen=True, eq=False)
+class _Dense:
+    """Exact ``V(t)`` from the stored closed-form segments (NaN past a stopped run's end)."""
+
+    t0: np.ndarray
+    V0: np.ndarray
+    c1: np.ndarray
+    B: np.ndarray
+    lam: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    mu: float
+    t_stop: float
+    success: bool
+
+    def _locate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        index = np.clip(np.searchsorted(self.t0, times, side="right") - 1, 0, self.t0.size - 1)
+        return index, times - self.t0[index]
+
+    def __call__(self, times: Any) -> np.ndarray:
+        """Body speed at ``times`` (s), m/s."""
+        query = np.asarray(times, dtype=float)
+        i, s = self._locate(query)
+        mu = self.mu
+        value = (self.V0[i] + self.c1[i] * s + self.B[i] * _em(self.lam[i], s)
+                 + self.C[i] * _em(mu, s) + self.D[i] * s * np.exp(-mu * s))
+        return np.where((query <= self.t_stop) | self.success, value, np.nan)
+
+    def derivative(self, times: Any) -> np.ndarray:
+        """Right derivative ``dV/dt`` at ``times`` (s), m/s^2."""
+        query = np.asarray(times, dtype=float)
+        i, s = self._locate(query)
+        mu = self.mu
+        decay = np.exp(-mu * s)
+        return (self.c1[i] + self.B[i] * np.exp(-self.lam[i] * s) + self.C[i] * decay
+                + self.D[i] * (1.0 - mu * s) * decay)
+
+
+# -- the force landscape of constant contact speeds ----------------------------------------
+@dataclass(frozen=True, eq=False)
+class _Landscape:
+    """Force-speed map of constant contact speeds: breakpoints and the force between them.
+
+    Interval ``j`` is ``(x[j-1], x[j])`` (``x[-1] = -inf``, ``x[K] = +inf``); inside it the
+    contact force is ``base_F[j] + slope[j] (V - base_x[j])``. At breakpoint ``k`` the
+    contacts there hold a stiction magnitude ``W[k]`` and the others push with ``G[k]``.
+    """
+
+    x: np.ndarray
+    xs: list[float]
+    W: list[float]
+    G: list[float]
+    contact: list[int]
+    base_x: list[float]
+    base_F: list[float]
+    slope: list[float]
+    total: float
+    kind: str
+
+    def locate(self, V: float) -> tuple[int, bool]:
+        """``(k, True)`` when ``V`` is breakpoint ``k``, else ``(j, False)`` for interval ``j``."""
+        j = int(np.searchsorted(self.x, V, side="left"))
+        return (j, True) if j < len(self.xs) and self.xs[j] == V else (j, False)
+
+    def force(self, j: int, V: float) -> float:
+        slope = self.slope[j]
+        return self.base_F[j] if slope == 0 else self.base_F[j] + slope * (V - self.base_x[j])
+
+
+def _first_index(values: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct ``values`` ascending and the lowest of ``indices`` at each."""
+    order = np.lexsort((indices, values))
+    values, indices = values[order], indices[order]
+    new = np.concatenate(([True], values[1:] != values[:-1]))
+    return values[new], indices[new]
+
+
+def _stiff_landscape(plant: Plant, speeds: np.ndarray) -> _Landscape:
+    contacts = plant.contacts.with_speeds(speeds)
+    stair = contacts.staircase()
+    plateaus = stair.plateaus
+    tol = contacts.tie_tolerance
+    others = 0.5 * (plateaus[:-1] + plateaus[1:])
+    others = np.where(np.abs(others) <= tol, 0.0, others)
+    active = np.flatnonzero(contacts.forces > 0)
+    _, first = _first_index(speeds[active], active)
+    K = stair.levels.size
+    return _Landscape(stair.levels, stair.levels.tolist(), stair.steps.tolist(), others.tolist(),
+                      first.tolist(), [0.0] * (K + 1), plateaus.tolist(), [0.0] * (K + 1),
+                      contacts.total_force, "cross")
+
+
+def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _Landscape:
+    f = plant.contacts.forces
+    k = plant.compliance
+    active = np.flatnonzero(f > 0)
+    v, fa = speeds[active], f[active]
+    points = np.concatenate((v - k * fa, v + k * fa))
+    change = np.concatenate((np.full(v.size, -1.0 / k), np.full(v.size, 1.0 / k)))
+    owner = np.concatenate((active, active))
+    order = np.lexsort((owner, points))
+    points, change, owner = points[order], change[order], owner[order]
+    new = np.concatenate(([True], points[1:] != points[:-1]))
+    group = np.cumsum(new) - 1
+    x = points[new]
+    change = np.bincount(group, weights=change, minlength=x.size)
+    first = owner[new]
+    total = float(np.sum(fa))
+    slope = np.concatenate(([0.0], np.cumsum(change)))           # slope inside interval j
+    slope[-1] = 0.0                                                # exactly flat above all
+    at_x = total + np.concatenate(([0.0], np.cumsum(slope[1:-1] * np.diff(x))))
+    tol = 4.0 * (x.size + 1) * _EPS * total
+    at_x = np.where(np.abs(at_x) <= tol, 0.0, at_x)
+    base_x = np.concatenate(([x[0]], x))
+    base_F = np.concatenate(([total], at_x))
+    base_F[-1] = -total
+    return _Landscape(x, x.tolist(), [0.0] * x.size, at_x.tolist(), first.tolist(),
+                      base_x.tolist(), base_F.tolist(), slope.tolist(), total, "saturation")
+
+
+# -- the ideal-motor engine -------------------------------------------------------------------
+def _neumaier(total: float, error: float, x: float) -> tuple[float, float]:
+    """Compensated summation step: event times stay exact over 1e5 segments."""
+    new = total + x
+    error += (total - new) + x if abs(total) >= abs(x) else (x - new) + total
+    return new, error
+
+
+def _pieces(plant: Plant, t_end: float) -> list[float]:
+    switches = plant.switching_times()
+    return [0.0, *switches[(switches > 0) & (switches < t_end)].tolist(), t_end]
+
+
+def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
+    """Integrate with piecewise-constant contact speeds; returns the final ``(t, V)``."""
+    m, c = plant.mass, plant.damping
+    build = _compliant_landscape if plant.compliance > 0 else _stiff_landscape
+    cache: dict[bytes, _Landscape] = {}
+    bounds = _pieces(plant, t_end)
+    V = v0
+    stuck: int | None = None         # contact the body is stuck to (Coulomb only)
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        speeds = plant.command(a)
+        key = speeds.tobytes()
+        if key not in cache:
+            cache[key] = build(plant, speeds)
+        land = cache[key]
+        E = plant.external(a)
+        t = t_sum = a
+        t_err = 0.0                     # compensated sum of the segment times
+        if a > 0:
+            rec.event(a, "command", None, V)
+        j, at = land.locate(V)
+        if stuck is not None and not (at and land.W[j] > 0):
+            rec.event(a, "release", stuck, V)
+            stuck = None
+        while True:
+            if at:
+                G = land.G[j] + E - c * V
+                W = land.W[j]
+                tol = 4.0 * (len(land.xs) + 1) * _EPS * (land.total + abs(E) + c * abs(V))
+                rec.n_evaluations += 1
+                if abs(G) <= W + tol:                       # stick (or rest at a balance)
+                    contact = land.contact[j]
+                    if W > 0 and stuck != contact:
+                        if stuck is not None:
+                            rec.event(t, "release", stuck, V)
+                        rec.event(t, "stick", contact, V)
+                        stuck = contact
+                    rec.segment(t, V)
+                    break
+                if stuck is not None:
+                    rec.event(t, "release", stuck, V)
+                    stuck = None
+                else:
+                    rec.event(t, land.kind, land.contact[j], V)
+                j = j + 1 if G > 0 else j
+            # Free motion inside interval j.
+            slope = land.slope[j]
+            r0 = (land.force(j, V) + E - c * V) / m
+            lam = (c - slope) / m
+            rec.n_evaluations += 1
+            rec.segment(t, V, r0, lam)
+            if r0 == 0.0:
+                break
+            up = r0 > 0
+            target = (land.xs[j] if j < len(land.xs) else math.inf) if up else \
+                (land.xs[j - 1] if j > 0 else -math.inf)
+            s = _reach_time(V, r0, lam, target) if math.isfinite(target) else math.inf
+            if t + s >= b:
+                V = V + r0 * _em1(lam, b - t)
+                lo = land.xs[j - 1] if j > 0 else -math.inf
+                hi = land.xs[j] if j < len(land.xs) else math.inf
+                V = min(max(V, lo), hi)
+                break
+            t_sum, t_err = _neumaier(t_sum, t_err, s)
+            t, V, at = t_sum + t_err, target, True
+            j = j if up else j - 1
+            if rec.stop(t):
+                return t, V
+        if rec.stop(b):
+            return b, V
+    return t_end, V
+
+
+# -- dynamic motors: closed-form motor tracks -------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class _MotorPiece:
+    """Contact speeds over one command piece starting at ``a`` from speeds ``start``.
+
+    Each motor first ramps at the rate limit while its gap to the command exceeds
+    ``rate * tau`` (the whole gap when ``tau = 0``), then approaches the command
+    exponentially with time constant ``tau`` (or holds it when ``tau = 0``).
+    """
+
+    a: float
+    start: np.ndarray
+    u: np.ndarray
+    tau: float
+    ramp: np.ndarray           # ramp slope, m/s^2 (0 where no ramp)
+    ramp_end: np.ndarray       # offset (s) at which the ramp ends (0 where none)
+    after: np.ndarray          # speed at the ramp end, m/s
+
+    @classmethod
+    def build(cls, a: float, start: np.ndarray, u: np.ndarray, tau: float, rate: float) -> _MotorPiece:
+        gap = u - start
+        if not math.isfinite(rate):                        # lag only: no ramp phase
+            zeros = np.zeros_like(gap)
+            return cls(a, start, u, tau, zeros, zeros, start)
+        direction = np.sign(gap)
+        excess = np.abs(gap) - rate * tau
+        ramping = excess > 0
+        slope = np.where(ramping, direction * rate, 0.0)
+        end = np.where(ramping, excess / rate, 0.0)
+        after = np.where(ramping, u - direction * rate * tau, start)
+        return cls(a, start, u, tau, slope, end, after)
+
+    def speeds(self, s: np.ndarray) -> np.ndarray:
+        """Speeds at offsets ``s`` (shape (T,)) from ``a``: shape (T, n), m/s."""
+        s = np.asarray(s, dtype=float)[:, None]
+        ramping = s < self.ramp_end
+        on_ramp = self.start + self.ramp * s
+        if self.tau > 0:
+            settle = self.u + (self.after - self.u) * np.exp(-(s - self.ramp_end) / self.tau)
+        else:
+            settle = np.broadcast_to(self.after, on_ramp.shape)
+        return np.where(ramping, on_ramp, settle)
+
+    def coefficients(self, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """At offset ``s``: speeds ``v0``, ramp slopes ``q``, exponential rates ``e`` (so that
+        ``v(s + x) = v0 + q x + e em(1/tau, x)``) and the offset of the next phase change."""
+        v0 = self.speeds(np.array([s]))[0]
+        ramping = s < self.ramp_end
+        q = np.where(ramping, self.ramp, 0.0)
+        e = np.where(ramping, 0.0, (self.u - v0) / self.tau) if self.tau > 0 else np.zeros_like(v0)
+        pending = self.ramp_end[ramping]
+        return v0, q, e, float(pending.min()) if pending.size else math.inf
+
+
+def _motor_pieces(plant: Plant, t_end: float) -> list[tuple[float, float, _MotorPiece]]:
+    motors = plant.motors
+    bounds = _pieces(plant, t_end)
+    v = plant.initial_speeds()
+    pieces = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        piece = _MotorPiece.build(a, v, plant.command(a), motors.lag, motors.rate_limit)
+        pieces.append((a, b, piece))
+        v = piece.speeds(np.array([b - a]))[0]
+    return pieces
+
+
+def _motor_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
+    """Exact contact speeds of dynamic motors at ``times`` (s): shape (T, n), m/s."""
+    t_end = float(max(times.max(initial=0.0), 0.0)) or 1.0
+    out = np.empty((times.size, plant.n))
+    for a, b, piece in _motor_pieces(plant, t_end):
+        inside = (times >= a) & ((times < b) | (b == t_end))
+        out[inside] = piece.speeds(times[inside] - a)
+    return out
+
+
+# -- dynamic motors: first root of the event functions --------------------------------------
+@dataclass(frozen=True)
+class _Fns:
+    """Event functions ``g(s) = alpha + beta s + gamma em(lam, s) + delta em(mu, s)
+    + D s exp(-mu s)`` (vectors of coefficients, scalars ``lam``, ``mu``, ``D``)."""
+
+    alpha: np.ndarray
+    beta: np.ndarray
+    gamma: np.ndarray
+    delta: np.ndarray
+    lam: float
+    mu: float
+    D: float = 0.0
+
+    def value(self, s: Any, i: Any = slice(None)) -> np.ndarray:
+        mu = self.mu
+        return (self.alpha[i] + self.beta[i] * s + self.gamma[i] * _em(self.lam, s)
+                + self.delta[i] * _em(mu, s) + self.D * s * np.exp(-mu * s))
+
+    def slope(self, s: Any, i: Any = slice(None)) -> np.ndarray:
+        mu = self.mu
+        decay = np.exp(-mu * s)
+        return (self.beta[i] + self.gamma[i] * np.exp(-self.lam * s) + self.delta[i] * decay
+                + self.D * (1.0 - mu * s) * decay)
+
+    def inflection(self) -> np.ndarray:
+        """The root of ``g''`` (at most one), NaN where there is none."""
+        lam, mu, D = self.lam, self.mu, self.D
+        P, Q = -self.gamma * lam, -self.delta * mu
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if D != 0.0:                                  # resonance lam == mu
+                return (2.0 * mu * D - P - Q) / (D * mu * mu)
+            if lam != mu:
+                ratio = -Q / P
+                return np.where((P != 0) & (ratio > 0), np.log(np.where(ratio > 0, ratio, 1.0))
+                                / (mu - lam), np.nan)
+        return np.full(P.shape, np.nan)
+
+
+def _bisect(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray,
+            index: np.ndarray, iterations: int = 200) -> np.ndarray:
+    """Vectorized bisection of ``fn(s, index)`` on brackets ``[lo, hi]`` (sign change); returns
+    the upper ends, which hold the new sign (or zero)."""
+    lo, hi = lo.copy(), hi.copy()
+    low_sign = np.sign(fn(lo, index))
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        moving = (mid > lo) & (mid < hi)
+        if not moving.any():
+            break
+        same = np.sign(fn(mid, index)) == low_sign
+        lo = np.where(moving & same, mid, lo)
+        hi = np.where(moving & ~same, mid, hi)
+    return hi
+
+
+def _first_root(fns: _Fns, horizon: float) -> tuple[float, int]:
+    """Earliest ``s`` in ``(0, horizon]`` at which some ``g_i`` changes sign or reaches zero.
+
+    ``g`` has at most one inflection, so ``g'`` is monotone on at most two pieces and ``g``
+    on at most three: bracket on those pieces and bisect. A function with ``g(0) == 0``
+    (a contact tied at the start) has no root at 0 by construction.
+    """
+    n = fns.alpha.size
+    rows = np.arange(n)
+    knots = np.full((n, 4), horizon)
+    knots[:, 0] = 0.0
+    infl = fns.inflection()
+    inside = (infl > 0) & (infl < horizon)
+    knots[:, 1] = np.where(inside, infl, horizon)
+    # Roots of g' on [0, infl] and [infl, horizon].
+    for col, (left, right) in enumerate(((0, 1), (1, 3)), start=2):
+        lo, hi = knots[:, left], knots[:, right]
+        d_lo, d_hi = fns.slope(lo), fns.slope(hi)
+        change = (d_lo * d_hi < 0)
+        root = np.full(n, horizon)
+        if change.any():
+            idx = rows[change]
+            root[change] = _bisect(lambda s, i: fns.slope(s, i), lo[change], hi[change], idx, 80)
+        knots[:, col] = root
+    knots = np.sort(knots, axis=1)
+    values = fns.value(knots, rows[:, None])
+    values[:, 0] = fns.alpha                                # exact g(0)
+    lo_v, hi_v = values[:, :-1], values[:, 1:]
+    crossing = ((lo_v * hi_v < 0) | ((hi_v == 0) & (lo_v != 0))) & (knots[:, 1:] > knots[:, :-1])
+    has = crossing.any(axis=1)
+    if not has.any():
+        return math.inf, -1
+    idx = rows[has]
+    piece = np.argmax(crossing[has], axis=1)
+    lo, hi = knots[idx, piece], knots[idx, piece + 1]
+    # Keep only candidates whose bracket can still hold the earliest root, then bisect.
+    keep = lo <= hi.min()
+    idx, lo, hi = idx[keep], lo[keep], hi[keep]
+    roots = _bisect(lambda s, i: fns.value(s, i), lo, hi, idx)
+    best = int(np.argmin(roots))
+    return float(roots[best]), int(idx[best])
+
+
+# -- dynamic motors: the engine ----------------------------------------------------------------
+def _filippov(G_out: float, slopes: np.ndarray, weights: np.ndarray, mass: float,
+              tol: float) -> tuple[float, np.ndarray | None]:
+    """Solve ``0 in G_out + sum_i w_i Sign(slope_i - a) - m a`` for the body's acceleration.
+
+    Returns ``(a, group)`` where ``group`` is the boolean mask of the tied contacts the body
+    follows (their slope is ``a``) or ``None`` when it leaves every one of them.
+    """
+    order = np.argsort(slopes)
+    s, w = slopes[order], weights[order]
+    distinct, start = np.unique(s, return_index=True)
+    W = np.add.reduceat(w, start)
+    below = np.concatenate(([0.0], np.cumsum(W)))
+    total = below[-1]
+    for k, level in enumerate(distinct):
+        base = G_out + (total - below[k + 1]) - below[k] - mass * level
+        if abs(base) <= W[k] + tol:
+            return float(level), slopes == level
+        a = (G_out + (total - below[k]) - below[k]) / mass      # free, below level k
+        if a < level:
+            return a, None
+    return (G_out - total) / mass, None
+
+
+def _run_dynamic(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
+    """Integrate with lagging / rate-limited motors; returns the final ``(t, V)``."""
+    m, c, k = plant.mass, plant.damping, plant.compliance
+    f = plant.contacts.forces
+    tau = plant.motors.lag
+    mu = 1.0 / tau if tau > 0 else 0.0
+    n = plant.n
+    V = v0
+    stuck: int | None = None
+    hint: int | None = None          # contact whose event ended the previous segment
+    releasing = 0.0                  # +-1: the body leaves `stuck` upward / downward
+    for a, b, motor in _motor_pieces(plant, t_end):
+        E = plant.external(a)
+        if a > 0:
+            rec.event(a, "command", None, V)
+        t = a
+        while t < b:
+            v, q, e, phase_end = motor.coefficients(t - a)
+            t_next = min(b, a + phase_end)
+            horizon = t_next - t
+            slope_now = q + e
+            scale = max(abs(V), float(np.max(np.abs(v))))
+            tie_v = 64.0 * _EPS * scale
+            tol = 4.0 * (n + 1) * _EPS * (plant.contacts.total_force + abs(E) + c * abs(V)
+                                          + m * float(np.max(np.abs(slope_now))))
+            rec.n_evaluations += 1
+            if k > 0:
+                fns, seg, kinds = _compliant_step(plant, V, v, q, e, E, mu, hint, tie_v)
+                rec.segment(t, V, *seg)
+                s, i = _first_root(fns, horizon)
+                if i >= 0:
+                    t, V, hint = t + s, _segment_value(V, seg, mu, s), int(kinds[i])
+                    rec.event(t, "saturation", hint, V)
+                else:
+                    t, V, hint = t_next, _segment_value(V, seg, mu, horizon), None
+                if rec.stop(t):
+                    return t, V
+                continue
+            # Coulomb contacts: which are tied with the body now?
+            tied = np.abs(v - V) <= tie_v
+            if hint is not None:
+                tied[hint] = True
+            if stuck is not None:
+                tied[stuck] = True
+            tied &= f > 0
+            anchor = hint if hint is not None else stuck
+            if anchor is not None and tied[anchor]:
+                V = float(v[anchor])
+            side = np.sign(v - V)
+            G_out = float(np.sum(f[~tied] * side[~tied])) + E - c * V
+            t_slopes = slope_now[tied].copy()
+            if releasing != 0.0:
+                t_slopes[np.flatnonzero(tied) == stuck] = -releasing * math.inf
+            acc, group = _filippov(G_out, t_slopes, f[tied], m, tol)
+            tied_idx = np.flatnonzero(tied)
+            new_stuck = int(tied_idx[group][0]) if group is not None else None
+            # Events at this instant.
+            if stuck is not None and new_stuck != stuck:
+                rec.event(t, "release", stuck, V)
+            if new_stuck is not None and new_stuck != stuck:
+                rec.event(t, "stick", new_stuck, V)
+            if hint is not None and (new_stuck is None or hint != new_stuck) and hint != stuck:
+                rec.event(t, "cross", hint, V)
+            stuck, hint, releasing = new_stuck, None, 0.0
+            if stuck is None:
+                signs = side.copy()
+                signs[tied] = np.sign(t_slopes - acc)
+                r0 = (float(np.sum(f * signs)) + E - c * V) / m
+                lam = c / m
+                alpha = np.where(tied, 0.0, V - v)
+                beta = -q.copy()
+                grazing = tied & (np.abs(acc - slope_now) <= 1e-9 * (abs(acc) + np.abs(slope_now)))
+                beta[grazing] = -(r0 - e[grazing])           # g'(0) = 0 exactly when grazing
+                fns = _Fns(alpha, beta, np.full(n, r0), -e, lam, mu)
+                rec.segment(t, V, r0, lam)
+                s, i = _first_root(fns, horizon)
+                step = horizon if i < 0 else s
+                V_new = V + r0 * _em1(lam, step)
+            else:
+                group_mask = np.zeros(n, dtype=bool)
+                group_mask[tied_idx[group]] = True
+                W = float(np.sum(f[group_mask]))
+                signs = side.copy()
+                signs[tied & ~group_mask] = np.sign(slope_now[tied & ~group_mask] - acc)
+                G_fixed = float(np.sum(f[~group_mask] * signs[~group_mask])) + E
+                qc, ec, vc = float(q[stuck]), float(e[stuck]), float(v[stuck])
+                h0 = G_fixed - c * vc - m * (qc + ec)
+                others = ~group_mask
+                alpha = np.concatenate((np.where(tied[others], 0.0, vc - v[others]),
+                                        [W + tol - h0, h0 + W + tol]))
+                beta = np.concatenate((qc - q[others], [c * qc, -c * qc]))
+                delta = np.concatenate((ec - e[others], [ec * (c - m * mu), ec * (m * mu - c)]))
+                fns = _Fns(alpha, beta, np.zeros(alpha.size), delta, 0.0, mu)
+                rec.segment(t, V, 0.0, 0.0, qc, ec)
+                s, i = _first_root(fns, horizon)
+                step = horizon if i < 0 else s
+                V_new = vc + qc * step + ec * _em1(mu, step)
+                if i >= 0:
+                    n_others = int(others.sum())
+                    if i >= n_others:
+                        releasing = 1.0 if i == n_others else -1.0
+                        i = -1
+                    else:
+                        i = int(np.flatnonzero(others)[i])
+            t, V = (t + step if i >= 0 or releasing else t_next), float(V_new)
+            hint = i if i >= 0 else None
+            if rec.stop(t):
+                return t, V
+    return t_end, V
+
+
+def _segment_value(V0: float, seg: tuple[float, ...], mu: float, s: float) -> float:
+    B, lam, c1, C, D = seg
+    return V0 + c1 * s + B * _em1(lam, s) + C * _em1(mu, s) + D * s * math.exp(-mu * s)
+
+
+def _compliant_step(plant: Plant, V: float, v: np.ndarray, q: np.ndarray, e: np.ndarray,
+                    E: float, mu: float, hint: int | None,
+                    tie_v: float) -> tuple[_Fns, tuple[float, ...], np.ndarray]:
+    """Closed-form segment and saturation event functions of compliant contacts."""
+    m, c, k = plant.mass, plant.damping, plant.compliance
+    f = plant.contacts.forces
+    kf = k * f
+    slip = v - V
+    region = np.where(slip > kf, 1.0, np.where(slip < -kf, -1.0, 0.0))
+    on_edge = (np.abs(np.abs(slip) - kf) <= tie_v) & (f > 0)
+    if hint is not None:
+        on_edge[hint] = f[hint] > 0
+    if on_edge.any():
+        # Force is continuous: V' is known; the slip's derivative picks the side.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            force = np.where(kf > 0, f * np.clip(slip / np.where(kf > 0, kf, 1.0), -1, 1), 0.0)
+        acc = (float(np.sum(force)) + E - c * V) / m
+        drift = (q + e) - acc
+        edge_sign = np.sign(slip)
+        outward = drift * edge_sign > 0
+        region = np.where(on_edge, np.where(outward, edge_sign, 0.0), region)
+        slip = np.where(on_edge, edge_sign * kf, slip)
+    region = np.where(f > 0, region, 2.0)                 # lifted contacts never matter
+    linear = region == 0.0
+    b = c + float(np.count_nonzero(linear)) / k
+    alpha_a = float(np.sum(v[linear])) / k + float(np.sum(f[np.abs(region) == 1.0] *
+                                                           region[np.abs(region) == 1.0])) + E
+    beta_a = float(np.sum(q[linear])) / k
+    gamma_a = float(np.sum(e[linear])) / k
+    C = D = 0.0
+    if b == 0.0:
+        c1, B, lam = 0.0, alpha_a / m, 0.0
+    else:
+        lam = b / m
+        c1 = beta_a / b
+        if gamma_a != 0.0:
+            if b != m * mu:
+                C = gamma_a / (b - m * mu)
+            else:
+                D = -gamma_a / b
+        B = (alpha_a - b * V) / m - c1 - C - D
+    # Event functions: slip reaching +kf (upper) and -kf (lower) from inside the region.
+    V_minus_v = V - v
+    upper = np.where(on_edge & (slip > 0), 0.0, V_minus_v + kf)
+    lower = np.where(on_edge & (slip < 0), 0.0, V_minus_v - kf)
+    want_upper = (region == 0.0) | (region == 1.0)
+    want_lower = (region == 0.0) | (region == -1.0)
+    rows = np.concatenate((np.flatnonzero(want_upper), np.flatnonzero(want_lower)))
+    alpha = np.concatenate((upper[want_upper], lower[want_lower]))
+    fns = _Fns(alpha, c1 - q[rows], np.full(rows.size, B), C - e[rows], lam, mu, D)
+    return fns, (B, lam, c1, C, D), rows
+
+
+# -- entry point ------------------------------------------------------------------------------
+def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray | None,
+                   budget: Budget) -> SimulationResult:
+    """Simulate ``plant`` exactly (event-driven closed forms); see the module docstring.
+
+    Parameters
+    ----------
+    plant : Plant
+    t_end : float, s
+    v0 : float, m/s
+    t_eval : ndarray of shape (T,) or None, s
+        Sample times; ``None``: ``0``, every event time and ``t_end``.
+    budget : Budget
+
+    Returns
+    -------
+    SimulationResult
+        ``dense`` evaluates the stored closed forms at any time (exactly); ``force`` is
+        ``m dV/dt`` from the right (the Filippov force actually applied).
+    """
+    started = time.perf_counter()
+    dynamic = plant.dynamic_motors
+    mu = 1.0 / plant.motors.lag if dynamic and plant.motors.lag > 0 else 0.0
+    cascade = 2 * plant.n + 2
+    rec = _Recorder(plant, budget, cascade, mu)
+    if dynamic:
+        t_stop, _ = _run_dynamic(plant, t_end, v0, rec)
+    else:
+        t_stop, _ = _run_ideal(plant, t_end, v0, rec)
+    success = rec.status is Status.SUCCESS
+    dense = rec.dense(t_stop, success)
+    if t_eval is None:
+        times = np.unique(np.concatenate(([0.0], rec.event_times, [t_stop])))
+    else:
+        times = t_eval
+    V = dense(times)
+    force = plant.mass * dense.derivative(times)
+    force = np.where(np.isnan(V), np.nan, force)
+    speeds = _contact_speeds(plant, times)
+    detail = rec.detail if not success else f"{len(rec.events)} events"
+    return SimulationResult(
+        method="exact", setting="event-driven closed form", t=times, V=V,
+        contact_speeds=speeds, force=force, events=tuple(rec.events), status=rec.status,
+        message=status_message(rec.status, detail), n_events=len(rec.events),
+        n_evaluations=rec.n_evaluations, n_steps=len(rec.columns[0]),
+        wall_time=time.perf_counter() - started, dense=dense)
+
+
+def _contact_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
+    """Contact speeds at ``times``: shape (T, n), a read-only broadcast when constant."""
+    if plant.dynamic_motors:
+        return _motor_speeds(plant, times)
+    if plant.commands is None:
+        return np.broadcast_to(plant.command(0.0), (times.size, plant.n))
+    low, high = plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf)
+    return np.clip(plant.commands(times).reshape(times.size, plant.n), low, high)

@@ -274,3 +274,37 @@ def test_bad_options_are_refused() -> None:
         simulate(plant, 1.0, method="moreau", step=-1e-3)
     with pytest.raises(ParameterError, match="Did you mean 'idas'"):
         simulate(plant, 1.0, method="casadi", integrator="ida")
+
+
+# -- against the exact method -------------------------------------------------------------------
+@pytest.mark.parametrize("method, options, atol", [
+    # tanh at eps: the smoothed solution differs from Coulomb by O(eps) near each contact
+    # speed (measured 0.4 eps); the solver's global error is <= ~100 rtol * 0.35 m/s.
+    ("radau", {"friction": "tanh", "epsilon": 1e-8, "rtol": 1e-8, "atol": 1e-12}, 10 * 1e-8 + 3.5e-7),
+    ("casadi", {"friction": "tanh", "epsilon": 1e-6, "rtol": 1e-10, "atol": 1e-12}, 10 * 1e-6 + 3.5e-9),
+    # first order: below one step's speed change, h F_tot / m
+    ("moreau", {"step": 1e-4}, 1e-4 * 2.0),
+])
+def test_reference_methods_agree_with_exact(method: str, options: dict, atol: float,
+                                            rng: np.random.Generator) -> None:
+    plant = _random_plant(rng)
+    t_eval = np.linspace(0.0, 3.0, 301)
+    exact = simulate(plant, 3.0, t_eval=t_eval)
+    result = simulate(plant, 3.0, method=method, t_eval=t_eval, **options)
+    assert result.success
+    np.testing.assert_allclose(result.V, exact.V, rtol=0, atol=atol)
+
+
+def test_motor_lag_reference_agrees_with_exact() -> None:
+    # Lagged motors (tau = 30 ms) with a command switch: the stuck body follows its contact
+    # through the tanh layer, offset by eps * atanh(m dv/dt / W) <= eps * atanh(0.9) ~ 1.5 eps;
+    # Radau's global error at rtol 1e-9 is <= ~1e-7. atol = 1e-6 covers both (eps = 1e-7).
+    commands = PiecewiseConstant([0.5], [[0.1, 0.2, -0.3], [-0.2, 0.3, 0.1]])
+    plant = Plant(ContactSet([0.1, 0.2, -0.3], np.full(3, 2.0 / 3)), mass=1.0,
+                  motors=Motors(lag=0.03), commands=commands)
+    t_eval = np.linspace(0.0, 1.5, 151)
+    exact = simulate(plant, 1.5, t_eval=t_eval)
+    radau = simulate(plant, 1.5, method="radau", friction="tanh", epsilon=1e-7, rtol=1e-9,
+                     atol=1e-12, t_eval=t_eval)
+    np.testing.assert_allclose(radau.contact_speeds, exact.contact_speeds, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(radau.V, exact.V, rtol=0, atol=1e-6)

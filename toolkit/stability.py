@@ -20,7 +20,7 @@ import numpy as np
 
 from .contacts import ContactSet
 from .plant import Motors, PiecewiseConstant, Plant
-from .simulation import Budget, SimulationResult, Status, simulate
+from .simulation import Budget, SimulationResult, simulate
 
 __all__ = ["StabilityCase", "StabilityReport", "stability_suite", "EXACT_TOLERANCE",
            "SMOOTH_TOLERANCE_FACTOR"]

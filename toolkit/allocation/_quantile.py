@@ -30,7 +30,8 @@ from ._evaluate import failure_margin
 from ._problem import AllocationProblem, AllocationResult, AllocationStatus, make_result
 from .targets import EquilibriumSpeed, ForceCurve
 
-__all__ = ["allocate_quantile", "quantile_applies", "quantile_speeds", "quantile_bound"]
+__all__ = ["allocate_quantile", "quantile_applies", "quantile_speeds", "quantile_bound",
+           "level_crossings"]
 
 
 def quantile_applies(problem: AllocationProblem) -> bool:
@@ -63,19 +64,27 @@ def quantile_speeds(curve: ForceCurve, n: int, total_force: float) -> np.ndarray
     -------
     ndarray of shape (n,), m/s, ascending; quantiles the band never reaches go to its ends.
     """
-    xs = curve.speeds
-    g = np.clip(0.5 * (1.0 - curve.forces / total_force), 0.0, 1.0)
-    g = np.maximum.accumulate(g)       # guard against rounding in a flat realizable curve
     p = (np.arange(1, n + 1) - 0.5) / n
-    k = np.searchsorted(g, p, side="left")
+    return level_crossings(curve, total_force * (1.0 - 2.0 * p))
+
+
+def level_crossings(curve: ForceCurve, levels: np.ndarray) -> np.ndarray:
+    """``inf {V in band : F*(V) <= level}`` for each level (N), on a non-increasing curve.
+
+    Levels the curve never reaches go to the band's upper end; levels at or above the
+    curve's start go to the lower end. Returns an ndarray of the shape of ``levels``, m/s.
+    """
+    xs = curve.speeds
+    neg = np.maximum.accumulate(-curve.forces)   # guard against rounding in flat stretches
+    target = -np.asarray(levels, dtype=float)
+    k = np.searchsorted(neg, target, side="left")
     inner = (k > 0) & (k < xs.size)
     kk = np.clip(k, 1, xs.size - 1)
-    x0, x1, g0, g1 = xs[kk - 1], xs[kk], g[kk - 1], g[kk]
+    x0, x1, g0, g1 = xs[kk - 1], xs[kk], neg[kk - 1], neg[kk]
     with np.errstate(invalid="ignore", divide="ignore"):
-        share = np.where(g1 > g0, (p - g0) / np.where(g1 > g0, g1 - g0, 1.0), 0.0)
-    speeds = np.where(inner, x0 + np.clip(share, 0.0, 1.0) * (x1 - x0),
-                      np.where(k == 0, xs[0], xs[-1]))
-    return speeds
+        share = np.where(g1 > g0, (target - g0) / np.where(g1 > g0, g1 - g0, 1.0), 0.0)
+    return np.where(inner, x0 + np.clip(share, 0.0, 1.0) * (x1 - x0),
+                    np.where(k == 0, xs[0], xs[-1]))
 
 
 def quantile_bound(curve: ForceCurve, n: int, total_force: float,

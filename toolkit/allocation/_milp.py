@@ -155,6 +155,65 @@ def _solve_partition(problem: AllocationProblem, deadline: float) -> _Solution:
     return _finish(problem, speeds, cls != 3, status, dual * total, stats)
 
 
+def _subset_sums(weights: np.ndarray) -> np.ndarray:
+    """All ``2^k`` subset sums; entry ``mask`` is the sum of the weights whose bit is set."""
+    sums = np.zeros(1)
+    for w in weights:
+        sums = np.concatenate((sums, sums + w))
+    return sums
+
+
+def _solve_subset_sum(problem: AllocationProblem) -> _Solution | None:
+    """Exact shortcut of the partition formulation when no contact sits inside the band.
+
+    With every contact at ``a`` (set ``B``) or ``b``, ``P(a+) = P(b-) = F_tot - 2 w(B)`` and
+    the error is ``h(w(B)) = max(|T(a+) - P|, |T(b-) - P|)`` (convex in ``w(B)``), besides the
+    forced errors outside the box, which do not depend on the split. The subset sum nearest
+    the minimizer of ``h`` is found exactly by meeting in the middle (``2^(n/2)`` sums per
+    half). Any allocation with a contact inside the band costs at least the smallest
+    magnitude, so when the best split costs no more than that it is optimal and its error is
+    a certified bound. Returns None when the shortcut does not apply or cannot certify.
+    """
+    n = problem.n
+    if n > 40 or np.any(problem.can_lift):
+        return None
+    forces, total = problem.forces, problem.total_force
+    curve = problem.curve
+    lo, hi = curve.band
+    a, b = _effective_band(problem)
+    t_a, t_b = float(curve.value_right(a)), float(curve.value_left(b))
+    forced = 0.0
+    if a > lo:
+        forced = max(forced, total - float(curve.value_left(a)))
+    if b < hi:
+        forced = max(forced, float(curve.value_right(b)) + total)
+    goal = 0.5 * (total - 0.5 * (t_a + t_b))        # w(B) minimizing h
+    half = n // 2
+    left, right = _subset_sums(forces[:half]), _subset_sums(forces[half:])
+    order = np.argsort(right, kind="stable")
+    ranked = right[order]
+    pos = np.clip(np.searchsorted(ranked, goal - left), 1, ranked.size - 1)
+    pick = np.where(np.abs(left + ranked[pos - 1] - goal) <= np.abs(left + ranked[pos] - goal),
+                    pos - 1, pos) if ranked.size > 1 else np.zeros(left.size, dtype=int)
+    sums = left + ranked[pick]
+    plateau = total - 2.0 * sums
+    cost = np.maximum(np.abs(t_a - plateau), np.abs(t_b - plateau))
+    best = int(np.argmin(cost))
+    error = max(float(cost[best]), forced)
+    positive = forces[forces > 0]
+    if positive.size == 0 or error > max(float(positive.min()), forced):
+        return None
+    mask_left, mask_right = best, int(order[pick[best]])
+    below = np.zeros(n, dtype=bool)
+    below[:half] = (mask_left >> np.arange(half)) & 1 == 1
+    below[half:] = (mask_right >> np.arange(n - half)) & 1 == 1
+    speeds = np.where(below, a, b)
+    stats = {"formulation": "subset-sum", "subset_sums": int(left.size + right.size)}
+    return _Solution(speeds, np.ones(n, dtype=bool), error, None,
+                     "exact split by meeting in the middle; certified since no contact inside "
+                     "the band can do better than the smallest magnitude", stats)
+
+
 # -- pairwise-order formulation -------------------------------------------------------------------
 def _classes(curve: ForceCurve, total: float, vmin: float, vmax: float
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -339,7 +398,7 @@ def allocate_milp(problem: AllocationProblem, start: float | None = None) -> All
             "contacts", "allocate", "be a ContactSet for method 'milp'", problem.contacts))
     deadline = start + problem.time_limit
     if partition_applies(problem):
-        sol = _solve_partition(problem, deadline)
+        sol = _solve_subset_sum(problem) or _solve_partition(problem, deadline)
     else:
         sol = _solve_pairwise(problem, deadline)
     result = make_result(problem, sol.speeds, sol.active, sol.bound, "milp", start,

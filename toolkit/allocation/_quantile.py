@@ -88,11 +88,12 @@ def level_crossings(curve: ForceCurve, levels: np.ndarray) -> np.ndarray:
 
 
 def quantile_bound(curve: ForceCurve, n: int, total_force: float,
-                   box: tuple[float, float]) -> float:
+                   box: tuple[float, float], inner: ForceCurve | None = None) -> float:
     """Closed-form optimal sup error (N) for ``n`` equal contacts sharing ``box`` (m/s).
 
     See the module docstring: the forced error outside the box and
-    ``(2 F_tot / n) sup dist(n G, Z)`` inside it.
+    ``(2 F_tot / n) sup dist(n G, Z)`` inside it. ``inner`` may pass ``curve`` already
+    restricted to the box (saves a copy).
     """
     lo, hi = curve.band
     low, high = max(lo, box[0]), min(hi, box[1])
@@ -105,7 +106,7 @@ def quantile_bound(curve: ForceCurve, n: int, total_force: float,
         bound = max(bound, float(total_force - curve.value_left(low)))
     if high < hi:
         bound = max(bound, float(curve.value_right(high) + total_force))
-    inner = curve.restrict(low, high)
+    inner = curve.restrict(low, high) if inner is None else inner
     g = n * 0.5 * (1.0 - inner.forces / total_force)
     xs = inner.speeds
     wide = np.flatnonzero(xs[1:] > xs[:-1])
@@ -141,13 +142,15 @@ def allocate_quantile(problem: AllocationProblem, start: float | None = None) ->
     box = (float(lo[0]), float(hi[0]))
     band_lo, band_hi = curve.band
     low, high = max(band_lo, box[0]), min(band_hi, box[1])
+    inner = None
     if low > band_hi:
         speeds = np.full(n, box[0])
     elif high < band_lo:
         speeds = np.full(n, box[1])
     else:
-        speeds = quantile_speeds(curve.restrict(low, high), n, total)
-    bound = quantile_bound(curve, n, total, box)
+        inner = curve.restrict(low, high)
+        speeds = quantile_speeds(inner, n, total)
+    bound = quantile_bound(curve, n, total, box, inner)
     # Quantile order is ascending; any assignment of the sorted speeds to equal contacts
     # is the same ContactSet. Keep the current order of contacts (least movement).
     order = np.argsort(problem.contacts.speeds, kind="stable")

@@ -148,19 +148,23 @@ class ForceCurve:
 
 
 def _interp(xs: np.ndarray, ys: np.ndarray, x: np.ndarray, side: str) -> np.ndarray:
-    """Piecewise-linear interpolation with one-sided limits at repeated abscissae."""
+    """Piecewise-linear interpolation with one-sided limits at repeated abscissae.
+
+    Uses segment ``[idx - 1, idx]`` with ``idx = searchsorted(xs, x, side)``, so at a repeated
+    speed the left limit is the first sample there and the right limit the last one; values
+    at segment ends are the samples themselves (no rounding).
+    """
     if xs.size == 1:
-        return np.full_like(x, ys[0])
-    idx = np.searchsorted(xs, x, side=side)
-    # Use segment [idx-1, idx]; the one-sided limit is the sample nearest on that side.
-    idx = np.clip(idx, 1, xs.size - 1)
+        return np.full(np.shape(x), ys[0])
+    idx = np.minimum(np.maximum(np.searchsorted(xs, x, side=side), 1), xs.size - 1)
     x0, x1, y0, y1 = xs[idx - 1], xs[idx], ys[idx - 1], ys[idx]
     width = x1 - x0
-    with np.errstate(invalid="ignore", divide="ignore"):
-        share = np.where(width > 0, (x - x0) / np.where(width > 0, width, 1.0), 0.0)
-    share = np.clip(share, 0.0, 1.0)
-    value = np.where(share <= 0.0, y0, np.where(share >= 1.0, y1, y0 + share * (y1 - y0)))
-    return value
+    flat = width <= 0
+    share = (x - x0) / np.where(flat, 1.0, width)
+    if side == "right":
+        share = np.where(flat, 1.0, share)
+    share = np.minimum(np.maximum(share, 0.0), 1.0)
+    return np.where(share >= 1.0, y1, y0 + share * (y1 - y0))
 
 
 @dataclass(frozen=True, eq=False)

@@ -284,3 +284,18 @@ def test_equilibrium_margin_with_unequal_loads() -> None:
                   speed_limits=(-V_MAX, V_MAX), rate_limit=1.0, dt=0.1, method="milp")
     assert ok.status is AllocationStatus.OPTIMAL
     assert failure_margin(ok.contacts, 0.1) >= 1
+
+
+def test_time_limit_returns_the_best_allocation_with_an_honest_gap() -> None:
+    # A hard instance (rate limits, N = 10, a flat target) stopped after 0.5 s: the status
+    # says so and the gap is the evaluated error minus HiGHS's dual bound.
+    rng = np.random.default_rng(3)
+    forces, v0 = rng.uniform(0.5, 2, 10), rng.uniform(-0.3, 0.3, 10)
+    result = allocate(FrictionFraction(0.3, 0.3), ContactSet(v0, forces),
+                      speed_limits=(-V_MAX, V_MAX), rate_limit=1.0, dt=0.2, time_limit=0.5)
+    assert result.status in (AllocationStatus.TIME_LIMIT, AllocationStatus.OPTIMAL)
+    sup, _ = evaluate_errors(result.curve, result.contacts)
+    assert sup == result.error_sup
+    assert result.gap == pytest.approx(result.error_sup - result.bound, rel=0, abs=0)
+    assert result.gap >= -1e-7 * forces.sum()                      # HiGHS tolerance 1e-9 F
+    assert np.all(np.abs(result.speeds - v0) <= 0.2 + 1e-12)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from toolkit import __version__
+from toolkit import ContactSet, __version__
 from toolkit.cli import main
 from toolkit.scene import load_scene
 
@@ -30,7 +30,10 @@ def test_run_succeeds_on_every_design(path, tmp_path, capsys):
     assert "wrote" in out
     result = json.loads((tmp_path / "result.json").read_text())
     scene = load_scene(path)
-    assert result["curve"]["equilibrium"] == list(scene.contact_set().equilibrium())
+    contacts = ContactSet(result["contacts"]["speeds"], result["contacts"]["forces"])
+    assert result["curve"]["equilibrium"] == list(contacts.equilibrium())
+    if scene.target is None:
+        np.testing.assert_array_equal(contacts.speeds, scene.contact_set().speeds)
     if scene.report is not None and scene.report.plots:
         assert (tmp_path / "force_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -80,3 +83,46 @@ def test_bad_scene_writes_nothing(tmp_path):
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "Did you mean 'forces'?" in done.stderr
     assert not out.exists()
+
+
+def test_allocate_json_reproduces_the_papers_split(capsys):
+    # braking.toml asks for mu/mu0 = 0.4 on 10 equal contacts: 3 at +v_max, 7 at -v_max.
+    assert main(["allocate", str(ROOT / "designs" / "braking.toml"), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert {"speeds", "error_sup", "error_l1", "bound", "gap", "method", "status", "wall_time"} <= set(data)
+    assert sorted(data["speeds"]) == [-0.35] * 7 + [0.35] * 3
+    assert data["error_sup"] == 0.0 and data["gap"] == 0.0
+
+
+def test_run_on_braking_checks_the_transition_time(tmp_path, capsys):
+    # dT = m 2 v_max / (F_tot mu/mu0) = 5 * 0.7 / (10 * 0.4) = 0.875 s (PHYSICS.md section 4).
+    assert main(["run", str(ROOT / "designs" / "braking.toml"), "--out", str(tmp_path), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    t, V = np.array(data["simulation"]["t"]), np.array(data["simulation"]["V"])
+    arrival = t[np.argmax(V <= -0.35)]
+    np.testing.assert_allclose(arrival, 0.875, rtol=1e-12)
+
+
+def test_allocate_without_target_is_a_user_error():
+    done = cli("allocate", "designs/equal.toml")
+    assert done.returncode == 2 and "no [target]" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_precision_json_rows(tmp_path):
+    done = cli("precision", "designs/odd7.toml", "--json", "--repeats", "1", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    rows = json.loads(done.stdout)["rows"]
+    assert {"method", "setting", "max_error", "final_error", "wall_time", "status"} <= set(rows[0])
+    exact = [r for r in rows if r["method"] == "exact"]
+    assert exact and all(r["max_error"] <= 1e-12 for r in exact)
+    assert {r["method"] for r in rows} >= {"exact", "rk45", "radau", "moreau", "casadi"}
+    assert (tmp_path / "precision.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_stability_quick_json():
+    done = cli("stability", "--quick", "--json")
+    assert done.returncode == 0, done.stderr
+    cases = json.loads(done.stdout)["cases"]
+    assert cases and all({"name", "method", "finished", "finite", "events", "wall_time", "ok"} <= set(c)
+                         for c in cases)
+    assert all(c["ok"] and c["finished"] and c["finite"] for c in cases)

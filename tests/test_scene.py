@@ -125,3 +125,12 @@ def test_declared_report_does_import_matplotlib(tmp_path):
     loaded = _modules_after_run(MINIMAL + "[report]\nplots = true\n", tmp_path)
     assert loaded["matplotlib"] is True
     assert (loaded["casadi"], loaded["cvxpy"], loaded["filterpy"]) == (False, False, False)
+
+
+def test_target_constraints_round_trip():
+    text = MINIMAL + ('[motors]\nspeed_limit = 0.35\nrate_limit = 2.0\n'
+                      '[target]\nkind = "viscosity"\nslope = 20.0\ncenter = 0.0\nband = 0.2\n'
+                      'dt = 0.05\nfixed = [0]\nliftable = [1, 2]\nmethod = "milp"\n')
+    scene = loads_scene(text)
+    assert (scene.target.dt, scene.target.fixed, scene.target.liftable) == (0.05, (0,), (1, 2))
+    assert loads_scene(dumps_scene(scene)) == scene

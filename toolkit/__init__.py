@@ -7,6 +7,16 @@ that need them.
 
 from __future__ import annotations
 
+from .allocation import (
+    AllocationResult,
+    AllocationStatus,
+    EquilibriumSpeed,
+    ForceCurve,
+    FrictionFraction,
+    Projection,
+    Viscosity,
+    allocate,
+)
 from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase
 from .errors import (
     ParameterError,
@@ -20,16 +30,25 @@ from .plant import Motors, PiecewiseConstant, Plant
 from .plots import plot_force_curve, plot_precision, plot_simulation
 from .scene import Scene, dumps_scene, load_scene
 from .sensors import Encoder
-from .simulation import Budget, Event, SimulationResult, Status, simulate
-from .study import ForceCurve, StudyResult, force_curve, run_study
+from .precision import PrecisionReport, PrecisionRow, carousel_startup_plant, precision_report
+from .simulation import BatchResult, Budget, Event, SimulationResult, Status, simulate, simulate_batch
+from .stability import StabilityCase, StabilityReport, stability_suite
+from .study import CurveSamples, StudyResult, force_curve, run_study
 
 __version__ = "0.1.0"
 
 __all__ = [
     # contact model
-    "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "ForceCurve", "force_curve",
+    "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "force_curve",
     # plant and simulation
     "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "Status", "Budget", "Event",
+    "simulate_batch", "BatchResult",
+    # work-precision report and stability suite
+    "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant",
+    "stability_suite", "StabilityReport", "StabilityCase",
+    # allocation (inverse design)
+    "allocate", "AllocationResult", "AllocationStatus", "Projection",
+    "ForceCurve", "Viscosity", "FrictionFraction", "EquilibriumSpeed",
     # sensors
     "Encoder",
     # plots (matplotlib is imported when one is drawn)

@@ -63,14 +63,82 @@ def _cmd_curve(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 2, got {text!r}") from None
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 2, got {value}")
-    return value
+def _cmd_allocate(args: argparse.Namespace) -> int:
+    from .errors import SceneError
+    from .scene import load_scene
+    from .study import allocate_scene
+
+    scene = load_scene(args.scene)
+    if scene.target is None:
+        raise SceneError(f"The scene {scene.name!r} has no [target] section to allocate.")
+    result = allocate_scene(scene)
+    if args.json:
+        _print_json(result.to_dict())
+    else:
+        print(f"{result.method}: {result.status.value}")
+        print(f"sup error {result.error_sup:.6g} N, L1 error {result.error_l1:.6g} N m/s, "
+              f"bound {result.bound:.6g} N, gap {result.gap:.3g} N, {result.wall_time * 1e3:.2f} ms")
+        print("speeds (m/s): " + ", ".join(f"{v:.6g}" for v in result.speeds))
+    return EXIT_OK
+
+
+def _cmd_precision(args: argparse.Namespace) -> int:
+    from .errors import SceneError
+    from .precision import precision_report
+    from .report import write_precision
+    from .scene import load_scene
+    from .study import scene_plant
+
+    scene = load_scene(args.scene)
+    if scene.simulation is None:
+        raise SceneError(f"The scene {scene.name!r} has no [simulation] section (t_end, v0) to compare methods on.")
+    report = precision_report(scene_plant(scene), scene.simulation.t_end, v0=scene.simulation.v0,
+                              repeats=args.repeats)
+    written = write_precision(report, args.out) if args.out else []
+    if args.json:
+        _print_json(report.to_dict())
+    else:
+        print(f"{'method':8} {'setting':28} {'max_error':>10} {'final_error':>11} {'wall_time':>10} "
+              f"{'evals':>8}  status")
+        for row in report.rows:
+            print(f"{row.method:8} {row.setting:28} {row.max_error:10.2e} {row.final_error:11.2e} "
+                  f"{row.wall_time:10.2e} {row.n_evaluations:8d}  {row.status.name}{_flags(row)}")
+        if written:
+            print(f"wrote {', '.join(str(p) for p in written)}")
+    return EXIT_OK
+
+
+def _flags(row: Any) -> str:
+    names = [name for name in ("chattering", "step_collapse", "creep", "stalled") if getattr(row, name)]
+    return f" [{', '.join(names)}]" if names else ""
+
+
+def _cmd_stability(args: argparse.Namespace) -> int:
+    from .stability import stability_suite
+
+    report = stability_suite(quick=args.quick)
+    if args.json:
+        _print_json(report.to_dict())
+    else:
+        print(f"{'case':34} {'method':8} {'finished':>8} {'finite':>6} {'events':>8} {'wall_time':>10}  ok")
+        for case in report.cases:
+            print(f"{case.name:34} {case.method:8} {case.finished!s:>8} {case.finite!s:>6} "
+                  f"{case.events:8d} {case.wall_time:10.2e}  {case.ok}")
+        print("all cases ok" if report.all_ok else "SOME CASES FAILED")
+    return EXIT_OK if report.all_ok else EXIT_FAILED
+
+
+def _at_least(low: int) -> Callable[[str], int]:
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+        return value
+
+    return convert
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -92,7 +160,15 @@ def _parser() -> argparse.ArgumentParser:
     run = command("run", _cmd_run, "run every stage the scene declares and write results and plots")
     run.add_argument("--out", metavar="DIR", help="output folder (default: out/<scene name>)")
     curve = command("curve", _cmd_curve, "print the force-speed curve of the scene's contacts")
-    curve.add_argument("--points", type=_positive_int, default=801, help="samples (default 801)")
+    curve.add_argument("--points", type=_at_least(2), default=801, help="samples (default 801)")
+    command("allocate", _cmd_allocate, "allocate contact speeds that realize the scene's [target]")
+    precision = command("precision", _cmd_precision,
+                        "work-precision report: every simulation method against the exact one")
+    precision.add_argument("--repeats", type=_at_least(1), default=3, help="timing repeats (default 3)")
+    precision.add_argument("--out", metavar="DIR", help="also write precision.json and precision.png here")
+    stability = command("stability", _cmd_stability,
+                        "stability suite over stiff and extreme cases (exit 1 if a case fails)", scene=False)
+    stability.add_argument("--quick", action="store_true", help="the smaller, faster set of cases")
     return parser
 
 

@@ -25,7 +25,7 @@ def _axes(ax: Any):
 
 
 def plot_force_curve(curve: Any, ax: Any = None, *, label: str | None = None):
-    """Draw a :class:`toolkit.study.ForceCurve`: the staircase, its set-valued steps, the equilibrium.
+    """Draw a :class:`toolkit.study.CurveSamples`: the staircase, its set-valued steps, the equilibrium.
 
     Returns the axes.
     """
@@ -53,7 +53,11 @@ def plot_simulation(result: Any, ax: Any = None):
     if speeds.ndim == 2 and speeds.shape[1] <= 50:
         ax.plot(t, speeds, color="0.6", lw=0.8, drawstyle="default")
         ax.plot([], [], color="0.6", lw=0.8, label="contact speeds v_i")
-    ax.plot(t, result.V, color="k", lw=1.6, label="body speed V")
+    fine, V = t, np.asarray(result.V)
+    if getattr(result, "dense", None) is not None and t.size:
+        fine = np.union1d(t, np.linspace(t[0], t[-1], 1001))   # exact between events
+        V = result.speed_at(fine)
+    ax.plot(fine, V, color="k", lw=1.6, label="body speed V")
     ax.set_xlabel("time t (s)")
     ax.set_ylabel("speed (m/s)")
     ax.set_title(f"{result.method}: {result.status.value}", fontsize="small")

@@ -102,6 +102,16 @@ def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
     return [atomic_write_bytes(out / name, data) for name, data in payload.items()]
 
 
+def write_precision(report: Any, out_dir: str | Path) -> list[Path]:
+    """Write ``precision.json`` and the log-log plot ``precision.png`` of a precision report."""
+    from . import plots
+
+    data = report.to_dict()
+    png = plots.figure_png(plots.plot_precision(data["rows"]))
+    out = Path(out_dir)
+    return [atomic_write_text(out / "precision.json", to_json(data)), atomic_write_bytes(out / "precision.png", png)]
+
+
 def write_text(path: str | Path, text: str) -> Path:
     """Write one text file atomically (CSV, JSON)."""
     return atomic_write_text(path, text)

@@ -319,13 +319,23 @@ class TargetSpec:
     ``kind = "viscosity"``: ``slope`` (N s/m), ``center`` (m/s), ``band`` (m/s, half-width);
     ``kind = "friction_fraction"``: ``fraction`` (mu/mu0 in [0, 1]), ``band`` (m/s);
     ``kind = "equilibrium_speed"``: ``speed`` (m/s), ``margin`` (contacts that may fail).
-    ``method`` (optional solver name) and ``strict`` (refuse instead of project).
+    Common keys: ``method`` (solver name; default: chosen), ``strict`` (refuse instead of
+    project), ``dt`` (s: with ``[motors] rate_limit``, each contact may move at most
+    ``rate_limit * dt`` from its current speed), ``fixed``, ``failed``, ``liftable`` (lists
+    of contact indices), ``time_limit`` (s, MILP budget).
     """
 
     kind: str
     params: dict[str, Any] = field(default_factory=dict)
     method: str | None = None
     strict: bool = False
+    dt: float | None = None
+    fixed: tuple[int, ...] = ()
+    failed: tuple[int, ...] = ()
+    liftable: tuple[int, ...] = ()
+    time_limit: float = 30.0
+
+    COMMON = ("kind", "method", "strict", "dt", "fixed", "failed", "liftable", "time_limit")
 
     _KIND_KEYS = {
         "force_curve": ("speeds", "forces", "weights"),
@@ -346,7 +356,7 @@ class TargetSpec:
         if kind not in cls._KIND_KEYS:
             raise SceneError(f"The 'target.kind' value in the scene must be one of {list(TARGET_KINDS)}. "
                              f"Got {kind!r} instead.{suggestion(kind, TARGET_KINDS)}")
-        _check_keys("target", table, ("kind", "method", "strict", *cls._KIND_KEYS[kind]))
+        _check_keys("target", table, (*cls.COMMON, *cls._KIND_KEYS[kind]))
         for key in cls._REQUIRED[kind]:
             _require("target", table, key)
         params: dict[str, Any] = {}
@@ -364,9 +374,19 @@ class TargetSpec:
                 params[key] = _scalar_or_numbers(where, table[key])
             else:
                 params[key] = _number(where, table[key])
+        def indices(key: str) -> tuple[int, ...]:
+            raw = table.get(key, [])
+            if not isinstance(raw, list):
+                raise _fail(f"target.{key}", "be a list of contact indices", raw)
+            return tuple(_integer(f"target.{key}[{i}]", item) for i, item in enumerate(raw))
+
         return cls(kind=kind, params=params,
                    method=_text("target.method", table["method"]) if "method" in table else None,
-                   strict=_flag("target.strict", table.get("strict", False)))
+                   strict=_flag("target.strict", table.get("strict", False)),
+                   dt=_number("target.dt", table["dt"], low=0.0, low_open=True) if "dt" in table else None,
+                   fixed=indices("fixed"), failed=indices("failed"), liftable=indices("liftable"),
+                   time_limit=_number("target.time_limit", table.get("time_limit", 30.0), low=0.0,
+                                      low_open=True))
 
 
 @dataclass(frozen=True)
@@ -541,9 +561,14 @@ def dumps_scene(scene: Scene) -> str:
         if spec is None:
             continue
         if key == "target":
-            table = {"kind": spec.kind, **_plain(spec.params), "strict": spec.strict}
-            if spec.method is not None:
-                table["method"] = spec.method
+            table = {"kind": spec.kind, **_plain(spec.params), "strict": spec.strict,
+                     "time_limit": spec.time_limit}
+            for name in ("method", "dt"):
+                if getattr(spec, name) is not None:
+                    table[name] = getattr(spec, name)
+            for name in ("fixed", "failed", "liftable"):
+                if getattr(spec, name):
+                    table[name] = list(getattr(spec, name))
         elif key == "motors":
             table = _section_table(spec)
             limits = table.pop("speed_limits", None)

@@ -17,11 +17,12 @@ import numpy as np
 from .contacts import ContactSet
 from .scene import Scene
 
-__all__ = ["ForceCurve", "StudyResult", "force_curve", "run_study", "scene_plant"]
+__all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study", "scene_plant", "scene_target",
+           "allocate_scene"]
 
 
 @dataclass(frozen=True)
-class ForceCurve:
+class CurveSamples:
     """Samples of a contact set's force-speed curve.
 
     Attributes
@@ -50,7 +51,7 @@ class ForceCurve:
                 "equilibrium": list(self.equilibrium), "total_force": self.total_force}
 
 
-def force_curve(contacts: ContactSet, points: int = 801, *, margin: float | None = None) -> ForceCurve:
+def force_curve(contacts: ContactSet, points: int = 801, *, margin: float | None = None) -> CurveSamples:
     """Sample ``F(V)`` over the contact speeds widened by ``margin`` on both sides.
 
     Parameters
@@ -67,7 +68,7 @@ def force_curve(contacts: ContactSet, points: int = 801, *, margin: float | None
         margin = 0.15 * (hi - lo) if hi > lo else 0.1
     grid = np.union1d(np.linspace(lo - margin, hi + margin, points), contacts.speeds)
     lower, upper = contacts.force_bounds(grid)
-    return ForceCurve(grid, contacts.force(grid), lower, upper, contacts.equilibrium(), contacts.total_force)
+    return CurveSamples(grid, contacts.force(grid), lower, upper, contacts.equilibrium(), contacts.total_force)
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,7 @@ class StudyResult:
 
     scene: Scene
     contacts: ContactSet
-    curve: ForceCurve
+    curve: CurveSamples
     sensors: dict[str, dict[str, float]] | None = None
     allocation: Any = None
     simulation: Any = None
@@ -133,14 +134,33 @@ def scene_plant(scene: Scene, contacts: ContactSet | None = None):
                  motors=_motors(scene), commands=commands)
 
 
-def _allocation(scene: Scene, contacts: ContactSet):
-    from .allocation import allocate
-    from .allocation.targets import target_from_spec
+def scene_target(scene: Scene):
+    """The allocation target a scene's ``[target]`` declares."""
+    from . import allocation
 
     spec = scene.target
-    limits = scene.motors.speed_limits if scene.motors is not None else None
-    return allocate(target_from_spec(spec.kind, spec.params), contacts,
-                    speed_limits=limits, method=spec.method, strict=spec.strict)
+    p = spec.params
+    if spec.kind == "force_curve":
+        return allocation.ForceCurve(p["speeds"], p["forces"], p.get("weights"))
+    if spec.kind == "viscosity":
+        return allocation.Viscosity(p["slope"], p["center"], p["band"])
+    if spec.kind == "friction_fraction":
+        return allocation.FrictionFraction(p["fraction"], p["band"])
+    return allocation.EquilibriumSpeed(p["speed"], p.get("margin", 0))
+
+
+def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
+    """Solve a scene's ``[target]`` under its ``[motors]`` limits; see :func:`toolkit.allocate`."""
+    from .allocation import allocate
+
+    spec = scene.target
+    motors = scene.motors
+    limits = motors.speed_limits if motors is not None else None
+    rate = motors.rate_limit if motors is not None and spec.dt is not None else None
+    return allocate(scene_target(scene), contacts if contacts is not None else scene.contact_set(),
+                    speed_limits=limits, rate_limit=rate, dt=spec.dt, fixed=list(spec.fixed),
+                    failed=list(spec.failed), liftable=list(spec.liftable), method=spec.method,
+                    strict=spec.strict, time_limit=spec.time_limit)
 
 
 def _simulation(scene: Scene, contacts: ContactSet):
@@ -167,7 +187,7 @@ def run_study(scene: Scene) -> StudyResult:
     sensors = _sensors(scene) if scene.sensors is not None else None
     allocation = None
     if scene.target is not None:
-        allocation = _allocation(scene, contacts)
+        allocation = allocate_scene(scene, contacts)
         contacts = allocation.contacts
     simulation = _simulation(scene, contacts) if scene.simulation is not None else None
     return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation, simulation)

@@ -90,10 +90,11 @@ class _Recorder:
         self.budget = budget
         self.mu = mu
         self.window = 2 * cascade + _ZENO_FLOOR
-        self.columns: list[list[float]] = [[] for _ in range(8)]   # t0 V0 c1 B lam C D end
+        self.columns: list[list[float]] = [[] for _ in range(7)]   # t0 V0 c1 B lam C D
         self.events: list[Event] = []
         self.event_times: list[float] = []
         self.n_evaluations = 0
+        self.rounds = 0
         self.started = time.perf_counter()
         self.status = Status.SUCCESS
         self.detail = ""
@@ -114,8 +115,9 @@ class _Recorder:
     def stop(self, t: float) -> bool:
         """Check the budget at simulated time ``t``; True when the run must stop."""
         budget = self.budget
-        if len(self.columns[0]) > budget.max_steps:
-            self.status, self.detail = Status.MAX_STEPS, f"{budget.max_steps} segments at t = {t:.6g} s"
+        self.rounds += 1
+        if self.rounds > budget.max_steps:
+            self.status, self.detail = Status.MAX_STEPS, f"{budget.max_steps} rounds at t = {t:.6g} s"
         elif time.perf_counter() - self.started > budget.wall_time:
             self.status, self.detail = Status.WALL_TIME, f"{budget.wall_time:g} s at t = {t:.6g} s"
         else:
@@ -553,11 +555,12 @@ def _run_dynamic(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple
         E = plant.external(a)
         if a > 0:
             rec.event(a, "command", None, V)
-        t = a
-        while t < b:
-            v, q, e, phase_end = motor.coefficients(t - a)
-            t_next = min(b, a + phase_end)
-            horizon = t_next - t
+        t, off, length = a, 0.0, b - a     # offsets from a keep phase ends exact
+        while off < length:
+            v, q, e, phase_end = motor.coefficients(off)
+            off_next = min(length, phase_end)
+            t_next = b if off_next == length else a + off_next
+            horizon = off_next - off
             slope_now = q + e
             scale = max(abs(V), float(np.max(np.abs(v))))
             tie_v = 64.0 * _EPS * scale
@@ -569,9 +572,11 @@ def _run_dynamic(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple
                 rec.segment(t, V, *seg)
                 s, i = _first_root(fns, horizon)
                 if i >= 0:
-                    t, V, hint = t + s, _segment_value(V, seg, mu, s), int(kinds[i])
+                    off += s
+                    t, V, hint = a + off, _segment_value(V, seg, mu, s), int(kinds[i])
                     rec.event(t, "saturation", hint, V)
                 else:
+                    off = off_next
                     t, V, hint = t_next, _segment_value(V, seg, mu, horizon), None
                 if rec.stop(t):
                     return t, V
@@ -642,7 +647,12 @@ def _run_dynamic(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple
                         i = -1
                     else:
                         i = int(np.flatnonzero(others)[i])
-            t, V = (t + step if i >= 0 or releasing else t_next), float(V_new)
+            if i >= 0 or releasing:
+                off += step
+                t = a + off
+            else:
+                off, t = off_next, t_next
+            V = float(V_new)
             hint = i if i >= 0 else None
             if rec.stop(t):
                 return t, V

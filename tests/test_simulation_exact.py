@@ -401,3 +401,52 @@ def test_step_and_wall_time_budgets():
     wall = simulate(plant, 100.0, v0=-2.0, budget=Budget(wall_time=1e-9))
     assert wall.status is Status.WALL_TIME
     assert np.all(np.isfinite(wall.V))
+
+
+# -- second method and robustness -----------------------------------------------------------
+def test_moreau_converges_to_the_exact_solution_with_dynamic_motors():
+    # Moreau-Jean is first order: shrinking its step 10x must shrink its distance to the
+    # exact trajectory about 10x (we ask for 5x). A wrong exact solution would make the
+    # distance stall at the size of the mistake instead.
+    rng = np.random.default_rng(11)
+    speeds, forces = rng.uniform(-0.35, 0.35, 5), rng.uniform(0.1, 1.0, 5)
+    commands = PiecewiseConstant([0.3, 0.6], [speeds, rng.uniform(-0.35, 0.35, 5),
+                                              rng.uniform(-0.35, 0.35, 5)])
+    plant = Plant(ContactSet(speeds, forces), 0.5, motors=Motors(lag=0.03, rate_limit=3.0),
+                  commands=commands)
+    times = np.linspace(0.0, 1.0, 41)
+    exact = simulate(plant, 1.0, v0=0.2, t_eval=times)
+    kinds = {e.kind for e in exact.events}
+    assert {"cross", "stick", "release", "command"} <= kinds
+    errors = [np.max(np.abs(simulate(plant, 1.0, v0=0.2, t_eval=times, method="moreau",
+                                     step=h).V - exact.V)) for h in (1e-3, 1e-4)]
+    assert errors[1] < errors[0] / 5 and errors[1] < 2e-4
+
+
+def test_speed_limits_clip_commands():
+    limits = (-0.3, 0.3)
+    commands = PiecewiseConstant([0.2], [[0.0, 0.1, 0.2], [0.5, 0.6, 0.7]])
+    for motors in (Motors(speed_limits=limits), Motors(lag=0.02, speed_limits=limits)):
+        plant = Plant(ContactSet([0.0, 0.1, 0.2]), 1.0, motors=motors, commands=commands)
+        result = simulate(plant, 3.0, v0=0.1)
+        # Every command above 0.3 is clipped to 0.3: the body ends at the limit exactly.
+        assert result.V[-1] == pytest.approx(0.3, rel=RTOL, abs=0)
+        assert np.max(result.contact_speeds) <= 0.3
+
+
+@settings(deadline=None, max_examples=12)
+@given(st.integers(0, 10**6))
+def test_random_dynamic_scenes_finish_finite(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 7))
+    speeds = rng.uniform(-0.35, 0.35, n)
+    motors = Motors(lag=float(rng.choice([0.0, 0.03])), rate_limit=float(rng.choice([2.0, 50.0])),
+                    compliance=float(rng.choice([0.0, 0.05])))
+    commands = PiecewiseConstant(np.sort(rng.uniform(0.0, 1.0, 2)),
+                                 rng.uniform(-0.35, 0.35, (3, n)))
+    plant = Plant(ContactSet(speeds, rng.uniform(0.1, 1.0, n)), float(rng.uniform(0.1, 2.0)),
+                  damping=float(rng.choice([0.0, 0.5])), motors=motors, commands=commands)
+    result = simulate(plant, 2.0, v0=float(rng.uniform(-0.5, 0.5)), budget=Budget(wall_time=20))
+    assert result.success and np.all(np.isfinite(result.V)) and result.n_events < 200
+    # The dense output agrees with the samples it produced (same closed forms).
+    np.testing.assert_allclose(result.speed_at(result.t), result.V, rtol=0, atol=0)

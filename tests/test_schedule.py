@@ -1,0 +1,231 @@
+"""Tests of toolkit.schedule: closed-form braking times, designed schedules verified by the
+exact simulator, limits, and the firmware export."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+from scipy.special import lambertw
+
+from toolkit.contacts import ContactSet
+from toolkit.errors import ParameterError, ParameterTypeError
+from toolkit.plant import Motors, PiecewiseConstant, Plant
+from toolkit.schedule import (Braking, ScheduleResult, SpeedTrajectory, braking_time,
+                              deviation_bound, design_schedule)
+from toolkit.simulation import simulate
+
+VMAX = 0.35                      # PHYSICS.md section 3
+TAU = 0.01                       # motors settle in ~30 ms = 3 tau
+PERIOD = 0.02                    # 50 Hz
+MOTORS = Motors(lag=TAU, speed_limits=(-VMAX, VMAX))
+
+
+def carousel(speeds, forces=None, motors=MOTORS, mass=1.0) -> Plant:
+    forces = np.full(len(speeds), 0.2) if forces is None else forces   # F_tot / m = 2 m/s^2
+    return Plant(ContactSet(speeds, forces), mass=mass, motors=motors)
+
+
+def exact_run(plant: Plant, result: ScheduleResult, v0: float, times):
+    return simulate(dataclasses.replace(plant, commands=result.as_commands()),
+                    float(result.times[-1]), v0=v0, t_eval=times)
+
+
+def check_limits(result: ScheduleResult, plant: Plant) -> None:
+    lo, hi = plant.motors.speed_limits
+    # Commands are projected onto the limits after the solver: exactly inside.
+    assert np.all(result.speeds >= lo) and np.all(result.speeds <= hi)
+    # The motor model of the schedule is the closed-form lag (second method: the recursion).
+    decay = math.exp(-PERIOD / TAU)
+    recursion = result.speeds[:-1] + (result.contact_speeds[:-1] - result.speeds[:-1]) * decay
+    np.testing.assert_allclose(result.contact_speeds[1:], recursion, rtol=0, atol=1e-12)
+    if math.isfinite(plant.motors.rate_limit):
+        gap = np.abs(result.speeds[:-1] - result.contact_speeds[:-1])
+        assert np.all(gap <= plant.motors.rate_limit * TAU * (1 + 1e-9))
+
+
+# -- closed forms -----------------------------------------------------------------------------
+def test_braking_time_ideal_motors_is_m_dv_over_ftot():
+    plant = carousel([0.3] * 10, motors=Motors(speed_limits=(-VMAX, VMAX)))
+    # dT = m (V0 - Vt) / F_tot = 1 * 0.3 / 2 (PHYSICS.md section 4).
+    assert braking_time(plant, 0.3, 0.0) == pytest.approx(0.15, rel=1e-15, abs=0)
+    # Mirrored: speeding up from -0.3 to 0 with contacts at +v_max takes as long.
+    assert braking_time(carousel([-0.3] * 10, motors=plant.motors), -0.3, 0.0) == \
+        pytest.approx(0.15, rel=1e-15, abs=0)
+
+
+def test_braking_time_lag_lost_time_is_the_crossing_time():
+    # Friction fraction 0 (five at +v_max, five at -v_max): the body coasts at 0.2 until the
+    # upper five decay past it, at t* = tau ln(2 v_max / (0.2 + v_max)) after the switch.
+    plant = carousel([VMAX] * 5 + [-VMAX] * 5)
+    t_star = TAU * math.log(2 * VMAX / (0.2 + VMAX))
+    expected = PERIOD + t_star + 0.2 / 2.0
+    assert braking_time(plant, 0.2, 0.0, hold=PERIOD) == pytest.approx(expected, rel=1e-14,
+                                                                       abs=0)
+    # Second method: the exact simulator under the bang-bang commands.
+    bang = PiecewiseConstant([PERIOD], [[VMAX] * 5 + [-VMAX] * 5, [-VMAX] * 10])
+    sim = simulate(dataclasses.replace(plant, commands=bang), 0.3, v0=0.2)
+    hit = brentq(lambda t: float(sim.speed_at(np.array([t]))[0]), 0.05, 0.3, xtol=1e-15)
+    assert hit == pytest.approx(expected, rel=1e-9, abs=0)     # event root finding
+
+
+def test_braking_time_lambert_w_while_the_body_accelerates():
+    # Seven contacts above, three below: the body accelerates at 0.8 m/s^2 while the seven
+    # decay towards -v_max; the crossing solves A e^{-x} = c + b x (Lambert W, branch 0).
+    plant = carousel([VMAX] * 7 + [-VMAX] * 3)
+    A, c, b = 2 * VMAX, 0.1 + VMAX, 0.8 * TAU
+    x = float(np.real(lambertw(A / b * math.exp(c / b)))) - c / b
+    t_star = TAU * x
+    V_star = 0.1 + 0.8 * t_star
+    expected = t_star + V_star / 2.0
+    assert braking_time(plant, 0.1, 0.0) == pytest.approx(expected, rel=1e-12, abs=0)
+
+
+def test_braking_time_refuses_uncovered_cases():
+    plant = carousel([0.3] * 10)
+    with pytest.raises(ParameterError, match="target_speed"):
+        braking_time(plant, 0.3, -0.34)           # within F_tot tau / m of the command
+    with pytest.raises(ParameterError, match="equilibrium"):
+        braking_time(plant, 0.1, 0.0, hold=0.02)  # body not at the median of the contacts
+    with pytest.raises(ParameterTypeError):
+        braking_time("plant", 0.3, 0.0)
+
+
+def test_deviation_bound_is_delta_when_the_smoothing_is_saturated():
+    # Contacts far from the body: tanh = +-1 to rounding, so the defect vanishes and the
+    # bound is the smallest delta tried (0.5 eps).
+    t = np.linspace(0.0, 1.0, 11)
+    v = np.tile([1.0, -1.0, -1.0], (11, 1))
+    bound, pointwise = deviation_bound(t, np.zeros(11), v, [1.0, 1.0, 1.0], 1.0, 1e-3)
+    assert bound == pytest.approx(0.5e-3, rel=1e-12, abs=0)
+    np.testing.assert_allclose(pointwise, 0.5e-3, rtol=1e-12, atol=0)
+
+
+# -- designed schedules, verified by the exact simulator -----------------------------------
+@pytest.fixture(scope="module")
+def braking():
+    plant = carousel([0.3] * 10)
+    return plant, design_schedule(plant, Braking(0.0), v0=0.3)
+
+
+def test_fast_braking_reaches_the_closed_form_minimum_time(braking):
+    plant, result = braking
+    check_limits(result, plant)
+    # Motors start settled on the current commands; the first new command acts at PERIOD.
+    T = braking_time(plant, 0.3, 0.0, hold=PERIOD)
+    assert T == pytest.approx(PERIOD + 0.15, rel=1e-14, abs=0)   # contacts drop past the body
+    assert result.minimum_time == pytest.approx(T, rel=1e-14, abs=0)
+    fine = np.linspace(0.0, result.times[-1], 4001)
+    sim = exact_run(plant, result, 0.3, fine)
+    bound = result.prediction_bound
+    assert bound < 5 * result.epsilon                 # the certificate is not vacuous
+    predicted = np.interp(fine, result.times, result.body_speed)
+    grid = exact_run(plant, result, 0.3, result.times)
+    assert np.max(np.abs(grid.V - result.body_speed)) <= bound
+    # Contact speeds: the simulator's motor model equals the schedule's (closed forms).
+    np.testing.assert_allclose(grid.contact_speeds, result.contact_speeds, rtol=0, atol=1e-12)
+    # First time the exact body is within 2 bounds of the goal: no schedule can get there
+    # before T - 2 bound m / F_tot (comparison principle); the design gets there within
+    # one controller period of the minimum.
+    hit = fine[np.argmax(sim.V <= 2 * bound)]
+    assert T - 2 * bound / 2.0 - 1e-12 <= hit <= T + PERIOD
+    # ... and stays there: the exact body ends within the bound of the goal.
+    assert abs(sim.V[-1]) <= 2 * bound
+    assert np.all(np.abs(predicted[-10:]) <= bound)
+
+
+def test_braking_within_a_duration_follows_the_constant_deceleration():
+    plant = carousel([0.3] * 10)
+    # mu/mu0 = 0.5: dT = m (V0 - Vt) / (F_tot mu/mu0) = 0.3 s (PHYSICS.md section 4).
+    result = design_schedule(plant, Braking(0.0, duration=0.3), v0=0.3)
+    check_limits(result, plant)
+    grid = exact_run(plant, result, 0.3, result.times)
+    assert np.max(np.abs(grid.V - result.body_speed)) <= result.prediction_bound
+    # The ramp needs half the friction; the contacts can follow it to within the lag of one
+    # period: the predicted error stays below the speed change of one period at 1 m/s^2
+    # plus the certificate.
+    assert np.max(np.abs(grid.V - result.reference)) <= 1.0 * PERIOD + \
+        result.tracking_error + result.prediction_bound
+    assert result.tracking_error <= 1.0 * PERIOD
+
+
+def test_tracking_a_sinusoid_is_verified_by_the_exact_simulator():
+    plant = carousel(np.zeros(10))
+    t = np.linspace(0.0, 0.6, 61)
+    reference = SpeedTrajectory(t, 0.1 * np.sin(2 * np.pi * t))
+    result = design_schedule(plant, reference, v0=0.0)
+    check_limits(result, plant)
+    fine = np.linspace(0.0, result.times[-1], 1201)
+    sim = exact_run(plant, result, 0.0, fine)
+    grid = exact_run(plant, result, 0.0, result.times)
+    assert np.max(np.abs(grid.V - result.body_speed)) <= result.prediction_bound
+    # Triangle inequality: exact tracking error <= predicted error + certificate.
+    assert np.max(np.abs(sim.V - reference(fine))) <= result.tracking_error + \
+        result.prediction_bound
+    # The first period is pinned (motors settled at rest): the reference moves by
+    # 0.1 * 2 pi * PERIOD meanwhile; afterwards the error stays below that.
+    assert result.tracking_error <= 0.1 * 2 * np.pi * PERIOD * (1 + 1e-6)
+
+
+def test_steady_tracking_puts_the_weighted_median_at_the_target():
+    rng = np.random.default_rng(3)
+    start = rng.uniform(-0.3, 0.3, 9)
+    plant = carousel(start)
+    target = 0.05
+    result = design_schedule(plant, SpeedTrajectory([0.0, 0.3], [target, target]), v0=target)
+    check_limits(result, plant)
+    lo, hi = ContactSet(result.speeds[-1], plant.contacts.forces).equilibrium()
+    # In the smoothed model the body balances a contact within a few eps of it; the exact
+    # median of the final commands lies within the certificate of the target.
+    distance = max(lo - target, target - hi, 0.0)
+    assert distance <= result.prediction_bound + 3 * result.epsilon
+    grid = exact_run(plant, result, target, result.times)
+    assert np.max(np.abs(grid.V - result.body_speed)) <= result.prediction_bound
+
+
+def test_rate_limit_is_respected():
+    motors = Motors(lag=TAU, rate_limit=20.0, speed_limits=(-VMAX, VMAX))
+    plant = carousel([0.3] * 10, motors=motors)
+    result = design_schedule(plant, Braking(0.1), v0=0.3)
+    check_limits(result, plant)                 # |u - v| <= r tau: the rate never clips
+    grid = exact_run(plant, result, 0.3, result.times)
+    assert np.max(np.abs(grid.V - result.body_speed)) <= result.prediction_bound
+
+
+# -- export -------------------------------------------------------------------------------
+def test_export_rows_dict_and_commands(braking):
+    plant, result = braking
+    header, rows = result.to_rows()
+    assert header == ["time_s"] + [f"speed_{i}_mps" for i in range(10)]
+    assert len(rows) == result.times.size
+    np.testing.assert_array_equal(np.array(rows)[:, 1:], result.speeds)
+    np.testing.assert_array_equal(np.array(rows)[:, 0], result.times)
+    data = json.loads(json.dumps(result.to_dict()))
+    assert data["status"] == result.status.name and data["period"] == PERIOD
+    np.testing.assert_array_equal(data["speeds"], result.speeds)
+    commands = result.as_commands()
+    for k, t in enumerate(result.times):
+        np.testing.assert_array_equal(commands(t + 0.5 * PERIOD), result.speeds[k])
+    assert not result.speeds.flags.writeable
+
+
+# -- refusals -----------------------------------------------------------------------------
+def test_refusals():
+    plant = carousel([0.0] * 3)
+    with pytest.raises(ParameterTypeError):
+        design_schedule(plant, 0.3)
+    with pytest.raises(ParameterError, match="speed_limits"):
+        design_schedule(carousel([0.0] * 3, motors=None), Braking(0.0), v0=0.3)
+    with pytest.raises(ParameterError, match="compliance"):
+        design_schedule(carousel([0.0] * 3, motors=Motors(compliance=0.1,
+                                                          speed_limits=(-1, 1))), Braking(0.0))
+    with pytest.raises(ParameterError, match="speed limits"):
+        design_schedule(plant, Braking(0.5), v0=0.3)
+    with pytest.raises(ParameterError, match="increasing"):
+        SpeedTrajectory([0.0, 0.0], [0.1, 0.2])
+    with pytest.raises(ParameterError, match="duration"):
+        Braking(0.0, duration=-1.0)

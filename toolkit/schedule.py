@@ -1,0 +1,952 @@
+"""Contact-speed schedules: time-varying commands that take the body along a target.
+
+A schedule is a table of commanded contact speeds, constant over each controller period
+(50 Hz on the paper's hardware, PHYSICS.md section 3), that firmware can play. Two targets:
+
+- :class:`SpeedTrajectory`: follow a body speed ``V_ref(t)`` (tracking);
+- :class:`Braking`: take the body from ``v0`` to a target speed as fast as possible, or
+  along a constant deceleration that lasts a given time.
+
+:func:`design_schedule` solves an optimal control problem with casadi's ``Opti`` and ipopt
+(direct multiple shooting over the controller periods) under the plant's motor model:
+first-order lag ``tau``, rate limit ``r`` and speed limits. The motor model is kept *exact*
+in the optimizer: a command may differ from the current contact speed by at most ``r tau``
+(``r dt`` without lag), so the rate limit never clips and every contact speed is the closed
+form ``u + (v - u) exp(-s / tau)`` inside a period.
+
+The Coulomb force is nonsmooth. The optimizer uses the smoothed law
+``f_i tanh((v_i - V) / epsilon)`` (with a continuation ``10 eps -> eps`` from a good
+initial guess) and classical RK4 substeps inside each period; the result
+is then checked against the exact nonsmooth model, without trusting the solver:
+
+1. the designed (projected) commands are integrated on the smoothed model with a stiff
+   integrator at tight tolerance (``scipy``'s Radau): the *predicted* body speed;
+2. a monotonicity argument bounds the distance between that prediction and every solution
+   of the exact differential inclusion ``m dV/dt in sum f_i Sign(v_i - V) + F_ext - c V``.
+   Because the Coulomb force is non-increasing in ``V``, for any ``delta > 0``
+   ``|V_exact(t) - V_pred(t)| <= delta + (1/m) int_0^t d_delta``, where the defect
+   ``d_delta`` is how far the smoothed force lies outside the exact set-valued force of the
+   speeds within ``delta`` of the prediction (:func:`deviation_bound`). The smallest bound
+   over a grid of ``delta`` is :attr:`ScheduleResult.prediction_bound`.
+
+For braking with every contact pushing backward the optimum is bang-bang (all contacts at
+the lowest speed); :func:`braking_time` gives the resulting minimum time in closed form
+(including the motor lag), a lower bound for every schedule within the speed limits.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ._validation import as_float, as_float_array, as_int
+from .errors import ParameterError, ParameterTypeError, parameter_message
+from .plant import Motors, PiecewiseConstant, Plant
+
+__all__ = [
+    "SpeedTrajectory",
+    "Braking",
+    "ScheduleStatus",
+    "ScheduleResult",
+    "design_schedule",
+    "braking_time",
+    "deviation_bound",
+]
+
+_OWNER = "design_schedule"
+#: Continuation of the smoothing width, in units of the final ``epsilon``.
+_CONTINUATION = (10.0, 1.0)
+#: Widths ``delta`` (units of ``epsilon``) tried by :func:`deviation_bound`.
+_DELTAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0)
+#: Samples per controller period for the prediction and its certificate.
+_SAMPLES = 32
+
+
+# -- targets ---------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class SpeedTrajectory:
+    """A target body speed over time, linear between samples and held after the last one.
+
+    Parameters
+    ----------
+    times : array_like of shape (k,), s
+        Sample times, ``>= 0`` and strictly increasing.
+    speeds : array_like of shape (k,), m/s
+        Target body speed at each sample time.
+
+    Examples
+    --------
+    >>> ref = SpeedTrajectory([0.0, 1.0], [0.0, 0.2])
+    >>> float(ref(0.5))
+    0.1
+    """
+
+    times: np.ndarray
+    speeds: np.ndarray
+
+    def __post_init__(self) -> None:
+        owner = "SpeedTrajectory"
+        times = as_float_array(self.times, "times", owner)
+        speeds = as_float_array(self.speeds, "speeds", owner)
+        if speeds.shape != times.shape:
+            raise ParameterError(parameter_message(
+                "speeds", owner, f"have the same length as 'times' ({times.size})",
+                f"an array of length {speeds.size}"))
+        if times[0] < 0 or np.any(np.diff(times) <= 0):
+            raise ParameterError(parameter_message(
+                "times", owner, "be >= 0 and strictly increasing",
+                times.tolist() if times.size <= 8 else f"[{times[0]:g} .. {times[-1]:g}]"))
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "speeds", speeds)
+
+    def __call__(self, t: Any) -> np.ndarray:
+        """Target speed (m/s) at times ``t`` (s); constant before the first/after the last sample."""
+        return np.interp(np.asarray(t, dtype=float), self.times, self.speeds)
+
+    @property
+    def end(self) -> float:
+        """Time of the last sample, s."""
+        return float(self.times[-1])
+
+
+@dataclass(frozen=True)
+class Braking:
+    """Bring the body from its initial speed to ``speed``.
+
+    Parameters
+    ----------
+    speed : float, m/s
+        Final body speed.
+    duration : float or None, s
+        ``None``: as fast as possible (the objective ``int (V - speed)^2 dt`` is minimized,
+        whose optimum reaches ``speed`` at the earliest time, see :func:`braking_time`).
+        A positive number: follow the constant deceleration from ``v0`` to ``speed`` over
+        this time (the paper's ``dT``), then hold.
+    """
+
+    speed: float
+    duration: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "speed", as_float(self.speed, "speed", "Braking"))
+        if self.duration is not None:
+            object.__setattr__(self, "duration", as_float(
+                self.duration, "duration", "Braking", low=0.0, low_open=True))
+
+
+# -- result ------------------------------------------------------------------------------------
+class ScheduleStatus(enum.Enum):
+    """Outcome of :func:`design_schedule`; the value is the message shown to users."""
+
+    OPTIMAL = ("solved: ipopt converged to a local optimum; the prediction is certified "
+               "against the exact Coulomb model within 'prediction_bound'")
+    ACCEPTABLE = ("solved to ipopt's acceptable (looser) tolerances; the prediction is "
+                  "certified within 'prediction_bound'")
+    ITERATION_LIMIT = ("stopped: ipopt's iteration limit was reached; the last iterate, "
+                       "projected onto the motor limits, is returned and certified")
+    TIME_LIMIT = ("stopped: the time limit was reached; the last iterate, projected onto the "
+                  "motor limits, is returned and certified")
+    SOLVER_ERROR = ("ipopt failed; the last iterate, projected onto the motor limits, is "
+                    "returned and certified (see 'message')")
+
+
+@dataclass(frozen=True, eq=False)
+class ScheduleResult:
+    """A designed schedule, its predicted effect and a certificate.
+
+    Attributes
+    ----------
+    times : ndarray of shape (K + 1,), s
+        ``k * period``: row ``k`` of :attr:`speeds` is commanded on ``[times[k], times[k+1])``
+        and the last row from ``times[K]`` on (it holds the final command).
+    speeds : ndarray of shape (K + 1, n), m/s
+        Commanded contact speeds, within the speed limits; with a lag or rate limit each
+        command differs from the contact speed at the start of its period by at most
+        ``r tau`` (``r * period`` without lag), so the motors never saturate their rate.
+        With dynamic motors ``speeds[0]`` equals the plant's current commands (motors start
+        settled there, see :class:`~toolkit.plant.Plant`): new commands act from ``times[1]``.
+    contact_speeds : ndarray of shape (K + 1, n), m/s
+        Contact speeds of the motor model at ``times`` (closed form).
+    body_speed : ndarray of shape (K + 1,), m/s
+        Predicted body speed at ``times``: the smoothed model integrated at tight tolerance.
+    reference : ndarray of shape (K + 1,), m/s
+        Target body speed at ``times``.
+    prediction_bound : float, m/s
+        Every solution of the exact Coulomb model under these commands stays within this
+        distance of the prediction on ``[0, times[-1]]`` (:func:`deviation_bound`).
+    tracking_error : float, m/s
+        ``max |body_speed - reference|`` over 32 samples per period of the prediction.
+    objective : float
+        The normalized objective evaluated on the prediction (not taken from the solver).
+    arrival_time : float or None, s
+        Braking: first time the prediction comes within ``prediction_bound`` of the target
+        speed (None when it never does, or for tracking).
+    minimum_time : float or None, s
+        Braking: the closed-form minimum time of :func:`braking_time` when it applies.
+    epsilon : float, m/s
+        Smoothing width of the optimizer's model.
+    period : float, s
+    model_mismatch : float, m/s
+        ``max |V_nlp - body_speed|`` at ``times``: the optimizer's discretization error.
+    iterations : int
+        ipopt iterations over the continuation.
+    solver_status : str
+        ipopt's return status of the last stage.
+    status : ScheduleStatus
+    message : str
+    wall_time : float, s
+    """
+
+    times: np.ndarray
+    speeds: np.ndarray
+    contact_speeds: np.ndarray
+    body_speed: np.ndarray
+    reference: np.ndarray
+    prediction_bound: float
+    tracking_error: float
+    objective: float
+    arrival_time: float | None
+    minimum_time: float | None
+    epsilon: float
+    period: float
+    model_mismatch: float
+    iterations: int
+    solver_status: str
+    status: ScheduleStatus
+    message: str
+    wall_time: float
+    target: Any = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        for name in ("times", "speeds", "contact_speeds", "body_speed", "reference"):
+            array = np.array(getattr(self, name), dtype=float)
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
+    @property
+    def n(self) -> int:
+        """Number of contacts."""
+        return int(self.speeds.shape[1])
+
+    @property
+    def success(self) -> bool:
+        """True for OPTIMAL and ACCEPTABLE."""
+        return self.status in (ScheduleStatus.OPTIMAL, ScheduleStatus.ACCEPTABLE)
+
+    def as_commands(self) -> PiecewiseConstant:
+        """The schedule as a :class:`~toolkit.plant.PiecewiseConstant` for ``Plant(commands=...)``.
+
+        Row ``k`` applies on ``[k period, (k + 1) period)`` (row 0 also before 0), the last
+        row from ``K period`` on.
+        """
+        return PiecewiseConstant(self.times[1:], self.speeds)
+
+    def to_rows(self) -> tuple[list[str], list[list[float]]]:
+        """Header and rows for a CSV file firmware can play.
+
+        Returns
+        -------
+        header : list of str
+            ``["time_s", "speed_0_mps", ..., "speed_{n-1}_mps"]``.
+        rows : list of list of float
+            One row per period: start time (s), then the commanded speed of each contact
+            (m/s), held until the next row's time (the last row: held from then on).
+        """
+        header = ["time_s"] + [f"speed_{i}_mps" for i in range(self.n)]
+        rows = [[float(t), *map(float, row)] for t, row in zip(self.times, self.speeds)]
+        return header, rows
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary with the table (``times``, ``speeds``) and the certificate."""
+        def opt(value: float | None) -> float | None:
+            return None if value is None else float(value)
+
+        return {
+            "period": float(self.period),
+            "times": self.times.tolist(),
+            "speeds": self.speeds.tolist(),
+            "contact_speeds": self.contact_speeds.tolist(),
+            "body_speed": self.body_speed.tolist(),
+            "reference": self.reference.tolist(),
+            "prediction_bound": float(self.prediction_bound),
+            "tracking_error": float(self.tracking_error),
+            "objective": float(self.objective),
+            "arrival_time": opt(self.arrival_time),
+            "minimum_time": opt(self.minimum_time),
+            "epsilon": float(self.epsilon),
+            "model_mismatch": float(self.model_mismatch),
+            "iterations": int(self.iterations),
+            "solver_status": self.solver_status,
+            "status": self.status.name,
+            "message": self.message,
+            "wall_time": float(self.wall_time),
+        }
+
+
+# -- motor model -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Motor:
+    """The motor model as the optimizer sees it: exact inside the rate-limit-free regime."""
+
+    tau: float                 # s, 0 = no lag
+    rate: float                # m/s^2, inf = none
+    period: float              # s
+
+    @property
+    def dynamic(self) -> bool:
+        return self.tau > 0 or math.isfinite(self.rate)
+
+    @property
+    def max_step(self) -> float:
+        """Largest ``|u_k - v_k|`` that keeps the motor out of rate saturation (inf = any)."""
+        if not math.isfinite(self.rate):
+            return math.inf
+        return self.rate * (self.tau if self.tau > 0 else self.period)
+
+    def decay(self) -> float:
+        return math.exp(-self.period / self.tau) if self.tau > 0 else 0.0
+
+    def speeds(self, start: np.ndarray, u: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Contact speeds at offsets ``s`` (T,) into a period: shape (T, n)."""
+        s = np.asarray(s, dtype=float)[:, None]
+        if self.tau > 0:
+            return u + (start - u) * np.exp(-s / self.tau)
+        if math.isfinite(self.rate):
+            return start + np.clip(u - start, -self.rate * s, self.rate * s)
+        return np.broadcast_to(u, (s.shape[0], u.size)).copy()
+
+    def symbolic(self, ca: Any, start: Any, u: Any, s: Any) -> Any:
+        if self.tau > 0:
+            return u + (start - u) * ca.exp(-s / self.tau)
+        if math.isfinite(self.rate):
+            return start + ca.fmin(ca.fmax(u - start, -self.rate * s), self.rate * s)
+        return u
+
+    def kinks(self, start: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Offsets inside a period where a rate-limited ideal motor reaches its command."""
+        if self.tau > 0 or not math.isfinite(self.rate):
+            return np.empty(0)
+        ends = np.abs(u - start) / self.rate
+        return np.unique(ends[(ends > 0) & (ends < self.period)])
+
+
+def _motor_of(plant: Plant, period: float) -> _Motor:
+    motors = plant.motors
+    if motors is None:
+        return _Motor(0.0, math.inf, period)
+    if motors.compliance > 0:
+        raise ParameterError(parameter_message(
+            "plant", _OWNER, "have stiff motors (Motors.compliance == 0): schedules use the "
+            "Coulomb model", f"compliance {motors.compliance:g}"))
+    return _Motor(motors.lag, motors.rate_limit, period)
+
+
+# -- closed form: minimum braking time ----------------------------------------------------------
+def _first_crossing(A: float, c: float, a: float, tau: float) -> float:
+    """First ``s >= 0`` with ``lo + A exp(-s/tau) = V + a s`` where ``c = V - lo > 0``.
+
+    ``A > c`` (the contact starts above the body). With ``x = s / tau`` and ``b = a tau``
+    this is ``A e^{-x} = c + b x``, i.e. ``y e^y = (A/b) e^{c/b}`` for ``y = x + c/b``
+    (Lambert W: branch 0 for ``b > 0``, branch -1 for ``b < 0``); solved here by bisection
+    on the convex function ``A e^{-x} - c - b x``, to the last bit. ``inf`` if never.
+    """
+    from scipy.optimize import brentq
+
+    b = a * tau
+    if b == 0.0:
+        return tau * math.log(A / c)
+
+    def gap(x: float) -> float:
+        return A * math.exp(-x) - c - b * x
+
+    if b > 0:
+        hi = math.log(A / c) + 1.0                 # gap(hi) < 0: A e^{-x} < c there
+        while gap(hi) > 0:
+            hi *= 2.0
+        return tau * brentq(gap, 0.0, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps)
+    x_min = math.log(A / -b) if A > -b else 0.0    # minimum of the convex gap
+    if gap(x_min) > 0:
+        return math.inf
+    return tau * brentq(gap, 0.0, x_min, xtol=1e-300, rtol=4 * np.finfo(float).eps)
+
+
+def braking_time(plant: Plant, v0: float, target_speed: float, *, command: float | None = None,
+                 hold: float = 0.0) -> float:
+    """Minimum time for the body to reach ``target_speed`` with commands bounded by ``command``.
+
+    Every contact is commanded to ``command`` (default: the motors' lower speed limit when
+    braking, the upper one when speeding up) from ``t = hold`` on; before that the motors
+    hold the plant's current commands and the body must be at equilibrium there. Between
+    events the body moves linearly (no drag, no external force) and each contact above it
+    decays exponentially towards ``command`` (lag ``tau``); a contact's crossing time is the
+    root of ``lo + A e^{-s/tau} = V + a s`` (a Lambert-W equation, see
+    :func:`_first_crossing`). Afterwards the body decelerates at ``F_tot / m``:
+
+        T = hold + m (v0 - target) / F_tot + (2 / F_tot) sum_i f_i t_i*
+
+    with ``t_i*`` the time contact ``i`` spends above the body (0 with ideal motors).
+
+    By the comparison principle (the force is non-decreasing in each contact speed and
+    non-increasing in ``V``) no schedule whose commands stay on the ``command`` side
+    reaches ``target_speed`` earlier: this is a lower bound and the bang-bang optimum.
+
+    Parameters
+    ----------
+    plant : Plant
+        Contacts (magnitudes, current commands), mass and motors (lag only; a finite rate
+        limit must not bind: ``|command - v_i| <= r tau``). ``damping`` and
+        ``external_force`` must be 0.
+    v0, target_speed : float, m/s
+    command : float, optional, m/s
+    hold : float, s
+        Delay before the commands switch (one controller period when the motors lag).
+
+    Returns
+    -------
+    float, s
+
+    Raises
+    ------
+    ParameterError
+        When an assumption above fails, or ``target_speed`` is within ``F_tot tau / m`` of
+        ``command`` (a contact could then re-cross the body: no closed form).
+    """
+    owner = "braking_time"
+    if not isinstance(plant, Plant):
+        raise ParameterTypeError(parameter_message("plant", owner, "be a Plant", plant))
+    v0 = as_float(v0, "v0", owner)
+    target = as_float(target_speed, "target_speed", owner)
+    hold = as_float(hold, "hold", owner, low=0.0)
+    if plant.damping != 0 or plant.external(0.0) != 0 or plant.switching_times().size:
+        raise ParameterError(parameter_message(
+            "plant", owner, "have no damping, no external force and constant commands",
+            plant))
+    sign = 1.0 if v0 >= target else -1.0             # mirror speeding up into braking
+    motors = plant.motors or Motors()
+    lo_lim, hi_lim = motors.speed_limits
+    if command is None:
+        command = lo_lim if sign > 0 else hi_lim
+    command = as_float(command, "command", owner)
+    forces = plant.contacts.forces
+    w = sign * plant.initial_speeds()
+    V, lo, goal = sign * v0, sign * command, sign * target
+    total = float(forces.sum())
+    a_tot = total / plant.mass
+    tau = motors.lag
+    if V == goal:
+        return 0.0
+    if hold > 0 and not _at_equilibrium(w, forces, V):
+        raise ParameterError(parameter_message(
+            "v0", owner, "lie in the equilibrium set of the current commands when hold > 0",
+            v0))
+    if not goal > lo + a_tot * tau:
+        raise ParameterError(parameter_message(
+            "target_speed", owner, f"lie beyond command + F_tot tau / m = "
+            f"{sign * (lo + a_tot * tau):g} m/s (farther from the command)", target_speed))
+    if math.isfinite(motors.rate_limit) and np.any(np.abs(w - lo) > motors.rate_limit * tau):
+        raise ParameterError(parameter_message(
+            "plant", owner, "have a rate limit that does not bind (|command - v_i| <= r tau)",
+            motors.rate_limit))
+    t = hold
+    active = forces > 0
+    w, f = np.sort(w[active]), forces[active][np.argsort(w[active])]
+    if tau == 0:                                       # ideal motors: all jump below the body
+        return t + (V - goal) / a_tot
+    amplitude = w - lo                                 # contact speed = lo + amplitude e^{-s/tau}
+    crossed = w < V
+    tied = w == V
+    if np.any(tied):
+        # Tied contacts leave the body at once when they drop faster than it can follow.
+        others = float(f[w > V].sum() - f[w < V].sum())
+        if plant.mass * (V - lo) / tau > float(f[tied].sum()) - others:
+            crossed |= tied
+        else:
+            raise ParameterError(parameter_message(
+                "plant", owner, "have motors faster than the body (a tied contact must drop "
+                "below it at once)", f"lag {tau:g} s"))
+    s_total = 0.0                                      # time since the switch
+    while not np.all(crossed):
+        accel = float(f[~crossed].sum() - f[crossed].sum()) / plant.mass
+        j = int(np.flatnonzero(~crossed)[0])           # lowest contact still above the body
+        s = _first_crossing(amplitude[j] * math.exp(-s_total / tau), V - lo, accel, tau)
+        if accel < 0 and V + accel * s <= goal:        # the body gets there first
+            return t + (goal - V) / accel
+        if not math.isfinite(s):
+            raise ParameterError(parameter_message(
+                "target_speed", owner, "be reachable with these motors", target_speed))
+        V += accel * s
+        t += s
+        s_total += s
+        crossed |= amplitude == amplitude[j]           # equal speeds cross together
+    return t + (V - goal) / a_tot
+
+
+def _at_equilibrium(speeds: np.ndarray, forces: np.ndarray, V: float) -> bool:
+    from .contacts import ContactSet
+
+    lo, hi = ContactSet(speeds, forces).equilibrium()
+    return lo <= V <= hi
+
+
+# -- certificate ---------------------------------------------------------------------------------
+def deviation_bound(times: Any, body_speed: Any, contact_speeds: Any, forces: Any, mass: float,
+                    epsilon: float) -> tuple[float, np.ndarray]:
+    """Bound the distance between a smoothed-model trajectory and the exact Coulomb model.
+
+    Let ``V_s`` solve ``m V' = sum f_i tanh((v_i - V)/eps) + F_ext - c V`` and ``V_e`` any
+    solution of the inclusion ``m V' in sum f_i Sign(v_i - V) + F_ext - c V`` with the same
+    contact speeds, external force and ``V_e(0) = V_s(0)``. The exact force is non-increasing
+    in ``V``, so while ``V_e > V_s + delta`` its value is at most the lower end
+    ``F_lo(V_s + delta)`` of the set at ``V_s + delta``, and
+
+        m d|e|/dt <= d_delta = max(0, F_lo(V_s + delta) - F_s(V_s), F_s(V_s) - F_hi(V_s - delta))
+
+    (drag only helps). Hence ``|e(t)| <= delta + (1/m) int_0^t d_delta`` for every delta.
+
+    Parameters
+    ----------
+    times : array_like of shape (T,), s
+        Dense samples of the trajectory (the integral uses the trapezoid rule on them).
+    body_speed : array_like of shape (T,), m/s
+    contact_speeds : array_like of shape (T, n), m/s
+    forces : array_like of shape (n,), N
+    mass : float, kg
+    epsilon : float, m/s
+
+    Returns
+    -------
+    bound : float, m/s
+        ``min over delta of (delta + int_0^T d_delta / m)``: valid on the whole interval.
+    pointwise : ndarray of shape (T,), m/s
+        ``min over delta of (delta + int_0^t d_delta / m)`` at each sample.
+    """
+    t = np.asarray(times, dtype=float)
+    V = np.asarray(body_speed, dtype=float)[:, None]
+    v = np.asarray(contact_speeds, dtype=float)
+    f = np.asarray(forces, dtype=float)
+    smooth = np.tanh((v - V) / epsilon) @ f
+    best = np.full(t.size, np.inf)
+    total = np.inf
+    for ratio in _DELTAS:
+        delta = ratio * epsilon
+        f_lo = np.where(v > V + delta, 1.0, -1.0) @ f      # lower end of F at V_s + delta
+        f_hi = np.where(v >= V - delta, 1.0, -1.0) @ f     # upper end of F at V_s - delta
+        defect = np.maximum(0.0, np.maximum(f_lo - smooth, smooth - f_hi)) / mass
+        growth = np.concatenate(([0.0], np.cumsum(0.5 * (defect[1:] + defect[:-1]) * np.diff(t))))
+        best = np.minimum(best, delta + growth)
+        total = min(total, delta + float(growth[-1]))
+    return total, best
+
+
+# -- design --------------------------------------------------------------------------------------
+def _limits(plant: Plant, speed_limits: Any) -> tuple[float, float]:
+    if speed_limits is None:
+        lo, hi = plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf)
+    else:
+        pair = as_float_array(speed_limits, "speed_limits", _OWNER)
+        if pair.size != 2 or not pair[0] < pair[1]:
+            raise ParameterError(parameter_message(
+                "speed_limits", _OWNER, "be a pair (lo, hi) with lo < hi (m/s)", speed_limits))
+        lo, hi = float(pair[0]), float(pair[1])
+        if plant.motors is not None:
+            lo, hi = max(lo, plant.motors.speed_limits[0]), min(hi, plant.motors.speed_limits[1])
+    if not (math.isfinite(lo) and math.isfinite(hi)) or not lo < hi:
+        raise ParameterError(parameter_message(
+            "speed_limits", _OWNER, "be finite with lo < hi: pass speed_limits=(lo, hi) or "
+            "Motors(speed_limits=...)", (lo, hi)))
+    return lo, hi
+
+
+def _reference(target: Any, v0: float, horizon: float | None, period: float, motor: _Motor,
+               plant: Plant, lo: float, hi: float) -> tuple[Any, float, float | None]:
+    """Return (reference function, horizon, closed-form minimum time or None)."""
+    if isinstance(target, SpeedTrajectory):
+        end = horizon if horizon is not None else target.end
+        return target, end, None
+    goal = target.speed
+    if not lo <= goal <= hi:
+        raise ParameterError(parameter_message(
+            "target", _OWNER, f"have a speed within the speed limits [{lo:g}, {hi:g}] m/s",
+            goal))
+    hold = period if motor.dynamic else 0.0
+    total = plant.contacts.total_force
+    try:
+        minimum = braking_time(replace(plant, motors=Motors(
+            motor.tau, motor.rate, (lo, hi))), v0, goal, hold=hold) \
+            if plant.damping == 0 and plant.external(0.0) == 0 \
+            and not isinstance(plant.external_force, PiecewiseConstant) else None
+    except ParameterError:
+        minimum = None
+    rough = hold + plant.mass * abs(v0 - goal) / total
+    if target.duration is None:
+        end = (minimum if minimum is not None else rough)
+        end = horizon if horizon is not None else end + max(0.25 * end, 5 * motor.tau, 10 * period)
+
+        def ref(t: Any) -> np.ndarray:
+            return np.full(np.shape(t), goal)
+        return ref, end, minimum
+    duration = target.duration
+    end = horizon if horizon is not None else duration + hold + max(5 * motor.tau, 10 * period)
+    ramp = SpeedTrajectory([0.0, hold, hold + duration], [v0, v0, goal]) if hold > 0 \
+        else SpeedTrajectory([0.0, duration], [v0, goal])
+    return ramp, end, minimum
+
+
+def _initial_guess(ref_grid: np.ndarray, start: np.ndarray, motor: _Motor, lo: float,
+                   hi: float, pin_first: bool, target: Any, v0: float, accel: float,
+                   times: np.ndarray) -> np.ndarray:
+    """Commands (K, n) that make every contact follow the reference (inverse motor lag).
+
+    For fast braking: the bang-bang schedule, every contact at the far limit until the body
+    (decelerating at ``F_tot / m``) is five lag times from the goal, then at the goal.
+    """
+    K = ref_grid.size - 1
+    n = start.size
+    decay = motor.decay()
+    braking = isinstance(target, Braking) and target.duration is None
+    if braking:
+        sign = 1.0 if v0 >= target.speed else -1.0
+        switch = (times[1] if pin_first else 0.0) + abs(v0 - target.speed) / accel \
+            - 5.0 * motor.tau
+    U = np.empty((K, n))
+    v = start.copy()
+    for k in range(K):
+        if k == 0 and pin_first:
+            u = start.copy()
+        elif braking:
+            u = np.full(n, (lo if sign > 0 else hi) if times[k] < switch else target.speed)
+        else:
+            want = ref_grid[k + 1]
+            u = np.full(n, (want - decay * v.mean()) / (1 - decay) if decay > 0 else want)
+        u = np.clip(u, lo, hi)
+        if math.isfinite(motor.max_step):
+            u = np.clip(u, v - motor.max_step, v + motor.max_step)
+        U[k] = u
+        v = u + (v - u) * decay
+    return U
+
+
+def _project(U: np.ndarray, start: np.ndarray, motor: _Motor, lo: float, hi: float,
+             pin_first: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Clip commands into the limits exactly (solver tolerances), forward through the motors."""
+    K, n = U.shape
+    decay = motor.decay()
+    out = np.empty_like(U)
+    v = start.copy()
+    speeds = [v.copy()]
+    step = motor.max_step
+    for k in range(K):
+        u = start.copy() if (k == 0 and pin_first) else np.clip(U[k], lo, hi)
+        if math.isfinite(step):
+            u = np.clip(u, np.maximum(v - step, lo), np.minimum(v + step, hi))
+        out[k] = u
+        v = u if not motor.dynamic or (motor.tau == 0) else u + (v - u) * decay
+        speeds.append(v.copy())
+    return out, np.array(speeds)
+
+
+def _build_interval(ca: Any, plant: Plant, motor: _Motor, M: int) -> Any:
+    """casadi Function (V, v, u, ref[2M+1], fext[M], eps) -> (V_next, int (V - ref)^2)."""
+    n = plant.n
+    h = motor.period / M
+    f = ca.DM(plant.contacts.forces)
+    m, c = plant.mass, plant.damping
+    V, s, F_ext, eps = ca.SX.sym("V"), ca.SX.sym("s"), ca.SX.sym("F"), ca.SX.sym("eps")
+    v, u = ca.SX.sym("v", n), ca.SX.sym("u", n)
+    ref, fext = ca.SX.sym("ref", 2 * M + 1), ca.SX.sym("fext", M)
+    g_expr = (ca.dot(f, ca.tanh((motor.symbolic(ca, v, u, s) - V) / eps)) + F_ext - c * V) / m
+    g = ca.Function("g", [s, V, v, u, F_ext, eps], [g_expr])
+    x, cost = V, 0
+    for j in range(M):                                  # classical RK4, F_ext frozen per step
+        a = j * h
+        k1 = g(a, x, v, u, fext[j], eps)
+        k2 = g(a + h / 2, x + h / 2 * k1, v, u, fext[j], eps)
+        k3 = g(a + h / 2, x + h / 2 * k2, v, u, fext[j], eps)
+        k4 = g(a + h, x + h * k3, v, u, fext[j], eps)
+        nxt = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        cost += h / 6 * ((x - ref[2 * j]) ** 2 + 4 * ((x + nxt) / 2 - ref[2 * j + 1]) ** 2
+                         + (nxt - ref[2 * j + 2]) ** 2)
+        x = nxt
+    return ca.Function("interval", [V, v, u, ref, fext, eps], [x, cost])
+
+
+def _make_predictor(ca: Any, plant: Plant, motor: _Motor, epsilon: float) -> Any:
+    """CVODES (BDF, rtol 1e-10) over one piece ``[a, b]`` of a period on the smoothed model.
+
+    Returns a casadi integrator with state ``V``, parameters ``(v_start (n), u (n), F_ext,
+    a, b)`` and outputs at ``_SAMPLES // 2 + 1`` equally spaced times of the piece.
+    """
+    n = plant.n
+    f = ca.DM(plant.contacts.forces)
+    V, x = ca.SX.sym("V"), ca.SX.sym("x")                # x in [0, 1] along the piece
+    v, u = ca.SX.sym("v", n), ca.SX.sym("u", n)
+    F_ext, a, b = ca.SX.sym("F"), ca.SX.sym("a"), ca.SX.sym("b")
+    s = a + (b - a) * x
+    rate = (ca.dot(f, ca.tanh((motor.symbolic(ca, v, u, s) - V) / epsilon)) + F_ext
+            - plant.damping * V) / plant.mass
+    dae = {"x": V, "p": ca.vertcat(v, u, F_ext, a, b), "t": x, "ode": (b - a) * rate}
+    grid = np.linspace(0.0, 1.0, _SAMPLES // 2 + 1)
+    return ca.integrator("prediction", "cvodes", dae, 0.0, grid[1:],
+                         {"reltol": 1e-10, "abstol": 1e-13, "max_num_steps": 100000}), grid
+
+
+def _predict(predictor: Any, plant: Plant, motor: _Motor, U: np.ndarray, speeds: np.ndarray,
+             v0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Integrate the smoothed model at tight tolerance: dense times, V, contact speeds."""
+    integrator, grid = predictor
+    dt = motor.period
+    K = U.shape[0]
+    all_t, all_V, all_v = [], [], []
+    V = v0
+    for k in range(K):
+        start, u = speeds[k], U[k]
+        t0 = k * dt
+        cuts = [0.0, *motor.kinks(start, u),
+                *(plant.external_force.breakpoints_in(t0, t0 + dt) - t0
+                  if isinstance(plant.external_force, PiecewiseConstant) else []), dt]
+        cuts = np.unique(np.clip(cuts, 0.0, dt))
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            ext = plant.external(t0 + 0.5 * (a + b))
+            out = integrator(x0=V, p=np.concatenate((start, u, [ext, a, b])))
+            path = np.concatenate(([V], np.asarray(out["xf"]).ravel()))
+            offsets = a + (b - a) * grid
+            all_t.append(t0 + offsets[:-1])
+            all_V.append(path[:-1])
+            all_v.append(motor.speeds(start, u, offsets[:-1]))
+            V = float(path[-1])
+    all_t.append(np.array([K * dt]))
+    all_V.append(np.array([V]))
+    all_v.append(speeds[-1][None, :])
+    return np.concatenate(all_t), np.concatenate(all_V), np.concatenate(all_v)
+
+
+@dataclass(frozen=True, eq=False)
+class _Verified:
+    """A candidate schedule evaluated on the accurate smoothed model (private)."""
+
+    commands: np.ndarray
+    contact_speeds: np.ndarray
+    t_dense: np.ndarray
+    V_dense: np.ndarray
+    bound: float
+    tracking: float
+    objective: float
+    mismatch: float
+    body: np.ndarray
+
+
+_IPOPT_STATUS = {
+    "Solve_Succeeded": ScheduleStatus.OPTIMAL,
+    "Solved_To_Acceptable_Level": ScheduleStatus.ACCEPTABLE,
+    "Maximum_Iterations_Exceeded": ScheduleStatus.ITERATION_LIMIT,
+    "Maximum_CpuTime_Exceeded": ScheduleStatus.TIME_LIMIT,
+    "Maximum_WallTime_Exceeded": ScheduleStatus.TIME_LIMIT,
+}
+
+
+def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: float = 0.0,
+                    horizon: float | None = None, period: float = 0.02,
+                    speed_limits: Any = None, epsilon: float = 1e-3, substeps: int = 8,
+                    smoothness: float = 1e-4, max_iter: int = 80,
+                    time_limit: float = 30.0) -> ScheduleResult:
+    """Design piecewise-constant contact-speed commands that take the body along a target.
+
+    Parameters
+    ----------
+    plant : Plant
+        Contacts (magnitudes ``f_i`` and current commands, m/s), mass, damping, external
+        force and motors (lag ``tau``, rate limit ``r``, speed limits; compliance must be
+        0). ``plant.commands`` is ignored: the schedule replaces it.
+    target : SpeedTrajectory or Braking
+    v0 : float, m/s
+        Body speed at ``t = 0``.
+    horizon : float, optional, s
+        Length of the schedule (rounded up to whole periods). Default: the trajectory's last
+        sample; for braking the closed-form minimum time (or the requested duration) plus
+        a settling margin.
+    period : float, s
+        Controller period (0.02 s = 50 Hz on the paper's hardware).
+    speed_limits : pair of float, optional, m/s
+        ``(lo, hi)`` for the commands (intersected with the motors' limits). Required when
+        the motors have none.
+    epsilon : float, m/s
+        Width of the tanh smoothing used by the optimizer (the prediction bound is a few
+        ``epsilon``).
+    substeps : int
+        RK4 steps per period inside the optimizer.
+    smoothness : float
+        Weight of the command-change penalty ``sum ||u_k - u_{k-1}||^2`` relative to the
+        tracking term (both normalized by the speed range).
+    max_iter : int
+        ipopt iterations per continuation stage.
+    time_limit : float, s
+        Wall-clock budget for ipopt over all stages.
+
+    Returns
+    -------
+    ScheduleResult
+        Always returned (also when ipopt stops early; see ``status``). Errors and the
+        certificate are evaluated on the projected commands, never taken from the solver.
+
+    Examples
+    --------
+    >>> from toolkit import ContactSet
+    >>> from toolkit.plant import Motors, Plant
+    >>> plant = Plant(ContactSet([0.3] * 10, [0.2] * 10), mass=1.0,
+    ...               motors=Motors(lag=0.01, speed_limits=(-0.35, 0.35)))
+    >>> result = design_schedule(plant, Braking(0.0), v0=0.3)   # doctest: +SKIP
+    """
+    import casadi as ca
+
+    start_clock = time.perf_counter()
+    if not isinstance(plant, Plant):
+        raise ParameterTypeError(parameter_message("plant", _OWNER, "be a Plant", plant))
+    if not isinstance(target, (SpeedTrajectory, Braking)):
+        raise ParameterTypeError(parameter_message(
+            "target", _OWNER, "be a SpeedTrajectory or a Braking", target))
+    v0 = as_float(v0, "v0", _OWNER)
+    period = as_float(period, "period", _OWNER, low=0.0, low_open=True)
+    epsilon = as_float(epsilon, "epsilon", _OWNER, low=0.0, low_open=True)
+    substeps = as_int(substeps, "substeps", _OWNER, low=1)
+    smoothness = as_float(smoothness, "smoothness", _OWNER, low=0.0)
+    max_iter = as_int(max_iter, "max_iter", _OWNER, low=1)
+    time_limit = as_float(time_limit, "time_limit", _OWNER, low=0.0, low_open=True)
+    if horizon is not None:
+        horizon = as_float(horizon, "horizon", _OWNER, low=0.0, low_open=True)
+    motor = _motor_of(plant, period)
+    lo, hi = _limits(plant, speed_limits)
+    start = np.clip(plant.contacts.speeds, lo, hi) if motor.dynamic else plant.contacts.speeds
+    if motor.dynamic and np.any(plant.initial_speeds() != start):
+        raise ParameterError(parameter_message(
+            "plant", _OWNER, f"have current commands within the speed limits [{lo:g}, {hi:g}]",
+            plant.contacts.speeds.tolist()))
+    ref_fn, end, minimum = _reference(target, v0, horizon, period, motor, plant, lo, hi)
+    K = max(1, math.ceil(end / period - 1e-9))
+    times = np.arange(K + 1) * period
+    M = substeps
+    fine = np.arange(2 * M * K + 1) * (period / (2 * M))
+    ref_fine = np.asarray(ref_fn(fine), dtype=float)
+    ref_nodes = np.stack([ref_fine[2 * M * k: 2 * M * k + 2 * M + 1] for k in range(K)], axis=1)
+    mids = (np.arange(M * K) + 0.5) * (period / M)
+    fext = np.array([plant.external(t) for t in mids]).reshape(K, M).T
+    pin_first = motor.dynamic
+    scale = max(abs(lo), abs(hi))
+    n = plant.n
+    accel = plant.contacts.total_force / plant.mass
+
+    interval = _build_interval(ca, plant, motor, M)
+    opti = ca.Opti()
+    U = opti.variable(n, K)
+    Vs = opti.variable(1, K + 1)
+    vs = opti.variable(n, K + 1)
+    eps_p = opti.parameter()
+    V_next, cost = interval.map(K)(Vs[:, :K], vs[:, :K], U, ref_nodes, fext,
+                                   ca.repmat(eps_p, 1, K))
+    opti.subject_to(Vs[:, 1:] == V_next)
+    opti.subject_to(Vs[0] == v0)
+    opti.subject_to(vs[:, 0] == start)
+    decay = motor.decay()
+    if motor.tau > 0:
+        opti.subject_to(vs[:, 1:] == U + (vs[:, :K] - U) * decay)
+    else:
+        opti.subject_to(vs[:, 1:] == U)
+    opti.subject_to(opti.bounded(lo, U, hi))
+    if pin_first:
+        opti.subject_to(U[:, 0] == start)
+    if math.isfinite(motor.max_step):
+        opti.subject_to(opti.bounded(-motor.max_step, U - vs[:, :K], motor.max_step))
+    changes = ca.diff(ca.horzcat(ca.DM(start), U), 1, 1)
+    objective = (ca.sum2(cost) / (K * period * scale ** 2)
+                 + smoothness * ca.sumsqr(changes) / (n * K * scale ** 2))
+    opti.minimize(objective)
+    U0 = _initial_guess(ref_fn(times), start, motor, lo, hi, pin_first, target, v0, accel,
+                        times)
+    U0, v_guess = _project(U0, start, motor, lo, hi, pin_first)
+    V_guess = [v0]
+    for k in range(K):                                  # consistent shooting states
+        V_guess.append(float(interval(V_guess[-1], v_guess[k], U0[k], ref_nodes[:, k],
+                                      fext[:, k], _CONTINUATION[0] * epsilon)[0]))
+    opti.set_initial(U, U0.T)
+    opti.set_initial(vs, v_guess.T)
+    opti.set_initial(Vs, np.array(V_guess)[None, :])
+
+    predictor = _make_predictor(ca, plant, motor, epsilon)
+
+    def verify(raw: np.ndarray, V_nlp: np.ndarray) -> _Verified:
+        commands, contact = _project(np.asarray(raw).reshape(n, K).T, start, motor, lo, hi,
+                                     pin_first)
+        t_d, V_d, v_d = _predict(predictor, plant, motor, commands, contact, v0)
+        bound, _ = deviation_bound(t_d, V_d, v_d, plant.contacts.forces, plant.mass, epsilon)
+        miss = V_d - np.asarray(ref_fn(t_d), dtype=float)
+        moves = np.diff(np.vstack((start, commands)), axis=0)
+        value = float(np.sum(0.5 * (miss[1:] ** 2 + miss[:-1] ** 2) * np.diff(t_d))
+                      / (K * period * scale ** 2)
+                      + smoothness * np.sum(moves ** 2) / (n * K * scale ** 2))
+        body = V_d[np.searchsorted(t_d, times - 1e-12 * period)]
+        return _Verified(commands, contact, t_d, V_d, bound, float(np.max(np.abs(miss))),
+                         value, float(np.max(np.abs(np.ravel(V_nlp) - body))), body)
+
+    # The heuristic guess is a candidate too: the result is never worse than it.
+    best = verify(U0.T, np.array(V_guess))
+    iterations, solver_status = 0, "Not_Run"
+    status = ScheduleStatus.OPTIMAL
+    for ratio in _CONTINUATION:
+        remaining = time_limit - (time.perf_counter() - start_clock)
+        if remaining <= 0:
+            status = ScheduleStatus.TIME_LIMIT
+            break
+        opti.solver("ipopt", {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
+                              "ipopt.max_iter": max_iter, "ipopt.max_wall_time": remaining,
+                              "ipopt.bound_relax_factor": 0.0, "ipopt.tol": 1e-6,
+                              "ipopt.acceptable_tol": 1e-4, "ipopt.acceptable_iter": 5})
+        opti.set_value(eps_p, ratio * epsilon)
+        try:
+            sol = opti.solve()
+            stats = sol.stats()
+        except RuntimeError:
+            sol = opti.debug
+            stats = opti.stats()
+        iterations += int(stats.get("iter_count", 0))
+        solver_status = str(stats.get("return_status", "unknown"))
+        status = _IPOPT_STATUS.get(solver_status, ScheduleStatus.SOLVER_ERROR)
+        values = (np.atleast_2d(sol.value(U)).reshape(n, K), sol.value(vs), sol.value(Vs))
+        if status not in (ScheduleStatus.OPTIMAL, ScheduleStatus.ACCEPTABLE):
+            break
+        opti.set_initial(U, values[0])
+        opti.set_initial(vs, values[1])
+        opti.set_initial(Vs, values[2])
+    if solver_status != "Not_Run":
+        candidate = verify(values[0], values[2])
+        if candidate.objective <= best.objective:
+            best = candidate
+            chosen = "the optimizer's schedule"
+        else:
+            chosen = ("the initial guess (every contact following the reference), which "
+                      "verified better than the optimizer's last iterate")
+    else:
+        chosen = "the initial guess (the optimizer did not run)"
+    commands, contact_speeds, bound, tracking = (best.commands, best.contact_speeds,
+                                                 best.bound, best.tracking)
+    t_dense, V_dense, body = best.t_dense, best.V_dense, best.body
+    objective_value, mismatch = best.objective, best.mismatch
+    arrival = None
+    if isinstance(target, Braking):
+        near = np.flatnonzero(np.abs(V_dense - target.speed) <= bound)
+        arrival = float(t_dense[near[0]]) if near.size else None
+    speeds = np.vstack((commands, commands[-1]))
+    detail = (f"returned {chosen}; {iterations} ipopt iterations ({solver_status}); epsilon {epsilon:g} m/s; "
+              f"prediction within {bound:.3g} m/s of the exact model; tracking error "
+              f"{tracking:.3g} m/s")
+    if isinstance(target, Braking) and minimum is not None and target.duration is not None \
+            and target.duration + (period if pin_first else 0.0) < minimum:
+        detail += (f"; the requested duration is shorter than the minimum braking time "
+                   f"{minimum - (period if pin_first else 0.0):.4g} s")
+    return ScheduleResult(times, speeds, contact_speeds, body, ref_fn(times), bound, tracking,
+                          objective_value, arrival, minimum, epsilon, period, mismatch,
+                          iterations, solver_status, status, f"{status.value}; {detail}",
+                          time.perf_counter() - start_clock, target)

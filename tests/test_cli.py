@@ -126,3 +126,28 @@ def test_stability_quick_json():
     assert cases and all({"name", "method", "finished", "finite", "events", "wall_time", "ok"} <= set(c)
                          for c in cases)
     assert all(c["ok"] and c["finished"] and c["finite"] for c in cases)
+
+
+def test_schedule_writes_csv_and_json_verified_by_exact_simulation(tmp_path):
+    done = cli("schedule", "designs/brake_schedule.toml", "--out", str(tmp_path), "--json")
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    rows = (tmp_path / "schedule.csv").read_text().splitlines()
+    assert rows[0].split(",") == ["time_s"] + [f"speed_{i}_mps" for i in range(10)]
+    table = np.array([[float(x) for x in row.split(",")] for row in rows[1:]])
+    np.testing.assert_array_equal(table[:, 0], data["times"])
+    np.testing.assert_array_equal(table[:, 1:], data["speeds"])
+    assert np.all(np.abs(table[:, 1:]) <= 0.35)                       # motor limits, exactly
+    assert json.loads((tmp_path / "schedule.json").read_text())["times"] == data["times"]
+    # The exact nonsmooth simulation stays within the design's certified prediction bound.
+    check = data["exact_check"]
+    assert check["within_bound"] and check["max_deviation"] <= check["prediction_bound"]
+    # Closed-form minimum braking time 0.17 s (one pinned period + m V0 / F_tot = 0.15 s; the
+    # lag's Lambert-W term is below the 20 ms grid): arrival on the grid point at or after it.
+    assert data["minimum_time"] == pytest.approx(0.17, abs=0.005)
+    assert data["arrival_time"] <= data["minimum_time"] + 0.02 + 1e-12
+
+
+def test_schedule_without_section_is_a_user_error():
+    done = cli("schedule", "designs/equal.toml")
+    assert done.returncode == 2 and "no [schedule]" in done.stderr and "Traceback" not in done.stderr

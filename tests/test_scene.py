@@ -134,3 +134,19 @@ def test_target_constraints_round_trip():
     scene = loads_scene(text)
     assert (scene.target.dt, scene.target.fixed, scene.target.liftable) == (0.05, (0,), (1, 2))
     assert loads_scene(dumps_scene(scene)) == scene
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        (MINIMAL + '[body]\nmass = 1.0\n[schedule]\nkind = "brake"\nspeed = 0.0\n', "Did you mean 'braking'?"),
+        (MINIMAL + '[body]\nmass = 1.0\n[schedule]\nkind = "track"\ntimes = [0.0]\n', "needs the key 'speeds'"),
+        (MINIMAL + '[schedule]\nkind = "braking"\nspeed = 0.0\n', "needs a [body] section"),
+        (MINIMAL + '[body]\nmass = 1.0\n[schedule]\nkind = "braking"\nspeed = 0.0\nperiod = 0\n',
+         "'schedule.period' value in the scene must be > 0"),
+    ],
+)
+def test_bad_schedules_are_refused(text, fragment):
+    with pytest.raises(SceneError) as info:
+        loads_scene(text)
+    assert fragment in str(info.value)

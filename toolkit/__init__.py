@@ -27,8 +27,9 @@ from .errors import (
     ToolkitError,
 )
 from .plant import Motors, PiecewiseConstant, Plant
-from .plots import plot_force_curve, plot_precision, plot_simulation
+from .plots import plot_force_curve, plot_precision, plot_schedule, plot_simulation
 from .scene import Scene, dumps_scene, load_scene
+from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .sensors import Encoder
 from .precision import PrecisionReport, PrecisionRow, carousel_startup_plant, precision_report
 from .simulation import BatchResult, Budget, Event, SimulationResult, Status, simulate, simulate_batch
@@ -49,10 +50,12 @@ __all__ = [
     # allocation (inverse design)
     "allocate", "AllocationResult", "AllocationStatus", "Projection",
     "ForceCurve", "Viscosity", "FrictionFraction", "EquilibriumSpeed",
+    # schedules (time-varying designs)
+    "design_schedule", "ScheduleResult", "ScheduleStatus", "SpeedTrajectory", "Braking", "braking_time",
     # sensors
     "Encoder",
     # plots (matplotlib is imported when one is drawn)
-    "plot_force_curve", "plot_simulation", "plot_precision",
+    "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision",
     # scenes and studies
     "Scene", "load_scene", "dumps_scene", "StudyResult", "run_study",
     # errors

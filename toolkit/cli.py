@@ -82,6 +82,30 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_schedule(args: argparse.Namespace) -> int:
+    from .errors import SceneError
+    from .report import schedule_check, write_schedule
+    from .scene import load_scene
+    from .study import design_scene_schedule
+
+    scene = load_scene(args.scene)
+    if scene.schedule is None:
+        raise SceneError(f"The scene {scene.name!r} has no [schedule] section to design.")
+    result, check = design_scene_schedule(scene)
+    out_dir = Path(args.out) if args.out else Path("out") / scene.name
+    written = write_schedule(result, out_dir)
+    verified = schedule_check(result, check)
+    if args.json:
+        _print_json({**result.to_dict(), "exact_check": verified, "written": [str(p) for p in written]})
+    else:
+        print(f"{result.status.value}")
+        print(f"{result.times.size - 1} periods of {result.period * 1e3:g} ms, {result.n} contacts; "
+              f"tracking error {result.tracking_error:.3g} m/s; exact simulation within "
+              f"{verified['max_deviation']:.2g} m/s of the prediction (bound {result.prediction_bound:.2g})")
+        print(f"wrote {', '.join(str(p) for p in written)}")
+    return EXIT_OK
+
+
 def _cmd_precision(args: argparse.Namespace) -> int:
     from .errors import SceneError
     from .precision import precision_report
@@ -162,6 +186,9 @@ def _parser() -> argparse.ArgumentParser:
     curve = command("curve", _cmd_curve, "print the force-speed curve of the scene's contacts")
     curve.add_argument("--points", type=_at_least(2), default=801, help="samples (default 801)")
     command("allocate", _cmd_allocate, "allocate contact speeds that realize the scene's [target]")
+    schedule = command("schedule", _cmd_schedule,
+                       "design the scene's [schedule] and write schedule.csv and schedule.json")
+    schedule.add_argument("--out", metavar="DIR", help="output folder (default: out/<scene name>)")
     precision = command("precision", _cmd_precision,
                         "work-precision report: every simulation method against the exact one")
     precision.add_argument("--repeats", type=_at_least(1), default=3, help="timing repeats (default 3)")

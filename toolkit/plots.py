@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_force_curve", "plot_simulation", "plot_precision", "figure_png"]
+__all__ = ["plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "figure_png"]
 
 
 def _axes(ax: Any):
@@ -61,6 +61,23 @@ def plot_simulation(result: Any, ax: Any = None):
     ax.set_xlabel("time t (s)")
     ax.set_ylabel("speed (m/s)")
     ax.set_title(f"{result.method}: {result.status.value}", fontsize="small")
+    ax.legend(loc="best", fontsize="small")
+    return ax
+
+
+def plot_schedule(schedule: Any, check: Any = None, ax: Any = None):
+    """Draw a designed schedule: commanded contact speeds (steps), the reference, the predicted
+    body speed and, if given, the exact simulation of the schedule. Returns the axes."""
+    ax = _axes(ax)
+    times = np.asarray(schedule.times)
+    ax.step(times, schedule.speeds, where="post", color="0.7", lw=0.8)
+    ax.plot([], [], color="0.7", lw=0.8, label="commanded contact speeds")
+    ax.plot(times, schedule.reference, "C1--", label="target")
+    ax.plot(times, schedule.body_speed, "C0", label="predicted body speed")
+    if check is not None:
+        ax.plot(check.t, check.V, "k:", lw=1.5, label="exact simulation")
+    ax.set_xlabel("time t (s)")
+    ax.set_ylabel("speed (m/s)")
     ax.legend(loc="best", fontsize="small")
     return ax
 

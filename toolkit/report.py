@@ -16,7 +16,8 @@ import numpy as np
 from ._io import atomic_write_bytes, atomic_write_text
 from .study import StudyResult
 
-__all__ = ["study_summary", "study_to_dict", "write_study", "to_json"]
+__all__ = ["study_summary", "study_to_dict", "write_study", "to_json", "schedule_csv", "schedule_check",
+           "write_precision", "write_schedule"]
 
 
 def _clean(value: Any) -> Any:
@@ -50,6 +51,21 @@ def _simulation_dict(sim: Any) -> dict[str, Any]:
             "t": sim.t, "V": sim.V}
 
 
+def schedule_csv(schedule: Any) -> str:
+    """The schedule as CSV text: ``time_s, speed_0_mps, ...``, one row per controller period."""
+    header, rows = schedule.to_rows()
+    lines = [",".join(header)] + [",".join(repr(float(x)) for x in row) for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def schedule_check(schedule: Any, check: Any) -> dict[str, Any]:
+    """How the exact nonsmooth simulation of a schedule compares with its prediction."""
+    deviation = float(np.max(np.abs(np.asarray(check.V) - schedule.body_speed)))
+    return {"method": check.method, "status": check.status, "max_deviation": deviation,
+            "prediction_bound": float(schedule.prediction_bound),
+            "within_bound": bool(deviation <= schedule.prediction_bound), "V": check.V}
+
+
 def study_to_dict(result: StudyResult) -> dict[str, Any]:
     """Everything the study computed, JSON-able."""
     out: dict[str, Any] = {"scene": result.scene.name, "stages": list(result.stages),
@@ -59,6 +75,9 @@ def study_to_dict(result: StudyResult) -> dict[str, Any]:
         out["sensors"] = result.sensors
     if result.allocation is not None:
         out["allocation"] = result.allocation.to_dict()
+    if result.schedule is not None:
+        out["schedule"] = {**result.schedule.to_dict(),
+                           "exact_check": schedule_check(result.schedule, result.schedule_check)}
     if result.simulation is not None:
         out["simulation"] = _simulation_dict(result.simulation)
     return out
@@ -78,6 +97,11 @@ def study_summary(result: StudyResult) -> list[str]:
         a = result.allocation
         lines.append(f"allocation ({a.method}): sup error {a.error_sup:.4g} N, bound {a.bound:.4g} N, "
                      f"gap {a.gap:.2g} N; {a.status.value}")
+    if result.schedule is not None:
+        sch, check = result.schedule, schedule_check(result.schedule, result.schedule_check)
+        lines.append(f"schedule: {sch.times.size - 1} periods of {sch.period * 1e3:g} ms, tracking error "
+                     f"{sch.tracking_error:.3g} m/s, exact simulation within {check['max_deviation']:.2g} m/s "
+                     f"of the prediction (bound {check['prediction_bound']:.2g}); {sch.status.value}")
     if result.simulation is not None:
         s = result.simulation
         lines.append(f"simulation ({s.method}): V({s.t[-1]:g} s) = {s.V[-1]:.6g} m/s after "
@@ -99,6 +123,12 @@ def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
         payload["force_curve.png"] = plots.figure_png(plots.plot_force_curve(result.curve))
         if result.simulation is not None:
             payload["simulation.png"] = plots.figure_png(plots.plot_simulation(result.simulation))
+        if result.schedule is not None:
+            payload["schedule.png"] = plots.figure_png(
+                plots.plot_schedule(result.schedule, result.schedule_check))
+    if result.schedule is not None:
+        payload["schedule.csv"] = schedule_csv(result.schedule).encode()
+        payload["schedule.json"] = to_json(result.schedule.to_dict()).encode()
     return [atomic_write_bytes(out / name, data) for name, data in payload.items()]
 
 
@@ -110,6 +140,13 @@ def write_precision(report: Any, out_dir: str | Path) -> list[Path]:
     png = plots.figure_png(plots.plot_precision(data["rows"]))
     out = Path(out_dir)
     return [atomic_write_text(out / "precision.json", to_json(data)), atomic_write_bytes(out / "precision.png", png)]
+
+
+def write_schedule(schedule: Any, out_dir: str | Path) -> list[Path]:
+    """Write ``schedule.csv`` and ``schedule.json`` (firmware-playable) into ``out_dir``."""
+    out = Path(out_dir)
+    csv_text, json_text = schedule_csv(schedule), to_json(schedule.to_dict())
+    return [atomic_write_text(out / "schedule.csv", csv_text), atomic_write_text(out / "schedule.json", json_text)]
 
 
 def write_text(path: str | Path, text: str) -> Path:

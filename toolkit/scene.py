@@ -13,7 +13,8 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
     [sensors]        rate; wheel_counts_per_rev; wheel_radius; wheel_backlash;
                      central_counts_per_rev; contact_radius
     [target]         kind = force_curve | viscosity | friction_fraction | equilibrium_speed,
-                     its parameters, method, strict
+                     its parameters, method, strict, dt, fixed, failed, liftable, time_limit
+    [schedule]       kind = braking | track, its parameters, v0, period, epsilon, horizon
     [simulation]     t_end; v0; method; options; commands
     [report]         plots; curve_points
 
@@ -34,7 +35,7 @@ from ._validation import suggestion
 from .errors import SceneError, SceneFileNotFoundError
 
 __all__ = [
-    "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec",
+    "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
     "SimulationSpec", "ReportSpec", "load_scene", "loads_scene", "dumps_scene",
 ]
 
@@ -390,6 +391,56 @@ class TargetSpec:
 
 
 @dataclass(frozen=True)
+class ScheduleSpec:
+    """``[schedule]``: a time-varying contact-speed design (:func:`toolkit.design_schedule`).
+
+    ``kind = "braking"``: ``speed`` (m/s, the speed to brake to), optional ``duration`` (s;
+    default: as fast as possible); ``kind = "track"``: ``times`` (s) and ``speeds`` (m/s) of
+    the body-speed trajectory. Common: ``v0`` (m/s), ``period`` (s, controller period,
+    default 0.02), ``epsilon`` (m/s, smoothing width of the optimizer, default 1e-3),
+    ``horizon`` (s), ``time_limit`` (s, default 30).
+    """
+
+    kind: str
+    params: dict[str, Any] = field(default_factory=dict)
+    v0: float = 0.0
+    period: float = 0.02
+    epsilon: float = 1e-3
+    horizon: float | None = None
+    time_limit: float = 30.0
+
+    _KIND_KEYS = {"braking": ("speed", "duration"), "track": ("times", "speeds")}
+    _REQUIRED = {"braking": ("speed",), "track": ("times", "speeds")}
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> ScheduleSpec:
+        kind = _text("schedule.kind", _require("schedule", table, "kind"))
+        if kind not in cls._KIND_KEYS:
+            raise SceneError(f"The 'schedule.kind' value in the scene must be one of {list(cls._KIND_KEYS)}. "
+                             f"Got {kind!r} instead.{suggestion(kind, cls._KIND_KEYS)}")
+        _check_keys("schedule", table, ("kind", "v0", "period", "epsilon", "horizon", "time_limit",
+                                        *cls._KIND_KEYS[kind]))
+        for key in cls._REQUIRED[kind]:
+            _require("schedule", table, key)
+        params: dict[str, Any] = {}
+        for key in cls._KIND_KEYS[kind]:
+            if key in table:
+                where = f"schedule.{key}"
+                params[key] = (_numbers(where, table[key]) if key in ("times", "speeds")
+                               else _number(where, table[key], low=0.0, low_open=True) if key == "duration"
+                               else _number(where, table[key]))
+
+        def positive(key: str, default: float | None) -> float | None:
+            if key not in table:
+                return default
+            return _number(f"schedule.{key}", table[key], low=0.0, low_open=True)
+
+        return cls(kind=kind, params=params, v0=_number("schedule.v0", table.get("v0", 0.0)),
+                   period=positive("period", 0.02), epsilon=positive("epsilon", 1e-3),
+                   horizon=positive("horizon", None), time_limit=positive("time_limit", 30.0))
+
+
+@dataclass(frozen=True)
 class SimulationSpec:
     """``[simulation]``: ``t_end`` (s), ``v0`` (m/s), ``method`` (default ``"exact"``),
     ``options`` (a table passed to :func:`toolkit.simulate`), ``commands`` (piecewise-constant
@@ -437,8 +488,8 @@ class ReportSpec:
 
 _SECTIONS: dict[str, Callable[[dict[str, Any]], Any]] = {
     "contacts": ContactsSpec.parse, "body": BodySpec.parse, "motors": MotorsSpec.parse,
-    "sensors": SensorsSpec.parse, "target": TargetSpec.parse, "simulation": SimulationSpec.parse,
-    "report": ReportSpec.parse,
+    "sensors": SensorsSpec.parse, "target": TargetSpec.parse, "schedule": ScheduleSpec.parse,
+    "simulation": SimulationSpec.parse, "report": ReportSpec.parse,
 }
 
 
@@ -460,13 +511,14 @@ class Scene:
     motors: MotorsSpec | None = None
     sensors: SensorsSpec | None = None
     target: TargetSpec | None = None
+    schedule: ScheduleSpec | None = None
     simulation: SimulationSpec | None = None
     report: ReportSpec | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
         """The stages this scene declares, in the order ``run`` executes them."""
-        order = ("sensors", "target", "simulation", "report")
+        order = ("sensors", "target", "schedule", "simulation", "report")
         return ("curve",) + tuple(s for s in order if getattr(self, s) is not None)
 
     def contact_set(self):
@@ -495,8 +547,9 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     if "contacts" not in data:
         raise SceneError(f"The scene {name!r} needs a [contacts] section.")
     sections = {key: _SECTIONS[key](value) for key, value in data.items() if key in _SECTIONS}
-    if "simulation" in sections and "body" not in sections:
-        raise SceneError("A [simulation] section needs a [body] section (the moving inertia).")
+    for stage in ("simulation", "schedule"):
+        if stage in sections and "body" not in sections:
+            raise SceneError(f"A [{stage}] section needs a [body] section (the moving inertia).")
     return Scene(name=_text("scene.name", meta.get("name", name)),
                  description=_text("scene.description", meta.get("description", "")), **sections)
 
@@ -560,7 +613,11 @@ def dumps_scene(scene: Scene) -> str:
         spec = getattr(scene, key)
         if spec is None:
             continue
-        if key == "target":
+        if key == "schedule":
+            table = {"kind": spec.kind, **_plain(spec.params), **{
+                k: getattr(spec, k) for k in ("v0", "period", "epsilon", "horizon", "time_limit")
+                if getattr(spec, k) is not None}}
+        elif key == "target":
             table = {"kind": spec.kind, **_plain(spec.params), "strict": spec.strict,
                      "time_limit": spec.time_limit}
             for name in ("method", "dt"):

@@ -5,6 +5,7 @@ when the scene has ``[sensors]``, the allocation when it has ``[target]`` and th
 simulation when it has ``[simulation]``. A stage that is not declared is not run, and the
 packages only it needs are not imported. When a scene has both a target and a simulation,
 the simulation runs on the allocated contact speeds: the design is checked by simulating it.
+A ``[schedule]`` is designed and then simulated exactly under its own commands.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from .contacts import ContactSet
 from .scene import Scene
 
 __all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study", "scene_plant", "scene_target",
-           "allocate_scene"]
+           "allocate_scene", "design_scene_schedule", "scene_schedule_target"]
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,8 @@ class StudyResult:
     curve: CurveSamples
     sensors: dict[str, dict[str, float]] | None = None
     allocation: Any = None
+    schedule: Any = None
+    schedule_check: Any = None
     simulation: Any = None
 
     @property
@@ -163,6 +166,38 @@ def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
                     strict=spec.strict, time_limit=spec.time_limit)
 
 
+def scene_schedule_target(scene: Scene):
+    """The :class:`~toolkit.Braking` or :class:`~toolkit.SpeedTrajectory` of ``[schedule]``."""
+    from .schedule import Braking, SpeedTrajectory
+
+    spec = scene.schedule
+    if spec.kind == "braking":
+        return Braking(spec.params["speed"], spec.params.get("duration"))
+    return SpeedTrajectory(spec.params["times"], spec.params["speeds"])
+
+
+def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None):
+    """Design the scene's ``[schedule]`` and verify it with the exact simulator.
+
+    Returns
+    -------
+    (ScheduleResult, SimulationResult)
+        The design, and the exact nonsmooth simulation of the plant under its commands.
+    """
+    from dataclasses import replace
+
+    from .schedule import design_schedule
+    from .simulation import simulate
+
+    spec = scene.schedule
+    plant = scene_plant(scene, contacts)
+    result = design_schedule(plant, scene_schedule_target(scene), v0=spec.v0, horizon=spec.horizon,
+                             period=spec.period, epsilon=spec.epsilon, time_limit=spec.time_limit)
+    check = simulate(replace(plant, commands=result.as_commands()), float(result.times[-1]),
+                     v0=spec.v0, t_eval=result.times)
+    return result, check
+
+
 def _simulation(scene: Scene, contacts: ContactSet):
     from .simulation import simulate
 
@@ -189,5 +224,9 @@ def run_study(scene: Scene) -> StudyResult:
     if scene.target is not None:
         allocation = allocate_scene(scene, contacts)
         contacts = allocation.contacts
+    schedule = check = None
+    if scene.schedule is not None:
+        schedule, check = design_scene_schedule(scene, contacts)
     simulation = _simulation(scene, contacts) if scene.simulation is not None else None
-    return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation, simulation)
+    return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation,
+                       schedule, check, simulation)

@@ -331,3 +331,24 @@ def test_result_to_dict_is_json_with_the_cli_keys() -> None:
     assert data["status"] == "OPTIMAL" and data["method"] == "quantile"
     with pytest.raises(ValueError):
         result.speeds[0] = 0.0
+
+
+def test_allocate_forwards_compliance_to_the_casadi_method():
+    # The public verb reaches the compliant model: same closed form as the direct call
+    # (abutting ramps of width 2 k f give slope 1/k; see test_allocation_smooth).
+    from toolkit import ContactSet, Viscosity, allocate
+
+    k, f = 0.1, 0.2
+    result = allocate(Viscosity(1.0 / k, 0.0, 0.1), ContactSet(np.zeros(5), np.full(5, f)),
+                      speed_limits=(-0.35, 0.35), compliance=k)
+    assert result.method == "casadi"
+    np.testing.assert_allclose(np.sort(result.speeds), [-0.08, -0.04, 0.0, 0.04, 0.08], rtol=0, atol=1e-7)
+
+
+def test_compliance_with_a_coulomb_method_is_refused():
+    from toolkit import ContactSet, ParameterError, Viscosity, allocate
+
+    with pytest.raises(ParameterError, match="'method' parameter of allocate must be 'casadi'"):
+        allocate(Viscosity(10.0, 0.0, 0.1), ContactSet(np.zeros(5)), method="quantile", compliance=0.1)
+    with pytest.raises(ParameterError, match="'compliance' parameter of allocate must be >= 0"):
+        allocate(Viscosity(10.0, 0.0, 0.1), ContactSet(np.zeros(5)), compliance=-1.0)

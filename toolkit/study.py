@@ -153,7 +153,7 @@ def scene_target(scene: Scene):
 
 
 def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
-    """Solve a scene's ``[target]`` under its ``[motors]`` limits; see :func:`toolkit.allocate`."""
+    """Solve a scene's ``[target]`` under its ``[motors]`` limits and compliance; see :func:`toolkit.allocate`."""
     from .allocation import allocate
 
     spec = scene.target
@@ -163,7 +163,8 @@ def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
     return allocate(scene_target(scene), contacts if contacts is not None else scene.contact_set(),
                     speed_limits=limits, rate_limit=rate, dt=spec.dt, fixed=list(spec.fixed),
                     failed=list(spec.failed), liftable=list(spec.liftable), method=spec.method,
-                    strict=spec.strict, time_limit=spec.time_limit)
+                    strict=spec.strict, time_limit=spec.time_limit,
+                    compliance=motors.compliance if motors is not None else 0.0)
 
 
 def scene_schedule_target(scene: Scene):

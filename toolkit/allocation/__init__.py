@@ -54,7 +54,7 @@ def choose_method(problem: AllocationProblem) -> str:
 def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit: Any = None,
              dt: Any = None, fixed: Any = None, failed: Any = None, liftable: Any = None,
              method: str | None = None, strict: bool = False,
-             time_limit: float = 30.0) -> AllocationResult:
+             time_limit: float = 30.0, compliance: float = 0.0) -> AllocationResult:
     """Choose contact speeds that realize ``target`` as closely as possible (sup norm).
 
     Parameters
@@ -81,6 +81,10 @@ def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit
         projecting them.
     time_limit : float, s
         Budget for the MILP; past it the best allocation is returned with its gap.
+    compliance : float, (m/s)/N
+        Motor compliance ``k`` (torque-speed line): each contact force becomes
+        ``f_i clip((v_i - V) / (k f_i), -1, 1)``. ``k > 0`` needs the ``"casadi"`` method
+        (chosen when ``method`` is None); 0 (default) is the Coulomb law.
 
     Returns
     -------
@@ -100,11 +104,19 @@ def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit
     problem = build_problem(target, contacts, speed_limits=speed_limits, rate_limit=rate_limit,
                             dt=dt, fixed=fixed, failed=failed, liftable=liftable, strict=strict,
                             time_limit=time_limit)
-    chosen = method if method is not None else choose_method(problem)
+    from .._validation import as_float
+
+    compliance = as_float(compliance, "compliance", "allocate", low=0.0)
+    chosen = method if method is not None else ("casadi" if compliance > 0 else choose_method(problem))
+    if compliance > 0 and chosen != "casadi":
+        from ..errors import ParameterError, parameter_message
+
+        raise ParameterError(parameter_message(
+            "method", "allocate", "be 'casadi' (or None) for compliant contacts (compliance > 0)", chosen))
     if chosen == "casadi":
         from ._smooth import allocate_smooth
 
-        return allocate_smooth(problem)
+        return allocate_smooth(problem, compliance=compliance)
     if isinstance(problem.contacts, ContactDistribution):
         from ..errors import ParameterError, parameter_message
 

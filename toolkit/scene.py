@@ -39,7 +39,6 @@ __all__ = [
     "SimulationSpec", "ReportSpec", "load_scene", "loads_scene", "dumps_scene",
 ]
 
-TARGET_KINDS = ("force_curve", "viscosity", "friction_fraction", "equilibrium_speed")
 PLANNED_SECTIONS = ("estimator", "controller")
 
 
@@ -112,6 +111,19 @@ def _exclusive(where: str, table: Mapping[str, Any], *keys: str) -> None:
     given = [k for k in keys if k in table]
     if len(given) > 1:
         raise SceneError(f"In [{where}] give only one of {', '.join(map(repr, keys))}; got {given}.")
+
+
+def _kind(section: str, table: Mapping[str, Any], kind_keys: Mapping[str, tuple[str, ...]],
+          required: Mapping[str, tuple[str, ...]], common: tuple[str, ...]) -> str:
+    """Read ``kind``, then refuse keys that kind does not take and require the ones it needs."""
+    kind = _text(f"{section}.kind", _require(section, table, "kind"))
+    if kind not in kind_keys:
+        raise SceneError(f"The '{section}.kind' value in the scene must be one of {list(kind_keys)}. "
+                         f"Got {kind!r} instead.{suggestion(kind, kind_keys)}")
+    _check_keys(section, table, (*common, *kind_keys[kind]))
+    for key in required[kind]:
+        _require(section, table, key)
+    return kind
 
 
 def _signal(where: str, value: Any, *, vector: bool = False) -> float | dict[str, Any]:
@@ -353,13 +365,7 @@ class TargetSpec:
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> TargetSpec:
-        kind = _text("target.kind", _require("target", table, "kind"))
-        if kind not in cls._KIND_KEYS:
-            raise SceneError(f"The 'target.kind' value in the scene must be one of {list(TARGET_KINDS)}. "
-                             f"Got {kind!r} instead.{suggestion(kind, TARGET_KINDS)}")
-        _check_keys("target", table, (*cls.COMMON, *cls._KIND_KEYS[kind]))
-        for key in cls._REQUIRED[kind]:
-            _require("target", table, key)
+        kind = _kind("target", table, cls._KIND_KEYS, cls._REQUIRED, cls.COMMON)
         params: dict[str, Any] = {}
         for key in cls._KIND_KEYS[kind]:
             if key not in table:
@@ -414,14 +420,8 @@ class ScheduleSpec:
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> ScheduleSpec:
-        kind = _text("schedule.kind", _require("schedule", table, "kind"))
-        if kind not in cls._KIND_KEYS:
-            raise SceneError(f"The 'schedule.kind' value in the scene must be one of {list(cls._KIND_KEYS)}. "
-                             f"Got {kind!r} instead.{suggestion(kind, cls._KIND_KEYS)}")
-        _check_keys("schedule", table, ("kind", "v0", "period", "epsilon", "horizon", "time_limit",
-                                        *cls._KIND_KEYS[kind]))
-        for key in cls._REQUIRED[kind]:
-            _require("schedule", table, key)
+        kind = _kind("schedule", table, cls._KIND_KEYS, cls._REQUIRED,
+                     ("kind", "v0", "period", "epsilon", "horizon", "time_limit"))
         params: dict[str, Any] = {}
         for key in cls._KIND_KEYS[kind]:
             if key in table:

@@ -448,5 +448,6 @@ def test_random_dynamic_scenes_finish_finite(seed):
                   damping=float(rng.choice([0.0, 0.5])), motors=motors, commands=commands)
     result = simulate(plant, 2.0, v0=float(rng.uniform(-0.5, 0.5)), budget=Budget(wall_time=20))
     assert result.success and np.all(np.isfinite(result.V)) and result.n_events < 200
-    # The dense output agrees with the samples it produced (same closed forms).
-    np.testing.assert_allclose(result.speed_at(result.t), result.V, rtol=0, atol=0)
+    # The dense output agrees with the samples it produced: the same closed forms, evaluated
+    # scalar (samples) or vectorized (dense), so they may differ by a few ulp.
+    np.testing.assert_allclose(result.speed_at(result.t), result.V, rtol=1e-15, atol=1e-300)

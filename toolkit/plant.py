@@ -193,6 +193,7 @@ class Plant:
     motors: Motors | None = None
     commands: PiecewiseConstant | None = None
     _limits: tuple[float, float] = field(init=False, repr=False)
+    _derived: dict[str, dict[Any, Any]] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.contacts, ContactSet):
@@ -222,6 +223,16 @@ class Plant:
                     f"values of shape {self.commands.values.shape}"))
         limits = self.motors.speed_limits if self.motors is not None else (-np.inf, np.inf)
         object.__setattr__(self, "_limits", limits)
+        object.__setattr__(self, "_derived", {})
+
+    def derived(self, name: str) -> dict[Any, Any]:
+        """A named cache of quantities derived from this (immutable) plant.
+
+        Solvers store what depends only on the plant here (e.g. the sorted force landscape
+        of each command), so repeated simulations of one plant skip recomputing it. The
+        plant's own fields never change; only this private cache grows.
+        """
+        return self._derived.setdefault(name, {})
 
     # -- properties ---------------------------------------------------------------------------
     @property
@@ -257,7 +268,7 @@ class Plant:
         ndarray of shape (n,), m/s
         """
         raw = self.contacts.speeds if self.commands is None else self.commands(t)
-        return np.clip(raw, *self._limits)
+        return raw if self.motors is None else np.clip(raw, *self._limits)
 
     def initial_speeds(self) -> np.ndarray:
         """Contact speeds at ``t = 0`` (motors start settled on ``command(0)``), m/s, shape (n,)."""

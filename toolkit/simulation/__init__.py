@@ -19,6 +19,7 @@ method) and returns their final speeds.
 from __future__ import annotations
 
 import importlib
+import math
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,9 @@ _DISPATCH: dict[str, tuple[str, str, dict[str, Any], tuple[str, ...]]] = {
     "moreau": ("_moreau", "simulate_moreau", {}, ("step",)),
     "casadi": ("_casadi", "simulate_casadi", {}, ("integrator", *_SCIPY_OPTIONS)),
 }
+
+_DEFAULT_BUDGET = Budget()
+_LOADED: dict[str, Any] = {}
 
 #: Names accepted by ``simulate(..., method=...)``.
 METHODS: tuple[str, ...] = tuple(_DISPATCH)
@@ -96,10 +100,13 @@ def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exac
     """
     if not isinstance(plant, Plant):
         raise ParameterTypeError(parameter_message("plant", "simulate", "be a Plant", plant))
-    t_end = as_float(t_end, "t_end", "simulate", low=0.0, low_open=True)
-    v0 = as_float(v0, "v0", "simulate")
-    check_option(method, "method", "simulate", METHODS)
-    budget = Budget() if budget is None else budget
+    if not (type(t_end) is float and 0.0 < t_end < math.inf):
+        t_end = as_float(t_end, "t_end", "simulate", low=0.0, low_open=True)
+    if not (type(v0) is float and math.isfinite(v0)):
+        v0 = as_float(v0, "v0", "simulate")
+    if method not in _DISPATCH:
+        check_option(method, "method", "simulate", METHODS)
+    budget = _DEFAULT_BUDGET if budget is None else budget
     if not isinstance(budget, Budget):
         raise ParameterTypeError(parameter_message("budget", "simulate", "be a Budget", budget))
     module, function, fixed, accepted = _DISPATCH[method]
@@ -109,6 +116,8 @@ def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exac
                     else f"be empty: method {method!r} takes no options")
             raise ParameterError(parameter_message("options", "simulate", rule, name)
                                  + suggestion(name, accepted))
-    fn = getattr(importlib.import_module(f"{__name__}.{module}"), function)
+    fn = _LOADED.get(method)
+    if fn is None:                       # import the method's module on first use only
+        fn = _LOADED[method] = getattr(importlib.import_module(f"{__name__}.{module}"), function)
     return fn(plant, t_end, v0=v0, t_eval=_check_t_eval(t_eval, t_end), budget=budget,
               **fixed, **options)

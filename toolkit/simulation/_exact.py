@@ -36,6 +36,7 @@ coincident contacts.
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 from collections.abc import Callable
@@ -44,13 +45,15 @@ from typing import Any
 
 import numpy as np
 
-from ..plant import Plant
+from ..plant import PiecewiseConstant, Plant
 from ._result import Budget, Event, SimulationResult, Status, status_message
 
 __all__ = ["simulate_exact"]
 
 _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
+_SMALL = 64                 # contacts up to which plain Python beats NumPy calls
+_SMALL_TABLE = 10**6        # contact-speed tables larger than this are read-only broadcasts
 
 
 # -- closed forms ---------------------------------------------------------------------------
@@ -90,7 +93,7 @@ class _Recorder:
         self.budget = budget
         self.mu = mu
         self.window = 2 * cascade + _ZENO_FLOOR
-        self.columns: list[list[float]] = [[] for _ in range(7)]   # t0 V0 c1 B lam C D
+        self.rows: list[tuple[float, ...]] = []       # segments (t0, V0, c1, B, lam, C, D)
         self.events: list[Event] = []
         self.event_times: list[float] = []
         self.n_evaluations = 0
@@ -101,12 +104,10 @@ class _Recorder:
 
     def segment(self, t0: float, V0: float, B: float = 0.0, lam: float = 0.0, c1: float = 0.0,
                 C: float = 0.0, D: float = 0.0) -> None:
-        cols = self.columns
-        if cols[0] and cols[0][-1] == t0:        # a zero-length segment is superseded
-            for col in cols:
-                col.pop()
-        for col, value in zip(cols, (t0, V0, c1, B, lam, C, D)):
-            col.append(value)
+        rows = self.rows
+        if rows and rows[-1][0] == t0:           # a zero-length segment is superseded
+            rows.pop()
+        rows.append((t0, V0, c1, B, lam, C, D))
 
     def event(self, t: float, kind: str, contact: int | None, V: float) -> None:
         self.events.append(Event(t, kind, contact, V))
@@ -129,49 +130,58 @@ class _Recorder:
         return self.status is not Status.SUCCESS
 
     # -- output -----------------------------------------------------------------------------
-    def dense(self, t_stop: float, success: bool) -> Callable[[np.ndarray], np.ndarray]:
-        cols = [np.array(col, dtype=float) for col in self.columns[:7]]
-        for col in cols:
-            col.setflags(write=False)
-        return _Dense(*cols, mu=self.mu, t_stop=t_stop, success=success)
+    def dense(self, t_stop: float, success: bool) -> _Dense:
+        return _Dense(self.rows, self.mu, t_stop, success)
 
 
-@dataclass(frozen=True, eq=False)
 class _Dense:
-    """Exact ``V(t)`` from the stored closed-form segments (NaN past a stopped run's end)."""
+    """Exact ``V(t)`` from the stored closed-form segments (NaN past a stopped run's end).
 
-    t0: np.ndarray
-    V0: np.ndarray
-    c1: np.ndarray
-    B: np.ndarray
-    lam: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-    mu: float
-    t_stop: float
-    success: bool
+    ``table`` holds one row ``(t0, V0, c1, B, lam, C, D)`` per segment; ``mu`` is the motor
+    rate shared by all segments.
+    """
 
-    def _locate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        index = np.clip(np.searchsorted(self.t0, times, side="right") - 1, 0, self.t0.size - 1)
-        return index, times - self.t0[index]
+    __slots__ = ("rows", "_table", "mu", "t_stop", "success")
+
+    def __init__(self, rows: list[tuple[float, ...]], mu: float, t_stop: float,
+                 success: bool) -> None:
+        self.rows, self.mu, self.t_stop, self.success = rows, mu, t_stop, success
+        self._table: np.ndarray | None = None
+
+    @property
+    def table(self) -> np.ndarray:
+        """The segments as an array of shape (segments, 7), built on first use."""
+        if self._table is None:
+            self._table = np.array(self.rows, dtype=float)
+            self._table.setflags(write=False)
+        return self._table
+
+    def _parts(self, times: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        query = np.asarray(times, dtype=float)
+        t0 = self.table[:, 0]
+        index = np.clip(np.searchsorted(t0, query, side="right") - 1, 0, t0.size - 1)
+        rows = self.table[index]
+        return query, query - rows[..., 0], np.moveaxis(rows, -1, 0)
 
     def __call__(self, times: Any) -> np.ndarray:
         """Body speed at ``times`` (s), m/s."""
-        query = np.asarray(times, dtype=float)
-        i, s = self._locate(query)
+        query, s, (_, V0, c1, B, lam, C, D) = self._parts(times)
         mu = self.mu
-        value = (self.V0[i] + self.c1[i] * s + self.B[i] * _em(self.lam[i], s)
-                 + self.C[i] * _em(mu, s) + self.D[i] * s * np.exp(-mu * s))
+        value = V0 + c1 * s + B * _em(lam, s) + C * _em(mu, s) + D * s * np.exp(-mu * s)
         return np.where((query <= self.t_stop) | self.success, value, np.nan)
 
     def derivative(self, times: Any) -> np.ndarray:
         """Right derivative ``dV/dt`` at ``times`` (s), m/s^2."""
-        query = np.asarray(times, dtype=float)
-        i, s = self._locate(query)
-        mu = self.mu
-        decay = np.exp(-mu * s)
-        return (self.c1[i] + self.B[i] * np.exp(-self.lam[i] * s) + self.C[i] * decay
-                + self.D[i] * (1.0 - mu * s) * decay)
+        _, s, (_, _, c1, B, lam, C, D) = self._parts(times)
+        decay = np.exp(-self.mu * s)
+        return c1 + B * np.exp(-lam * s) + C * decay + D * (1.0 - self.mu * s) * decay
+
+    def end_rate(self, t: float) -> float:
+        """Derivative of the last segment at time ``t`` (s), m/s^2."""
+        t0, _, c1, B, lam, C, D = self.rows[-1]
+        s = t - t0
+        decay = math.exp(-self.mu * s)
+        return c1 + B * math.exp(-lam * s) + C * decay + D * (1.0 - self.mu * s) * decay
 
 
 # -- the force landscape of constant contact speeds ----------------------------------------
@@ -184,7 +194,6 @@ class _Landscape:
     contacts there hold a stiction magnitude ``W[k]`` and the others push with ``G[k]``.
     """
 
-    x: np.ndarray
     xs: list[float]
     W: list[float]
     G: list[float]
@@ -197,7 +206,7 @@ class _Landscape:
 
     def locate(self, V: float) -> tuple[int, bool]:
         """``(k, True)`` when ``V`` is breakpoint ``k``, else ``(j, False)`` for interval ``j``."""
-        j = int(np.searchsorted(self.x, V, side="left"))
+        j = bisect.bisect_left(self.xs, V)
         return (j, True) if j < len(self.xs) and self.xs[j] == V else (j, False)
 
     def force(self, j: int, V: float) -> float:
@@ -205,27 +214,54 @@ class _Landscape:
         return self.base_F[j] if slope == 0 else self.base_F[j] + slope * (V - self.base_x[j])
 
 
-def _first_index(values: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct ``values`` ascending and the lowest of ``indices`` at each."""
-    order = np.lexsort((indices, values))
-    values, indices = values[order], indices[order]
-    new = np.concatenate(([True], values[1:] != values[:-1]))
-    return values[new], indices[new]
-
-
 def _stiff_landscape(plant: Plant, speeds: np.ndarray) -> _Landscape:
-    contacts = plant.contacts.with_speeds(speeds)
-    stair = contacts.staircase()
-    plateaus = stair.plateaus
-    tol = contacts.tie_tolerance
+    """Staircase of Coulomb contacts; the prefix sums and snapping of :class:`ContactSet`."""
+    forces = plant.contacts.forces
+    if forces.size <= _SMALL:
+        return _stiff_landscape_small(speeds.tolist(), forces.tolist())
+    active = np.flatnonzero(forces > 0)
+    levels, first, inverse = np.unique(speeds[active], return_index=True, return_inverse=True)
+    steps = np.bincount(inverse, weights=forces[active], minlength=levels.size)
+    cumulative = np.cumsum(steps)
+    below = np.concatenate(([0.0], cumulative))
+    above = np.concatenate((np.cumsum(steps[::-1])[::-1], [0.0]))
+    total = float(cumulative[-1])
+    tol = 4.0 * (levels.size + 1) * _EPS * total
+    plateaus = above - below
+    plateaus[np.abs(plateaus) <= tol] = 0.0
     others = 0.5 * (plateaus[:-1] + plateaus[1:])
-    others = np.where(np.abs(others) <= tol, 0.0, others)
-    active = np.flatnonzero(contacts.forces > 0)
-    _, first = _first_index(speeds[active], active)
-    K = stair.levels.size
-    return _Landscape(stair.levels, stair.levels.tolist(), stair.steps.tolist(), others.tolist(),
-                      first.tolist(), [0.0] * (K + 1), plateaus.tolist(), [0.0] * (K + 1),
-                      contacts.total_force, "cross")
+    others[np.abs(others) <= tol] = 0.0
+    K = levels.size
+    zeros = [0.0] * (K + 1)
+    return _Landscape(levels.tolist(), steps.tolist(), others.tolist(),
+                      active[first].tolist(), zeros, plateaus.tolist(), zeros, total, "cross")
+
+
+def _stiff_landscape_small(speeds: list[float], forces: list[float]) -> _Landscape:
+    """:func:`_stiff_landscape` in plain Python for a few contacts (same sums, same order)."""
+    levels: list[float] = []
+    steps: list[float] = []
+    first: list[int] = []
+    for speed, i in sorted((v, i) for i, (v, f) in enumerate(zip(speeds, forces)) if f > 0):
+        if levels and levels[-1] == speed:
+            steps[-1] += forces[i]
+        else:
+            levels.append(speed)
+            steps.append(forces[i])
+            first.append(i)
+    K = len(levels)
+    below = [0.0] * (K + 1)
+    above = [0.0] * (K + 1)
+    for k in range(K):
+        below[k + 1] = below[k] + steps[k]
+        above[K - 1 - k] = above[K - k] + steps[K - 1 - k]
+    total = below[K]
+    tol = 4.0 * (K + 1) * _EPS * total
+    plateaus = [p if abs(p) > tol else 0.0 for p in (a - b for a, b in zip(above, below))]
+    others = [g if abs(g) > tol else 0.0
+              for g in (0.5 * (lo + hi) for lo, hi in zip(plateaus[:-1], plateaus[1:]))]
+    zeros = [0.0] * (K + 1)
+    return _Landscape(levels, steps, others, first, zeros, plateaus, zeros, total, "cross")
 
 
 def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _Landscape:
@@ -252,7 +288,7 @@ def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _Landscape:
     base_x = np.concatenate(([x[0]], x))
     base_F = np.concatenate(([total], at_x))
     base_F[-1] = -total
-    return _Landscape(x, x.tolist(), [0.0] * x.size, at_x.tolist(), first.tolist(),
+    return _Landscape(x.tolist(), [0.0] * x.size, at_x.tolist(), first.tolist(),
                       base_x.tolist(), base_F.tolist(), slope.tolist(), total, "saturation")
 
 
@@ -265,6 +301,8 @@ def _neumaier(total: float, error: float, x: float) -> tuple[float, float]:
 
 
 def _pieces(plant: Plant, t_end: float) -> list[float]:
+    if plant.commands is None and not isinstance(plant.external_force, PiecewiseConstant):
+        return [0.0, t_end]
     switches = plant.switching_times()
     return [0.0, *switches[(switches > 0) & (switches < t_end)].tolist(), t_end]
 
@@ -273,7 +311,7 @@ def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[f
     """Integrate with piecewise-constant contact speeds; returns the final ``(t, V)``."""
     m, c = plant.mass, plant.damping
     build = _compliant_landscape if plant.compliance > 0 else _stiff_landscape
-    cache: dict[bytes, _Landscape] = {}
+    cache = plant.derived("exact landscapes")
     bounds = _pieces(plant, t_end)
     V = v0
     stuck: int | None = None         # contact the body is stuck to (Coulomb only)
@@ -728,7 +766,8 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     t_end : float, s
     v0 : float, m/s
     t_eval : ndarray of shape (T,) or None, s
-        Sample times; ``None``: ``0``, every event time and ``t_end``.
+        Sample times; ``None``: the start of every closed-form segment (``0``, every event
+        time, and with dynamic motors the ends of their ramp phases) and the final time.
     budget : Budget
 
     Returns
@@ -743,25 +782,34 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     cascade = 2 * plant.n + 2
     rec = _Recorder(plant, budget, cascade, mu)
     if dynamic:
-        t_stop, _ = _run_dynamic(plant, t_end, v0, rec)
+        t_stop, V_stop = _run_dynamic(plant, t_end, v0, rec)
     else:
-        t_stop, _ = _run_ideal(plant, t_end, v0, rec)
+        t_stop, V_stop = _run_ideal(plant, t_end, v0, rec)
     success = rec.status is Status.SUCCESS
     dense = rec.dense(t_stop, success)
     if t_eval is None:
-        times = np.unique(np.concatenate(([0.0], rec.event_times, [t_stop])))
+        # Segment starts (events, switches, motor phase changes) and the end: exact values.
+        rows = rec.rows
+        samples = [(row[0], row[1], row[2] + row[3] + row[5] + row[6]) for row in rows]
+        if t_stop > rows[-1][0]:
+            samples.append((t_stop, V_stop, dense.end_rate(t_stop)))
+        table = np.array(samples, dtype=float).T.copy()
+        table[2] *= plant.mass
+        table.setflags(write=False)              # fresh: the result need not copy it
+        times, V, force = table
     else:
         times = t_eval
-    V = dense(times)
-    force = plant.mass * dense.derivative(times)
-    force = np.where(np.isnan(V), np.nan, force)
+        V = dense(times)
+        force = plant.mass * dense.derivative(times)
+        force[np.isnan(V)] = np.nan
     speeds = _contact_speeds(plant, times)
+    speeds.setflags(write=False)
     detail = rec.detail if not success else f"{len(rec.events)} events"
     return SimulationResult(
         method="exact", setting="event-driven closed form", t=times, V=V,
         contact_speeds=speeds, force=force, events=tuple(rec.events), status=rec.status,
         message=status_message(rec.status, detail), n_events=len(rec.events),
-        n_evaluations=rec.n_evaluations, n_steps=len(rec.columns[0]),
+        n_evaluations=rec.n_evaluations, n_steps=len(rec.rows),
         wall_time=time.perf_counter() - started, dense=dense)
 
 
@@ -770,6 +818,11 @@ def _contact_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
     if plant.dynamic_motors:
         return _motor_speeds(plant, times)
     if plant.commands is None:
-        return np.broadcast_to(plant.command(0.0), (times.size, plant.n))
+        speeds = plant.command(0.0)
+        if times.size * plant.n <= _SMALL_TABLE:
+            table = np.empty((times.size, plant.n))
+            table[:] = speeds
+            return table
+        return np.broadcast_to(speeds, (times.size, plant.n))   # no copy for huge tables
     low, high = plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf)
     return np.clip(plant.commands(times).reshape(times.size, plant.n), low, high)

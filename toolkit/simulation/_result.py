@@ -81,10 +81,12 @@ class Event:
     speed: float
 
     def __post_init__(self) -> None:
-        check_option(self.kind, "kind", "Event", EVENT_KINDS)
-        object.__setattr__(self, "time", float(self.time))
-        object.__setattr__(self, "speed", float(self.speed))
-        if self.contact is not None:
+        if self.kind not in EVENT_KINDS:
+            check_option(self.kind, "kind", "Event", EVENT_KINDS)
+        for name in ("time", "speed"):
+            if type(getattr(self, name)) is not float:
+                object.__setattr__(self, name, float(getattr(self, name)))
+        if self.contact is not None and (type(self.contact) is not int or self.contact < 0):
             object.__setattr__(self, "contact", as_int(self.contact, "contact", "Event", low=0))
 
 
@@ -158,7 +160,9 @@ class SimulationResult:
                 "status", "SimulationResult", "be a Status", self.status))
         object.__setattr__(self, "events", tuple(self.events))
         for name in ("n_events", "n_evaluations", "n_steps"):
-            object.__setattr__(self, name, as_int(getattr(self, name), name, "SimulationResult", low=0))
+            count = getattr(self, name)
+            if type(count) is not int or count < 0:
+                object.__setattr__(self, name, as_int(count, name, "SimulationResult", low=0))
 
     @property
     def success(self) -> bool:

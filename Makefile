@@ -1,12 +1,17 @@
 # Two commands set everything up on a fresh machine with python3 and make:
 #   make demo   creates .venv, installs the toolkit, runs designs/carousel.toml
 #   make test   creates or updates .venv, runs the whole test suite
+#   make test-min  creates or updates .venv-min with the tested minimum versions
+#                  (constraints/minimum.txt = the lower bounds in pyproject.toml), runs the suite
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+MIN_VENV  := .venv-min
+MIN_BIN   := $(MIN_VENV)/bin
+MIN_STAMP := $(MIN_VENV)/.installed
 
-.PHONY: demo test bench clean venv
+.PHONY: demo test test-min bench clean venv
 
 venv: $(STAMP)
 
@@ -22,8 +27,17 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
+$(MIN_STAMP): pyproject.toml constraints/minimum.txt
+	test -x $(MIN_BIN)/python || $(PYTHON) -m venv $(MIN_VENV)
+	$(MIN_BIN)/python -m pip install --quiet --upgrade pip
+	$(MIN_BIN)/python -m pip install --quiet -c constraints/minimum.txt -e ".[test]"
+	touch $(MIN_STAMP)
+
+test-min: $(MIN_STAMP)
+	$(MIN_BIN)/python -m pytest -q
+
 bench: $(STAMP)
 	$(BIN)/python -m toolkit.bench all
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .hypothesis
+	rm -rf $(VENV) $(MIN_VENV) out .pytest_cache .hypothesis

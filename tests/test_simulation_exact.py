@@ -342,10 +342,12 @@ def test_stuck_body_released_when_the_contact_accelerates_too_fast():
 
 
 def test_dynamic_engine_equals_ideal_engine_when_motors_are_settled(rng):
-    # Constant commands: a lagging motor never moves, so both engines solve one problem.
+    # A schedule whose only switch comes after t_end sends the plant through the dynamic
+    # engine, but its lagging motors never move: both engines solve one problem.
     speeds = rng.uniform(-0.35, 0.35, 9)
     ideal = simulate(Plant(ContactSet(speeds), 0.6, damping=0.1), 3.0, v0=-0.5)
-    lagged = simulate(Plant(ContactSet(speeds), 0.6, damping=0.1, motors=Motors(lag=0.03)),
+    lagged = simulate(Plant(ContactSet(speeds), 0.6, damping=0.1, motors=Motors(lag=0.03),
+                            commands=PiecewiseConstant([100.0], [speeds, speeds])),
                       3.0, v0=-0.5)
     assert [e.kind for e in ideal.events] == [e.kind for e in lagged.events]
     np.testing.assert_allclose([e.time for e in lagged.events], [e.time for e in ideal.events],
@@ -451,3 +453,14 @@ def test_random_dynamic_scenes_finish_finite(seed):
     # The dense output agrees with the samples it produced: the same closed forms, evaluated
     # scalar (samples) or vectorized (dense), so they may differ by a few ulp.
     np.testing.assert_allclose(result.speed_at(result.t), result.V, rtol=1e-15, atol=1e-300)
+
+
+def test_repeated_runs_reuse_the_plant_cache_without_changing_results():
+    plant = Plant(ContactSet([0.3, -0.2, 0.1, 0.25, -0.05]), 0.4, damping=0.05)
+    first = simulate(plant, 2.0)
+    assert plant.derived("exact landscapes")             # the sorted landscape is kept
+    second = simulate(plant, 2.0)
+    np.testing.assert_array_equal(first.V, second.V)
+    assert first.events == second.events
+    other = Plant(ContactSet([0.3, -0.2, 0.1]), 0.4)
+    assert not other.derived("exact landscapes")         # each plant has its own cache

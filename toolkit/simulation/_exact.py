@@ -17,7 +17,9 @@ Two engines share that form:
   saturation limits ``v_i +- k f_i`` for compliant ones) with constant or linear force
   between them. Locating ``V`` is a binary search; each event then costs ``O(1)``, so a
   run from rest over ``N = 1e5`` contacts costs ``O(N)`` events of constant work.
-- **Dynamic motors** (lag, rate limit): contact speeds move between events. Every event
+- **Dynamic motors** (lag, rate limit) with a command schedule: contact speeds move
+  between events (with constant commands the motors never leave their settled speeds and
+  the ideal engine applies). Every event
   function (a crossing ``V(t) = v_i(t)``, a saturation limit, the end of a sliding mode) is
   ``g(s) = alpha + beta s + gamma em(lam, s) + delta em(mu, s) + D s exp(-mu s)``, which has
   at most three roots: the root of ``g''`` is explicit, the roots of ``g'`` and then of ``g``
@@ -474,6 +476,11 @@ class _Fns:
         return (self.alpha[i] + self.beta[i] * s + self.gamma[i] * _em(self.lam, s)
                 + self.delta[i] * _em(mu, s) + self.D * s * np.exp(-mu * s))
 
+    def take(self, index: np.ndarray) -> _Fns:
+        """The functions at ``index`` only."""
+        return _Fns(self.alpha[index], self.beta[index], self.gamma[index], self.delta[index],
+                    self.lam, self.mu, self.D)
+
     def slope(self, s: Any, i: Any = slice(None)) -> np.ndarray:
         mu = self.mu
         decay = np.exp(-mu * s)
@@ -512,7 +519,35 @@ def _bisect(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray, 
 
 
 def _first_root(fns: _Fns, horizon: float) -> tuple[float, int]:
-    """Earliest ``s`` in ``(0, horizon]`` at which some ``g_i`` changes sign or reaches zero.
+    """Earliest ``s`` in ``(0, horizon]`` at which some ``g_i`` changes sign or reaches zero,
+    and the index ``i`` (``(inf, -1)`` when none does).
+
+    With many functions, a cheap bound first: ``|g_i'| <= |beta| + |gamma| + |delta| + |D|``
+    on ``s >= 0``, so ``g_i`` keeps its sign before ``|g_i(0)| / bound``. Only the functions
+    whose bound falls inside a window are searched; the window doubles until a root is found
+    inside it (then no other function can have an earlier one) or it covers the horizon.
+    """
+    n = fns.alpha.size
+    if n <= _SMALL:
+        return _first_root_all(fns, horizon)
+    bound = np.abs(fns.beta) + np.abs(fns.gamma) + np.abs(fns.delta) + abs(fns.D)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        earliest = np.where(bound > 0, np.abs(fns.alpha) / bound,
+                            np.where(fns.alpha == 0, 0.0, math.inf))
+    window = float(np.partition(earliest, _SMALL)[_SMALL])
+    while True:
+        pick = np.flatnonzero(earliest <= window)
+        s, i = _first_root_all(fns.take(pick), min(horizon, window))
+        if i >= 0:
+            return s, int(pick[i])
+        later = earliest[earliest > window]
+        if window >= horizon or not later.size:
+            return math.inf, -1
+        window = max(2.0 * window, float(later.min()))
+
+
+def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
+    """:func:`_first_root` over every function (no prefilter).
 
     ``g`` has at most one inflection, so ``g'`` is monotone on at most two pieces and ``g``
     on at most three: bracket on those pieces and bisect. A function with ``g(0) == 0``
@@ -546,12 +581,36 @@ def _first_root(fns: _Fns, horizon: float) -> tuple[float, int]:
     idx = rows[has]
     piece = np.argmax(crossing[has], axis=1)
     lo, hi = knots[idx, piece], knots[idx, piece + 1]
-    # Keep only candidates whose bracket can still hold the earliest root, then bisect.
-    keep = lo <= hi.min()
-    idx, lo, hi = idx[keep], lo[keep], hi[keep]
-    roots = _bisect(lambda s, i: fns.value(s, i), lo, hi, idx)
-    best = int(np.argmin(roots))
-    return float(roots[best]), int(idx[best])
+    # Halve the brackets until one candidate can hold the earliest root, then polish it with
+    # Brent's method on the scalar closed form (to a few ulp).
+    while True:
+        keep = lo <= hi.min()
+        idx, lo, hi = idx[keep], lo[keep], hi[keep]
+        if idx.size == 1:
+            break
+        mid = 0.5 * (lo + hi)
+        if not np.any((mid > lo) & (mid < hi)):
+            best = int(np.argmin(hi))
+            return float(hi[best]), int(idx[best])
+        changed = np.sign(fns.value(mid, idx)) != np.sign(fns.value(lo, idx))
+        lo, hi = np.where(changed, lo, mid), np.where(changed, mid, hi)
+    return _brent(fns, int(idx[0]), float(lo[0]), float(hi[0])), int(idx[0])
+
+
+def _brent(fns: _Fns, i: int, lo: float, hi: float) -> float:
+    """The root of ``g_i`` in the sign-changing bracket ``(lo, hi]`` to a few ulp."""
+    from scipy.optimize import brentq
+
+    alpha, beta, gamma, delta = (float(c[i]) for c in (fns.alpha, fns.beta, fns.gamma, fns.delta))
+    lam, mu, D = fns.lam, fns.mu, fns.D
+
+    def g(s: float) -> float:
+        return (alpha + beta * s + gamma * _em1(lam, s) + delta * _em1(mu, s)
+                + D * s * math.exp(-mu * s))
+
+    if g(hi) == 0.0:
+        return hi
+    return float(brentq(g, lo, hi, xtol=1e-300, rtol=4.0 * _EPS, maxiter=500))
 
 
 # -- dynamic motors: the engine ----------------------------------------------------------------
@@ -777,7 +836,9 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         ``m dV/dt`` from the right (the Filippov force actually applied).
     """
     started = time.perf_counter()
-    dynamic = plant.dynamic_motors
+    # Motors start settled, so with constant commands their speeds never move: the
+    # ideal-motor engine (O(log N) per event) is exact for them too.
+    dynamic = plant.dynamic_motors and plant.commands is not None
     mu = 1.0 / plant.motors.lag if dynamic and plant.motors.lag > 0 else 0.0
     cascade = 2 * plant.n + 2
     rec = _Recorder(plant, budget, cascade, mu)
@@ -815,7 +876,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
 
 def _contact_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
     """Contact speeds at ``times``: shape (T, n), a read-only broadcast when constant."""
-    if plant.dynamic_motors:
+    if plant.dynamic_motors and plant.commands is not None:
         return _motor_speeds(plant, times)
     if plant.commands is None:
         speeds = plant.command(0.0)

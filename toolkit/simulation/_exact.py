@@ -19,11 +19,28 @@ Two engines share that form:
   run from rest over ``N = 1e5`` contacts costs ``O(N)`` events of constant work.
 - **Dynamic motors** (lag, rate limit) with a command schedule: contact speeds move
   between events (with constant commands the motors never leave their settled speeds and
-  the ideal engine applies). Every event
-  function (a crossing ``V(t) = v_i(t)``, a saturation limit, the end of a sliding mode) is
+  the ideal engine applies). Every event function (a crossing ``V(t) = v_i(t)``, a
+  saturation limit, the end of a sliding mode) is
   ``g(s) = alpha + beta s + gamma em(lam, s) + delta em(mu, s) + D s exp(-mu s)``, which has
   at most three roots: the root of ``g''`` is explicit, the roots of ``g'`` and then of ``g``
-  are bracketed on monotone pieces and located by vectorized bisection to the last bit.
+  are bracketed on monotone pieces, and the earliest is located by bisection and Brent's
+  method. With many contacts a bound on ``|g'|`` first discards the functions that cannot
+  change sign soon, so an event costs a few ``O(N)`` array operations.
+
+Limits of exactness
+-------------------
+Event times are roots located to a few ulp (bisection, then Brent's method); a crossing in
+which ``V`` only touches a moving contact speed without crossing it (a double root) is not
+an event. With compliance and a motor lag, a body rate ``b/m`` within rounding of ``1/tau``
+loses digits in ``1 / (b - m/tau)`` (exact resonance itself is handled in closed form).
+
+Zeno guard
+----------
+With constant commands the body passes each breakpoint at most once, so a burst of more
+than ``2 K + 1000`` events (``K = 2 N + 2`` bounds the breakpoints) can only come from fast
+switching or chatter;
+such a burst inside ``(2 K + 1000) / Budget.max_event_rate`` seconds stops the run with
+``Status.ZENO``.
 
 Tie convention
 --------------
@@ -32,8 +49,11 @@ At ``V = s`` with contacts of total magnitude ``W`` at ``s`` and ``G`` the rest 
 sticks when ``|G| <= W + tol`` and passes in the direction of ``sign(G)`` otherwise. ``tol``
 is ``4 (K + 1) eps (F_tot + |F_ext| + c |V|)``, a bound on the rounding of the prefix sums
 (the same rule as :attr:`ContactSet.tie_tolerance`), so that exactly balanced cases (an
-even-N zero band edge, ``|G| == W``) stick. Events name the lowest contact index among
-coincident contacts.
+even-N zero band edge, ``|G| == W``) stick. When contacts moving at different rates meet
+the body at once, the body's acceleration ``a`` solves
+``0 in G + sum_i f_i Sign(dv_i/dt - a) - m a`` (unique: the left side decreases in ``a``);
+it follows the contacts whose rate equals ``a``, if any. Events name the lowest contact index
+among coincident contacts.
 """
 
 from __future__ import annotations
@@ -90,8 +110,7 @@ def _reach_time(V: float, r0: float, lam: float, target: float) -> float:
 class _Recorder:
     """Collects segments and events and enforces the budget (private, mutable while running)."""
 
-    def __init__(self, plant: Plant, budget: Budget, cascade: int, mu: float) -> None:
-        self.plant = plant
+    def __init__(self, budget: Budget, cascade: int, mu: float) -> None:
         self.budget = budget
         self.mu = mu
         self.window = 2 * cascade + _ZENO_FLOOR
@@ -841,7 +860,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     dynamic = plant.dynamic_motors and plant.commands is not None
     mu = 1.0 / plant.motors.lag if dynamic and plant.motors.lag > 0 else 0.0
     cascade = 2 * plant.n + 2
-    rec = _Recorder(plant, budget, cascade, mu)
+    rec = _Recorder(budget, cascade, mu)
     if dynamic:
         t_stop, V_stop = _run_dynamic(plant, t_end, v0, rec)
     else:

@@ -464,3 +464,21 @@ def test_repeated_runs_reuse_the_plant_cache_without_changing_results():
     assert first.events == second.events
     other = Plant(ContactSet([0.3, -0.2, 0.1]), 0.4)
     assert not other.derived("exact landscapes")         # each plant has its own cache
+
+
+def test_coincident_moving_contacts_act_as_one():
+    # Identity: two contacts with the same schedule move identically, so they are one contact
+    # with the summed magnitude; the two plants must give the same trajectory bit for bit.
+    motors = Motors(lag=0.05, rate_limit=2.0)
+    split = Plant(ContactSet([-0.3, 0.1, 0.1, 0.3], [1.0, 0.5, 0.5, 1.0]), 0.3, motors=motors,
+                  commands=PiecewiseConstant([0.2, 0.6], [[-0.3, 0.1, 0.1, 0.3],
+                                                          [-0.3, 0.25, 0.25, 0.3],
+                                                          [-0.3, -0.2, -0.2, 0.3]]))
+    merged = Plant(ContactSet([-0.3, 0.1, 0.3], [1.0, 1.0, 1.0]), 0.3, motors=motors,
+                   commands=PiecewiseConstant([0.2, 0.6], [[-0.3, 0.1, 0.3], [-0.3, 0.25, 0.3],
+                                                           [-0.3, -0.2, 0.3]]))
+    times = np.linspace(0.0, 1.5, 31)
+    a = simulate(split, 1.5, t_eval=times, v0=0.05)
+    b = simulate(merged, 1.5, t_eval=times, v0=0.05)
+    np.testing.assert_array_equal(a.V, b.V)
+    assert [e.kind for e in a.events] == [e.kind for e in b.events]

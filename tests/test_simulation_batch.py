@@ -93,3 +93,12 @@ def test_result_is_read_only():
     result = simulate_batch([[0.0, 1.0, 2.0]], None, 1.0, 1.0)
     with pytest.raises(ValueError):
         result.final_speeds[0] = 3.0
+
+
+def test_to_dict_is_json_able():
+    import json
+
+    result = simulate_batch([[-1.0, 0.5, 2.0]], None, 1.0, 5.0)
+    summary = json.loads(json.dumps(result.to_dict()))
+    assert summary["final_speeds"] == [0.5] and summary["n_events"] == [1]
+    assert summary["stuck"] == [True] and summary["status"] == "SUCCESS"

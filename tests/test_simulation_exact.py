@@ -482,3 +482,13 @@ def test_coincident_moving_contacts_act_as_one():
     b = simulate(merged, 1.5, t_eval=times, v0=0.05)
     np.testing.assert_array_equal(a.V, b.V)
     assert [e.kind for e in a.events] == [e.kind for e in b.events]
+
+
+def test_to_dict_is_json_able():
+    import json
+
+    result = simulate(Plant(ContactSet([-1.0, 0.5, 2.0]), 1.0), 2.0)
+    summary = json.loads(json.dumps(result.to_dict(samples=True)))
+    assert summary["status"] == "SUCCESS" and summary["V_final"] == 0.5
+    assert summary["events"] == [{"time": 0.5, "kind": "stick", "contact": 1, "speed": 0.5}]
+    assert summary["t"] == result.t.tolist()

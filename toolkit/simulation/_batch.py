@@ -60,6 +60,13 @@ class BatchResult:
         """True when every scene reached ``t_end``."""
         return self.status is Status.SUCCESS
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: ``final_speeds``, ``n_events``, ``stuck`` (lists), ``status`` (name),
+        ``message``, ``wall_time``."""
+        return {"final_speeds": self.final_speeds.tolist(), "n_events": self.n_events.tolist(),
+                "stuck": self.stuck.tolist(), "status": self.status.name,
+                "message": self.message, "wall_time": self.wall_time}
+
     @property
     def n_scenes(self) -> int:
         """Number of scenes."""

@@ -174,6 +174,26 @@ class SimulationResult:
         """Last simulated time, s (``t_end`` on success)."""
         return float(self.t[-1]) if self.t.size else 0.0
 
+    def to_dict(self, *, samples: bool = False) -> dict[str, Any]:
+        """A JSON-able summary (``samples=True`` adds ``t``, ``V`` and ``force`` lists).
+
+        Keys: ``method``, ``setting``, ``status`` (the Status name), ``message``,
+        ``t_final``, ``V_final``, ``n_events``, ``n_evaluations``, ``n_steps``,
+        ``wall_time`` and ``events`` (``time``, ``kind``, ``contact``, ``speed`` each).
+        """
+        out: dict[str, Any] = {
+            "method": self.method, "setting": self.setting, "status": self.status.name,
+            "message": self.message, "t_final": self.t_final,
+            "V_final": float(self.V[-1]) if self.V.size else None,
+            "n_events": self.n_events, "n_evaluations": self.n_evaluations,
+            "n_steps": self.n_steps, "wall_time": self.wall_time,
+            "events": [{"time": e.time, "kind": e.kind, "contact": e.contact, "speed": e.speed}
+                       for e in self.events],
+        }
+        if samples:
+            out.update(t=self.t.tolist(), V=self.V.tolist(), force=self.force.tolist())
+        return out
+
     def speed_at(self, times: Any) -> np.ndarray:
         """Body speed at ``times`` (s): the dense output if present, else linear interpolation.
 

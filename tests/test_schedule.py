@@ -9,14 +9,17 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import brentq
 from scipy.special import lambertw
 
 from toolkit.contacts import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
 from toolkit.plant import Motors, PiecewiseConstant, Plant
-from toolkit.schedule import (Braking, ScheduleResult, SpeedTrajectory, braking_time,
-                              deviation_bound, design_schedule)
+from toolkit._schedule_construct import implicit_step
+from toolkit.schedule import (Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory,
+                              braking_time, design_schedule, deviation_bound)
 from toolkit.simulation import simulate
 
 VMAX = 0.35                      # PHYSICS.md section 3
@@ -229,3 +232,139 @@ def test_refusals():
         SpeedTrajectory([0.0, 0.0], [0.1, 0.2])
     with pytest.raises(ParameterError, match="duration"):
         Braking(0.0, duration=-1.0)
+
+
+# -- the constructive design: closed forms and certificates --------------------------------
+IDEAL = Motors(speed_limits=(-VMAX, VMAX))
+A_MAX = 2.0                      # F_tot / m of carousel(): 10 x 0.2 N on 1 kg
+
+
+def test_ideal_motors_stick_to_a_feasible_reference_exactly():
+    # Hold, ramp at exactly the largest acceleration F_tot / m (every contact above the
+    # body), hold: feasible everywhere, so the body can ride the reference exactly: sticking
+    # (Filippov) on the holds, the full force on the ramp.
+    plant = carousel([0.1] * 10, motors=IDEAL)
+    reference = SpeedTrajectory([0.0, 0.1, 0.2, 0.4], [0.1, 0.1, 0.1 + A_MAX * 0.1,
+                                                       0.1 + A_MAX * 0.1])
+    result = design_schedule(plant, reference, v0=0.1)
+    fine = np.linspace(0.0, result.times[-1], 2001)
+    sim = exact_run(plant, result, 0.1, fine)
+    # Exact event-driven closed forms: equal to the reference up to rounding.
+    np.testing.assert_allclose(sim.V, reference(fine), rtol=0, atol=1e-12)
+    assert result.status is ScheduleStatus.OPTIMAL
+    # The certified lower bound is 0 up to the funnel's conservative step (A_MAX h, h =
+    # period / 32) and the schedule meets it.
+    assert 0.0 <= result.lower_bound <= A_MAX * PERIOD / 32
+    assert result.exact_tracking_error == pytest.approx(0.0, abs=1e-12)
+
+
+def test_lagged_contacts_carry_the_body_while_sticking_holds():
+    # With a lag the contacts follow exponentials; wherever every contact has the same speed
+    # p(t) and |m p'(t)| <= F_tot (PHYSICS.md section 2, c = F_ext = 0) the body sticks to
+    # them: the exact simulation equals the closed-form path p to rounding.
+    plant = carousel(np.zeros(10))
+    t = np.linspace(0.0, 0.6, 61)
+    reference = SpeedTrajectory(t, 0.1 * np.sin(2 * np.pi * t))
+    result = design_schedule(plant, reference, v0=0.0)
+    check_limits(result, plant)
+    checked = 0
+    for k in range(1, result.times.size - 1):
+        v_k, u_k = result.contact_speeds[k], result.speeds[k]
+        common = np.ptp(v_k) == 0 and np.ptp(u_k) == 0
+        if not common:
+            continue
+        start = exact_run(plant, result, 0.0, result.times[:k + 1]).V[-1]
+        rate = abs(u_k[0] - v_k[0]) / TAU                  # largest |p'| in the period: at s = 0
+        if start != v_k[0] or plant.mass * rate > plant.contacts.total_force:
+            continue
+        s = np.linspace(0.0, PERIOD, 17)
+        path = u_k[0] + (v_k[0] - u_k[0]) * np.exp(-s / TAU)
+        sim = exact_run(plant, result, 0.0, np.concatenate((result.times[:k + 1], result.times[k] + s[1:])))
+        np.testing.assert_allclose(sim.V[k:], path, rtol=0, atol=1e-12)
+        checked += 1
+    assert checked >= (result.times.size - 1) // 2         # most periods are sticking periods
+
+
+def test_braking_is_certified_optimal_by_the_closed_form_minimum_time(braking):
+    plant, result = braking
+    assert result.status is ScheduleStatus.OPTIMAL and result.success
+    assert result.method == "constructive" and result.solver_status == "not run"
+    T = braking_time(plant, 0.3, 0.0, hold=PERIOD)
+    # Arrival (exact simulation within the bound of the goal) no later than one period after
+    # the closed-form minimum time, and no earlier than the comparison principle allows.
+    assert T - result.prediction_bound / A_MAX - 1e-12 <= result.arrival_time <= T + PERIOD
+    assert result.exact_deviation <= result.prediction_bound
+
+
+def test_unequal_magnitudes_infeasible_ramp_saturates_at_the_closed_form_error():
+    # The reference climbs at 1.5 times the largest acceleration A for 0.1 s, then holds.
+    # From V(0) = V_ref(0) no schedule is above V_ref(0) + A t, so the error at the end of
+    # the ramp is at least (1.5 A - A) 0.1; pushing every contact up meets it exactly, then
+    # the body catches the hold at A and sticks there. Unequal magnitudes: only F_tot counts.
+    forces = np.array([0.05, 0.1, 0.15, 0.2, 0.25, 0.25])          # F_tot = 1 N
+    plant = Plant(ContactSet(np.zeros(6), forces), mass=0.5, motors=IDEAL)   # A = 2 m/s^2
+    level = 1.5 * A_MAX * 0.1
+    reference = SpeedTrajectory([0.0, 0.1, 0.4], [0.0, level, level])
+    result = design_schedule(plant, reference, v0=0.0)
+    closed_form = (1.5 * A_MAX - A_MAX) * 0.1
+    fine = np.linspace(0.0, result.times[-1], 4001)
+    sim = exact_run(plant, result, 0.0, fine)
+    # Second method: the exact simulation against the closed-form optimum.
+    assert np.max(np.abs(sim.V - reference(fine))) == pytest.approx(closed_form, rel=1e-12, abs=0)
+    caught = 0.1 + closed_form / A_MAX                  # then it rides the hold exactly
+    np.testing.assert_allclose(sim.V[fine >= caught], level, rtol=0, atol=1e-12)
+    assert result.exact_tracking_error == pytest.approx(closed_form, rel=1e-12, abs=0)
+    # The funnel bound is valid (<= the optimum) and tight up to its conservative step.
+    assert closed_form - 2 * A_MAX * PERIOD / 32 <= result.lower_bound <= closed_form + 1e-12
+    assert result.status is ScheduleStatus.OPTIMAL
+
+
+@settings(deadline=None, max_examples=8)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_lower_bound_holds_for_arbitrary_schedules(seed):
+    # Validity of the certificate: no schedule within the limits, however chosen, tracks
+    # better than the lower bound (second method: exact simulation of random commands).
+    rng = np.random.default_rng(seed)
+    plant = carousel(rng.uniform(-0.3, 0.3, 4), forces=rng.uniform(0.1, 0.5, 4))
+    reference = SpeedTrajectory([0.0, 0.2, 0.3], [0.0, 0.2, -0.1])
+    result = design_schedule(plant, reference, v0=0.0)
+    K = result.times.size - 1
+    table = np.vstack((plant.contacts.speeds, rng.uniform(-VMAX, VMAX, (K, 4))))
+    random_plant = dataclasses.replace(plant, commands=PiecewiseConstant(result.times[1:], table))
+    fine = np.linspace(0.0, result.times[-1], 801)
+    sim = simulate(random_plant, float(result.times[-1]), v0=0.0, t_eval=fine)
+    # The bound is over the design's samples; the max over 801 samples of a continuous
+    # error differs from it by at most A_MAX * (sample spacing).
+    spacing = result.times[-1] / 800
+    assert np.max(np.abs(sim.V - reference(fine))) >= result.lower_bound - A_MAX * spacing * 3
+    assert result.exact_tracking_error >= result.lower_bound - 1e-12
+
+
+def test_implicit_step_solves_the_inclusion_exactly():
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        n = int(rng.integers(1, 8))
+        v = np.round(rng.uniform(-1, 1, (3, n)), 1)         # ties on purpose
+        f = rng.uniform(0.1, 1.0, n)
+        V = rng.uniform(-1, 1, 3)
+        m, c, ext, h = 0.7, 0.3, float(rng.uniform(-0.5, 0.5)), 1e-2
+        W = implicit_step(V, v, f, m, c, ext, h)
+        for row in range(3):
+            lower, upper = ContactSet(v[row], f).force_bounds(W[row])
+            lhs = m * (W[row] - V[row]) / h + c * W[row] - ext
+            # Identity of the backward-Euler step: lhs in [F_lo(W), F_hi(W)] (rounding).
+            assert float(lower) - 1e-9 <= lhs <= float(upper) + 1e-9
+
+
+def test_refinement_runs_bounded_and_keeps_a_verified_schedule():
+    plant = carousel(np.zeros(4), forces=np.full(4, 0.5))
+    t = np.linspace(0.0, 0.2, 21)
+    reference = SpeedTrajectory(t, 0.1 * np.sin(2 * np.pi * 2.5 * t))
+    base = design_schedule(plant, reference, v0=0.0)
+    refined = design_schedule(plant, reference, v0=0.0, refine=True, max_iter=15)
+    assert refined.solver_status != "not run" and 0 < refined.iterations <= 15
+    assert refined.success and refined.exact_deviation <= refined.prediction_bound
+    # Kept only if it lowers the objective; the certificate still holds either way.
+    assert refined.objective <= base.objective
+    assert refined.exact_tracking_error >= refined.lower_bound - 1e-12
+    np.testing.assert_allclose(refined.lower_bound, base.lower_bound, rtol=0, atol=1e-12)

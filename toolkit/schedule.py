@@ -704,7 +704,16 @@ def _make_predictor(ca: Any, plant: Plant, motor: _Motor, epsilon: float) -> Any
 
 def _predict(predictor: Any, plant: Plant, motor: _Motor, U: np.ndarray, speeds: np.ndarray,
              v0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Integrate the smoothed model at tight tolerance: dense times, V, contact speeds."""
+    """Integrate the smoothed model at tight tolerance: dense times, V, contact speeds.
+
+    Returns
+    -------
+    t : ndarray of shape (T,), s
+        Non-decreasing: ``_SAMPLES // 2 + 1`` samples per piece (a period, split at rate
+        kinks and external-force switches), both ends included.
+    V : ndarray of shape (T,), m/s
+    v : ndarray of shape (T, n), m/s
+    """
     integrator, grid = predictor
     dt = motor.period
     K = U.shape[0]
@@ -722,14 +731,14 @@ def _predict(predictor: Any, plant: Plant, motor: _Motor, U: np.ndarray, speeds:
             out = integrator(x0=V, p=np.concatenate((start, u, [ext, a, b])))
             path = np.concatenate(([V], np.asarray(out["xf"]).ravel()))
             offsets = a + (b - a) * grid
-            all_t.append(t0 + offsets[:-1])
-            all_V.append(path[:-1])
-            all_v.append(motor.speeds(start, u, offsets[:-1]))
+            # Both ends of every piece, with the piece's own contact speeds: a switching
+            # time appears twice, so the certificate integrates each piece on its own law.
+            all_t.append(t0 + offsets)
+            all_V.append(path)
+            all_v.append(motor.speeds(start, u, offsets))
             V = float(path[-1])
-    all_t.append(np.array([K * dt]))
-    all_V.append(np.array([V]))
-    all_v.append(speeds[-1][None, :])
-    return np.concatenate(all_t), np.concatenate(all_V), np.concatenate(all_v)
+    t = np.maximum.accumulate(np.minimum(np.concatenate(all_t), K * dt))   # rounding of t0 + b
+    return t, np.concatenate(all_V), np.concatenate(all_v)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1023,8 +1032,9 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         status = ScheduleStatus.OPTIMAL if optimal else ScheduleStatus.VERIFIED
     speeds = np.vstack((best.commands, best.commands[-1]))
     mismatch = float(np.max(np.abs(np.asarray(design_model) - best.body)))
-    pushes = sum(c.startswith("push") for c in built.choices)
-    detail = [f"{method} schedule ({pushes} of {K} periods pushing at a speed limit)",
+    pushes = int(np.sum(np.any((best.commands == lo) | (best.commands == hi), axis=1)))
+    detail = [f"{method} schedule (a contact commanded at a speed limit in {pushes} of {K} "
+              f"periods)",
               f"ipopt {solver_status}" + (f" after {iterations} iterations" if iterations else ""),
               f"exact simulation within {best.deviation:.3g} m/s of the prediction "
               f"(certified bound {best.bound:.3g} m/s, epsilon {epsilon:g} m/s)"

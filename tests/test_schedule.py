@@ -156,11 +156,16 @@ def test_braking_within_a_duration_follows_the_constant_deceleration():
     assert result.tracking_error <= 1.0 * PERIOD
 
 
-def test_tracking_a_sinusoid_is_verified_by_the_exact_simulator():
+@pytest.fixture(scope="module")
+def sinusoid():
     plant = carousel(np.zeros(10))
     t = np.linspace(0.0, 0.6, 61)
     reference = SpeedTrajectory(t, 0.1 * np.sin(2 * np.pi * t))
-    result = design_schedule(plant, reference, v0=0.0)
+    return plant, reference, design_schedule(plant, reference, v0=0.0)
+
+
+def test_tracking_a_sinusoid_is_verified_by_the_exact_simulator(sinusoid):
+    plant, reference, result = sinusoid
     check_limits(result, plant)
     fine = np.linspace(0.0, result.times[-1], 1201)
     sim = exact_run(plant, result, 0.0, fine)
@@ -258,15 +263,11 @@ def test_ideal_motors_stick_to_a_feasible_reference_exactly():
     assert result.exact_tracking_error == pytest.approx(0.0, abs=1e-12)
 
 
-def test_lagged_contacts_carry_the_body_while_sticking_holds():
+def test_lagged_contacts_carry_the_body_while_sticking_holds(sinusoid):
     # With a lag the contacts follow exponentials; wherever every contact has the same speed
     # p(t) and |m p'(t)| <= F_tot (PHYSICS.md section 2, c = F_ext = 0) the body sticks to
     # them: the exact simulation equals the closed-form path p to rounding.
-    plant = carousel(np.zeros(10))
-    t = np.linspace(0.0, 0.6, 61)
-    reference = SpeedTrajectory(t, 0.1 * np.sin(2 * np.pi * t))
-    result = design_schedule(plant, reference, v0=0.0)
-    check_limits(result, plant)
+    plant, _, result = sinusoid
     checked = 0
     for k in range(1, result.times.size - 1):
         v_k, u_k = result.contact_speeds[k], result.speeds[k]
@@ -368,3 +369,26 @@ def test_refinement_runs_bounded_and_keeps_a_verified_schedule():
     assert refined.objective <= base.objective
     assert refined.exact_tracking_error >= refined.lower_bound - 1e-12
     np.testing.assert_allclose(refined.lower_bound, base.lower_bound, rtol=0, atol=1e-12)
+
+
+def test_holding_against_drag_and_a_force_step_is_exact():
+    # Contacts at the held speed R carry the body there while |F_ext - c R| <= F_tot
+    # (Filippov sticking, PHYSICS.md section 2): 1.2 N - 2 N s/m x 0.1 m/s = 1 N <= 2 N.
+    push = PiecewiseConstant([0.13], [0.0, 1.2])                    # N, a step mid-period
+    plant = Plant(ContactSet(np.full(10, 0.1), np.full(10, 0.2)), mass=1.0, damping=2.0,
+                  external_force=push, motors=MOTORS)
+    reference = SpeedTrajectory([0.0, 0.3], [0.1, 0.1])
+    result = design_schedule(plant, reference, v0=0.1)
+    fine = np.linspace(0.0, result.times[-1], 1001)
+    sim = exact_run(plant, result, 0.1, fine)
+    np.testing.assert_allclose(sim.V, 0.1, rtol=0, atol=1e-12)    # rounding of the closed forms
+    assert result.status is ScheduleStatus.OPTIMAL and result.lower_bound == 0.0
+    np.testing.assert_array_equal(result.speeds, 0.1)                # nothing to change
+
+
+def test_refusals_of_the_design_options():
+    plant = carousel([0.0] * 3)
+    with pytest.raises(ParameterTypeError, match="refine"):
+        design_schedule(plant, Braking(0.0), refine="yes")
+    with pytest.raises(ParameterError, match="tolerance"):
+        design_schedule(plant, Braking(0.0), tolerance=-1.0)

@@ -7,27 +7,35 @@ A schedule is a table of commanded contact speeds, constant over each controller
 - :class:`Braking`: take the body from ``v0`` to a target speed as fast as possible, or
   along a constant deceleration that lasts a given time.
 
-:func:`design_schedule` solves an optimal control problem with casadi's ``Opti`` and ipopt
-(direct multiple shooting over the controller periods) under the plant's motor model:
-first-order lag ``tau``, rate limit ``r`` and speed limits. The motor model is kept *exact*
-in the optimizer: a command may differ from the current contact speed by at most ``r tau``
-(``r dt`` without lag), so the rate limit never clips and every contact speed is the closed
-form ``u + (v - u) exp(-s / tau)`` inside a period.
+:func:`design_schedule` works under the plant's motor model (first-order lag ``tau``, rate
+limit ``r``, speed limits). A command may differ from the current contact speed by at most
+``r tau`` (``r dt`` without lag), so the rate limit never clips and every contact speed is
+the closed form ``u + (v - u) exp(-s / tau)`` inside a period.
 
-The Coulomb force is nonsmooth. The optimizer uses the smoothed law
-``f_i tanh((v_i - V) / epsilon)`` (with a continuation ``10 eps -> eps`` from a good
-initial guess) and classical RK4 substeps inside each period; the result
-is then checked against the exact nonsmooth model, without trusting the solver:
-
-1. the designed (projected) commands are integrated on the smoothed model with a stiff
-   integrator at tight tolerance (``scipy``'s Radau): the *predicted* body speed;
-2. a monotonicity argument bounds the distance between that prediction and every solution
-   of the exact differential inclusion ``m dV/dt in sum f_i Sign(v_i - V) + F_ext - c V``.
-   Because the Coulomb force is non-increasing in ``V``, for any ``delta > 0``
+1. *Construction* (``toolkit._schedule_construct``): physics gives the schedule. Contacts
+   commanded along one lag-compensated path carry the body on it (Filippov sticking) while
+   ``|m p' + c p - F_ext| <= F_tot``; when the body must catch up, contacts push from the
+   right side of it (at or towards a speed limit). Period by period the best of these
+   closed-form candidates is chosen by implicit steps of the exact Coulomb law.
+2. *Refinement* (optional, ``refine=True``): casadi ``Opti`` + ipopt, direct multiple
+   shooting on the smoothed law ``f_i tanh((v_i - V) / epsilon)`` with stable RK4 substeps,
+   scaled, warm-started at the construction, bounded in iterations and time; kept only
+   when it verifies and lowers the objective.
+3. *Verification*, never trusting a solver: the commands are integrated on the smoothed
+   law at tight tolerance (CVODES): the *predicted* body speed; a monotonicity argument
+   bounds the distance between that prediction and every solution of the exact inclusion
+   ``m dV/dt in sum f_i Sign(v_i - V) + F_ext - c V``. Because the Coulomb force is
+   non-increasing in ``V``, for any ``delta > 0``
    ``|V_exact(t) - V_pred(t)| <= delta + (1/m) int_0^t d_delta``, where the defect
    ``d_delta`` is how far the smoothed force lies outside the exact set-valued force of the
-   speeds within ``delta`` of the prediction (:func:`deviation_bound`). The smallest bound
-   over a grid of ``delta`` is :attr:`ScheduleResult.prediction_bound`.
+   speeds within ``delta`` of the prediction (:func:`deviation_bound`); the smallest bound
+   over a grid of ``delta`` is :attr:`ScheduleResult.prediction_bound`. The exact
+   event-driven simulator (:func:`toolkit.simulation.simulate`) then runs the schedule and
+   must stay within that bound.
+4. *Certificate*: tracking errors are compared with a certified lower bound over every
+   schedule (the funnel of the extreme forces the motors allow); fast braking with the
+   closed-form minimum time below. :class:`ScheduleStatus` reports OPTIMAL, VERIFIED or
+   UNVERIFIED accordingly.
 
 For braking with every contact pushing backward the optimum is bang-bang (all contacts at
 the lowest speed); :func:`braking_time` gives the resulting minimum time in closed form

@@ -32,7 +32,8 @@ from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .sensors import Encoder
 from .precision import PrecisionReport, PrecisionRow, carousel_startup_plant, precision_report
-from .simulation import BatchResult, Budget, Event, SimulationResult, Status, simulate, simulate_batch
+from .simulation import BatchResult, Budget, Event, SimulationResult, simulate, simulate_batch
+from .simulation import Status as SimulationStatus
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
 
@@ -42,7 +43,7 @@ __all__ = [
     # contact model
     "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "force_curve",
     # plant and simulation
-    "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "Status", "Budget", "Event",
+    "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "SimulationStatus", "Budget", "Event",
     "simulate_batch", "BatchResult",
     # work-precision report and stability suite
     "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant",

@@ -14,10 +14,11 @@ candidates, each projected onto the motor model (speed limits, ``|u - v| <= r ta
 - *push up* / *push down*: every contact at the upper / lower speed limit (the largest
   force, bang-bang).
 
-Each candidate is evaluated over its period plus one look-ahead period (follow) with
-implicit (Moreau) time stepping of the exact set-valued Coulomb law, vectorized over the
-candidates; the best (tracking: smallest sup error, then smallest squared error; braking:
-smallest squared error) is kept.
+Each candidate is evaluated over its period plus three look-ahead periods (the first with
+a choice of follow shifts, then the steady follow) with implicit (Moreau) time stepping of
+the exact set-valued Coulomb law, vectorized over the candidates; the best (tracking:
+smallest sup error, then smallest squared error; braking: smallest squared error) is kept.
+The look-ahead lets the schedule start moving before a reference step it cannot follow.
 
 :func:`tracking_lower_bound` certifies how good any schedule can be: the body's speed stays
 in the funnel of the extreme forces the motors allow (each contact at most as fast as its
@@ -37,6 +38,8 @@ import numpy as np
 _SHIFTS = (0.0, -0.5, 0.5, 1.0, 2.0)
 #: Fractions of the way to the speed limit for contacts on the wrong side of the body.
 _SHARES = (0.1, 0.25, 0.5, 1.0)
+#: Look-ahead periods after each candidate's own (the first with a choice of shifts).
+_AHEAD = 3
 #: Implicit substeps per period of the candidate evaluation.
 _STEPS = 16
 #: Sup errors closer than this (m/s) tie; the squared error breaks the tie.
@@ -212,19 +215,25 @@ def construct(*, forces: np.ndarray, mass: float, damping: float, external: Call
             R2 = float(reference(t0 + 2 * period))
             A = ahead_shifts.size
             ahead = follow(np.tile(R2 + ahead_shifts * (R2 - R1), C), np.repeat(v1, A, axis=0))
-            path2, _, _ = run(np.repeat(V1, A), np.repeat(v1, A, axis=0), ahead, t0 + period)
-            times = t0 + np.concatenate((offsets, period + offsets))
-            miss = np.hstack((np.repeat(path, A, axis=0), path2)) - reference(times)[None, :]
-            l2 = np.sum(miss ** 2, axis=1).reshape(C, A)
+            path2, Vj, vj = run(np.repeat(V1, A), np.repeat(v1, A, axis=0), ahead, t0 + period)
+            pieces = [np.repeat(path, A, axis=0), path2]
+            for j in range(2, _AHEAD + 1):                  # then the steady follow policy
+                Rn, Rp = (float(reference(t0 + (j + 1) * period)),
+                          float(reference(t0 + j * period)))
+                steady = follow(np.full(C * A, Rn - kappa * (Rn - Rp)), vj)
+                piece, Vj, vj = run(Vj, vj, steady, t0 + j * period)
+                pieces.append(piece)
+            times = t0 + np.concatenate([j * period + offsets for j in range(_AHEAD + 1)])
+            miss = np.hstack(pieces) - reference(times)[None, :]
+            # Rows are (candidate, first look-ahead shift) pairs: rank them, keep the candidate.
+            l2 = np.sum(miss ** 2, axis=1)
             if squared:
-                score = l2.min(axis=1)
-                best = int(np.argmin(score))
+                row = int(np.argmin(l2))
             else:
-                sup = np.max(np.abs(miss), axis=1).reshape(C, A)
-                pick = np.argmin(sup + l2 * 0.0, axis=1)
-                sup_c = sup[np.arange(C), pick]
-                near = sup_c <= sup_c.min() + _TIE
-                best = int(np.flatnonzero(near)[np.argmin(l2.min(axis=1)[near])])
+                sup = np.max(np.abs(miss), axis=1)
+                near = np.flatnonzero(sup <= sup.min() + _TIE)
+                row = int(near[np.argmin(l2[near])])
+            best = row // A
             u = cand[best:best + 1]
             choices.append(names[best])
         commands[k] = u[0]

@@ -71,6 +71,8 @@ _OWNER = "design_schedule"
 _CONTINUATION = (10.0, 1.0)
 #: Widths ``delta`` (units of ``epsilon``) tried by :func:`deviation_bound`.
 _DELTAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0)
+#: Decimal digits (m/s) of the commands' second try when the exact simulator fails.
+_DIGITS = 9
 #: Smoothing width divisor of the second prediction when the first does not verify.
 _RETRY = 4.0
 #: Samples per controller period for the prediction and its certificate.
@@ -306,6 +308,9 @@ class ScheduleResult:
         def opt(value: float | None) -> float | None:
             return None if value is None else float(value)
 
+        def finite(value: float) -> float | None:           # NaN/inf are not JSON
+            return float(value) if math.isfinite(value) else None
+
         return {
             "period": float(self.period),
             "times": self.times.tolist(),
@@ -326,8 +331,8 @@ class ScheduleResult:
             "message": self.message,
             "wall_time": float(self.wall_time),
             "method": self.method,
-            "exact_tracking_error": float(self.exact_tracking_error),
-            "exact_deviation": float(self.exact_deviation),
+            "exact_tracking_error": finite(self.exact_tracking_error),
+            "exact_deviation": finite(self.exact_deviation),
             "lower_bound": opt(self.lower_bound),
             "gap": opt(self.gap),
             "tolerance": float(self.tolerance),
@@ -987,14 +992,20 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
                       + smoothness * np.sum(moves ** 2) / (n * K * scale ** 2))
         body = V_d[np.searchsorted(t_d, times - 1e-12 * period)]
         table = PiecewiseConstant(times[1:], np.vstack((commands, commands[-1])))
-        exact = simulate(replace(plant, commands=table), float(times[-1]), v0=v0, t_eval=t_d)
-        finished = exact.success and exact.V.size == t_d.size
+        try:
+            exact = simulate(replace(plant, commands=table), float(times[-1]), v0=v0,
+                             t_eval=t_d)
+        except (ArithmeticError, ValueError, RuntimeError) as error:   # a simulator defect
+            exact, finished = None, False
+            report = f"the exact simulator raised {type(error).__name__}: {error}"
+        else:
+            finished = exact.success and exact.V.size == t_d.size
+            report = exact.message
         exact_V = exact.V if finished else np.full(t_d.size, np.nan)
         deviation = float(np.max(np.abs(exact_V - V_d))) if finished else math.inf
         exact_tracking = float(np.max(np.abs(exact_V - ref_d))) if finished else math.inf
         return _Verified(commands, contact, t_d, V_d, bound, float(np.max(np.abs(miss))),
-                         value, body, exact_V, exact_tracking, deviation, finished,
-                         exact.message)
+                         value, body, exact_V, exact_tracking, deviation, finished, report)
 
     def certify(candidate: _Verified) -> tuple[float | None, float | None, float | None]:
         """(lower bound, gap, arrival) of a verified candidate."""
@@ -1023,6 +1034,11 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         return gap is not None and gap <= tolerance
 
     best = verify(built.commands)
+    first_try = best.exact_message
+    if not best.exact_finished:
+        # Contacts meant to move together can be a few ulp apart, which the exact simulator
+        # may not resolve: the same commands on a 1e-9 m/s grid make them exactly equal.
+        best = verify(np.round(built.commands, _DIGITS))
     used_epsilon = epsilon
     if best.exact_finished and not best.verified:
         # The certificate's quadrature missed a sharp defect: predict closer to the exact law.
@@ -1058,6 +1074,10 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
               f"(certified bound {best.bound:.3g} m/s, epsilon {used_epsilon:g} m/s)"
               if best.exact_finished else f"exact simulation: {best.exact_message}",
               f"exact tracking error {best.exact_tracking:.4g} m/s"]
+    if not np.array_equal(best.commands, _project(built.commands, start, motor, lo, hi,
+                                                  pin_first)[0]) and method == "constructive":
+        detail.append(f"commands rounded to 1e-{_DIGITS} m/s after the first exact "
+                      f"simulation failed ({first_try})")
     if lower is not None:
         detail.append(f"no schedule can do better than {lower:.4g} m/s (gap {gap:.3g} m/s, "
                       f"tolerance {tolerance:g} m/s)")

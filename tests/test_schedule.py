@@ -407,3 +407,23 @@ def test_contacts_moving_together_are_verified():
     grid = exact_run(plant, result, 0.0, result.times)
     assert np.max(np.abs(grid.V - result.body_speed)) <= result.prediction_bound
     assert result.exact_tracking_error >= result.lower_bound
+
+
+def test_a_prediction_that_does_not_verify_is_redone_closer_to_the_exact_law(monkeypatch):
+    import toolkit.schedule as schedule
+
+    calls = []
+    honest = schedule.deviation_bound
+
+    def first_too_small(*args, **kwargs):              # the first certificate misses a defect
+        bound, pointwise = honest(*args, **kwargs)
+        calls.append(bound)
+        return (bound * 1e-6, pointwise) if len(calls) == 1 else (bound, pointwise)
+
+    monkeypatch.setattr(schedule, "deviation_bound", first_too_small)
+    plant = carousel([0.3] * 10)
+    result = design_schedule(plant, Braking(0.0), v0=0.3, epsilon=1e-3)
+    assert len(calls) == 2 and result.success
+    assert result.epsilon == pytest.approx(1e-3 / 4, rel=1e-15, abs=0)   # _RETRY = 4
+    grid = exact_run(plant, result, 0.3, result.times)
+    assert np.max(np.abs(grid.V - result.body_speed)) <= result.prediction_bound

@@ -1043,7 +1043,7 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
     if best.exact_finished and not best.verified:
         # The certificate's quadrature missed a sharp defect: predict closer to the exact law.
         used_epsilon = epsilon / _RETRY
-        best = verify(built.commands, used_epsilon)
+        best = verify(best.commands, used_epsilon)
     lower, gap, arrival = certify(best) if best.verified else (None, None, None)
     design_model = built.body_speed
     method, iterations, solver_status = "constructive", 0, "not run"
@@ -1053,8 +1053,7 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         U_r, V_r, iterations, solver_status = _refine(
             ca, plant, motor, U0=best.commands, start=start, v0=v0, lo=lo, hi=hi,
             pin_first=pin_first, ref_fn=ref_fn, epsilon=epsilon, substeps=substeps,
-            smoothness=smoothness,
-            max_iter=max_iter, wall_time=remaining)
+            smoothness=smoothness, max_iter=max_iter, wall_time=remaining)
         refined = verify(U_r, used_epsilon)
         if refined.verified and (refined.objective < best.objective or not best.verified):
             best, design_model, method = refined, V_r, "constructive + ipopt"

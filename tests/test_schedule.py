@@ -280,7 +280,8 @@ def test_lagged_contacts_carry_the_body_while_sticking_holds(sinusoid):
             continue
         s = np.linspace(0.0, PERIOD, 17)
         path = u_k[0] + (v_k[0] - u_k[0]) * np.exp(-s / TAU)
-        sim = exact_run(plant, result, 0.0, np.concatenate((result.times[:k + 1], result.times[k] + s[1:])))
+        samples = np.concatenate((result.times[:k + 1], result.times[k] + s[1:]))
+        sim = exact_run(plant, result, 0.0, samples)
         np.testing.assert_allclose(sim.V[k:], path, rtol=0, atol=1e-12)
         checked += 1
     assert checked >= (result.times.size - 1) // 2         # most periods are sticking periods

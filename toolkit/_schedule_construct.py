@@ -128,10 +128,12 @@ def _steady_shift(tau: float, period: float) -> float:
     return 0.5 * max(0.0, (1.0 - math.exp(-x)) / (1.0 - d) - x / X)
 
 
-def construct(*, forces: np.ndarray, mass: float, damping: float, external: Callable[[float], float],
-              tau: float, rate: float, period: float, lo: float, hi: float, start: np.ndarray,
-              v0: float, K: int, pinned: bool, reference: Callable[[Any], np.ndarray],
-              project: Callable[[np.ndarray, np.ndarray], np.ndarray], squared: bool) -> Construction:
+def construct(*, forces: np.ndarray, mass: float, damping: float,
+              external: Callable[[float], float], tau: float, rate: float, period: float,
+              lo: float, hi: float, start: np.ndarray, v0: float, K: int, pinned: bool,
+              reference: Callable[[Any], np.ndarray],
+              project: Callable[[np.ndarray, np.ndarray], np.ndarray],
+              squared: bool) -> Construction:
     """Build a schedule of ``K`` periods greedily from the closed-form candidates.
 
     Parameters

@@ -788,7 +788,8 @@ def _stable_substeps(plant: Plant, period: float, epsilon: float) -> int:
 
 def _refine(ca: Any, plant: Plant, motor: _Motor, *, U0: np.ndarray, start: np.ndarray,
             v0: float, lo: float, hi: float, pin_first: bool, ref_fn: Any, epsilon: float,
-            substeps: int, smoothness: float, max_iter: int, wall_time: float) -> tuple[np.ndarray, np.ndarray, int, str]:
+            substeps: int, smoothness: float, max_iter: int,
+            wall_time: float) -> tuple[np.ndarray, np.ndarray, int, str]:
     """Refine commands with ipopt (multiple shooting on the smoothed law), warm-started at U0.
 
     Speeds are scaled by the largest speed limit, the objective by the horizon; the RK4

@@ -492,3 +492,90 @@ def test_to_dict_is_json_able():
     assert summary["status"] == "SUCCESS" and summary["V_final"] == 0.5
     assert summary["events"] == [{"time": 0.5, "kind": "stick", "contact": 1, "speed": 0.5}]
     assert summary["t"] == result.t.tolist()
+
+
+# -- fast paths: the result built without re-validation, the landscape read from ContactSet ----
+def _revalidated(result: SimulationResult) -> SimulationResult:
+    """The same fields through the public, validating constructor."""
+    import dataclasses
+
+    return SimulationResult(**{f.name: getattr(result, f.name)
+                               for f in dataclasses.fields(SimulationResult)})
+
+
+@pytest.mark.parametrize("case", ["ideal", "t_eval", "commands", "dynamic", "compliant"])
+def test_result_built_by_the_fast_path_passes_validation_unchanged(case):
+    speeds = [-0.3, 0.1, 0.25, -0.05, 0.3]
+    kwargs: dict = {}
+    if case == "commands":
+        kwargs["commands"] = PiecewiseConstant([0.5], [speeds, [0.2, -0.1, 0.0, 0.3, -0.3]])
+    if case == "dynamic":
+        kwargs.update(motors=Motors(lag=0.05, rate_limit=3.0),
+                      commands=PiecewiseConstant([0.4], [speeds, [0.2, -0.1, 0.0, 0.3, -0.3]]))
+    if case == "compliant":
+        kwargs["motors"] = Motors(compliance=0.02)
+    plant = Plant(ContactSet(speeds), 0.7, damping=0.1, **kwargs)
+    t_eval = np.linspace(0.0, 1.5, 7) if case == "t_eval" else None
+    result = simulate(plant, 1.5, t_eval=t_eval)
+    again = _revalidated(result)
+    for name in ("t", "V", "force", "contact_speeds"):
+        array = getattr(result, name)
+        assert not array.flags.writeable
+        np.testing.assert_array_equal(array, getattr(again, name))
+    assert result.events == again.events and result.n_events == len(result.events) > 0
+    for event in result.events:
+        assert type(event.time) is float and type(event.speed) is float
+        assert event.contact is None or type(event.contact) is int
+        assert Event(event.time, event.kind, event.contact, event.speed) == event
+
+
+def test_caller_t_eval_array_is_not_frozen_by_the_result():
+    times = np.linspace(0.0, 1.0, 5)
+    result = simulate(Plant(ContactSet([-0.2, 0.1, 0.3]), 1.0), 1.0, t_eval=times)
+    assert times.flags.writeable and not result.t.flags.writeable
+    np.testing.assert_array_equal(result.t, times)
+
+
+@pytest.mark.parametrize("n_far", [0, 100])        # few contacts: a scan; many: one sort
+def test_events_name_the_lowest_touching_contact(n_far):
+    # Contact 0 is lifted (f = 0) at the speed where the body sticks; contacts 2 and 3 touch
+    # there. Far contacts (at +-10 m/s, balanced) only add the same force above and below.
+    far = [10.0, -10.0] * (n_far // 2)
+    speeds = [0.5, 1.0, 0.5, 0.5, 2.0, -0.5] + far
+    forces = [0.0, 1.0, 1.0, 1.0, 1.0, 1.0] + [1.0] * n_far
+    plant = Plant(ContactSet(speeds, forces), 2.0)
+    result = simulate(plant, 3.0)
+    # From rest: F = (4 - 1) N above 0 up to 0.5, where W = 2 N holds against G = 2 - 1 = 1 N.
+    assert [(e.kind, e.contact) for e in result.events] == [("stick", 2)]
+    assert result.events[0].time == pytest.approx(0.5 * 2.0 / 3.0, rel=RTOL, abs=0)
+    # Passing downward through 0.5 from above 1.0: crossings name contacts 1 and then 2.
+    down = simulate(Plant(ContactSet(speeds, forces), 2.0, external_force=-5.0), 3.0, v0=1.5)
+    assert [(e.kind, e.contact) for e in down.events][:2] == [("cross", 1), ("cross", 2)]
+
+
+@settings(deadline=None, max_examples=25)
+@given(st.lists(st.tuples(st.sampled_from([-0.3, -0.1, 0.0, 0.2, 0.4]),
+                          st.sampled_from([0.0, 0.5, 1.0, 2.0])), min_size=1, max_size=9)
+       .filter(lambda pairs: any(f > 0 for _, f in pairs)))
+def test_coulomb_landscape_is_the_contact_set_staircase(pairs):
+    # Identity: the engine's landscape reads the ContactSet's own prefix sums, so its plateau
+    # forces are ContactSet.force between the levels, bit for bit, and its stiction is the
+    # half-width of ContactSet.force_bounds at each level (magnitudes are halves and integers,
+    # so every sum is exact in binary; 1e-15 only allows for the ulp of a different order).
+    from toolkit.simulation._exact import _CoulombLandscape
+
+    contacts = ContactSet([v for v, _ in pairs], [f for _, f in pairs])
+    land = _CoulombLandscape(contacts)
+    levels = contacts.staircase().levels
+    assert land.xs == levels.tolist()
+    probes = np.concatenate(([levels[0] - 1.0], 0.5 * (levels[:-1] + levels[1:]),
+                             [levels[-1] + 1.0]))
+    for j, V in enumerate(probes):
+        assert land.force(j, float(V)) == (float(contacts.force(V)), 0.0)
+    for k, level in enumerate(levels):
+        W, G = land.stiction(k)
+        lower, upper = contacts.force_bounds(level)
+        assert W == pytest.approx(0.5 * (upper - lower), rel=1e-15, abs=1e-15)
+        assert G == pytest.approx(contacts.force(level), rel=1e-15, abs=1e-15)
+        touching = [i for i, (v, f) in enumerate(pairs) if v == level and f > 0]
+        assert land.contact(k) == touching[0]

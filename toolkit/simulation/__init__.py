@@ -119,5 +119,7 @@ def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exac
     fn = _LOADED.get(method)
     if fn is None:                       # import the method's module on first use only
         fn = _LOADED[method] = getattr(importlib.import_module(f"{__name__}.{module}"), function)
-    return fn(plant, t_end, v0=v0, t_eval=_check_t_eval(t_eval, t_end), budget=budget,
-              **fixed, **options)
+    times = None if t_eval is None else _check_t_eval(t_eval, t_end)
+    if fixed or options:
+        return fn(plant, t_end, v0=v0, t_eval=times, budget=budget, **fixed, **options)
+    return fn(plant, t_end, v0=v0, t_eval=times, budget=budget)

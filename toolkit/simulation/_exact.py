@@ -67,6 +67,7 @@ from typing import Any
 
 import numpy as np
 
+from ..contacts import ContactSet
 from ..plant import PiecewiseConstant, Plant
 from ._result import Budget, Event, SimulationResult, Status, status_message
 
@@ -76,6 +77,7 @@ _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _SMALL = 64                 # contacts up to which plain Python beats NumPy calls
 _SMALL_TABLE = 10**6        # contact-speed tables larger than this are read-only broadcasts
+_SUCCESS = Status.SUCCESS   # (a module constant is faster to read than an Enum member)
 
 
 # -- closed forms ---------------------------------------------------------------------------
@@ -116,11 +118,10 @@ class _Recorder:
         self.window = 2 * cascade + _ZENO_FLOOR
         self.rows: list[tuple[float, ...]] = []       # segments (t0, V0, c1, B, lam, C, D)
         self.events: list[Event] = []
-        self.event_times: list[float] = []
         self.n_evaluations = 0
         self.rounds = 0
-        self.started = time.perf_counter()
-        self.status = Status.SUCCESS
+        self.deadline = time.perf_counter() + budget.wall_time
+        self.status = _SUCCESS
         self.detail = ""
 
     def segment(self, t0: float, V0: float, B: float = 0.0, lam: float = 0.0, c1: float = 0.0,
@@ -131,28 +132,48 @@ class _Recorder:
         rows.append((t0, V0, c1, B, lam, C, D))
 
     def event(self, t: float, kind: str, contact: int | None, V: float) -> None:
-        self.events.append(Event(t, kind, contact, V))
-        self.event_times.append(t)
+        # The engines pass known kinds and plain ints; floats are made sure of here.
+        self.events.append(Event._trusted(float(t), kind, contact, float(V)))
 
     def stop(self, t: float) -> bool:
         """Check the budget at simulated time ``t``; True when the run must stop."""
         budget = self.budget
         self.rounds += 1
+        events, w = self.events, self.window
         if self.rounds > budget.max_steps:
             self.status, self.detail = Status.MAX_STEPS, f"{budget.max_steps} rounds at t = {t:.6g} s"
-        elif time.perf_counter() - self.started > budget.wall_time:
+        elif time.perf_counter() > self.deadline:
             self.status, self.detail = Status.WALL_TIME, f"{budget.wall_time:g} s at t = {t:.6g} s"
+        elif len(events) > w and ((span := events[-1].time - events[-1 - w].time)
+                                  * budget.max_event_rate < w):
+            self.status = Status.ZENO
+            self.detail = f"{w} events within {span:.3g} s before t = {t:.6g} s"
         else:
-            times, w = self.event_times, self.window
-            if len(times) > w and (times[-1] - times[-1 - w]) * budget.max_event_rate < w:
-                self.status = Status.ZENO
-                self.detail = (f"{w} events within {times[-1] - times[-1 - w]:.3g} s "
-                               f"before t = {t:.6g} s")
-        return self.status is not Status.SUCCESS
+            return False
+        return True
 
     # -- output -----------------------------------------------------------------------------
     def dense(self, t_stop: float, success: bool) -> _Dense:
         return _Dense(self.rows, self.mu, t_stop, success)
+
+    def samples(self, t_stop: float, V_stop: float, mass: float) -> np.ndarray:
+        """Segment starts and the final time: rows ``t`` (s), ``V`` (m/s) and the force
+        ``m dV/dt`` (N) from the right, exact, as a fresh read-only array of shape (3, T)."""
+        rows = self.rows
+        times = [row[0] for row in rows]
+        speeds = [row[1] for row in rows]
+        forces = [mass * (row[2] + row[3] + row[5] + row[6]) for row in rows]
+        if t_stop > times[-1]:
+            t0, _, c1, B, lam, C, D = rows[-1]
+            s, mu = t_stop - t0, self.mu
+            decay = math.exp(-mu * s)
+            times.append(t_stop)
+            speeds.append(V_stop)
+            forces.append(mass * (c1 + B * math.exp(-lam * s) + C * decay
+                                  + D * (1.0 - mu * s) * decay))
+        table = np.array((times, speeds, forces))
+        table.setflags(write=False)
+        return table
 
 
 class _Dense:
@@ -197,95 +218,109 @@ class _Dense:
         decay = np.exp(-self.mu * s)
         return c1 + B * np.exp(-lam * s) + C * decay + D * (1.0 - self.mu * s) * decay
 
-    def end_rate(self, t: float) -> float:
-        """Derivative of the last segment at time ``t`` (s), m/s^2."""
-        t0, _, c1, B, lam, C, D = self.rows[-1]
-        s = t - t0
-        decay = math.exp(-self.mu * s)
-        return c1 + B * math.exp(-lam * s) + C * decay + D * (1.0 - self.mu * s) * decay
-
 
 # -- the force landscape of constant contact speeds ----------------------------------------
-@dataclass(frozen=True, eq=False)
-class _Landscape:
-    """Force-speed map of constant contact speeds: breakpoints and the force between them.
+# Both landscapes answer the ideal engine's three questions: where is ``V`` (:meth:`locate`),
+# what is the force and its slope inside an interval (:meth:`force`), and what holds at a
+# breakpoint (:meth:`stiction`, :meth:`contact`). Interval ``j`` is ``(xs[j-1], xs[j])``
+# (``xs[-1] = -inf``, ``xs[K] = +inf``).
+class _CoulombLandscape:
+    """The staircase of Coulomb contacts, read from the prefix sums a :class:`ContactSet`
+    already holds (its sorted distinct speeds and the magnitudes below / above each).
 
-    Interval ``j`` is ``(x[j-1], x[j])`` (``x[-1] = -inf``, ``x[K] = +inf``); inside it the
-    contact force is ``base_F[j] + slope[j] (V - base_x[j])``. At breakpoint ``k`` the
-    contacts there hold a stiction magnitude ``W[k]`` and the others push with ``G[k]``.
+    Nothing is rebuilt: each event reads two prefix sums, snapped to zero within
+    ``4 (K + 1) eps F_tot`` (the rule of :attr:`ContactSet.tie_tolerance`). Breakpoint ``k``
+    holds the stiction magnitude ``W = below[k+1] - below[k]``; the other contacts push with
+    ``G``, the mean of the two plateaus beside it.
     """
 
-    xs: list[float]
-    W: list[float]
-    G: list[float]
-    contact: list[int]
-    base_x: list[float]
-    base_F: list[float]
-    slope: list[float]
-    total: float
-    kind: str
+    __slots__ = ("xs", "total", "_below", "_above", "_tol", "_contacts", "_speeds", "_forces",
+                 "_first")
+    kind = "cross"
+
+    def __init__(self, contacts: ContactSet) -> None:
+        # The private prefix sums of ContactSet (levels, below, above) are exactly the
+        # staircase; reading them spares an O(N log N) sort per new plant.
+        self.xs: list[float] = contacts._levels.tolist()
+        self._below: list[float] = contacts._below.tolist()
+        self._above: list[float] = contacts._above.tolist()
+        self.total = self._below[-1]
+        self._tol = 4.0 * (len(self.xs) + 1) * _EPS * self.total
+        self._contacts = contacts
+        small = contacts.n <= _SMALL                 # few contacts: find indices by a scan
+        self._speeds = contacts.speeds.tolist() if small else None
+        self._forces = contacts.forces.tolist() if small else None
+        self._first: list[int] | None = None       # many: lowest index per level, on demand
 
     def locate(self, V: float) -> tuple[int, bool]:
         """``(k, True)`` when ``V`` is breakpoint ``k``, else ``(j, False)`` for interval ``j``."""
         j = bisect.bisect_left(self.xs, V)
         return (j, True) if j < len(self.xs) and self.xs[j] == V else (j, False)
 
-    def force(self, j: int, V: float) -> float:
+    def force(self, j: int, V: float) -> tuple[float, float]:
+        """Force (N) at ``V`` inside interval ``j`` (the plateau), and its slope: 0."""
+        plateau = self._above[j] - self._below[j]
+        return (plateau if abs(plateau) > self._tol else 0.0), 0.0
+
+    def stiction(self, k: int) -> tuple[float, float]:
+        """``(W, G)`` at breakpoint ``k``: stiction magnitude there and the others' push, N."""
+        above, below, tol = self._above, self._below, self._tol
+        lower, upper = above[k] - below[k], above[k + 1] - below[k + 1]     # the plateaus
+        push = 0.5 * ((lower if abs(lower) > tol else 0.0) + (upper if abs(upper) > tol else 0.0))
+        return below[k + 1] - below[k], (push if abs(push) > tol else 0.0)
+
+    def contact(self, k: int) -> int:
+        """The lowest index of the touching contacts at breakpoint ``k``."""
+        speeds = self._speeds
+        if speeds is not None:                       # a C-level scan beats sorting
+            i = speeds.index(self.xs[k])
+            while self._forces[i] <= 0:              # a lifted contact at the same speed
+                i = speeds.index(self.xs[k], i + 1)
+            return i
+        if self._first is None:                      # one sort, on the first event
+            contacts = self._contacts
+            active = np.flatnonzero(contacts.forces > 0)
+            _, first = np.unique(contacts.speeds[active], return_index=True)
+            self._first = active[first].tolist()
+        return self._first[k]
+
+
+@dataclass(frozen=True, eq=False)
+class _CompliantLandscape:
+    """Force-speed map of compliant contacts: saturation limits ``v_i +- k f_i`` as
+    breakpoints, the force linear between them (``base_F[j] + slope[j] (V - base_x[j])``
+    in interval ``j``). Breakpoints hold no stiction; ``G[k]`` is the force there."""
+
+    xs: list[float]
+    G: list[float]
+    first: list[int]
+    base_x: list[float]
+    base_F: list[float]
+    slope: list[float]
+    total: float
+    kind = "saturation"
+
+    locate = _CoulombLandscape.locate
+
+    def force(self, j: int, V: float) -> tuple[float, float]:
+        """Force (N) at ``V`` inside interval ``j``, and its slope ``dF/dV`` (N s/m)."""
         slope = self.slope[j]
-        return self.base_F[j] if slope == 0 else self.base_F[j] + slope * (V - self.base_x[j])
+        return (self.base_F[j] if slope == 0 else self.base_F[j] + slope * (V - self.base_x[j]),
+                slope)
+
+    def stiction(self, k: int) -> tuple[float, float]:
+        """``(0, G)``: no stiction at a saturation limit, the force there, N."""
+        return 0.0, self.G[k]
+
+    def contact(self, k: int) -> int:
+        """The lowest index of the contacts saturating at breakpoint ``k``."""
+        return self.first[k]
 
 
-def _stiff_landscape(plant: Plant, speeds: np.ndarray) -> _Landscape:
-    """Staircase of Coulomb contacts; the prefix sums and snapping of :class:`ContactSet`."""
-    forces = plant.contacts.forces
-    if forces.size <= _SMALL:
-        return _stiff_landscape_small(speeds.tolist(), forces.tolist())
-    active = np.flatnonzero(forces > 0)
-    levels, first, inverse = np.unique(speeds[active], return_index=True, return_inverse=True)
-    steps = np.bincount(inverse, weights=forces[active], minlength=levels.size)
-    cumulative = np.cumsum(steps)
-    below = np.concatenate(([0.0], cumulative))
-    above = np.concatenate((np.cumsum(steps[::-1])[::-1], [0.0]))
-    total = float(cumulative[-1])
-    tol = 4.0 * (levels.size + 1) * _EPS * total
-    plateaus = above - below
-    plateaus[np.abs(plateaus) <= tol] = 0.0
-    others = 0.5 * (plateaus[:-1] + plateaus[1:])
-    others[np.abs(others) <= tol] = 0.0
-    K = levels.size
-    zeros = [0.0] * (K + 1)
-    return _Landscape(levels.tolist(), steps.tolist(), others.tolist(),
-                      active[first].tolist(), zeros, plateaus.tolist(), zeros, total, "cross")
+_Landscape = _CoulombLandscape | _CompliantLandscape
 
 
-def _stiff_landscape_small(speeds: list[float], forces: list[float]) -> _Landscape:
-    """:func:`_stiff_landscape` in plain Python for a few contacts (same sums, same order)."""
-    levels: list[float] = []
-    steps: list[float] = []
-    first: list[int] = []
-    for speed, i in sorted((v, i) for i, (v, f) in enumerate(zip(speeds, forces)) if f > 0):
-        if levels and levels[-1] == speed:
-            steps[-1] += forces[i]
-        else:
-            levels.append(speed)
-            steps.append(forces[i])
-            first.append(i)
-    K = len(levels)
-    below = [0.0] * (K + 1)
-    above = [0.0] * (K + 1)
-    for k in range(K):
-        below[k + 1] = below[k] + steps[k]
-        above[K - 1 - k] = above[K - k] + steps[K - 1 - k]
-    total = below[K]
-    tol = 4.0 * (K + 1) * _EPS * total
-    plateaus = [p if abs(p) > tol else 0.0 for p in (a - b for a, b in zip(above, below))]
-    others = [g if abs(g) > tol else 0.0
-              for g in (0.5 * (lo + hi) for lo, hi in zip(plateaus[:-1], plateaus[1:]))]
-    zeros = [0.0] * (K + 1)
-    return _Landscape(levels, steps, others, first, zeros, plateaus, zeros, total, "cross")
-
-
-def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _Landscape:
+def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _CompliantLandscape:
     f = plant.contacts.forces
     k = plant.compliance
     active = np.flatnonzero(f > 0)
@@ -309,8 +344,26 @@ def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _Landscape:
     base_x = np.concatenate(([x[0]], x))
     base_F = np.concatenate(([total], at_x))
     base_F[-1] = -total
-    return _Landscape(x.tolist(), [0.0] * x.size, at_x.tolist(), first.tolist(),
-                      base_x.tolist(), base_F.tolist(), slope.tolist(), total, "saturation")
+    return _CompliantLandscape(x.tolist(), at_x.tolist(), first.tolist(), base_x.tolist(),
+                               base_F.tolist(), slope.tolist(), total)
+
+
+def _landscape(plant: Plant, a: float) -> _Landscape:
+    """The landscape of the contact speeds commanded at time ``a`` (s), kept in the plant's
+    cache (one entry per distinct command)."""
+    cache = plant.derived("exact landscapes")
+    constant = plant.commands is None and plant.motors is None
+    speeds = None if constant else plant.command(a)
+    key = None if constant else speeds.tobytes()
+    land = cache.get(key)
+    if land is None:
+        if plant.compliance > 0:
+            land = _compliant_landscape(plant, speeds)
+        else:
+            contacts = plant.contacts
+            land = _CoulombLandscape(contacts if constant else contacts.with_speeds(speeds))
+        cache[key] = land
+    return land
 
 
 # -- the ideal-motor engine -------------------------------------------------------------------
@@ -331,34 +384,32 @@ def _pieces(plant: Plant, t_end: float) -> list[float]:
 def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
     """Integrate with piecewise-constant contact speeds; returns the final ``(t, V)``."""
     m, c = plant.mass, plant.damping
-    build = _compliant_landscape if plant.compliance > 0 else _stiff_landscape
-    cache = plant.derived("exact landscapes")
     bounds = _pieces(plant, t_end)
     V = v0
     stuck: int | None = None         # contact the body is stuck to (Coulomb only)
     for a, b in zip(bounds[:-1], bounds[1:]):
-        speeds = plant.command(a)
-        key = speeds.tobytes()
-        if key not in cache:
-            cache[key] = build(plant, speeds)
-        land = cache[key]
+        land = _landscape(plant, a)
+        xs = land.xs
+        K = len(xs)
         E = plant.external(a)
+        tol_scale = 4.0 * (K + 1) * _EPS                # tie tolerance per N of force scale
+        push_scale = land.total + abs(E)
         t = t_sum = a
         t_err = 0.0                     # compensated sum of the segment times
         if a > 0:
             rec.event(a, "command", None, V)
         j, at = land.locate(V)
-        if stuck is not None and not (at and land.W[j] > 0):
+        if stuck is not None and not (at and land.stiction(j)[0] > 0):
             rec.event(a, "release", stuck, V)
             stuck = None
         while True:
             if at:
-                G = land.G[j] + E - c * V
-                W = land.W[j]
-                tol = 4.0 * (len(land.xs) + 1) * _EPS * (land.total + abs(E) + c * abs(V))
+                W, G = land.stiction(j)
+                G += E - c * V
+                tol = tol_scale * (push_scale + c * abs(V))
                 rec.n_evaluations += 1
                 if abs(G) <= W + tol:                       # stick (or rest at a balance)
-                    contact = land.contact[j]
+                    contact = land.contact(j)
                     if W > 0 and stuck != contact:
                         if stuck is not None:
                             rec.event(t, "release", stuck, V)
@@ -370,24 +421,23 @@ def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[f
                     rec.event(t, "release", stuck, V)
                     stuck = None
                 else:
-                    rec.event(t, land.kind, land.contact[j], V)
+                    rec.event(t, land.kind, land.contact(j), V)
                 j = j + 1 if G > 0 else j
             # Free motion inside interval j.
-            slope = land.slope[j]
-            r0 = (land.force(j, V) + E - c * V) / m
+            force, slope = land.force(j, V)
+            r0 = (force + E - c * V) / m
             lam = (c - slope) / m
             rec.n_evaluations += 1
             rec.segment(t, V, r0, lam)
             if r0 == 0.0:
                 break
             up = r0 > 0
-            target = (land.xs[j] if j < len(land.xs) else math.inf) if up else \
-                (land.xs[j - 1] if j > 0 else -math.inf)
-            s = _reach_time(V, r0, lam, target) if math.isfinite(target) else math.inf
+            target = (xs[j] if j < K else math.inf) if up else (xs[j - 1] if j > 0 else -math.inf)
+            s = _reach_time(V, r0, lam, target)                # inf for an infinite target
             if t + s >= b:
                 V = V + r0 * _em1(lam, b - t)
-                lo = land.xs[j - 1] if j > 0 else -math.inf
-                hi = land.xs[j] if j < len(land.xs) else math.inf
+                lo = xs[j - 1] if j > 0 else -math.inf
+                hi = xs[j] if j < K else math.inf
                 V = min(max(V, lo), hi)
                 break
             t_sum, t_err = _neumaier(t_sum, t_err, s)
@@ -865,44 +915,43 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         t_stop, V_stop = _run_dynamic(plant, t_end, v0, rec)
     else:
         t_stop, V_stop = _run_ideal(plant, t_end, v0, rec)
-    success = rec.status is Status.SUCCESS
+    success = rec.status is _SUCCESS
     dense = rec.dense(t_stop, success)
+    m = plant.mass
     if t_eval is None:
         # Segment starts (events, switches, motor phase changes) and the end: exact values.
-        rows = rec.rows
-        samples = [(row[0], row[1], row[2] + row[3] + row[5] + row[6]) for row in rows]
-        if t_stop > rows[-1][0]:
-            samples.append((t_stop, V_stop, dense.end_rate(t_stop)))
-        table = np.array(samples, dtype=float).T.copy()
-        table[2] *= plant.mass
-        table.setflags(write=False)              # fresh: the result need not copy it
-        times, V, force = table
+        times, V, force = rec.samples(t_stop, V_stop, m)
     else:
-        times = t_eval
+        times = t_eval.copy() if t_eval.flags.writeable else t_eval
         V = dense(times)
-        force = plant.mass * dense.derivative(times)
+        force = m * dense.derivative(times)
         force[np.isnan(V)] = np.nan
+        for array in (times, V, force):
+            array.setflags(write=False)
     speeds = _contact_speeds(plant, times)
     speeds.setflags(write=False)
-    detail = rec.detail if not success else f"{len(rec.events)} events"
-    return SimulationResult(
+    n_events = len(rec.events)
+    detail = rec.detail if not success else f"{n_events} events"
+    # Every array above is fresh and read-only, every count an int: no re-validation.
+    return SimulationResult._trusted(
         method="exact", setting="event-driven closed form", t=times, V=V,
         contact_speeds=speeds, force=force, events=tuple(rec.events), status=rec.status,
-        message=status_message(rec.status, detail), n_events=len(rec.events),
+        message=status_message(rec.status, detail), n_events=n_events,
         n_evaluations=rec.n_evaluations, n_steps=len(rec.rows),
         wall_time=time.perf_counter() - started, dense=dense)
 
 
 def _contact_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
     """Contact speeds at ``times``: shape (T, n), a read-only broadcast when constant."""
-    if plant.dynamic_motors and plant.commands is not None:
-        return _motor_speeds(plant, times)
     if plant.commands is None:
         speeds = plant.command(0.0)
-        if times.size * plant.n <= _SMALL_TABLE:
-            table = np.empty((times.size, plant.n))
+        shape = (times.size, speeds.size)
+        if times.size * speeds.size <= _SMALL_TABLE:
+            table = np.empty(shape)
             table[:] = speeds
             return table
-        return np.broadcast_to(speeds, (times.size, plant.n))   # no copy for huge tables
+        return np.broadcast_to(speeds, shape)               # no copy for huge tables
+    if plant.dynamic_motors:
+        return _motor_speeds(plant, times)
     low, high = plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf)
     return np.clip(plant.commands(times).reshape(times.size, plant.n), low, high)

@@ -89,6 +89,14 @@ class Event:
         if self.contact is not None and (type(self.contact) is not int or self.contact < 0):
             object.__setattr__(self, "contact", as_int(self.contact, "contact", "Event", low=0))
 
+    @classmethod
+    def _trusted(cls, time: float, kind: str, contact: int | None, speed: float) -> Event:
+        """An event whose fields the simulator already produced checked (a float time and
+        speed, a known kind, a contact index or None): built without re-validation."""
+        event = object.__new__(cls)
+        event.__dict__.update(time=time, kind=kind, contact=contact, speed=speed)
+        return event
+
 
 def _frozen(value: Any, name: str, ndim: int) -> np.ndarray:
     array = np.asarray(value, dtype=float)
@@ -164,6 +172,15 @@ class SimulationResult:
             if type(count) is not int or count < 0:
                 object.__setattr__(self, name, as_int(count, name, "SimulationResult", low=0))
 
+    @classmethod
+    def _trusted(cls, **values: Any) -> SimulationResult:
+        """A result from fields a simulator produced itself: every field given, the arrays
+        fresh, read-only and of matching shapes, the counts ints, ``events`` a tuple of
+        :class:`Event`. Built without re-validation or copies (private fast path)."""
+        result = object.__new__(cls)
+        result.__dict__.update(values)
+        return result
+
     @property
     def success(self) -> bool:
         """True when the run reached ``t_end``."""
@@ -216,7 +233,11 @@ class SimulationResult:
                 f"events={self.n_events}, steps={self.n_steps}, wall_time={self.wall_time:.3g} s)")
 
 
+_MESSAGES = {status: status.value for status in Status}     # Enum .value is a slow property
+
+
 def status_message(status: Status, detail: str = "") -> str:
     """``status.value`` followed by ``detail`` (a sentence of specifics), if any."""
-    return status.value if not detail else f"{status.value} ({detail})"
+    message = _MESSAGES[status]
+    return message if not detail else f"{message} ({detail})"
 

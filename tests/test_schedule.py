@@ -429,3 +429,12 @@ def test_a_prediction_that_does_not_verify_is_redone_closer_to_the_exact_law(mon
     assert result.epsilon == pytest.approx(1e-3 / 4, rel=1e-15, abs=0)   # _RETRY = 4
     grid = exact_run(plant, result, 0.3, result.times)
     assert np.max(np.abs(grid.V - result.body_speed)) <= result.prediction_bound
+
+
+def test_the_exact_body_speed_is_the_exact_simulation_at_the_period_starts(braking):
+    plant, result = braking
+    grid = exact_run(plant, result, 0.3, result.times)
+    # Same simulator, same commands, same times: equal up to the dense evaluation's rounding.
+    np.testing.assert_allclose(result.exact_body_speed, grid.V, rtol=0, atol=1e-12)
+    assert json.loads(json.dumps(result.to_dict()))["exact_body_speed"] == \
+        result.exact_body_speed.tolist()

@@ -228,6 +228,9 @@ class ScheduleResult:
     exact_deviation : float, m/s
         ``max |V_exact - body_speed|`` over the samples (at most ``prediction_bound`` when
         verified).
+    exact_body_speed : ndarray of shape (K + 1,), m/s
+        The exact simulation's body speed at ``times`` (NaN when it did not finish): callers
+        need not simulate the schedule again to check it.
     lower_bound : float or None, m/s
         Tracking: a certified lower bound on the sup tracking error (at the same samples)
         of *every* schedule within the motor limits (:func:`tracking_lower_bound`); None for
@@ -262,10 +265,12 @@ class ScheduleResult:
     lower_bound: float | None = None
     gap: float | None = None
     tolerance: float = 0.0
+    exact_body_speed: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
     target: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        for name in ("times", "speeds", "contact_speeds", "body_speed", "reference"):
+        for name in ("times", "speeds", "contact_speeds", "body_speed", "reference",
+                     "exact_body_speed"):
             array = np.array(getattr(self, name), dtype=float)
             array.setflags(write=False)
             object.__setattr__(self, name, array)
@@ -333,6 +338,7 @@ class ScheduleResult:
             "method": self.method,
             "exact_tracking_error": finite(self.exact_tracking_error),
             "exact_deviation": finite(self.exact_deviation),
+            "exact_body_speed": [finite(x) for x in self.exact_body_speed],
             "lower_bound": opt(self.lower_bound),
             "gap": opt(self.gap),
             "tolerance": float(self.tolerance),
@@ -769,6 +775,7 @@ class _Verified:
     tracking: float
     objective: float
     body: np.ndarray
+    exact_body: np.ndarray
     exact_V: np.ndarray
     exact_tracking: float
     deviation: float
@@ -991,7 +998,8 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         value = float(np.sum(0.5 * (miss[1:] ** 2 + miss[:-1] ** 2) * np.diff(t_d))
                       / (K * period * scale ** 2)
                       + smoothness * np.sum(moves ** 2) / (n * K * scale ** 2))
-        body = V_d[np.searchsorted(t_d, times - 1e-12 * period)]
+        at_times = np.searchsorted(t_d, times - 1e-12 * period)
+        body = V_d[at_times]
         table = PiecewiseConstant(times[1:], np.vstack((commands, commands[-1])))
         try:
             exact = simulate(replace(plant, commands=table), float(times[-1]), v0=v0,
@@ -1006,7 +1014,8 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         deviation = float(np.max(np.abs(exact_V - V_d))) if finished else math.inf
         exact_tracking = float(np.max(np.abs(exact_V - ref_d))) if finished else math.inf
         return _Verified(commands, contact, t_d, V_d, bound, float(np.max(np.abs(miss))),
-                         value, body, exact_V, exact_tracking, deviation, finished, report)
+                         value, body, exact_V[at_times], exact_V, exact_tracking, deviation,
+                         finished, report)
 
     def certify(candidate: _Verified) -> tuple[float | None, float | None, float | None]:
         """(lower bound, gap, arrival) of a verified candidate."""
@@ -1095,4 +1104,4 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         iterations, solver_status, status, f"{status.value}; " + "; ".join(detail),
         time.perf_counter() - start_clock, method=method, exact_tracking_error=best.exact_tracking,
         exact_deviation=best.deviation, lower_bound=lower, gap=gap, tolerance=tolerance,
-        target=target)
+        exact_body_speed=best.exact_body, target=target)

@@ -84,7 +84,7 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
     from .errors import SceneError
-    from .report import schedule_check, write_schedule
+    from .report import schedule_check, schedule_lines, write_schedule
     from .scene import load_scene
     from .study import design_scene_schedule
 
@@ -98,10 +98,8 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
     if args.json:
         _print_json({**result.to_dict(), "exact_check": verified, "written": [str(p) for p in written]})
     else:
-        print(f"{result.status.value}")
-        print(f"{result.times.size - 1} periods of {result.period * 1e3:g} ms, {result.n} contacts; "
-              f"tracking error {result.tracking_error:.3g} m/s; exact simulation within "
-              f"{verified['max_deviation']:.2g} m/s of the prediction (bound {result.prediction_bound:.2g})")
+        for line in schedule_lines(result, check):
+            print(line)
         print(f"wrote {', '.join(str(p) for p in written)}")
     return EXIT_OK
 

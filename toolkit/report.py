@@ -16,7 +16,7 @@ import numpy as np
 from ._io import atomic_write_bytes, atomic_write_text
 from .study import StudyResult
 
-__all__ = ["study_summary", "study_to_dict", "write_study", "to_json", "schedule_csv", "schedule_check",
+__all__ = ["study_summary", "study_to_dict", "write_study", "to_json", "schedule_csv", "schedule_check", "schedule_lines",
            "write_precision", "write_schedule"]
 
 
@@ -66,6 +66,22 @@ def schedule_check(schedule: Any, check: Any) -> dict[str, Any]:
             "within_bound": bool(deviation <= schedule.prediction_bound), "V": check.V}
 
 
+def schedule_lines(schedule: Any, check: Any) -> list[str]:
+    """Human lines on a designed schedule and its exact check."""
+    verified = schedule_check(schedule, check)
+    head = f"schedule: {schedule.times.size - 1} periods of {schedule.period * 1e3:g} ms, {schedule.n} contacts; "
+    if schedule.minimum_time is not None:
+        arrival = "not reached" if schedule.arrival_time is None else f"{schedule.arrival_time:.4g} s"
+        head += f"arrival {arrival} (closed-form minimum {schedule.minimum_time:.4g} s)"
+    else:
+        head += (f"tracking error {schedule.exact_tracking_error:.3g} m/s (exact model), lower bound "
+                 f"{schedule.lower_bound:.3g} m/s")
+    return [head,
+            f"exact simulation within {verified['max_deviation']:.2g} m/s of the prediction "
+            f"(bound {verified['prediction_bound']:.2g} m/s)",
+            schedule.status.value]
+
+
 def study_to_dict(result: StudyResult) -> dict[str, Any]:
     """Everything the study computed, JSON-able."""
     out: dict[str, Any] = {"scene": result.scene.name, "stages": list(result.stages),
@@ -98,10 +114,7 @@ def study_summary(result: StudyResult) -> list[str]:
         lines.append(f"allocation ({a.method}): sup error {a.error_sup:.4g} N, bound {a.bound:.4g} N, "
                      f"gap {a.gap:.2g} N; {a.status.value}")
     if result.schedule is not None:
-        sch, check = result.schedule, schedule_check(result.schedule, result.schedule_check)
-        lines.append(f"schedule: {sch.times.size - 1} periods of {sch.period * 1e3:g} ms, tracking error "
-                     f"{sch.tracking_error:.3g} m/s, exact simulation within {check['max_deviation']:.2g} m/s "
-                     f"of the prediction (bound {check['prediction_bound']:.2g}); {sch.status.value}")
+        lines.extend(schedule_lines(result.schedule, result.schedule_check))
     if result.simulation is not None:
         s = result.simulation
         lines.append(f"simulation ({s.method}): V({s.t[-1]:g} s) = {s.V[-1]:.6g} m/s after "

@@ -292,6 +292,12 @@ def test_strict_refuses_unrealizable_targets(target, limits, word) -> None:
     ({"rate_limit": 1.0, "dt": 0.0}, ParameterError, "dt"),
     ({"fixed": [True, False]}, ParameterError, "shape"),
     ({"failed": [7]}, ParameterError, "indices"),
+    # Non-integral and out-of-range indices are refused, not truncated (1.5 is not 1).
+    ({"fixed": [1.5]}, ParameterError, "'fixed' parameter of allocate must hold integral"),
+    ({"liftable": [0.999]}, ParameterError, "'liftable' parameter .* integral"),
+    ({"failed": [-1]}, ParameterError, "'failed' parameter .* indices in \\[0, 3\\]"),
+    ({"fixed": [np.nan]}, ParameterError, "integral"),
+    ({"fixed": ["a"]}, ParameterTypeError, "fixed"),
     ({"strict": "yes"}, ParameterTypeError, "strict"),
     ({"time_limit": -1.0}, ParameterError, "time_limit"),
 ])
@@ -324,7 +330,11 @@ def test_strict_rate_limit_refusal_and_lenient_note() -> None:
 def test_result_to_dict_is_json_with_the_cli_keys() -> None:
     result = allocate(FrictionFraction(0.4, V_MAX), ContactSet(np.zeros(10)),
                       speed_limits=(-V_MAX, V_MAX))
-    data = json.loads(json.dumps(result.to_dict()))
+    # allow_nan=False: strict JSON (no NaN/Infinity tokens), also for the MILP's extra stats.
+    data = json.loads(json.dumps(result.to_dict(), allow_nan=False))
+    milp = allocate(FrictionFraction(0.4, V_MAX), ContactSet(np.zeros(3), [1.0, 2.0, 3.0]),
+                    speed_limits=(-V_MAX, (V_MAX, V_MAX, 0.3)), method="milp")
+    assert json.loads(json.dumps(milp.to_dict(), allow_nan=False))["method"] == "milp"
     for key in ("speeds", "error_sup", "error_l1", "bound", "gap", "method", "status",
                 "wall_time"):
         assert key in data

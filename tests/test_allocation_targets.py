@@ -86,7 +86,12 @@ def test_equilibrium_speed_curve_is_a_coulomb_step() -> None:
     (lambda: Viscosity(-1.0, 0.0, 0.3), ParameterError, "slope"),
     (lambda: Viscosity(1.0, np.nan, 0.3), ParameterError, "center"),
     (lambda: Viscosity(1.0, 0.0, -0.3), ParameterError, "band"),
-    (lambda: Viscosity(1.0, 0.0, (0.3, -0.3)), ParameterError, "lo <= hi"),
+    (lambda: Viscosity(1.0, 0.0, (0.3, -0.3)), ParameterError, "lo < hi"),
+    # Zero-width bands: a law at a single speed is met by a Coulomb step with error 0.
+    (lambda: Viscosity(10.0, 0.0, 0.0), ParameterError, "band"),
+    (lambda: Viscosity(10.0, 0.0, (0.1, 0.1)), ParameterError, "lo < hi"),
+    (lambda: FrictionFraction(0.4, 0.0), ParameterError, "band"),
+    (lambda: FrictionFraction(0.4, (0.2, 0.2)), ParameterError, "lo < hi"),
     (lambda: Viscosity(1.0, 0.0, (0.1, 0.2, 0.3)), ParameterError, "pair"),
     (lambda: FrictionFraction("half", 0.3), ParameterTypeError, "fraction"),
     (lambda: FrictionFraction(0.5, "wide"), ParameterTypeError, "band"),

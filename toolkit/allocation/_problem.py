@@ -70,13 +70,30 @@ class Projection:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary."""
-        return {"reasons": list(self.reasons), "distance_sup": _json_float(self.distance_sup),
-                "distance_l1": _json_float(self.distance_l1),
-                "speeds": self.curve.speeds.tolist(), "forces": self.curve.forces.tolist()}
+        return _jsonable({"reasons": list(self.reasons), "distance_sup": self.distance_sup,
+                          "distance_l1": self.distance_l1, "speeds": self.curve.speeds,
+                          "forces": self.curve.forces})
 
 
-def _json_float(value: float) -> float | str:
-    return float(value) if np.isfinite(value) else str(value)
+def _jsonable(value: Any) -> Any:
+    """``value`` made JSON-able (the one place non-finite floats are handled here).
+
+    Arrays and tuples become lists, numpy scalars Python ones, and ``inf``/``-inf``/``nan``
+    the strings ``"inf"``/``"-inf"``/``"nan"`` (``json`` would otherwise write the
+    non-standard tokens ``Infinity``/``NaN``), recursively through dicts and lists.
+    """
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in (value.tolist() if isinstance(value, np.ndarray)
+                                       else value)]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (np.integer, int)):
+        return int(value)
+    if isinstance(value, (np.floating, float)):
+        return float(value) if np.isfinite(value) else str(float(value))
+    return value
 
 
 @dataclass(frozen=True, eq=False)
@@ -226,21 +243,21 @@ class AllocationResult:
         """JSON-able summary: ``speeds``, ``error_sup``, ``error_l1``, ``bound``, ``gap``,
         ``method``, ``status``, ``wall_time``, ``message``, ``active``, ``forces``,
         ``projection``, ``extra``."""
-        return {
-            "speeds": self.speeds.tolist(),
-            "active": self.active.tolist(),
-            "forces": np.asarray(getattr(self.contacts, "forces", [])).tolist(),
-            "error_sup": _json_float(self.error_sup),
-            "error_l1": _json_float(self.error_l1),
-            "bound": _json_float(self.bound),
-            "gap": _json_float(self.gap),
+        return _jsonable({
+            "speeds": self.speeds,
+            "active": self.active,
+            "forces": np.asarray(getattr(self.contacts, "forces", [])),
+            "error_sup": self.error_sup,
+            "error_l1": self.error_l1,
+            "bound": self.bound,
+            "gap": self.gap,
             "method": self.method,
             "status": self.status.name,
             "message": self.message,
             "wall_time": float(self.wall_time),
             "projection": None if self.projection is None else self.projection.to_dict(),
             "extra": self.extra,
-        }
+        })
 
 
 # -- building ----------------------------------------------------------------------------------
@@ -258,26 +275,30 @@ def _per_contact(value: Any, name: str, n: int) -> np.ndarray:
 
 
 def _mask(value: Any, name: str, n: int) -> np.ndarray:
+    """A boolean mask of shape (n,) from a mask or a list of integral contact indices."""
     if value is None:
         return np.zeros(n, dtype=bool)
     array = np.asarray(value)
-    if array.dtype != bool:
-        # Accept index lists as well as boolean masks.
-        try:
-            index = np.asarray(value, dtype=int).ravel()
-        except (TypeError, ValueError):
-            raise ParameterTypeError(parameter_message(
-                name, _OWNER, "be a boolean mask or a list of contact indices", value)) from None
-        if np.any((index < 0) | (index >= n)):
+    if array.dtype == bool:
+        if array.shape != (n,):
             raise ParameterError(parameter_message(
-                name, _OWNER, f"hold contact indices in [0, {n - 1}]", value))
-        mask = np.zeros(n, dtype=bool)
-        mask[index] = True
-        return mask
-    if array.shape != (n,):
+                name, _OWNER, f"be a boolean mask of shape ({n},)", f"shape {array.shape}"))
+        return array.copy()
+    # An index list: integral values only (1.5 is not contact 1), each in [0, n - 1].
+    try:
+        index = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ParameterTypeError(parameter_message(
+            name, _OWNER, "be a boolean mask or a list of contact indices", value)) from None
+    if np.any(~np.isfinite(index)) or np.any(index != np.round(index)):
         raise ParameterError(parameter_message(
-            name, _OWNER, f"be a boolean mask of shape ({n},)", f"shape {array.shape}"))
-    return array.copy()
+            name, _OWNER, "hold integral contact indices (or be a boolean mask)", value))
+    if np.any((index < 0) | (index >= n)):
+        raise ParameterError(parameter_message(
+            name, _OWNER, f"hold contact indices in [0, {n - 1}]", value))
+    mask = np.zeros(n, dtype=bool)
+    mask[index.astype(int)] = True
+    return mask
 
 
 def _limits(speed_limits: Any, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -46,10 +46,17 @@ def parse_band(band: Any, name: str, owner: str, center: float = 0.0) -> tuple[f
 
     Returns
     -------
-    (lo, hi) : tuple of float, m/s, with ``lo <= hi``
+    (lo, hi) : tuple of float, m/s, with ``lo < hi``
+
+    Raises
+    ------
+    ParameterError
+        A half-width ``<= 0`` or a pair with ``lo >= hi``: a band of zero width would ask
+        for a law at a single speed, which every staircase with its steps there meets with
+        error 0 (a Coulomb step, not the requested law).
     """
     if isinstance(band, numbers.Real) and not isinstance(band, bool):
-        half = as_float(band, name, owner, low=0.0)
+        half = as_float(band, name, owner, low=0.0, low_open=True)
         return center - half, center + half
     if isinstance(band, (str, bytes)) or not hasattr(band, "__len__"):
         raise ParameterTypeError(parameter_message(
@@ -59,8 +66,9 @@ def parse_band(band: Any, name: str, owner: str, center: float = 0.0) -> tuple[f
         raise ParameterError(parameter_message(
             name, owner, "be a half-width or a pair (lo, hi) in m/s", band))
     lo, hi = float(pair[0]), float(pair[1])
-    if not lo <= hi:
-        raise ParameterError(parameter_message(name, owner, "satisfy lo <= hi", band))
+    if not lo < hi:
+        raise ParameterError(parameter_message(
+            name, owner, "satisfy lo < hi (a band of positive width)", band))
     return lo, hi
 
 
@@ -178,7 +186,8 @@ class Viscosity:
     center : float, m/s
         Speed of zero force (the equilibrium).
     band : float or pair of float, m/s
-        Half-width around ``center``, or ``(lo, hi)``: where the viscous law should hold.
+        Half-width ``> 0`` around ``center``, or ``(lo, hi)`` with ``lo < hi``: where the
+        viscous law should hold.
     """
 
     slope: float
@@ -210,7 +219,8 @@ class FrictionFraction:
         negative values push forward. ``|fraction| > 1`` is unrealizable and is projected
         (or refused with ``strict=True``) by :func:`~toolkit.allocation.allocate`.
     band : float or pair of float, m/s
-        Half-width around 0 (``v`` -> ``(-v, v)``) or ``(lo, hi)``: the sliding speeds.
+        Half-width ``> 0`` around 0 (``v`` -> ``(-v, v)``) or ``(lo, hi)`` with ``lo < hi``:
+        the sliding speeds.
     """
 
     fraction: float

@@ -135,6 +135,17 @@ def test_brute_force_reproduces_closed_forms() -> None:
 
 
 # -- the MILP against brute force (tiny instances) -------------------------------------------------
+def _assert_valid_tight_bound(bound: float, optimum: float, total: float) -> None:
+    """``bound`` is a lower bound of the brute-force ``optimum`` and within tolerance of it.
+
+    Upper side: brute-force bisection resolves the optimum to 2 F_tot / 2^40 < 1e-11 N, so a
+    valid bound is <= optimum + 1e-9. Lower side: HiGHS closes to 1e-9 F_tot and the reported
+    bound is lowered by BOUND_ALLOWANCE F_tot (1e-8), so it is >= optimum - 1e-7 F_tot.
+    """
+    assert bound <= optimum + 1e-9
+    assert bound >= optimum - 1e-7 * total
+
+
 def _random_curve(rng: np.random.Generator, total: float) -> ForceCurve:
     xs = np.sort(rng.uniform(-0.3, 0.3, 3))
     return ForceCurve(xs, np.sort(rng.uniform(-total, total, 3))[::-1])
@@ -152,7 +163,7 @@ def test_milp_matches_brute_force_with_free_speeds(seed: int) -> None:
                            np.zeros(n, bool))
     # Bisection resolves to 2 F_tot / 2^40 ~ 1e-11; HiGHS tolerances are 1e-9 of F_tot.
     assert result.error_sup == pytest.approx(expected, abs=1e-7)
-    assert result.bound == pytest.approx(expected, abs=1e-7)
+    _assert_valid_tight_bound(result.bound, expected, forces.sum())
     assert result.status is AllocationStatus.OPTIMAL
 
 
@@ -188,7 +199,7 @@ def test_milp_matches_brute_force_with_boxes_lifts_and_fixed(seed: int) -> None:
     expected = brute_force(curve, forces, lo, hi, liftable)
     assert result.extra["formulation"] == "pairwise"
     assert result.error_sup == pytest.approx(expected, abs=1e-7)
-    assert result.bound == pytest.approx(expected, abs=1e-7)
+    _assert_valid_tight_bound(result.bound, expected, forces.sum())
     assert result.speeds[0] == v0[0]                                    # fixed stays
     assert np.all(np.abs(result.speeds - v0) <= 0.15 + 1e-15)           # rate limit
     assert np.all(result.active[~liftable])
@@ -299,3 +310,37 @@ def test_time_limit_returns_the_best_allocation_with_an_honest_gap() -> None:
     assert result.gap == pytest.approx(result.error_sup - result.bound, rel=0, abs=0)
     assert result.gap >= -1e-7 * forces.sum()                      # HiGHS tolerance 1e-9 F
     assert np.all(np.abs(result.speeds - v0) <= 0.2 + 1e-12)
+
+
+@pytest.mark.parametrize("upper", [V_MAX, (V_MAX, V_MAX, 0.3)])
+def test_every_contact_liftable_keeps_one_down(upper) -> None:
+    # Target 0 with loads 1, 2, 3.5 all liftable: lifting all would give F = 0 (no contact
+    # set at all). With one contact at least down the best is {1, 2} against {3.5}: 0.5 N.
+    # A shared box goes through the partition MILP, per-contact boxes through the pairwise.
+    forces = np.array([1.0, 2.0, 3.5])
+    result = allocate(FrictionFraction(0.0, V_MAX), ContactSet(np.zeros(3), forces),
+                      liftable=[0, 1, 2], speed_limits=(-V_MAX, upper))
+    hi = np.broadcast_to(np.asarray(upper, dtype=float), (3,))
+    expected = brute_force(result.curve, forces, np.full(3, -V_MAX), hi, np.ones(3, bool))
+    assert expected == pytest.approx(0.5, abs=1e-9)           # closed form above; bisection
+    assert result.error_sup == pytest.approx(expected, abs=1e-7)   # HiGHS tol 1e-9 F_tot
+    assert result.bound <= expected + 1e-9                     # a valid lower bound
+    assert result.contacts.total_force > 0
+    assert result.extra["formulation"] == ("partition" if upper == V_MAX else "pairwise")
+
+
+def test_milp_bound_is_conservative_by_the_stated_allowance() -> None:
+    # Ten unit contacts, two failed at 0 m/s, equilibrium asked at 0.1 m/s (margin 3): the
+    # failed pair is below 0.1 on (0, 0.1), where the force is at most 10 - 2 * 2 = 6 N
+    # against the target's 10 N: the optimum is 4 N (closed form). HiGHS's floating dual
+    # bound alone gave gaps of -3.6e-15 here; the reported bound is lowered by the stated
+    # allowance, so it lies in [4 - 2 * allowance, 4] and the gap is >= 0.
+    from toolkit.allocation._milp import BOUND_ALLOWANCE
+
+    result = allocate(EquilibriumSpeed(0.1, 3), ContactSet(np.zeros(10)), failed=[0, 1],
+                      speed_limits=(-V_MAX, V_MAX))
+    allowance = BOUND_ALLOWANCE * 10.0
+    assert result.error_sup == pytest.approx(4.0, abs=1e-9)      # exact staircase levels
+    assert 4.0 - 2 * allowance <= result.bound <= 4.0
+    assert result.gap >= 0.0
+    assert result.extra["bound_allowance"] == pytest.approx(allowance, rel=1e-15)

@@ -105,8 +105,9 @@ def failure_margin(contacts: ContactSet, speed: float) -> int:
     may then stop at any speed and ``speed`` stays in the equilibrium set. Returns -1 when
     ``speed`` is not even an equilibrium (``W < |U - L|``).
     """
-    below, above, at = (float(x) for x in contacts._parts(speed))  # noqa: SLF001
-    slack = at - abs(above - below)
+    # force_bounds(speed) = [U - L - W, U - L + W] (public API; no private access).
+    low, high = (float(x) for x in contacts.force_bounds(float(speed)))
+    slack = 0.5 * (high - low) - abs(0.5 * (high + low))
     tol = contacts.tie_tolerance
     if slack < -tol:
         return -1

@@ -204,7 +204,9 @@ class AllocationResult:
     bound : float, N
         Certified lower bound on the best achievable ``error_sup`` under the constraints.
     gap : float, N
-        ``error_sup - bound``.
+        ``max(0, error_sup - bound)``: a valid bound never exceeds an achieved error, so a
+        negative difference can only be rounding (of the order of the solver tolerances)
+        and is reported as 0.
     method : str
         The solver that produced the speeds.
     status : AllocationStatus
@@ -421,7 +423,8 @@ def make_result(problem: AllocationProblem, speeds: np.ndarray, active: np.ndarr
     forces = np.where(active, problem.forces, 0.0)
     achieved = ContactSet(speeds, forces)
     error_sup, error_l1 = evaluate_errors(problem.curve, achieved)
-    gap = error_sup - bound
+    # A certified bound is <= every achievable error, so error < bound is rounding only.
+    gap = max(error_sup - bound, 0.0)
     if status is None:
         if gap <= gap_tolerance * max(problem.total_force, 1.0):
             status = (AllocationStatus.PROJECTED if problem.projection is not None

@@ -151,3 +151,10 @@ def test_schedule_writes_csv_and_json_verified_by_exact_simulation(tmp_path):
 def test_schedule_without_section_is_a_user_error():
     done = cli("schedule", "designs/equal.toml")
     assert done.returncode == 2 and "no [schedule]" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_output_folder_that_is_a_file_is_a_user_error(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    done = cli("run", "designs/equal.toml", "--out", str(blocker / "sub"))
+    assert done.returncode == 2 and "cannot write the output" in done.stderr and "Traceback" not in done.stderr

@@ -257,3 +257,22 @@ def test_distribution_bad_input(call, error, fragment):
     with pytest.raises(error) as info:
         call()
     assert fragment in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "fragment"),
+    [
+        (lambda: ContactSet([0.0, 1.0, 2.0], [1e308] * 3), ParameterError, "finite sum"),
+        (lambda: ContactSet([True, False]), ParameterTypeError, "real numbers"),
+        (lambda: ContactSet([0.0]).force("a"), ParameterTypeError, "'V' parameter of ContactSet.force"),
+        (lambda: ContactSet([0.0]).force(1j), ParameterTypeError, "real numbers"),
+        (lambda: ContactSet([0.0]).force(None), ParameterTypeError, "real numbers"),
+        (lambda: ContactSet([0.0]).cdf([np.nan]), ParameterError, "'V' parameter of ContactSet.cdf"),
+        (lambda: ContactSet([0.0]).force_bounds([np.nan]), ParameterError, "ContactSet.force_bounds"),
+        (lambda: ContactDistribution(stats.poisson(3.0), 1.0), ParameterTypeError, "continuous"),
+    ],
+)
+def test_more_bad_input(call, error, fragment):
+    with pytest.raises(error) as info:
+        call()
+    assert fragment in str(info.value)

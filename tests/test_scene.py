@@ -31,7 +31,8 @@ def test_carousel_has_the_papers_hardware():
     assert contacts.n == 10
     assert np.all(np.abs(contacts.speeds) <= 0.35)
     assert scene.motors.speed_limits == (-0.35, 0.35)
-    # F_tot / m = 2 m/s^2 (PHYSICS.md section 4): I / L^2 = 0.35378 / 0.266^2 = 5.0 kg.
+    # F_tot / m = 2 m/s^2 (PHYSICS.md section 4): I / L^2 = 0.353780 / 0.266^2 = 5.000 kg;
+    # rtol 1e-5 because the inertia is written with 6 significant digits.
     np.testing.assert_allclose(contacts.total_force / scene.body.moving_mass, 2.0, rtol=1e-5)
 
 
@@ -147,6 +148,34 @@ def test_target_constraints_round_trip():
     ],
 )
 def test_bad_schedules_are_refused(text, fragment):
+    with pytest.raises(SceneError) as info:
+        loads_scene(text)
+    assert fragment in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("[contacts]\nrandom = { n = 100000000000, low = 0.0, high = 1.0 }\n", "<= 10000000"),
+        (MINIMAL + "[report]\ncurve_points = 100000000000\n", "<= 10000000"),
+        (MINIMAL + '[target]\nkind = "viscosity"\nslope = 1.0\ncenter = 0.0\nband = [0.1, 0.2, 0.3]\n',
+         "In [target]: The 'band' parameter"),
+        (MINIMAL + '[target]\nkind = "force_curve"\nspeeds = [0.2, 0.1]\nforces = [1.0, 0.0]\n', "In [target]:"),
+        (MINIMAL + '[target]\nkind = "friction_fraction"\nfraction = 0.5\nband = 0.3\nmethod = "milpp"\n',
+         "Did you mean 'milp'?"),
+        (MINIMAL + '[target]\nkind = "friction_fraction"\nfraction = 0.5\nband = 0.3\nfixed = [5]\n',
+         "indices below n = 3"),
+        (MINIMAL + '[target]\nkind = "friction_fraction"\nfraction = 0.5\nband = 0.3\ndt = 0.1\n',
+         "needs [motors] rate_limit"),
+        (MINIMAL + '[body]\nmass = 1.0\n[schedule]\nkind = "track"\ntimes = [1.0, 0.0]\nspeeds = [0.0, 0.1]\n',
+         "In [schedule]:"),
+        (MINIMAL + '[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\n'
+                   'commands = { times = [0.5], values = [[0.0, 0.1, 0.2], [1.0, 2.0]] }\n',
+         "one speed per contact (3)"),
+        ('[scene]\nname = "../../tmp/x"\n' + MINIMAL, "plain name"),
+    ],
+)
+def test_values_are_checked_at_load_time(text, fragment):
     with pytest.raises(SceneError) as info:
         loads_scene(text)
     assert fragment in str(info.value)

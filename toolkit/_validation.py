@@ -29,6 +29,8 @@ def as_float_array(value: Any, name: str, owner: str, *, ndim: int = 1,
         raise ParameterTypeError(parameter_message(name, owner, "be an array of numbers", value))
     if ndim == 1 and isinstance(value, numbers.Real) and not isinstance(value, bool):
         value = [value]
+    if np.asarray(value).dtype == bool or np.iscomplexobj(value):
+        raise ParameterTypeError(parameter_message(name, owner, "be an array of real numbers", value))
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError):

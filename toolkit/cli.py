@@ -206,6 +206,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ToolkitError as error:
         print(f"active-contacts: error: {error}", file=sys.stderr)
         return EXIT_USAGE
+    except OSError as error:  # an output folder that is a file, no permission, a full disk
+        print(f"active-contacts: error: cannot write the output: {error}", file=sys.stderr)
+        return EXIT_USAGE
     except KeyboardInterrupt:
         print("active-contacts: interrupted", file=sys.stderr)
         return 130

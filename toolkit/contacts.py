@@ -20,6 +20,8 @@ returns the interval itself. Net forces are computed from prefix sums of the sor
 magnitudes; a net force whose magnitude is below :attr:`ContactSet.tie_tolerance` (a few
 rounding errors of those sums) is reported as exactly zero, so that cancelling contacts
 (five at -v, five at +v, or loads 0.1 + 0.2 against 0.3) give an exactly zero-force band.
+The price: a contact whose magnitude is itself below that tolerance (about ``1e-15 F_tot``)
+is not resolved; such a contact is lost to rounding in any floating-point sum anyway.
 """
 
 from __future__ import annotations
@@ -79,10 +81,16 @@ class Staircase:
     plateaus: np.ndarray
 
 
-def _as_query(V: Any) -> np.ndarray:
-    array = np.asarray(V, dtype=float)
+def _as_query(V: Any, owner: str) -> np.ndarray:
+    """Body speeds as a float array of any shape; +-inf allowed, NaN and non-numbers refused."""
+    if V is None or isinstance(V, (str, bytes)) or np.iscomplexobj(V):
+        raise ParameterTypeError(parameter_message("V", owner, "be real numbers (m/s)", V))
+    try:
+        array = np.asarray(V, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterTypeError(parameter_message("V", owner, "be real numbers (m/s)", V)) from None
     if np.any(np.isnan(array)):
-        raise ParameterError(parameter_message("V", "ContactSet.force", "not contain NaN", V))
+        raise ParameterError(parameter_message("V", owner, "not contain NaN", V))
     return array
 
 
@@ -137,6 +145,11 @@ class ContactSet:
                 raise ParameterError(parameter_message(
                     "forces", "ContactSet", f"have the same length as 'speeds' ({speeds.size})",
                     f"an array of length {forces.size}"))
+        with np.errstate(over="ignore"):
+            overflow = not np.isfinite(forces.sum())
+        if overflow:
+            raise ParameterError(parameter_message(
+                "forces", "ContactSet", "have a finite sum (F_tot overflows)", f"max {forces.max()}"))
         object.__setattr__(self, "speeds", speeds)
         object.__setattr__(self, "forces", forces)
         active = forces > 0
@@ -220,8 +233,8 @@ class ContactSet:
     def _snap(self, force: np.ndarray) -> np.ndarray:
         return np.where(np.abs(force) <= self.tie_tolerance, 0.0, force)
 
-    def _parts(self, V: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        query = _as_query(V)
+    def _parts(self, V: Any, owner: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        query = _as_query(V, owner)
         left = np.searchsorted(self._levels, query, side="left")
         right = np.searchsorted(self._levels, query, side="right")
         below = self._below[left]            # magnitude of contacts with v_i < V
@@ -244,7 +257,7 @@ class ContactSet:
             ``V`` contribute 0, i.e. ``sign(0) = 0``). Values below :attr:`tie_tolerance`
             in magnitude are exactly 0.
         """
-        below, above, _ = self._parts(V)
+        below, above, _ = self._parts(V, "ContactSet.force")
         return self._snap(above - below)
 
     def force_bounds(self, V: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -253,12 +266,12 @@ class ContactSet:
         Equal away from contact speeds; at ``V == v_i`` the interval spans the stiction
         forces ``[-W, +W]`` of the contacts at that speed (total magnitude ``W``).
         """
-        below, above, at = self._parts(V)
+        below, above, at = self._parts(V, "ContactSet.force_bounds")
         return self._snap(above - below - at), self._snap(above - below + at)
 
     def cdf(self, V: Any) -> np.ndarray:
         """Force-weighted CDF of the speeds, ``sum_{v_i <= V} f_i / F_tot`` (right-continuous)."""
-        query = _as_query(V)
+        query = _as_query(V, "ContactSet.cdf")
         right = np.searchsorted(self._levels, query, side="right")
         return self._below[right] / self._total
 
@@ -309,12 +322,12 @@ class ContactDistribution:
 
     distribution: Any
     total_force: float
-    _edges: np.ndarray | None = field(default=None, repr=False)
-    _cumulative: np.ndarray | None = field(default=None, repr=False)
+    _edges: np.ndarray | None = field(default=None, init=False, repr=False)
+    _cumulative: np.ndarray | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         dist = self.distribution
-        if not all(hasattr(dist, name) for name in ("cdf", "ppf", "support")):
+        if not all(hasattr(dist, name) for name in ("cdf", "ppf", "pdf", "support")):
             raise ParameterTypeError(parameter_message(
                 "distribution", "ContactDistribution",
                 "be a frozen scipy.stats continuous distribution", dist))
@@ -353,8 +366,10 @@ class ContactDistribution:
                 "weights", "ContactDistribution.from_histogram", "have a positive sum",
                 weights_a.tolist()))
         cumulative = np.concatenate(([0.0], np.cumsum(weights_a))) / weights_a.sum()
-        return cls(stats.rv_histogram((weights_a, edges_a), density=False), total_force,
-                   edges_a, cumulative)
+        patch = cls(stats.rv_histogram((weights_a, edges_a), density=False), total_force)
+        object.__setattr__(patch, "_edges", edges_a)
+        object.__setattr__(patch, "_cumulative", cumulative)
+        return patch
 
     def force(self, V: Any) -> np.ndarray:
         """Net force ``F_tot (1 - 2 CDF(V))`` at body speeds ``V`` (m/s), N."""
@@ -367,11 +382,11 @@ class ContactDistribution:
 
     def cdf(self, V: Any) -> np.ndarray:
         """CDF of the contact-speed distribution at ``V`` (m/s)."""
-        return np.asarray(self.distribution.cdf(_as_query(V)), dtype=float)
+        return np.asarray(self.distribution.cdf(_as_query(V, "ContactDistribution.cdf")), dtype=float)
 
     def density(self, V: Any) -> np.ndarray:
         """Density of contact speed at ``V``, 1/(m/s); ``-dF/dV = 2 F_tot density``."""
-        return np.asarray(self.distribution.pdf(_as_query(V)), dtype=float)
+        return np.asarray(self.distribution.pdf(_as_query(V, "ContactDistribution.density")), dtype=float)
 
     def equilibrium(self) -> tuple[float, float]:
         """The median set ``{V : CDF(V) = 1/2}`` as ``(lo, hi)``, m/s.

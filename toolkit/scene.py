@@ -25,6 +25,7 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
@@ -40,6 +41,9 @@ __all__ = [
 ]
 
 PLANNED_SECTIONS = ("estimator", "controller")
+#: Largest generated array a scene may ask for (random contacts, curve samples): 1e7.
+MAX_SAMPLES = 10_000_000
+_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 
 
 # -- value checks: each returns the cleaned value or raises SceneError ------------------------
@@ -60,9 +64,11 @@ def _number(where: str, value: Any, *, low: float | None = None, low_open: bool 
     return value
 
 
-def _integer(where: str, value: Any, *, low: int = 0) -> int:
+def _integer(where: str, value: Any, *, low: int = 0, high: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < low:
         raise _fail(where, f"be an integer >= {low}", value)
+    if high is not None and value > high:
+        raise _fail(where, f"be an integer <= {high}", value)
     return value
 
 
@@ -175,7 +181,8 @@ class ContactsSpec:
         if "random" in table:
             raw = _table("contacts.random", table["random"])
             _check_keys("contacts.random", raw, ("n", "low", "high", "seed"))
-            random = {"n": _integer("contacts.random.n", _require("contacts.random", raw, "n"), low=1),
+            random = {"n": _integer("contacts.random.n", _require("contacts.random", raw, "n"), low=1,
+                                    high=MAX_SAMPLES),
                       "low": _number("contacts.random.low", _require("contacts.random", raw, "low")),
                       "high": _number("contacts.random.high", _require("contacts.random", raw, "high")),
                       "seed": _integer("contacts.random.seed", raw.get("seed", 0))}
@@ -387,13 +394,39 @@ class TargetSpec:
                 raise _fail(f"target.{key}", "be a list of contact indices", raw)
             return tuple(_integer(f"target.{key}[{i}]", item) for i, item in enumerate(raw))
 
-        return cls(kind=kind, params=params,
-                   method=_text("target.method", table["method"]) if "method" in table else None,
+        method = _text("target.method", table["method"]) if "method" in table else None
+        if method is not None:
+            from .allocation import METHODS
+
+            if method not in METHODS:
+                raise SceneError(f"The 'target.method' value in the scene must be one of {list(METHODS)}. "
+                                 f"Got {method!r} instead.{suggestion(method, METHODS)}")
+        spec = cls(kind=kind, params=params, method=method,
                    strict=_flag("target.strict", table.get("strict", False)),
                    dt=_number("target.dt", table["dt"], low=0.0, low_open=True) if "dt" in table else None,
                    fixed=indices("fixed"), failed=indices("failed"), liftable=indices("liftable"),
                    time_limit=_number("target.time_limit", table.get("time_limit", 30.0), low=0.0,
                                       low_open=True))
+        spec.build()  # the target's own rules (monotone speeds, band order, ...), at load time
+        return spec
+
+    def build(self):
+        """The allocation target (:class:`~toolkit.ForceCurve`, :class:`~toolkit.Viscosity`,
+        :class:`~toolkit.FrictionFraction` or :class:`~toolkit.EquilibriumSpeed`)."""
+        from . import allocation
+        from .errors import ParameterError
+
+        p = self.params
+        try:
+            if self.kind == "force_curve":
+                return allocation.ForceCurve(p["speeds"], p["forces"], p.get("weights"))
+            if self.kind == "viscosity":
+                return allocation.Viscosity(p["slope"], p["center"], p["band"])
+            if self.kind == "friction_fraction":
+                return allocation.FrictionFraction(p["fraction"], p["band"])
+            return allocation.EquilibriumSpeed(p["speed"], p.get("margin", 0))
+        except (ParameterError, TypeError) as error:
+            raise SceneError(f"In [target]: {error}") from None
 
 
 @dataclass(frozen=True)
@@ -435,9 +468,23 @@ class ScheduleSpec:
                 return default
             return _number(f"schedule.{key}", table[key], low=0.0, low_open=True)
 
-        return cls(kind=kind, params=params, v0=_number("schedule.v0", table.get("v0", 0.0)),
+        spec = cls(kind=kind, params=params, v0=_number("schedule.v0", table.get("v0", 0.0)),
                    period=positive("period", 0.02), epsilon=positive("epsilon", 1e-3),
                    horizon=positive("horizon", None), time_limit=positive("time_limit", 30.0))
+        spec.build()
+        return spec
+
+    def build(self):
+        """The schedule target: a :class:`~toolkit.Braking` or a :class:`~toolkit.SpeedTrajectory`."""
+        from .errors import ParameterError
+        from .schedule import Braking, SpeedTrajectory
+
+        try:
+            if self.kind == "braking":
+                return Braking(self.params["speed"], self.params.get("duration"))
+            return SpeedTrajectory(self.params["times"], self.params["speeds"])
+        except (ParameterError, TypeError) as error:
+            raise SceneError(f"In [schedule]: {error}") from None
 
 
 @dataclass(frozen=True)
@@ -483,7 +530,8 @@ class ReportSpec:
     def parse(cls, table: dict[str, Any]) -> ReportSpec:
         _check_keys("report", table, cls.KEYS)
         return cls(plots=_flag("report.plots", table.get("plots", True)),
-                   curve_points=_integer("report.curve_points", table.get("curve_points", 801), low=2))
+                   curve_points=_integer("report.curve_points", table.get("curve_points", 801), low=2,
+                                         high=MAX_SAMPLES))
 
 
 _SECTIONS: dict[str, Callable[[dict[str, Any]], Any]] = {
@@ -526,6 +574,27 @@ class Scene:
         return self.contacts.build()
 
 
+def _check_across(sections: dict[str, Any]) -> None:
+    """Rules that tie one section to another (contact counts, rate limits)."""
+    contacts = sections["contacts"]
+    n = contacts.random["n"] if contacts.random is not None else len(contacts.speeds)
+    target = sections.get("target")
+    if target is not None:
+        for key in ("fixed", "failed", "liftable"):
+            for index in getattr(target, key):
+                if index >= n:
+                    raise _fail(f"target.{key}", f"hold contact indices below n = {n}", list(getattr(target, key)))
+        motors = sections.get("motors")
+        if target.dt is not None and (motors is None or not math.isfinite(motors.rate_limit)):
+            raise SceneError("'target.dt' limits each contact's change to rate_limit * dt: "
+                             "it needs [motors] rate_limit (m/s^2).")
+    simulation = sections.get("simulation")
+    if simulation is not None and simulation.commands is not None:
+        for i, row in enumerate(simulation.commands["values"]):
+            if len(row) != n:
+                raise _fail(f"simulation.commands.values[{i}]", f"hold one speed per contact ({n})", list(row))
+
+
 def loads_scene(text: str, *, name: str = "scene") -> Scene:
     """Parse and validate a scene from TOML text; see :func:`load_scene`."""
     try:
@@ -550,7 +619,12 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     for stage in ("simulation", "schedule"):
         if stage in sections and "body" not in sections:
             raise SceneError(f"A [{stage}] section needs a [body] section (the moving inertia).")
-    return Scene(name=_text("scene.name", meta.get("name", name)),
+    _check_across(sections)
+    scene_name = _text("scene.name", meta.get("name", name))
+    if not _NAME.fullmatch(scene_name):
+        raise _fail("scene.name", "be a plain name of letters, digits, '_', '.' and '-' (it names the "
+                    "output folder)", scene_name)
+    return Scene(name=scene_name,
                  description=_text("scene.description", meta.get("description", "")), **sections)
 
 
@@ -576,7 +650,8 @@ def load_scene(path: str | Path) -> Scene:
     file = Path(path)
     if not file.is_file():
         raise SceneFileNotFoundError(f"The scene file {str(file)!r} does not exist.")
-    return loads_scene(file.read_text(encoding="utf-8"), name=file.stem)
+    stem = file.stem if _NAME.fullmatch(file.stem) else "scene"
+    return loads_scene(file.read_text(encoding="utf-8"), name=stem)
 
 
 def _plain(value: Any) -> Any:

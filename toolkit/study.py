@@ -139,17 +139,7 @@ def scene_plant(scene: Scene, contacts: ContactSet | None = None):
 
 def scene_target(scene: Scene):
     """The allocation target a scene's ``[target]`` declares."""
-    from . import allocation
-
-    spec = scene.target
-    p = spec.params
-    if spec.kind == "force_curve":
-        return allocation.ForceCurve(p["speeds"], p["forces"], p.get("weights"))
-    if spec.kind == "viscosity":
-        return allocation.Viscosity(p["slope"], p["center"], p["band"])
-    if spec.kind == "friction_fraction":
-        return allocation.FrictionFraction(p["fraction"], p["band"])
-    return allocation.EquilibriumSpeed(p["speed"], p.get("margin", 0))
+    return scene.target.build()
 
 
 def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
@@ -169,12 +159,7 @@ def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
 
 def scene_schedule_target(scene: Scene):
     """The :class:`~toolkit.Braking` or :class:`~toolkit.SpeedTrajectory` of ``[schedule]``."""
-    from .schedule import Braking, SpeedTrajectory
-
-    spec = scene.schedule
-    if spec.kind == "braking":
-        return Braking(spec.params["speed"], spec.params.get("duration"))
-    return SpeedTrajectory(spec.params["times"], spec.params["speeds"])
+    return scene.schedule.build()
 
 
 def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None):

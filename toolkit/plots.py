@@ -82,19 +82,28 @@ def plot_schedule(schedule: Any, check: Any = None, ax: Any = None):
     return ax
 
 
-def plot_precision(rows: Any, ax: Any = None):
-    """Log-log error against wall time, one series per method, from precision-report rows."""
+def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None = None):
+    """Log-log error against wall time, one series per method.
+
+    Parameters
+    ----------
+    curves : sequence of WorkPrecisionCurve
+        From :func:`toolkit.precision.work_precision_curves`. Runs a budget stopped are drawn
+        with open markers (their error covers only the part they simulated).
+    """
     ax = _axes(ax)
-    by_method: dict[str, list[tuple[float, float]]] = {}
-    for row in rows:
-        row = row if isinstance(row, dict) else row.to_dict()
-        if np.isfinite(row["max_error"]) and row["wall_time"] > 0:
-            by_method.setdefault(row["method"], []).append((row["wall_time"], max(row["max_error"], 1e-17)))
-    for method, points in sorted(by_method.items()):
-        points.sort()
-        ax.loglog(*zip(*points), marker="o", label=method)
-    ax.set_xlabel("wall time (s)")
-    ax.set_ylabel("max |V error| (m/s)")
+    floor = 1e-17   # an exact zero error drawn at the bottom of the log axis
+    for index, curve in enumerate(curves):
+        color = f"C{index % 10}"
+        error = np.maximum(curve.max_error, floor)
+        ax.loglog([], [], "o", color=color, label=curve.method)   # settings differ in kind: no lines
+        done = np.asarray(curve.success)
+        ax.loglog(curve.wall_time[done], error[done], "o", color=color)
+        ax.loglog(curve.wall_time[~done], error[~done], "o", mfc="none", color=color)
+    if reference_time is not None:
+        ax.axvline(reference_time, color="k", ls="--", lw=1, label="exact (the reference)")
+    ax.set_xlabel("wall time per run (s)")
+    ax.set_ylabel("max |V error| over the run (m/s)")
     ax.legend(fontsize="small")
     return ax
 

@@ -148,9 +148,12 @@ def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
 def write_precision(report: Any, out_dir: str | Path) -> list[Path]:
     """Write ``precision.json`` and the log-log plot ``precision.png`` of a precision report."""
     from . import plots
+    from .precision import work_precision_curves
 
     data = report.to_dict()
-    png = plots.figure_png(plots.plot_precision(data["rows"]))
+    exact = [row for row in report.rows if row.method == "exact" and not math.isfinite(row.max_error)]
+    reference = exact[0].wall_time if exact else None
+    png = plots.figure_png(plots.plot_precision(work_precision_curves(report), reference_time=reference))
     out = Path(out_dir)
     return [atomic_write_text(out / "precision.json", to_json(data)), atomic_write_bytes(out / "precision.png", png)]
 

@@ -158,3 +158,13 @@ def test_output_folder_that_is_a_file_is_a_user_error(tmp_path):
     blocker.write_text("x")
     done = cli("run", "designs/equal.toml", "--out", str(blocker / "sub"))
     assert done.returncode == 2 and "cannot write the output" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_precision_plot_with_motors_where_exact_is_the_reference(tmp_path):
+    # random10 has motors: no rational-arithmetic reference, so the exact row has no
+    # independent error (null in JSON) and is drawn as the reference line (regression test).
+    done = cli("precision", "designs/random10.toml", "--json", "--repeats", "1", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    exact = [r for r in json.loads(done.stdout)["rows"] if r["method"] == "exact"]
+    assert exact[0]["max_error"] is None and exact[0]["status"] == "SUCCESS"
+    assert (tmp_path / "precision.png").read_bytes()[:4] == b"\x89PNG"

@@ -99,3 +99,64 @@ def test_refusals():
         allocate_smooth(problem)                  # Coulomb contacts: not this method
     with pytest.raises(ParameterError, match="compliance"):
         allocate_smooth(problem, compliance=-1.0)
+
+
+def test_compliant_result_is_self_consistent_with_the_plant_law():
+    # The reviewer's case: ten unit contacts, compliance 0.01 (m/s)/N. The result records
+    # the compliance, and its contacts driven by motors of that compliance (second method:
+    # the plant's per-contact law, summed) reproduce error_sup; their Coulomb staircase
+    # does not (it is another law).
+    from toolkit.allocation._evaluate import evaluate_errors
+
+    k, v_max = 0.01, 0.35
+    target = Viscosity(10 / v_max, 0.0, v_max)
+    result = allocate(target, ContactSet(np.zeros(10)), compliance=k,
+                      speed_limits=(-v_max, v_max))
+    assert result.compliance == k and result.extra["compliance"] == k
+    assert "compliance k = 0.01" in result.message
+    plant = Plant(result.contacts, mass=1.0, motors=Motors(compliance=k))
+    # Samples: a dense grid plus every kink of the compliant law (v_i +- k f_i) and the band
+    # ends; the difference is linear between kinks, so its max over these samples is the
+    # sup, to rounding (1e-12 N: sums of ten O(1) terms).
+    kinks = np.concatenate((result.speeds - k, result.speeds + k))
+    V = np.unique(np.concatenate((np.linspace(-v_max, v_max, 2001),
+                                  kinks[np.abs(kinks) <= v_max])))
+    achieved = np.array([plant.contact_forces(float(v), result.speeds).sum() for v in V])
+    sampled = float(np.max(np.abs(achieved - result.curve.value_right(V))))
+    assert sampled == pytest.approx(result.error_sup, rel=0, abs=1e-12)
+    # The evaluation helper accepts the compliance and agrees; the Coulomb reading differs.
+    sup, _ = evaluate_errors(result.curve, result.contacts, compliance=k)
+    assert sup == pytest.approx(result.error_sup, rel=0, abs=1e-12)
+    coulomb, _ = evaluate_errors(result.curve, result.contacts)
+    assert coulomb > result.error_sup + 0.1          # 1.036 vs 0.750 N on this case
+
+
+def test_patch_respects_scalar_speed_limits_and_reports_the_forced_bound():
+    # A standard normal patch, target slope 10 N s/m on [-0.35, 0.35], F_tot = 10 N, limits
+    # +-0.1 m/s. Closed form: for V < -0.1 every contact is above V, F = +10 N, against
+    # T(-0.1) = 1 N: the forced error is 9 N, a certified bound. The patch [-0.1, 0.1] has
+    # slope 2 F_tot / 0.2 = 100 N s/m, within 9 N of the target on [-0.1, 0.1] too, so the
+    # optimum is 9 N.
+    result = allocate(Viscosity(10.0, 0.0, 0.35), ContactDistribution(stats.norm(), 10.0),
+                      speed_limits=(-0.1, 0.1))
+    assert -0.1 <= result.speeds[0] < result.speeds[1] <= 0.1
+    assert result.bound == pytest.approx(9.0, rel=1e-15, abs=0)   # two roundings of 10 * 0.1
+    # Second method: the achieved patch's force (scipy's cdf) sampled on the band.
+    V = np.linspace(-0.35, 0.35, 7001)
+    sampled = np.max(np.abs(result.contacts.force(V) - (-10.0 * V)))
+    # The patch is at most 100 N s/m steep: sampling at h = 1e-4 misses <= 100 h / 2.
+    assert sampled <= result.error_sup + 1e-12
+    assert result.error_sup <= sampled + 100 * 1e-4 / 2
+    assert result.error_sup >= result.bound
+    assert result.status is AllocationStatus.OPTIMAL
+
+
+@pytest.mark.parametrize("kwargs, word", [
+    ({"speed_limits": ([-0.1, -0.2], 0.1)}, "pair of scalars"),
+    ({"rate_limit": 1.0, "dt": 0.1}, "rate_limit"),
+    ({"fixed": [0]}, "fixed"),
+    ({"liftable": [0]}, "liftable"),
+])
+def test_patch_refuses_per_contact_arguments(kwargs, word):
+    with pytest.raises(ParameterError, match=word):
+        allocate(Viscosity(10.0, 0.0, 0.35), ContactDistribution(stats.norm(), 10.0), **kwargs)

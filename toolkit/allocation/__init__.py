@@ -10,8 +10,11 @@ One verb, :func:`allocate`, over small frozen target objects
   magnitudes, per-contact boxes, rate limits, fixed/failed and liftable contacts.
 - ``"casadi"`` (:mod:`._smooth`): compliant contacts and continuous distributions.
 
-Every result reports its error (evaluated on the achieved contacts), a certified lower
-bound on the best achievable error, and the gap.
+Every result reports its error (evaluated on the achieved contacts), a lower bound on the
+best achievable error, and the gap. The bound is certified for ``"quantile"`` (closed form)
+and ``"milp"`` (HiGHS's dual bound less a stated tolerance allowance). ``"casadi"`` results
+are in general *uncertified*: their bound is 0 (for a patch under speed limits, the error
+those limits force), the gap is then the whole error, and the message says so.
 """
 
 from __future__ import annotations
@@ -84,7 +87,13 @@ def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit
     compliance : float, (m/s)/N
         Motor compliance ``k`` (torque-speed line): each contact force becomes
         ``f_i clip((v_i - V) / (k f_i), -1, 1)``. ``k > 0`` needs the ``"casadi"`` method
-        (chosen when ``method`` is None); 0 (default) is the Coulomb law.
+        (chosen when ``method`` is None); 0 (default) is the Coulomb law. The result records
+        it (``result.compliance``, ``extra["compliance"]``): its ``contacts`` are the speeds
+        and magnitudes to drive with motors of that compliance, and its errors are those of
+        the compliant law (``evaluate_errors(result.curve, result.contacts, compliance=k)``).
+        For a :class:`~toolkit.contacts.ContactDistribution` ``speed_limits`` must be a pair
+        of scalars (the patch's speed range stays inside), and per-contact arguments
+        (``rate_limit``, ``dt``, ``fixed``, ``failed``, ``liftable``) are refused.
 
     Returns
     -------

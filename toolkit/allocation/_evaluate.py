@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from ._problem import AllocationProblem, Projection
 
 __all__ = ["evaluate_errors", "abs_integral", "realizable_curve", "failure_margin",
-           "margin_requirement"]
+           "margin_requirement", "compliant_force", "piecewise_linear_errors", "forced_error"]
 
 
 def abs_integral(d0: np.ndarray, d1: np.ndarray, width: np.ndarray) -> np.ndarray:
@@ -57,13 +57,34 @@ def _interval_distance(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray,
     return np.maximum(0.0, np.maximum(lo1 - hi2, lo2 - hi1))
 
 
-def evaluate_errors(curve: ForceCurve, contacts: ContactSet) -> tuple[float, float]:
+def evaluate_errors(curve: ForceCurve, contacts: ContactSet, compliance: float = 0.0
+                    ) -> tuple[float, float]:
     """``(error_sup, error_l1)`` of ``contacts`` against ``curve`` over its band (N, N m/s).
 
     See the module docstring for the definitions; both are exact. With ``curve.weights``,
     ``error_l1`` is ``sum_k weights[k] * dist(target_k, achieved(V_k))`` instead of the
     integral. Cost ``O((n + k) log(n + k))`` for ``n`` contacts and ``k`` samples.
+
+    Parameters
+    ----------
+    curve : ForceCurve
+    contacts : ContactSet
+        Contact speeds (m/s) and magnitudes (N), shape (n,).
+    compliance : float, (m/s)/N
+        Motor compliance ``k``: 0 (default) is the Coulomb staircase; ``k > 0`` the
+        saturated linear law ``f_i clip((v_i - V) / (k f_i), -1, 1)`` of
+        :func:`compliant_force` (how ``allocate(..., compliance=k)`` measures its errors,
+        so its results can be re-evaluated here).
     """
+    if compliance != 0.0:
+        if not (np.isfinite(compliance) and compliance > 0):
+            raise ParameterError(parameter_message("compliance", "evaluate_errors",
+                                                   "be finite and >= 0", compliance))
+        speeds, forces = contacts.speeds, contacts.forces
+        scale = compliance * forces[forces > 0]
+        kinks = np.concatenate((speeds[forces > 0] - scale, speeds[forces > 0] + scale))
+        return piecewise_linear_errors(
+            curve, lambda V: compliant_force(V, speeds, forces, compliance), kinks)
     xs, ys = curve.speeds, curve.forces
     lo, hi = curve.band
     stairs = contacts.staircase()
@@ -88,6 +109,88 @@ def evaluate_errors(curve: ForceCurve, contacts: ContactSet) -> tuple[float, flo
         a_lo, a_hi = contacts.force_bounds(xs)
         l1 = float(np.sum(curve.weights * _interval_distance(ys, ys, a_lo, a_hi)))
     return sup, l1
+
+
+
+def compliant_force(V: Any, speeds: Any, forces: Any, compliance: float) -> np.ndarray:
+    """Net force of compliant contacts, ``sum f_i clip((v_i - V) / (k f_i), -1, 1)``.
+
+    Parameters
+    ----------
+    V : array_like of shape (m,), m/s
+    speeds, forces : array_like of shape (n,), m/s and N
+    compliance : float, (m/s)/N, ``> 0``
+
+    Returns
+    -------
+    ndarray of shape (m,), N
+    """
+    V = np.asarray(V, dtype=float)[:, None]
+    f = np.asarray(forces, dtype=float)
+    scale = np.where(f > 0, compliance * f, 1.0)
+    ratio = np.clip((np.asarray(speeds, dtype=float) - V) / scale, -1.0, 1.0)
+    return np.where(f > 0, f * ratio, 0.0).sum(axis=1)
+
+
+def piecewise_linear_errors(curve: ForceCurve, force: Any, breakpoints: Any
+                            ) -> tuple[float, float]:
+    """Exact sup and L1 errors between a continuous piecewise-linear force and a target curve.
+
+    Parameters
+    ----------
+    curve : ForceCurve
+        Linear between samples; a repeated speed is a vertical step.
+    force : callable
+        ``force(V) -> ndarray``: continuous and linear between ``breakpoints``.
+    breakpoints : array_like, m/s
+        Every kink of ``force`` (those outside the band are ignored).
+
+    Returns
+    -------
+    error_sup : float, N
+        ``sup |force - target|`` over the band (one-sided limits at the target's steps).
+    error_l1 : float, N m/s
+        Exact integral of ``|force - target|`` over the band, or with the curve's weights
+        ``sum_k w_k |force(V_k) - F_k|``.
+    """
+    lo, hi = curve.band
+    points = np.concatenate((curve.speeds, np.asarray(breakpoints, dtype=float)))
+    points = np.unique(np.clip(points, lo, hi))
+    achieved = np.asarray(force(points), dtype=float)
+    left = achieved - curve.value_left(points)
+    right = achieved - curve.value_right(points)
+    error_sup = float(np.max(np.maximum(np.abs(left), np.abs(right))))
+    if curve.weights is not None:
+        error_l1 = float(np.sum(curve.weights * np.abs(np.asarray(force(curve.speeds))
+                                                      - curve.forces)))
+    elif points.size > 1:
+        error_l1 = float(np.sum(abs_integral(right[:-1], left[1:], np.diff(points))))
+    else:
+        error_l1 = 0.0
+    return error_sup, error_l1
+
+
+def forced_error(curve: ForceCurve, total_force: float, box: tuple[float, float]) -> float:
+    """Error (N) that every allocation of speeds in ``box = (L, H)`` (m/s) must make.
+
+    For ``V < L`` every contact is above ``V`` and the force is ``+F_tot``; for ``V > H``
+    it is ``-F_tot``. On a non-increasing target the worst points are next to ``L`` and
+    ``H``: ``F_tot - T(L-)`` and ``T(H+) + F_tot`` (the band's far end when the whole box
+    lies beyond it). 0 when the box covers the band. A certified lower bound for any
+    Coulomb contacts (or patch) confined to the box, whatever their magnitudes.
+    """
+    lo, hi = curve.band
+    low, high = box
+    if low > hi:                                  # every contact above the band: F = +F_tot
+        return float(total_force - curve.value_left(hi))
+    if high < lo:                                 # every contact below the band: F = -F_tot
+        return float(curve.value_right(lo) + total_force)
+    bound = 0.0
+    if low > lo:
+        bound = max(bound, float(total_force - curve.value_left(low)))
+    if high < hi:
+        bound = max(bound, float(curve.value_right(high) + total_force))
+    return bound
 
 
 # -- robustness of an equilibrium ---------------------------------------------------------------

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ParameterError, parameter_message
-from ._evaluate import margin_requirement
+from ._evaluate import forced_error, margin_requirement
 from ._problem import AllocationProblem, AllocationResult, AllocationStatus, make_result
 from ._quantile import level_crossings
 from .targets import EquilibriumSpeed, ForceCurve
@@ -199,14 +199,9 @@ def _solve_subset_sum(problem: AllocationProblem) -> _Solution | None:
         return None
     forces, total = problem.forces, problem.total_force
     curve = problem.curve
-    lo, hi = curve.band
     a, b = _effective_band(problem)
     t_a, t_b = float(curve.value_right(a)), float(curve.value_left(b))
-    forced = 0.0
-    if a > lo:
-        forced = max(forced, total - float(curve.value_left(a)))
-    if b < hi:
-        forced = max(forced, float(curve.value_right(b)) + total)
+    forced = forced_error(curve, total, (a, b))
     goal = 0.5 * (total - 0.5 * (t_a + t_b))        # w(B) minimizing h
     half = n // 2
     left, right = _subset_sums(forces[:half]), _subset_sums(forces[half:])

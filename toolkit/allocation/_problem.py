@@ -34,7 +34,7 @@ class AllocationStatus(enum.Enum):
     """Outcome of an allocation; the value is the message shown to users."""
 
     OPTIMAL = "optimal: the error equals the certified lower bound (gap within tolerance)"
-    FEASIBLE_WITH_GAP = ("feasible: the error exceeds the certified lower bound by the "
+    FEASIBLE_WITH_GAP = ("feasible: the error exceeds the reported lower bound by the "
                          "reported gap")
     PROJECTED = ("the target was not realizable; it was projected onto the realizable set "
                  "(see 'projection') and the projection was solved to optimality")
@@ -107,7 +107,9 @@ class AllocationProblem:
     contacts : ContactSet or ContactDistribution
         Friction magnitudes ``f_i`` (N) and current speeds ``v0_i`` (m/s).
     lower, upper : ndarray of shape (n,), m/s
-        Motor speed limits per contact (``-inf``/``inf`` when unlimited).
+        Motor speed limits per contact (``-inf``/``inf`` when unlimited); for a
+        :class:`~toolkit.contacts.ContactDistribution`, shape (1,): the scalar limits of the
+        patch's speed range.
     max_change : ndarray of shape (n,) or None, m/s
         Largest allowed ``|v_i - v0_i|`` (``rate_limit * dt``), or None.
     fixed, failed, liftable : ndarray of shape (n,), bool
@@ -202,7 +204,9 @@ class AllocationResult:
         ``integral |F_achieved - F_target| dV`` over the band, exact (or the weighted sum
         at the samples when the target curve has weights).
     bound : float, N
-        Certified lower bound on the best achievable ``error_sup`` under the constraints.
+        Lower bound on the best achievable ``error_sup`` under the constraints: certified
+        for the ``"quantile"`` and ``"milp"`` methods; for ``"casadi"`` 0 (uncertified,
+        said in ``message``) except the error forced by a patch's speed limits.
     gap : float, N
         ``max(0, error_sup - bound)``: a valid bound never exceeds an achieved error, so a
         negative difference can only be rounding (of the order of the solver tolerances)
@@ -218,6 +222,12 @@ class AllocationResult:
         The realizable target curve the errors are measured against.
     extra : dict
         Method-specific JSON-able details (e.g. solver statistics).
+    compliance : float, (m/s)/N
+        Motor compliance ``k`` the allocation was made for (``allocate(..., compliance=k)``),
+        0 for Coulomb contacts. With ``k > 0``, ``contacts`` holds the speeds and magnitudes
+        to drive with motors of that compliance; the errors are those of the compliant law
+        (``evaluate_errors(curve, contacts, compliance=k)`` reproduces them), not of the
+        Coulomb staircase of ``contacts``.
     """
 
     speeds: np.ndarray
@@ -234,6 +244,7 @@ class AllocationResult:
     projection: Projection | None = None
     curve: ForceCurve | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    compliance: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("speeds", "active"):
@@ -244,7 +255,7 @@ class AllocationResult:
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary: ``speeds``, ``error_sup``, ``error_l1``, ``bound``, ``gap``,
         ``method``, ``status``, ``wall_time``, ``message``, ``active``, ``forces``,
-        ``projection``, ``extra``."""
+        ``compliance``, ``projection``, ``extra``."""
         return _jsonable({
             "speeds": self.speeds,
             "active": self.active,
@@ -257,6 +268,7 @@ class AllocationResult:
             "status": self.status.name,
             "message": self.message,
             "wall_time": float(self.wall_time),
+            "compliance": self.compliance,
             "projection": None if self.projection is None else self.projection.to_dict(),
             "extra": self.extra,
         })
@@ -322,6 +334,27 @@ def _limits(speed_limits: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
     return lower, upper
 
 
+def _patch_limits(speed_limits: Any, *per_contact: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Scalar limits ``(lo, hi)`` (shape (1,) each) for a ContactDistribution's speed range.
+
+    A patch has no individual contacts: per-contact limits, rate limits and masks are
+    refused (``per_contact``: rate_limit, dt, fixed, failed, liftable).
+    """
+    for name, value in zip(("rate_limit", "dt", "fixed", "failed", "liftable"), per_contact):
+        if value is not None:
+            raise ParameterError(parameter_message(
+                name, _OWNER, "be None for a ContactDistribution (a patch has no individual "
+                "contacts)", value))
+    if speed_limits is not None and not isinstance(speed_limits, (str, bytes)) \
+            and hasattr(speed_limits, "__len__") and len(speed_limits) == 2:
+        for value in speed_limits:
+            if np.size(value) != 1:
+                raise ParameterError(parameter_message(
+                    "speed_limits", _OWNER, "be a pair of scalars (lo, hi) for a "
+                    "ContactDistribution (a patch has no individual contacts)", speed_limits))
+    return _limits(speed_limits, 1)
+
+
 def build_problem(target: Any, contacts: Any, *, speed_limits: Any = None,
                   rate_limit: Any = None, dt: Any = None, fixed: Any = None,
                   failed: Any = None, liftable: Any = None, strict: bool = False,
@@ -347,7 +380,10 @@ def build_problem(target: Any, contacts: Any, *, speed_limits: Any = None,
         raise ParameterTypeError(parameter_message("strict", _OWNER, "be True or False", strict))
     time_limit = as_float(time_limit, "time_limit", _OWNER, low=0.0, low_open=True)
     n = contacts.n if isinstance(contacts, ContactSet) else 0
-    lower, upper = _limits(speed_limits, n)
+    if n == 0:
+        lower, upper = _patch_limits(speed_limits, rate_limit, dt, fixed, failed, liftable)
+    else:
+        lower, upper = _limits(speed_limits, n)
     max_change = None
     if (rate_limit is None) != (dt is None):
         missing = "dt" if dt is None else "rate_limit"

@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from ..errors import ParameterError, parameter_message
-from ._evaluate import failure_margin
+from ._evaluate import failure_margin, forced_error
 from ._problem import AllocationProblem, AllocationResult, AllocationStatus, make_result
 from .targets import EquilibriumSpeed, ForceCurve
 
@@ -96,16 +96,10 @@ def quantile_bound(curve: ForceCurve, n: int, total_force: float,
     restricted to the box (saves a copy).
     """
     lo, hi = curve.band
+    bound = forced_error(curve, total_force, box)
+    if box[0] > hi or box[1] < lo:                # every contact on one side of the band
+        return bound
     low, high = max(lo, box[0]), min(hi, box[1])
-    bound = 0.0
-    if low > hi:                                  # every contact above the band: F = +F_tot
-        return float(total_force - curve.value_left(hi))
-    if high < lo:                                 # every contact below the band: F = -F_tot
-        return float(curve.value_right(lo) + total_force)
-    if low > lo:
-        bound = max(bound, float(total_force - curve.value_left(low)))
-    if high < hi:
-        bound = max(bound, float(curve.value_right(high) + total_force))
     inner = curve.restrict(low, high) if inner is None else inner
     g = n * 0.5 * (1.0 - inner.forces / total_force)
     xs = inner.speeds

@@ -21,7 +21,6 @@ from toolkit.allocation import (
     allocate,
 )
 from toolkit.allocation._evaluate import evaluate_errors, failure_margin
-from toolkit.allocation._quantile import quantile_bound
 from toolkit.errors import ParameterError, ParameterTypeError
 
 V_MAX = 0.35          # PHYSICS.md section 3: |v_i| <= 0.35 m/s
@@ -89,8 +88,10 @@ def test_quantile_error_is_f_tot_over_n_on_a_full_range_target(n: int) -> None:
     assert result.bound == pytest.approx(total / n, rel=1e-15, abs=0)
     assert abs(result.gap) < 1e-12
     # The paper's viscosity configuration: uniformly spaced speeds, spacing 2 v_max / N.
+    # Each speed is the quantile x0 + share (x1 - x0) on [-v_max, v_max], a few roundings
+    # (<= 8 eps relative of 2 v_max) from exact; a spacing carries two of them.
     np.testing.assert_allclose(np.diff(np.sort(result.speeds)), 2 * V_MAX / n,
-                               rtol=1e-9, atol=1e-15)
+                               rtol=0, atol=2 * 8 * np.finfo(float).eps * 2 * V_MAX)
 
 
 @settings(deadline=None, max_examples=40)
@@ -107,16 +108,53 @@ def test_quantile_meets_the_grid_distance_bound_on_constant_targets(n: int, frac
     assert abs(result.gap) < 1e-12
 
 
-@settings(deadline=None, max_examples=30)
-@given(seed=st.integers(0, 10**6), n=st.integers(1, 25))
-def test_quantile_is_optimal_on_random_curves(seed: int, n: int) -> None:
+def _random_curve(seed: int, n: int) -> ForceCurve:
     rng = np.random.default_rng(seed)
     xs = np.sort(rng.uniform(-0.3, 0.3, 4))
-    forces = np.sort(rng.uniform(-n, n, 4))[::-1]
-    result = allocate(ForceCurve(xs, forces), ContactSet(np.zeros(n)))
-    assert abs(result.gap) < 1e-12
-    assert result.bound == pytest.approx(quantile_bound(ForceCurve(xs, forces), n, float(n),
-                                                        (-np.inf, np.inf)), rel=0, abs=0)
+    return ForceCurve(xs, np.sort(rng.uniform(-n, n, 4))[::-1])
+
+
+def _rounding_allowance(curve: ForceCurve) -> float:
+    """Error (N) that rounding the quantile speeds can add: each speed is a few roundings
+    (8 eps relative) of numbers of magnitude <= 0.3 m/s, and the target moves by its
+    steepest slope per unit of speed (the random curves can be very steep)."""
+    slope = float(np.max(np.abs(np.diff(curve.forces) / np.diff(curve.speeds))))
+    return 8 * np.finfo(float).eps * 0.3 * slope
+
+
+@settings(deadline=None, max_examples=12)
+@given(seed=st.integers(0, 10**6), n=st.integers(1, 3))
+def test_quantile_is_optimal_on_random_curves_against_brute_force(seed: int, n: int) -> None:
+    # Second method: the brute-force optimum (enumeration of every ordered grouping, bisection
+    # to 2 F_tot / 2^40 < 1e-11 N). The quantile's bound is a valid lower bound on it and its
+    # error attains it.
+    from test_allocation_milp import brute_force
+
+    curve = _random_curve(seed, n)
+    result = allocate(curve, ContactSet(np.zeros(n)))
+    assert result.method == "quantile"
+    inf = np.full(n, np.inf)
+    optimum = brute_force(curve, np.ones(n), -inf, inf, np.zeros(n, bool))
+    assert result.bound <= optimum + 1e-9
+    assert result.error_sup == pytest.approx(optimum, rel=0,
+                                             abs=1e-9 + _rounding_allowance(curve))
+
+
+@pytest.mark.parametrize("seed, n", [(1, 5), (2, 6), (3, 7), (4, 8)])
+def test_quantile_is_optimal_on_random_curves_against_the_milp(seed: int, n: int) -> None:
+    # Second method for larger n: the MILP (HiGHS closes to 1e-9 F_tot; its bound is lowered
+    # by 1e-8 F_tot). Its error can be no lower than the quantile's optimum, its bound no
+    # higher, and the two optima agree to the MILP's tolerance.
+    curve = _random_curve(seed, n)
+    contacts = ContactSet(np.zeros(n))
+    quant = allocate(curve, contacts, speed_limits=(-V_MAX, V_MAX))
+    milp = allocate(curve, contacts, speed_limits=(-V_MAX, V_MAX), method="milp")
+    tol = 1e-7 * n + _rounding_allowance(curve)
+    assert quant.method == "quantile" and milp.method == "milp"
+    assert milp.bound <= quant.error_sup + tol
+    assert quant.bound <= milp.error_sup + tol
+    assert quant.error_sup == pytest.approx(milp.error_sup, rel=0, abs=tol)
+    assert quant.gap <= 1e-12 * n + _rounding_allowance(curve)     # issue 4: gap < 1e-12
 
 
 def test_motor_limits_clip_the_quantile_range_and_the_bound() -> None:
@@ -141,7 +179,9 @@ def test_quantile_agrees_with_the_milp_on_equal_magnitudes() -> None:
     contacts = ContactSet(np.zeros(6))
     quant = allocate(target, contacts, method="quantile")
     milp = allocate(target, contacts, method="milp")
-    assert milp.error_sup == pytest.approx(quant.error_sup, rel=0, abs=1e-7)   # HiGHS tol
+    # HiGHS closes to 1e-9 F_tot and its bound is lowered by 1e-8 F_tot (F_tot = 6 N):
+    # both within 1e-7 N of the closed form.
+    assert milp.error_sup == pytest.approx(quant.error_sup, rel=0, abs=1e-7)
     assert milp.bound == pytest.approx(quant.bound, rel=0, abs=1e-7)
 
 
@@ -157,7 +197,10 @@ def test_quantile_timing_targets() -> None:
             result = allocate(target, contacts, method="quantile")
             best = min(best, time.perf_counter() - start)
         assert result.error_sup == pytest.approx(1.0, rel=1e-9, abs=0)
-        assert best < limit * 5, f"N={n}: {best:.4g} s"   # 5x slack for a loaded test machine
+        # 5x slack: the tests run on a shared 2-core CI machine next to other jobs, where a
+        # best-of-5 can be several times the quiet figure. The target itself is checked
+        # (no slack) by `python -m toolkit.bench allocate`, which exits 1 when missed.
+        assert best < limit * 5, f"N={n}: {best:.4g} s"
 
 
 # -- the paper's configurations ----------------------------------------------------------------

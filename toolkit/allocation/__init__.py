@@ -117,6 +117,7 @@ def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit
 
     compliance = as_float(compliance, "compliance", "allocate", low=0.0)
     chosen = method if method is not None else ("casadi" if compliance > 0 else choose_method(problem))
+    checked = method is None and chosen == "quantile"        # choose_method verified it
     if compliance > 0 and chosen != "casadi":
         from ..errors import ParameterError, parameter_message
 
@@ -134,7 +135,7 @@ def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit
     if chosen == "quantile":
         from ._quantile import allocate_quantile
 
-        return allocate_quantile(problem, start)
+        return allocate_quantile(problem, start, checked=checked)
     from ._milp import allocate_milp
 
     return allocate_milp(problem, start)

@@ -46,9 +46,8 @@ def abs_integral(d0: np.ndarray, d1: np.ndarray, width: np.ndarray) -> np.ndarra
     a0, a1 = np.abs(d0), np.abs(d1)
     same = d0 * d1 >= 0
     total = a0 + a1
-    with np.errstate(invalid="ignore", divide="ignore"):
-        crossing = np.where(total > 0, (d0 * d0 + d1 * d1) / (2.0 * np.where(total > 0, total, 1.0)),
-                            0.0)
+    # Safe denominator (no errstate context needed: it costs more than the arithmetic).
+    crossing = (d0 * d0 + d1 * d1) / (2.0 * np.where(total > 0, total, 1.0))
     return width * np.where(same, 0.5 * total, crossing)
 
 
@@ -86,30 +85,35 @@ def evaluate_errors(curve: ForceCurve, contacts: ContactSet, compliance: float =
         return piecewise_linear_errors(
             curve, lambda V: compliant_force(V, speeds, forces, compliance), kinks)
     xs, ys = curve.speeds, curve.forces
-    lo, hi = curve.band
+    lo, hi = float(xs[0]), float(xs[-1])
     stairs = contacts.staircase()
-    levels = stairs.levels
+    levels, plateaus = stairs.levels, stairs.plateaus
     inner = levels[(levels > lo) & (levels < hi)]
-    points = np.unique(np.concatenate((xs, inner)))
-    # Pointwise distance at every breakpoint (target interval vs achieved interval).
+    points = np.concatenate((xs, inner))
+    points.sort()
+    points = points[np.concatenate(([True], points[1:] > points[:-1]))]
+    # Target limits at every breakpoint; the achieved force at a point is the interval
+    # between the plateaus on its two sides (they differ only at a contact speed, by the
+    # stiction forces there: force_bounds read from the same staircase).
     t_left, t_right = curve.value_left(points), curve.value_right(points)
-    a_lo, a_hi = contacts.force_bounds(points)
+    p_left = plateaus[np.searchsorted(levels, points, side="left")]
+    p_right = plateaus[np.searchsorted(levels, points, side="right")]
     point_err = _interval_distance(np.minimum(t_left, t_right), np.maximum(t_left, t_right),
-                                   a_lo, a_hi)
+                                   np.minimum(p_left, p_right), np.maximum(p_left, p_right))
     sup = float(point_err.max())
     l1 = 0.0
     if points.size >= 2:
-        x0, x1 = points[:-1], points[1:]
-        plateau = stairs.plateaus[np.searchsorted(levels, x0, side="right")]
-        d0 = curve.value_right(x0) - plateau
-        d1 = curve.value_left(x1) - plateau
+        # Open piece (x0, x1) between breakpoints: plateau p_right(x0), target linear from
+        # T(x0+) to T(x1-).
+        plateau = p_right[:-1]
+        d0 = t_right[:-1] - plateau
+        d1 = t_left[1:] - plateau
         sup = max(sup, float(np.max(np.maximum(np.abs(d0), np.abs(d1)))))
-        l1 = float(np.sum(abs_integral(d0, d1, x1 - x0)))
+        l1 = float(np.sum(abs_integral(d0, d1, np.diff(points))))
     if curve.weights is not None:
         a_lo, a_hi = contacts.force_bounds(xs)
         l1 = float(np.sum(curve.weights * _interval_distance(ys, ys, a_lo, a_hi)))
     return sup, l1
-
 
 
 def compliant_force(V: Any, speeds: Any, forces: Any, compliance: float) -> np.ndarray:
@@ -300,17 +304,17 @@ def realizable_curve(problem: AllocationProblem) -> tuple[ForceCurve, Projection
                       f"[{reach[0]:g}, {reach[1]:g}] m/s", (lo, hi))
     xs, ys = requested.speeds, requested.forces
     nan = np.isnan(ys)
-    if np.all(nan):
+    if nan.all():
         raise ParameterError(parameter_message(
             "target", "allocate", "have at least one finite force sample", ys.tolist()))
-    if np.any(~np.isfinite(ys)):
+    if not np.isfinite(ys).all():
         if problem.strict:
             raise _refuse("target", "have finite forces",
                           float(ys[~np.isfinite(ys)][0]))
         reasons.append("non-finite values")
         xs, ys = xs[~nan], ys[~nan]
         ys = np.where(np.isinf(ys), np.sign(ys) * total, ys)
-    if np.any(np.abs(ys) > total):
+    if ys.max() > total or ys.min() < -total:
         if problem.strict:
             raise _refuse("target", f"stay within +-F_tot = +-{total:g} N",
                           float(ys[np.argmax(np.abs(ys))]))
@@ -318,7 +322,7 @@ def realizable_curve(problem: AllocationProblem) -> tuple[ForceCurve, Projection
         for level in (total, -total):
             xs, ys = _insert_crossings(xs, ys, level)
         ys = np.clip(ys, -total, total)
-    if np.any(np.diff(ys) > 0):
+    if (ys[1:] > ys[:-1]).any():
         if problem.strict:
             i = int(np.flatnonzero(np.diff(ys) > 0)[0])
             raise _refuse("target", "be non-increasing in speed (a staircase of Coulomb "

@@ -72,7 +72,9 @@ BOUND_ALLOWANCE = 10.0 * _TOLERANCE
 
 
 def _highs_options(problem: AllocationProblem, deadline: float) -> dict[str, Any]:
-    return {"time_limit": max(deadline - time.perf_counter(), 0.05), "mip_rel_gap": 0.0,
+    # What is left of the caller's budget (0 once spent: HiGHS then stops at once, status
+    # user_limit, and the heuristic's allocation is returned with status TIME_LIMIT).
+    return {"time_limit": max(deadline - time.perf_counter(), 0.0), "mip_rel_gap": 0.0,
             "mip_abs_gap": _TOLERANCE, "primal_feasibility_tolerance": _TOLERANCE,
             "dual_feasibility_tolerance": _TOLERANCE,
             "mip_feasibility_tolerance": _TOLERANCE, "random_seed": 0}

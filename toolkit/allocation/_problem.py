@@ -12,6 +12,7 @@ which measures the errors by evaluating the achieved contacts, never by trusting
 from __future__ import annotations
 
 import enum
+import functools
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,6 +28,7 @@ __all__ = ["AllocationProblem", "AllocationResult", "AllocationStatus", "Project
            "build_problem", "make_result"]
 
 _OWNER = "allocate"
+_PLACEHOLDER = ForceCurve([0.0], [0.0])     # curve slot before the target is reduced
 _TARGET_TYPES = (ForceCurve, Viscosity, FrictionFraction, EquilibriumSpeed)
 
 
@@ -157,12 +159,17 @@ class AllocationProblem:
         return float(self.contacts.total_force)
 
     def boxes(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per-contact allowed speeds ``[lo_i, hi_i]`` (m/s), each of shape (n,).
+        """Per-contact allowed speeds ``[lo_i, hi_i]`` (m/s), each of shape (n,), read-only.
 
         Motor limits intersected with ``v0_i +- max_change_i``; fixed and failed contacts
         get ``[v0_i, v0_i]``. A box that would be empty (current speed outside the limits
         and too far to reach them) becomes the reachable point nearest to the limits.
+        Computed once per problem (the problem is immutable).
         """
+        return self._boxes
+
+    @functools.cached_property
+    def _boxes(self) -> tuple[np.ndarray, np.ndarray]:
         v0 = self.contacts.speeds
         lo, hi = self.lower.copy(), self.upper.copy()
         if self.max_change is not None:
@@ -175,6 +182,8 @@ class AllocationProblem:
         frozen = self.fixed | self.failed
         lo = np.where(frozen, v0, lo)
         hi = np.where(frozen, v0, hi)
+        lo.setflags(write=False)
+        hi.setflags(write=False)
         return lo, hi
 
     @property
@@ -276,6 +285,11 @@ class AllocationResult:
 
 # -- building ----------------------------------------------------------------------------------
 def _per_contact(value: Any, name: str, n: int) -> np.ndarray:
+    if isinstance(value, (float, int, np.floating, np.integer)) and not isinstance(value, bool):
+        scalar = float(value)                     # the common case, without array checks
+        if np.isnan(scalar):
+            raise ParameterError(parameter_message(name, _OWNER, "not contain NaN", value))
+        return np.full(n, scalar)
     array = as_float_array(value, name, _OWNER, finite=False)
     if np.any(np.isnan(array)):
         raise ParameterError(parameter_message(name, _OWNER, "not contain NaN", value))
@@ -326,7 +340,7 @@ def _limits(speed_limits: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
     lower = _per_contact(speed_limits[0], "speed_limits", n)
     upper = _per_contact(speed_limits[1], "speed_limits", n)
     bad = ~(lower <= upper)
-    if np.any(bad):
+    if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise ParameterError(parameter_message(
             "speed_limits", _OWNER, "satisfy lo <= hi for every contact",
@@ -419,8 +433,7 @@ def build_problem(target: Any, contacts: Any, *, speed_limits: Any = None,
                 notes.append(f"{int(far.sum())} contact(s) cannot reach their speed limits "
                              "within dt; they go as near as the rate limit allows")
     problem = AllocationProblem(target, contacts, lower, upper, max_change, fixed_m, failed_m,
-                                lift_m, strict, time_limit,
-                                ForceCurve([0.0], [0.0]), None, tuple(notes))
+                                lift_m, strict, time_limit, _PLACEHOLDER, None, tuple(notes))
     curve, projection = realizable_curve(problem)
     return AllocationProblem(target, contacts, lower, upper, max_change, fixed_m, failed_m,
                              lift_m, strict, time_limit, curve, projection, tuple(notes))
@@ -454,7 +467,7 @@ def make_result(problem: AllocationProblem, speeds: np.ndarray, active: np.ndarr
     from ._evaluate import evaluate_errors
 
     lo, hi = problem.boxes()
-    speeds = np.clip(np.asarray(speeds, dtype=float), lo, hi)
+    speeds = np.minimum(np.maximum(np.asarray(speeds, dtype=float), lo), hi)
     active = np.asarray(active, dtype=bool)
     forces = np.where(active, problem.forces, 0.0)
     achieved = ContactSet(speeds, forces)

@@ -41,9 +41,9 @@ def quantile_applies(problem: AllocationProblem) -> bool:
         return False
     forces = problem.forces
     lo, hi = problem.boxes()
-    return bool(forces[0] > 0 and np.all(forces == forces[0]) and np.all(lo == lo[0])
-                and np.all(hi == hi[0]) and not np.any(problem.fixed | problem.failed
-                                                      | problem.liftable))
+    return bool(forces[0] > 0 and (forces == forces[0]).all() and (lo == lo[0]).all()
+                and (hi == hi[0]).all()
+                and not (problem.fixed | problem.failed | problem.liftable).any())
 
 
 def _grid_distance(x: np.ndarray) -> np.ndarray:
@@ -79,11 +79,11 @@ def level_crossings(curve: ForceCurve, levels: np.ndarray) -> np.ndarray:
     target = -np.asarray(levels, dtype=float)
     k = np.searchsorted(neg, target, side="left")
     inner = (k > 0) & (k < xs.size)
-    kk = np.clip(k, 1, xs.size - 1)
+    kk = np.minimum(np.maximum(k, 1), xs.size - 1)
     x0, x1, g0, g1 = xs[kk - 1], xs[kk], neg[kk - 1], neg[kk]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        share = np.where(g1 > g0, (target - g0) / np.where(g1 > g0, g1 - g0, 1.0), 0.0)
-    return np.where(inner, x0 + np.clip(share, 0.0, 1.0) * (x1 - x0),
+    rising = g1 > g0
+    share = np.where(rising, (target - g0) / np.where(rising, g1 - g0, 1.0), 0.0)
+    return np.where(inner, x0 + np.minimum(np.maximum(share, 0.0), 1.0) * (x1 - x0),
                     np.where(k == 0, xs[0], xs[-1]))
 
 
@@ -116,16 +116,18 @@ def quantile_bound(curve: ForceCurve, n: int, total_force: float,
     return max(bound, 2.0 * total_force / n * worst)
 
 
-def allocate_quantile(problem: AllocationProblem, start: float | None = None) -> AllocationResult:
+def allocate_quantile(problem: AllocationProblem, start: float | None = None, *,
+                      checked: bool = False) -> AllocationResult:
     """Solve ``problem`` by the quantile construction (equal magnitudes, one shared box).
 
     Raises
     ------
     ParameterError
-        When the problem is outside the construction's setting (see :func:`quantile_applies`).
+        When the problem is outside the construction's setting (see :func:`quantile_applies`;
+        ``checked=True``: the caller has just verified it).
     """
     start = time.perf_counter() if start is None else start
-    if not quantile_applies(problem):
+    if not checked and not quantile_applies(problem):
         raise ParameterError(parameter_message(
             "method", "allocate", "be 'milp' (or None) unless all contacts have equal "
             "magnitudes and one shared speed box and none is fixed, failed or liftable",

@@ -124,6 +124,20 @@ class ForceCurve:
                 raise ParameterError(parameter_message("weights", owner, "be >= 0",
                                                        float(weights[weights < 0][0])))
             object.__setattr__(self, "weights", weights)
+        object.__setattr__(self, "_steps", bool(np.any(speeds[1:] == speeds[:-1])))
+
+    @classmethod
+    def _trusted(cls, speeds: np.ndarray, forces: np.ndarray) -> ForceCurve:
+        """Build without validation from float arrays already known to be valid (sorted,
+        equal lengths): curves the toolkit derives from validated ones. Private."""
+        curve = object.__new__(cls)
+        for name, array in (("speeds", speeds), ("forces", forces)):
+            array = np.asarray(array, dtype=float)
+            array.setflags(write=False)
+            object.__setattr__(curve, name, array)
+        object.__setattr__(curve, "weights", None)
+        object.__setattr__(curve, "_steps", bool(np.any(curve.speeds[1:] == curve.speeds[:-1])))
+        return curve
 
     @property
     def band(self) -> tuple[float, float]:
@@ -137,14 +151,24 @@ class ForceCurve:
 
     def value_right(self, V: Any) -> np.ndarray:
         """Right limit ``F(V+)`` of the target at speeds inside the band (N)."""
+        if not self._steps:
+            return _interp_continuous(self.speeds, self.forces, V)
         return _interp(self.speeds, self.forces, np.asarray(V, dtype=float), "right")
 
     def value_left(self, V: Any) -> np.ndarray:
         """Left limit ``F(V-)`` of the target at speeds inside the band (N)."""
+        if not self._steps:
+            return _interp_continuous(self.speeds, self.forces, V)
         return _interp(self.speeds, self.forces, np.asarray(V, dtype=float), "left")
 
     def restrict(self, lo: float, hi: float) -> ForceCurve:
-        """The same curve cut to ``[lo, hi]`` (inside the band), weights dropped."""
+        """The same curve cut to ``[lo, hi]`` (inside the band), weights dropped.
+
+        ``self`` itself when that changes nothing (the whole band, no steps, no weights).
+        """
+        if (lo == self.speeds[0] and hi == self.speeds[-1] and not self._steps
+                and self.weights is None):
+            return self
         inner = (self.speeds > lo) & (self.speeds < hi)
         speeds = np.concatenate(([lo], self.speeds[inner], [hi]))
         forces = np.concatenate((self.value_right(lo)[None], self.forces[inner],
@@ -152,7 +176,23 @@ class ForceCurve:
         if lo == hi:
             speeds, forces = np.array([lo, lo]), np.array([float(self.value_left(lo)),
                                                            float(self.value_right(lo))])
-        return ForceCurve(speeds, forces)
+        return ForceCurve._trusted(speeds, forces)
+
+
+def _interp_continuous(xs: np.ndarray, ys: np.ndarray, x: Any) -> np.ndarray:
+    """:func:`_interp` for a curve without repeated speeds (both limits agree), leaner.
+
+    The same arithmetic as :func:`_interp` (``y0 + share (y1 - y0)``, the samples
+    themselves at the sample speeds, the end values outside), so both give bitwise the
+    same values, consistent with the inverse in ``_quantile.level_crossings``.
+    """
+    x = np.asarray(x, dtype=float)
+    if xs.size == 1:
+        return np.full(x.shape, ys[0])
+    idx = np.searchsorted(xs, x, side="right").clip(1, xs.size - 1)
+    x0, y0, y1 = xs[idx - 1], ys[idx - 1], ys[idx]
+    share = ((x - x0) / (xs[idx] - x0)).clip(0.0, 1.0)
+    return np.where(share >= 1.0, y1, y0 + share * (y1 - y0))
 
 
 def _interp(xs: np.ndarray, ys: np.ndarray, x: np.ndarray, side: str) -> np.ndarray:
@@ -205,7 +245,7 @@ class Viscosity:
         """Two samples at the band ends (the law is linear)."""
         lo, hi = self.band
         speeds = np.array([lo, hi])
-        return ForceCurve(speeds, -self.slope * (speeds - self.center))
+        return ForceCurve._trusted(speeds, -self.slope * (speeds - self.center))
 
 
 @dataclass(frozen=True, eq=False)

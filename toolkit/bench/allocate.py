@@ -8,7 +8,8 @@
 - baseline 2, a naive construction at every N: for each contact, bisection on the speed
   (60 halvings) of the sampled target's inverse, one contact at a time in Python.
 
-Each line gives the best of several runs and the ratio baseline / quantile.
+Each line gives the best of several runs and the ratio baseline / quantile. The exit status
+is 1 when a target of issue 4 (< 1 ms at N = 10, < 100 ms at N = 1e5) is missed, 0 otherwise.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ def _naive(n: int) -> np.ndarray:
 
 
 def main(argv: list[str]) -> int:
+    """Print the timings; return 1 when a target is missed (see the module docstring)."""
     quick = "--quick" in argv
     sizes = (10, 1000) if quick else (10, 1000, 100_000)
     print(f"{'N':>8} {'quantile [s]':>14} {'naive [s]':>12} {'naive/quantile':>15}"
@@ -56,7 +58,7 @@ def main(argv: list[str]) -> int:
     for n in sizes:
         contacts = ContactSet(np.zeros(n))
         target = Viscosity(n / V_MAX, 0.0, V_MAX)
-        repeats = 50 if n <= 1000 else 5
+        repeats = 500 if n <= 1000 else 5          # best of many: a shared, noisy machine
         result = allocate(target, contacts, method="quantile")
         t_q = _best(lambda: allocate(target, contacts, method="quantile"), repeats)
         t_n = _best(lambda: _naive(n), 3 if n > 1000 else repeats)
@@ -70,4 +72,4 @@ def main(argv: list[str]) -> int:
     print(f"N=10 MILP (HiGHS) baseline: {t_m:.3e} s; MILP/quantile = {t_m / timings[10]:.1f}")
     ok = timings[10] < 1e-3 and timings.get(100_000, 0.0) < 0.1
     print(f"targets (<1 ms at N=10, <100 ms at N=1e5): {'met' if ok else 'NOT met'}")
-    return 0
+    return 0 if ok else 1

@@ -106,7 +106,7 @@ def test_compliant_result_is_self_consistent_with_the_plant_law():
     # the compliance, and its contacts driven by motors of that compliance (second method:
     # the plant's per-contact law, summed) reproduce error_sup; their Coulomb staircase
     # does not (it is another law).
-    from toolkit.allocation._evaluate import evaluate_errors
+    from toolkit.allocation import evaluate_errors      # public: the message points to it
 
     k, v_max = 0.01, 0.35
     target = Viscosity(10 / v_max, 0.0, v_max)

@@ -31,11 +31,12 @@ from ._problem import (
     Projection,
     build_problem,
 )
+from ._evaluate import evaluate_errors
 from .targets import EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 
 __all__ = ["allocate", "AllocationProblem", "AllocationResult", "AllocationStatus",
            "Projection", "ForceCurve", "Viscosity", "FrictionFraction", "EquilibriumSpeed",
-           "METHODS", "choose_method"]
+           "METHODS", "choose_method", "evaluate_errors"]
 
 METHODS = ("quantile", "milp", "casadi")
 

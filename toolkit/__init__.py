@@ -16,6 +16,7 @@ from .allocation import (
     Projection,
     Viscosity,
     allocate,
+    evaluate_errors,
 )
 from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase
 from .errors import (
@@ -49,7 +50,7 @@ __all__ = [
     "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant",
     "stability_suite", "StabilityReport", "StabilityCase",
     # allocation (inverse design)
-    "allocate", "AllocationResult", "AllocationStatus", "Projection",
+    "allocate", "evaluate_errors", "AllocationResult", "AllocationStatus", "Projection",
     "ForceCurve", "Viscosity", "FrictionFraction", "EquilibriumSpeed",
     # schedules (time-varying designs)
     "design_schedule", "ScheduleResult", "ScheduleStatus", "SpeedTrajectory", "Braking", "braking_time",

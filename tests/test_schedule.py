@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 from scipy.special import lambertw
 
 from toolkit.contacts import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
 from toolkit.plant import Motors, PiecewiseConstant, Plant
-from toolkit._schedule_construct import implicit_step
+from toolkit._schedule_construct import implicit_step, tracking_lower_bound
 from toolkit.schedule import (Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory,
                               braking_time, design_schedule, deviation_bound)
 from toolkit.simulation import simulate
@@ -106,6 +107,72 @@ def test_deviation_bound_is_delta_when_the_smoothing_is_saturated():
     bound, pointwise = deviation_bound(t, np.zeros(11), v, [1.0, 1.0, 1.0], 1.0, 1e-3)
     assert bound == pytest.approx(0.5e-3, rel=1e-12, abs=0)
     np.testing.assert_allclose(pointwise, 0.5e-3, rtol=1e-12, atol=0)
+    # The predictor's integration allowance widens the enclosure (still saturated) and
+    # adds to the bound: identity.
+    bound, _ = deviation_bound(t, np.zeros(11), v, [1.0, 1.0, 1.0], 1.0, 1e-3, allowance=1e-6)
+    assert bound == pytest.approx(0.5e-3 + 1e-6, rel=1e-12, abs=0)
+
+
+DELTAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0)   # schedule._DELTAS
+
+
+def test_deviation_bound_never_misses_a_crossing_between_samples():
+    # One contact (f = 1 N, m = 1 kg) sweeps v = 1 - 2t past a body held at V = 0. The
+    # defect for a given delta vanishes for |v| <= delta and is 1 - tanh(|v|/eps) beyond, so
+    # int d_delta dt = eps ln(1 + exp(-2 delta/eps)) (closed form, dv/dt = -2 m/s^2), and the
+    # smallest bound over the deltas is min(delta + that).
+    eps = 1e-3
+    closed = min(r * eps + eps * math.log1p(math.exp(-2 * r)) for r in DELTAS)
+    # Samples at v = 1, 1/3, -1/3, -1 never see the contact near the body: a quadrature on
+    # them would return 0.5 eps (regression: the trapezoid rule did), below the truth.
+    t = np.linspace(0.0, 1.0, 4)
+    coarse, _ = deviation_bound(t, np.zeros(4), (1 - 2 * t)[:, None], [1.0], 1.0, eps)
+    assert coarse >= closed
+    # Dense samples: the interval extension exceeds the integral only on intervals holding
+    # a jump of the sign pattern (two, of height <= 2 f/m) or through the variation of the
+    # tanh term (total <= 4 f/m): at most 8 h above the closed form.
+    t = np.linspace(0.0, 1.0, 100001)
+    dense, _ = deviation_bound(t, np.zeros(t.size), (1 - 2 * t)[:, None], [1.0], 1.0, eps)
+    assert closed <= dense <= closed + 8 * (t[1] - t[0])
+
+
+def smoothed_run(plant: Plant, result: ScheduleResult, v0: float):
+    """Second method for the prediction: scipy's Radau on the tanh-smoothed law, period by
+    period on the closed-form lag paths (no external force or drag in these plants)."""
+    f, m, eps = plant.contacts.forces, plant.mass, result.epsilon
+    pieces, V = [], v0
+    for k in range(result.times.size - 1):
+        start, u, t0 = result.contact_speeds[k], result.speeds[k], result.times[k]
+
+        def rhs(t, y, start=start, u=u, t0=t0):
+            v = u + (start - u) * np.exp(-(t - t0) / TAU)
+            return [float(np.tanh((v - y[0]) / eps) @ f) / m]
+
+        sol = solve_ivp(rhs, (t0, result.times[k + 1]), [V], method="Radau", rtol=1e-11,
+                        atol=1e-14, dense_output=True)
+        pieces.append(sol.sol)
+        V = float(sol.y[0, -1])
+    return lambda t: np.array([float(pieces[min(int(x // PERIOD), len(pieces) - 1)](x)[0])
+                               for x in t])
+
+
+@pytest.mark.parametrize("name", ["braking", "sinusoid"])
+def test_exact_model_stays_within_the_bound_over_the_whole_run(name, request):
+    # The bound is claimed on the whole run, not at the samples: check the exact solution
+    # (closed-form dense output, on a fine grid and at every event time) against a second
+    # integration of the smoothed law (scipy Radau, rtol 1e-11: its error is below 1e-9 m/s,
+    # the allowance added to the bound).
+    fixture = request.getfixturevalue(name)
+    plant, result = fixture[0], fixture[-1]
+    v0 = 0.3 if name == "braking" else 0.0
+    sim = exact_run(plant, result, v0, result.times)
+    events = np.array([e.time for e in sim.events])
+    grid = np.unique(np.concatenate((np.linspace(0.0, result.times[-1], 6001), events)))
+    smooth = smoothed_run(plant, result, v0)(grid)
+    assert np.max(np.abs(sim.speed_at(grid) - smooth)) <= result.prediction_bound + 1e-9
+    # And the smoothed law agrees with the designer's prediction at the period starts.
+    np.testing.assert_allclose(smooth[np.searchsorted(grid, result.times)], result.body_speed,
+                               rtol=0, atol=1e-8)   # both integrators at rtol <= 1e-10
 
 
 # -- designed schedules, verified by the exact simulator -----------------------------------
@@ -438,3 +505,51 @@ def test_the_exact_body_speed_is_the_exact_simulation_at_the_period_starts(braki
     np.testing.assert_allclose(result.exact_body_speed, grid.V, rtol=0, atol=1e-12)
     assert json.loads(json.dumps(result.to_dict()))["exact_body_speed"] == \
         result.exact_body_speed.tolist()
+
+
+@settings(deadline=None, max_examples=5)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_lower_bound_holds_with_drag_and_m_per_s_swings(seed):
+    # Regression (speed cap of the funnel): with drag the funnel's in-step slope must cover
+    # |V| up to max |reference| + the tube width, which m/s swings put far above the speed
+    # limits plus 1. Second method: exact simulations of random feasible schedules and of
+    # one following the reference, all with the first period pinned at rest (so the body
+    # is at V_free = 0 at t_free = PERIOD: no force acts on it) and evaluated at exactly the
+    # bound's samples, where no schedule can beat it.
+    rng = np.random.default_rng(seed)
+    limit = 3.0
+    forces = rng.uniform(0.2, 0.8, 4)
+    damping = float(rng.uniform(0.5, 2.0))
+    plant = Plant(ContactSet(np.zeros(4), forces), mass=1.0, damping=damping,
+                  motors=Motors(lag=TAU, speed_limits=(-limit, limit)))
+    swing = float(rng.uniform(1.5, 2.9))
+    reference = SpeedTrajectory([0.0, 1.0, 2.0], [0.0, swing, -swing])
+    K = 100
+    times = np.arange(K + 1) * PERIOD
+    t = np.linspace(PERIOD, K * PERIOD, 16 * (K - 1) + 1)
+    forced = float(reference(PERIOD))          # V = 0 on [0, PERIOD], the reference rises
+    bound = tracking_lower_bound(
+        forces=forces, mass=1.0, damping=damping, external=plant.external, tau=TAU,
+        rate=math.inf, lo=-limit, hi=limit, t=t, reference=reference(t), t_free=PERIOD,
+        V_free=0.0, v_free=np.zeros(4), forced=forced)
+    follow = np.tile(np.clip(reference(times[1:]), -limit, limit)[:, None], (1, 4))
+    tables = [follow] + [rng.uniform(-limit, limit, (K, 4)) for _ in range(3)]
+    for rows in tables:
+        table = PiecewiseConstant(times[1:], np.vstack((np.zeros(4), rows)))
+        sim = simulate(dataclasses.replace(plant, commands=table), K * PERIOD, v0=0.0,
+                       t_eval=np.concatenate(([0.0], t)))
+        assert sim.V[1] == 0.0                  # the forced part: at rest, exactly
+        assert np.max(np.abs(sim.V - reference(sim.t))) >= bound
+
+
+def test_huge_horizons_are_refused_before_allocating():
+    plant = carousel([0.0] * 3)
+    with pytest.raises(ParameterError, match="'horizon'.*100000 controller periods.*'period'"):
+        design_schedule(plant, Braking(0.0), horizon=1e6)            # 5e7 periods
+    with pytest.raises(ParameterError, match="'target'.*'times\\[-1\\]'.*'period'"):
+        design_schedule(plant, SpeedTrajectory([0.0, 1e12], [0.0, 0.1]))
+    with pytest.raises(ParameterError, match="'target'.*'duration'.*'period'"):
+        design_schedule(plant, Braking(0.0, duration=1e5))
+    # Just above the cap (100100 periods) is refused too; the check precedes any work.
+    with pytest.raises(ParameterError, match="controller periods"):
+        design_schedule(plant, Braking(0.0), horizon=100_000 * PERIOD * 1.001)

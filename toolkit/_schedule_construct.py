@@ -251,6 +251,22 @@ def construct(*, forces: np.ndarray, mass: float, damping: float,
     return Construction(commands, np.array(speeds), np.array(body), tuple(choices))
 
 
+def speed_rate(push: Any, damping: float, speed: Any, mass: float, h: Any) -> Any:
+    """Bound on ``|V'|`` (m/s^2) over an interval of length ``h`` (s) starting at ``|V| <= speed``.
+
+    ``m V' = F + F_ext - c V`` with ``|F + F_ext| <= push`` (N). While ``|V| <= speed + A s``
+    the slope is at most ``(push + c (speed + A h)) / m``, which equals ``A`` for
+    ``A = (push + c speed) / (m - c h)`` (``c h < m``): a bootstrap bound. Otherwise (a drag
+    time ``m / c`` below ``h``) by comparison ``|V| <= max(speed, push / c)`` throughout and
+    ``A = (push + max(c speed, push)) / m``. Elementwise on arrays.
+    """
+    if damping <= 0:
+        return np.asarray(push, dtype=float) / mass + 0.0 * np.asarray(h, dtype=float)
+    short = damping * np.asarray(h, dtype=float) < 0.5 * mass
+    bootstrap = (push + damping * speed) / np.where(short, mass - damping * h, mass)
+    return np.where(short, bootstrap, (push + np.maximum(damping * speed, push)) / mass)
+
+
 # -- certificate: the funnel of the extreme forces -----------------------------------------------
 def _reach(tau: float, rate: float, v: np.ndarray, limit: float, s: np.ndarray) -> np.ndarray:
     """Fastest motion of each contact from ``v`` towards ``limit`` after ``s`` seconds: (T, n).
@@ -320,16 +336,20 @@ def tracking_lower_bound(*, forces: np.ndarray, mass: float, damping: float,
     f = forces
     total = float(f.sum())
     ext = np.array([external(0.5 * (a + b)) for a, b in zip(t[:-1], t[1:])])
-    speed_cap = max(abs(lo), abs(hi), abs(V_free), float(np.max(np.abs(reference)))) + 1.0
-    accel = (total + float(np.max(np.abs(ext), initial=0.0)) + damping * speed_cap) / mass
+    low_e = forced
+    high_e = max(forced, float(np.max(np.abs(reference - V_free)))) + 1e-12
+    # Every step starts inside the tube (|V| <= max |reference| + e <= ... + high_e) or at
+    # V_free: within the step the speed changes at most at this rate (drag included).
+    speed_cap = max(abs(V_free), float(np.max(np.abs(reference))) + high_e)
     h = np.diff(t)
+    accel = speed_rate(total + np.abs(ext), damping, speed_cap, mass, h)
 
     def feasible(widths: np.ndarray) -> np.ndarray:
         a = np.full(widths.size, V_free)
         b = np.full(widths.size, V_free)
         ok = np.abs(V_free - reference[0]) <= widths
         for j in range(h.size):
-            slack = accel * h[j]
+            slack = accel[j] * h[j]
             low_b = b - slack                                     # lowest V in the step
             high_a = a + slack
             f_up = np.where(up[j + 1][None, :] >= low_b[:, None], 1.0, -1.0) @ f
@@ -344,8 +364,6 @@ def tracking_lower_bound(*, forces: np.ndarray, mass: float, damping: float,
             a, b = np.minimum(a, b), np.maximum(a, b)
         return ok
 
-    low_e = forced
-    high_e = max(forced, float(np.max(np.abs(reference - V_free)))) + 1e-12
     if feasible(np.array([low_e]))[0]:
         return forced
     for _ in range(2):

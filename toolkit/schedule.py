@@ -28,14 +28,20 @@ the closed form ``u + (v - u) exp(-s / tau)`` inside a period.
    non-increasing in ``V``, for any ``delta > 0``
    ``|V_exact(t) - V_pred(t)| <= delta + (1/m) int_0^t d_delta``, where the defect
    ``d_delta`` is how far the smoothed force lies outside the exact set-valued force of the
-   speeds within ``delta`` of the prediction (:func:`deviation_bound`); the smallest bound
-   over a grid of ``delta`` is :attr:`ScheduleResult.prediction_bound`. The exact
-   event-driven simulator (:func:`toolkit.simulation.simulate`) then runs the schedule and
-   must stay within that bound.
-4. *Certificate*: tracking errors are compared with a certified lower bound over every
-   schedule (the funnel of the extreme forces the motors allow); fast braking with the
-   closed-form minimum time below. :class:`ScheduleStatus` reports OPTIMAL, VERIFIED or
-   UNVERIFIED accordingly.
+   speeds within ``delta`` of the prediction (:func:`deviation_bound`). The integral is
+   bounded, not estimated: on each interval between two dense samples (64 per period) the
+   defect is bounded by its interval extension over enclosures of the contact speeds
+   (monotone there) and of the prediction (bounded slope); the predictor's own integration
+   error enters as an allowance derived from its tolerances (``_predict``). The smallest
+   bound over a grid of ``delta`` is :attr:`ScheduleResult.prediction_bound`: a proof, up
+   to floating-point rounding and CVODES honouring its local error tolerance. The exact
+   event-driven simulator (:func:`toolkit.simulation.simulate`, closed-form segments) then
+   runs the schedule as a second method: its distance to the prediction at the dense
+   samples (64 per period) must stay within that bound.
+4. *Optimality*: tracking errors are compared with a lower bound over every schedule (the
+   funnel of the extreme forces the motors allow, :func:`tracking_lower_bound`); fast
+   braking with the closed-form minimum time below. :class:`ScheduleStatus` reports
+   OPTIMAL, VERIFIED or UNVERIFIED accordingly.
 
 For braking with every contact pushing backward the optimum is bang-bang (all contacts at
 the lowest speed); :func:`braking_time` gives the resulting minimum time in closed form
@@ -52,6 +58,7 @@ from typing import Any
 
 import numpy as np
 
+from ._schedule_construct import speed_rate
 from ._validation import as_float, as_float_array, as_int
 from .errors import ParameterError, ParameterTypeError, parameter_message
 from .plant import Motors, PiecewiseConstant, Plant
@@ -75,8 +82,16 @@ _DELTAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0)
 _DIGITS = 9
 #: Smoothing width divisor of the second prediction when the first does not verify.
 _RETRY = 4.0
-#: Samples per controller period for the prediction and its certificate.
-_SAMPLES = 32
+#: Intervals per piece (a period, or part of one) of the prediction's dense output.
+_INTERVALS = 64
+#: Every ``_COARSE``-th dense sample enters the tracking lower bound (16 per period).
+_COARSE = 4
+#: Most controller periods a schedule may span (the design is O(K) work and memory).
+_MAX_PERIODS = 100_000
+#: CVODES tolerances of the prediction.
+_RTOL, _ATOL = 1e-10, 1e-13
+#: Safety factor on CVODES's local error estimates in the integration allowance.
+_LOCAL_SAFETY = 10.0
 
 
 # -- targets ---------------------------------------------------------------------------------
@@ -159,16 +174,20 @@ class ScheduleStatus(enum.Enum):
     in :attr:`ScheduleResult.solver_status` and the message).
     """
 
-    OPTIMAL = ("optimal: the exact simulation of the schedule stays within "
-               "'prediction_bound' of the prediction and meets a certified bound (tracking: "
-               "its error is within 'tolerance' of 'lower_bound', which no schedule beats; "
-               "braking: it arrives within one period of the closed-form minimum time)")
-    VERIFIED = ("verified: the exact simulation of the schedule stays within "
-                "'prediction_bound' of the prediction; not proven optimal (see "
-                "'lower_bound' and 'gap')")
-    UNVERIFIED = ("failed: the exact simulation of the schedule left the certified "
-                  "prediction bound or did not finish; the schedule is returned for "
-                  "inspection but must not be played (see 'message')")
+    OPTIMAL = ("optimal: the exact model stays within 'prediction_bound' of the prediction "
+               "(a proven bound over the whole run, confirmed by the exact simulation at the "
+               "dense samples) and "
+               "the schedule meets a proven optimality bound (tracking: its exact error at "
+               "the dense samples is within 'tolerance' of 'lower_bound', which no schedule "
+               "beats there; braking: it arrives within one period of the closed-form "
+               "minimum time)")
+    VERIFIED = ("verified: the exact model stays within 'prediction_bound' of the "
+                "prediction (a proven bound over the whole run, confirmed by the exact "
+                "simulation at the dense samples); not proven optimal (see 'lower_bound' and "
+                "'gap')")
+    UNVERIFIED = ("failed: the exact simulation of the schedule left the prediction bound "
+                  "at a dense sample or did not finish; the schedule is returned for inspection but must not "
+                  "be played (see 'message')")
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,20 +213,25 @@ class ScheduleResult:
         Target body speed at ``times``.
     prediction_bound : float, m/s
         Every solution of the exact Coulomb model under these commands stays within this
-        distance of the prediction on ``[0, times[-1]]`` (:func:`deviation_bound`).
+        distance of the prediction on the whole of ``[0, times[-1]]``
+        (:func:`deviation_bound`: a rigorous bound of the defect integral plus an
+        allowance for the predictor's integration error; exact up to floating-point
+        rounding and CVODES honouring its local error tolerance).
     tracking_error : float, m/s
-        ``max |body_speed - reference|`` over 32 samples per period of the prediction.
+        ``max |body_speed - reference|`` over the prediction's dense samples (64 per period).
     objective : float
         The normalized objective evaluated on the prediction (not taken from the solver).
     arrival_time : float or None, s
-        Braking: first sample time (32 per period) at which the exact simulation comes
+        Braking: first dense sample time (64 per period) at which the exact simulation comes
         within ``prediction_bound`` of the target speed (None when it never does, or for
         tracking).
     minimum_time : float or None, s
         Braking: the closed-form minimum time of :func:`braking_time` when it applies.
     epsilon : float, m/s
         Smoothing width of the prediction's model: the requested ``epsilon``, or a quarter of
-        it when the first prediction did not verify against the exact simulation.
+        it when the exact simulation left the first prediction's bound (a guard: the bound
+        is proven, so only rounding, CVODES missing its tolerance or a simulator defect can
+        trigger it).
     period : float, s
     model_mismatch : float, m/s
         ``max |V_design - body_speed|`` at ``times``: how far the designer's own model of
@@ -224,17 +248,20 @@ class ScheduleResult:
     method : str
         ``"constructive"`` or ``"constructive + ipopt"``: what produced the schedule.
     exact_tracking_error : float, m/s
-        ``max |V_exact - reference|`` over the samples, on the exact simulation.
+        ``max |V_exact - reference|`` over the dense samples (64 per period), on the exact
+        simulation.
     exact_deviation : float, m/s
-        ``max |V_exact - body_speed|`` over the samples (at most ``prediction_bound`` when
-        verified).
+        ``max |V_exact - V_pred|`` over the dense samples (64 per period) of the exact
+        simulation (at most ``prediction_bound`` when verified; between the samples
+        ``prediction_bound`` holds by proof).
     exact_body_speed : ndarray of shape (K + 1,), m/s
         The exact simulation's body speed at ``times`` (NaN when it did not finish): callers
         need not simulate the schedule again to check it.
     lower_bound : float or None, m/s
-        Tracking: a certified lower bound on the sup tracking error (at the same samples)
-        of *every* schedule within the motor limits (:func:`tracking_lower_bound`); None for
-        braking as fast as possible.
+        Tracking: a lower bound on the sup tracking error at the dense samples (hence
+        also over the whole run) of *every* schedule within the motor limits
+        (:func:`tracking_lower_bound` on every fourth sample, the forced first period on
+        all); None for braking as fast as possible.
     gap : float or None, m/s
         ``exact_tracking_error - lower_bound``.
     tolerance : float, m/s
@@ -552,7 +579,8 @@ def _at_equilibrium(speeds: np.ndarray, forces: np.ndarray, V: float) -> bool:
 
 # -- certificate ---------------------------------------------------------------------------------
 def deviation_bound(times: Any, body_speed: Any, contact_speeds: Any, forces: Any, mass: float,
-                    epsilon: float) -> tuple[float, np.ndarray]:
+                    epsilon: float, *, damping: float = 0.0, external: Any = 0.0,
+                    allowance: float = 0.0) -> tuple[float, np.ndarray]:
     """Bound the distance between a smoothed-model trajectory and the exact Coulomb model.
 
     Let ``V_s`` solve ``m V' = sum f_i tanh((v_i - V)/eps) + F_ext - c V`` and ``V_e`` any
@@ -565,39 +593,70 @@ def deviation_bound(times: Any, body_speed: Any, contact_speeds: Any, forces: An
 
     (drag only helps). Hence ``|e(t)| <= delta + (1/m) int_0^t d_delta`` for every delta.
 
+    The integral is bounded rigorously, not estimated: on each interval between two samples
+    every contact speed lies between its two end values (each is monotone there: samples
+    come in pieces on which the motor law is one exponential or one ramp, so a switching
+    time appears twice and the interval between the copies has length 0), and ``V_s`` lies
+    in the enclosure ``(V_a + V_b)/2 +- A h/2`` of a function with ``|V_s'| <= A`` (and
+    between ``min(V_a, V_b) - A h`` and ``max(V_a, V_b) + A h``), widened by
+    ``allowance``; ``d_delta`` is bounded there by its interval extension (``tanh`` and the
+    sign patterns are monotone) and multiplied by ``h``. ``A`` is
+    :func:`~toolkit._schedule_construct.speed_rate` of ``F_tot + |F_ext|`` from the larger
+    end speed plus ``allowance`` (drag included). Floating-point rounding of the sums is not
+    accounted for (relative 1e-15).
+
     Parameters
     ----------
     times : array_like of shape (T,), s
-        Dense samples of the trajectory (the integral uses the trapezoid rule on them).
+        Samples of the trajectory, non-decreasing, in pieces as described above.
     body_speed : array_like of shape (T,), m/s
+        ``V_s`` at ``times``, each within ``allowance`` of the true smoothed solution.
     contact_speeds : array_like of shape (T, n), m/s
     forces : array_like of shape (n,), N
     mass : float, kg
     epsilon : float, m/s
+    damping : float, N s/m
+    external : float or array_like of shape (T - 1,), N
+        External force on each interval (constant there).
+    allowance : float, m/s
+        Bound on ``|body_speed - V_s|`` (the predictor's integration error); added to the
+        result too, so the bound holds for the distance to ``body_speed``.
 
     Returns
     -------
     bound : float, m/s
-        ``min over delta of (delta + int_0^T d_delta / m)``: valid on the whole interval.
+        ``allowance + min over delta of (delta + int_0^T d_delta / m)``: valid on the whole
+        interval ``[times[0], times[-1]]``.
     pointwise : ndarray of shape (T,), m/s
-        ``min over delta of (delta + int_0^t d_delta / m)`` at each sample.
+        ``allowance + min over delta of (delta + int_0^t d_delta / m)`` at each sample:
+        valid on ``[times[0], t]``.
     """
     t = np.asarray(times, dtype=float)
-    V = np.asarray(body_speed, dtype=float)[:, None]
+    V = np.asarray(body_speed, dtype=float)
     v = np.asarray(contact_speeds, dtype=float)
     f = np.asarray(forces, dtype=float)
-    smooth = np.tanh((v - V) / epsilon) @ f
+    h = np.diff(t)
+    push = float(np.sum(np.abs(f))) + np.abs(np.broadcast_to(
+        np.asarray(external, dtype=float), h.shape))
+    A = speed_rate(push, damping, np.maximum(np.abs(V[:-1]), np.abs(V[1:])) + allowance, mass,
+                   h)
+    V_a, V_b = V[:-1], V[1:]
+    low = np.maximum(0.5 * (V_a + V_b - A * h), np.minimum(V_a, V_b) - A * h) - allowance
+    high = np.minimum(0.5 * (V_a + V_b + A * h), np.maximum(V_a, V_b) + A * h) + allowance
+    v_min, v_max = np.minimum(v[:-1], v[1:]), np.maximum(v[:-1], v[1:])
+    smooth_min = np.tanh((v_min - high[:, None]) / epsilon) @ f     # F_s is decreasing in V
+    smooth_max = np.tanh((v_max - low[:, None]) / epsilon) @ f      # and increasing in v_i
     best = np.full(t.size, np.inf)
     total = np.inf
     for ratio in _DELTAS:
         delta = ratio * epsilon
-        f_lo = np.where(v > V + delta, 1.0, -1.0) @ f      # lower end of F at V_s + delta
-        f_hi = np.where(v >= V - delta, 1.0, -1.0) @ f     # upper end of F at V_s - delta
-        defect = np.maximum(0.0, np.maximum(f_lo - smooth, smooth - f_hi)) / mass
-        growth = np.concatenate(([0.0], np.cumsum(0.5 * (defect[1:] + defect[:-1]) * np.diff(t))))
+        f_lo = np.where(v_max > low[:, None] + delta, 1.0, -1.0) @ f   # sup of F_lo(V_s + delta)
+        f_hi = np.where(v_min >= high[:, None] - delta, 1.0, -1.0) @ f  # inf of F_hi(V_s - delta)
+        defect = np.maximum(0.0, np.maximum(f_lo - smooth_min, smooth_max - f_hi)) / mass
+        growth = np.concatenate(([0.0], np.cumsum(defect * h)))
         best = np.minimum(best, delta + growth)
         total = min(total, delta + float(growth[-1]))
-    return total, best
+    return total + allowance, best + allowance
 
 
 # -- design --------------------------------------------------------------------------------------
@@ -708,7 +767,7 @@ def _make_predictor(ca: Any, plant: Plant, motor: _Motor, epsilon: float) -> Any
     """CVODES (BDF, rtol 1e-10) over one piece ``[a, b]`` of a period on the smoothed model.
 
     Returns a casadi integrator with state ``V``, parameters ``(v_start (n), u (n), F_ext,
-    a, b)`` and outputs at ``_SAMPLES // 2 + 1`` equally spaced times of the piece.
+    a, b)`` and outputs at ``_INTERVALS`` equally spaced times of the piece after ``a``.
     """
     n = plant.n
     f = ca.DM(plant.contacts.forces)
@@ -719,27 +778,36 @@ def _make_predictor(ca: Any, plant: Plant, motor: _Motor, epsilon: float) -> Any
     rate = (ca.dot(f, ca.tanh((motor.symbolic(ca, v, u, s) - V) / epsilon)) + F_ext
             - plant.damping * V) / plant.mass
     dae = {"x": V, "p": ca.vertcat(v, u, F_ext, a, b), "t": x, "ode": (b - a) * rate}
-    grid = np.linspace(0.0, 1.0, _SAMPLES // 2 + 1)
+    grid = np.linspace(0.0, 1.0, _INTERVALS + 1)
     return ca.integrator("prediction", "cvodes", dae, 0.0, grid[1:],
-                         {"reltol": 1e-10, "abstol": 1e-13, "max_num_steps": 100000}), grid
+                         {"reltol": _RTOL, "abstol": _ATOL, "max_num_steps": 100000}), grid
 
 
 def _predict(predictor: Any, plant: Plant, motor: _Motor, U: np.ndarray, speeds: np.ndarray,
-             v0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             v0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
     """Integrate the smoothed model at tight tolerance: dense times, V, contact speeds.
 
     Returns
     -------
     t : ndarray of shape (T,), s
-        Non-decreasing: ``_SAMPLES // 2 + 1`` samples per piece (a period, split at rate
+        Non-decreasing: ``_INTERVALS + 1`` samples per piece (a period, split at rate
         kinks and external-force switches), both ends included.
     V : ndarray of shape (T,), m/s
     v : ndarray of shape (T, n), m/s
+    ext : ndarray of shape (T,), N
+        External force of each sample's piece.
+    allowance : float, m/s
+        Bound on the integration error of ``V``: CVODES keeps its estimate of each step's
+        local error within ``rtol |V| + atol``, and the smoothed law is dissipative (its
+        right side decreases in ``V``), so local errors add up without amplification; the
+        allowance is ``_LOCAL_SAFETY`` (10, for the estimate being an estimate) times the
+        number of steps times ``rtol max |V| + atol``.
     """
     integrator, grid = predictor
     dt = motor.period
     K = U.shape[0]
-    all_t, all_V, all_v = [], [], []
+    all_t, all_V, all_v, all_ext = [], [], [], []
+    steps = 0
     V = v0
     for k in range(K):
         start, u = speeds[k], U[k]
@@ -751,6 +819,7 @@ def _predict(predictor: Any, plant: Plant, motor: _Motor, U: np.ndarray, speeds:
         for a, b in zip(cuts[:-1], cuts[1:]):
             ext = plant.external(t0 + 0.5 * (a + b))
             out = integrator(x0=V, p=np.concatenate((start, u, [ext, a, b])))
+            steps += int(integrator.stats().get("nsteps", 100000))
             path = np.concatenate(([V], np.asarray(out["xf"]).ravel()))
             offsets = a + (b - a) * grid
             # Both ends of every piece, with the piece's own contact speeds: a switching
@@ -758,9 +827,12 @@ def _predict(predictor: Any, plant: Plant, motor: _Motor, U: np.ndarray, speeds:
             all_t.append(t0 + offsets)
             all_V.append(path)
             all_v.append(motor.speeds(start, u, offsets))
+            all_ext.append(np.full(grid.size, ext))
             V = float(path[-1])
     t = np.maximum.accumulate(np.minimum(np.concatenate(all_t), K * dt))   # rounding of t0 + b
-    return t, np.concatenate(all_V), np.concatenate(all_v)
+    V_all = np.concatenate(all_V)
+    allowance = _LOCAL_SAFETY * steps * (_RTOL * float(np.max(np.abs(V_all))) + _ATOL)
+    return t, V_all, np.concatenate(all_v), np.concatenate(all_ext), allowance
 
 
 @dataclass(frozen=True, eq=False)
@@ -878,9 +950,9 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
     follows a lag-compensated path the body sticks to, or pushes at a speed limit when the
     body must catch up, chosen period by period on the exact Coulomb law). Optionally ipopt
     refines it (multiple shooting on the tanh-smoothed law, warm-started there). Every
-    candidate is then predicted on the smoothed law at tight tolerance, certified against
-    the exact model (:func:`deviation_bound`) and simulated exactly; the status says what
-    the returned schedule achieves.
+    candidate is then predicted on the smoothed law at tight tolerance, bounded against
+    the exact model (:func:`deviation_bound`) and simulated exactly (compared with the
+    prediction over the whole run); the status says what the returned schedule achieves.
 
     Parameters
     ----------
@@ -924,8 +996,8 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
     Returns
     -------
     ScheduleResult
-        Always returned; errors, arrival and certificate are evaluated on the projected
-        commands (the exact simulation and the certified prediction), never taken from a
+        Always returned; errors, arrival and bounds are evaluated on the projected
+        commands (the exact simulation and the bounded prediction), never taken from a
         solver.
 
     Examples
@@ -964,7 +1036,19 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
             "plant", _OWNER, f"have current commands within the speed limits [{lo:g}, {hi:g}]",
             plant.contacts.speeds.tolist()))
     ref_fn, end, minimum = _reference(target, v0, horizon, period, motor, plant, lo, hi)
-    K = max(1, math.ceil(end / period - 1e-9))
+    periods = end / period
+    if not periods <= _MAX_PERIODS:             # before allocating anything of size K
+        if horizon is not None:
+            name, span = "horizon", "'horizon'"
+        elif isinstance(target, SpeedTrajectory):
+            name, span = "target", "the trajectory's last sample time 'times[-1]'"
+        else:
+            name, span = "target", "the braking 'duration' plus settling"
+        raise ParameterError(parameter_message(
+            name, _OWNER, f"span at most {_MAX_PERIODS} controller periods ({span} / "
+            f"'period' = {end:g} s / {period:g} s = {periods:.4g}): shorten it or lengthen "
+            f"'period'", end))
+    K = max(1, math.ceil(periods - 1e-9))
     times = np.arange(K + 1) * period
     pin_first = motor.dynamic
     n = plant.n
@@ -990,8 +1074,11 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         if width not in predictors:
             predictors[width] = _make_predictor(ca, plant, motor, width)
         commands, contact = _project(raw, start, motor, lo, hi, pin_first)
-        t_d, V_d, v_d = _predict(predictors[width], plant, motor, commands, contact, v0)
-        bound, _ = deviation_bound(t_d, V_d, v_d, forces, plant.mass, width)
+        t_d, V_d, v_d, ext_d, allowance = _predict(predictors[width], plant, motor, commands,
+                                                   contact, v0)
+        ext_h = np.maximum(np.abs(ext_d[:-1]), np.abs(ext_d[1:]))
+        bound, _ = deviation_bound(t_d, V_d, v_d, forces, plant.mass, width,
+                                   damping=plant.damping, external=ext_h, allowance=allowance)
         ref_d = np.asarray(ref_fn(t_d), dtype=float)
         miss = V_d - ref_d
         moves = np.diff(np.vstack((start, commands)), axis=0)
@@ -1011,6 +1098,8 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
             finished = exact.success and exact.V.size == t_d.size
             report = exact.message
         exact_V = exact.V if finished else np.full(t_d.size, np.nan)
+        # A second method: the closed-form exact solution against the prediction at the
+        # dense samples (the bound itself holds over the whole run, by proof).
         deviation = float(np.max(np.abs(exact_V - V_d))) if finished else math.inf
         exact_tracking = float(np.max(np.abs(exact_V - ref_d))) if finished else math.inf
         return _Verified(commands, contact, t_d, V_d, bound, float(np.max(np.abs(miss))),
@@ -1026,9 +1115,13 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         t_free = period if pin_first else 0.0
         forced_part = t_d <= t_free * (1 + 1e-12)
         ref_d = np.asarray(ref_fn(t_d), dtype=float)
+        # The motion before t_free is the same under every schedule: its error is forced.
         forced = float(np.max(np.abs(exact_V[forced_part] - ref_d[forced_part])))
         j = int(np.flatnonzero(forced_part)[-1])
-        free = t_d >= t_d[j]
+        # The funnel runs on every _COARSE-th dense sample (both ends of every piece): a
+        # bound over fewer samples is still a bound over all of them, at a quarter the cost.
+        coarse = np.arange(t_d.size) % (_INTERVALS + 1) % _COARSE == 0
+        free = (t_d >= t_d[j]) & (coarse | (np.arange(t_d.size) == j))
         bound_value = tracking_lower_bound(
             forces=forces, mass=plant.mass, damping=plant.damping, external=plant.external,
             tau=motor.tau, rate=motor.rate, lo=lo, hi=hi, t=t_d[free], reference=ref_d[free],
@@ -1048,10 +1141,13 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
     if not best.exact_finished:
         # Contacts meant to move together can be a few ulp apart, which the exact simulator
         # may not resolve: the same commands on a 1e-9 m/s grid make them exactly equal.
+        # Works around a simulator bug (the sign check of toolkit.simulation._exact._brent
+        # on near-tied event functions), being fixed separately; remove once fixed.
         best = verify(np.round(built.commands, _DIGITS))
     used_epsilon = epsilon
     if best.exact_finished and not best.verified:
-        # The certificate's quadrature missed a sharp defect: predict closer to the exact law.
+        # The exact simulation left a proven bound: only rounding, CVODES missing its
+        # tolerance or a simulator defect can do that. Guard: predict closer to the exact law.
         used_epsilon = epsilon / _RETRY
         best = verify(best.commands, used_epsilon)
     lower, gap, arrival = certify(best) if best.verified else (None, None, None)
@@ -1080,7 +1176,8 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
               f"periods)",
               f"ipopt {solver_status}" + (f" after {iterations} iterations" if iterations else ""),
               f"exact simulation within {best.deviation:.3g} m/s of the prediction "
-              f"(certified bound {best.bound:.3g} m/s, epsilon {used_epsilon:g} m/s)"
+              f"at the dense samples (proven bound {best.bound:.3g} m/s, epsilon "
+              f"{used_epsilon:g} m/s)"
               if best.exact_finished else f"exact simulation: {best.exact_message}",
               f"exact tracking error {best.exact_tracking:.4g} m/s"]
     if not np.array_equal(best.commands, _project(built.commands, start, motor, lo, hi,

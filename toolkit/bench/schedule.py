@@ -4,7 +4,7 @@
 ``designs/brake_schedule.toml`` and ``designs/carousel.toml`` twice, measured in the same run:
 
 - ``constructive`` (``design_schedule(..., refine=False)``, the default: construction,
-  certified prediction, exact simulation and certificate, everything included);
+  proven prediction bound, exact simulation and lower bound, everything included);
 - baseline, ``refine=True``: the same plus ipopt's multiple-shooting refinement warm-started
   at the constructive schedule (``max_iter`` 30; ``--quick``: 10).
 

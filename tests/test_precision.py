@@ -78,6 +78,25 @@ def test_exact_row_is_exact_and_references_are_measured(quick_report: PrecisionR
         assert row.wall_time > 0 and math.isfinite(row.wall_time)
 
 
+def test_moreau_error_includes_the_kink_between_steps() -> None:
+    # Startup of three unit contacts at -1, 0.1, 2 m/s, m = 2 kg: V = a t with a = 1/2 m/s^2
+    # up to the kink t* = 0.2 s, then V = 0.1 (it sticks). Implicit Euler with h = 0.08 s is
+    # exact at its steps (V_k = a k h = 0.04 k until it sticks at 0.1 at t = 0.24 s), so an
+    # error measured at its own steps is 0. Between the steps t_k = 0.16 and 0.24 it reports
+    # the chord; the report's times include the event time t*, where the chord is below the
+    # kink by a d (1 - d / h) with d = t* - t_k = h / 2: a h / 4 = 0.01 m/s, the largest gap
+    # (both are linear on each side of t*). rtol 1e-12: a few roundings of values of order 0.1.
+    plant = Plant(ContactSet([-1.0, 0.1, 2.0]), mass=2.0)
+    settings = (MethodSetting("exact"), MethodSetting("moreau", {"step": 0.08}))
+    report = precision_report(plant, 1.0, repeats=1, settings=settings)
+    a, h, d = 0.5, 0.08, 0.04
+    moreau = simulate(plant, 1.0, method="moreau", step=h)
+    truth = rational_trajectory(plant, 0.0, moreau.t)
+    assert np.max(np.abs(moreau.V - truth)) <= 1e-16            # exact at its own steps
+    assert report.row("moreau").max_error == pytest.approx(a * d * (1 - d / h), rel=1e-12, abs=0)
+    assert report.row("exact").max_error <= 1e-16
+
+
 def test_sign_rk45_stalls_and_chatters(quick_report: PrecisionReport) -> None:
     rk45 = quick_report.row("rk45")
     assert rk45.stalled and rk45.status in (Status.WALL_TIME, Status.MAX_STEPS)

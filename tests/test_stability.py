@@ -9,7 +9,7 @@ import pytest
 
 from toolkit.contacts import ContactSet
 from toolkit.plant import Motors, PiecewiseConstant, Plant
-from toolkit.simulation import simulate
+from toolkit.simulation import Status, simulate
 from toolkit.stability import StabilityReport, _case, _mirror, _Spec, stability_suite
 
 
@@ -39,15 +39,20 @@ def test_every_case_finishes_finite_bounded_and_ok(report: StabilityReport) -> N
     assert report.all_ok
 
 
-def test_whole_suite_runs_under_a_minute(report: StabilityReport) -> None:
-    assert sum(case.wall_time for case in report.cases) < 60.0
+def test_no_case_is_stopped_by_its_budget(report: StabilityReport) -> None:
+    # Every case finishes within its own wall-clock, step and event-rate budget: its status
+    # is SUCCESS, none of the statuses a budget sets. (No overall wall-clock assertion: the
+    # per-case budgets already bound the suite, and machine load must not fail the test.)
+    for case in report.cases:
+        assert case.status == Status.SUCCESS.name, case
 
 
 def test_to_dict_is_json(report: StabilityReport) -> None:
     data = json.loads(json.dumps(report.to_dict()))
     assert len(data["cases"]) == len(report.cases)
     for case in data["cases"]:
-        assert {"name", "method", "finished", "finite", "events", "wall_time", "ok"} <= set(case)
+        assert {"name", "method", "finished", "finite", "events", "wall_time", "ok",
+                "status"} <= set(case)
 
 
 def test_check_fails_when_the_state_is_wrong() -> None:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import statistics
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
@@ -37,7 +37,7 @@ __all__ = [
     "precision_report", "default_settings", "work_precision_curves", "exact_speedup",
     "carousel_startup_plant", "rational_trajectory",
     "CHATTER_MARGIN", "STEP_COLLAPSE_RATIO", "STEP_COLLAPSE_RUN", "CREEP_TOLERANCE",
-    "MOTION_FLOOR",
+    "MOTION_FLOOR", "EVALUATION_POINTS", "evaluation_times",
 ]
 
 #: Speed increments at or below ``MOTION_FLOOR * max(1, max|V|)`` (m/s) count as no motion
@@ -50,6 +50,7 @@ STEP_COLLAPSE_RUN = 1000
 #: ... each shorter than this fraction of the horizon ``t_end``.
 STEP_COLLAPSE_RATIO = 1e-6
 #: Methods with adaptive step control, whose sample times are their steps when t_eval is None.
+#: (casadi's SUNDIALS steps are internal: it reports on its output grid only.)
 _ADAPTIVE = ("rk45", "lsoda", "radau", "bdf")
 #: ``creep``: deviation (m/s) inside a zero-force band, where the exact solution is constant.
 CREEP_TOLERANCE = 1e-6
@@ -57,6 +58,8 @@ CREEP_TOLERANCE = 1e-6
 _MIN_REPEAT_TIME = 5e-3
 #: A first run at least this long (s) counts as a timing repeat.
 _WARM_RUN = 0.2
+#: Uniform times on [0, t_end] of the common evaluation grid (with the exact event times).
+EVALUATION_POINTS = 1001
 #: Reference carousel: F_tot / m (m/s^2), from dT = 0.35 s for 2 v_max = 0.7 m/s (PHYSICS.md 4).
 CAROUSEL_ACCELERATION = 2.0
 #: Reference carousel: contact speed limit v_max (m/s), PHYSICS.md section 3.
@@ -257,9 +260,12 @@ class PrecisionRow:
     method, setting : str
         As in :class:`~toolkit.simulation.SimulationResult` (``setting`` lists the options).
     max_error : float, m/s
-        ``max |V - V_exact|`` over the method's own sample times (up to where it stopped).
-        For the exact method: against :func:`rational_trajectory` at its event times and on a
-        uniform grid of 1001 times (``nan`` when the plant is outside what that supports).
+        ``max |V - V_exact|`` over the report's common evaluation times (up to where the run
+        stopped): the exact event times together with 1001 uniform times on ``[0, t_end]``,
+        which every method is asked for through ``t_eval`` (see :func:`precision_report`).
+        ``V_exact`` is :func:`rational_trajectory` when the plant is within what it supports,
+        otherwise the exact method's dense output; the exact row itself is measured against
+        the rational reference only (``nan`` when the plant is outside what it supports).
     final_error : float, m/s
         ``|V(t_end) - V_exact(t_end)|``; ``inf`` when the run stopped before ``t_end``.
     wall_time : float, s
@@ -273,13 +279,16 @@ class PrecisionRow:
     chattering : bool
         The body speed reverses direction (sign change between successive increments larger
         than ``MOTION_FLOOR * max(1, max|V|)``) more than ``CHATTER_MARGIN`` times more often
-        than the exact solution sampled at the same times.
+        than the exact solution sampled at the same times. Counted at the solver's own steps
+        for the adaptive solvers (the untimed run of ``step_collapse``: chattering happens
+        between steps), at the common evaluation times for the others.
     step_collapse : bool or None
         The adaptive solver crawls: at least ``STEP_COLLAPSE_RUN`` (1000) consecutive steps
         are each shorter than ``STEP_COLLAPSE_RATIO * t_end`` (1e-6 of the horizon). Short
         steps that resolve a smoothing layer and then grow again do not count; a solver
-        stuck in a chattering loop does. ``None`` for methods without adaptive steps
-        (exact, moreau) or whose samples are not its steps (casadi reports on a grid).
+        stuck in a chattering loop does. Read from one extra, untimed run that reports the
+        solver's own steps (``t_eval=None``). ``None`` for methods without adaptive steps
+        (exact, moreau) or whose steps casadi does not expose.
     creep : bool
         Only for plants whose final contacts have a zero-force band and no drag, external
         force, command schedule or compliance: the exact solution starts strictly inside the
@@ -290,7 +299,8 @@ class PrecisionRow:
     reversals : int
         Direction reversals counted for ``chattering``.
     min_step : float or None, s
-        The smallest step of an adaptive solver.
+        The smallest step of an adaptive solver (from the same untimed run as
+        ``step_collapse``).
     """
 
     method: str
@@ -425,7 +435,7 @@ def _step_collapse(result: SimulationResult, t_end: float) -> tuple[bool | None,
     return longest >= STEP_COLLAPSE_RUN, float(np.min(steps))
 
 
-def _creep(result: SimulationResult, reference: np.ndarray, plant: Plant, v0: float) -> bool:
+def _creep(V: np.ndarray, reference: np.ndarray, plant: Plant, v0: float) -> bool:
     if (plant.commands is not None or plant.damping != 0 or plant.compliance != 0
             or isinstance(plant.external_force, PiecewiseConstant) or plant.external_force != 0):
         return False
@@ -433,15 +443,39 @@ def _creep(result: SimulationResult, reference: np.ndarray, plant: Plant, v0: fl
     if band is None or not band[0] + CREEP_TOLERANCE < v0 < band[1] - CREEP_TOLERANCE:
         return False
     inside = (reference > band[0] + CREEP_TOLERANCE) & (reference < band[1] - CREEP_TOLERANCE)
-    return bool(np.any(np.abs(result.V[inside] - reference[inside]) > CREEP_TOLERANCE))
+    return bool(np.any(np.abs(V[inside] - reference[inside]) > CREEP_TOLERANCE))
 
 
-def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting,
-           repeats: int) -> tuple[SimulationResult, float]:
-    """Run once, then time ``repeats`` repeats (back-to-back calls of >= 5 ms each)."""
+def evaluation_times(exact: SimulationResult, t_end: float) -> np.ndarray:
+    """The common evaluation times of the report: exact event times and a uniform grid.
+
+    Parameters
+    ----------
+    exact : SimulationResult
+        An exact run without ``t_eval`` (its ``t`` holds 0, every event time and ``t_end``).
+    t_end : float, s
+
+    Returns
+    -------
+    ndarray of shape (T,), s
+        Sorted, unique: ``t``, the event times and ``EVALUATION_POINTS`` uniform times on
+        ``[0, t_end]``. The kinks of the exact solution are all among them.
+    """
+    events = np.array([event.time for event in exact.events], dtype=float)
+    grid = np.union1d(np.union1d(exact.t, events), np.linspace(0.0, t_end, EVALUATION_POINTS))
+    return grid[(grid >= 0.0) & (grid <= t_end)]
+
+
+def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting, repeats: int,
+           t_eval: np.ndarray) -> tuple[SimulationResult, float]:
+    """Run once, then time ``repeats`` repeats (back-to-back calls of >= 5 ms each).
+
+    Every call asks for the report's common times ``t_eval``, so the measured time includes
+    producing those outputs.
+    """
     def call() -> SimulationResult:
-        return simulate(plant, t_end, v0=v0, method=setting.method, budget=setting.budget,
-                        **setting.kwargs)
+        return simulate(plant, t_end, v0=v0, method=setting.method, t_eval=t_eval,
+                        budget=setting.budget, **setting.kwargs)
 
     start = time.perf_counter()
     result = call()
@@ -460,32 +494,37 @@ def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting,
 
 
 def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: Plant,
-         t_end: float, v0: float, exact: SimulationResult) -> PrecisionRow:
-    if result.method == "exact":
-        if _rational_supported(plant):
-            times = np.union1d(result.t, np.linspace(0.0, t_end, 1001))
-            truth = rational_trajectory(plant, v0, times)
-            mine = result.speed_at(times)
-            max_error = float(np.max(np.abs(mine - truth)))
-            final_error = float(abs(mine[-1] - truth[-1])) if result.success else math.inf
-        else:
-            max_error = final_error = math.nan
-        reference = exact.speed_at(result.t)
+         t_end: float, v0: float, grid: np.ndarray, truth: np.ndarray, rational: bool,
+         exact_at: Callable[[np.ndarray], np.ndarray]) -> PrecisionRow:
+    """Measure one run on the common times ``grid`` against ``truth`` (the exact values there)."""
+    reached = np.searchsorted(grid, result.t)              # result.t is a prefix of grid
+    if result.t.size and not (reached[-1] < grid.size and np.array_equal(grid[reached], result.t)):
+        raise SolverError(f"{result.method} did not report at the requested times")
+    reference = truth[reached]
+    if result.method == "exact" and not rational:
+        max_error = final_error = math.nan                 # no reference independent of itself
     else:
-        reference = exact.speed_at(result.t)
         errors = np.abs(result.V - reference)
         max_error = float(np.max(errors)) if errors.size else math.inf
-        final_error = float(errors[-1]) if result.success and errors.size else math.inf
-    reversals = _reversals(result.V)
-    chattering = reversals > _reversals(reference) + CHATTER_MARGIN
-    collapse, min_step = _step_collapse(result, t_end)
+        done = result.success and errors.size == grid.size
+        final_error = float(errors[-1]) if done else math.inf
+    collapse, min_step = None, None
+    if result.method in _ADAPTIVE:                         # the solver's own steps, untimed
+        own = simulate(plant, t_end, v0=v0, method=setting.method, budget=setting.budget,
+                       **setting.kwargs)
+        collapse, min_step = _step_collapse(own, t_end)
+        reversals = _reversals(own.V)
+        chattering = reversals > _reversals(exact_at(own.t)) + CHATTER_MARGIN
+    else:
+        reversals = _reversals(result.V)
+        chattering = reversals > _reversals(reference) + CHATTER_MARGIN
     stalled = result.status in (Status.WALL_TIME, Status.MAX_STEPS, Status.ZENO)
     return PrecisionRow(
         method=result.method, setting=result.setting, max_error=max_error,
         final_error=final_error, wall_time=float(wall), n_steps=result.n_steps,
         n_evaluations=result.n_evaluations, n_events=result.n_events, status=result.status,
         message=result.message, chattering=bool(chattering), step_collapse=collapse,
-        creep=_creep(result, reference, plant, v0), stalled=stalled, reversals=reversals,
+        creep=_creep(result.V, reference, plant, v0), stalled=stalled, reversals=reversals,
         min_step=min_step)
 
 
@@ -493,13 +532,18 @@ def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: in
                      settings: Sequence[MethodSetting] | None = None) -> PrecisionReport:
     """Run every method and setting on one plant and measure error against run time.
 
+    The comparison is made on equal terms: every method, the exact one included, is asked
+    for the same output times (:func:`evaluation_times`: the exact event times, where the
+    solution has its kinks, and 1001 uniform times) through ``t_eval``, each with its own way
+    of producing them (dense output, interpolation between steps, an output grid); errors
+    are measured at those times and the wall time is that of the same calls, so every method
+    pays for producing them. A time-stepping method is thus judged over the whole run, not
+    only at its own steps.
+
     Parameters
     ----------
-    plant : Plant
-    t_end : float, s
-        Horizon, ``> 0``.
-    v0 : float, m/s
-        Initial body speed.
+    plant, t_end, v0
+        The scene, as in :func:`toolkit.simulation.simulate`.
     repeats : int
         Timing repeats per successful run (median reported), ``>= 1``.
     settings : sequence of MethodSetting, optional
@@ -508,8 +552,9 @@ def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: in
     Returns
     -------
     PrecisionReport
-        One row per setting, in order. The reference of every error is the exact method's
-        dense output (itself checked against :func:`rational_trajectory` in its row).
+        One row per setting, in order. The reference of every error is
+        :func:`rational_trajectory` when the plant is within what it supports, else the
+        exact method's dense output.
 
     Raises
     ------
@@ -529,10 +574,14 @@ def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: in
     exact = simulate(plant, t_end, v0=v0, method="exact")
     if not exact.success:
         raise SolverError(f"The exact reference did not reach t_end = {t_end:g} s: {exact.message}")
+    grid = evaluation_times(exact, t_end)
+    rational = _rational_supported(plant)
+    truth = rational_trajectory(plant, v0, grid) if rational else exact.speed_at(grid)
     rows = []
     for setting in chosen:
-        result, wall = _timed(plant, t_end, v0, setting, repeats)
-        rows.append(_row(setting, result, wall, plant, t_end, v0, exact))
+        result, wall = _timed(plant, t_end, v0, setting, repeats, grid)
+        rows.append(_row(setting, result, wall, plant, t_end, v0, grid, truth, rational,
+                         exact.speed_at))
     return PrecisionReport(rows=tuple(rows), t_end=t_end, v0=v0, repeats=repeats)
 
 

@@ -68,6 +68,10 @@ class StabilityCase:
         Distance of the final speed to the set, or the max mirror mismatch.
     message : str
         The run's status message.
+    status : str
+        Name of the run's :class:`~toolkit.simulation.Status` (``"SUCCESS"`` when it finished;
+        ``"WALL_TIME"``, ``"MAX_STEPS"`` or ``"ZENO"`` when its budget stopped it). For a
+        mirror check, that of the first run that did not succeed.
     """
 
     name: str
@@ -86,6 +90,7 @@ class StabilityCase:
     expected: tuple[float, float]
     deviation: float
     message: str
+    status: str
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dictionary (``name``, ``method``, ``finished``, ``finite``, ``events``,
@@ -98,7 +103,7 @@ class StabilityCase:
                 "final_speed": self.final_speed if np.isfinite(self.final_speed) else None,
                 "expected": list(self.expected),
                 "deviation": self.deviation if np.isfinite(self.deviation) else None,
-                "message": self.message}
+                "message": self.message, "status": self.status}
 
 
 @dataclass(frozen=True)
@@ -244,13 +249,14 @@ def _case(spec: _Spec) -> StabilityCase:
     plant = spec.plant
     grid = np.linspace(0.0, spec.t_end, 201) if spec.check == "mirror" else None
     result, wall = _run(spec, plant, spec.v0, grid)
-    finished, finite = result.success, _finite(result)
+    finished, finite, status = result.success, _finite(result), result.status
     lo, hi = plant.equilibrium()
     final = float(result.V[-1]) if result.V.size else float("nan")
     if spec.check == "mirror":
         mirrored, wall_m = _run(spec, _mirror(plant), -spec.v0, grid)
         wall += wall_m
         finished = finished and mirrored.success
+        status = result.status if not result.success else mirrored.status
         finite = finite and _finite(mirrored)
         same = result.V.size == mirrored.V.size
         deviation = float(np.max(np.abs(result.V + mirrored.V))) if same else float("inf")
@@ -267,7 +273,8 @@ def _case(spec: _Spec) -> StabilityCase:
         finite=finite, events=int(events), max_events=int(max_events), wall_time=wall,
         budget=spec.wall_time * (2 if spec.check == "mirror" else 1), ok=bool(ok),
         check=spec.check, tolerance=spec.tolerance, final_speed=final,
-        expected=(float(lo), float(hi)), deviation=float(deviation), message=result.message)
+        expected=(float(lo), float(hi)), deviation=float(deviation), message=result.message,
+        status=status.name)
 
 
 def stability_suite(*, quick: bool = False) -> StabilityReport:

@@ -105,13 +105,11 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
 
     Parameters
     ----------
-    plant : Plant
-    t_end : float, s
-    v0 : float, m/s
+    plant, t_end, v0, budget
+        As in :func:`toolkit.simulation.simulate` (checked there); the module docstring says
+        what of ``budget`` casadi can enforce.
     t_eval : ndarray of shape (T,) or None, s
         Report times; ``None``: 201 uniform times (plus the switching times).
-    budget : Budget
-        See the module docstring for what casadi can and cannot enforce.
     integrator : {"cvodes", "idas"}
     friction : {"tanh", "stribeck"}
     epsilon : float, m/s
@@ -162,7 +160,7 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
         elif meter.elapsed() > budget.wall_time:
             status, detail = Status.WALL_TIME, (f"{meter.elapsed():.3g} s used of wall_time = "
                                                 f"{budget.wall_time:g} s (checked after the call)")
-    if t_eval is not None and status is Status.SUCCESS:
+    if t_eval is not None and t_out.size > 1:            # a trajectory, complete or over budget
         keep = np.searchsorted(t_out, t_eval)            # every t_eval is on the grid
         t_out, y_out = t_out[keep], y_out[keep]
     return build_result(

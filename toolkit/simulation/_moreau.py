@@ -167,14 +167,12 @@ def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
 
     Parameters
     ----------
-    plant : Plant
-    t_end : float, s
-    v0 : float, m/s
+    plant, t_end, v0, budget
+        As in :func:`toolkit.simulation.simulate` (checked there); ``budget.max_steps``
+        counts steps.
     t_eval : ndarray of shape (T,) or None, s
         Report times (linear interpolation between steps, the net force of the step that
         ends at or after each time); ``None``: every step.
-    budget : Budget
-        ``max_steps`` counts steps.
     step : float, s
         Step length ``h > 0`` (shortened to land on switches and ``t_end``).
 
@@ -190,20 +188,10 @@ def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     speeds = plant.initial_speeds()
     times, values, forces, rows = [0.0], [v0], [plant.net_force(0.0, v0, speeds)], [speeds]
     status, detail = Status.SUCCESS, ""
-    V = v0
     edges = segment_edges(plant, t_end)
     try:
-        for t0, t1 in zip(edges[:-1], edges[1:]):
-            t0, t1 = float(t0), float(t1)
-            count = max(1, math.ceil((t1 - t0) / h * (1.0 - 1e-12)))
-            # (time at the end of the step, step length): nominal h, the last one shortened
-            grid = [(t0 + j * h, h) for j in range(1, count)]
-            grid.append((t1, t1 - (t0 + (count - 1) * h)))
-            if dynamic or plant.compliance > 0:
-                V, speeds = _general_segment(plant, t0, grid, V, speeds, meter,
-                                             times, values, forces, rows)
-            else:
-                V = _staircase_segment(plant, t0, grid, V, meter, times, values, forces)
+        with np.errstate(over="ignore", invalid="ignore"):   # non-finite W: caught per step
+            _segments(plant, edges, h, v0, speeds, meter, times, values, forces, rows)
     except BudgetExceeded as stop:
         status, detail = stop.status, stop.detail
     step_t = np.array(times)
@@ -218,6 +206,32 @@ def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
         plant, method="moreau", setting=format_setting(h=h), t=t_out, V=y_out[:, 0],
         contact_speeds=y_out[:, 2:] if dynamic else None, force=y_out[:, 1], meter=meter,
         status=status, detail=detail)
+
+
+def _segments(plant: Plant, edges: np.ndarray, h: float, V: float, speeds: np.ndarray,
+              meter: Meter, times: list[float], values: list[float], forces: list[float],
+              rows: list[np.ndarray]) -> None:
+    """Step over every segment between switches, appending to the output lists."""
+    dynamic = plant.dynamic_motors
+    for t0, t1 in zip(edges[:-1], edges[1:]):
+        t0, t1 = float(t0), float(t1)
+        count = max(1, math.ceil((t1 - t0) / h * (1.0 - 1e-12)))
+        # (time at the end of the step, step length): nominal h, the last one shortened
+        grid = [(t0 + j * h, h) for j in range(1, count)]
+        grid.append((t1, t1 - (t0 + (count - 1) * h)))
+        if dynamic or plant.compliance > 0:
+            V, speeds = _general_segment(plant, t0, grid, V, speeds, meter,
+                                         times, values, forces, rows)
+        else:
+            V = _staircase_segment(plant, t0, grid, V, meter, times, values, forces)
+
+
+def _finite_step(t: float, W: float, force: float) -> float:
+    """``force``, after checking that the step's speed and force are finite (else FAILED)."""
+    if not (math.isfinite(W) and math.isfinite(force)):
+        raise BudgetExceeded(Status.FAILED, f"the state became non-finite at t = {t:.6g} s "
+                             f"(V = {W:.3g} m/s, force = {force:.3g} N)")
+    return force
 
 
 def _staircase_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V: float,
@@ -238,7 +252,7 @@ def _staircase_segment(plant: Plant, t0: float, grid: list[tuple[float, float]],
         W, _ = _resolve(levels, plateaus, a, b, bisect.bisect_left(upper, b))
         meter.evaluations += 1
         meter.step()
-        forces.append(m * (W - V) / h)
+        forces.append(_finite_step(t_next, W, m * (W - V) / h))
         times.append(t_next)
         values.append(W)
         V = W
@@ -264,7 +278,7 @@ def _general_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V
             W, _ = moreau_step_staircase(levels, plateaus, a, b)
             meter.evaluation()
         meter.step()
-        forces.append(m * (W - V) / h)
+        forces.append(_finite_step(t_next, W, m * (W - V) / h))
         times.append(t_next)
         values.append(W)
         rows.append(speeds)

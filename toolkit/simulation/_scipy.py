@@ -33,6 +33,7 @@ exception aborts the solver and the accepted steps so far are returned with stat
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -56,13 +57,17 @@ def _right_hand_side(plant: Plant, t0: float, friction: str, epsilon: float, met
     # Within a segment nothing depends on t except through the (constant) commands and F_ext,
     # so every evaluation uses t0: the solver may probe the segment's right end, where
     # PiecewiseConstant already holds the next value.
+    # A non-finite value stops the run (status FAILED): no solver recovers from it, and some
+    # (LSODA) would otherwise retry until the wall-clock budget is spent.
     if not dynamic:
         speeds = plant.command(t0)
 
         def rhs(t: float, y: np.ndarray) -> np.ndarray:
             meter.evaluation()
-            return np.array([plant.net_force(t0, y[0], speeds, friction=friction,
-                                             epsilon=epsilon) / mass])
+            value = plant.net_force(t0, y[0], speeds, friction=friction, epsilon=epsilon) / mass
+            if not math.isfinite(value):
+                raise BudgetExceeded(Status.FAILED, _non_finite(t, y))
+            return np.array([value])
         return rhs
 
     def rhs_dynamic(t: float, y: np.ndarray) -> np.ndarray:
@@ -71,8 +76,14 @@ def _right_hand_side(plant: Plant, t0: float, friction: str, epsilon: float, met
         out = np.empty_like(y)
         out[0] = plant.net_force(t0, y[0], speeds, friction=friction, epsilon=epsilon) / mass
         out[1:] = plant.motor_rate(t0, speeds)
+        if not np.all(np.isfinite(out)):
+            raise BudgetExceeded(Status.FAILED, _non_finite(t, y))
         return out
     return rhs_dynamic
+
+
+def _non_finite(t: float, y: np.ndarray) -> str:
+    return f"the right-hand side became non-finite at t = {t:.6g} s (V = {y[0]:.3g} m/s)"
 
 
 def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray | None,
@@ -82,16 +93,13 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
 
     Parameters
     ----------
-    plant : Plant
-    t_end : float, s
-    v0 : float, m/s
+    plant, t_end, v0, budget
+        As in :func:`toolkit.simulation.simulate` (checked there); ``budget.max_steps``
+        counts right-hand-side evaluations (finite-difference Jacobian evaluations included).
     t_eval : ndarray of shape (T,) or None, s
         Report times, evaluated with the solver's own dense output on the step that
         contains each time; ``None``: every accepted step. A run stopped by a budget
         reports only the times it reached.
-    budget : Budget
-        ``max_steps`` counts right-hand-side evaluations (finite-difference Jacobian
-        evaluations included).
     solver : {"rk45", "lsoda", "radau", "bdf"}
     friction : {"sign", "tanh", "stribeck"}
     epsilon : float, m/s
@@ -125,10 +133,10 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     try:
         for t0, t1 in zip(edges[:-1], edges[1:]):
             rhs = _right_hand_side(plant, float(t0), friction, epsilon, meter, dynamic)
-            stepper = solver_class(rhs, float(t0), y, float(t1), rtol=rtol, atol=atol)
+            stepper = _solver_call(solver, solver_class, rhs, float(t0), y, float(t1),
+                                   rtol=rtol, atol=atol)
             while stepper.status == "running":
-                with np.errstate(divide="ignore"):   # Radau's step-size ratio at a zero error
-                    message = stepper.step()
+                message = _solver_call(solver, stepper.step)
                 if stepper.status == "failed":
                     raise BudgetExceeded(Status.FAILED, f"{SCIPY_SOLVERS[solver]}: {message}")
                 meter.step()
@@ -149,6 +157,21 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         plant, method=solver, setting=setting, t=t_out, V=y_out[:, 0],
         contact_speeds=y_out[:, 1:] if dynamic else None, force=None, meter=meter,
         status=status, detail=detail, friction=friction, epsilon=epsilon)
+
+
+def _solver_call(solver: str, function: Any, *args: Any, **kwargs: Any) -> Any:
+    """Call into the scipy solver; its numerical failures become status ``FAILED``.
+
+    Overflowing states make scipy raise ``ValueError`` ("array must not contain infs or
+    NaNs"), a singular iteration matrix ``LinAlgError``; both (and ``ArithmeticError``) end
+    the run with their message instead of escaping ``simulate``. Floating-point warnings are
+    silenced: a non-finite value is caught by the right-hand side or by the result.
+    """
+    try:
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+            return function(*args, **kwargs)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+        raise BudgetExceeded(Status.FAILED, f"{SCIPY_SOLVERS[solver]}: {error}") from error
 
 
 def _sample_step(stepper: Any, t_eval: np.ndarray, out_t: list[float],

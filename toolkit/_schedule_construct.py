@@ -303,7 +303,9 @@ def tracking_lower_bound(*, forces: np.ndarray, mass: float, damping: float,
     force of the highest contacts (and symmetrically below). For a tube half-width ``e`` the
     set of speeds reachable while ``|V(t_j) - reference_j| <= e`` at every sample is inside
     an interval whose ends follow these extreme rates (evaluated conservatively over each
-    step) clipped to the tube; when it empties, no schedule achieves ``e``. The largest
+    step, at the lowest/highest speed the body can reach within it: every step starts in
+    the tube, so ``|V| <= max |reference| + e`` there, and :func:`speed_rate` bounds the
+    in-step slope with drag) clipped to the tube; when it empties, no schedule achieves ``e``. The largest
     such ``e`` on a grid (refined twice) is returned: a valid lower bound, never above the
     true optimum.
 

@@ -232,7 +232,10 @@ class Plant:
         of each command), so repeated simulations of one plant skip recomputing it. The
         plant's own fields never change; only this private cache grows.
         """
-        return self._derived.setdefault(name, {})
+        cache = self._derived.get(name)
+        if cache is None:
+            cache = self._derived[name] = {}
+        return cache
 
     # -- properties ---------------------------------------------------------------------------
     @property

@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import struct
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -156,24 +157,29 @@ class _Recorder:
     def dense(self, t_stop: float, success: bool) -> _Dense:
         return _Dense(self.rows, self.mu, t_stop, success)
 
-    def samples(self, t_stop: float, V_stop: float, mass: float) -> np.ndarray:
-        """Segment starts and the final time: rows ``t`` (s), ``V`` (m/s) and the force
-        ``m dV/dt`` (N) from the right, exact, as a fresh read-only array of shape (3, T)."""
-        rows = self.rows
-        times = [row[0] for row in rows]
-        speeds = [row[1] for row in rows]
-        forces = [mass * (row[2] + row[3] + row[5] + row[6]) for row in rows]
-        if t_stop > times[-1]:
-            t0, _, c1, B, lam, C, D = rows[-1]
+    def samples(self, t_stop: float, V_stop: float,
+                mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Segment starts and the final time: ``t`` (s), ``V`` (m/s) and the force ``m dV/dt``
+        (N) from the right, exact, as fresh read-only arrays of shape (T,)."""
+        times: list[float] = []
+        speeds: list[float] = []
+        forces: list[float] = []
+        for t0, V0, c1, B, lam, C, D in self.rows:                # each segment at s = 0
+            times.append(t0)
+            speeds.append(V0)
+            forces.append(mass * (c1 + B + C + D))
+        if t_stop > t0:                  # the last segment (the loop's last row) at its end
             s, mu = t_stop - t0, self.mu
             decay = math.exp(-mu * s)
             times.append(t_stop)
             speeds.append(V_stop)
             forces.append(mass * (c1 + B * math.exp(-lam * s) + C * decay
                                   + D * (1.0 - mu * s) * decay))
-        table = np.array((times, speeds, forces))
-        table.setflags(write=False)
-        return table
+        # One immutable bytes buffer: its views are read-only without a copy or a flag to set
+        # (and this beats np.array on a few values).
+        T = len(times)
+        table = np.frombuffer(struct.pack(f"{3 * T}d", *times, *speeds, *forces))
+        return table[:T], table[T:2 * T], table[2 * T:]
 
 
 class _Dense:
@@ -929,29 +935,29 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         for array in (times, V, force):
             array.setflags(write=False)
     speeds = _contact_speeds(plant, times)
-    speeds.setflags(write=False)
     n_events = len(rec.events)
     detail = rec.detail if not success else f"{n_events} events"
     # Every array above is fresh and read-only, every count an int: no re-validation.
-    return SimulationResult._trusted(
-        method="exact", setting="event-driven closed form", t=times, V=V,
-        contact_speeds=speeds, force=force, events=tuple(rec.events), status=rec.status,
-        message=status_message(rec.status, detail), n_events=n_events,
-        n_evaluations=rec.n_evaluations, n_steps=len(rec.rows),
-        wall_time=time.perf_counter() - started, dense=dense)
+    return SimulationResult._trusted({
+        "method": "exact", "setting": "event-driven closed form", "t": times, "V": V,
+        "contact_speeds": speeds, "force": force, "events": tuple(rec.events),
+        "status": rec.status, "message": status_message(rec.status, detail),
+        "n_events": n_events, "n_evaluations": rec.n_evaluations, "n_steps": len(rec.rows),
+        "wall_time": time.perf_counter() - started, "dense": dense})
 
 
 def _contact_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
-    """Contact speeds at ``times``: shape (T, n), a read-only broadcast when constant."""
+    """Contact speeds at ``times``: shape (T, n), read-only (a broadcast when constant and huge)."""
+    T = times.size
     if plant.commands is None:
         speeds = plant.command(0.0)
-        shape = (times.size, speeds.size)
-        if times.size * speeds.size <= _SMALL_TABLE:
-            table = np.empty(shape)
-            table[:] = speeds
-            return table
-        return np.broadcast_to(speeds, shape)               # no copy for huge tables
+        if T * speeds.size <= _SMALL_TABLE:                # rows of one immutable buffer
+            return np.frombuffer(speeds.tobytes() * T).reshape(T, speeds.size)
+        return np.broadcast_to(speeds, (T, speeds.size))   # no copy when huge
     if plant.dynamic_motors:
-        return _motor_speeds(plant, times)
-    low, high = plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf)
-    return np.clip(plant.commands(times).reshape(times.size, plant.n), low, high)
+        table = _motor_speeds(plant, times)
+    else:
+        low, high = plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf)
+        table = np.clip(plant.commands(times).reshape(T, plant.n), low, high)
+    table.setflags(write=False)
+    return table

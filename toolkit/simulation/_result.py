@@ -173,12 +173,13 @@ class SimulationResult:
                 object.__setattr__(self, name, as_int(count, name, "SimulationResult", low=0))
 
     @classmethod
-    def _trusted(cls, **values: Any) -> SimulationResult:
-        """A result from fields a simulator produced itself: every field given, the arrays
-        fresh, read-only and of matching shapes, the counts ints, ``events`` a tuple of
-        :class:`Event`. Built without re-validation or copies (private fast path)."""
+    def _trusted(cls, values: dict[str, Any]) -> SimulationResult:
+        """A result from fields a simulator produced itself (``values``: field name -> value,
+        every field given; the arrays fresh, read-only and of matching shapes, the counts
+        ints, ``events`` a tuple of :class:`Event`). The dict becomes the instance's own,
+        without re-validation or copies (private fast path)."""
         result = object.__new__(cls)
-        result.__dict__.update(values)
+        object.__setattr__(result, "__dict__", values)
         return result
 
     @property

@@ -466,7 +466,7 @@ def test_refusals_of_the_design_options():
 def test_contacts_moving_together_are_verified():
     # Lag-compensated commands bring contacts to one speed up to a few ulp; a schedule with
     # such near-ties is still simulated exactly and verified (regression: the exact
-    # simulator once raised on it; the designer then retries on a 1e-9 m/s command grid).
+    # simulator once raised on it: toolkit.simulation._exact._brent's sign check).
     rng = np.random.default_rng(46965)
     plant = carousel(rng.uniform(-0.3, 0.3, 4), forces=rng.uniform(0.1, 0.5, 4))
     reference = SpeedTrajectory([0.0, 0.2, 0.3], [0.0, 0.2, -0.1])

@@ -487,6 +487,42 @@ def test_coincident_moving_contacts_act_as_one():
     assert [e.kind for e in a.events] == [e.kind for e in b.events]
 
 
+def test_contacts_a_few_ulp_apart_are_simulated():
+    # Regression (F1): lag-compensated commands from design_schedule (seed 46965, 4 contacts,
+    # lag 0.01) bring contacts within a few ulp of each other; the crossing bracket (found
+    # with np.expm1) then held no sign change for the scalar polish (math.expm1) and _brent
+    # raised ValueError. Second method: the same run on commands rounded to 1e-9 m/s (exactly
+    # tied). Identity used for the tolerance: V' = (1/m) sum f_i sign(v_i - V) is monotone in
+    # (v - V), so two runs whose contact speeds differ by at most d stay within d of each
+    # other; a first-order lag is an average of its commands, so d <= max |command shift|.
+    rng = np.random.default_rng(46965)
+    speeds, forces = rng.uniform(-0.3, 0.3, 4), rng.uniform(0.1, 0.5, 4)
+    head = [[0.08090092114379605, 0.12980428791116305, -0.11386425712043502,
+             0.27726807981134954],
+            [0.03359828423628308, 0.025944044547332464, 0.35, 0.00286335944818803],
+            [0.060386661353120874, 0.060386661353120874, 0.021691931560304814,
+             0.06038666135312089]]
+    tail = [0.0835016711215131, 0.10038666135312088, 0.12286486408818263, 0.14250443788420314,
+            0.15166154833501488, 0.17, -0.35, 0.17104062313054505, 0.0917666197287446,
+            0.04307656111839125, -0.019391058564980062, -0.07939105856498002,
+            -0.07939105856498002]
+    values = np.vstack((head, np.repeat(np.array(tail)[:, None], 4, axis=1)))
+    times = 0.02 * np.arange(1, 16)
+    motors = Motors(lag=0.01, speed_limits=(-0.35, 0.35))
+    plant = Plant(ContactSet(speeds, forces), 1.0, motors=motors,
+                  commands=PiecewiseConstant(times, values))
+    rounded = Plant(ContactSet(speeds, forces), 1.0, motors=motors,
+                    commands=PiecewiseConstant(times, np.round(values, 9)))
+    grid = np.linspace(0.0, 0.3, 3001)
+    result = simulate(plant, 0.3, t_eval=grid)
+    second = simulate(rounded, 0.3, t_eval=grid)
+    assert result.status is Status.SUCCESS and second.status is Status.SUCCESS
+    assert all(math.isfinite(e.time) for e in result.events)
+    shift = float(np.max(np.abs(values - np.round(values, 9))))
+    # atol: the shift bound plus rounding of the two closed forms (|V| <= 0.35, ~1e-15).
+    np.testing.assert_allclose(result.V, second.V, rtol=0, atol=shift + 1e-14)
+
+
 def test_to_dict_is_json_able():
     import json
 

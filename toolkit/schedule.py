@@ -78,8 +78,6 @@ _OWNER = "design_schedule"
 _CONTINUATION = (10.0, 1.0)
 #: Widths ``delta`` (units of ``epsilon``) tried by :func:`deviation_bound`.
 _DELTAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0)
-#: Decimal digits (m/s) of the commands' second try when the exact simulator fails.
-_DIGITS = 9
 #: Smoothing width divisor of the second prediction when the first does not verify.
 _RETRY = 4.0
 #: Intervals per piece (a period, or part of one) of the prediction's dense output.
@@ -1137,13 +1135,6 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         return gap is not None and gap <= tolerance
 
     best = verify(built.commands)
-    first_try = best.exact_message
-    if not best.exact_finished:
-        # Contacts meant to move together can be a few ulp apart, which the exact simulator
-        # may not resolve: the same commands on a 1e-9 m/s grid make them exactly equal.
-        # Works around a simulator bug (the sign check of toolkit.simulation._exact._brent
-        # on near-tied event functions), being fixed separately; remove once fixed.
-        best = verify(np.round(built.commands, _DIGITS))
     used_epsilon = epsilon
     if best.exact_finished and not best.verified:
         # The exact simulation left a proven bound: only rounding, CVODES missing its
@@ -1180,10 +1171,6 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
               f"{used_epsilon:g} m/s)"
               if best.exact_finished else f"exact simulation: {best.exact_message}",
               f"exact tracking error {best.exact_tracking:.4g} m/s"]
-    if not np.array_equal(best.commands, _project(built.commands, start, motor, lo, hi,
-                                                  pin_first)[0]) and method == "constructive":
-        detail.append(f"commands rounded to 1e-{_DIGITS} m/s after the first exact "
-                      f"simulation failed ({first_try})")
     if lower is not None:
         detail.append(f"no schedule can do better than {lower:.4g} m/s (gap {gap:.3g} m/s, "
                       f"tolerance {tolerance:g} m/s)")

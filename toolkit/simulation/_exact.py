@@ -683,7 +683,11 @@ def _brent(fns: _Fns, i: int, lo: float, hi: float) -> float:
         return (alpha + beta * s + gamma * _em1(lam, s) + delta * _em1(mu, s)
                 + D * s * math.exp(-mu * s))
 
-    if g(hi) == 0.0:
+    g_lo, g_hi = g(lo), g(hi)
+    if g_hi == 0.0 or g_lo * g_hi > 0.0:
+        # The bracket was found with the vectorized closed form (np.expm1), this polish uses
+        # math.expm1: the two differ by a few ulp, so on near-tied contacts the scalar form
+        # may see no sign change. The change is then rounding noise and hi a root within it.
         return hi
     return float(brentq(g, lo, hi, xtol=1e-300, rtol=4.0 * _EPS, maxiter=500))
 

@@ -207,3 +207,40 @@ def test_compliant_equilibrium_is_a_zero_of_the_force(speeds, k):
     for V in (lo, hi):
         # Zero to the rounding of a sum of n slopes of size 1/k over spans <= 2 + 2 k n.
         assert abs(np.sum(plant.contact_forces(V, cs.speeds))) <= 1e-12 * cs.n * (1 + 1 / k)
+
+
+def test_plant_refuses_rates_that_overflow():
+    # (F_tot + max|F_ext|) / m = (1 + 1e300) / 1e-300 = 1e600 > 1.8e308: not a double.
+    with pytest.raises(ParameterError, match="'mass' parameter of Plant"):
+        Plant(ContactSet([0.1]), mass=1e-300, external_force=1e300)
+    with pytest.raises(ParameterError, match="'mass' parameter of Plant"):
+        Plant(ContactSet([0.1]), mass=1e-300,
+              external_force=PiecewiseConstant([1.0], [0.0, -1e300]))
+    # c / m = 1e10 / 1e-300 = 1e310 overflows.
+    with pytest.raises(ParameterError, match="'damping' parameter of Plant"):
+        Plant(ContactSet([0.1]), mass=1e-300, damping=1e10)
+    # Just inside: (1 + 1e300) / 1e-8 = 1e308 and 1e8 / 1e-300 = 1e308 are finite.
+    Plant(ContactSet([0.1]), mass=1e-8, external_force=1e300)
+    Plant(ContactSet([0.1]), mass=1e-300, damping=1e8)
+    # 1 / lag must be finite: 1 / 5e-324 (the smallest subnormal) overflows, 1 / 1e-300 not.
+    with pytest.raises(ParameterError, match="'lag' parameter of Motors"):
+        Motors(lag=5e-324)
+    assert Motors(lag=1e-300).lag == 1e-300
+
+
+def test_plant_refuses_compliance_below_the_speeds_rounding():
+    # k f = 1e-17 N (m/s)/N is below 4 eps max|v| = 4 * 2.2e-16 * 0.7 = 6.2e-16 m/s: the
+    # linear band is lost in the rounding of the speeds (it used to give ZENO at 0.7 in the
+    # exact method and an IndexError in equilibrium()).
+    with pytest.raises(ParameterError, match="compliance=0"):
+        Plant(ContactSet([0.3, 0.5, 0.7]), 1.0, motors=Motors(compliance=1e-17))
+    # Commands count too: their largest |v| sets the rounding.
+    with pytest.raises(ParameterError, match="'motors' parameter of Plant"):
+        Plant(ContactSet([0.0, 0.0]), 1.0, motors=Motors(compliance=1e-16),
+              commands=PiecewiseConstant([1.0], [[0.0, 0.0], [7.0, 7.0]]))
+    # 1 / (k f) must be finite even when every speed is 0: 1 / 1e-310 overflows.
+    with pytest.raises(ParameterError, match="'motors' parameter of Plant"):
+        Plant(ContactSet([0.0, 0.0]), 1.0, motors=Motors(compliance=1e-310))
+    # Just above the rounding, the equilibrium is the closed form: the median 0.5 (odd N).
+    plant = Plant(ContactSet([0.3, 0.5, 0.7]), 1.0, motors=Motors(compliance=1e-15))
+    assert plant.equilibrium() == pytest.approx((0.5, 0.5), rel=0, abs=4e-15)   # +- k f

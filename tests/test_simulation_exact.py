@@ -618,3 +618,32 @@ def test_coulomb_landscape_is_the_contact_set_staircase(pairs):
         assert G == pytest.approx(contacts.force(level), rel=1e-15, abs=1e-15)
         touching = [i for i, (v, f) in enumerate(pairs) if v == level and f > 0]
         assert land.contact(k) == touching[0]
+
+
+# -- non-finite physics ------------------------------------------------------------------------
+def test_overflow_over_the_horizon_is_failed_not_success():
+    # Finite rates (1e300 m/s^2) can still overflow over a long run: V(1e10 s) = 1e310 is not
+    # a double. The run must say FAILED, never SUCCESS with V = inf.
+    plant = Plant(ContactSet([0.1]), mass=1.0, external_force=1e300)
+    result = simulate(plant, 1e10)
+    assert result.status is Status.FAILED
+    assert result.message.startswith(Status.FAILED.value)
+    assert "floating-point range" in result.message
+    # The same plant over 1 s stays finite: V(1) = 1e300 exactly (constant acceleration,
+    # the contact force 1 N is rounding next to 1e300).
+    short = simulate(plant, 1.0)
+    assert short.status is Status.SUCCESS
+    assert short.V[-1] == pytest.approx(1e300, rel=RTOL, abs=0)
+
+
+def test_reach_time_of_non_finite_targets_and_rates_is_never():
+    from toolkit.simulation._exact import _reach_time
+
+    inf = math.inf
+    assert _reach_time(0.0, inf, 0.0, 0.1) == inf          # infinite rate
+    assert _reach_time(0.0, 1.0, 0.0, inf) == inf          # infinite target
+    assert _reach_time(0.0, 1.0, 2.0, -inf) == inf
+    assert _reach_time(inf, 1.0, 0.0, 0.1) == inf          # an overflowed V: never, not NaN
+    # Closed forms: linear V = r0 s reaches 1 at s = 1 / 2; V = 1 - exp(-s) reaches 1/2 at ln 2.
+    assert _reach_time(0.0, 2.0, 0.0, 1.0) == 0.5
+    assert _reach_time(0.0, 1.0, 1.0, 0.5) == pytest.approx(math.log(2.0), rel=1e-15, abs=0)

@@ -15,6 +15,7 @@ Everything here is data plus pure helpers that every simulation method shares
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -135,6 +136,9 @@ class Motors:
     def __post_init__(self) -> None:
         owner = "Motors"
         object.__setattr__(self, "lag", as_float(self.lag, "lag", owner, low=0.0))
+        if self.lag > 0 and not math.isfinite(1.0 / self.lag):
+            raise ParameterError(parameter_message(
+                "lag", owner, "be 0 or have a finite rate 1 / lag", self.lag))
         object.__setattr__(self, "rate_limit", as_float(
             self.rate_limit, "rate_limit", owner, low=0.0, low_open=True, finite=False))
         object.__setattr__(self, "compliance", as_float(
@@ -223,7 +227,42 @@ class Plant:
                     f"values of shape {self.commands.values.shape}"))
         limits = self.motors.speed_limits if self.motors is not None else (-np.inf, np.inf)
         object.__setattr__(self, "_limits", limits)
+        self._check_scales()
         object.__setattr__(self, "_derived", {})
+
+    def _check_scales(self) -> None:
+        """Refuse parameters whose rates overflow or whose compliance is below rounding.
+
+        Every method divides by the mass and by ``k f_i``: ``(F_tot + max|F_ext|) / m`` (the
+        largest acceleration, m/s^2), ``c / m`` (the drag rate, 1/s) and ``1 / (k f_i)``
+        must be finite. A compliance with ``k f_i <= 4 eps max|v_j|`` is below the speeds'
+        rounding: its linear band is not resolved (use ``compliance=0``).
+        """
+        ext = self.external_force
+        push = float(np.max(np.abs(ext.values))) if isinstance(ext, PiecewiseConstant) else abs(ext)
+        accel = (self.contacts.total_force + push) / self.mass
+        if not math.isfinite(accel):
+            raise ParameterError(parameter_message(
+                "mass", "Plant", f"keep the largest acceleration (F_tot + max|F_ext|) / m finite "
+                f"(F_tot = {self.contacts.total_force:g} N, max|F_ext| = {push:g} N)", self.mass))
+        if not math.isfinite(self.damping / self.mass):
+            raise ParameterError(parameter_message(
+                "damping", "Plant", f"keep the drag rate c / m finite (m = {self.mass:g} kg)",
+                self.damping))
+        k = self.compliance
+        if k > 0:
+            f = self.contacts.forces[self.contacts.forces > 0]
+            speeds = self.contacts.speeds if self.commands is None else self.commands.values
+            scale = float(np.max(np.abs(np.clip(speeds, *self._limits)), initial=0.0))
+            floor = 4.0 * float(np.finfo(float).eps) * scale
+            with np.errstate(over="ignore", divide="ignore"):
+                resolved = np.all(k * f > floor) and np.all(np.isfinite(1.0 / (k * f)))
+            if not resolved:
+                raise ParameterError(parameter_message(
+                    "motors", "Plant", f"have a compliance k with k f_i above the speeds' "
+                    f"rounding 4 eps max|v| = {floor:.3g} m/s and 1 / (k f_i) finite for every "
+                    f"contact (smallest f_i = {float(np.min(f)):g} N); use compliance=0 for a "
+                    f"stiff motor", k))
 
     def derived(self, name: str) -> dict[Any, Any]:
         """A named cache of quantities derived from this (immutable) plant.
@@ -351,10 +390,12 @@ class Plant:
         if friction == "sign":
             return f * np.sign(slip)
         eps = as_float(epsilon, "epsilon", "Plant.contact_forces", low=0.0, low_open=True)
-        smooth = np.tanh(slip / eps)
-        if friction == "tanh":
-            return f * smooth
-        return f * smooth * (1.0 + (STRIBECK_PEAK - 1.0) * np.exp(-(slip / (STRIBECK_SPEED * eps)) ** 2))
+        with np.errstate(over="ignore"):     # slip / eps = +-inf: tanh = +-1, exp(-inf) = 0
+            smooth = np.tanh(slip / eps)
+            if friction == "tanh":
+                return f * smooth
+            hump = np.exp(-(slip / (STRIBECK_SPEED * eps)) ** 2)
+        return f * smooth * (1.0 + (STRIBECK_PEAK - 1.0) * hump)
 
     def net_force(self, t: float, V: float, speeds: Any, *, friction: str = "sign",
                   epsilon: float = 0.0) -> float:

@@ -97,9 +97,12 @@ def _em1(rate: float, s: float) -> float:
 
 
 def _reach_time(V: float, r0: float, lam: float, target: float) -> float:
-    """Time for ``V + r0 em(lam, s)`` to reach ``target`` (``inf`` if it never does)."""
+    """Time for ``V + r0 em(lam, s)`` to reach ``target`` (``inf`` if it never does, or when
+    ``target`` or ``r0`` is not finite)."""
+    if not (math.isfinite(target) and math.isfinite(r0)):
+        return math.inf
     y = (target - V) / r0
-    if y < 0:
+    if not y >= 0:                                  # negative, or NaN from an infinite V
         return math.inf
     if lam == 0:
         return y
@@ -925,6 +928,12 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         t_stop, V_stop = _run_dynamic(plant, t_end, v0, rec)
     else:
         t_stop, V_stop = _run_ideal(plant, t_end, v0, rec)
+    if rec.status is _SUCCESS and not (math.isfinite(t_stop) and math.isfinite(V_stop)):
+        # Finite parameters (Plant refuses overflowing rates) can still overflow over a long
+        # horizon, e.g. a huge external force for 1e10 s: report it, never as a success.
+        rec.status = Status.FAILED
+        rec.detail = (f"the body speed left the floating-point range (V = {V_stop:g} m/s "
+                      f"at t = {t_stop:g} s); shorten t_end or rescale the forces")
     success = rec.status is _SUCCESS
     dense = rec.dense(t_stop, success)
     m = plant.mass

@@ -218,7 +218,8 @@ class _Dense:
         """Body speed at ``times`` (s), m/s."""
         query, s, (_, V0, c1, B, lam, C, D) = self._parts(times)
         mu = self.mu
-        value = V0 + c1 * s + B * _em(lam, s) + C * _em(mu, s) + D * s * np.exp(-mu * s)
+        with np.errstate(over="ignore", invalid="ignore"):     # masked past a stopped run
+            value = V0 + c1 * s + B * _em(lam, s) + C * _em(mu, s) + D * s * np.exp(-mu * s)
         return np.where((query <= self.t_stop) | self.success, value, np.nan)
 
     def derivative(self, times: Any) -> np.ndarray:
@@ -934,6 +935,10 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         rec.status = Status.FAILED
         rec.detail = (f"the body speed left the floating-point range (V = {V_stop:g} m/s "
                       f"at t = {t_stop:g} s); shorten t_end or rescale the forces")
+        rows = rec.rows                  # keep the finite part: up to the last finite segment
+        while len(rows) > 1 and not (math.isfinite(rows[-1][0]) and math.isfinite(rows[-1][1])):
+            rows.pop()
+        t_stop, V_stop = rows[-1][0], rows[-1][1]
     success = rec.status is _SUCCESS
     dense = rec.dense(t_stop, success)
     m = plant.mass

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from toolkit.contacts import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
-from toolkit.plant import STRIBECK_PEAK, Motors, PiecewiseConstant, Plant
+from toolkit.plant import STRIBECK_PEAK, Motors, PiecewiseConstant, Plant, compliant_breakpoints
 
 
 # -- PiecewiseConstant ----------------------------------------------------------------------
@@ -244,3 +244,21 @@ def test_plant_refuses_compliance_below_the_speeds_rounding():
     # Just above the rounding, the equilibrium is the closed form: the median 0.5 (odd N).
     plant = Plant(ContactSet([0.3, 0.5, 0.7]), 1.0, motors=Motors(compliance=1e-15))
     assert plant.equilibrium() == pytest.approx((0.5, 0.5), rel=0, abs=4e-15)   # +- k f
+
+
+@settings(deadline=None, max_examples=40)
+@given(st.lists(st.floats(-1, 1), min_size=1, max_size=9), st.floats(1e-3, 1.0))
+def test_compliant_breakpoints_are_the_force_law(speeds, k):
+    # One implementation serves Plant.equilibrium and the exact method's landscape; check it
+    # against the second method, the direct sum of the saturated linear contact forces.
+    cs = ContactSet(speeds, np.linspace(0.5, 1.5, len(speeds)))
+    plant = Plant(cs, 1.0, motors=Motors(compliance=k))
+    x, at_x, first, slope, total = compliant_breakpoints(cs.speeds, cs.forces, k)
+    assert np.all(np.diff(x) > 0) and total == pytest.approx(cs.total_force, rel=1e-15)
+    direct = np.array([np.sum(plant.contact_forces(V, cs.speeds)) for V in x])
+    # Rounding of a running sum of n slopes (<= 1/k each) over spans <= 2 + 2 k n.
+    np.testing.assert_allclose(at_x, direct, rtol=0, atol=1e-12 * cs.n * (1 + 1 / k))
+    # Each limit belongs to a contact: x = v_first +- k f_first up to rounding of v +- k f.
+    gap = np.abs(np.abs(x - cs.speeds[first]) - k * cs.forces[first])
+    assert np.all(gap <= 4e-16 * (1 + np.abs(x)))
+    assert slope[0] == slope[-1] == 0.0 and np.all(slope <= 0)

@@ -419,23 +419,58 @@ class Plant:
         return _compliant_zero_set(speeds, self.contacts.forces, self.compliance)
 
 
+def compliant_breakpoints(speeds: np.ndarray, forces: np.ndarray, k: float) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """The force-speed map ``F(V) = sum f_i clip((v_i - V)/(k f_i), -1, 1)`` of compliant
+    contacts: continuous, piecewise linear, non-increasing.
+
+    Parameters
+    ----------
+    speeds : ndarray of shape (n,), m/s
+    forces : ndarray of shape (n,), N
+    k : float, (m/s)/N
+        Compliance, ``> 0`` (Plant makes sure ``k f_i`` is above the speeds' rounding).
+
+    Returns
+    -------
+    x : ndarray of shape (K,), m/s
+        Distinct saturation limits ``v_i +- k f_i`` of the contacts with ``f_i > 0``, ascending.
+    at_x : ndarray of shape (K,), N
+        ``F(x)``, snapped to 0 within ``4 (K + 1) eps F_tot``.
+    first : ndarray of shape (K,), int
+        The lowest index of the contacts saturating at each limit.
+    slope : ndarray of shape (K + 1,), N s/m
+        ``dF/dV`` inside interval ``j`` = ``(x[j-1], x[j])`` (0 below and above all limits).
+    total : float, N
+        ``F_tot`` of the contacts with ``f_i > 0``.
+    """
+    active = np.flatnonzero(forces > 0)
+    v, fa = speeds[active], forces[active]
+    points = np.concatenate((v - k * fa, v + k * fa))
+    change = np.concatenate((np.full(v.size, -1.0 / k), np.full(v.size, 1.0 / k)))
+    owner = np.concatenate((active, active))
+    order = np.lexsort((owner, points))
+    points, change, owner = points[order], change[order], owner[order]
+    new = np.concatenate(([True], points[1:] != points[:-1]))
+    group = np.cumsum(new) - 1
+    x = points[new]
+    change = np.bincount(group, weights=change, minlength=x.size)
+    total = float(np.sum(fa))
+    slope = np.concatenate(([0.0], np.cumsum(change)))           # slope inside interval j
+    slope[-1] = 0.0                                                # exactly flat above all
+    at_x = total + np.concatenate(([0.0], np.cumsum(slope[1:-1] * np.diff(x))))
+    tol = 4.0 * (x.size + 1) * float(np.finfo(float).eps) * total
+    at_x = np.where(np.abs(at_x) <= tol, 0.0, at_x)
+    return x, at_x, owner[new], slope, total
+
+
 def _compliant_zero_set(speeds: np.ndarray, forces: np.ndarray, k: float) -> tuple[float, float]:
     """Zero set of ``F(V) = sum f_i clip((v_i - V)/(k f_i), -1, 1)`` (continuous, non-increasing)."""
-    active = forces > 0
-    v, f = speeds[active], forces[active]
-    points = np.concatenate((v - k * f, v + k * f))
-    slope_change = np.concatenate((np.full(v.size, -1.0 / k), np.full(v.size, 1.0 / k)))
-    order = np.argsort(points, kind="stable")
-    points, slope_change = points[order], slope_change[order]
-    slopes = np.cumsum(slope_change)[:-1]              # slope on (points[j], points[j+1])
-    total = float(np.sum(f))
-    values = total + np.concatenate(([0.0], np.cumsum(slopes * np.diff(points))))
-    tol = 4.0 * points.size * np.finfo(float).eps * total
-    values = np.where(np.abs(values) <= tol, 0.0, values)
+    x, values, _, _, _ = compliant_breakpoints(speeds, forces, k)
     zero = np.flatnonzero(values == 0.0)
     if zero.size:
-        return float(points[zero[0]]), float(points[zero[-1]])
-    j = int(np.flatnonzero(values < 0.0)[0])           # F(points[j-1]) > 0 > F(points[j])
+        return float(x[zero[0]]), float(x[zero[-1]])
+    j = int(np.flatnonzero(values < 0.0)[0])           # F(x[j-1]) > 0 > F(x[j])
     share = values[j - 1] / (values[j - 1] - values[j])
-    point = float(points[j - 1] + share * (points[j] - points[j - 1]))
+    point = float(x[j - 1] + share * (x[j] - x[j - 1]))
     return point, point

@@ -69,7 +69,7 @@ from typing import Any
 import numpy as np
 
 from ..contacts import ContactSet
-from ..plant import PiecewiseConstant, Plant
+from ..plant import PiecewiseConstant, Plant, compliant_breakpoints
 from ._result import Budget, Event, SimulationResult, Status, status_message
 
 __all__ = ["simulate_exact"]
@@ -331,26 +331,8 @@ _Landscape = _CoulombLandscape | _CompliantLandscape
 
 
 def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _CompliantLandscape:
-    f = plant.contacts.forces
-    k = plant.compliance
-    active = np.flatnonzero(f > 0)
-    v, fa = speeds[active], f[active]
-    points = np.concatenate((v - k * fa, v + k * fa))
-    change = np.concatenate((np.full(v.size, -1.0 / k), np.full(v.size, 1.0 / k)))
-    owner = np.concatenate((active, active))
-    order = np.lexsort((owner, points))
-    points, change, owner = points[order], change[order], owner[order]
-    new = np.concatenate(([True], points[1:] != points[:-1]))
-    group = np.cumsum(new) - 1
-    x = points[new]
-    change = np.bincount(group, weights=change, minlength=x.size)
-    first = owner[new]
-    total = float(np.sum(fa))
-    slope = np.concatenate(([0.0], np.cumsum(change)))           # slope inside interval j
-    slope[-1] = 0.0                                                # exactly flat above all
-    at_x = total + np.concatenate(([0.0], np.cumsum(slope[1:-1] * np.diff(x))))
-    tol = 4.0 * (x.size + 1) * _EPS * total
-    at_x = np.where(np.abs(at_x) <= tol, 0.0, at_x)
+    x, at_x, first, slope, total = compliant_breakpoints(speeds, plant.contacts.forces,
+                                                         plant.compliance)
     base_x = np.concatenate(([x[0]], x))
     base_F = np.concatenate(([total], at_x))
     base_F[-1] = -total

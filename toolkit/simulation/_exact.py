@@ -214,19 +214,92 @@ class _Dense:
         rows = self.table[index]
         return query, query - rows[..., 0], np.moveaxis(rows, -1, 0)
 
+    def sorted_values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(V, dV/dt)`` at non-decreasing ``query`` times (s): each closed-form segment on
+        its contiguous slice of the times, with scalar coefficients and without its zero
+        terms. The same operations in the same order as :meth:`__call__` and
+        :meth:`derivative`, so the same values (a dropped zero term only turns a ``-0.0``
+        into ``0.0``), without gathering a row per time.
+
+        Parameters
+        ----------
+        query : ndarray of shape (T,), s
+            Sorted (non-decreasing), not NaN.
+
+        Returns
+        -------
+        V : ndarray of shape (T,), m/s
+            NaN past the end of a stopped run.
+        dV : ndarray of shape (T,), m/s^2
+            Right derivative.
+        """
+        rows, mu = self.rows, self.mu
+        T = query.size
+        V, dV = np.empty(T), np.empty(T)
+        starts = np.searchsorted(query, [row[0] for row in rows], side="left").tolist()
+        starts[0] = 0                                   # times before t0[0] use the first row
+        starts.append(T)
+        with np.errstate(over="ignore", invalid="ignore"):     # only past a stopped run
+            for (t0, V0, c1, B, lam, C, D), a, b in zip(rows, starts, starts[1:]):
+                if a >= b:
+                    continue
+                s = query[a:b] - t0
+                value = V0 + c1 * s if c1 != 0 else None
+                slope: Any = c1
+                if B != 0:
+                    term = B * (-np.expm1(-(lam * s)) / lam) if lam > 0 else B * s
+                    # exp(-0 s) = 1 exactly: the term is B
+                    slope = slope + (B if lam == 0 else B * np.exp(-lam * s))
+                    value = V0 + term if value is None else value + term
+                if C != 0 or D != 0:
+                    decay = np.exp(-mu * s)
+                    if C != 0:
+                        term = C * (-np.expm1(-(mu * s)) / mu) if mu > 0 else C * s
+                        value = V0 + term if value is None else value + term
+                        slope = slope + C * decay
+                    if D != 0:
+                        term = D * s * decay
+                        value = V0 + term if value is None else value + term
+                        slope = slope + D * (1.0 - mu * s) * decay
+                V[a:b] = V0 if value is None else value
+                dV[a:b] = slope
+        if not self.success:
+            V[np.searchsorted(query, self.t_stop, side="right"):] = np.nan
+        return V, dV
+
     def __call__(self, times: Any) -> np.ndarray:
-        """Body speed at ``times`` (s), m/s."""
-        query, s, (_, V0, c1, B, lam, C, D) = self._parts(times)
+        """Body speed at ``times`` (s, any shape), m/s."""
+        query = np.asarray(times, dtype=float)
+        if _is_sorted(query):
+            return self.sorted_values(query)[0]
+        return self.gathered_values(query)
+
+    def derivative(self, times: Any) -> np.ndarray:
+        """Right derivative ``dV/dt`` at ``times`` (s, any shape), m/s^2."""
+        query = np.asarray(times, dtype=float)
+        if _is_sorted(query):
+            return self.sorted_values(query)[1]
+        return self.gathered_derivative(query)
+
+    def gathered_values(self, query: np.ndarray) -> np.ndarray:
+        """:meth:`__call__` at times in any order: one segment row gathered per time."""
+        query, s, (_, V0, c1, B, lam, C, D) = self._parts(query)
         mu = self.mu
         with np.errstate(over="ignore", invalid="ignore"):     # masked past a stopped run
             value = V0 + c1 * s + B * _em(lam, s) + C * _em(mu, s) + D * s * np.exp(-mu * s)
         return np.where((query <= self.t_stop) | self.success, value, np.nan)
 
-    def derivative(self, times: Any) -> np.ndarray:
-        """Right derivative ``dV/dt`` at ``times`` (s), m/s^2."""
-        _, s, (_, _, c1, B, lam, C, D) = self._parts(times)
-        decay = np.exp(-self.mu * s)
-        return c1 + B * np.exp(-lam * s) + C * decay + D * (1.0 - self.mu * s) * decay
+    def gathered_derivative(self, query: np.ndarray) -> np.ndarray:
+        """:meth:`derivative` at times in any order: one segment row gathered per time."""
+        _, s, (_, _, c1, B, lam, C, D) = self._parts(query)
+        with np.errstate(over="ignore", invalid="ignore"):
+            decay = np.exp(-self.mu * s)
+            return c1 + B * np.exp(-lam * s) + C * decay + D * (1.0 - self.mu * s) * decay
+
+
+def _is_sorted(query: np.ndarray) -> bool:
+    """True for a 1-d array of at least two non-decreasing times (NaN-free)."""
+    return query.ndim == 1 and query.size > 1 and bool(np.all(query[1:] >= query[:-1]))
 
 
 # -- the force landscape of constant contact speeds ----------------------------------------
@@ -929,8 +1002,8 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         times, V, force = rec.samples(t_stop, V_stop, m)
     else:
         times = t_eval.copy() if t_eval.flags.writeable else t_eval
-        V = dense(times)
-        force = m * dense.derivative(times)
+        V, slope = dense.sorted_values(times)          # simulate() checked: non-decreasing
+        force = m * slope
         force[np.isnan(V)] = np.nan
         for array in (times, V, force):
             array.setflags(write=False)

@@ -157,8 +157,8 @@ class _Recorder:
         return True
 
     # -- output -----------------------------------------------------------------------------
-    def dense(self, t_stop: float, success: bool) -> _Dense:
-        return _Dense(self.rows, self.mu, t_stop, success)
+    def dense(self, t_stop: float, success: bool, t_end: float) -> _Dense:
+        return _Dense(self.rows, self.mu, t_stop, success, t_end)
 
     def samples(self, t_stop: float, V_stop: float,
                 mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -189,14 +189,16 @@ class _Dense:
     """Exact ``V(t)`` from the stored closed-form segments (NaN past a stopped run's end).
 
     ``table`` holds one row ``(t0, V0, c1, B, lam, C, D)`` per segment; ``mu`` is the motor
-    rate shared by all segments.
+    rate shared by all segments. Defined on ``[0, t_end]`` (the requested horizon);
+    :meth:`SimulationResult.speed_at` refuses times outside it.
     """
 
-    __slots__ = ("rows", "_table", "mu", "t_stop", "success")
+    __slots__ = ("rows", "_table", "mu", "t_stop", "success", "t_end")
 
     def __init__(self, rows: list[tuple[float, ...]], mu: float, t_stop: float,
-                 success: bool) -> None:
+                 success: bool, t_end: float) -> None:
         self.rows, self.mu, self.t_stop, self.success = rows, mu, t_stop, success
+        self.t_end = t_end
         self._table: np.ndarray | None = None
 
     @property
@@ -553,7 +555,8 @@ class _MotorPiece:
         ramping = s < self.ramp_end
         on_ramp = self.start + self.ramp * s
         if self.tau > 0:
-            settle = self.u + (self.after - self.u) * np.exp(-(s - self.ramp_end) / self.tau)
+            with np.errstate(over="ignore", invalid="ignore"):    # only on the ramp, masked
+                settle = self.u + (self.after - self.u) * np.exp(-(s - self.ramp_end) / self.tau)
         else:
             settle = np.broadcast_to(self.after, on_ramp.shape)
         return np.where(ramping, on_ramp, settle)
@@ -624,8 +627,8 @@ class _Fns:
     def inflection(self) -> np.ndarray:
         """The root of ``g''`` (at most one), NaN where there is none."""
         lam, mu, D = self.lam, self.mu, self.D
-        P, Q = -self.gamma * lam, -self.delta * mu
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            P, Q = -self.gamma * lam, -self.delta * mu     # may overflow with lag ~ 1e-300
             if D != 0.0:                                  # resonance lam == mu
                 return (2.0 * mu * D - P - Q) / (D * mu * mu)
             if lam != mu:
@@ -698,7 +701,8 @@ def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
     for col, (left, right) in enumerate(((0, 1), (1, 3)), start=2):
         lo, hi = knots[:, left], knots[:, right]
         d_lo, d_hi = fns.slope(lo), fns.slope(hi)
-        change = (d_lo * d_hi < 0)
+        with np.errstate(over="ignore"):                # only the product's sign is used
+            change = (d_lo * d_hi < 0)
         root = np.full(n, horizon)
         if change.any():
             idx = rows[change]
@@ -708,7 +712,8 @@ def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
     values = fns.value(knots, rows[:, None])
     values[:, 0] = fns.alpha                                # exact g(0)
     lo_v, hi_v = values[:, :-1], values[:, 1:]
-    crossing = ((lo_v * hi_v < 0) | ((hi_v == 0) & (lo_v != 0))) & (knots[:, 1:] > knots[:, :-1])
+    with np.errstate(over="ignore"):                    # only the product's sign is used
+        crossing = ((lo_v * hi_v < 0) | ((hi_v == 0) & (lo_v != 0))) & (knots[:, 1:] > knots[:, :-1])
     has = crossing.any(axis=1)
     if not has.any():
         return math.inf, -1
@@ -748,7 +753,9 @@ def _brent(fns: _Fns, i: int, lo: float, hi: float) -> float:
         # math.expm1: the two differ by a few ulp, so on near-tied contacts the scalar form
         # may see no sign change. The change is then rounding noise and hi a root within it.
         return hi
-    return float(brentq(g, lo, hi, xtol=1e-300, rtol=4.0 * _EPS, maxiter=500))
+    # disp=False: on a stiff closed form (lag 1e-300) brentq may stall short of its rtol; its
+    # last iterate is then still inside the bracket, the best the floats resolve.
+    return float(brentq(g, lo, hi, xtol=1e-300, rtol=4.0 * _EPS, maxiter=500, disp=False))
 
 
 # -- dynamic motors: the engine ----------------------------------------------------------------
@@ -995,7 +1002,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
             rows.pop()
         t_stop, V_stop = rows[-1][0], rows[-1][1]
     success = rec.status is _SUCCESS
-    dense = rec.dense(t_stop, success)
+    dense = rec.dense(t_stop, success, t_end)
     m = plant.mass
     if t_eval is None:
         # Segment starts (events, switches, motor phase changes) and the end: exact values.

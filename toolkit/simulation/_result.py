@@ -215,6 +215,13 @@ class SimulationResult:
     def speed_at(self, times: Any) -> np.ndarray:
         """Body speed at ``times`` (s): the dense output if present, else linear interpolation.
 
+        Parameters
+        ----------
+        times : array_like of any shape, s
+            Within the simulated span: ``[0, t_end]`` for a dense output that knows its
+            horizon (the exact method's; NaN past a stopped run's end), else
+            ``[t[0], t_final]``. Nothing is extrapolated: times outside are refused.
+
         Returns
         -------
         ndarray of the shape of ``times``, m/s
@@ -223,6 +230,13 @@ class SimulationResult:
         if not np.all(np.isfinite(query)):
             raise ParameterError(parameter_message(
                 "times", "SimulationResult.speed_at", "be finite", times))
+        horizon = getattr(self.dense, "t_end", None)
+        lo, hi = (0.0, horizon) if horizon is not None else (
+            float(self.t[0]) if self.t.size else 0.0, self.t_final)
+        if query.size and not (query.min() >= lo and query.max() <= hi):
+            raise ParameterError(parameter_message(
+                "times", "SimulationResult.speed_at",
+                f"lie within the simulated span [{lo:g}, {hi:g}] s (no extrapolation)", times))
         if self.dense is not None:
             return np.asarray(self.dense(query), dtype=float).reshape(query.shape)
         return np.interp(query, self.t, self.V)

@@ -139,6 +139,9 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
                 message = _solver_call(solver, stepper.step)
                 if stepper.status == "failed":
                     raise BudgetExceeded(Status.FAILED, f"{SCIPY_SOLVERS[solver]}: {message}")
+                if not np.all(np.isfinite(stepper.y)):   # the state overflowed (LSODA does not stop)
+                    raise BudgetExceeded(Status.FAILED, f"{SCIPY_SOLVERS[solver]}: the state is not "
+                                         f"finite at t = {stepper.t:g} s")
                 meter.step()
                 if t_eval is not None:
                     _sample_step(stepper, t_eval, dense_t, dense_y)

@@ -56,8 +56,13 @@ METHODS: tuple[str, ...] = tuple(_DISPATCH)
 def _check_t_eval(t_eval: Any, t_end: float) -> np.ndarray | None:
     if t_eval is None:
         return None
-    times = as_float_array(t_eval, "t_eval", "simulate")
-    if np.any(np.diff(times) < 0) or times[0] < 0 or times[-1] > t_end:
+    if isinstance(t_eval, np.ndarray) and t_eval.dtype == np.float64 and t_eval.ndim == 1 and t_eval.size:
+        times = t_eval   # the common case: no conversion (copied below only if writeable)
+    else:
+        times = as_float_array(t_eval, "t_eval", "simulate")
+    # One pass, NaN-safe: every comparison with NaN is False, and the two bounds exclude +-inf.
+    ordered = bool(np.all(times[1:] >= times[:-1]))
+    if not (ordered and times[0] >= 0 and times[-1] <= t_end):
         raise ParameterError(parameter_message(
             "t_eval", "simulate", f"be non-decreasing times within [0, t_end = {t_end:g}]",
             times.tolist() if times.size <= 8 else f"[{times.min():g} .. {times.max():g}]"))

@@ -27,15 +27,29 @@ def _print_json(data: Any) -> None:
     sys.stdout.write(to_json(data))
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    from .report import study_summary, study_to_dict, write_study
+def _scene(args: argparse.Namespace, section: str | None = None, purpose: str = ""):
+    """Load the SCENE argument; with ``section``, refuse a scene that does not declare it."""
+    from .errors import SceneError
     from .scene import load_scene
-    from .study import run_study
 
     scene = load_scene(args.scene)
+    if section is not None and getattr(scene, section) is None:
+        raise SceneError(f"The scene {scene.name!r} has no [{section}] section {purpose}.")
+    return scene
+
+
+def _out_dir(args: argparse.Namespace, scene: Any) -> Path:
+    """``--out``, or ``out/<scene name>``."""
+    return Path(args.out) if args.out else Path("out") / scene.name
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .report import study_summary, study_to_dict, write_study
+    from .study import run_study
+
+    scene = _scene(args)
     result = run_study(scene)
-    out_dir = Path(args.out) if args.out else Path("out") / scene.name
-    written = write_study(result, out_dir)
+    written = write_study(result, _out_dir(args, scene))
     if args.json:
         _print_json({**study_to_dict(result), "written": [str(p) for p in written]})
     else:
@@ -46,32 +60,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_curve(args: argparse.Namespace) -> int:
-    from .scene import load_scene
     from .study import force_curve
 
-    scene = load_scene(args.scene)
-    curve = force_curve(scene.contact_set(), args.points)
+    curve = force_curve(_scene(args).contact_set(), args.points)
     if args.json:
         _print_json(curve.to_dict())
     else:
         lo, hi = curve.equilibrium
         print(f"F_tot = {curve.total_force:.6g} N; equilibrium [{lo:.6g}, {hi:.6g}] m/s")
         print(f"{'V (m/s)':>12} {'F (N)':>12}")
-        for v, f in zip(curve.speeds[:: max(1, curve.speeds.size // 40)],
-                        curve.force[:: max(1, curve.speeds.size // 40)]):
+        stride = max(1, curve.speeds.size // 40)
+        for v, f in zip(curve.speeds[::stride], curve.force[::stride]):
             print(f"{v:12.5f} {f:12.5f}")
     return EXIT_OK
 
 
 def _cmd_allocate(args: argparse.Namespace) -> int:
-    from .errors import SceneError
-    from .scene import load_scene
     from .study import allocate_scene
 
-    scene = load_scene(args.scene)
-    if scene.target is None:
-        raise SceneError(f"The scene {scene.name!r} has no [target] section to allocate.")
-    result = allocate_scene(scene)
+    result = allocate_scene(_scene(args, "target", "to allocate"))
     if args.json:
         _print_json(result.to_dict())
     else:
@@ -83,17 +90,12 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
-    from .errors import SceneError
     from .report import schedule_check, schedule_lines, write_schedule
-    from .scene import load_scene
     from .study import design_scene_schedule
 
-    scene = load_scene(args.scene)
-    if scene.schedule is None:
-        raise SceneError(f"The scene {scene.name!r} has no [schedule] section to design.")
+    scene = _scene(args, "schedule", "to design")
     result, check = design_scene_schedule(scene)
-    out_dir = Path(args.out) if args.out else Path("out") / scene.name
-    written = write_schedule(result, out_dir)
+    written = write_schedule(result, _out_dir(args, scene))
     verified = schedule_check(result, check)
     if args.json:
         _print_json({**result.to_dict(), "exact_check": verified, "written": [str(p) for p in written]})
@@ -105,15 +107,11 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
 
 
 def _cmd_precision(args: argparse.Namespace) -> int:
-    from .errors import SceneError
     from .precision import precision_report
     from .report import write_precision
-    from .scene import load_scene
     from .study import scene_plant
 
-    scene = load_scene(args.scene)
-    if scene.simulation is None:
-        raise SceneError(f"The scene {scene.name!r} has no [simulation] section (t_end, v0) to compare methods on.")
+    scene = _scene(args, "simulation", "(t_end, v0) to compare methods on")
     report = precision_report(scene_plant(scene), scene.simulation.t_end, v0=scene.simulation.v0,
                               repeats=args.repeats)
     written = write_precision(report, args.out) if args.out else []

@@ -18,8 +18,8 @@ import numpy as np
 from .contacts import ContactSet
 from .scene import Scene
 
-__all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study", "scene_plant", "scene_target",
-           "allocate_scene", "design_scene_schedule", "scene_schedule_target"]
+__all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study", "scene_plant",
+           "allocate_scene", "design_scene_schedule"]
 
 
 @dataclass(frozen=True)
@@ -137,11 +137,6 @@ def scene_plant(scene: Scene, contacts: ContactSet | None = None):
                  motors=_motors(scene), commands=commands)
 
 
-def scene_target(scene: Scene):
-    """The allocation target a scene's ``[target]`` declares."""
-    return scene.target.build()
-
-
 def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
     """Solve a scene's ``[target]`` under its ``[motors]`` limits and compliance; see :func:`toolkit.allocate`."""
     from .allocation import allocate
@@ -150,16 +145,11 @@ def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
     motors = scene.motors
     limits = motors.speed_limits if motors is not None else None
     rate = motors.rate_limit if motors is not None and spec.dt is not None else None
-    return allocate(scene_target(scene), contacts if contacts is not None else scene.contact_set(),
+    return allocate(scene.target.build(), contacts if contacts is not None else scene.contact_set(),
                     speed_limits=limits, rate_limit=rate, dt=spec.dt, fixed=list(spec.fixed),
                     failed=list(spec.failed), liftable=list(spec.liftable), method=spec.method,
                     strict=spec.strict, time_limit=spec.time_limit,
                     compliance=motors.compliance if motors is not None else 0.0)
-
-
-def scene_schedule_target(scene: Scene):
-    """The :class:`~toolkit.Braking` or :class:`~toolkit.SpeedTrajectory` of ``[schedule]``."""
-    return scene.schedule.build()
 
 
 def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None):
@@ -177,7 +167,7 @@ def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None):
 
     spec = scene.schedule
     plant = scene_plant(scene, contacts)
-    result = design_schedule(plant, scene_schedule_target(scene), v0=spec.v0, horizon=spec.horizon,
+    result = design_schedule(plant, spec.build(), v0=spec.v0, horizon=spec.horizon,
                              period=spec.period, epsilon=spec.epsilon, time_limit=spec.time_limit)
     check = simulate(replace(plant, commands=result.as_commands()), float(result.times[-1]),
                      v0=spec.v0, t_eval=result.times)

@@ -261,4 +261,7 @@ def test_compliant_breakpoints_are_the_force_law(speeds, k):
     # Each limit belongs to a contact: x = v_first +- k f_first up to rounding of v +- k f.
     gap = np.abs(np.abs(x - cs.speeds[first]) - k * cs.forces[first])
     assert np.all(gap <= 4e-16 * (1 + np.abs(x)))
-    assert slope[0] == slope[-1] == 0.0 and np.all(slope <= 0)
+    # Slopes are running sums of up to 2n increments of size 1/k: a flat stretch may come out
+    # as a few rounding errors, at most 4 n eps (n / k), instead of exactly 0.
+    assert slope[0] == slope[-1] == 0.0
+    assert np.all(slope <= 4 * cs.n * np.finfo(float).eps * cs.n / k)

@@ -669,8 +669,10 @@ def _random_scene(rng: np.random.Generator, kind: int) -> Plant:
 
 def test_sorted_dense_output_equals_the_gathered_path(rng):
     # Second method: the per-time gather of segment rows (the path kept for unsorted times)
-    # against the per-segment slices for sorted times. Same operations in the same order, so
-    # equal bit for bit (array_equal; a dropped zero term may only turn -0.0 into 0.0).
+    # against the per-segment slices for sorted times, and against the straight-line gather
+    # of runs whose segments are all lines. Same operations in the same order, so equal bit
+    # for bit (array_equal; a dropped zero term may only turn -0.0 into 0.0).
+    linear_runs = 0
     for kind in range(35):
         plant = _random_scene(rng, kind)
         budget = Budget(max_steps=5) if kind % 11 == 10 else Budget()   # a stopped run: NaN
@@ -683,6 +685,14 @@ def test_sorted_dense_output_equals_the_gathered_path(rng):
         np.testing.assert_array_equal(dV, dense.gathered_derivative(times))
         shuffled = rng.permutation(times)                    # unsorted: the gathered path
         np.testing.assert_array_equal(dense(shuffled), dense.gathered_values(shuffled))
+        lines = dense.linear_values(shuffled)
+        # The engine's claim that its segments are lines holds on the stored rows (it may
+        # also hold without the claim, e.g. a damped body stuck all along).
+        assert not dense.linear or (not np.any(dense.table[:, [2, 4, 5, 6]]) and dense.mu == 0)
+        if lines is not None:
+            linear_runs += 1
+            np.testing.assert_array_equal(lines[0], dense.gathered_values(shuffled))
+            np.testing.assert_array_equal(lines[1], dense.gathered_derivative(shuffled))
         # simulate with t_eval (sorted) gives the same samples and force m dV/dt.
         run = simulate(plant, 2.0, v0=float(base.V[0]),
                        t_eval=times, budget=budget)
@@ -690,6 +700,7 @@ def test_sorted_dense_output_equals_the_gathered_path(rng):
         force = plant.mass * dV
         force[np.isnan(V)] = np.nan
         np.testing.assert_array_equal(run.force, force)
+    assert linear_runs >= 3                                  # the straight-line path was tested
 
 
 def test_speed_at_refuses_times_outside_the_simulated_span():

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import statistics
 import time
+import timeit
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -55,7 +56,7 @@ _ADAPTIVE = ("rk45", "lsoda", "radau", "bdf")
 #: ``creep``: deviation (m/s) inside a zero-force band, where the exact solution is constant.
 CREEP_TOLERANCE = 1e-6
 #: Each timing repeat runs a method back to back until it has used at least this long (s).
-_MIN_REPEAT_TIME = 5e-3
+_MIN_REPEAT_TIME = 0.02
 #: A first run at least this long (s) counts as a timing repeat.
 _WARM_RUN = 0.2
 #: Uniform times on [0, t_end] of the common evaluation grid (with the exact event times).
@@ -269,9 +270,11 @@ class PrecisionRow:
     final_error : float, m/s
         ``|V(t_end) - V_exact(t_end)|``; ``inf`` when the run stopped before ``t_end``.
     wall_time : float, s
-        Median over the repeats of the run time of one call of ``simulate`` (each repeat
-        times back-to-back calls for at least 5 ms and divides, like ``timeit``). A run that
-        does not succeed is timed once.
+        Median over the repeats of the run time of one call of ``simulate``: after a first
+        and a second (warm) call, each repeat times back-to-back calls for at least 20 ms
+        with :class:`timeit.Timer` (garbage collection off while timing, as ``timeit`` does)
+        and divides. A run that does not succeed is timed once; a first run of at least
+        0.2 s counts as one repeat and the others run once each.
     n_steps, n_evaluations, n_events : int
         From the result.
     status : Status
@@ -468,7 +471,7 @@ def evaluation_times(exact: SimulationResult, t_end: float) -> np.ndarray:
 
 def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting, repeats: int,
            t_eval: np.ndarray) -> tuple[SimulationResult, float]:
-    """Run once, then time ``repeats`` repeats (back-to-back calls of >= 5 ms each).
+    """Run once, then time ``repeats`` repeats (see ``PrecisionRow.wall_time``).
 
     Every call asks for the report's common times ``t_eval``, so the measured time includes
     producing those outputs.
@@ -482,15 +485,12 @@ def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting, repeat
     first = time.perf_counter() - start
     if not result.success or repeats <= 1 and first >= _MIN_REPEAT_TIME:
         return result, first
-    number = max(1, math.ceil(_MIN_REPEAT_TIME / max(first, 1e-9)))
-    # a long first run (>= 0.2 s) counts as a repeat: import and warm-up costs are negligible
-    times = [first] if first >= _WARM_RUN else []
-    for _ in range(repeats - len(times)):
-        start = time.perf_counter()
-        for _ in range(number):
-            call()
-        times.append((time.perf_counter() - start) / number)
-    return result, statistics.median(times)
+    timer = timeit.Timer(call)
+    if first >= _WARM_RUN:          # long runs: import and warm-up costs are negligible
+        return result, statistics.median([first, *timer.repeat(repeats - 1, 1)])
+    warm = timer.timeit(1)          # the first call may pay one-off costs (imports, caches)
+    number = max(1, math.ceil(_MIN_REPEAT_TIME / max(warm, 1e-9)))
+    return result, statistics.median(timer.repeat(repeats, number)) / number
 
 
 def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: Plant,

@@ -157,8 +157,8 @@ class _Recorder:
         return True
 
     # -- output -----------------------------------------------------------------------------
-    def dense(self, t_stop: float, success: bool, t_end: float) -> _Dense:
-        return _Dense(self.rows, self.mu, t_stop, success, t_end)
+    def dense(self, t_stop: float, success: bool, t_end: float, linear: bool) -> _Dense:
+        return _Dense(self.rows, self.mu, t_stop, success, t_end, linear)
 
     def samples(self, t_stop: float, V_stop: float,
                 mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -189,17 +189,19 @@ class _Dense:
     """Exact ``V(t)`` from the stored closed-form segments (NaN past a stopped run's end).
 
     ``table`` holds one row ``(t0, V0, c1, B, lam, C, D)`` per segment; ``mu`` is the motor
-    rate shared by all segments. Defined on ``[0, t_end]`` (the requested horizon);
+    rate shared by all segments; ``linear`` says every row is a line ``V0 + B s`` (the
+    engine that produced them knows it). Defined on ``[0, t_end]`` (the requested horizon);
     :meth:`SimulationResult.speed_at` refuses times outside it.
     """
 
-    __slots__ = ("rows", "_table", "mu", "t_stop", "success", "t_end")
+    __slots__ = ("rows", "_table", "linear", "_lines", "mu", "t_stop", "success", "t_end")
 
     def __init__(self, rows: list[tuple[float, ...]], mu: float, t_stop: float,
-                 success: bool, t_end: float) -> None:
+                 success: bool, t_end: float, linear: bool) -> None:
         self.rows, self.mu, self.t_stop, self.success = rows, mu, t_stop, success
-        self.t_end = t_end
+        self.t_end, self.linear = t_end, linear
         self._table: np.ndarray | None = None
+        self._lines: tuple[np.ndarray, ...] | None = None
 
     @property
     def table(self) -> np.ndarray:
@@ -208,6 +210,39 @@ class _Dense:
             self._table = np.array(self.rows, dtype=float)
             self._table.setflags(write=False)
         return self._table
+
+    def linear_values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(V, dV/dt)`` at ``query`` times (s, 1-d, any order) when every segment is a
+        straight line ``V0 + B s`` (``linear``: the ideal engine without drag or compliance),
+        else None.
+
+        One gathered row per time, the operations of :meth:`gathered_values` without its zero
+        terms: the same values (a dropped zero term may only turn ``-0.0`` into ``0.0``).
+        """
+        if not self.linear:
+            return None
+        lines = self._lines
+        if lines is None:       # t0, then t0, V0 and B each with its first row prepended
+            rows = self.rows
+            S = len(rows)
+            t0, V0, _, B = list(zip(*rows))[:4]
+            packed = struct.pack(f"{4 * S + 3}d", *t0, t0[0], *t0, V0[0], *V0, B[0], *B)
+            table = np.frombuffer(packed)
+            lines = self._lines = (table[:S], table[S:2 * S + 1], table[2 * S + 1:3 * S + 2],
+                                   table[3 * S + 2:])
+        starts, t0, V0, B = lines
+        # Row k - 1 for t0[k-1] <= t < t0[k]; the prepended row serves times before t0[0].
+        index = starts.searchsorted(query, side="right")
+        dV = B[index]
+        if self.success:                         # finite lines over finite times: no overflow
+            V = dV * (query - t0[index])
+            V += V0[index]
+            return V, dV
+        with np.errstate(over="ignore", invalid="ignore"):
+            V = dV * (query - t0[index])
+            V += V0[index]
+        V[query > self.t_stop] = np.nan
+        return V, dV
 
     def _parts(self, times: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         query = np.asarray(times, dtype=float)
@@ -269,19 +304,26 @@ class _Dense:
             V[np.searchsorted(query, self.t_stop, side="right"):] = np.nan
         return V, dV
 
+    def values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(V, dV/dt)`` at ``query`` times (s, 1-d, not NaN), by the cheapest exact path:
+        :meth:`linear_values` when every segment is a line, else :meth:`sorted_values` for
+        non-decreasing times, else the per-time gather."""
+        fast = self.linear_values(query)
+        if fast is not None:
+            return fast
+        if _is_sorted(query):
+            return self.sorted_values(query)
+        return self.gathered_values(query), self.gathered_derivative(query)
+
     def __call__(self, times: Any) -> np.ndarray:
         """Body speed at ``times`` (s, any shape), m/s."""
         query = np.asarray(times, dtype=float)
-        if _is_sorted(query):
-            return self.sorted_values(query)[0]
-        return self.gathered_values(query)
+        return self.values(query.ravel())[0].reshape(query.shape)
 
     def derivative(self, times: Any) -> np.ndarray:
         """Right derivative ``dV/dt`` at ``times`` (s, any shape), m/s^2."""
         query = np.asarray(times, dtype=float)
-        if _is_sorted(query):
-            return self.sorted_values(query)[1]
-        return self.gathered_derivative(query)
+        return self.values(query.ravel())[1].reshape(query.shape)
 
     def gathered_values(self, query: np.ndarray) -> np.ndarray:
         """:meth:`__call__` at times in any order: one segment row gathered per time."""
@@ -1002,16 +1044,19 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
             rows.pop()
         t_stop, V_stop = rows[-1][0], rows[-1][1]
     success = rec.status is _SUCCESS
-    dense = rec.dense(t_stop, success, t_end)
+    # The ideal engine's segments are lines unless drag or compliance gives them a slope.
+    linear = not dynamic and plant.damping == 0 and plant.compliance == 0
+    dense = rec.dense(t_stop, success, t_end, linear)
     m = plant.mass
     if t_eval is None:
         # Segment starts (events, switches, motor phase changes) and the end: exact values.
         times, V, force = rec.samples(t_stop, V_stop, m)
     else:
         times = t_eval.copy() if t_eval.flags.writeable else t_eval
-        V, slope = dense.sorted_values(times)          # simulate() checked: non-decreasing
+        V, slope = dense.values(times)                 # simulate() checked: non-decreasing
         force = m * slope
-        force[np.isnan(V)] = np.nan
+        if not success:
+            force[np.isnan(V)] = np.nan
         for array in (times, V, force):
             array.setflags(write=False)
     speeds = _contact_speeds(plant, times)

@@ -117,6 +117,12 @@ def test_precision_json_rows(tmp_path):
     assert exact and all(r["max_error"] <= 1e-12 for r in exact)
     assert {r["method"] for r in rows} >= {"exact", "rk45", "radau", "moreau", "casadi"}
     assert (tmp_path / "precision.png").read_bytes()[:4] == b"\x89PNG"
+    # The speedup summary is the identity reference / exact over the rows it names.
+    speedup = json.loads(done.stdout)["speedup"]
+    by_label = {f"{r['method']} {r['setting']}".strip(): r for r in rows}
+    reference, exact = by_label[speedup["reference"]], by_label[speedup["exact"]]
+    assert reference["max_error"] <= speedup["error_level"] == 1e-6
+    assert speedup["ratio"] == pytest.approx(reference["wall_time"] / exact["wall_time"], rel=1e-15)
 
 
 def test_stability_quick_json():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +16,9 @@ from toolkit.plant import Plant
 from toolkit.precision import (CAROUSEL_ACCELERATION, MethodSetting, PrecisionReport,
                                carousel_startup_plant, default_settings, exact_speedup,
                                precision_report, rational_trajectory, work_precision_curves)
+from toolkit.scene import load_scene
 from toolkit.simulation import Budget, Status, simulate
+from toolkit.study import scene_plant
 
 
 @pytest.fixture(scope="module")
@@ -34,6 +37,16 @@ def test_carousel_plant_matches_the_paper_numbers(carousel: Plant) -> None:
     assert carousel.contacts.total_force / carousel.mass == pytest.approx(CAROUSEL_ACCELERATION,
                                                                           rel=1e-15)
     np.testing.assert_array_equal(carousel_startup_plant(seed=7).contacts.speeds, speeds)
+
+
+def test_startup11_design_is_the_benchmark_scene() -> None:
+    # designs/startup11.toml lets the CLI reproduce `python -m toolkit.bench precision`.
+    scene = load_scene(Path(__file__).parents[1] / "designs" / "startup11.toml")
+    plant, reference = scene_plant(scene), carousel_startup_plant(seed=0)
+    np.testing.assert_array_equal(plant.contacts.speeds, reference.contacts.speeds)
+    np.testing.assert_array_equal(plant.contacts.forces, reference.contacts.forces)
+    assert (plant.mass, plant.damping, plant.motors, plant.commands) == (1.0, 0.0, None, None)
+    assert (scene.simulation.t_end, scene.simulation.v0) == (5.0, 0.0)
 
 
 def test_rational_trajectory_closed_forms() -> None:

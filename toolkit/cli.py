@@ -107,7 +107,7 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
 
 
 def _cmd_precision(args: argparse.Namespace) -> int:
-    from .precision import precision_report
+    from .precision import exact_speedup, precision_report
     from .report import write_precision
     from .study import scene_plant
 
@@ -118,11 +118,17 @@ def _cmd_precision(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(report.to_dict())
     else:
-        print(f"{'method':8} {'setting':28} {'max_error':>10} {'final_error':>11} {'wall_time':>10} "
+        print(f"{'method':8} {'setting':46} {'max_error':>10} {'final_error':>11} {'wall_time':>10} "
               f"{'evals':>8}  status")
         for row in report.rows:
-            print(f"{row.method:8} {row.setting:28} {row.max_error:10.2e} {row.final_error:11.2e} "
+            print(f"{row.method:8} {row.setting:46} {row.max_error:10.2e} {row.final_error:11.2e} "
                   f"{row.wall_time:10.2e} {row.n_evaluations:8d}  {row.status.name}{_flags(row)}")
+        if any(row.method == "exact" for row in report.rows):
+            speedup = exact_speedup(report)
+            print(f"exact {speedup.exact.wall_time:.2e} s; fastest reference with max_error <= "
+                  f"{speedup.error_level:g} m/s: " + (
+                      f"{speedup.reference.label} {speedup.reference.wall_time:.2e} s, "
+                      f"ratio {speedup.ratio:.1f}x" if speedup.reference is not None else "none"))
         if written:
             print(f"wrote {', '.join(str(p) for p in written)}")
     return EXIT_OK

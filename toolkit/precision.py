@@ -17,7 +17,6 @@ Pure numerics: no files, no matplotlib.
 from __future__ import annotations
 
 import math
-import statistics
 import time
 import timeit
 from collections.abc import Callable, Mapping, Sequence
@@ -270,11 +269,12 @@ class PrecisionRow:
     final_error : float, m/s
         ``|V(t_end) - V_exact(t_end)|``; ``inf`` when the run stopped before ``t_end``.
     wall_time : float, s
-        Median over the repeats of the run time of one call of ``simulate``: after a first
+        Minimum over the repeats of the run time of one call of ``simulate``: after a first
         and a second (warm) call, each repeat times back-to-back calls for at least 20 ms
         with :class:`timeit.Timer` (garbage collection off while timing, as ``timeit`` does)
-        and divides. A run that does not succeed is timed once; a first run of at least
-        0.2 s counts as one repeat and the others run once each.
+        and divides. The minimum, as ``timeit`` advises: a slower repeat measures other
+        processes, not the method. A run that does not succeed is timed once; a first run of
+        at least 0.2 s counts as one repeat and the others run once each.
     n_steps, n_evaluations, n_events : int
         From the result.
     status : Status
@@ -359,6 +359,13 @@ class Speedup:
     exact: PrecisionRow
     reference: PrecisionRow | None
 
+    def to_dict(self) -> dict[str, Any]:
+        """``{"ratio", "error_level", "exact", "reference"}`` (the two as labels), JSON-able;
+        ``ratio`` and ``reference`` are None when no reference method reaches the level."""
+        return {"ratio": _json_float(self.ratio), "error_level": self.error_level,
+                "exact": self.exact.label,
+                "reference": None if self.reference is None else self.reference.label}
+
 
 @dataclass(frozen=True)
 class WorkPrecisionCurve:
@@ -399,9 +406,13 @@ class PrecisionReport:
     repeats: int
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"t_end", "v0", "repeats", "rows": [row.to_dict(), ...]}``, JSON-able."""
-        return {"t_end": self.t_end, "v0": self.v0, "repeats": self.repeats,
-                "rows": [row.to_dict() for row in self.rows]}
+        """``{"t_end", "v0", "repeats", "rows": [row.to_dict(), ...]}``, JSON-able, and
+        ``"speedup"`` (:meth:`Speedup.to_dict` at 1e-6 m/s) when the report has an exact row."""
+        out = {"t_end": self.t_end, "v0": self.v0, "repeats": self.repeats,
+               "rows": [row.to_dict() for row in self.rows]}
+        if any(row.method == "exact" for row in self.rows):
+            out["speedup"] = exact_speedup(self).to_dict()
+        return out
 
     def row(self, method: str, setting: str | None = None) -> PrecisionRow:
         """The first row of ``method`` (and ``setting``, if given)."""
@@ -461,12 +472,15 @@ def evaluation_times(exact: SimulationResult, t_end: float) -> np.ndarray:
     Returns
     -------
     ndarray of shape (T,), s
-        Sorted, unique: ``t``, the event times and ``EVALUATION_POINTS`` uniform times on
-        ``[0, t_end]``. The kinks of the exact solution are all among them.
+        Sorted, unique, read-only (methods may then use it without a copy): ``t``, the event
+        times and ``EVALUATION_POINTS`` uniform times on ``[0, t_end]``. The kinks of the
+        exact solution are all among them.
     """
     events = np.array([event.time for event in exact.events], dtype=float)
     grid = np.union1d(np.union1d(exact.t, events), np.linspace(0.0, t_end, EVALUATION_POINTS))
-    return grid[(grid >= 0.0) & (grid <= t_end)]
+    grid = grid[(grid >= 0.0) & (grid <= t_end)]
+    grid.setflags(write=False)
+    return grid
 
 
 def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting, repeats: int,
@@ -487,10 +501,10 @@ def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting, repeat
         return result, first
     timer = timeit.Timer(call)
     if first >= _WARM_RUN:          # long runs: import and warm-up costs are negligible
-        return result, statistics.median([first, *timer.repeat(repeats - 1, 1)])
+        return result, min([first, *timer.repeat(repeats - 1, 1)])
     warm = timer.timeit(1)          # the first call may pay one-off costs (imports, caches)
     number = max(1, math.ceil(_MIN_REPEAT_TIME / max(warm, 1e-9)))
-    return result, statistics.median(timer.repeat(repeats, number)) / number
+    return result, min(timer.repeat(repeats, number)) / number
 
 
 def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: Plant,
@@ -545,7 +559,7 @@ def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: in
     plant, t_end, v0
         The scene, as in :func:`toolkit.simulation.simulate`.
     repeats : int
-        Timing repeats per successful run (median reported), ``>= 1``.
+        Timing repeats per successful run (the minimum is reported), ``>= 1``.
     settings : sequence of MethodSetting, optional
         Default :func:`default_settings`. Include ``"exact"`` to time the exact method.
 

@@ -61,7 +61,7 @@ def _check_t_eval(t_eval: Any, t_end: float) -> np.ndarray | None:
     else:
         times = as_float_array(t_eval, "t_eval", "simulate")
     # One pass, NaN-safe: every comparison with NaN is False, and the two bounds exclude +-inf.
-    ordered = bool(np.all(times[1:] >= times[:-1]))
+    ordered = bool((times[1:] >= times[:-1]).all())
     if not (ordered and times[0] >= 0 and times[-1] <= t_end):
         raise ParameterError(parameter_message(
             "t_eval", "simulate", f"be non-decreasing times within [0, t_end = {t_end:g}]",

@@ -77,7 +77,6 @@ __all__ = ["simulate_exact"]
 _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _SMALL = 64                 # contacts up to which plain Python beats NumPy calls
-_SMALL_TABLE = 10**6        # contact-speed tables larger than this are read-only broadcasts
 _SUCCESS = Status.SUCCESS   # (a module constant is faster to read than an Enum member)
 
 
@@ -476,13 +475,6 @@ def _landscape(plant: Plant, a: float) -> _Landscape:
 
 
 # -- the ideal-motor engine -------------------------------------------------------------------
-def _neumaier(total: float, error: float, x: float) -> tuple[float, float]:
-    """Compensated summation step: event times stay exact over 1e5 segments."""
-    new = total + x
-    error += (total - new) + x if abs(total) >= abs(x) else (x - new) + total
-    return new, error
-
-
 def _pieces(plant: Plant, t_end: float) -> list[float]:
     if plant.commands is None and not isinstance(plant.external_force, PiecewiseConstant):
         return [0.0, t_end]
@@ -496,8 +488,10 @@ def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[f
     bounds = _pieces(plant, t_end)
     V = v0
     stuck: int | None = None         # contact the body is stuck to (Coulomb only)
+    event, segment, stop = rec.event, rec.segment, rec.stop      # (bound once: hot loop)
     for a, b in zip(bounds[:-1], bounds[1:]):
         land = _landscape(plant, a)
+        stiction, force_at, contact_at, kind = land.stiction, land.force, land.contact, land.kind
         xs = land.xs
         K = len(xs)
         E = plant.external(a)
@@ -506,38 +500,38 @@ def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[f
         t = t_sum = a
         t_err = 0.0                     # compensated sum of the segment times
         if a > 0:
-            rec.event(a, "command", None, V)
+            event(a, "command", None, V)
         j, at = land.locate(V)
-        if stuck is not None and not (at and land.stiction(j)[0] > 0):
-            rec.event(a, "release", stuck, V)
+        if stuck is not None and not (at and stiction(j)[0] > 0):
+            event(a, "release", stuck, V)
             stuck = None
         while True:
             if at:
-                W, G = land.stiction(j)
+                W, G = stiction(j)
                 G += E - c * V
                 tol = tol_scale * (push_scale + c * abs(V))
                 rec.n_evaluations += 1
                 if abs(G) <= W + tol:                       # stick (or rest at a balance)
-                    contact = land.contact(j)
+                    contact = contact_at(j)
                     if W > 0 and stuck != contact:
                         if stuck is not None:
-                            rec.event(t, "release", stuck, V)
-                        rec.event(t, "stick", contact, V)
+                            event(t, "release", stuck, V)
+                        event(t, "stick", contact, V)
                         stuck = contact
-                    rec.segment(t, V)
+                    segment(t, V)
                     break
                 if stuck is not None:
-                    rec.event(t, "release", stuck, V)
+                    event(t, "release", stuck, V)
                     stuck = None
                 else:
-                    rec.event(t, land.kind, land.contact(j), V)
+                    event(t, kind, contact_at(j), V)
                 j = j + 1 if G > 0 else j
             # Free motion inside interval j.
-            force, slope = land.force(j, V)
+            force, slope = force_at(j, V)
             r0 = (force + E - c * V) / m
             lam = (c - slope) / m
             rec.n_evaluations += 1
-            rec.segment(t, V, r0, lam)
+            segment(t, V, r0, lam)
             if r0 == 0.0:
                 break
             up = r0 > 0
@@ -549,12 +543,15 @@ def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[f
                 hi = xs[j] if j < K else math.inf
                 V = min(max(V, lo), hi)
                 break
-            t_sum, t_err = _neumaier(t_sum, t_err, s)
+            # Compensated (Neumaier) sum of the segment times: exact over 1e5 segments.
+            t_new = t_sum + s
+            t_err += (t_sum - t_new) + s if abs(t_sum) >= abs(s) else (s - t_new) + t_sum
+            t_sum = t_new
             t, V, at = t_sum + t_err, target, True
             j = j if up else j - 1
-            if rec.stop(t):
+            if stop(t):
                 return t, V
-        if rec.stop(b):
+        if stop(b):
             return b, V
     return t_end, V
 
@@ -1072,13 +1069,14 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
 
 
 def _contact_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
-    """Contact speeds at ``times``: shape (T, n), read-only (a broadcast when constant and huge)."""
+    """Contact speeds at ``times``: shape (T, n), read-only (a broadcast when constant)."""
     T = times.size
     if plant.commands is None:
-        speeds = plant.command(0.0)
-        if T * speeds.size <= _SMALL_TABLE:                # rows of one immutable buffer
-            return np.frombuffer(speeds.tobytes() * T).reshape(T, speeds.size)
-        return np.broadcast_to(speeds, (T, speeds.size))   # no copy when huge
+        # Every row is the one speed vector: a read-only zero-stride view of a private copy.
+        speeds = plant.command(0.0).copy()
+        table = np.ndarray((T, speeds.size), buffer=speeds, strides=(0, speeds.itemsize))
+        table.setflags(write=False)
+        return table
     if plant.dynamic_motors:
         table = _motor_speeds(plant, times)
     else:

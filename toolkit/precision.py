@@ -16,6 +16,7 @@ Pure numerics: no files, no matplotlib.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import timeit
@@ -272,9 +273,10 @@ class PrecisionRow:
         Minimum over the repeats of the run time of one call of ``simulate``: after a first
         and a second (warm) call, each repeat times back-to-back calls for at least 20 ms
         with :class:`timeit.Timer` (garbage collection off while timing, as ``timeit`` does)
-        and divides. The minimum, as ``timeit`` advises: a slower repeat measures other
-        processes, not the method. A run that does not succeed is timed once; a first run of
-        at least 0.2 s counts as one repeat and the others run once each.
+        and divides; the repeats of all settings run round-robin. The minimum, as ``timeit``
+        advises: a slower repeat measures other processes, not the method. A run that does
+        not succeed is timed once; a first run of at least 0.2 s counts as one repeat and
+        the others run once each.
     n_steps, n_evaluations, n_events : int
         From the result.
     status : Status
@@ -483,28 +485,45 @@ def evaluation_times(exact: SimulationResult, t_end: float) -> np.ndarray:
     return grid
 
 
-def _timed(plant: Plant, t_end: float, v0: float, setting: MethodSetting, repeats: int,
-           t_eval: np.ndarray) -> tuple[SimulationResult, float]:
-    """Run once, then time ``repeats`` repeats (see ``PrecisionRow.wall_time``).
+def _timed(plant: Plant, t_end: float, v0: float, settings: Sequence[MethodSetting],
+           repeats: int, t_eval: np.ndarray) -> list[tuple[SimulationResult, float]]:
+    """Run every setting once, then time the repeats round-robin (see ``PrecisionRow.wall_time``).
 
+    Repeat ``r`` of every setting runs before repeat ``r + 1`` of any, so each setting's
+    repeats are spread over the whole report: a burst of load from other processes slows
+    one repeat of several settings, not every repeat of one, and the minimum discards it.
     Every call asks for the report's common times ``t_eval``, so the measured time includes
     producing those outputs.
-    """
-    def call() -> SimulationResult:
-        return simulate(plant, t_end, v0=v0, method=setting.method, t_eval=t_eval,
-                        budget=setting.budget, **setting.kwargs)
 
-    start = time.perf_counter()
-    result = call()
-    first = time.perf_counter() - start
-    if not result.success or repeats <= 1 and first >= _MIN_REPEAT_TIME:
-        return result, first
-    timer = timeit.Timer(call)
-    if first >= _WARM_RUN:          # long runs: import and warm-up costs are negligible
-        return result, min([first, *timer.repeat(repeats - 1, 1)])
-    warm = timer.timeit(1)          # the first call may pay one-off costs (imports, caches)
-    number = max(1, math.ceil(_MIN_REPEAT_TIME / max(warm, 1e-9)))
-    return result, min(timer.repeat(repeats, number)) / number
+    Returns
+    -------
+    list of (SimulationResult, float)
+        The first run's result and the wall time of one call (s), per setting.
+    """
+    results, timers, numbers, times = [], [], [], []
+    for setting in settings:
+        call = functools.partial(simulate, plant, t_end, v0=v0, method=setting.method,
+                                 t_eval=t_eval, budget=setting.budget, **setting.kwargs)
+        start = time.perf_counter()
+        result = call()
+        first = time.perf_counter() - start
+        timer = timeit.Timer(call)
+        if not result.success or repeats <= 1 and first >= _MIN_REPEAT_TIME:
+            number, timed = 0, [first]              # timed once
+        elif first >= _WARM_RUN:      # long runs: import and warm-up costs are negligible
+            number, timed = 1, [first]
+        else:                         # the first call may pay one-off costs (imports, caches)
+            number = max(1, math.ceil(_MIN_REPEAT_TIME / max(timer.timeit(1), 1e-9)))
+            timed = []
+        results.append(result)
+        timers.append(timer)
+        numbers.append(number)
+        times.append(timed)
+    for _ in range(repeats):
+        for timer, number, timed in zip(timers, numbers, times):
+            if number and len(timed) < repeats:
+                timed.append(timer.timeit(number) / number)
+    return [(result, min(timed)) for result, timed in zip(results, times)]
 
 
 def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: Plant,
@@ -591,11 +610,9 @@ def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: in
     grid = evaluation_times(exact, t_end)
     rational = _rational_supported(plant)
     truth = rational_trajectory(plant, v0, grid) if rational else exact.speed_at(grid)
-    rows = []
-    for setting in chosen:
-        result, wall = _timed(plant, t_end, v0, setting, repeats, grid)
-        rows.append(_row(setting, result, wall, plant, t_end, v0, grid, truth, rational,
-                         exact.speed_at))
+    timings = _timed(plant, t_end, v0, chosen, repeats, grid)
+    rows = [_row(setting, result, wall, plant, t_end, v0, grid, truth, rational, exact.speed_at)
+            for setting, (result, wall) in zip(chosen, timings)]
     return PrecisionReport(rows=tuple(rows), t_end=t_end, v0=v0, repeats=repeats)
 
 

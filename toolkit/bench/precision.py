@@ -24,7 +24,7 @@ def _format(value: float) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m toolkit.bench precision", description=__doc__)
     parser.add_argument("--seed", type=int, default=0, help="seed of the random contact speeds")
-    parser.add_argument("--repeats", type=int, default=3, help="timing repeats (minimum reported)")
+    parser.add_argument("--repeats", type=int, default=5, help="timing repeats (minimum reported)")
     parser.add_argument("--t-end", type=float, default=5.0, help="horizon, s")
     parser.add_argument("--quick", action="store_true", help="a few settings only")
     args = parser.parse_args(argv)

@@ -721,27 +721,21 @@ def test_speed_at_refuses_times_outside_the_simulated_span():
         plain.speed_at(0.25)
 
 
-_STIFF_DRAG_BUG = pytest.mark.xfail(strict=True, reason=(
-    "known bug: lag 1e-300 with compliance ends off the ideal-motor engine (0.2 - 1e-16 vs "
-    "0.1999999996 m/s without drag, 0.19512 vs 0.190476 m/s with c = 0.5; lag 1e-9 agrees to "
-    "1e-15): the dynamic engine's compliant coefficients at mu = 1e300"))
-
-
 @pytest.mark.parametrize("motors, t_end", [
     (Motors(lag=1e-300), 2.0), (Motors(lag=1e-300, rate_limit=1.0), 2.0),
     (Motors(lag=0.1), 1e300), (Motors(lag=0.1, rate_limit=2.0), 1e300),
     (Motors(rate_limit=1e300), 2.0), (Motors(lag=1e-300, compliance=0.1), 2.0),
 ])
 @pytest.mark.parametrize("damping", [0.0, 0.5])
-def test_extreme_motor_scales_run_without_warnings(motors, t_end, damping, request):
+def test_extreme_motor_scales_run_without_warnings(motors, t_end, damping):
     # Regression (F11): lag 1e-300 and horizons of 1e300 s overflowed masked or sign-only
     # products (warnings, errors under this suite's filterwarnings). Coulomb: both command
     # sets have the median 0.2 m/s (equal forces) and 0 lies in F(0.2) - 0.2 c = [-1, 1] -
     # 0.1 c, so the body ends at V = 0.2 exactly. Compliant: second method, the same plant
     # with instantaneous motors (lag 0: the ideal-motor engine); a 1e-300 s lag changes
-    # nothing a double can hold, so rtol 1e-12 (the issue's target).
-    if motors.compliance > 0:
-        request.applymarker(_STIFF_DRAG_BUG)
+    # nothing a double can hold, so rtol 1e-12 (the issue's target). Regression: the
+    # saturation events of the 1e-300 s transient were once placed near 1e-175 s (bisection
+    # by halving widths from the 1.5 s horizon), leaving a saturated contact linear for good.
     commands = PiecewiseConstant([0.5], [[0.0, 0.2, 0.4], [0.3, -0.1, 0.2]])
     plant = Plant(ContactSet([0.0, 0.2, 0.4]), 1.0, damping=damping, motors=motors,
                   commands=commands)
@@ -754,3 +748,61 @@ def test_extreme_motor_scales_run_without_warnings(motors, t_end, damping, reque
                       motors=Motors(compliance=motors.compliance), commands=commands)
         expected = float(simulate(ideal, t_end).V[-1])
     assert result.V[-1] == pytest.approx(expected, rel=1e-12, abs=0)
+
+
+@pytest.mark.parametrize("lag", [1e-30, 1e-100, 1e-200, 1e-300, 1e-307])
+@pytest.mark.parametrize("compliance, damping", [(0.05, 0.0), (0.3, 0.4)])
+def test_compliant_lag_tends_to_instantaneous_motors(lag, compliance, damping):
+    # Regression: below lag ~ 1e-200 s the saturation events of the motors' transient were
+    # placed far from their roots (the bisection only resolved ~1e-24 s of a 1.5 s bracket),
+    # so runs ended off by a few percent or stalled on chatter. Second method: the same plant
+    # with instantaneous motors (lag 0: the ideal-motor engine). A lag tau moves V by about
+    # tau F_tot / m <= 1e-29 m/s, below rounding, so what is left is the two engines'
+    # rounding over ~10-30 closed-form segments: rtol 1e-12 (the issue's target; measured
+    # <= 7e-15 for every lag here), atol 1e-15 m/s for samples that pass near V = 0.
+    rng = np.random.default_rng(7)
+    commands = rng.uniform(-0.3, 0.3, (4, 6))
+    forces = rng.uniform(0.2, 1.0, 6)
+    schedule = PiecewiseConstant([0.3, 0.7, 1.1], commands)
+    times = np.linspace(0.0, 1.5, 16)
+    runs = [simulate(Plant(ContactSet(commands[0], forces), 0.5, damping=damping,
+                           motors=Motors(lag=tau, compliance=compliance), commands=schedule),
+                     1.5, t_eval=times) for tau in (lag, 0.0)]
+    assert all(run.status is Status.SUCCESS for run in runs)
+    np.testing.assert_allclose(runs[0].V, runs[1].V, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("mu", [1.0, 1e3, 1e10, 1e100, 1e300])
+@pytest.mark.parametrize("gamma", [0.0, 0.027])
+def test_event_roots_are_located_at_every_motor_rate(mu, gamma):
+    # g(s) = 0.1 + gamma em(20, s) - 0.2 mu em(mu, s): a saturation event function with a body
+    # term (rate lam = 20 /s) and a motor term (rate mu = 1 / lag); its root lies near
+    # ln 2 / mu, down to 7e-301 s, inside a 1.5 s horizon. Regression: with mu = 1e300 the
+    # inflection overflowed and bisection by widths stopped near 1e-24 s. References:
+    # gamma = 0, the closed form em(mu, s) = 1 / (2 mu), s = ln 2 / mu; gamma > 0, a second
+    # method, brentq on the rescaled time x = mu s (a bracket [0, 50] on the root's scale).
+    # rtol 16 eps: the root finder's "a few ulp" (brentq's rtol 4 eps) plus the rounding of g
+    # near its root (|g| rounds at ~eps 0.1 where |g'| s ~ 0.1: a few eps of s).
+    from toolkit.simulation._exact import _em1, _first_root, _Fns
+
+    eps = float(np.finfo(float).eps)
+    lam, delta = 20.0, -0.2 * mu
+    fns = _Fns(np.array([0.3, 0.1]), np.zeros(2), np.array([0.0, gamma]),
+               np.array([0.0, delta]), lam, mu)      # function 0 never changes sign
+    s, i = _first_root(fns, 1.5)
+    if gamma == 0.0:
+        expected = math.log(2.0) / mu
+    else:
+        def scaled(x: float) -> float:
+            return 0.1 + gamma * _em1(lam, x / mu) + (delta / mu) * -math.expm1(-x)
+
+        expected = optimize.brentq(scaled, 0.0, 50.0, xtol=1e-300, rtol=4 * eps) / mu
+        # The inflection is where the two terms of g'' balance (computed without overflow).
+        infl = float(fns.inflection()[1])
+        assert 0.0 < infl < 1.5
+        # Both sides are ~ -0.6 after cancelling terms up to mu infl ~ 1400: 4 * 1400 eps.
+        assert (math.log(gamma * lam) - lam * infl
+                == pytest.approx(math.log(-delta) + math.log(mu) - mu * infl,
+                                 rel=0, abs=4 * 1400 * eps))
+    assert i == 1
+    assert s == pytest.approx(expected, rel=16 * eps, abs=0)

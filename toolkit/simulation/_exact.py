@@ -29,10 +29,12 @@ Two engines share that form:
 
 Limits of exactness
 -------------------
-Event times are roots located to a few ulp (bisection, then Brent's method); a crossing in
-which ``V`` only touches a moving contact speed without crossing it (a double root) is not
-an event. With compliance and a motor lag, a body rate ``b/m`` within rounding of ``1/tau``
-loses digits in ``1 / (b - m/tau)`` (exact resonance itself is handled in closed form).
+Event times are roots located to a few ulp at any time scale, down to a motor lag of 1e-307 s
+(bisection, with scale-free midpoints for brackets many binades wider than their root, then
+Brent's method); a crossing in which ``V`` only touches a moving contact speed without
+crossing it (a double root) is not an event. With compliance and a motor lag, a body rate
+``b/m`` within rounding of ``1/tau`` loses digits in ``1 / (b - m/tau)`` (exact resonance
+itself is handled in closed form).
 
 Zeno guard
 ----------
@@ -664,27 +666,58 @@ class _Fns:
                 + self.D * (1.0 - mu * s) * decay)
 
     def inflection(self) -> np.ndarray:
-        """The root of ``g''`` (at most one), NaN where there is none."""
+        """The root of ``g''`` (at most one), NaN where there is none.
+
+        ``g''(s) = -gamma lam exp(-lam s) - delta mu exp(-mu s)`` vanishes where
+        ``exp((mu - lam) s) = -(delta mu) / (gamma lam)``; the ratio is formed from logarithms
+        because the products overflow with lag ~ 1e-300 (``mu = 1e300``), and an overflowed
+        ratio would lose the knot that splits ``g'`` into monotone pieces.
+        """
         lam, mu, D = self.lam, self.mu, self.D
+        gamma, delta = self.gamma, self.delta
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            P, Q = -self.gamma * lam, -self.delta * mu     # may overflow with lag ~ 1e-300
-            if D != 0.0:                                  # resonance lam == mu
-                return (2.0 * mu * D - P - Q) / (D * mu * mu)
-            if lam != mu:
-                ratio = -Q / P
-                return np.where((P != 0) & (ratio > 0), np.log(np.where(ratio > 0, ratio, 1.0))
-                                / (mu - lam), np.nan)
-        return np.full(P.shape, np.nan)
+            if D != 0.0:         # resonance lam == mu: s = 2 / mu + (gamma + delta) / (D mu)
+                return (2.0 + (gamma + delta) / D) / mu
+            if lam > 0 and mu > 0 and lam != mu:
+                opposite = np.sign(gamma) * np.sign(delta) < 0  # the ratio is positive
+                log_ratio = (np.log(np.where(opposite, np.abs(delta), 1.0))
+                             - np.log(np.where(opposite, np.abs(gamma), 1.0))
+                             + (math.log(mu) - math.log(lam)))
+                return np.where(opposite, log_ratio / (mu - lam), np.nan)
+        return np.full(gamma.shape, np.nan)
+
+
+_ARITHMETIC_HALVINGS = 53   # bisection: arithmetic midpoints first, then scale-free ones
+
+
+def _midpoint(lo: np.ndarray, hi: np.ndarray, k: int) -> np.ndarray:
+    """Midpoints of brackets ``0 <= lo < hi`` (offsets, s; float64, ``+0.0`` not ``-0.0``) for
+    the ``k``-th halving (from 0).
+
+    The first 53 halvings take the arithmetic midpoint, the fastest on a bracket on the scale
+    of its root (the usual case): it ends on adjacent doubles within
+    ``53 + log2(hi / root)`` halvings. A bracket still open after them is many binades wider
+    than its root, e.g. a motor transient of ``tau = 1e-300`` s inside a bracket of 1.5 s,
+    which arithmetic halving would reach only after about 1000 halvings. Later halvings are
+    scale-free: the double halfway between the ends in the order of the doubles
+    (non-negative doubles sort like their bit patterns), which ends on adjacent doubles within
+    64 more halvings whatever the scale of the root.
+    """
+    if k < _ARITHMETIC_HALVINGS:
+        return 0.5 * (lo + hi)
+    a, b = (lo + 0.0).view(np.int64), hi.view(np.int64)     # (+ 0.0 turns -0.0 into +0.0)
+    return (a + (b - a) // 2).view(np.float64)
 
 
 def _bisect(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray,
-            index: np.ndarray, iterations: int = 200) -> np.ndarray:
-    """Vectorized bisection of ``fn(s, index)`` on brackets ``[lo, hi]`` (sign change); returns
-    the upper ends, which hold the new sign (or zero)."""
+            index: np.ndarray) -> np.ndarray:
+    """Vectorized bisection of ``fn(s, index)`` on brackets ``[lo, hi]`` (sign change, offsets
+    ``>= 0``, s) to adjacent doubles at any scale (:func:`_midpoint`); returns the upper ends,
+    which hold the new sign (or zero)."""
     lo, hi = lo.copy(), hi.copy()
     low_sign = np.sign(fn(lo, index))
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
+    for k in range(_ARITHMETIC_HALVINGS + 64):
+        mid = _midpoint(lo, hi, k)
         moving = (mid > lo) & (mid < hi)
         if not moving.any():
             break
@@ -745,7 +778,7 @@ def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
         root = np.full(n, horizon)
         if change.any():
             idx = rows[change]
-            root[change] = _bisect(lambda s, i: fns.slope(s, i), lo[change], hi[change], idx, 80)
+            root[change] = _bisect(lambda s, i: fns.slope(s, i), lo[change], hi[change], idx)
         knots[:, col] = root
     knots = np.sort(knots, axis=1)
     values = fns.value(knots, rows[:, None])
@@ -759,14 +792,16 @@ def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
     idx = rows[has]
     piece = np.argmax(crossing[has], axis=1)
     lo, hi = knots[idx, piece], knots[idx, piece + 1]
-    # Halve the brackets until one candidate can hold the earliest root, then polish it with
-    # Brent's method on the scalar closed form (to a few ulp).
+    # Halve the brackets (at any scale: _midpoint) until one candidate can hold the earliest
+    # root, then polish it with Brent's method on the scalar closed form (to a few ulp).
+    k = 0
     while True:
         keep = lo <= hi.min()
         idx, lo, hi = idx[keep], lo[keep], hi[keep]
         if idx.size == 1:
             break
-        mid = 0.5 * (lo + hi)
+        mid = _midpoint(lo, hi, k)
+        k += 1
         if not np.any((mid > lo) & (mid < hi)):
             best = int(np.argmin(hi))
             return float(hi[best]), int(idx[best])
@@ -792,9 +827,19 @@ def _brent(fns: _Fns, i: int, lo: float, hi: float) -> float:
         # math.expm1: the two differ by a few ulp, so on near-tied contacts the scalar form
         # may see no sign change. The change is then rounding noise and hi a root within it.
         return hi
-    # disp=False: on a stiff closed form (lag 1e-300) brentq may stall short of its rtol; its
-    # last iterate is then still inside the bracket, the best the floats resolve.
-    return float(brentq(g, lo, hi, xtol=1e-300, rtol=4.0 * _EPS, maxiter=500, disp=False))
+    # No absolute floor (xtol: the smallest subnormal, 5e-324 s), so rtol sets the precision
+    # at every scale: with lag 1e-300 s the roots lie near 1e-300 s, where an absolute 1e-300 s
+    # would blur them entirely (and 2e-308 s, the smallest normal, would leave them to 1e-8).
+    # On a bracket on the scale of its root Brent's method converges in a few dozen
+    # iterations; on one spanning many binades (a stiff closed form without knots near its
+    # root) it may not, and its last iterate may be far from the root: then finish by
+    # bisection, which ends on adjacent doubles at any scale (_midpoint).
+    root, info = brentq(g, lo, hi, xtol=math.ulp(0.0), rtol=4.0 * _EPS, maxiter=500,
+                        full_output=True, disp=False)
+    if info.converged:
+        return float(root)
+    left, right = np.array([lo]), np.array([hi])
+    return float(_bisect(lambda s, _: np.array([g(float(s[0]))]), left, right, left)[0])
 
 
 # -- dynamic motors: the engine ----------------------------------------------------------------

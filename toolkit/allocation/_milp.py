@@ -307,7 +307,8 @@ def _solve_pairwise(problem: AllocationProblem, deadline: float) -> _Solution:
                  flat[i * n + k] + flat[k * n + j] + flat[j * n + i] <= 2]
     if np.any(lift):
         z = cp.Variable(n, boolean=True)
-        cons.append(z[~lift] == 1)
+        if not np.all(lift):          # (cvxpy 1.6 refuses a constraint on an empty selection)
+            cons.append(z[~lift] == 1)
         zcol = cp.reshape(z, (n, 1), order="F") @ ones
         below = cp.Variable((n, n), nonneg=True)
         cons += [below <= before, below <= zcol, below >= before + zcol - 1]

@@ -263,6 +263,17 @@ class Plant:
                     f"rounding 4 eps max|v| = {floor:.3g} m/s and 1 / (k f_i) finite for every "
                     f"contact (smallest f_i = {float(np.min(f)):g} N); use compliance=0 for a "
                     f"stiff motor", k))
+            lag = self.motors.lag
+            if lag > 0 and self.commands is not None:
+                # The lagging motors pull the compliant force at up to n 2 max|v| / (tau k)
+                # N/s, summed in the event functions: keep it (with 4 bits to spare) finite.
+                with np.errstate(over="ignore"):
+                    pull = 16.0 * self.n * (2.0 * scale / lag) / k
+                if not math.isfinite(pull):
+                    raise ParameterError(parameter_message(
+                        "motors", "Plant", f"have a lag tau with 16 n 2 max|v| / (tau k) finite "
+                        f"(n = {self.n}, max|v| = {scale:g} m/s, k = {k:g} (m/s)/N); use lag=0 "
+                        f"for instantaneous motors", lag))
 
     def derived(self, name: str) -> dict[Any, Any]:
         """A named cache of quantities derived from this (immutable) plant.
@@ -275,6 +286,11 @@ class Plant:
         if cache is None:
             cache = self._derived[name] = {}
         return cache
+
+    def clear_derived(self) -> None:
+        """Empty the caches of :meth:`derived`: the next run pays what a new plant would
+        (benchmarks time runs from scratch this way)."""
+        self._derived.clear()
 
     # -- properties ---------------------------------------------------------------------------
     @property

@@ -32,7 +32,8 @@ import numpy as np
 
 from .._validation import as_float, check_option
 from ..plant import STRIBECK_PEAK, STRIBECK_SPEED, Plant
-from ._reference import Meter, build_result, check_smoothing, format_setting
+from ._reference import (Meter, build_result, check_smoothing, external_forces, format_setting,
+                         ideal_speeds)
 from ._result import Budget, SimulationResult, Status
 
 __all__ = ["simulate_casadi", "CASADI_INTEGRATORS", "casadi_right_hand_side"]
@@ -134,7 +135,7 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     x, u, ode = casadi_right_hand_side(plant, friction, epsilon)
     grid = _output_grid(plant, t_end, t_eval)
     starts = np.concatenate(([0.0], grid[:-1]))          # u is held on (starts[k], grid[k]]
-    controls = np.array([np.concatenate((plant.command(s), [plant.external(s)])) for s in starts]).T
+    controls = np.vstack((ideal_speeds(plant, starts).T, external_forces(plant, starts)))
     options = {"abstol": atol, "reltol": rtol, "max_num_steps": int(min(budget.max_steps, 2**31 - 1))}
     function = ca.integrator("contacts", integrator, {"x": x, "u": u, "ode": ode}, 0.0,
                              grid.tolist(), options)

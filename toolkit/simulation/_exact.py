@@ -29,9 +29,9 @@ Two engines share that form:
 
 Limits of exactness
 -------------------
-Event times are roots located to a few ulp at any time scale, down to a motor lag of 1e-307 s
-(bisection, with scale-free midpoints for brackets many binades wider than their root, then
-Brent's method); a crossing in which ``V`` only touches a moving contact speed without
+Event times are roots located to a few ulp at any time scale, down to the smallest motor lag
+:class:`Plant` accepts (about 1e-305 s at carousel scales with compliance; bisection, with
+scale-free midpoints for brackets many binades wider than their root, then Brent's method); a crossing in which ``V`` only touches a moving contact speed without
 crossing it (a double root) is not an event. With compliance and a motor lag, a body rate
 ``b/m`` within rounding of ``1/tau`` loses digits in ``1 / (b - m/tau)`` (exact resonance
 itself is handled in closed form).
@@ -306,9 +306,9 @@ class _Dense:
         return V, dV
 
     def values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(V, dV/dt)`` at ``query`` times (s, 1-d, not NaN), by the cheapest exact path:
-        :meth:`linear_values` when every segment is a line, else :meth:`sorted_values` for
-        non-decreasing times, else the per-time gather."""
+        """``(V, dV/dt)`` at ``query`` times (s, 1-d, within ``[0, t_end]``), by the cheapest
+        exact path: :meth:`linear_values` when every segment is a line, else
+        :meth:`sorted_values` for non-decreasing times, else the per-time gather."""
         fast = self.linear_values(query)
         if fast is not None:
             return fast
@@ -316,15 +316,27 @@ class _Dense:
             return self.sorted_values(query)
         return self.gathered_values(query), self.gathered_derivative(query)
 
+    def _anywhere(self, times: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`values` at any times (any shape, also non-finite or outside ``[0, t_end]``,
+        where the closed forms may overflow quietly): ``(query, V, dV/dt)``."""
+        query = np.asarray(times, dtype=float)
+        flat = query.ravel()
+        with np.errstate(over="ignore", invalid="ignore"):
+            if np.isfinite(flat).all():
+                V, dV = self.values(flat)
+            else:       # NaN or inf times: the general closed form propagates them
+                V, dV = self.gathered_values(flat), self.gathered_derivative(flat)
+        return query, V, dV
+
     def __call__(self, times: Any) -> np.ndarray:
         """Body speed at ``times`` (s, any shape), m/s."""
-        query = np.asarray(times, dtype=float)
-        return self.values(query.ravel())[0].reshape(query.shape)
+        query, V, _ = self._anywhere(times)
+        return V.reshape(query.shape)
 
     def derivative(self, times: Any) -> np.ndarray:
         """Right derivative ``dV/dt`` at ``times`` (s, any shape), m/s^2."""
-        query = np.asarray(times, dtype=float)
-        return self.values(query.ravel())[1].reshape(query.shape)
+        query, _, dV = self._anywhere(times)
+        return dV.reshape(query.shape)
 
     def gathered_values(self, query: np.ndarray) -> np.ndarray:
         """:meth:`__call__` at times in any order: one segment row gathered per time."""
@@ -1117,11 +1129,10 @@ def _contact_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
     """Contact speeds at ``times``: shape (T, n), read-only (a broadcast when constant)."""
     T = times.size
     if plant.commands is None:
-        # Every row is the one speed vector: a read-only zero-stride view of a private copy.
-        speeds = plant.command(0.0).copy()
-        table = np.ndarray((T, speeds.size), buffer=speeds, strides=(0, speeds.itemsize))
-        table.setflags(write=False)
-        return table
+        # Every row is the one speed vector: a zero-stride view of an immutable bytes copy
+        # (read-only for good: a view of bytes cannot be made writeable).
+        speeds = plant.command(0.0)
+        return np.ndarray((T, speeds.size), buffer=speeds.tobytes(), strides=(0, speeds.itemsize))
     if plant.dynamic_motors:
         table = _motor_speeds(plant, times)
     else:

@@ -154,6 +154,12 @@ def ideal_speeds(plant: Plant, t: np.ndarray) -> np.ndarray:
     return np.clip(plant.commands(t).reshape(t.size, plant.n), *limits)
 
 
+def external_forces(plant: Plant, t: np.ndarray) -> np.ndarray:
+    """External force at times ``t`` (s), shape (T,), N."""
+    ext = plant.external_force
+    return ext(t) if callable(ext) else np.full(t.size, float(ext))
+
+
 def net_forces(plant: Plant, t: np.ndarray, V: np.ndarray, speeds: np.ndarray, *,
                friction: str = "sign", epsilon: float = 0.0) -> np.ndarray:
     """Net force of a friction law at many samples at once, N, shape (T,).
@@ -165,9 +171,7 @@ def net_forces(plant: Plant, t: np.ndarray, V: np.ndarray, speeds: np.ndarray, *
         return np.empty(0)
     eps = epsilon if friction != "sign" else 0.0
     contact = plant.contact_forces(V[:, None], speeds, friction=friction, epsilon=eps)
-    ext = plant.external_force
-    outside = ext(t) if callable(ext) else np.full(t.size, float(ext))
-    return np.sum(contact, axis=1) + outside - plant.damping * V
+    return np.sum(contact, axis=1) + external_forces(plant, t) - plant.damping * V
 
 
 def build_result(plant: Plant, *, method: str, setting: str, t: np.ndarray, V: np.ndarray,

@@ -165,3 +165,33 @@ def test_settings_are_validated() -> None:
     assert setting.kwargs == {"step": 1e-3}
     with pytest.raises(ParameterError, match="'repeats' parameter"):
         precision_report(carousel_startup_plant(), 1.0, repeats=0)
+
+
+def test_timing_runs_repeats_round_robin_from_scratch(monkeypatch) -> None:
+    # The call log of the timing loop, with simulate replaced by an instant fake: each
+    # setting runs once (+ one warm call when it succeeded), then `repeats` rounds visit the
+    # successful settings in order, each with its own batch size; a failed run is never
+    # repeated, and every call starts with the plant's derived caches empty.
+    import itertools
+
+    import toolkit.precision as precision
+
+    plant = carousel_startup_plant(seed=1)
+    log: list[tuple[str, int]] = []
+
+    def fake_simulate(plant_, t_end, *, v0, method, t_eval, budget, **options):
+        log.append((method, len(plant_._derived)))
+        plant_.derived("fake")["filled"] = True          # what a warm cache would keep
+        return type("Result", (), {"success": method != "rk45"})()
+
+    monkeypatch.setattr(precision, "simulate", fake_simulate)
+    settings = [MethodSetting("exact"), MethodSetting("rk45"), MethodSetting("moreau")]
+    timings = precision._timed(plant, 1.0, 0.0, settings, 3, np.linspace(0.0, 1.0, 5))
+    assert all(cached == 0 for _, cached in log)
+    runs = [(method, len(list(group))) for method, group in
+            itertools.groupby(method for method, _ in log)]
+    assert runs[:3] == [("exact", 2), ("rk45", 1), ("moreau", 2)]
+    rounds = runs[3:]
+    assert [method for method, _ in rounds] == ["exact", "moreau"] * 3
+    assert len({count for method, count in rounds if method == "exact"}) == 1   # one batch size
+    assert len(timings) == 3 and all(wall > 0 for _, wall in timings)

@@ -30,11 +30,12 @@ Two engines share that form:
 Limits of exactness
 -------------------
 Event times are roots located to a few ulp at any time scale, down to the smallest motor lag
-:class:`Plant` accepts (about 1e-305 s at carousel scales with compliance; bisection, with
-scale-free midpoints for brackets many binades wider than their root, then Brent's method); a crossing in which ``V`` only touches a moving contact speed without
-crossing it (a double root) is not an event. With compliance and a motor lag, a body rate
-``b/m`` within rounding of ``1/tau`` loses digits in ``1 / (b - m/tau)`` (exact resonance
-itself is handled in closed form).
+:class:`Plant` accepts (about 1e-305 s at carousel scales with compliance): bisection, with
+scale-free midpoints for brackets many binades wider than their root, then Brent's method.
+A crossing in which ``V`` only touches a moving contact speed without crossing it (a double
+root) is not an event. With compliance and a motor lag, a body rate ``b/m`` within rounding
+of ``1/tau`` loses digits in ``1 / (b - m/tau)`` (exact resonance itself is handled in
+closed form).
 
 Zeno guard
 ----------

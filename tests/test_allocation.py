@@ -216,7 +216,7 @@ def test_friction_fraction_gives_the_papers_split(k: int) -> None:
 @pytest.mark.parametrize("k", range(1, 6))
 def test_friction_fraction_braking_time_by_simulation(k: int) -> None:
     simulation = pytest.importorskip("toolkit.simulation")
-    from toolkit.plant import Plant
+    from toolkit.model import Plant
 
     mass, f = 1.0, 0.2                        # F_tot = 2 N, F_tot / m = 2 m/s^2 (PHYSICS.md 4)
     result = allocate(FrictionFraction(k / 5, V_MAX), ContactSet(np.zeros(10), np.full(10, f)),
@@ -230,7 +230,7 @@ def test_friction_fraction_braking_time_by_simulation(k: int) -> None:
 
 def test_viscosity_allocation_decays_like_the_staircase_by_simulation() -> None:
     simulation = pytest.importorskip("toolkit.simulation")
-    from toolkit.plant import Plant
+    from toolkit.model import Plant
 
     n, mass = 10, 0.5
     result = allocate(Viscosity(10.0 / V_MAX, 0.0, V_MAX), ContactSet(np.zeros(n)))
@@ -249,7 +249,7 @@ def test_viscosity_allocation_decays_like_the_staircase_by_simulation() -> None:
 
 def test_equilibrium_speed_survives_margin_failures_by_simulation() -> None:
     simulation = pytest.importorskip("toolkit.simulation")
-    from toolkit.plant import Plant
+    from toolkit.model import Plant
 
     result = allocate(EquilibriumSpeed(0.1, margin=4), ContactSet(np.zeros(10)),
                       speed_limits=(-V_MAX, V_MAX))

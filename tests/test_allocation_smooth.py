@@ -13,9 +13,9 @@ from toolkit.allocation._problem import AllocationStatus, build_problem
 from toolkit.allocation._smooth import (allocate_smooth, compliant_force, patch_force,
                                         piecewise_linear_errors)
 from toolkit.allocation.targets import ForceCurve
-from toolkit.contacts import ContactDistribution, ContactSet
+from toolkit.model import ContactDistribution, ContactSet
 from toolkit.errors import ParameterError
-from toolkit.plant import Motors, Plant
+from toolkit.model import Motors, Plant
 
 
 def test_compliant_contacts_reproduce_a_viscosity_slope_exactly():

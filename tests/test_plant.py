@@ -1,4 +1,4 @@
-"""Tests of toolkit.plant: validation, signals and the force helpers shared by every method."""
+"""Tests of toolkit.model: validation, signals and the force helpers shared by every method."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from toolkit.contacts import ContactSet
+from toolkit.model import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
-from toolkit.plant import STRIBECK_PEAK, Motors, PiecewiseConstant, Plant, compliant_breakpoints
+from toolkit.model import STRIBECK_PEAK, Motors, PiecewiseConstant, Plant, compliant_breakpoints
 
 
 # -- PiecewiseConstant ----------------------------------------------------------------------

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from toolkit.contacts import ContactSet
+from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
-from toolkit.plant import Plant
+from toolkit.model import Plant
 from toolkit.precision import (CAROUSEL_ACCELERATION, MethodSetting, PrecisionReport,
                                carousel_startup_plant, default_settings, exact_speedup,
                                precision_report, rational_trajectory, work_precision_curves)

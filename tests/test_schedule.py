@@ -15,9 +15,9 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 from scipy.special import lambertw
 
-from toolkit.contacts import ContactSet
+from toolkit.model import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
-from toolkit.plant import Motors, PiecewiseConstant, Plant
+from toolkit.model import Motors, PiecewiseConstant, Plant
 from toolkit._schedule_construct import implicit_step, tracking_lower_bound
 from toolkit.schedule import (Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory,
                               braking_time, design_schedule, deviation_bound)

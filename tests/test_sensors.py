@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from toolkit import ParameterError
-from toolkit.sensors import Encoder
+from toolkit.model import Encoder
 
 
 def test_wheel_encoder_matches_the_hardware_table():

@@ -7,9 +7,9 @@ import time
 import numpy as np
 import pytest
 
-from toolkit.contacts import ContactSet
+from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
-from toolkit.plant import Plant
+from toolkit.model import Plant
 from toolkit.simulation import Status, simulate, simulate_batch
 
 RTOL = 1e-12      # the target: each scene equal to the single-run result to 1e-12

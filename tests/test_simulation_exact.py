@@ -15,9 +15,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate, optimize, special
 
-from toolkit.contacts import ContactSet
+from toolkit.model import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
-from toolkit.plant import Motors, PiecewiseConstant, Plant
+from toolkit.model import Motors, PiecewiseConstant, Plant
 from toolkit.simulation import METHODS, Budget, Event, SimulationResult, Status, simulate
 
 RTOL = 1e-12      # the precision target for the exact method

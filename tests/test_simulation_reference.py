@@ -7,9 +7,9 @@ import time
 import numpy as np
 import pytest
 
-from toolkit.contacts import ContactSet
+from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
-from toolkit.plant import Motors, PiecewiseConstant, Plant
+from toolkit.model import Motors, PiecewiseConstant, Plant
 from toolkit.simulation import Budget, Status, simulate
 from toolkit.simulation._moreau import _compliant_step, _staircase, moreau_step_staircase
 from toolkit.simulation._reference import Meter

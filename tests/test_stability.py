@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from toolkit.contacts import ContactSet
-from toolkit.plant import Motors, PiecewiseConstant, Plant
+from toolkit.model import ContactSet
+from toolkit.model import Motors, PiecewiseConstant, Plant
 from toolkit.simulation import Status, simulate
 from toolkit.stability import StabilityReport, _case, _mirror, _Spec, stability_suite
 

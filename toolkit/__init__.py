@@ -18,7 +18,7 @@ from .allocation import (
     allocate,
     evaluate_errors,
 )
-from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase
+from .model import ContactDistribution, ContactModel, ContactSet, Encoder, Motors, PiecewiseConstant, Plant, Staircase
 from .errors import (
     ParameterError,
     ParameterTypeError,
@@ -27,11 +27,9 @@ from .errors import (
     SolverError,
     ToolkitError,
 )
-from .plant import Motors, PiecewiseConstant, Plant
 from .plots import plot_force_curve, plot_precision, plot_schedule, plot_simulation
 from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
-from .sensors import Encoder
 from .precision import PrecisionReport, PrecisionRow, carousel_startup_plant, precision_report
 from .simulation import BatchResult, Budget, Event, SimulationResult, simulate, simulate_batch
 from .simulation import Status as SimulationStatus

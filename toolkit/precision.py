@@ -28,9 +28,8 @@ from typing import Any
 import numpy as np
 
 from ._validation import as_float, as_int
-from .contacts import ContactSet
+from .model import ContactSet, PiecewiseConstant, Plant
 from .errors import ParameterError, ParameterTypeError, SolverError, parameter_message
-from .plant import Plant, PiecewiseConstant
 from .simulation import METHODS, Budget, SimulationResult, Status, simulate
 
 __all__ = [

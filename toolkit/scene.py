@@ -203,7 +203,7 @@ class ContactsSpec:
         """The :class:`~toolkit.ContactSet` this section declares."""
         import numpy as np
 
-        from .contacts import ContactSet
+        from .model import ContactSet
         from .errors import ParameterError
 
         if self.random is not None:

@@ -61,7 +61,7 @@ import numpy as np
 from ._schedule_construct import speed_rate
 from ._validation import as_float, as_float_array, as_int
 from .errors import ParameterError, ParameterTypeError, parameter_message
-from .plant import Motors, PiecewiseConstant, Plant
+from .model import Motors, PiecewiseConstant, Plant
 
 __all__ = [
     "SpeedTrajectory",
@@ -202,7 +202,7 @@ class ScheduleResult:
         command differs from the contact speed at the start of its period by at most
         ``r tau`` (``r * period`` without lag), so the motors never saturate their rate.
         With dynamic motors ``speeds[0]`` equals the plant's current commands (motors start
-        settled there, see :class:`~toolkit.plant.Plant`): new commands act from ``times[1]``.
+        settled there, see :class:`~toolkit.model.Plant`): new commands act from ``times[1]``.
     contact_speeds : ndarray of shape (K + 1, n), m/s
         Contact speeds of the motor model at ``times`` (closed form).
     body_speed : ndarray of shape (K + 1,), m/s
@@ -311,7 +311,7 @@ class ScheduleResult:
         return self.status in (ScheduleStatus.OPTIMAL, ScheduleStatus.VERIFIED)
 
     def as_commands(self) -> PiecewiseConstant:
-        """The schedule as a :class:`~toolkit.plant.PiecewiseConstant` for ``Plant(commands=...)``.
+        """The schedule as a :class:`~toolkit.model.PiecewiseConstant` for ``Plant(commands=...)``.
 
         Row ``k`` applies on ``[k period, (k + 1) period)`` (row 0 also before 0), the last
         row from ``K period`` on.
@@ -569,7 +569,7 @@ def braking_time(plant: Plant, v0: float, target_speed: float, *, command: float
 
 
 def _at_equilibrium(speeds: np.ndarray, forces: np.ndarray, V: float) -> bool:
-    from .contacts import ContactSet
+    from .model import ContactSet
 
     lo, hi = ContactSet(speeds, forces).equilibrium()
     return lo <= V <= hi
@@ -1001,7 +1001,7 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
     Examples
     --------
     >>> from toolkit import ContactSet
-    >>> from toolkit.plant import Motors, Plant
+    >>> from toolkit.model import Motors, Plant
     >>> plant = Plant(ContactSet([0.3] * 10, [0.2] * 10), mass=1.0,
     ...               motors=Motors(lag=0.01, speed_limits=(-0.35, 0.35)))
     >>> result = design_schedule(plant, Braking(0.0), v0=0.3)   # doctest: +SKIP

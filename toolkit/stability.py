@@ -18,8 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .contacts import ContactSet
-from .plant import Motors, PiecewiseConstant, Plant
+from .model import ContactSet, Motors, PiecewiseConstant, Plant
 from .simulation import Budget, SimulationResult, simulate
 
 __all__ = ["StabilityCase", "StabilityReport", "stability_suite", "EXACT_TOLERANCE",

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .contacts import ContactSet
+from .model import ContactSet
 from .scene import Scene
 
 __all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study", "scene_plant",
@@ -92,7 +92,7 @@ class StudyResult:
 
 
 def _sensors(scene: Scene) -> dict[str, dict[str, float]]:
-    from .sensors import Encoder
+    from .model import Encoder
 
     spec = scene.sensors
     out: dict[str, dict[str, float]] = {}
@@ -105,7 +105,7 @@ def _sensors(scene: Scene) -> dict[str, dict[str, float]]:
 
 
 def _motors(scene: Scene):
-    from .plant import Motors
+    from .model import Motors
 
     spec = scene.motors
     if spec is None:
@@ -115,7 +115,7 @@ def _motors(scene: Scene):
 
 
 def _signal(value: Any):
-    from .plant import PiecewiseConstant
+    from .model import PiecewiseConstant
 
     if isinstance(value, dict):
         return PiecewiseConstant(np.asarray(value["times"]), np.asarray(value["values"], dtype=float))
@@ -125,7 +125,7 @@ def _signal(value: Any):
 def scene_plant(scene: Scene, contacts: ContactSet | None = None):
     """The :class:`~toolkit.Plant` a scene declares (needs ``[body]``), optionally on other contacts."""
     from .errors import SceneError
-    from .plant import Plant
+    from .model import Plant
 
     if scene.body is None:
         raise SceneError("This stage needs a [body] section (the moving inertia).")

@@ -23,7 +23,7 @@ import time
 from typing import Any
 
 from .._validation import check_option
-from ..contacts import ContactDistribution
+from ..model import ContactDistribution
 from ._problem import (
     AllocationProblem,
     AllocationResult,
@@ -44,7 +44,7 @@ METHODS = ("quantile", "milp", "casadi")
 def choose_method(problem: AllocationProblem) -> str:
     """The method ``allocate(method=None)`` uses for ``problem``.
 
-    ``"casadi"`` for a continuous :class:`~toolkit.contacts.ContactDistribution`;
+    ``"casadi"`` for a continuous :class:`~toolkit.model.ContactDistribution`;
     ``"quantile"`` when every contact has the same magnitude and the same speed box and
     none is fixed, failed or liftable; ``"milp"`` otherwise.
     """
@@ -67,7 +67,7 @@ def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit
         The requested force-speed behaviour.
     contacts : ContactSet
         Friction magnitudes ``f_i`` (N) and current speeds ``v0_i`` (m/s), shape (n,). A
-        :class:`~toolkit.contacts.ContactDistribution` goes to the ``"casadi"`` method.
+        :class:`~toolkit.model.ContactDistribution` goes to the ``"casadi"`` method.
     speed_limits : pair of (float or array_like of shape (n,)), m/s, optional
         Motor limits ``(lo, hi)``, per contact or shared; possibly asymmetric.
     rate_limit : float or array_like of shape (n,), m/s^2, optional
@@ -92,7 +92,7 @@ def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit
         it (``result.compliance``, ``extra["compliance"]``): its ``contacts`` are the speeds
         and magnitudes to drive with motors of that compliance, and its errors are those of
         the compliant law (``evaluate_errors(result.curve, result.contacts, compliance=k)``).
-        For a :class:`~toolkit.contacts.ContactDistribution` ``speed_limits`` must be a pair
+        For a :class:`~toolkit.model.ContactDistribution` ``speed_limits`` must be a pair
         of scalars (the patch's speed range stays inside), and per-contact arguments
         (``rate_limit``, ``dt``, ``fixed``, ``failed``, ``liftable``) are refused.
 

@@ -4,8 +4,8 @@ Error definitions (used for every result, whatever the method):
 
 - The target is the piecewise-linear curve through its samples; at a repeated speed it is
   the interval between the two forces (a vertical step).
-- The achieved force is the staircase of the achieved :class:`~toolkit.contacts.ContactSet`;
-  at a contact speed it is the interval :meth:`~toolkit.contacts.ContactSet.force_bounds`.
+- The achieved force is the staircase of the achieved :class:`~toolkit.model.ContactSet`;
+  at a contact speed it is the interval :meth:`~toolkit.model.ContactSet.force_bounds`.
 - ``error_sup = sup_V dist(target(V), achieved(V))`` over the band, with ``dist`` the
   distance between the two intervals (0 when they meet).
 - ``error_l1 = integral |achieved - target| dV`` over the band.
@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..contacts import ContactSet
+from ..model import ContactSet
 from ..errors import ParameterError, parameter_message
 from .targets import EquilibriumSpeed, ForceCurve
 

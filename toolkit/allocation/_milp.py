@@ -421,7 +421,7 @@ def _heuristic(problem: AllocationProblem) -> tuple[np.ndarray, float]:
     its box. Also tries the current speeds. Returns the better one and its evaluated error.
     """
     from ._evaluate import evaluate_errors
-    from ..contacts import ContactSet
+    from ..model import ContactSet
 
     lo, hi = problem.boxes()
     forces, total = problem.forces, problem.total_force

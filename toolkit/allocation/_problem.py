@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_float, as_float_array
-from ..contacts import ContactDistribution, ContactSet
+from ..model import ContactDistribution, ContactSet
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from .targets import EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 
@@ -110,7 +110,7 @@ class AllocationProblem:
         Friction magnitudes ``f_i`` (N) and current speeds ``v0_i`` (m/s).
     lower, upper : ndarray of shape (n,), m/s
         Motor speed limits per contact (``-inf``/``inf`` when unlimited); for a
-        :class:`~toolkit.contacts.ContactDistribution`, shape (1,): the scalar limits of the
+        :class:`~toolkit.model.ContactDistribution`, shape (1,): the scalar limits of the
         patch's speed range.
     max_change : ndarray of shape (n,) or None, m/s
         Largest allowed ``|v_i - v0_i|`` (``rate_limit * dt``), or None.

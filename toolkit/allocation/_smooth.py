@@ -5,7 +5,7 @@ Two models whose force-speed law is continuous, so that a gradient method applie
 - **Compliant contacts** (a motor torque-speed line of slope ``k``, (m/s)/N): contact ``i``
   pushes with the saturated linear law ``f_i clip((v_i - V) / (k f_i), -1, 1)``. Each
   contact is a ramp of slope ``-1/k`` and width ``2 k f_i`` centred on ``v_i``.
-- **A continuous patch** (:class:`~toolkit.contacts.ContactDistribution`): a uniform density
+- **A continuous patch** (:class:`~toolkit.model.ContactDistribution`): a uniform density
   of contact speed on ``[a, b]`` gives ``F(V) = F_tot (1 - 2 clip((V - a)/(b - a), 0, 1))``;
   the optimizer chooses ``a`` and ``b``.
 
@@ -21,11 +21,11 @@ outside the limits (:func:`~toolkit.allocation._evaluate.forced_error`) is a cer
 bound. Otherwise there is no closed form: ``bound`` is 0 (or the error itself when that is 0
 to rounding), ``gap = error_sup``, and the message says the result is uncertified.
 
-For compliant contacts the returned ``contacts`` is a :class:`~toolkit.contacts.ContactSet` of
+For compliant contacts the returned ``contacts`` is a :class:`~toolkit.model.ContactSet` of
 the chosen speeds and the magnitudes: the contacts to drive *with motors of that compliance*
 (``result.compliance``, also ``extra["compliance"]``). Its own Coulomb staircase is not what
 was optimized; re-evaluate with ``evaluate_errors(result.curve, result.contacts,
-compliance=result.compliance)`` or a :class:`~toolkit.plant.Plant` with
+compliance=result.compliance)`` or a :class:`~toolkit.model.Plant` with
 ``Motors(compliance=k)``.
 """
 
@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from ..contacts import ContactDistribution, ContactSet
+from ..model import ContactDistribution, ContactSet
 from ..errors import ParameterError, parameter_message
 from ._evaluate import compliant_force, forced_error, piecewise_linear_errors
 from ._problem import AllocationProblem, AllocationResult, AllocationStatus
@@ -129,9 +129,9 @@ def allocate_smooth(problem: AllocationProblem, *, compliance: float = 0.0) -> A
     Parameters
     ----------
     problem : AllocationProblem
-        With a :class:`~toolkit.contacts.ContactSet`: per-contact boxes, fixed, failed masks
+        With a :class:`~toolkit.model.ContactSet`: per-contact boxes, fixed, failed masks
         apply (liftable contacts are not lifted by this method). With a
-        :class:`~toolkit.contacts.ContactDistribution`: the patch is replaced by a uniform
+        :class:`~toolkit.model.ContactDistribution`: the patch is replaced by a uniform
         patch of the same ``F_tot`` whose speed range ``[a, b]`` is optimized inside the
         scalar speed limits ``problem.lower[0] <= a < b <= problem.upper[0]``.
     compliance : float, (m/s)/N

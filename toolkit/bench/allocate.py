@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..contacts import ContactSet
+from ..model import ContactSet
 from ..allocation import Viscosity, allocate
 
 V_MAX = 0.35

@@ -15,8 +15,7 @@ import time
 
 import numpy as np
 
-from toolkit.contacts import ContactSet
-from toolkit.plant import Plant
+from toolkit.model import ContactSet, Plant
 from toolkit.simulation import simulate, simulate_batch
 
 

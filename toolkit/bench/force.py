@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from toolkit.contacts import ContactSet
+from toolkit.model import ContactSet
 
 
 def broadcast_force(speeds: np.ndarray, forces: np.ndarray, V: np.ndarray, chunk: int = 1000) -> np.ndarray:

@@ -26,7 +26,7 @@ import numpy as np
 
 from .._validation import as_float, as_float_array, check_option, suggestion
 from ..errors import ParameterError, ParameterTypeError, parameter_message
-from ..plant import Plant
+from ..model import Plant
 from ._batch import BatchResult, simulate_batch
 from ._result import Budget, Event, SimulationResult, Status
 

@@ -2,7 +2,7 @@
 
 ``simulate(plant, t_end, method="casadi", integrator="cvodes" | "idas", friction=..., ...)``.
 
-The smoothed friction laws are those of :meth:`toolkit.plant.Plant.contact_forces` written
+The smoothed friction laws are those of :meth:`toolkit.model.Plant.contact_forces` written
 symbolically (``"tanh"`` and ``"stribeck"``; a compliant motor's saturated linear law when the
 plant has compliance). ``"sign"`` is refused: SUNDIALS' error control assumes a smooth
 right-hand side. The state is ``[V]`` or, with dynamic motors, ``[V, v_1, ..., v_n]``.
@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_float, check_option
-from ..plant import STRIBECK_PEAK, STRIBECK_SPEED, Plant
+from ..model import STRIBECK_PEAK, STRIBECK_SPEED, Plant
 from ._reference import (Meter, build_result, check_smoothing, external_forces, format_setting,
                          ideal_speeds)
 from ._result import Budget, SimulationResult, Status

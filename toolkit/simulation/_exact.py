@@ -71,8 +71,7 @@ from typing import Any
 
 import numpy as np
 
-from ..contacts import ContactSet
-from ..plant import PiecewiseConstant, Plant, compliant_breakpoints
+from ..model import ContactSet, PiecewiseConstant, Plant, compliant_breakpoints
 from ._result import Budget, Event, SimulationResult, Status, status_message
 
 __all__ = ["simulate_exact"]

@@ -10,7 +10,7 @@ for the new speed ``W``, with the contact speeds ``v_i`` and ``F_ext`` of the st
 (implicit Euler). Writing ``a = m / h + c`` and ``b = m V / h + F_ext``, ``W`` is the zero of
 ``g(W) = a W - b - F(W)``: since ``F`` is non-increasing (maximal monotone), ``g`` is strictly
 increasing, so the zero exists, is unique and is found exactly on the staircase of
-:meth:`toolkit.contacts.ContactSet.staircase` (levels ``s_k``, plateau forces ``P_k`` below
+:meth:`toolkit.model.ContactSet.staircase` (levels ``s_k``, plateau forces ``P_k`` below
 ``s_k`` and ``P_{k+1}`` above):
 
 - at a level, ``g(s_k) = [a s_k - b - P_k, a s_k - b - P_{k+1}]``; both ends increase with
@@ -42,7 +42,7 @@ import math
 import numpy as np
 
 from .._validation import as_float
-from ..plant import Plant
+from ..model import Plant
 from ._reference import (BudgetExceeded, Meter, build_result, format_setting,
                          samples_from_steps, segment_edges)
 from ._result import Budget, SimulationResult, Status

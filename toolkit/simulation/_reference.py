@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_float, check_option
-from ..plant import FRICTION_MODELS, Plant
+from ..model import FRICTION_LAWS, Plant
 from ._result import Budget, SimulationResult, Status, status_message
 
 __all__ = ["BudgetExceeded", "Meter", "segment_edges", "build_result", "check_smoothing",
@@ -102,7 +102,7 @@ def segment_edges(plant: Plant, t_end: float) -> np.ndarray:
 
 
 def check_smoothing(friction: str, epsilon: Any, owner: str,
-                    choices: tuple[str, ...] = FRICTION_MODELS) -> float:
+                    choices: tuple[str, ...] = FRICTION_LAWS) -> float:
     """Validate the friction law and its smoothing width; return ``epsilon`` as a float (m/s)."""
     check_option(friction, "friction", owner, choices)
     return as_float(epsilon, "epsilon", owner, low=0.0, low_open=True)

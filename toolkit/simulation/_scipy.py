@@ -8,7 +8,7 @@ are dynamic (a lag or a rate limit), with
     dV/dt   = (sum_i phi_i(v_i - V) + F_ext - c V) / m
     dv_i/dt = Plant.motor_rate(t, v)
 
-where ``phi_i`` is the friction law of :meth:`toolkit.plant.Plant.contact_forces`:
+where ``phi_i`` is the friction law of :meth:`toolkit.model.Plant.contact_forces`:
 
 - ``"sign"``: ``f_i sign(s)`` (``sign(0) = 0``). A discontinuous right-hand side: adaptive
   solvers chatter around the median and their step size collapses. This is the case the
@@ -16,8 +16,8 @@ where ``phi_i`` is the friction law of :meth:`toolkit.plant.Plant.contact_forces
 - ``"tanh"``: ``f_i tanh(s / epsilon)``; Coulomb's law as ``epsilon -> 0`` for every ``s != 0``.
   Stiff (slope ``f_i / epsilon``) and it makes the body creep inside zero-force bands.
 - ``"stribeck"``: ``f_i tanh(s / epsilon) (1 + (P - 1) exp(-(s / (S epsilon))^2))`` with
-  ``P = toolkit.plant.STRIBECK_PEAK`` (breakaway over Coulomb force, 1.5) and
-  ``S = toolkit.plant.STRIBECK_SPEED`` (Stribeck speed in units of ``epsilon``, 3). Both
+  ``P = toolkit.model.STRIBECK_PEAK`` (breakaway over Coulomb force, 1.5) and
+  ``S = toolkit.model.STRIBECK_SPEED`` (Stribeck speed in units of ``epsilon``, 3). Both
   widths scale with ``epsilon``, so the law tends to Coulomb's ``f_i sign(s)`` pointwise for
   ``s != 0`` as ``epsilon -> 0``; the hump makes the force non-monotone in slip.
 
@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_float, check_option
-from ..plant import Plant
+from ..model import Plant
 from ._reference import (BudgetExceeded, Meter, build_result, check_smoothing, format_setting,
                          samples_from_steps, segment_edges)
 from ._result import Budget, SimulationResult, Status

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import as_float
+from .._validation import as_float
 
 __all__ = ["Encoder"]
 

@@ -1,0 +1,35 @@
+"""The model: the physics of active contacts, written once.
+
+Read this package alone to know the whole model:
+
+- :mod:`~toolkit.model.contacts`: contact sets and continuous patches, their net force
+  ``F(V) = sum f_i sign(v_i - V)`` and its equilibrium set (the weighted median);
+- :mod:`~toolkit.model.friction`: the friction law of one contact (Coulomb, tanh, Stribeck,
+  compliant), over numpy or casadi;
+- :mod:`~toolkit.model.motors`: the motor law (lag, rate limit, speed limits) and its
+  closed-form solutions;
+- :mod:`~toolkit.model.signals`: piecewise-constant signals (external force, commands);
+- :mod:`~toolkit.model.plant`: the body on its contacts, ``m dV/dt in F(V) + F_ext - c V``,
+  and its right-hand side :meth:`Plant.rhs`;
+- :mod:`~toolkit.model.sensors`: encoders as integer counts of position.
+
+Every solver, estimator and controller calls these; none re-derives them.
+"""
+
+from __future__ import annotations
+
+from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase
+from .friction import (FRICTION_LAWS, STRIBECK_PEAK, STRIBECK_SPEED, compliant_breakpoints,
+                       compliant_zero_set, contact_forces)
+from .motors import MotorPiece, Motors, implicit_step, motor_rate, reach, unsaturated_response
+from .plant import Plant
+from .sensors import Encoder
+from .signals import PiecewiseConstant
+
+__all__ = [
+    "ContactModel", "ContactSet", "ContactDistribution", "Staircase",
+    "FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",
+    "compliant_breakpoints", "compliant_zero_set",
+    "Motors", "motor_rate", "MotorPiece", "unsaturated_response", "implicit_step", "reach",
+    "PiecewiseConstant", "Plant", "Encoder",
+]

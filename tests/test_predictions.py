@@ -1,0 +1,91 @@
+"""Closed forms of the ideal model's predictions, checked against the exact simulator."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from toolkit import ContactSet, ParameterError, Plant, simulate
+from toolkit.predictions.theory import (ONE_MINUS_INV_E, resting_speed, time_constant,
+                                        transition_time, travel_time, uniform_staircase,
+                                        viscosity_correction)
+
+# The exact simulator and travel_time both sum closed-form segments: they agree to rounding
+# (a few ulp per segment, <= 20 segments here): rtol 1e-12.
+RTOL_EXACT = 1e-12
+
+
+@pytest.mark.parametrize("n, center, spacing", [(10, 0.15, 0.03), (11, 0.12, 0.02), (7, -0.1, 0.05)])
+def test_travel_time_equals_the_exact_simulation(n, center, spacing):
+    contacts = uniform_staircase(n, center, spacing, 0.2)
+    mass = 1.3
+    stop = resting_speed(contacts, 0.0)
+    target = ONE_MINUS_INV_E * stop
+    run = simulate(Plant(contacts, mass), 3.0)
+    # The body's speed is piecewise linear in time: read the crossing time off its events.
+    t, V = run.t, run.V
+    k = int(np.flatnonzero(np.sign(target) * (V - target) >= 0)[0])
+    crossing = t[k - 1] + (target - V[k - 1]) * (t[k] - t[k - 1]) / (V[k] - V[k - 1])
+    assert travel_time(contacts, mass, 0.0, target) == pytest.approx(crossing, rel=RTOL_EXACT)
+    assert time_constant(contacts, mass, 0.0) == pytest.approx(crossing, rel=RTOL_EXACT)
+
+
+def test_travel_time_is_infinite_where_the_body_stops_first():
+    contacts = ContactSet([-0.35] * 5 + [0.35] * 5)            # zero-force band
+    assert travel_time(contacts, 1.0, 0.0, 0.1) == math.inf
+    assert travel_time(contacts, 1.0, 0.2, 0.2) == 0.0
+
+
+def test_resting_speed_is_the_near_edge_of_the_band():
+    contacts = ContactSet([-0.35] * 5 + [0.35] * 5)
+    assert resting_speed(contacts, 0.1) == 0.1                  # inside the band: coasts
+    assert resting_speed(contacts, -0.5) == -0.35
+    assert resting_speed(contacts, 0.9) == 0.35
+
+
+def test_uniform_staircase_has_the_commanded_slope():
+    f, s = 0.2, 0.04
+    contacts = uniform_staircase(9, 0.1, s, f)
+    # Between neighbouring contacts the force drops by 2 f: slope 2 f / s on average.
+    mids = contacts.speeds[:-1] + s / 2
+    np.testing.assert_allclose(np.diff(contacts.force(mids)), -2 * f, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("u0", [20.5, 40.5, 80.5])
+def test_correction_tends_to_one_deep_inside_the_spread(u0):
+    # Odd n, start at mid-step u0 steps below the centre: the staircase force is the linear
+    # law at each step's middle, so C is a midpoint rule for integral du/u = 1, whose error
+    # is (1/24) sum h^3 f''/1 = (1/12) integral du/u^3 + O(u^-4) = (e^2 - 1)/(24 u0^2) + ...
+    # (the 63.2 % point falls inside a step: one partial step adds at most 1/u1 = e/u0).
+    n, s, f, m = 2 * int(u0) + 41, 0.01, 0.1, 2.0
+    contacts = uniform_staircase(n, u0 * s, s, f)
+    C = viscosity_correction(contacts, m, 0.0, 2 * f / s)
+    assert abs(C - 1.0) <= (math.e ** 2 - 1) / (24 * u0 ** 2) + math.e / u0 ** 2
+
+
+def test_correction_of_even_n_is_below_one():
+    # Even n stops at the near edge of the zero band, half a step short of the centre,
+    # while the plateaus push as the linear law about the centre: faster than exponential.
+    contacts = uniform_staircase(10, 0.13, 0.04, 0.2)
+    assert viscosity_correction(contacts, 1.0, 0.0, 2 * 0.2 / 0.04) < 1.0
+
+
+@pytest.mark.parametrize("j", [1, 2, 3, 4, 5])
+def test_transition_time_matches_the_exact_braking_run(j):
+    v, f, m = 0.35, 0.2, 1.0
+    contacts = ContactSet([v] * (5 - j) + [-v] * (5 + j), [f] * 10)
+    run = simulate(Plant(contacts, m), 10.0, v0=v)
+    arrival = run.t[np.flatnonzero(run.V <= -v)[0]]
+    assert transition_time(m, v, 10 * f, j / 5) == pytest.approx(arrival, rel=RTOL_EXACT)
+    assert transition_time(m, v, 10 * f, 0.0) == math.inf
+
+
+def test_bad_inputs_name_the_parameter():
+    with pytest.raises(ParameterError, match="'mass' parameter of travel_time"):
+        travel_time(ContactSet([0.0]), -1.0, 0.0, 1.0)
+    with pytest.raises(ParameterError, match="'fraction' parameter of transition_time"):
+        transition_time(1.0, 0.35, 2.0, -0.1)
+    with pytest.raises(ParameterError, match="'spacing' parameter of uniform_staircase"):
+        uniform_staircase(3, 0.0, 0.0, 1.0)

@@ -1,0 +1,171 @@
+"""What the ideal model predicts for the paper's viscosity and friction-fraction experiments.
+
+Numerics only, on the model's own :class:`~toolkit.model.ContactSet`.
+
+Viscosity of a finite staircase
+-------------------------------
+``n`` equal contacts (magnitude ``f``) spread uniformly with spacing ``s`` realize, on
+average, the viscous law ``F = -k (V - c)`` with ``k = dF/dV = 2 f / s`` (PHYSICS.md
+section 4), whose startup from ``V0`` is exponential with ``tau = m / k``. The staircase is
+only approximately viscous: between two contact speeds its force is constant, so ``V(t)`` is
+piecewise linear and the body reaches its resting speed ``V_stop`` (the median, or for even
+``n`` the near edge of the zero-force band) in finite time.
+
+We measure a time constant the way an experimenter fits one to a startup that settles:
+``tau`` is the time at which the body has covered ``1 - 1/e`` (63.2 %) of its way from
+``V0`` to where it comes to rest. For the linear law that is exactly ``m / k``. For the
+staircase it is the travel time (:func:`travel_time`, a sum of ``m dV / F`` over plateaus,
+exact) to ``V0 + (1 - 1/e)(V_stop - V0)``, so the **correction factor**
+
+    C(n, u0) = tau_staircase k / m = (2 / s) * integral dV / (F(V) / f)
+
+depends only on ``n`` and on where the start lies in units of the spacing. Between contact
+speeds the staircase force equals the linear law at the middle of each step, so ``C`` is a
+midpoint-rule estimate of ``integral du / u = 1``: far inside the spread ``C -> 1`` with an
+error of order ``(e^2 - 1) / (24 u0^2)``, ``u0 = (V_stop - V0) / s`` (the midpoint rule's
+error on ``1/u``; phase effects of where ``V0`` falls inside a step add to it); outside the
+spread (``V0`` below every contact) the force saturates at ``F_tot`` and ``C`` falls below
+that estimate. :func:`viscosity_correction` evaluates ``C`` exactly for any contact set.
+
+Friction fraction
+-----------------
+``5 - j`` contacts at ``+v_max`` and ``5 + j`` at ``-v_max`` (ten equal contacts) give
+``F = -(2 j f)`` for every ``V`` in ``(-v_max, v_max)``: ``mu / mu0 = j / 5`` exactly, and a
+body released at ``+v_max`` crosses the band in ``dT = m 2 v_max / (F_tot mu / mu0)``
+(:func:`transition_time`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, as_float_array
+from ..errors import ParameterError, parameter_message
+from ..model import ContactSet
+
+__all__ = ["travel_time", "resting_speed", "time_constant", "viscosity_correction",
+           "uniform_staircase", "transition_time", "ONE_MINUS_INV_E"]
+
+#: The fraction of the way covered after one time constant of an exponential.
+ONE_MINUS_INV_E = 1.0 - math.exp(-1.0)
+
+
+def _check_contacts(contacts: Any, owner: str) -> ContactSet:
+    if not isinstance(contacts, ContactSet):
+        raise ParameterError(parameter_message("contacts", owner, "be a ContactSet", contacts))
+    return contacts
+
+
+def travel_time(contacts: ContactSet, mass: float, v_from: float, v_to: float) -> float:
+    """Exact time for the ideal body (no drag, no outside force) to go from ``v_from`` to ``v_to``.
+
+    ``T = sum over plateaus of m |dV| / |F|`` with ``F`` the staircase of ``contacts``.
+
+    Parameters
+    ----------
+    contacts : ContactSet
+    mass : float, kg
+    v_from, v_to : float, m/s
+
+    Returns
+    -------
+    float, s
+        ``inf`` when the force on the way is zero or points the other way (the body stops
+        first); 0 when ``v_from == v_to``.
+    """
+    owner = "travel_time"
+    _check_contacts(contacts, owner)
+    m = as_float(mass, "mass", owner, low=0.0, low_open=True)
+    a = as_float(v_from, "v_from", owner)
+    b = as_float(v_to, "v_to", owner)
+    if a == b:
+        return 0.0
+    direction = 1.0 if b > a else -1.0
+    levels = contacts.staircase().levels
+    inside = levels[(levels > min(a, b)) & (levels < max(a, b))]
+    edges = np.concatenate(([a], inside if direction > 0 else inside[::-1], [b]))
+    middles = 0.5 * (edges[:-1] + edges[1:])
+    push = direction * contacts.force(middles)            # force along the motion, N
+    if np.any(push <= 0.0):
+        return math.inf
+    return float(np.sum(m * np.abs(np.diff(edges)) / push))
+
+
+def resting_speed(contacts: ContactSet, v0: float) -> float:
+    """Where the ideal body started at ``v0`` comes to rest: the nearest point of the
+    equilibrium set (the weighted median; for a zero-force band its near edge), m/s."""
+    lo, hi = _check_contacts(contacts, "resting_speed").equilibrium()
+    return float(min(max(as_float(v0, "v0", "resting_speed"), lo), hi))
+
+
+def time_constant(contacts: ContactSet, mass: float, v0: float) -> float:
+    """The 63.2 % time of the ideal startup from ``v0``: exact travel time to
+    ``v0 + (1 - 1/e) (V_stop - v0)``, s (``nan`` when ``v0`` is already at rest)."""
+    stop = resting_speed(contacts, v0)
+    if stop == v0:
+        return math.nan
+    return travel_time(contacts, mass, v0, v0 + ONE_MINUS_INV_E * (stop - v0))
+
+
+def viscosity_correction(contacts: ContactSet, mass: float, v0: float, slope: float) -> float:
+    """``C = tau_staircase * slope / mass``: the staircase's 63.2 % time over the linear law's.
+
+    Parameters
+    ----------
+    contacts : ContactSet
+        The staircase realizing the commanded viscosity.
+    mass : float, kg
+    v0 : float, m/s
+        Start speed.
+    slope : float, N s/m
+        The commanded viscosity ``k = dF/dV`` (for ``n`` equal contacts with spacing ``s``,
+        ``2 f / s``).
+
+    Returns
+    -------
+    float
+        1 for a perfectly viscous law; see the module docstring for its dependence on the
+        number of contacts and on where the start lies.
+    """
+    k = as_float(slope, "slope", "viscosity_correction", low=0.0, low_open=True)
+    return time_constant(contacts, mass, v0) * k / float(mass)
+
+
+def uniform_staircase(n: int, center: float, spacing: float, force: float) -> ContactSet:
+    """``n`` contacts of magnitude ``force`` (N) at ``center + (j - (n + 1)/2) spacing`` (m/s),
+    ``j = 1..n``: the optimal equal-magnitude staircase for a viscous target (its quantiles,
+    PHYSICS.md section 6), slope ``2 force / spacing``."""
+    if not isinstance(n, (int, np.integer)) or n < 1:
+        raise ParameterError(parameter_message("n", "uniform_staircase", "be an integer >= 1", n))
+    s = as_float(spacing, "spacing", "uniform_staircase", low=0.0, low_open=True)
+    c = as_float(center, "center", "uniform_staircase")
+    f = as_float(force, "force", "uniform_staircase", low=0.0, low_open=True)
+    speeds = c + (np.arange(1, n + 1) - (n + 1) / 2.0) * s
+    return ContactSet(speeds, np.full(n, f))
+
+
+def transition_time(mass: float, v_max: float, total_force: float, fraction: Any) -> Any:
+    """``dT = m 2 v_max / (F_tot mu/mu0)``: the ideal crossing time from ``+v_max`` to
+    ``-v_max`` under a friction fraction, s (``inf`` at fraction 0).
+
+    Parameters
+    ----------
+    mass : float, kg
+    v_max : float, m/s
+    total_force : float, N
+    fraction : float or array_like
+        ``mu / mu0`` (``>= 0``).
+    """
+    owner = "transition_time"
+    m = as_float(mass, "mass", owner, low=0.0, low_open=True)
+    v = as_float(v_max, "v_max", owner, low=0.0, low_open=True)
+    F = as_float(total_force, "total_force", owner, low=0.0, low_open=True)
+    ratio = as_float_array(fraction, "fraction", owner)
+    if np.any(ratio < 0):
+        raise ParameterError(parameter_message("fraction", owner, "be >= 0", ratio.tolist()))
+    with np.errstate(divide="ignore"):
+        out = m * 2.0 * v / (F * ratio)
+    return float(out[0]) if np.ndim(fraction) == 0 else out

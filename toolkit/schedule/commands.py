@@ -16,13 +16,18 @@ import numpy as np
 
 from ..errors import ParameterError, parameter_message
 from ..model import Plant
+from ..model.motors import unsaturated_response
 
 _OWNER = "design_schedule"
 
 
 @dataclass(frozen=True)
 class _Motor:
-    """The motor model as the optimizer sees it: exact inside the rate-limit-free regime."""
+    """The motor model as the designer sees it: exact inside the rate-limit-free regime.
+
+    Contact speeds are :func:`toolkit.model.motors.unsaturated_response` (the motor law
+    solved for a constant command): exact because commands stay within :attr:`max_step`.
+    """
 
     tau: float                 # s, 0 = no lag
     rate: float                # m/s^2, inf = none
@@ -39,23 +44,24 @@ class _Motor:
             return math.inf
         return self.rate * (self.tau if self.tau > 0 else self.period)
 
-    def decay(self) -> float:
-        return math.exp(-self.period / self.tau) if self.tau > 0 else 0.0
-
     def speeds(self, start: np.ndarray, u: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Contact speeds at offsets ``s`` (T,) into a period: shape (T, n)."""
+        """Contact speeds at offsets ``s`` (T,) into a period: shape (T, n), m/s."""
         s = np.asarray(s, dtype=float)[:, None]
-        if self.tau > 0:
-            return u + (start - u) * np.exp(-s / self.tau)
-        if math.isfinite(self.rate):
-            return start + np.clip(u - start, -self.rate * s, self.rate * s)
-        return np.broadcast_to(u, (s.shape[0], u.size)).copy()
+        return unsaturated_response(start, u, s, self.tau, self.rate)
 
     def symbolic(self, ca: Any, start: Any, u: Any, s: Any) -> Any:
+        """:meth:`speeds` as a casadi expression (``ca`` the casadi module)."""
+        return unsaturated_response(start, u, s, self.tau, self.rate, xp=ca)
+
+    def period_end(self, start: Any, u: Any, xp: Any = np) -> Any:
+        """Contact speeds at the end of a period whose commands ``u`` lie within
+        :attr:`max_step` of ``start`` (m/s; numpy arrays, or casadi with ``xp=casadi``).
+
+        With a lag, the closed form at ``s = period``; without one the command itself (a ramp
+        of at most ``r period``, or a jump, ends on it within the period).
+        """
         if self.tau > 0:
-            return u + (start - u) * ca.exp(-s / self.tau)
-        if math.isfinite(self.rate):
-            return start + ca.fmin(ca.fmax(u - start, -self.rate * s), self.rate * s)
+            return unsaturated_response(start, u, self.period, self.tau, self.rate, xp=xp)
         return u
 
     def kinks(self, start: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -89,7 +95,6 @@ def _project(U: np.ndarray, start: np.ndarray, motor: _Motor, lo: float, hi: flo
              pin_first: bool) -> tuple[np.ndarray, np.ndarray]:
     """Clip commands into the limits exactly (solver tolerances), forward through the motors."""
     K, n = U.shape
-    decay = motor.decay()
     out = np.empty_like(U)
     v = start.copy()
     speeds = [v.copy()]
@@ -97,6 +102,6 @@ def _project(U: np.ndarray, start: np.ndarray, motor: _Motor, lo: float, hi: flo
         u = start.copy() if (k == 0 and pin_first) else _clip_commands(U[k], v, lo, hi,
                                                                           motor.max_step)
         out[k] = u
-        v = u if not motor.dynamic or (motor.tau == 0) else u + (v - u) * decay
+        v = motor.period_end(v, u)
         speeds.append(v.copy())
     return out, np.array(speeds)

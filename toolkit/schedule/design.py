@@ -42,7 +42,7 @@ from .commands import _OWNER, _clip_commands, _Motor, _motor_of, _project
 from .construct import construct, tracking_lower_bound
 from .result import ScheduleResult, ScheduleStatus
 from .targets import Braking, SpeedTrajectory
-from .verify import _INTERVALS, _Verified, _verifier
+from .verify import _INTERVALS, _smoothed_rate, _Verified, _verifier
 
 __all__ = ["design_schedule"]
 
@@ -107,29 +107,28 @@ def _reference(target: Any, v0: float, horizon: float | None, period: float, mot
     return ramp, end, minimum
 
 
-def _build_interval(ca: Any, plant: Plant, motor: _Motor, M: int) -> Any:
-    """casadi Function (V, v, u, ref[2M+1], fext[M], eps) -> (V_next, int (V - ref)^2)."""
+def _build_interval(ca: Any, plant: Plant, motor: _Motor, M: int, epsilon: float) -> Any:
+    """casadi Function (V, v, u, ref[2M+1], fext[M]) -> (V_next, int (V - ref)^2): ``M``
+    RK4 steps over one period of the law smoothed at ``epsilon`` (m/s)."""
     n = plant.n
     h = motor.period / M
-    f = ca.DM(plant.contacts.forces)
-    m, c = plant.mass, plant.damping
-    V, s, F_ext, eps = ca.SX.sym("V"), ca.SX.sym("s"), ca.SX.sym("F"), ca.SX.sym("eps")
+    V, s, F_ext = ca.SX.sym("V"), ca.SX.sym("s"), ca.SX.sym("F")
     v, u = ca.SX.sym("v", n), ca.SX.sym("u", n)
     ref, fext = ca.SX.sym("ref", 2 * M + 1), ca.SX.sym("fext", M)
-    g_expr = (ca.dot(f, ca.tanh((motor.symbolic(ca, v, u, s) - V) / eps)) + F_ext - c * V) / m
-    g = ca.Function("g", [s, V, v, u, F_ext, eps], [g_expr])
+    g_expr = _smoothed_rate(ca, plant, motor.symbolic(ca, v, u, s), V, F_ext, epsilon)
+    g = ca.Function("g", [s, V, v, u, F_ext], [g_expr])
     x, cost = V, 0
     for j in range(M):                                  # classical RK4, F_ext frozen per step
         a = j * h
-        k1 = g(a, x, v, u, fext[j], eps)
-        k2 = g(a + h / 2, x + h / 2 * k1, v, u, fext[j], eps)
-        k3 = g(a + h / 2, x + h / 2 * k2, v, u, fext[j], eps)
-        k4 = g(a + h, x + h * k3, v, u, fext[j], eps)
+        k1 = g(a, x, v, u, fext[j])
+        k2 = g(a + h / 2, x + h / 2 * k1, v, u, fext[j])
+        k3 = g(a + h / 2, x + h / 2 * k2, v, u, fext[j])
+        k4 = g(a + h, x + h * k3, v, u, fext[j])
         nxt = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         cost += h / 6 * ((x - ref[2 * j]) ** 2 + 4 * ((x + nxt) / 2 - ref[2 * j + 1]) ** 2
                          + (nxt - ref[2 * j + 2]) ** 2)
         x = nxt
-    return ca.Function("interval", [V, v, u, ref, fext, eps], [x, cost])
+    return ca.Function("interval", [V, v, u, ref, fext], [x, cost])
 
 
 def _stable_substeps(plant: Plant, period: float, epsilon: float) -> int:
@@ -165,19 +164,17 @@ def _refine(ca: Any, plant: Plant, motor: _Motor, *, U0: np.ndarray, start: np.n
     ref_nodes = np.stack([ref_fine[2 * M * k: 2 * M * k + 2 * M + 1] for k in range(K)], axis=1)
     mids = (np.arange(M * K) + 0.5) * (period / M)
     fext = np.array([plant.external(t) for t in mids]).reshape(K, M).T
-    interval = _build_interval(ca, plant, motor, M)
+    interval = _build_interval(ca, plant, motor, M, epsilon)
     opti = ca.Opti()
     Un = opti.variable(n, K)                      # speeds in units of the largest limit
     Vn = opti.variable(1, K + 1)
     vn = opti.variable(n, K + 1)
     U, Vs, vs = scale * Un, scale * Vn, scale * vn
-    V_next, cost = interval.map(K)(Vs[:, :K], vs[:, :K], U, ref_nodes, fext,
-                                   ca.DM.ones(1, K) * epsilon)
+    V_next, cost = interval.map(K)(Vs[:, :K], vs[:, :K], U, ref_nodes, fext)
     opti.subject_to(Vn[:, 1:] == V_next / scale)
     opti.subject_to(Vn[0] == v0 / scale)
     opti.subject_to(vn[:, 0] == start / scale)
-    decay = motor.decay()
-    opti.subject_to(vn[:, 1:] == (Un + (vn[:, :K] - Un) * decay if motor.tau > 0 else Un))
+    opti.subject_to(vn[:, 1:] == motor.period_end(vn[:, :K], Un, xp=ca))
     opti.subject_to(opti.bounded(lo / scale, Un, hi / scale))
     if pin_first:
         opti.subject_to(Un[:, 0] == start / scale)
@@ -191,7 +188,7 @@ def _refine(ca: Any, plant: Plant, motor: _Motor, *, U0: np.ndarray, start: np.n
     V_guess = [v0]
     for k in range(K):
         V_guess.append(float(interval(V_guess[-1], contact[k], commands[k], ref_nodes[:, k],
-                                      fext[:, k], epsilon)[0]))
+                                      fext[:, k])[0]))
     opti.set_initial(Un, commands.T / scale)
     opti.set_initial(vn, contact.T / scale)
     opti.set_initial(Vn, np.array(V_guess)[None, :] / scale)

@@ -27,6 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..model import PiecewiseConstant, Plant
+from ..model.friction import contact_forces
 from ..simulation import simulate
 from .commands import _Motor, _project
 from .construct import speed_rate
@@ -109,8 +110,11 @@ def deviation_bound(times: Any, body_speed: Any, contact_speeds: Any, forces: An
     low = np.maximum(0.5 * (V_a + V_b - A * h), np.minimum(V_a, V_b) - A * h) - allowance
     high = np.minimum(0.5 * (V_a + V_b + A * h), np.maximum(V_a, V_b) + A * h) + allowance
     v_min, v_max = np.minimum(v[:-1], v[1:]), np.maximum(v[:-1], v[1:])
-    smooth_min = np.tanh((v_min - high[:, None]) / epsilon) @ f     # F_s is decreasing in V
-    smooth_max = np.tanh((v_max - low[:, None]) / epsilon) @ f      # and increasing in v_i
+    # F_s is decreasing in V and increasing in v_i: its extremes are at the interval ends.
+    smooth_min = np.sum(contact_forces(v_min - high[:, None], f, law="tanh", epsilon=epsilon,
+                                       owner="deviation_bound"), axis=-1)
+    smooth_max = np.sum(contact_forces(v_max - low[:, None], f, law="tanh", epsilon=epsilon,
+                                       owner="deviation_bound"), axis=-1)
     best = np.full(t.size, np.inf)
     total = np.inf
     for ratio in _DELTAS:
@@ -124,6 +128,28 @@ def deviation_bound(times: Any, body_speed: Any, contact_speeds: Any, forces: An
     return total + allowance, best + allowance
 
 
+def _smoothed_rate(ca: Any, plant: Plant, contact_speeds: Any, V: Any, F_ext: Any,
+                   epsilon: float) -> Any:
+    """``dV/dt`` (m/s^2) of the smoothed model as a casadi expression:
+    ``(sum_i contact_forces(v_i - V, law="tanh") + F_ext - c V) / m``.
+
+    Parameters
+    ----------
+    ca : module
+        casadi.
+    plant : Plant
+        Friction magnitudes (N), mass (kg) and damping (N s/m).
+    contact_speeds : casadi expression of shape (n, 1), m/s
+    V, F_ext : casadi expressions
+        Body speed (m/s) and external force (N).
+    epsilon : float, m/s
+        Smoothing width.
+    """
+    forces = contact_forces(contact_speeds - V, plant.contacts.forces, law="tanh",
+                            epsilon=epsilon, xp=ca, owner="design_schedule")
+    return (ca.sum1(forces) + F_ext - plant.damping * V) / plant.mass
+
+
 def _make_predictor(ca: Any, plant: Plant, motor: _Motor, epsilon: float) -> Any:
     """CVODES (BDF, rtol 1e-10) over one piece ``[a, b]`` of a period on the smoothed model.
 
@@ -131,13 +157,11 @@ def _make_predictor(ca: Any, plant: Plant, motor: _Motor, epsilon: float) -> Any
     a, b)`` and outputs at ``_INTERVALS`` equally spaced times of the piece after ``a``.
     """
     n = plant.n
-    f = ca.DM(plant.contacts.forces)
     V, x = ca.SX.sym("V"), ca.SX.sym("x")                # x in [0, 1] along the piece
     v, u = ca.SX.sym("v", n), ca.SX.sym("u", n)
     F_ext, a, b = ca.SX.sym("F"), ca.SX.sym("a"), ca.SX.sym("b")
     s = a + (b - a) * x
-    rate = (ca.dot(f, ca.tanh((motor.symbolic(ca, v, u, s) - V) / epsilon)) + F_ext
-            - plant.damping * V) / plant.mass
+    rate = _smoothed_rate(ca, plant, motor.symbolic(ca, v, u, s), V, F_ext, epsilon)
     dae = {"x": V, "p": ca.vertcat(v, u, F_ext, a, b), "t": x, "ode": (b - a) * rate}
     grid = np.linspace(0.0, 1.0, _INTERVALS + 1)
     return ca.integrator("prediction", "cvodes", dae, 0.0, grid[1:],

@@ -18,7 +18,7 @@ from scipy.special import lambertw
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
 from toolkit.model import Motors, PiecewiseConstant, Plant
-from toolkit._schedule_construct import implicit_step, tracking_lower_bound
+from toolkit.schedule.construct import implicit_step, tracking_lower_bound
 from toolkit.schedule import (Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory,
                               braking_time, design_schedule, deviation_bound)
 from toolkit.simulation import simulate
@@ -479,7 +479,7 @@ def test_contacts_moving_together_are_verified():
 
 
 def test_a_prediction_that_does_not_verify_is_redone_closer_to_the_exact_law(monkeypatch):
-    import toolkit.schedule as schedule
+    import toolkit.schedule.verify as schedule
 
     calls = []
     honest = schedule.deviation_bound

@@ -34,6 +34,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..model.motors import reach, unsaturated_response
+
 #: Shifts of the follow target, in units of the period's reference change (plus -kappa).
 _SHIFTS = (0.0, -0.5, 0.5, 1.0, 2.0)
 #: Fractions of the way to the speed limit for contacts on the wrong side of the body.
@@ -66,15 +68,6 @@ class Construction:
     contact_speeds: np.ndarray
     body_speed: np.ndarray
     choices: tuple[str, ...]
-
-
-def _paths(tau: float, rate: float, start: np.ndarray, u: np.ndarray, s: float) -> np.ndarray:
-    """Contact speeds ``s`` seconds into a period, for rows of starts and commands (C, n)."""
-    if tau > 0:
-        return u + (start - u) * math.exp(-s / tau)
-    if math.isfinite(rate):
-        return start + np.clip(u - start, -rate * s, rate * s)
-    return u
 
 
 def implicit_step(V: np.ndarray, v: np.ndarray, forces: np.ndarray, mass: float, damping: float,
@@ -168,7 +161,8 @@ def construct(*, forces: np.ndarray, mass: float, damping: float,
     Construction
     """
     n = start.size
-    d = math.exp(-period / tau) if tau > 0 else 0.0
+    # Fraction of a gap the lag leaves after one period (the motor law at s = period).
+    d = float(unsaturated_response(1.0, 0.0, period, tau, math.inf)) if tau > 0 else 0.0
     kappa = _steady_shift(tau, period)
     shifts = tuple(sorted(set((*_SHIFTS, -kappa, -2.0 * kappa))))
     h = period / _STEPS
@@ -181,10 +175,10 @@ def construct(*, forces: np.ndarray, mass: float, damping: float,
         """Body speeds at the substeps (C, S) and the end states, one period from t0."""
         out = np.empty((V.size, _STEPS))
         for j, s in enumerate(offsets):
-            V = implicit_step(V, _paths(tau, rate, v, u, s), forces, mass, damping,
-                              external(t0 + s - 0.5 * h), h)
+            V = implicit_step(V, unsaturated_response(v, u, s, tau, rate), forces, mass,
+                              damping, external(t0 + s - 0.5 * h), h)
             out[:, j] = V
-        return out, V, _paths(tau, rate, v, u, period)
+        return out, V, unsaturated_response(v, u, period, tau, rate)
 
     ahead_shifts = np.array(sorted({0.0, -kappa, 0.5}))
     commands = np.empty((K, n))
@@ -268,27 +262,6 @@ def speed_rate(push: Any, damping: float, speed: Any, mass: float, h: Any) -> An
 
 
 # -- certificate: the funnel of the extreme forces -----------------------------------------------
-def _reach(tau: float, rate: float, v: np.ndarray, limit: float, s: np.ndarray) -> np.ndarray:
-    """Fastest motion of each contact from ``v`` towards ``limit`` after ``s`` seconds: (T, n).
-
-    Under ``dv/dt = clip((u - v)/tau, -r, r)`` with ``u`` between the limits no contact gets
-    farther than this (comparison principle for the scalar motor ODE).
-    """
-    s = np.asarray(s, dtype=float)[:, None]
-    direction = np.sign(limit - v)
-    gap = np.abs(limit - v)
-    if tau <= 0 and not math.isfinite(rate):
-        return np.broadcast_to(np.full_like(v, limit), (s.shape[0], v.size)).copy()
-    if tau <= 0:
-        return v + direction * np.minimum(gap, rate * s)
-    if not math.isfinite(rate):
-        return limit - direction * gap * np.exp(-s / tau)
-    linear = np.maximum(gap - rate * tau, 0.0) / rate    # saturated rate until gap = r tau
-    near = np.minimum(gap, rate * tau)
-    moved = np.where(s <= linear, rate * s, gap - near * np.exp(-(s - linear) / tau))
-    return v + direction * moved
-
-
 def tracking_lower_bound(*, forces: np.ndarray, mass: float, damping: float,
                          external: Callable[[float], float], tau: float, rate: float,
                          lo: float, hi: float, t: np.ndarray, reference: np.ndarray,
@@ -299,14 +272,14 @@ def tracking_lower_bound(*, forces: np.ndarray, mass: float, damping: float,
     From ``t_free`` on (the first time a new command acts; before it the motion is forced
     and its error ``forced`` is given) each contact is at most as high as its fastest rise
     towards ``hi`` and at least as low as its fastest fall towards ``lo``
-    (:func:`_reach`), so ``m V' <= F_up(t, V) + F_ext - c V`` with ``F_up`` the Coulomb
-    force of the highest contacts (and symmetrically below). For a tube half-width ``e`` the
-    set of speeds reachable while ``|V(t_j) - reference_j| <= e`` at every sample is inside
-    an interval whose ends follow these extreme rates (evaluated conservatively over each
-    step, at the lowest/highest speed the body can reach within it: every step starts in
-    the tube, so ``|V| <= max |reference| + e`` there, and :func:`speed_rate` bounds the
-    in-step slope with drag) clipped to the tube; when it empties, no schedule achieves ``e``. The largest
-    such ``e`` on a grid (refined twice) is returned: a valid lower bound, never above the
+    (:func:`toolkit.model.motors.reach`), so ``m V' <= F_up(t, V) + F_ext - c V`` with
+    ``F_up`` the Coulomb force of the highest contacts (and symmetrically below). For a tube
+    half-width ``e`` the set of speeds reachable while ``|V(t_j) - reference_j| <= e`` at
+    every sample is inside an interval whose ends follow these extreme rates (evaluated
+    conservatively over each step, at the lowest/highest speed the body can reach within
+    it: every step starts in the tube, so ``|V| <= max |reference| + e`` there, and
+    :func:`speed_rate` bounds the in-step slope with drag) clipped to the tube; when it
+    empties, no schedule achieves ``e``. The largest such ``e`` on a grid (refined twice) is returned: a valid lower bound, never above the
     true optimum.
 
     Parameters
@@ -334,7 +307,7 @@ def tracking_lower_bound(*, forces: np.ndarray, mass: float, damping: float,
     float, m/s
     """
     s = t - t_free
-    up, down = _reach(tau, rate, v_free, hi, s), _reach(tau, rate, v_free, lo, s)
+    up, down = reach(tau, rate, v_free, hi, s), reach(tau, rate, v_free, lo, s)
     f = forces
     total = float(f.sum())
     ext = np.array([external(0.5 * (a + b)) for a, b in zip(t[:-1], t[1:])])

@@ -204,7 +204,7 @@ class ContactsSpec:
                       "seed": _integer("contacts.random.seed", raw.get("seed", 0))}
             if random["high"] < random["low"]:
                 raise _fail("contacts.random.high", f"be >= low ({random['low']:g})", random["high"])
-        spec = cls(
+        return cls(
             speeds=_numbers("contacts.speeds", table["speeds"]) if "speeds" in table else None,
             random=random,
             forces=_scalar_or_numbers("contacts.forces", table["forces"]) if "forces" in table else None,
@@ -212,7 +212,6 @@ class ContactsSpec:
             normal_loads=(_scalar_or_numbers("contacts.normal_loads", table["normal_loads"])
                           if "normal_loads" in table else None),
         )
-        return spec
 
     @property
     def n(self) -> int:

@@ -18,7 +18,7 @@ from toolkit.precision import (CAROUSEL_ACCELERATION, MethodSetting, PrecisionRe
                                precision_report, rational_trajectory, work_precision_curves)
 from toolkit.scene import load_scene
 from toolkit.simulation import Budget, Status, simulate
-from toolkit.study import scene_plant
+from toolkit.scene_build import scene_plant
 
 
 @pytest.fixture(scope="module")

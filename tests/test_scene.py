@@ -157,3 +157,34 @@ def test_target_constraints_round_trip():
     scene = loads_scene(text)
     assert (scene.target.dt, scene.target.fixed, scene.target.liftable) == (0.05, (0,), (1, 2))
     assert loads_scene(dumps_scene(scene)) == scene
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "rule"),
+    [
+        (MINIMAL + "[motors]\nlag = -0.1\n", "'motors.lag'", "The 'lag' parameter of Motors must be >= 0. Got -0.1"),
+        (MINIMAL + "[body]\nmass = -1.0\n", "'body.mass'", "The 'mass' parameter of Plant must be > 0. Got -1.0"),
+        (MINIMAL + "[sensors]\nwheel_counts_per_rev = 48\nwheel_radius = -0.045\n", "'sensors.wheel_radius'",
+         "The 'radius' parameter of Encoder must be > 0. Got -0.045"),
+        (MINIMAL + "[body]\nmass = 1.0\nexternal_force = { times = [0.5], values = [0.0, 1.0, 2.0] }\n",
+         "'body.external_force.values'", "The 'values' parameter of PiecewiseConstant must have one more row"),
+    ],
+)
+def test_constructor_rules_are_refused_under_the_scene_key(text, key, rule):
+    # Each value is checked once, by the constructor that takes it; the scene names the key.
+    with pytest.raises(SceneError) as info:
+        loads_scene(text)
+    message = str(info.value)
+    assert f"(scene key {key})" in message and rule in message
+
+
+def test_declared_objects_are_built_once_at_load():
+    path = Path(__file__).parents[1] / "designs" / "carousel.toml"
+    scene = load_scene(path)
+    objects = scene.objects
+    assert scene.objects is objects and scene.contact_set() is objects.contacts
+    assert objects.plant.contacts is objects.contacts and objects.plant.motors is objects.motors
+    assert set(objects.encoders) == {"wheel", "central"}
+    # F_tot / m = 2 m/s^2 (PHYSICS.md section 4), rtol 1e-5 as in the carousel test above.
+    np.testing.assert_allclose(objects.contacts.total_force / objects.plant.mass, 2.0, rtol=1e-5)
+    assert load_scene(path) == scene            # the built objects are not part of equality

@@ -14,7 +14,14 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
-from .errors import ToolkitError
+from .errors import SceneError, ToolkitError
+from .precision import exact_speedup, precision_report
+from .report import (schedule_check, schedule_lines, study_summary, study_to_dict, to_json,
+                     write_precision, write_schedule, write_study)
+from .scene import Scene, load_scene
+from .scene_build import scene_plant
+from .stability import stability_suite
+from .study import allocate_scene, design_scene_schedule, force_curve, run_study
 
 __all__ = ["main"]
 
@@ -22,31 +29,23 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
 
 def _print_json(data: Any) -> None:
-    from .report import to_json
-
     sys.stdout.write(to_json(data))
 
 
-def _scene(args: argparse.Namespace, section: str | None = None, purpose: str = ""):
+def _scene(args: argparse.Namespace, section: str | None = None, purpose: str = "") -> Scene:
     """Load the SCENE argument; with ``section``, refuse a scene that does not declare it."""
-    from .errors import SceneError
-    from .scene import load_scene
-
     scene = load_scene(args.scene)
     if section is not None and getattr(scene, section) is None:
         raise SceneError(f"The scene {scene.name!r} has no [{section}] section {purpose}.")
     return scene
 
 
-def _out_dir(args: argparse.Namespace, scene: Any) -> Path:
+def _out_dir(args: argparse.Namespace, scene: Scene) -> Path:
     """``--out``, or ``out/<scene name>``."""
     return Path(args.out) if args.out else Path("out") / scene.name
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .report import study_summary, study_to_dict, write_study
-    from .study import run_study
-
     scene = _scene(args)
     result = run_study(scene)
     written = write_study(result, _out_dir(args, scene))
@@ -60,8 +59,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_curve(args: argparse.Namespace) -> int:
-    from .study import force_curve
-
     curve = force_curve(_scene(args).contact_set(), args.points)
     if args.json:
         _print_json(curve.to_dict())
@@ -76,8 +73,6 @@ def _cmd_curve(args: argparse.Namespace) -> int:
 
 
 def _cmd_allocate(args: argparse.Namespace) -> int:
-    from .study import allocate_scene
-
     result = allocate_scene(_scene(args, "target", "to allocate"))
     if args.json:
         _print_json(result.to_dict())
@@ -90,9 +85,6 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
-    from .report import schedule_check, schedule_lines, write_schedule
-    from .study import design_scene_schedule
-
     scene = _scene(args, "schedule", "to design")
     result, check = design_scene_schedule(scene)
     written = write_schedule(result, _out_dir(args, scene))
@@ -107,10 +99,6 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
 
 
 def _cmd_precision(args: argparse.Namespace) -> int:
-    from .precision import exact_speedup, precision_report
-    from .report import write_precision
-    from .study import scene_plant
-
     scene = _scene(args, "simulation", "(t_end, v0) to compare methods on")
     report = precision_report(scene_plant(scene), scene.simulation.t_end, v0=scene.simulation.v0,
                               repeats=args.repeats)
@@ -140,8 +128,6 @@ def _flags(row: Any) -> str:
 
 
 def _cmd_stability(args: argparse.Namespace) -> int:
-    from .stability import stability_suite
-
     report = stability_suite(quick=args.quick)
     if args.json:
         _print_json(report.to_dict())

@@ -13,7 +13,9 @@ from typing import Any
 
 import numpy as np
 
+from . import plots
 from ._io import atomic_write_bytes, atomic_write_text
+from .precision import work_precision_curves
 from .study import StudyResult
 
 __all__ = ["study_summary", "study_to_dict", "write_study", "to_json", "schedule_csv", "schedule_check", "schedule_lines",
@@ -131,8 +133,6 @@ def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
     payload: dict[str, bytes] = {"result.json": to_json(study_to_dict(result)).encode()}
     report = result.scene.report
     if report is not None and report.plots:
-        from . import plots
-
         payload["force_curve.png"] = plots.figure_png(plots.plot_force_curve(result.curve))
         if result.simulation is not None:
             payload["simulation.png"] = plots.figure_png(plots.plot_simulation(result.simulation))
@@ -147,9 +147,6 @@ def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
 
 def write_precision(report: Any, out_dir: str | Path) -> list[Path]:
     """Write ``precision.json`` and the log-log plot ``precision.png`` of a precision report."""
-    from . import plots
-    from .precision import work_precision_curves
-
     data = report.to_dict()
     exact = [row for row in report.rows if row.method == "exact" and not math.isfinite(row.max_error)]
     reference = exact[0].wall_time if exact else None

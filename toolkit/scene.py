@@ -20,10 +20,18 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
 
 :func:`load_scene` validates every value and refuses unknown keys with a suggestion;
 :func:`dumps_scene` writes a scene back (round trip: ``load(dump(s)) == s``).
+
+Validation happens once per value. This module checks the *form* of the document (known
+sections and keys, types, finite numbers, required and exclusive keys, rules between
+sections such as one command per contact) and the rules of keys that no constructor takes
+(``motors.speed_limit``, ``body.inertia``, ``contacts.random``, ``schedule.period``, ...).
+Every other value is checked by the constructor that takes it, when
+:mod:`toolkit.scene_build` builds the scene's objects (``Scene.objects``, once, at load).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import tomllib
@@ -32,8 +40,12 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 from ._validation import suggestion
 from .errors import SceneError, SceneFileNotFoundError
+from .model import ContactSet
+from .scene_build import SceneObjects, build_scene, schedule_target
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
@@ -64,22 +76,24 @@ def _number(where: str, value: Any, *, low: float | None = None, low_open: bool 
     return value
 
 
-def _integer(where: str, value: Any, *, low: int = 0, high: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+def _integer(where: str, value: Any, *, low: int | None = 0, high: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _fail(where, "be an integer" if low is None else f"be an integer >= {low}", value)
+    if low is not None and value < low:
         raise _fail(where, f"be an integer >= {low}", value)
     if high is not None and value > high:
         raise _fail(where, f"be an integer <= {high}", value)
     return value
 
 
-def _numbers(where: str, value: Any, *, low: float | None = None) -> tuple[float, ...]:
+def _numbers(where: str, value: Any) -> tuple[float, ...]:
     if not isinstance(value, list) or not value:
         raise _fail(where, "be a non-empty array of numbers", value)
-    return tuple(_number(f"{where}[{i}]", item, low=low) for i, item in enumerate(value))
+    return tuple(_number(f"{where}[{i}]", item) for i, item in enumerate(value))
 
 
-def _scalar_or_numbers(where: str, value: Any, *, low: float | None = None) -> float | tuple[float, ...]:
-    return _numbers(where, value, low=low) if isinstance(value, list) else _number(where, value, low=low)
+def _scalar_or_numbers(where: str, value: Any) -> float | tuple[float, ...]:
+    return _numbers(where, value) if isinstance(value, list) else _number(where, value)
 
 
 def _text(where: str, value: Any) -> str:
@@ -132,17 +146,19 @@ def _kind(section: str, table: Mapping[str, Any], kind_keys: Mapping[str, tuple[
     return kind
 
 
-def _signal(where: str, value: Any, *, vector: bool = False) -> float | dict[str, Any]:
-    """A constant, or a piecewise-constant table ``{times = [...], values = [...]}``."""
+def _signal_table(where: str, value: Any, *, vector: bool = False) -> float | dict[str, Any]:
+    """A constant, or a piecewise-constant table ``{times = [...], values = [...]}`` of numbers.
+
+    Only the form is checked here; the order of the times and the number of values are the
+    rules of :class:`~toolkit.model.PiecewiseConstant`, checked when it is built.
+    """
     if not isinstance(value, dict):
         return _number(where, value)
     _check_keys(where, value, ("times", "values"))
     times = _numbers(f"{where}.times", _require(where, value, "times"))
-    if any(b <= a for a, b in zip(times, times[1:])):
-        raise _fail(f"{where}.times", "be strictly increasing", list(times))
     raw = _require(where, value, "values")
-    if not isinstance(raw, list) or len(raw) != len(times) + 1:
-        raise _fail(f"{where}.values", f"have len(times) + 1 = {len(times) + 1} entries", raw)
+    if not isinstance(raw, list) or not raw:
+        raise _fail(f"{where}.values", "be a non-empty array", raw)
     values: list[Any] = []
     for i, item in enumerate(raw):
         values.append(_numbers(f"{where}.values[{i}]", item) if vector else _number(f"{where}.values[{i}]", item))
@@ -188,38 +204,19 @@ class ContactsSpec:
                       "seed": _integer("contacts.random.seed", raw.get("seed", 0))}
             if random["high"] < random["low"]:
                 raise _fail("contacts.random.high", f"be >= low ({random['low']:g})", random["high"])
-        spec = cls(
+        return cls(
             speeds=_numbers("contacts.speeds", table["speeds"]) if "speeds" in table else None,
             random=random,
-            forces=_scalar_or_numbers("contacts.forces", table["forces"], low=0.0) if "forces" in table else None,
-            mu=_scalar_or_numbers("contacts.mu", table["mu"], low=0.0) if "mu" in table else None,
-            normal_loads=(_scalar_or_numbers("contacts.normal_loads", table["normal_loads"], low=0.0)
+            forces=_scalar_or_numbers("contacts.forces", table["forces"]) if "forces" in table else None,
+            mu=_scalar_or_numbers("contacts.mu", table["mu"]) if "mu" in table else None,
+            normal_loads=(_scalar_or_numbers("contacts.normal_loads", table["normal_loads"])
                           if "normal_loads" in table else None),
         )
-        spec.build()  # lengths, positive total: refused here, at load time
-        return spec
 
-    def build(self):
-        """The :class:`~toolkit.ContactSet` this section declares."""
-        import numpy as np
-
-        from .model import ContactSet
-        from .errors import ParameterError
-
-        if self.random is not None:
-            rng = np.random.default_rng(self.random["seed"])
-            speeds = rng.uniform(self.random["low"], self.random["high"], self.random["n"])
-        else:
-            speeds = np.asarray(self.speeds)
-        try:
-            if self.mu is not None:
-                return ContactSet.from_friction(speeds, self.mu, self.normal_loads)
-            forces = self.forces
-            if isinstance(forces, float):
-                forces = np.full(speeds.shape, forces)
-            return ContactSet(speeds, forces)
-        except (ParameterError, ValueError) as error:
-            raise SceneError(f"In [contacts]: {error}") from None
+    @property
+    def n(self) -> int:
+        """Number of contacts declared."""
+        return self.random["n"] if self.random is not None else len(self.speeds)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -246,12 +243,12 @@ class BodySpec:
             raise SceneError("In [body] 'inertia' needs 'contact_radius' (m): mass = inertia / contact_radius**2.")
         get = table.get
         return cls(
-            mass=_number("body.mass", table["mass"], low=0.0, low_open=True) if "mass" in table else None,
+            mass=_number("body.mass", table["mass"]) if "mass" in table else None,
             inertia=_number("body.inertia", table["inertia"], low=0.0, low_open=True) if "inertia" in table else None,
             contact_radius=(_number("body.contact_radius", table["contact_radius"], low=0.0, low_open=True)
                             if "contact_radius" in table else None),
-            damping=_number("body.damping", get("damping", 0.0), low=0.0),
-            external_force=_signal("body.external_force", get("external_force", 0.0)),
+            damping=_number("body.damping", get("damping", 0.0)),
+            external_force=_signal_table("body.external_force", get("external_force", 0.0)),
         )
 
     @property
@@ -285,15 +282,14 @@ class MotorsSpec:
             limits = (-v_max, v_max)
         elif "speed_limits" in table:
             pair = _numbers("motors.speed_limits", table["speed_limits"])
-            if len(pair) != 2 or not pair[0] < pair[1]:
-                raise _fail("motors.speed_limits", "be [lo, hi] with lo < hi", list(pair))
+            if len(pair) != 2:
+                raise _fail("motors.speed_limits", "be a pair [lo, hi]", list(pair))
             limits = (pair[0], pair[1])
         return cls(
             speed_limits=limits,
-            lag=_number("motors.lag", table.get("lag", 0.0), low=0.0),
-            rate_limit=_number("motors.rate_limit", table.get("rate_limit", math.inf), low=0.0,
-                               low_open=True, allow_inf=True),
-            compliance=_number("motors.compliance", table.get("compliance", 0.0), low=0.0),
+            lag=_number("motors.lag", table.get("lag", 0.0)),
+            rate_limit=_number("motors.rate_limit", table.get("rate_limit", math.inf), allow_inf=True),
+            compliance=_number("motors.compliance", table.get("compliance", 0.0)),
         )
 
 
@@ -320,12 +316,12 @@ class SensorsSpec:
             if (a in table) != (b in table):
                 raise SceneError(f"In [sensors] {a!r} and {b!r} go together.")
         def optional(key: str) -> float | None:
-            return _number(f"sensors.{key}", table[key], low=0.0, low_open=True) if key in table else None
+            return _number(f"sensors.{key}", table[key]) if key in table else None
         return cls(
-            rate=_number("sensors.rate", table.get("rate", 50.0), low=0.0, low_open=True),
+            rate=_number("sensors.rate", table.get("rate", 50.0)),
             wheel_counts_per_rev=optional("wheel_counts_per_rev"),
             wheel_radius=optional("wheel_radius"),
-            wheel_backlash=_number("sensors.wheel_backlash", table.get("wheel_backlash", 0.0), low=0.0),
+            wheel_backlash=_number("sensors.wheel_backlash", table.get("wheel_backlash", 0.0)),
             central_counts_per_rev=optional("central_counts_per_rev"),
             contact_radius=optional("contact_radius"),
         )
@@ -378,12 +374,10 @@ class TargetSpec:
             if key not in table:
                 continue
             where = f"target.{key}"
-            if key in ("speeds", "forces"):
+            if key in ("speeds", "forces", "weights"):
                 params[key] = _numbers(where, table[key])
-            elif key == "weights":
-                params[key] = _numbers(where, table[key], low=0.0)
             elif key == "margin":
-                params[key] = _integer(where, table[key])
+                params[key] = _integer(where, table[key], low=None)
             elif key == "band":
                 params[key] = _scalar_or_numbers(where, table[key])
             else:
@@ -395,38 +389,12 @@ class TargetSpec:
             return tuple(_integer(f"target.{key}[{i}]", item) for i, item in enumerate(raw))
 
         method = _text("target.method", table["method"]) if "method" in table else None
-        if method is not None:
-            from .allocation import METHODS
-
-            if method not in METHODS:
-                raise SceneError(f"The 'target.method' value in the scene must be one of {list(METHODS)}. "
-                                 f"Got {method!r} instead.{suggestion(method, METHODS)}")
-        spec = cls(kind=kind, params=params, method=method,
+        return cls(kind=kind, params=params, method=method,
                    strict=_flag("target.strict", table.get("strict", False)),
                    dt=_number("target.dt", table["dt"], low=0.0, low_open=True) if "dt" in table else None,
                    fixed=indices("fixed"), failed=indices("failed"), liftable=indices("liftable"),
                    time_limit=_number("target.time_limit", table.get("time_limit", 30.0), low=0.0,
                                       low_open=True))
-        spec.build()  # the target's own rules (monotone speeds, band order, ...), at load time
-        return spec
-
-    def build(self):
-        """The allocation target (:class:`~toolkit.ForceCurve`, :class:`~toolkit.Viscosity`,
-        :class:`~toolkit.FrictionFraction` or :class:`~toolkit.EquilibriumSpeed`)."""
-        from . import allocation
-        from .errors import ParameterError
-
-        p = self.params
-        try:
-            if self.kind == "force_curve":
-                return allocation.ForceCurve(p["speeds"], p["forces"], p.get("weights"))
-            if self.kind == "viscosity":
-                return allocation.Viscosity(p["slope"], p["center"], p["band"])
-            if self.kind == "friction_fraction":
-                return allocation.FrictionFraction(p["fraction"], p["band"])
-            return allocation.EquilibriumSpeed(p["speed"], p.get("margin", 0))
-        except (ParameterError, TypeError) as error:
-            raise SceneError(f"In [target]: {error}") from None
 
 
 @dataclass(frozen=True)
@@ -460,7 +428,6 @@ class ScheduleSpec:
             if key in table:
                 where = f"schedule.{key}"
                 params[key] = (_numbers(where, table[key]) if key in ("times", "speeds")
-                               else _number(where, table[key], low=0.0, low_open=True) if key == "duration"
                                else _number(where, table[key]))
 
         def positive(key: str, default: float | None) -> float | None:
@@ -468,23 +435,13 @@ class ScheduleSpec:
                 return default
             return _number(f"schedule.{key}", table[key], low=0.0, low_open=True)
 
-        spec = cls(kind=kind, params=params, v0=_number("schedule.v0", table.get("v0", 0.0)),
+        return cls(kind=kind, params=params, v0=_number("schedule.v0", table.get("v0", 0.0)),
                    period=positive("period", 0.02), epsilon=positive("epsilon", 1e-3),
                    horizon=positive("horizon", None), time_limit=positive("time_limit", 30.0))
-        spec.build()
-        return spec
 
     def build(self):
-        """The schedule target: a :class:`~toolkit.Braking` or a :class:`~toolkit.SpeedTrajectory`."""
-        from .errors import ParameterError
-        from .schedule import Braking, SpeedTrajectory
-
-        try:
-            if self.kind == "braking":
-                return Braking(self.params["speed"], self.params.get("duration"))
-            return SpeedTrajectory(self.params["times"], self.params["speeds"])
-        except (ParameterError, TypeError) as error:
-            raise SceneError(f"In [schedule]: {error}") from None
+        """Deprecated: use ``scene.objects.schedule_target`` (kept for ``toolkit.bench.schedule``)."""
+        return schedule_target(self)
 
 
 @dataclass(frozen=True)
@@ -506,7 +463,8 @@ class SimulationSpec:
         _check_keys("simulation", table, cls.KEYS)
         commands = None
         if "commands" in table:
-            commands = _signal("simulation.commands", _table("simulation.commands", table["commands"]), vector=True)
+            commands = _signal_table("simulation.commands", _table("simulation.commands", table["commands"]),
+                                     vector=True)
         return cls(
             t_end=_number("simulation.t_end", _require("simulation", table, "t_end"), low=0.0, low_open=True),
             v0=_number("simulation.v0", table.get("v0", 0.0)),
@@ -569,15 +527,21 @@ class Scene:
         order = ("sensors", "target", "schedule", "simulation", "report")
         return ("curve",) + tuple(s for s in order if getattr(self, s) is not None)
 
-    def contact_set(self):
+    @functools.cached_property
+    def objects(self) -> SceneObjects:
+        """The toolkit objects this scene declares (:func:`toolkit.scene_build.build_scene`),
+        built once: :func:`load_scene` builds them to validate the values, and every stage
+        reuses them."""
+        return build_scene(self)
+
+    def contact_set(self) -> ContactSet:
         """The declared :class:`~toolkit.ContactSet`."""
-        return self.contacts.build()
+        return self.objects.contacts
 
 
 def _check_across(sections: dict[str, Any]) -> None:
     """Rules that tie one section to another (contact counts, rate limits)."""
-    contacts = sections["contacts"]
-    n = contacts.random["n"] if contacts.random is not None else len(contacts.speeds)
+    n = sections["contacts"].n
     target = sections.get("target")
     if target is not None:
         for key in ("fixed", "failed", "liftable"):
@@ -624,8 +588,10 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     if not _NAME.fullmatch(scene_name):
         raise _fail("scene.name", "be a plain name of letters, digits, '_', '.' and '-' (it names the "
                     "output folder)", scene_name)
-    return Scene(name=scene_name,
-                 description=_text("scene.description", meta.get("description", "")), **sections)
+    scene = Scene(name=scene_name,
+                  description=_text("scene.description", meta.get("description", "")), **sections)
+    scene.objects  # build every declared object once: the constructors check their values
+    return scene
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -679,8 +645,6 @@ def _section_table(spec: Any) -> dict[str, Any]:
 
 def dumps_scene(scene: Scene) -> str:
     """Write a scene as TOML text that :func:`loads_scene` reads back to an equal scene."""
-    import tomli_w
-
     data: dict[str, Any] = {"scene": {"name": scene.name}}
     if scene.description:
         data["scene"]["description"] = scene.description

@@ -1,4 +1,4 @@
-"""Run the stages a scene declares (numerics only: no files, no plots).
+"""Run the stages a scene declares (numerics only: no files, no plots, no building).
 
 ``run_study(scene)`` always computes the force-speed curve; it adds the encoder summary
 when the scene has ``[sensors]``, the allocation when it has ``[target]`` and the
@@ -6,17 +6,24 @@ simulation when it has ``[simulation]``. A stage that is not declared is not run
 packages only it needs are not imported. When a scene has both a target and a simulation,
 the simulation runs on the allocated contact speeds: the design is checked by simulating it.
 A ``[schedule]`` is designed and then simulated exactly under its own commands.
+
+Every object a stage needs (contacts, motors, plant, encoders, targets) comes from
+``scene.objects`` (:mod:`toolkit.scene_build`), built once when the scene was loaded.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+from .allocation import AllocationResult, allocate
 from .model import ContactSet
 from .scene import Scene
+from .scene_build import scene_plant  # re-exported: toolkit.bench.schedule imports it from here
+from .schedule import ScheduleResult, design_schedule
+from .simulation import SimulationResult, simulate
 
 __all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study", "scene_plant",
            "allocate_scene", "design_scene_schedule"]
@@ -80,10 +87,10 @@ class StudyResult:
     contacts: ContactSet
     curve: CurveSamples
     sensors: dict[str, dict[str, float]] | None = None
-    allocation: Any = None
-    schedule: Any = None
-    schedule_check: Any = None
-    simulation: Any = None
+    allocation: AllocationResult | None = None
+    schedule: ScheduleResult | None = None
+    schedule_check: SimulationResult | None = None
+    simulation: SimulationResult | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -92,93 +99,58 @@ class StudyResult:
 
 
 def _sensors(scene: Scene) -> dict[str, dict[str, float]]:
-    from .model import Encoder
-
-    spec = scene.sensors
-    out: dict[str, dict[str, float]] = {}
-    if spec.wheel_counts_per_rev is not None:
-        out["wheel"] = Encoder(spec.wheel_counts_per_rev, spec.wheel_radius, spec.rate,
-                               spec.wheel_backlash).summary()
-    if spec.central_counts_per_rev is not None:
-        out["central"] = Encoder(spec.central_counts_per_rev, spec.contact_radius, spec.rate).summary()
-    return out
+    return {name: encoder.summary() for name, encoder in scene.objects.encoders.items()}
 
 
-def _motors(scene: Scene):
-    from .model import Motors
+def allocate_scene(scene: Scene, contacts: ContactSet | None = None) -> AllocationResult:
+    """Solve a scene's ``[target]`` under its ``[motors]`` limits and compliance; see :func:`toolkit.allocate`.
 
-    spec = scene.motors
-    if spec is None:
-        return None
-    return Motors(lag=spec.lag, rate_limit=spec.rate_limit, speed_limits=spec.speed_limits,
-                  compliance=spec.compliance)
-
-
-def _signal(value: Any):
-    from .model import PiecewiseConstant
-
-    if isinstance(value, dict):
-        return PiecewiseConstant(np.asarray(value["times"]), np.asarray(value["values"], dtype=float))
-    return value
-
-
-def scene_plant(scene: Scene, contacts: ContactSet | None = None):
-    """The :class:`~toolkit.Plant` a scene declares (needs ``[body]``), optionally on other contacts."""
-    from .errors import SceneError
-    from .model import Plant
-
-    if scene.body is None:
-        raise SceneError("This stage needs a [body] section (the moving inertia).")
-    commands = None
-    if scene.simulation is not None and scene.simulation.commands is not None:
-        commands = _signal(scene.simulation.commands)
-    return Plant(contacts if contacts is not None else scene.contact_set(), scene.body.moving_mass,
-                 damping=scene.body.damping, external_force=_signal(scene.body.external_force),
-                 motors=_motors(scene), commands=commands)
-
-
-def allocate_scene(scene: Scene, contacts: ContactSet | None = None):
-    """Solve a scene's ``[target]`` under its ``[motors]`` limits and compliance; see :func:`toolkit.allocate`."""
-    from .allocation import allocate
-
-    spec = scene.target
-    motors = scene.motors
+    Parameters
+    ----------
+    scene : Scene
+        Needs ``[target]``.
+    contacts : ContactSet, optional
+        Start from these contacts instead of the declared ones.
+    """
+    spec, motors = scene.target, scene.objects.motors
     limits = motors.speed_limits if motors is not None else None
     rate = motors.rate_limit if motors is not None and spec.dt is not None else None
-    return allocate(scene.target.build(), contacts if contacts is not None else scene.contact_set(),
+    return allocate(scene.objects.target, contacts if contacts is not None else scene.objects.contacts,
                     speed_limits=limits, rate_limit=rate, dt=spec.dt, fixed=list(spec.fixed),
                     failed=list(spec.failed), liftable=list(spec.liftable), method=spec.method,
                     strict=spec.strict, time_limit=spec.time_limit,
                     compliance=motors.compliance if motors is not None else 0.0)
 
 
-def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None):
+def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None
+                          ) -> tuple[ScheduleResult, SimulationResult]:
     """Design the scene's ``[schedule]`` and verify it with the exact simulator.
+
+    Parameters
+    ----------
+    scene : Scene
+        Needs ``[schedule]`` and ``[body]``.
+    contacts : ContactSet, optional
+        Design on these contacts (e.g. allocated ones) instead of the declared ones.
 
     Returns
     -------
     (ScheduleResult, SimulationResult)
         The design, and the exact nonsmooth simulation of the plant under its commands.
     """
-    from dataclasses import replace
-
-    from .schedule import design_schedule
-    from .simulation import simulate
-
     spec = scene.schedule
-    plant = scene_plant(scene, contacts)
-    result = design_schedule(plant, spec.build(), v0=spec.v0, horizon=spec.horizon,
+    plant = scene.objects.plant_on(contacts)
+    result = design_schedule(plant, scene.objects.schedule_target, v0=spec.v0, horizon=spec.horizon,
                              period=spec.period, epsilon=spec.epsilon, time_limit=spec.time_limit)
     check = simulate(replace(plant, commands=result.as_commands()), float(result.times[-1]),
                      v0=spec.v0, t_eval=result.times)
     return result, check
 
 
-def _simulation(scene: Scene, contacts: ContactSet):
-    from .simulation import simulate
-
+def _simulation(scene: Scene, contacts: ContactSet) -> SimulationResult:
     spec = scene.simulation
-    return simulate(scene_plant(scene, contacts), spec.t_end, v0=spec.v0, method=spec.method, **spec.options)
+    return simulate(scene.objects.plant_on(contacts), spec.t_end, v0=spec.v0, method=spec.method,
+                    **spec.options)
 
 
 def run_study(scene: Scene) -> StudyResult:
@@ -193,7 +165,7 @@ def run_study(scene: Scene) -> StudyResult:
     -------
     StudyResult
     """
-    contacts = scene.contact_set()
+    contacts = scene.objects.contacts
     points = scene.report.curve_points if scene.report is not None else 801
     sensors = _sensors(scene) if scene.sensors is not None else None
     allocation = None

@@ -22,16 +22,15 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from .._validation import check_option
+from .._validation import as_float, check_option
+from ..errors import ParameterError, parameter_message
 from ..model import ContactDistribution
-from ._problem import (
-    AllocationProblem,
-    AllocationResult,
-    AllocationStatus,
-    Projection,
-    build_problem,
-)
 from ._evaluate import evaluate_errors
+from ._milp import allocate_milp
+from ._problem import AllocationProblem, AllocationResult, AllocationStatus, build_problem
+from ._projection import Projection
+from ._quantile import allocate_quantile, quantile_applies
+from ._smooth import allocate_smooth
 from .targets import EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 
 __all__ = ["allocate", "AllocationProblem", "AllocationResult", "AllocationStatus",
@@ -50,8 +49,6 @@ def choose_method(problem: AllocationProblem) -> str:
     """
     if isinstance(problem.contacts, ContactDistribution):
         return "casadi"
-    from ._quantile import quantile_applies
-
     return "quantile" if quantile_applies(problem) else "milp"
 
 
@@ -114,29 +111,17 @@ def allocate(target: Any, contacts: Any, *, speed_limits: Any = None, rate_limit
     problem = build_problem(target, contacts, speed_limits=speed_limits, rate_limit=rate_limit,
                             dt=dt, fixed=fixed, failed=failed, liftable=liftable, strict=strict,
                             time_limit=time_limit)
-    from .._validation import as_float
-
     compliance = as_float(compliance, "compliance", "allocate", low=0.0)
     chosen = method if method is not None else ("casadi" if compliance > 0 else choose_method(problem))
     checked = method is None and chosen == "quantile"        # choose_method verified it
     if compliance > 0 and chosen != "casadi":
-        from ..errors import ParameterError, parameter_message
-
         raise ParameterError(parameter_message(
             "method", "allocate", "be 'casadi' (or None) for compliant contacts (compliance > 0)", chosen))
     if chosen == "casadi":
-        from ._smooth import allocate_smooth
-
         return allocate_smooth(problem, compliance=compliance)
     if isinstance(problem.contacts, ContactDistribution):
-        from ..errors import ParameterError, parameter_message
-
         raise ParameterError(parameter_message(
             "method", "allocate", "be 'casadi' (or None) for a ContactDistribution", chosen))
     if chosen == "quantile":
-        from ._quantile import allocate_quantile
-
         return allocate_quantile(problem, start, checked=checked)
-    from ._milp import allocate_milp
-
     return allocate_milp(problem, start)

@@ -1,4 +1,4 @@
-"""Exact error evaluation of an allocation and projection of unrealizable targets (private).
+"""Exact error evaluation of an allocation (private).
 
 Error definitions (used for every result, whatever the method):
 
@@ -18,19 +18,16 @@ trapezoid or two triangles. No sampling and no quadrature error.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from ..model import ContactSet
 from ..errors import ParameterError, parameter_message
-from .targets import EquilibriumSpeed, ForceCurve
+from ..model import ContactSet
+from .targets import ForceCurve
 
-if TYPE_CHECKING:
-    from ._problem import AllocationProblem, Projection
-
-__all__ = ["evaluate_errors", "abs_integral", "realizable_curve", "failure_margin",
-           "margin_requirement", "compliant_force", "piecewise_linear_errors", "forced_error"]
+__all__ = ["evaluate_errors", "abs_integral", "failure_margin", "margin_requirement",
+           "compliant_force", "piecewise_linear_errors", "forced_error"]
 
 
 def abs_integral(d0: np.ndarray, d1: np.ndarray, width: np.ndarray) -> np.ndarray:
@@ -221,131 +218,3 @@ def failure_margin(contacts: ContactSet, speed: float) -> int:
     ordered = np.sort(contacts.forces[contacts.forces > 0])[::-1]
     used = 2.0 * np.cumsum(ordered)
     return int(np.searchsorted(used, slack + tol, side="right"))
-
-
-# -- projection onto the realizable set ---------------------------------------------------------
-def _insert_crossings(xs: np.ndarray, ys: np.ndarray, level: float
-                      ) -> tuple[np.ndarray, np.ndarray]:
-    d0, d1 = ys[:-1] - level, ys[1:] - level
-    cross = np.flatnonzero((d0 * d1 < 0) & (xs[1:] > xs[:-1]))
-    if cross.size == 0:
-        return xs, ys
-    share = d0[cross] / (d0[cross] - d1[cross])
-    new_x = xs[cross] + share * (xs[cross + 1] - xs[cross])
-    return (np.insert(xs, cross + 1, new_x), np.insert(ys, cross + 1, np.full(cross.size, level)))
-
-
-def _trapezoid_weights(xs: np.ndarray) -> np.ndarray:
-    widths = np.diff(xs)
-    weights = np.zeros_like(xs)
-    weights[:-1] += 0.5 * widths
-    weights[1:] += 0.5 * widths
-    floor = 1e-9 * max(float(weights.max()), 1.0)
-    return np.maximum(weights, floor)
-
-
-def _refuse(name: str, rule: str, value: Any) -> ParameterError:
-    return ParameterError(parameter_message(name, "allocate", rule + " (strict=True)", value))
-
-
-def _reach(problem: AllocationProblem) -> tuple[float, float]:
-    lo, hi = problem.boxes()
-    return float(np.min(lo)), float(np.max(hi))
-
-
-def realizable_curve(problem: AllocationProblem) -> tuple[ForceCurve, Projection | None]:
-    """Reduce the problem's target to a realizable curve, projecting or refusing.
-
-    Rules (each refused with ``strict=True``, otherwise projected and listed in
-    ``Projection.reasons``):
-
-    - NaN forces: the samples are dropped (a curve with no finite sample is always refused);
-      ``+-inf`` forces are clipped to ``+-F_tot`` ("non-finite values").
-    - ``|F| > F_tot``: clipped to ``+-F_tot``, with the crossing speeds inserted so the
-      clipped curve is exactly the pointwise clip of the piecewise-linear one.
-    - Increasing anywhere: replaced by the weighted isotonic (non-increasing) regression of
-      the samples (trapezoid weights), ``scipy.optimize.isotonic_regression``.
-    - :class:`EquilibriumSpeed` with ``speed`` beyond every contact's reach: moved to the
-      nearest reachable speed.
-
-    A band that extends beyond the speeds the contacts can reach is *not* changed (the
-    force there can only be ``+-F_act``); it is refused with ``strict=True`` and otherwise
-    its forced error enters the certified bound.
-    """
-    from ._problem import Projection
-
-    total = problem.total_force
-    reasons: list[str] = []
-    target = problem.target
-    reach = _reach(problem) if problem.n else (-np.inf, np.inf)
-    if isinstance(target, EquilibriumSpeed):
-        speed = target.speed
-        if not reach[0] <= speed <= reach[1]:
-            if problem.strict:
-                raise _refuse("target", f"ask for an equilibrium speed the contacts can reach "
-                              f"[{reach[0]:g}, {reach[1]:g}] m/s", speed)
-            speed = float(np.clip(speed, *reach))
-            reasons.append("equilibrium speed beyond the limits")
-        limits = reach if np.all(np.isfinite(reach)) else None
-        if limits is None and problem.n:
-            v0 = problem.contacts.speeds
-            limits = (min(float(v0.min()), speed) - 1.0, max(float(v0.max()), speed) + 1.0)
-        requested = target.to_curve(total, limits)
-        curve = EquilibriumSpeed(speed, target.margin).to_curve(total, limits)
-        if not reasons:
-            return curve, None
-        # The two steps differ by 2 F_tot between the requested and the projected speed.
-        return curve, Projection(requested, curve, 2.0 * total,
-                                 2.0 * total * abs(speed - target.speed), tuple(reasons))
-    requested = target.to_curve(total, None)
-    lo, hi = requested.band
-    if problem.strict and problem.n and (lo < reach[0] or hi > reach[1]):
-        raise _refuse("target", f"have its band of speeds within the contacts' reach "
-                      f"[{reach[0]:g}, {reach[1]:g}] m/s", (lo, hi))
-    xs, ys = requested.speeds, requested.forces
-    nan = np.isnan(ys)
-    if nan.all():
-        raise ParameterError(parameter_message(
-            "target", "allocate", "have at least one finite force sample", ys.tolist()))
-    if not np.isfinite(ys).all():
-        if problem.strict:
-            raise _refuse("target", "have finite forces",
-                          float(ys[~np.isfinite(ys)][0]))
-        reasons.append("non-finite values")
-        xs, ys = xs[~nan], ys[~nan]
-        ys = np.where(np.isinf(ys), np.sign(ys) * total, ys)
-    if ys.max() > total or ys.min() < -total:
-        if problem.strict:
-            raise _refuse("target", f"stay within +-F_tot = +-{total:g} N",
-                          float(ys[np.argmax(np.abs(ys))]))
-        reasons.append("forces beyond +-F_tot")
-        for level in (total, -total):
-            xs, ys = _insert_crossings(xs, ys, level)
-        ys = np.clip(ys, -total, total)
-    if (ys[1:] > ys[:-1]).any():
-        if problem.strict:
-            i = int(np.flatnonzero(np.diff(ys) > 0)[0])
-            raise _refuse("target", "be non-increasing in speed (a staircase of Coulomb "
-                          "contacts can only decrease)",
-                          f"F={ys[i]:g} N at V={xs[i]:g} m/s rising to {ys[i + 1]:g} N "
-                          f"at V={xs[i + 1]:g} m/s")
-        from scipy.optimize import isotonic_regression
-
-        reasons.append("increasing")
-        ys = isotonic_regression(ys, weights=_trapezoid_weights(xs), increasing=False).x
-    if not reasons:
-        return requested, None
-    curve = ForceCurve(xs, ys, requested.weights if xs.size == requested.speeds.size else None)
-    # Distances measured at the projected curve's samples (a superset of the finite
-    # requested samples), where both curves are linear in between.
-    with np.errstate(invalid="ignore"):
-        req_left, req_right = requested.value_left(xs), requested.value_right(xs)
-    diff = np.where(np.isnan(req_left), 0.0, req_left - ys)
-    sup = float(np.max(np.abs(np.where(np.isnan(requested.forces), 0.0,
-                                       requested.forces - curve.value_left(requested.speeds)))))
-    sup = max(sup, float(np.max(np.abs(diff))))
-    diff_r = np.where(np.isnan(req_right), 0.0, req_right - ys)
-    finite = np.isfinite(diff) & np.isfinite(diff_r)
-    l1 = float(np.sum(abs_integral(diff_r[:-1], diff[1:], np.diff(xs)))) if np.all(finite) \
-        else float("inf")
-    return curve, Projection(requested, curve, sup, l1, tuple(reasons))

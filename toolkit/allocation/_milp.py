@@ -35,13 +35,14 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from ..errors import ParameterError, parameter_message
-from ._evaluate import forced_error, margin_requirement
+from ..model import ContactSet
+from ._evaluate import evaluate_errors, forced_error, margin_requirement
 from ._problem import AllocationProblem, AllocationResult, AllocationStatus, make_result
 from ._quantile import level_crossings
 from .targets import EquilibriumSpeed, ForceCurve
@@ -82,7 +83,7 @@ def _highs_options(problem: AllocationProblem, deadline: float) -> dict[str, Any
 
 def _solve(objective: Any, constraints: list[Any], options: dict[str, Any]
            ) -> tuple[str, float, float, dict[str, Any]]:
-    import cvxpy as cp
+    import cvxpy as cp  # cvxpy loads only when the MILP method runs
 
     prob = cp.Problem(cp.Minimize(objective), constraints)
     try:
@@ -129,7 +130,7 @@ def partition_applies(problem: AllocationProblem) -> bool:
 
 
 def _solve_partition(problem: AllocationProblem, deadline: float) -> _Solution:
-    import cvxpy as cp
+    import cvxpy as cp  # cvxpy loads only when the MILP method runs
 
     n, total = problem.n, problem.total_force
     f = problem.forces / total
@@ -255,7 +256,7 @@ def _classes(curve: ForceCurve, total: float, vmin: float, vmax: float
 
 
 def _solve_pairwise(problem: AllocationProblem, deadline: float) -> _Solution:
-    import cvxpy as cp
+    import cvxpy as cp  # cvxpy loads only when the MILP method runs
 
     total = problem.total_force
     curve = problem.curve
@@ -420,9 +421,6 @@ def _heuristic(problem: AllocationProblem) -> tuple[np.ndarray, float]:
     the target crosses the middle of its own step (``F_tot - 2 W_before - f_i``), clipped to
     its box. Also tries the current speeds. Returns the better one and its evaluated error.
     """
-    from ._evaluate import evaluate_errors
-    from ..model import ContactSet
-
     lo, hi = problem.boxes()
     forces, total = problem.forces, problem.total_force
     centre = np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi),
@@ -471,8 +469,6 @@ def allocate_milp(problem: AllocationProblem, start: float | None = None) -> All
                                  "heuristic, its gap against the solver's bound is reported",
                                  extra=extra, gap_tolerance=1e-7)
     if sol.status is None and result.error_sup < result.bound - 1e-7 * problem.total_force:
-        from dataclasses import replace
-
         return replace(result, status=AllocationStatus.SOLVER_ERROR,
                        message=f"{AllocationStatus.SOLVER_ERROR.value}; the evaluated error "
                                f"{result.error_sup:.9g} N is below HiGHS's bound "

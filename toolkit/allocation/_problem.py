@@ -5,8 +5,9 @@ validated, frozen :class:`AllocationProblem`: per-contact speed boxes (motor lim
 intersected with what the rate limit allows from the current speeds), the masks of fixed,
 failed and liftable contacts, and the target reduced to a realizable
 :class:`~toolkit.allocation.targets.ForceCurve` (with the :class:`Projection` that got it
-there). Every method returns an :class:`AllocationResult` built by :func:`make_result`,
-which measures the errors by evaluating the achieved contacts, never by trusting a solver.
+there, :mod:`._projection`). Every method returns an :class:`AllocationResult` built by
+:func:`make_result`, which measures the errors by evaluating the achieved contacts, never by
+trusting a solver.
 """
 
 from __future__ import annotations
@@ -20,8 +21,10 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_float, as_float_array
-from ..model import ContactDistribution, ContactSet
 from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..model import ContactDistribution, ContactSet
+from ._evaluate import evaluate_errors
+from ._projection import Projection, realizable_curve, to_jsonable
 from .targets import EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 
 __all__ = ["AllocationProblem", "AllocationResult", "AllocationStatus", "Projection",
@@ -33,7 +36,7 @@ _TARGET_TYPES = (ForceCurve, Viscosity, FrictionFraction, EquilibriumSpeed)
 
 
 class AllocationStatus(enum.Enum):
-    """Outcome of an allocation; the value is the message shown to users."""
+    """Outcome of :func:`~toolkit.allocation.allocate`; the value is the message shown to users."""
 
     OPTIMAL = "optimal: the error equals the certified lower bound (gap within tolerance)"
     FEASIBLE_WITH_GAP = ("feasible: the error exceeds the reported lower bound by the "
@@ -43,59 +46,6 @@ class AllocationStatus(enum.Enum):
     INFEASIBLE = "infeasible: no allocation within the constraints meets the requirement"
     TIME_LIMIT = "the time limit was reached; the best allocation found is returned with its gap"
     SOLVER_ERROR = "the numerical back end failed; see 'message'"
-
-
-@dataclass(frozen=True, eq=False)
-class Projection:
-    """How an unrealizable target was changed before solving.
-
-    Attributes
-    ----------
-    requested : ForceCurve
-        The target as requested (sampled), possibly with non-finite values.
-    curve : ForceCurve
-        The realizable curve that was solved (non-increasing, finite, within ``+-F_tot``).
-    distance_sup : float, N
-        ``max_k |requested_k - curve_k|`` over the requested samples (``inf`` when a
-        requested value is infinite; dropped NaN samples do not count).
-    distance_l1 : float, N m/s
-        Trapezoid integral of ``|requested - curve|`` over the finite samples.
-    reasons : tuple of str
-        What was wrong, e.g. ``"forces beyond +-F_tot"``, ``"increasing"``.
-    """
-
-    requested: ForceCurve
-    curve: ForceCurve
-    distance_sup: float
-    distance_l1: float
-    reasons: tuple[str, ...]
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able summary."""
-        return _jsonable({"reasons": list(self.reasons), "distance_sup": self.distance_sup,
-                          "distance_l1": self.distance_l1, "speeds": self.curve.speeds,
-                          "forces": self.curve.forces})
-
-
-def _jsonable(value: Any) -> Any:
-    """``value`` made JSON-able (the one place non-finite floats are handled here).
-
-    Arrays and tuples become lists, numpy scalars Python ones, and ``inf``/``-inf``/``nan``
-    the strings ``"inf"``/``"-inf"``/``"nan"`` (``json`` would otherwise write the
-    non-standard tokens ``Infinity``/``NaN``), recursively through dicts and lists.
-    """
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in (value.tolist() if isinstance(value, np.ndarray)
-                                       else value)]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (np.integer, int)):
-        return int(value)
-    if isinstance(value, (np.floating, float)):
-        return float(value) if np.isfinite(value) else str(float(value))
-    return value
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,7 +215,7 @@ class AllocationResult:
         """JSON-able summary: ``speeds``, ``error_sup``, ``error_l1``, ``bound``, ``gap``,
         ``method``, ``status``, ``wall_time``, ``message``, ``active``, ``forces``,
         ``compliance``, ``projection``, ``extra``."""
-        return _jsonable({
+        return to_jsonable({
             "speeds": self.speeds,
             "active": self.active,
             "forces": np.asarray(getattr(self.contacts, "forces", [])),
@@ -379,10 +329,8 @@ def build_problem(target: Any, contacts: Any, *, speed_limits: Any = None,
     ------
     ParameterTypeError, ParameterError
         Wrong types or values; with ``strict=True`` also unrealizable targets
-        (see :func:`toolkit.allocation._evaluate.realizable_curve`).
+        (see :func:`toolkit.allocation._projection.realizable_curve`).
     """
-    from ._evaluate import realizable_curve
-
     if not isinstance(target, _TARGET_TYPES):
         raise ParameterTypeError(parameter_message(
             "target", _OWNER,
@@ -434,7 +382,11 @@ def build_problem(target: Any, contacts: Any, *, speed_limits: Any = None,
                              "within dt; they go as near as the rate limit allows")
     problem = AllocationProblem(target, contacts, lower, upper, max_change, fixed_m, failed_m,
                                 lift_m, strict, time_limit, _PLACEHOLDER, None, tuple(notes))
-    curve, projection = realizable_curve(problem)
+    reach = v0 = None
+    if n:
+        lo, hi = problem.boxes()
+        reach, v0 = (float(np.min(lo)), float(np.max(hi))), contacts.speeds
+    curve, projection = realizable_curve(target, problem.total_force, reach, v0, strict)
     return AllocationProblem(target, contacts, lower, upper, max_change, fixed_m, failed_m,
                              lift_m, strict, time_limit, curve, projection, tuple(notes))
 
@@ -464,8 +416,6 @@ def make_result(problem: AllocationProblem, speeds: np.ndarray, active: np.ndarr
     gap_tolerance : float
         Relative (to ``F_tot``) gap under which the result counts as optimal.
     """
-    from ._evaluate import evaluate_errors
-
     lo, hi = problem.boxes()
     speeds = np.minimum(np.maximum(np.asarray(speeds, dtype=float), lo), hi)
     active = np.asarray(active, dtype=bool)

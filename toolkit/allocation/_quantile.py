@@ -22,6 +22,7 @@ segment's range holds a half integer and the larger endpoint distance otherwise.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -166,8 +167,6 @@ def _check_margin(problem: AllocationProblem, result: AllocationResult) -> Alloc
     achieved = failure_margin(result.contacts, speed)
     if achieved >= target.margin:
         return result
-    from dataclasses import replace
-
     detail = (f"the equilibrium at {speed:g} m/s survives {max(achieved, 0)} failure(s), "
               f"fewer than the requested margin {target.margin}")
     return replace(result, status=AllocationStatus.INFEASIBLE,

@@ -1,0 +1,246 @@
+"""Build toolkit objects from a parsed scene: the one place scene specs become objects.
+
+:mod:`toolkit.scene` reads a TOML file into frozen spec dataclasses and checks the *form* of
+every value (known keys, types, finite numbers, rules between sections, and the rules of
+keys no constructor takes, such as ``motors.speed_limit`` or ``contacts.random``).
+:func:`build_scene` then builds the objects those specs declare, once:
+
+==========================  ===============================================================
+``[contacts]``              :class:`~toolkit.model.ContactSet`
+``[motors]``                :class:`~toolkit.model.Motors`
+``[body]`` (+ motors,       :class:`~toolkit.model.Plant`, its external force and commands
+``simulation.commands``)    as :class:`~toolkit.model.PiecewiseConstant` signals
+``[sensors]``               :class:`~toolkit.model.Encoder` per declared encoder
+``[target]``                the allocation target (:class:`~toolkit.ForceCurve`, ...)
+``[schedule]``              the schedule target (:class:`~toolkit.Braking` or
+                            :class:`~toolkit.SpeedTrajectory`)
+==========================  ===============================================================
+
+Each value's rules live in the constructor that takes it (the motor lag in
+:class:`~toolkit.model.Motors`, the mass in :class:`~toolkit.model.Plant`, ...). A
+constructor's :class:`~toolkit.errors.ParameterError` becomes a
+:class:`~toolkit.errors.SceneError` that keeps the constructor's rule and value and names
+the scene key::
+
+    In [motors]: The 'lag' parameter of Motors must be >= 0. Got -0.1 instead.
+    (scene key 'motors.lag')
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ._validation import check_option
+from .allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
+from .errors import ParameterError, ParameterTypeError, SceneError
+from .model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant
+from .schedule import Braking, SpeedTrajectory
+
+if TYPE_CHECKING:                      # scene.py imports this module: types only, no cycle
+    from .scene import Scene, ScheduleSpec
+
+__all__ = ["SceneObjects", "build_scene", "scene_plant", "schedule_target"]
+
+#: The parameter name in the single error template (:func:`toolkit.errors.parameter_message`).
+_PARAMETER = re.compile(r"The '(?P<name>[^']+)' parameter of ")
+
+
+@dataclass(frozen=True, eq=False)
+class SceneObjects:
+    """The toolkit objects a scene declares, built and validated once by :func:`build_scene`.
+
+    Attributes
+    ----------
+    contacts : ContactSet
+        Declared contact speeds (m/s) and friction magnitudes (N), shape (n,).
+    motors : Motors or None
+        ``[motors]``; None for ideal motors.
+    plant : Plant or None
+        ``[body]`` on the declared contacts with the motors, the external force (N) and the
+        ``[simulation]`` commands (m/s); None without ``[body]``.
+    encoders : dict of str to Encoder
+        ``"wheel"`` and ``"central"``, those ``[sensors]`` declares (empty without it).
+    target : ForceCurve, Viscosity, FrictionFraction, EquilibriumSpeed or None
+        The allocation target of ``[target]``.
+    schedule_target : Braking, SpeedTrajectory or None
+        The schedule target of ``[schedule]``.
+    """
+
+    contacts: ContactSet
+    motors: Motors | None = None
+    plant: Plant | None = None
+    encoders: dict[str, Encoder] = field(default_factory=dict)
+    target: Any = None
+    schedule_target: Braking | SpeedTrajectory | None = None
+
+    def plant_on(self, contacts: ContactSet | None = None) -> Plant:
+        """The scene's plant, on other contacts (e.g. allocated ones) when given.
+
+        Raises
+        ------
+        SceneError
+            The scene has no ``[body]`` (the moving inertia).
+        """
+        if self.plant is None:
+            raise SceneError("This stage needs a [body] section (the moving inertia).")
+        if contacts is None or contacts is self.contacts:
+            return self.plant
+        return replace(self.plant, contacts=contacts)
+
+
+@contextmanager
+def _scene_keys(section: str, keys: Mapping[str, str | tuple[str, ...]]) -> Iterator[None]:
+    """Turn a constructor's parameter error into a SceneError naming the scene key.
+
+    ``keys`` maps the constructor's parameter names to the scene key (or keys) that set
+    them; the message keeps the constructor's rule and value (one template everywhere) and
+    adds the key.
+    """
+    try:
+        yield
+    except SceneError:
+        raise
+    except (ParameterError, ParameterTypeError) as error:
+        message = str(error)
+        match = _PARAMETER.match(message)
+        found = keys.get(match["name"], ()) if match else ()
+        names = (found,) if isinstance(found, str) else found
+        where = names[0].split(".")[0] if names else section
+        suffix = (f" (scene keys {' and '.join(map(repr, names))})" if len(names) > 1
+                  else f" (scene key {names[0]!r})" if names else "")
+        raise SceneError(f"In [{where}]: {message}{suffix}") from None
+
+
+def _same_keys(section: str, names: tuple[str, ...]) -> dict[str, str]:
+    return {name: f"{section}.{name}" for name in names}
+
+
+def _signal(value: float | Mapping[str, Any], key: str) -> float | PiecewiseConstant:
+    """A constant, or a :class:`PiecewiseConstant` from a parsed ``{times, values}`` table."""
+    if not isinstance(value, Mapping):
+        return value
+    with _scene_keys(key.split(".")[0], _same_keys(key, ("times", "values"))):
+        return PiecewiseConstant(np.asarray(value["times"]), np.asarray(value["values"], dtype=float))
+
+
+def _contacts(scene: Scene) -> ContactSet:
+    spec = scene.contacts
+    if spec.random is not None:
+        rng = np.random.default_rng(spec.random["seed"])
+        speeds = rng.uniform(spec.random["low"], spec.random["high"], spec.random["n"])
+    else:
+        speeds = np.asarray(spec.speeds)
+    with _scene_keys("contacts", _same_keys("contacts", ("speeds", "forces", "mu", "normal_loads"))):
+        if spec.mu is not None:
+            return ContactSet.from_friction(speeds, spec.mu, spec.normal_loads)
+        forces = spec.forces
+        if isinstance(forces, float):
+            forces = np.full(speeds.shape, forces)
+        return ContactSet(speeds, forces)
+
+
+def _motors(scene: Scene) -> Motors | None:
+    spec = scene.motors
+    if spec is None:
+        return None
+    with _scene_keys("motors", _same_keys("motors", ("lag", "rate_limit", "speed_limits", "compliance"))):
+        return Motors(lag=spec.lag, rate_limit=spec.rate_limit, speed_limits=spec.speed_limits,
+                      compliance=spec.compliance)
+
+
+def _plant(scene: Scene, contacts: ContactSet, motors: Motors | None) -> Plant | None:
+    body = scene.body
+    if body is None:
+        return None
+    commands = None
+    if scene.simulation is not None and scene.simulation.commands is not None:
+        commands = _signal(scene.simulation.commands, "simulation.commands")
+    keys = {"mass": "body.mass" if body.mass is not None else ("body.inertia", "body.contact_radius"),
+            "damping": "body.damping", "external_force": "body.external_force",
+            "motors": ("motors.compliance", "motors.lag"), "commands": "simulation.commands"}
+    external_force = _signal(body.external_force, "body.external_force")
+    with _scene_keys("body", keys):
+        return Plant(contacts, body.moving_mass, damping=body.damping,
+                     external_force=external_force, motors=motors, commands=commands)
+
+
+def _encoders(scene: Scene) -> dict[str, Encoder]:
+    spec = scene.sensors
+    encoders: dict[str, Encoder] = {}
+    if spec is None:
+        return encoders
+    if spec.wheel_counts_per_rev is not None:
+        with _scene_keys("sensors", {"counts_per_rev": "sensors.wheel_counts_per_rev",
+                                     "radius": "sensors.wheel_radius", "rate": "sensors.rate",
+                                     "backlash": "sensors.wheel_backlash"}):
+            encoders["wheel"] = Encoder(spec.wheel_counts_per_rev, spec.wheel_radius, spec.rate,
+                                        spec.wheel_backlash)
+    if spec.central_counts_per_rev is not None:
+        with _scene_keys("sensors", {"counts_per_rev": "sensors.central_counts_per_rev",
+                                     "radius": "sensors.contact_radius", "rate": "sensors.rate"}):
+            encoders["central"] = Encoder(spec.central_counts_per_rev, spec.contact_radius, spec.rate)
+    return encoders
+
+
+def _target(scene: Scene) -> Any:
+    spec = scene.target
+    if spec is None:
+        return None
+    p = spec.params
+    with _scene_keys("target", _same_keys("target", (*p, "method"))):
+        if spec.method is not None:
+            check_option(spec.method, "method", "allocate", METHODS)
+        if spec.kind == "force_curve":
+            return ForceCurve(p["speeds"], p["forces"], p.get("weights"))
+        if spec.kind == "viscosity":
+            return Viscosity(p["slope"], p["center"], p["band"])
+        if spec.kind == "friction_fraction":
+            return FrictionFraction(p["fraction"], p["band"])
+        return EquilibriumSpeed(p["speed"], p.get("margin", 0))
+
+
+def schedule_target(spec: ScheduleSpec | None) -> Braking | SpeedTrajectory | None:
+    """The schedule target a ``[schedule]`` section declares (None without one)."""
+    if spec is None:
+        return None
+    with _scene_keys("schedule", _same_keys("schedule", tuple(spec.params))):
+        if spec.kind == "braking":
+            return Braking(spec.params["speed"], spec.params.get("duration"))
+        return SpeedTrajectory(spec.params["times"], spec.params["speeds"])
+
+
+def build_scene(scene: Scene) -> SceneObjects:
+    """Build every object ``scene`` declares (use ``scene.objects``: built once and kept).
+
+    Parameters
+    ----------
+    scene : Scene
+        A parsed scene (:func:`toolkit.load_scene`).
+
+    Returns
+    -------
+    SceneObjects
+
+    Raises
+    ------
+    SceneError
+        A constructor refused a value; the message names the scene key, the rule and the
+        value received.
+    """
+    contacts = _contacts(scene)
+    motors = _motors(scene)
+    return SceneObjects(contacts=contacts, motors=motors, plant=_plant(scene, contacts, motors),
+                        encoders=_encoders(scene), target=_target(scene),
+                        schedule_target=schedule_target(scene.schedule))
+
+
+def scene_plant(scene: Scene, contacts: ContactSet | None = None) -> Plant:
+    """The :class:`~toolkit.model.Plant` a scene declares (needs ``[body]``), optionally on
+    other contacts."""
+    return scene.objects.plant_on(contacts)

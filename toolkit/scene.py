@@ -45,7 +45,7 @@ import tomli_w
 from ._validation import suggestion
 from .errors import SceneError, SceneFileNotFoundError
 from .model import ContactSet
-from .scene_build import SceneObjects, build_scene, schedule_target
+from .scene_build import SceneObjects, build_scene
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
@@ -438,10 +438,6 @@ class ScheduleSpec:
         return cls(kind=kind, params=params, v0=_number("schedule.v0", table.get("v0", 0.0)),
                    period=positive("period", 0.02), epsilon=positive("epsilon", 1e-3),
                    horizon=positive("horizon", None), time_limit=positive("time_limit", 30.0))
-
-    def build(self):
-        """Deprecated: use ``scene.objects.schedule_target`` (kept for ``toolkit.bench.schedule``)."""
-        return schedule_target(self)
 
 
 @dataclass(frozen=True)

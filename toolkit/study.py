@@ -21,11 +21,10 @@ import numpy as np
 from .allocation import AllocationResult, allocate
 from .model import ContactSet
 from .scene import Scene
-from .scene_build import scene_plant  # re-exported: toolkit.bench.schedule imports it from here
 from .schedule import ScheduleResult, design_schedule
 from .simulation import SimulationResult, simulate
 
-__all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study", "scene_plant",
+__all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study",
            "allocate_scene", "design_scene_schedule"]
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..scene import load_scene
 from ..schedule import design_schedule
-from ..study import scene_plant
+from ..scene_build import scene_plant
 
 SCENES = ("brake_schedule", "carousel")
 
@@ -34,7 +34,7 @@ def main(argv: list[str]) -> int:
     for name in SCENES:
         scene = load_scene(designs / f"{name}.toml")
         spec = scene.schedule
-        plant, target = scene_plant(scene), scene.schedule.build()
+        plant, target = scene_plant(scene), scene.objects.schedule_target
         walls = {}
         for refine in (False, True):
             started = time.perf_counter()

@@ -17,7 +17,7 @@ from toolkit.precision import (CAROUSEL_ACCELERATION, MethodSetting, PrecisionRe
                                carousel_startup_plant, default_settings, exact_speedup,
                                precision_report, rational_trajectory, work_precision_curves)
 from toolkit.scene import load_scene
-from toolkit.simulation import Budget, Status, simulate
+from toolkit.simulation import Budget, SimulationStatus, simulate
 from toolkit.study import scene_plant
 
 
@@ -77,7 +77,7 @@ def test_rational_trajectory_crossing_times_are_exact_fractions() -> None:
 
 def test_exact_row_is_exact_and_references_are_measured(quick_report: PrecisionReport) -> None:
     exact = quick_report.row("exact")
-    assert exact.status is Status.SUCCESS
+    assert exact.status is SimulationStatus.SUCCESS
     assert exact.max_error <= 1e-12                       # issue 3 criterion
     radau = quick_report.row("radau")
     # tanh with eps = 1e-4: the smoothed solution lags the Coulomb one by about eps near each
@@ -112,7 +112,7 @@ def test_moreau_error_includes_the_kink_between_steps() -> None:
 
 def test_sign_rk45_stalls_and_chatters(quick_report: PrecisionReport) -> None:
     rk45 = quick_report.row("rk45")
-    assert rk45.stalled and rk45.status in (Status.WALL_TIME, Status.MAX_STEPS)
+    assert rk45.stalled and rk45.status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS)
     assert rk45.chattering
     assert rk45.final_error == math.inf
     assert not quick_report.row("moreau").chattering
@@ -134,7 +134,7 @@ def test_curves_and_speedup_are_consistent(quick_report: PrecisionReport) -> Non
         assert np.all(np.diff(curve.wall_time) >= 0)
     speedup = exact_speedup(quick_report, error=1e-2)
     accurate = [row for row in quick_report.rows
-                if row.method != "exact" and row.status is Status.SUCCESS and row.max_error <= 1e-2]
+                if row.method != "exact" and row.status is SimulationStatus.SUCCESS and row.max_error <= 1e-2]
     fastest = min(accurate, key=lambda row: row.wall_time)
     assert speedup.reference is fastest
     assert speedup.ratio == pytest.approx(fastest.wall_time / speedup.exact.wall_time, rel=1e-15)

@@ -10,7 +10,7 @@ import pytest
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
 from toolkit.model import Plant
-from toolkit.simulation import Status, simulate, simulate_batch
+from toolkit.simulation import SimulationStatus, simulate, simulate_batch
 
 RTOL = 1e-12      # the target: each scene equal to the single-run result to 1e-12
 
@@ -63,7 +63,7 @@ def test_even_sets_stop_at_the_first_band_edge():
     batch = simulate_batch(speeds, None, 1.0, 10.0, v0=[0.0, 0.0])
     # From rest: below the first band [0.2, 0.3] -> 0.2; above the second [-0.3, -0.2] -> -0.2.
     np.testing.assert_array_equal(batch.final_speeds, [0.2, -0.2])
-    assert batch.stuck.all() and batch.status is Status.SUCCESS
+    assert batch.stuck.all() and batch.status is SimulationStatus.SUCCESS
 
 
 def test_docstring_example():

@@ -18,7 +18,7 @@ from scipy import integrate, optimize, special
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
 from toolkit.model import Motors, PiecewiseConstant, Plant
-from toolkit.simulation import METHODS, Budget, Event, SimulationResult, Status, simulate
+from toolkit.simulation import METHODS, Budget, Event, SimulationResult, SimulationStatus, simulate
 
 RTOL = 1e-12      # the issue's precision target for the exact method
 
@@ -63,13 +63,13 @@ def test_budget_event_and_result_validation():
         Event(0.0, "crss", 1, 0.0)
     with pytest.raises(ParameterError):
         SimulationResult("x", "", [0.0, 1.0], [0.0], np.zeros((2, 1)), [0.0, 0.0], (),
-                         Status.SUCCESS, "", 0, 0, 0, 0.0)
+                         SimulationStatus.SUCCESS, "", 0, 0, 0, 0.0)
     result = SimulationResult("x", "", [0.0, 1.0], [0.0, 2.0], np.zeros((2, 1)), [2.0, 2.0],
-                              (), Status.SUCCESS, "", 0, 0, 1, 0.0)
+                              (), SimulationStatus.SUCCESS, "", 0, 0, 1, 0.0)
     # No dense output: linear interpolation between samples (exact for this line).
     np.testing.assert_allclose(result.speed_at([0.25, 0.5]), [0.5, 1.0], rtol=0, atol=0)
     assert result.success and not result.V.flags.writeable
-    assert Status.ZENO.value.startswith("stopped") and Status.SUCCESS.value.startswith("finished")
+    assert SimulationStatus.ZENO.value.startswith("stopped") and SimulationStatus.SUCCESS.value.startswith("finished")
 
 
 def test_t_eval_gives_exactly_those_times():
@@ -390,7 +390,7 @@ def test_zeno_guard_returns_zeno_status():
     rows = np.where((np.arange(20_001) % 2)[:, None] == 0, [[0.0, 1.0, 2.0]], [[0.0, -1.0, 2.0]])
     plant = Plant(ContactSet([0.0, 1.0, 2.0]), 1.0, commands=PiecewiseConstant(times, rows))
     result = simulate(plant, 1.0, budget=Budget(max_event_rate=1e6))
-    assert result.status is Status.ZENO and not result.success
+    assert result.status is SimulationStatus.ZENO and not result.success
     assert "Zeno" in result.message and result.t_final < 3e-3
     assert np.isnan(result.speed_at(0.5))              # nothing is claimed past the stop
 
@@ -399,9 +399,9 @@ def test_step_and_wall_time_budgets():
     speeds = np.linspace(-1.0, 1.0, 2001)
     plant = Plant(ContactSet(speeds), 1.0)
     steps = simulate(plant, 100.0, v0=-2.0, budget=Budget(max_steps=50))
-    assert steps.status is Status.MAX_STEPS and steps.n_steps <= 51
+    assert steps.status is SimulationStatus.MAX_STEPS and steps.n_steps <= 51
     wall = simulate(plant, 100.0, v0=-2.0, budget=Budget(wall_time=1e-9))
-    assert wall.status is Status.WALL_TIME
+    assert wall.status is SimulationStatus.WALL_TIME
     assert np.all(np.isfinite(wall.V))
 
 
@@ -516,7 +516,7 @@ def test_contacts_a_few_ulp_apart_are_simulated():
     grid = np.linspace(0.0, 0.3, 3001)
     result = simulate(plant, 0.3, t_eval=grid)
     second = simulate(rounded, 0.3, t_eval=grid)
-    assert result.status is Status.SUCCESS and second.status is Status.SUCCESS
+    assert result.status is SimulationStatus.SUCCESS and second.status is SimulationStatus.SUCCESS
     assert all(math.isfinite(e.time) for e in result.events)
     shift = float(np.max(np.abs(values - np.round(values, 9))))
     # atol: the shift bound plus rounding of the two closed forms (|V| <= 0.35, ~1e-15).
@@ -629,8 +629,8 @@ def test_overflow_over_the_horizon_is_failed_not_success():
     # a double. The run must say FAILED, never SUCCESS with V = inf.
     plant = Plant(ContactSet([0.1]), mass=1.0, external_force=1e300)
     result = simulate(plant, 1e10)
-    assert result.status is Status.FAILED
-    assert result.message.startswith(Status.FAILED.value)
+    assert result.status is SimulationStatus.FAILED
+    assert result.message.startswith(SimulationStatus.FAILED.value)
     assert "floating-point range" in result.message
     assert np.all(np.isfinite(result.V)) and np.all(np.isfinite(result.t))   # the finite part
     # Kept: the segments that start finite; before the crossing at 1e-301 s, V = 1e300 t.
@@ -639,7 +639,7 @@ def test_overflow_over_the_horizon_is_failed_not_success():
     # The same plant over 1 s stays finite: V(1) = 1e300 exactly (constant acceleration,
     # the contact force 1 N is rounding next to 1e300).
     short = simulate(plant, 1.0)
-    assert short.status is Status.SUCCESS
+    assert short.status is SimulationStatus.SUCCESS
     assert short.V[-1] == pytest.approx(1e300, rel=RTOL, abs=0)
 
 
@@ -722,7 +722,7 @@ def test_speed_at_refuses_times_outside_the_simulated_span():
             result.speed_at(outside)
     # Without a dense output: the samples' span [t[0], t_final], linear interpolation inside.
     plain = SimulationResult("x", "y", [0.5, 1.0], [1.0, 2.0], np.zeros((2, 1)), [0.0, 0.0],
-                             (), Status.SUCCESS, "ok", 0, 0, 1, 0.0)
+                             (), SimulationStatus.SUCCESS, "ok", 0, 0, 1, 0.0)
     assert plain.speed_at(0.75) == pytest.approx(1.5, rel=1e-15, abs=0)
     with pytest.raises(ParameterError, match=r"\[0.5, 1\] s"):
         plain.speed_at(0.25)
@@ -747,7 +747,7 @@ def test_extreme_motor_scales_run_without_warnings(motors, t_end, damping):
     plant = Plant(ContactSet([0.0, 0.2, 0.4]), 1.0, damping=damping, motors=motors,
                   commands=commands)
     result = simulate(plant, t_end)
-    assert result.status is Status.SUCCESS
+    assert result.status is SimulationStatus.SUCCESS
     assert np.all(np.isfinite(result.V)) and np.all(np.isfinite(result.t))
     expected = 0.2
     if motors.compliance > 0:
@@ -781,7 +781,7 @@ def test_compliant_lag_tends_to_instantaneous_motors(lag, compliance, damping):
     for seed in (6, 7, 9, 10):
         runs = [simulate(_compliant_schedule_plant(seed, tau, compliance, damping), 1.5,
                          t_eval=times) for tau in (lag, 0.0)]
-        assert all(run.status is Status.SUCCESS for run in runs)
+        assert all(run.status is SimulationStatus.SUCCESS for run in runs)
         np.testing.assert_allclose(runs[0].V, runs[1].V, rtol=1e-12, atol=1e-15)
 
 

@@ -10,7 +10,7 @@ import pytest
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
 from toolkit.model import Motors, PiecewiseConstant, Plant
-from toolkit.simulation import Budget, Status, simulate
+from toolkit.simulation import Budget, SimulationStatus, simulate
 from toolkit.simulation._moreau import _compliant_step, _staircase, moreau_step_staircase
 from toolkit.simulation._reference import Meter
 
@@ -51,7 +51,7 @@ def test_constant_deceleration(method: str) -> None:
     if method == "moreau":
         options = {"step": 0.01}
     result = simulate(plant, 0.5, v0=0.5, method=method, t_eval=t_eval, **options)
-    assert result.status is Status.SUCCESS
+    assert result.status is SimulationStatus.SUCCESS
     np.testing.assert_array_equal(result.t, t_eval)
     np.testing.assert_allclose(result.V, 0.5 - 2.0 * t_eval, rtol=0,
                                atol=(result.n_steps + 5) * EPS)
@@ -238,7 +238,7 @@ def test_sign_rk45_returns_budget_status_instead_of_hanging(rng: np.random.Gener
     start = time.perf_counter()
     result = simulate(plant, 5.0, method="rk45", friction="sign", budget=Budget(wall_time=0.5))
     elapsed = time.perf_counter() - start
-    assert result.status in (Status.WALL_TIME, Status.MAX_STEPS)
+    assert result.status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS)
     assert result.t_final < 5.0
     assert elapsed < 0.5 + 0.5                           # budget + one step + result assembly
     assert np.all(np.isfinite(result.V))
@@ -248,17 +248,17 @@ def test_sign_rk45_returns_budget_status_instead_of_hanging(rng: np.random.Gener
 def test_step_budget_counts_evaluations(rng: np.random.Generator) -> None:
     plant = _random_plant(rng)
     result = simulate(plant, 5.0, method="lsoda", friction="sign", budget=Budget(max_steps=2000))
-    assert result.status is Status.MAX_STEPS
+    assert result.status is SimulationStatus.MAX_STEPS
     assert result.n_evaluations <= 2001                  # the refused call is counted, not run
     moreau = simulate(plant, 5.0, method="moreau", step=1e-3, budget=Budget(max_steps=100))
-    assert moreau.status is Status.MAX_STEPS
+    assert moreau.status is SimulationStatus.MAX_STEPS
     assert moreau.n_steps <= 101 and moreau.t_final == pytest.approx(0.1, abs=1e-12)
 
 
 def test_casadi_step_budget(rng: np.random.Generator) -> None:
     plant = _random_plant(rng)
     result = simulate(plant, 5.0, method="casadi", epsilon=1e-8, budget=Budget(max_steps=3))
-    assert result.status is Status.MAX_STEPS
+    assert result.status is SimulationStatus.MAX_STEPS
     assert result.t.size == 1                            # casadi returns no partial trajectory
 
 
@@ -357,10 +357,10 @@ def test_overflowing_plant_fails_with_a_status(method: str, options: dict) -> No
     if method == "lsoda":
         # LSODA shrinks its step until t + h == t and never reaches the overflow: it stalls,
         # and the budget stops it with its own status, within the budget.
-        assert result.status in (Status.FAILED, Status.WALL_TIME), result.message
+        assert result.status in (SimulationStatus.FAILED, SimulationStatus.WALL_TIME), result.message
         assert result.wall_time <= 1.0 + 0.5
     else:
-        assert result.status is Status.FAILED, result.message
+        assert result.status is SimulationStatus.FAILED, result.message
         assert result.message.startswith(result.status.value)
     assert np.all(np.isfinite(result.V))                  # only the finite part is returned
 
@@ -383,7 +383,7 @@ def test_scipy_solver_errors_map_to_failed(error: Exception) -> None:
 
     with pytest.raises(BudgetExceeded) as stop:
         _solver_call("radau", raising)
-    assert stop.value.status is Status.FAILED
+    assert stop.value.status is SimulationStatus.FAILED
     assert stop.value.detail == f"Radau: {error}"
 
 
@@ -396,4 +396,4 @@ def test_scipy_own_value_error_maps_to_failed() -> None:
 
     with pytest.raises(BudgetExceeded, match="must be finite") as stop:
         _solver_call("bdf", scipy.integrate.BDF, lambda t, y: y, 0.0, np.array([np.nan]), 1.0)
-    assert stop.value.status is Status.FAILED
+    assert stop.value.status is SimulationStatus.FAILED

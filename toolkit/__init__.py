@@ -31,8 +31,8 @@ from .plots import plot_force_curve, plot_precision, plot_schedule, plot_simulat
 from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .precision import PrecisionReport, PrecisionRow, carousel_startup_plant, precision_report
-from .simulation import BatchResult, Budget, Event, SimulationResult, simulate, simulate_batch
-from .simulation import Status as SimulationStatus
+from .simulation import (BatchResult, Budget, Event, SimulationResult, SimulationStatus, simulate,
+                         simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
 

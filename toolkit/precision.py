@@ -30,7 +30,7 @@ import numpy as np
 from ._validation import as_float, as_int
 from .model import ContactSet, PiecewiseConstant, Plant
 from .errors import ParameterError, ParameterTypeError, SolverError, parameter_message
-from .simulation import METHODS, Budget, SimulationResult, Status, simulate
+from .simulation import METHODS, Budget, SimulationResult, SimulationStatus, simulate
 
 __all__ = [
     "MethodSetting", "PrecisionRow", "PrecisionReport", "Speedup", "WorkPrecisionCurve",
@@ -281,7 +281,7 @@ class PrecisionRow:
         the others run once each.
     n_steps, n_evaluations, n_events : int
         From the result.
-    status : Status
+    status : SimulationStatus
     message : str
     chattering : bool
         The body speed reverses direction (sign change between successive increments larger
@@ -318,7 +318,7 @@ class PrecisionRow:
     n_steps: int
     n_evaluations: int
     n_events: int
-    status: Status
+    status: SimulationStatus
     message: str
     chattering: bool
     step_collapse: bool | None
@@ -559,7 +559,7 @@ def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: P
     else:
         reversals = _reversals(result.V)
         chattering = reversals > _reversals(reference) + CHATTER_MARGIN
-    stalled = result.status in (Status.WALL_TIME, Status.MAX_STEPS, Status.ZENO)
+    stalled = result.status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS, SimulationStatus.ZENO)
     return PrecisionRow(
         method=result.method, setting=result.setting, max_error=max_error,
         final_error=final_error, wall_time=float(wall), n_steps=result.n_steps,
@@ -642,7 +642,7 @@ def exact_speedup(report: PrecisionReport, error: float = 1e-6) -> Speedup:
     error = as_float(error, "error", "exact_speedup", low=0.0, low_open=True)
     exact = report.row("exact")
     accurate = [row for row in report.rows if row.method != "exact"
-                and row.status is Status.SUCCESS and row.max_error <= error]
+                and row.status is SimulationStatus.SUCCESS and row.max_error <= error]
     if not accurate:
         return Speedup(math.nan, error, exact, None)
     fastest = min(accurate, key=lambda row: row.wall_time)
@@ -663,7 +663,7 @@ def work_precision_curves(report: PrecisionReport) -> tuple[WorkPrecisionCurve, 
             continue
         arrays = [np.array([row.wall_time for row in rows]),
                   np.array([row.max_error for row in rows]),
-                  np.array([row.status is Status.SUCCESS for row in rows])]
+                  np.array([row.status is SimulationStatus.SUCCESS for row in rows])]
         for array in arrays:
             array.setflags(write=False)
         curves.append(WorkPrecisionCurve(method, tuple(row.setting for row in rows), *arrays))

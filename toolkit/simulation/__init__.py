@@ -28,9 +28,9 @@ from .._validation import as_float, as_float_array, check_option, suggestion
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant
 from ._batch import BatchResult, simulate_batch
-from ._result import Budget, Event, SimulationResult, Status
+from ._result import Budget, Event, SimulationResult, SimulationStatus
 
-__all__ = ["simulate", "simulate_batch", "BatchResult", "Status", "Budget", "Event",
+__all__ = ["simulate", "simulate_batch", "BatchResult", "SimulationStatus", "Budget", "Event",
            "SimulationResult", "METHODS"]
 
 _SCIPY_OPTIONS = ("friction", "epsilon", "rtol", "atol")

@@ -43,7 +43,7 @@ With constant commands the body passes each breakpoint at most once, so a burst 
 than ``2 K + 1000`` events (``K = 2 N + 2`` bounds the breakpoints) can only come from fast
 switching or chatter;
 such a burst inside ``(2 K + 1000) / Budget.max_event_rate`` seconds stops the run with
-``Status.ZENO``.
+``SimulationStatus.ZENO``.
 
 Tie convention
 --------------
@@ -72,14 +72,14 @@ from typing import Any
 import numpy as np
 
 from ..model import ContactSet, PiecewiseConstant, Plant, compliant_breakpoints
-from ._result import Budget, Event, SimulationResult, Status, status_message
+from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
 
 __all__ = ["simulate_exact"]
 
 _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _SMALL = 64                 # contacts up to which plain Python beats NumPy calls
-_SUCCESS = Status.SUCCESS   # (a module constant is faster to read than an Enum member)
+_SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than an Enum member)
 
 
 # -- closed forms ---------------------------------------------------------------------------
@@ -146,12 +146,14 @@ class _Recorder:
         self.rounds += 1
         events, w = self.events, self.window
         if self.rounds > budget.max_steps:
-            self.status, self.detail = Status.MAX_STEPS, f"{budget.max_steps} rounds at t = {t:.6g} s"
+            self.status = SimulationStatus.MAX_STEPS
+            self.detail = f"{budget.max_steps} rounds at t = {t:.6g} s"
         elif time.perf_counter() > self.deadline:
-            self.status, self.detail = Status.WALL_TIME, f"{budget.wall_time:g} s at t = {t:.6g} s"
+            self.status = SimulationStatus.WALL_TIME
+            self.detail = f"{budget.wall_time:g} s at t = {t:.6g} s"
         elif len(events) > w and ((span := events[-1].time - events[-1 - w].time)
                                   * budget.max_event_rate < w):
-            self.status = Status.ZENO
+            self.status = SimulationStatus.ZENO
             self.detail = f"{w} events within {span:.3g} s before t = {t:.6g} s"
         else:
             return False
@@ -1090,7 +1092,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     if rec.status is _SUCCESS and not (math.isfinite(t_stop) and math.isfinite(V_stop)):
         # Finite parameters (Plant refuses overflowing rates) can still overflow over a long
         # horizon, e.g. a huge external force for 1e10 s: report it, never as a success.
-        rec.status = Status.FAILED
+        rec.status = SimulationStatus.FAILED
         rec.detail = (f"the body speed left the floating-point range (V = {V_stop:g} m/s "
                       f"at t = {t_stop:g} s); shorten t_end or rescale the forces")
         rows = rec.rows                  # keep the finite part: up to the last finite segment

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from fractions import Fraction
@@ -13,11 +14,13 @@ import pytest
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
 from toolkit.model import Plant
-from toolkit.precision import (CAROUSEL_ACCELERATION, MethodSetting, PrecisionReport,
-                               carousel_startup_plant, default_settings, exact_speedup,
+import toolkit.precision as precision
+from toolkit.model.carousel import CAROUSEL_ACCELERATION, carousel_startup_plant
+from toolkit.precision import (MethodSetting, PrecisionReport, default_settings, exact_speedup,
                                precision_report, rational_trajectory, work_precision_curves)
 from toolkit.scene import load_scene
 from toolkit.simulation import Budget, SimulationStatus, simulate
+from toolkit.simulation._exact import _LANDSCAPES
 from toolkit.study import scene_plant
 
 
@@ -171,17 +174,13 @@ def test_timing_runs_repeats_round_robin_from_scratch(monkeypatch) -> None:
     # The call log of the timing loop, with simulate replaced by an instant fake: each
     # setting runs once (+ one warm call when it succeeded), then `repeats` rounds visit the
     # successful settings in order, each with its own batch size; a failed run is never
-    # repeated, and every call starts with the plant's derived caches empty.
-    import itertools
-
-    import toolkit.precision as precision
-
+    # repeated, and every call starts with the exact method's cache of the plant empty.
     plant = carousel_startup_plant(seed=1)
     log: list[tuple[str, int]] = []
 
     def fake_simulate(plant_, t_end, *, v0, method, t_eval, budget, **options):
-        log.append((method, len(plant_._derived)))
-        plant_.derived("fake")["filled"] = True          # what a warm cache would keep
+        log.append((method, len(_LANDSCAPES.get(plant_, {}))))
+        _LANDSCAPES.setdefault(plant_, {})[b"fake"] = True   # what a warm cache would keep
         return type("Result", (), {"success": method != "rk45"})()
 
     monkeypatch.setattr(precision, "simulate", fake_simulate)

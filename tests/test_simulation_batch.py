@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 
 import numpy as np
@@ -96,8 +97,6 @@ def test_result_is_read_only():
 
 
 def test_to_dict_is_json_able():
-    import json
-
     result = simulate_batch([[-1.0, 0.5, 2.0]], None, 1.0, 5.0)
     summary = json.loads(json.dumps(result.to_dict()))
     assert summary["final_speeds"] == [0.5] and summary["n_events"] == [1]

@@ -7,6 +7,8 @@ the closed forms involve a handful of operations, so rounding is ~1e-15.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 
 import numpy as np
@@ -18,7 +20,10 @@ from scipy import integrate, optimize, special
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
 from toolkit.model import Motors, PiecewiseConstant, Plant
-from toolkit.simulation import METHODS, Budget, Event, SimulationResult, SimulationStatus, simulate
+from toolkit.simulation import (METHODS, Budget, Event, SimulationResult, SimulationStatus,
+                                simulate)
+from toolkit.simulation._exact import (_LANDSCAPES, _CoulombLandscape, _EventFunctions,
+                                       _first_root, _reach_time, _scalar_expm1_ratio)
 
 RTOL = 1e-12      # the issue's precision target for the exact method
 
@@ -461,12 +466,12 @@ def test_random_dynamic_scenes_finish_finite(seed):
 def test_repeated_runs_reuse_the_plant_cache_without_changing_results():
     plant = Plant(ContactSet([0.3, -0.2, 0.1, 0.25, -0.05]), 0.4, damping=0.05)
     first = simulate(plant, 2.0)
-    assert plant.derived("exact landscapes")             # the sorted landscape is kept
+    assert _LANDSCAPES.get(plant)                        # the sorted landscape is kept
     second = simulate(plant, 2.0)
     np.testing.assert_array_equal(first.V, second.V)
     assert first.events == second.events
     other = Plant(ContactSet([0.3, -0.2, 0.1]), 0.4)
-    assert not other.derived("exact landscapes")         # each plant has its own cache
+    assert not _LANDSCAPES.get(other)                    # each plant has its own cache
 
 
 def test_coincident_moving_contacts_act_as_one():
@@ -524,8 +529,6 @@ def test_contacts_a_few_ulp_apart_are_simulated():
 
 
 def test_to_dict_is_json_able():
-    import json
-
     result = simulate(Plant(ContactSet([-1.0, 0.5, 2.0]), 1.0), 2.0)
     summary = json.loads(json.dumps(result.to_dict(samples=True)))
     assert summary["status"] == "SUCCESS" and summary["V_final"] == 0.5
@@ -536,8 +539,6 @@ def test_to_dict_is_json_able():
 # -- fast paths: the result built without re-validation, the landscape read from ContactSet ----
 def _revalidated(result: SimulationResult) -> SimulationResult:
     """The same fields through the public, validating constructor."""
-    import dataclasses
-
     return SimulationResult(**{f.name: getattr(result, f.name)
                                for f in dataclasses.fields(SimulationResult)})
 
@@ -604,8 +605,6 @@ def test_coulomb_landscape_is_the_contact_set_staircase(pairs):
     # forces are ContactSet.force between the levels, bit for bit, and its stiction is the
     # half-width of ContactSet.force_bounds at each level (magnitudes are halves and integers,
     # so every sum is exact in binary; 1e-15 only allows for the ulp of a different order).
-    from toolkit.simulation._exact import _CoulombLandscape
-
     contacts = ContactSet([v for v, _ in pairs], [f for _, f in pairs])
     land = _CoulombLandscape(contacts)
     levels = contacts.staircase().levels
@@ -644,8 +643,6 @@ def test_overflow_over_the_horizon_is_failed_not_success():
 
 
 def test_reach_time_of_non_finite_targets_and_rates_is_never():
-    from toolkit.simulation._exact import _reach_time
-
     inf = math.inf
     assert _reach_time(0.0, inf, 0.0, 0.1) == inf          # infinite rate
     assert _reach_time(0.0, 1.0, 0.0, inf) == inf          # infinite target
@@ -796,26 +793,24 @@ def test_compliant_lag_too_small_for_doubles_is_refused():
 @pytest.mark.parametrize("mu", [1.0, 1e3, 1e10, 1e100, 1e300])
 @pytest.mark.parametrize("gamma", [0.0, 0.027])
 def test_event_roots_are_located_at_every_motor_rate(mu, gamma):
-    # g(s) = 0.1 + gamma em(20, s) - 0.2 mu em(mu, s): a saturation event function with a body
-    # term (rate lam = 20 /s) and a motor term (rate mu = 1 / lag); its root lies near
-    # ln 2 / mu, down to 7e-301 s, inside a 1.5 s horizon. Regression: with mu = 1e300 the
-    # inflection overflowed and bisection by widths stopped near 1e-24 s. References:
-    # gamma = 0, the closed form em(mu, s) = 1 / (2 mu), s = ln 2 / mu; gamma > 0, a second
-    # method, brentq on the rescaled time x = mu s (a bracket [0, 50] on the root's scale).
+    # g(s) = 0.1 + gamma expm1_ratio(20, s) - 0.2 mu expm1_ratio(mu, s): a saturation event
+    # function with a body term (rate lam = 20 /s) and a motor term (rate mu = 1 / lag); its
+    # root lies near ln 2 / mu, down to 7e-301 s, inside a 1.5 s horizon. Regression: with
+    # mu = 1e300 the inflection overflowed and bisection by widths stopped near 1e-24 s.
+    # References: gamma = 0, the closed form expm1_ratio(mu, s) = 1 / (2 mu), s = ln 2 / mu;
+    # gamma > 0, a second method, brentq on the rescaled time x = mu s (a bracket [0, 50] on the root's scale).
     # rtol 16 eps: the root finder's "a few ulp" (brentq's rtol 4 eps) plus the rounding of g
     # near its root (|g| rounds at ~eps 0.1 where |g'| s ~ 0.1: a few eps of s).
-    from toolkit.simulation._exact import _em1, _first_root, _Fns
-
     eps = float(np.finfo(float).eps)
     lam, delta = 20.0, -0.2 * mu
-    fns = _Fns(np.array([0.3, 0.1]), np.zeros(2), np.array([0.0, gamma]),
+    fns = _EventFunctions(np.array([0.3, 0.1]), np.zeros(2), np.array([0.0, gamma]),
                np.array([0.0, delta]), lam, mu)      # function 0 never changes sign
     s, i = _first_root(fns, 1.5)
     if gamma == 0.0:
         expected = math.log(2.0) / mu
     else:
         def scaled(x: float) -> float:
-            return 0.1 + gamma * _em1(lam, x / mu) + (delta / mu) * -math.expm1(-x)
+            return 0.1 + gamma * _scalar_expm1_ratio(lam, x / mu) + (delta / mu) * -math.expm1(-x)
 
         expected = optimize.brentq(scaled, 0.0, 50.0, xtol=1e-300, rtol=4 * eps) / mu
         # The inflection is where the two terms of g'' balance (computed without overflow).

@@ -6,13 +6,17 @@ import time
 
 import numpy as np
 import pytest
+import scipy.integrate
+from scipy.optimize import brentq
 
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
 from toolkit.model import Motors, PiecewiseConstant, Plant
+from toolkit.precision import rational_trajectory
 from toolkit.simulation import Budget, SimulationStatus, simulate
 from toolkit.simulation._moreau import _compliant_step, _staircase, moreau_step_staircase
-from toolkit.simulation._reference import Meter
+from toolkit.simulation._reference import BudgetExceeded, Meter
+from toolkit.simulation._scipy import _solver_call
 
 SCIPY = ("rk45", "lsoda", "radau", "bdf")
 EPS = np.finfo(float).eps
@@ -106,8 +110,6 @@ def test_moreau_first_order_on_startup_events() -> None:
     # Startup through several contact speeds: the error of each crossing time is below one
     # step, so the max |V error| against the rational exact solution is <= h * F_tot / m
     # (the speed change over one step) for every h.
-    from toolkit.precision import rational_trajectory
-
     plant = Plant(ContactSet([-0.3, -0.1, 0.05, 0.2, 0.3], np.full(5, 0.4)), mass=1.0)
     for h in (1e-2, 1e-3, 1e-4):
         result = simulate(plant, 2.0, v0=-0.35, method="moreau", step=h)
@@ -163,8 +165,6 @@ def test_moving_staircase_matches_contact_set(rng: np.random.Generator) -> None:
 @pytest.mark.parametrize("n", [5, 70])      # 10 kinks (all evaluated) / 140 (binary search)
 def test_compliant_step_solves_the_equation(n: int, rng: np.random.Generator) -> None:
     # Second method: scipy's brentq on a W - b - F(W) (strictly increasing, continuous).
-    from scipy.optimize import brentq
-
     plant = Plant(ContactSet(rng.uniform(-0.3, 0.3, n), rng.uniform(0.1, 1.0, n)), mass=1.0,
                   motors=Motors(compliance=0.02))
     speeds = plant.contacts.speeds
@@ -265,9 +265,9 @@ def test_casadi_step_budget(rng: np.random.Generator) -> None:
 # -- casadi against the plant's own friction laws ----------------------------------------------
 @pytest.mark.parametrize("friction", ["tanh", "stribeck"])
 def test_casadi_right_hand_side_is_the_plant_law(friction: str, rng: np.random.Generator) -> None:
-    import casadi as ca
+    import casadi as ca          # (here: only the casadi tests load casadi)
 
-    from toolkit.simulation._casadi import casadi_right_hand_side
+    from toolkit.simulation._casadi import casadi_right_hand_side   # (imports casadi)
 
     plant = Plant(ContactSet(rng.uniform(-1, 1, 6), rng.uniform(0.1, 1, 6)), mass=2.0,
                   damping=0.3)
@@ -375,9 +375,6 @@ def test_plant_whose_acceleration_overflows_is_refused() -> None:
                                    np.linalg.LinAlgError("Singular matrix"),
                                    ZeroDivisionError("float division by zero")])
 def test_scipy_solver_errors_map_to_failed(error: Exception) -> None:
-    from toolkit.simulation._reference import BudgetExceeded
-    from toolkit.simulation._scipy import _solver_call
-
     def raising() -> None:
         raise error
 
@@ -389,11 +386,6 @@ def test_scipy_solver_errors_map_to_failed(error: Exception) -> None:
 
 def test_scipy_own_value_error_maps_to_failed() -> None:
     # A real scipy refusal (non-finite initial state) goes through the same mapping.
-    import scipy.integrate
-
-    from toolkit.simulation._reference import BudgetExceeded
-    from toolkit.simulation._scipy import _solver_call
-
     with pytest.raises(BudgetExceeded, match="must be finite") as stop:
         _solver_call("bdf", scipy.integrate.BDF, lambda t, y: y, 0.0, np.array([np.nan]), 1.0)
     assert stop.value.status is SimulationStatus.FAILED

@@ -30,7 +30,8 @@ from .errors import (
 from .plots import plot_force_curve, plot_precision, plot_schedule, plot_simulation
 from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
-from .precision import PrecisionReport, PrecisionRow, carousel_startup_plant, precision_report
+from .model.carousel import carousel_startup_plant
+from .precision import PrecisionReport, PrecisionRow, precision_report
 from .simulation import (BatchResult, Budget, Event, SimulationResult, SimulationStatus, simulate,
                          simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite

@@ -3,8 +3,8 @@
 Between two events the body obeys a linear ODE with closed-form solution, and every segment
 is stored in the one form
 
-    V(t0 + s) = V0 + c1 s + B em(lam, s) + C em(mu, s) + D s exp(-mu s),
-    em(x, s) = (1 - exp(-x s)) / x     (em(0, s) = s),
+    V(t0 + s) = V0 + c1 s + B expm1_ratio(lam, s) + C expm1_ratio(mu, s) + D s exp(-mu s),
+    expm1_ratio(x, s) = (1 - exp(-x s)) / x = -expm1(-x s) / x   (= s at x = 0),
 
 where ``lam = b / m`` is the body's own rate (drag, plus ``1/k`` per unsaturated compliant
 contact) and ``mu = 1 / tau`` the motor rate. Contact speeds take the same form with
@@ -21,7 +21,8 @@ Two engines share that form:
   between events (with constant commands the motors never leave their settled speeds and
   the ideal engine applies). Every event function (a crossing ``V(t) = v_i(t)``, a
   saturation limit, the end of a sliding mode) is
-  ``g(s) = alpha + beta s + gamma em(lam, s) + delta em(mu, s) + D s exp(-mu s)``, which has
+  ``g(s) = alpha + beta s + gamma expm1_ratio(lam, s) + delta expm1_ratio(mu, s)
+  + D s exp(-mu s)``, which has
   at most three roots: the root of ``g''`` is explicit, the roots of ``g'`` and then of ``g``
   are bracketed on monotone pieces, and the earliest is located by bisection and Brent's
   method. With many contacts a bound on ``|g'|`` first discards the functions that cannot
@@ -65,13 +66,14 @@ import bisect
 import math
 import struct
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ..model import ContactSet, PiecewiseConstant, Plant, compliant_breakpoints
+from ..model import ContactSet, MotorPiece, PiecewiseConstant, Plant, compliant_breakpoints
 from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
 
 __all__ = ["simulate_exact"]
@@ -83,7 +85,7 @@ _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than
 
 
 # -- closed forms ---------------------------------------------------------------------------
-def _em(rate: Any, s: Any) -> Any:
+def _expm1_ratio(rate: Any, s: Any) -> Any:
     """``(1 - exp(-rate s)) / rate``, continuous at ``rate = 0`` (``= s``); vectorized."""
     rate = np.asarray(rate, dtype=float)
     s = np.asarray(s, dtype=float)
@@ -92,14 +94,14 @@ def _em(rate: Any, s: Any) -> Any:
     return np.where(rate > 0, -np.expm1(-x) / safe, s)
 
 
-def _em1(rate: float, s: float) -> float:
-    """Scalar :func:`_em`."""
+def _scalar_expm1_ratio(rate: float, s: float) -> float:
+    """Scalar :func:`_expm1_ratio`."""
     return -math.expm1(-rate * s) / rate if rate > 0 else s
 
 
 def _reach_time(V: float, r0: float, lam: float, target: float) -> float:
-    """Time for ``V + r0 em(lam, s)`` to reach ``target`` (``inf`` if it never does, or when
-    ``target`` or ``r0`` is not finite)."""
+    """Time for ``V + r0 expm1_ratio(lam, s)`` to reach ``target`` (``inf`` if it never does, or
+    when ``target`` or ``r0`` is not finite)."""
     if not (math.isfinite(target) and math.isfinite(r0)):
         return math.inf
     y = (target - V) / r0
@@ -345,7 +347,8 @@ class _Dense:
         query, s, (_, V0, c1, B, lam, C, D) = self._parts(query)
         mu = self.mu
         with np.errstate(over="ignore", invalid="ignore"):     # masked past a stopped run
-            value = V0 + c1 * s + B * _em(lam, s) + C * _em(mu, s) + D * s * np.exp(-mu * s)
+            value = (V0 + c1 * s + B * _expm1_ratio(lam, s) + C * _expm1_ratio(mu, s)
+                     + D * s * np.exp(-mu * s))
         return np.where((query <= self.t_stop) | self.success, value, np.nan)
 
     def gathered_derivative(self, query: np.ndarray) -> np.ndarray:
@@ -472,26 +475,45 @@ def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _CompliantLandscap
                                base_F.tolist(), slope.tolist(), total)
 
 
+# The exact method's own cache (a Plant holds no solver state): per plant, the landscape of
+# each distinct command, so repeated simulations of one plant skip rebuilding them. Keyed
+# weakly: a plant's entry goes with the plant.
+_LANDSCAPES: weakref.WeakKeyDictionary[Plant, dict[bytes | None, _Landscape]] = (
+    weakref.WeakKeyDictionary())
+
+
+def clear_cache(plant: Plant) -> None:
+    """Forget the landscapes cached for ``plant``: its next run pays what a new plant would
+    (benchmarks time runs from scratch this way)."""
+    _LANDSCAPES.pop(plant, None)
+
+
+def _build_landscape(plant: Plant, speeds: np.ndarray | None) -> _Landscape:
+    """The landscape of contact speeds ``speeds`` (m/s; ``None``: the plant's own constant
+    contact speeds)."""
+    if plant.compliance > 0:
+        return _compliant_landscape(plant, speeds)
+    contacts = plant.contacts
+    return _CoulombLandscape(contacts if speeds is None else contacts.with_speeds(speeds))
+
+
 def _landscape(plant: Plant, a: float) -> _Landscape:
-    """The landscape of the contact speeds commanded at time ``a`` (s), kept in the plant's
-    cache (one entry per distinct command)."""
-    cache = plant.derived("exact landscapes")
+    """The landscape of the contact speeds commanded at time ``a`` (s), kept in this module's
+    cache (one entry per plant and distinct command)."""
+    cache = _LANDSCAPES.get(plant)
+    if cache is None:
+        cache = _LANDSCAPES[plant] = {}
     constant = plant.commands is None and plant.motors is None
     speeds = None if constant else plant.command(a)
     key = None if constant else speeds.tobytes()
     land = cache.get(key)
     if land is None:
-        if plant.compliance > 0:
-            land = _compliant_landscape(plant, speeds)
-        else:
-            contacts = plant.contacts
-            land = _CoulombLandscape(contacts if constant else contacts.with_speeds(speeds))
-        cache[key] = land
+        land = cache[key] = _build_landscape(plant, speeds)
     return land
 
 
 # -- the ideal-motor engine -------------------------------------------------------------------
-def _pieces(plant: Plant, t_end: float) -> list[float]:
+def _piece_bounds(plant: Plant, t_end: float) -> list[float]:
     if plant.commands is None and not isinstance(plant.external_force, PiecewiseConstant):
         return [0.0, t_end]
     switches = plant.switching_times()
@@ -500,140 +522,101 @@ def _pieces(plant: Plant, t_end: float) -> list[float]:
 
 def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
     """Integrate with piecewise-constant contact speeds; returns the final ``(t, V)``."""
-    m, c = plant.mass, plant.damping
-    bounds = _pieces(plant, t_end)
+    bounds = _piece_bounds(plant, t_end)
     V = v0
     stuck: int | None = None         # contact the body is stuck to (Coulomb only)
-    event, segment, stop = rec.event, rec.segment, rec.stop      # (bound once: hot loop)
     for a, b in zip(bounds[:-1], bounds[1:]):
         land = _landscape(plant, a)
-        stiction, force_at, contact_at, kind = land.stiction, land.force, land.contact, land.kind
-        xs = land.xs
-        K = len(xs)
-        E = plant.external(a)
-        tol_scale = 4.0 * (K + 1) * _EPS                # tie tolerance per N of force scale
-        push_scale = land.total + abs(E)
-        t = t_sum = a
-        t_err = 0.0                     # compensated sum of the segment times
         if a > 0:
-            event(a, "command", None, V)
-        j, at = land.locate(V)
-        if stuck is not None and not (at and stiction(j)[0] > 0):
-            event(a, "release", stuck, V)
-            stuck = None
-        while True:
-            if at:
-                W, G = stiction(j)
-                G += E - c * V
-                tol = tol_scale * (push_scale + c * abs(V))
-                rec.n_evaluations += 1
-                if abs(G) <= W + tol:                       # stick (or rest at a balance)
-                    contact = contact_at(j)
-                    if W > 0 and stuck != contact:
-                        if stuck is not None:
-                            event(t, "release", stuck, V)
-                        event(t, "stick", contact, V)
-                        stuck = contact
-                    segment(t, V)
-                    break
-                if stuck is not None:
-                    event(t, "release", stuck, V)
-                    stuck = None
-                else:
-                    event(t, kind, contact_at(j), V)
-                j = j + 1 if G > 0 else j
-            # Free motion inside interval j.
-            force, slope = force_at(j, V)
-            r0 = (force + E - c * V) / m
-            lam = (c - slope) / m
-            rec.n_evaluations += 1
-            segment(t, V, r0, lam)
-            if r0 == 0.0:
-                break
-            up = r0 > 0
-            target = (xs[j] if j < K else math.inf) if up else (xs[j - 1] if j > 0 else -math.inf)
-            s = _reach_time(V, r0, lam, target)                # inf for an infinite target
-            if t + s >= b:
-                V = V + r0 * _em1(lam, b - t)
-                lo = xs[j - 1] if j > 0 else -math.inf
-                hi = xs[j] if j < K else math.inf
-                V = min(max(V, lo), hi)
-                break
-            # Compensated (Neumaier) sum of the segment times: exact over 1e5 segments.
-            t_new = t_sum + s
-            t_err += (t_sum - t_new) + s if abs(t_sum) >= abs(s) else (s - t_new) + t_sum
-            t_sum = t_new
-            t, V, at = t_sum + t_err, target, True
-            j = j if up else j - 1
-            if stop(t):
-                return t, V
-        if stop(b):
-            return b, V
+            rec.event(a, "command", None, V)
+        t, V, stuck, stopped = _ideal_piece(plant, land, plant.external(a), a, b, V, stuck, rec)
+        if stopped:
+            return t, V
     return t_end, V
 
 
-# -- dynamic motors: closed-form motor tracks -------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class _MotorPiece:
-    """Contact speeds over one command piece starting at ``a`` from speeds ``start``.
+def _ideal_piece(plant: Plant, land: _Landscape, E: float, a: float, b: float, V: float,
+                 stuck: int | None, rec: _Recorder) -> tuple[float, float, int | None, bool]:
+    """Integrate over ``[a, b]`` (s) with constant contact speeds (landscape ``land``) and
+    external force ``E`` (N) from speed ``V`` (m/s), the body stuck to contact ``stuck`` (or
+    None); the one engine of :func:`simulate_exact` and :func:`advance`.
 
-    Each motor first ramps at the rate limit while its gap to the command exceeds
-    ``rate * tau`` (the whole gap when ``tau = 0``), then approaches the command
-    exponentially with time constant ``tau`` (or holds it when ``tau = 0``).
+    Returns
+    -------
+    (t, V, stuck, stopped)
+        The time and speed reached (``b`` unless the budget stopped the run, then
+        ``stopped``), and the contact the body is stuck to there.
     """
+    m, c = plant.mass, plant.damping
+    event, segment, stop = rec.event, rec.segment, rec.stop      # (bound once: hot loop)
+    stiction, force_at, contact_at, kind = land.stiction, land.force, land.contact, land.kind
+    xs = land.xs
+    K = len(xs)
+    tol_scale = 4.0 * (K + 1) * _EPS                # tie tolerance per N of force scale
+    push_scale = land.total + abs(E)
+    t = t_sum = a
+    t_err = 0.0                     # compensated sum of the segment times
+    j, at = land.locate(V)
+    if stuck is not None and not (at and stiction(j)[0] > 0):
+        event(a, "release", stuck, V)
+        stuck = None
+    while True:
+        if at:
+            W, G = stiction(j)
+            G += E - c * V
+            tol = tol_scale * (push_scale + c * abs(V))
+            rec.n_evaluations += 1
+            if abs(G) <= W + tol:                       # stick (or rest at a balance)
+                contact = contact_at(j)
+                if W > 0 and stuck != contact:
+                    if stuck is not None:
+                        event(t, "release", stuck, V)
+                    event(t, "stick", contact, V)
+                    stuck = contact
+                segment(t, V)
+                break
+            if stuck is not None:
+                event(t, "release", stuck, V)
+                stuck = None
+            else:
+                event(t, kind, contact_at(j), V)
+            j = j + 1 if G > 0 else j
+        # Free motion inside interval j.
+        force, slope = force_at(j, V)
+        r0 = (force + E - c * V) / m
+        lam = (c - slope) / m
+        rec.n_evaluations += 1
+        segment(t, V, r0, lam)
+        if r0 == 0.0:
+            break
+        up = r0 > 0
+        target = (xs[j] if j < K else math.inf) if up else (xs[j - 1] if j > 0 else -math.inf)
+        s = _reach_time(V, r0, lam, target)                # inf for an infinite target
+        if t + s >= b:
+            V = V + r0 * _scalar_expm1_ratio(lam, b - t)
+            lo = xs[j - 1] if j > 0 else -math.inf
+            hi = xs[j] if j < K else math.inf
+            V = min(max(V, lo), hi)
+            break
+        # Compensated (Neumaier) sum of the segment times: exact over 1e5 segments.
+        t_new = t_sum + s
+        t_err += (t_sum - t_new) + s if abs(t_sum) >= abs(s) else (s - t_new) + t_sum
+        t_sum = t_new
+        t, V, at = t_sum + t_err, target, True
+        j = j if up else j - 1
+        if stop(t):
+            return t, V, stuck, True
+    return b, V, stuck, stop(b)
 
-    a: float
-    start: np.ndarray
-    u: np.ndarray
-    tau: float
-    ramp: np.ndarray           # ramp slope, m/s^2 (0 where no ramp)
-    ramp_end: np.ndarray       # offset (s) at which the ramp ends (0 where none)
-    after: np.ndarray          # speed at the ramp end, m/s
 
-    @classmethod
-    def build(cls, a: float, start: np.ndarray, u: np.ndarray, tau: float, rate: float) -> _MotorPiece:
-        gap = u - start
-        if not math.isfinite(rate):                        # lag only: no ramp phase
-            zeros = np.zeros_like(gap)
-            return cls(a, start, u, tau, zeros, zeros, start)
-        direction = np.sign(gap)
-        excess = np.abs(gap) - rate * tau
-        ramping = excess > 0
-        slope = np.where(ramping, direction * rate, 0.0)
-        end = np.where(ramping, excess / rate, 0.0)
-        after = np.where(ramping, u - direction * rate * tau, start)
-        return cls(a, start, u, tau, slope, end, after)
-
-    def speeds(self, s: np.ndarray) -> np.ndarray:
-        """Speeds at offsets ``s`` (shape (T,)) from ``a``: shape (T, n), m/s."""
-        s = np.asarray(s, dtype=float)[:, None]
-        ramping = s < self.ramp_end
-        on_ramp = self.start + self.ramp * s
-        if self.tau > 0:
-            with np.errstate(over="ignore", invalid="ignore"):    # only on the ramp, masked
-                settle = self.u + (self.after - self.u) * np.exp(-(s - self.ramp_end) / self.tau)
-        else:
-            settle = np.broadcast_to(self.after, on_ramp.shape)
-        return np.where(ramping, on_ramp, settle)
-
-    def coefficients(self, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """At offset ``s``: speeds ``v0``, ramp slopes ``q``, exponential rates ``e`` (so that
-        ``v(s + x) = v0 + q x + e em(1/tau, x)``) and the offset of the next phase change."""
-        v0 = self.speeds(np.array([s]))[0]
-        ramping = s < self.ramp_end
-        q = np.where(ramping, self.ramp, 0.0)
-        e = np.where(ramping, 0.0, (self.u - v0) / self.tau) if self.tau > 0 else np.zeros_like(v0)
-        pending = self.ramp_end[ramping]
-        return v0, q, e, float(pending.min()) if pending.size else math.inf
-
-
-def _motor_pieces(plant: Plant, t_end: float) -> list[tuple[float, float, _MotorPiece]]:
+# -- dynamic motors: closed-form motor tracks -------------------------------------------------
+def _motor_pieces(plant: Plant, t_end: float) -> list[tuple[float, float, MotorPiece]]:
     motors = plant.motors
-    bounds = _pieces(plant, t_end)
+    bounds = _piece_bounds(plant, t_end)
     v = plant.initial_speeds()
     pieces = []
     for a, b in zip(bounds[:-1], bounds[1:]):
-        piece = _MotorPiece.build(a, v, plant.command(a), motors.lag, motors.rate_limit)
+        piece = MotorPiece.build(a, v, plant.command(a), motors.lag, motors.rate_limit)
         pieces.append((a, b, piece))
         v = piece.speeds(np.array([b - a]))[0]
     return pieces
@@ -651,9 +634,10 @@ def _motor_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
 
 # -- dynamic motors: first root of the event functions --------------------------------------
 @dataclass(frozen=True)
-class _Fns:
-    """Event functions ``g(s) = alpha + beta s + gamma em(lam, s) + delta em(mu, s)
-    + D s exp(-mu s)`` (vectors of coefficients, scalars ``lam``, ``mu``, ``D``)."""
+class _EventFunctions:
+    """Event functions ``g(s) = alpha + beta s + gamma expm1_ratio(lam, s)
+    + delta expm1_ratio(mu, s) + D s exp(-mu s)`` (vectors of coefficients, scalars ``lam``,
+    ``mu``, ``D``)."""
 
     alpha: np.ndarray
     beta: np.ndarray
@@ -665,13 +649,13 @@ class _Fns:
 
     def value(self, s: Any, i: Any = slice(None)) -> np.ndarray:
         mu = self.mu
-        return (self.alpha[i] + self.beta[i] * s + self.gamma[i] * _em(self.lam, s)
-                + self.delta[i] * _em(mu, s) + self.D * s * np.exp(-mu * s))
+        return (self.alpha[i] + self.beta[i] * s + self.gamma[i] * _expm1_ratio(self.lam, s)
+                + self.delta[i] * _expm1_ratio(mu, s) + self.D * s * np.exp(-mu * s))
 
-    def take(self, index: np.ndarray) -> _Fns:
+    def take(self, index: np.ndarray) -> _EventFunctions:
         """The functions at ``index`` only."""
-        return _Fns(self.alpha[index], self.beta[index], self.gamma[index], self.delta[index],
-                    self.lam, self.mu, self.D)
+        return _EventFunctions(self.alpha[index], self.beta[index], self.gamma[index],
+                               self.delta[index], self.lam, self.mu, self.D)
 
     def slope(self, s: Any, i: Any = slice(None)) -> np.ndarray:
         mu = self.mu
@@ -741,7 +725,7 @@ def _bisect(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray, 
     return hi
 
 
-def _first_root(fns: _Fns, horizon: float) -> tuple[float, int]:
+def _first_root(fns: _EventFunctions, horizon: float) -> tuple[float, int]:
     """Earliest ``s`` in ``(0, horizon]`` at which some ``g_i`` changes sign or reaches zero,
     and the index ``i`` (``(inf, -1)`` when none does).
 
@@ -769,7 +753,7 @@ def _first_root(fns: _Fns, horizon: float) -> tuple[float, int]:
         window = max(2.0 * window, float(later.min()))
 
 
-def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
+def _first_root_all(fns: _EventFunctions, horizon: float) -> tuple[float, int]:
     """:func:`_first_root` over every function (no prefilter).
 
     ``g`` has at most one inflection, so ``g'`` is monotone on at most two pieces and ``g``
@@ -821,10 +805,10 @@ def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
             return float(hi[best]), int(idx[best])
         changed = np.sign(fns.value(mid, idx)) != np.sign(fns.value(lo, idx))
         lo, hi = np.where(changed, lo, mid), np.where(changed, mid, hi)
-    return _brent(fns, int(idx[0]), float(lo[0]), float(hi[0])), int(idx[0])
+    return _brent_root(fns, int(idx[0]), float(lo[0]), float(hi[0])), int(idx[0])
 
 
-def _brent(fns: _Fns, i: int, lo: float, hi: float) -> float:
+def _brent_root(fns: _EventFunctions, i: int, lo: float, hi: float) -> float:
     """The root of ``g_i`` in the sign-changing bracket ``(lo, hi]`` to a few ulp."""
     from scipy.optimize import brentq
 
@@ -832,8 +816,8 @@ def _brent(fns: _Fns, i: int, lo: float, hi: float) -> float:
     lam, mu, D = fns.lam, fns.mu, fns.D
 
     def g(s: float) -> float:
-        return (alpha + beta * s + gamma * _em1(lam, s) + delta * _em1(mu, s)
-                + D * s * math.exp(-mu * s))
+        return (alpha + beta * s + gamma * _scalar_expm1_ratio(lam, s)
+                + delta * _scalar_expm1_ratio(mu, s) + D * s * math.exp(-mu * s))
 
     g_lo, g_hi = g(lo), g(hi)
     if g_hi == 0.0 or g_lo * g_hi > 0.0:
@@ -882,131 +866,157 @@ def _filippov(G_out: float, slopes: np.ndarray, weights: np.ndarray, mass: float
 
 def _run_dynamic(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
     """Integrate with lagging / rate-limited motors; returns the final ``(t, V)``."""
+    V = v0
+    mode = _FREE
+    for a, b, motor in _motor_pieces(plant, t_end):
+        E = plant.external(a)
+        if a > 0:
+            rec.event(a, "command", None, V)
+        t, V, mode, stopped = _dynamic_piece(plant, motor, E, b, V, mode, rec)
+        if stopped:
+            return t, V
+    return t_end, V
+
+
+#: The engine's mode between events: ``(stuck, hint, releasing)``: the contact the body is
+#: stuck to (or None), the contact whose event ended the previous segment (or None), and
+#: +-1 when the body leaves ``stuck`` upward / downward (else 0).
+_Mode = tuple[int | None, int | None, float]
+_FREE: _Mode = (None, None, 0.0)
+
+
+def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float, mode: _Mode,
+                   rec: _Recorder) -> tuple[float, float, _Mode, bool]:
+    """Integrate from ``motor.a`` to ``b`` (s) under one constant command (the contact speeds
+    of ``motor``) and external force ``E`` (N), from body speed ``V`` (m/s) in engine mode
+    ``mode``; the one engine of :func:`simulate_exact` and :func:`advance`.
+
+    Returns
+    -------
+    (t, V, mode, stopped)
+        The time and speed reached (``b`` unless the budget stopped the run, then
+        ``stopped``), and the engine's mode there.
+    """
     m, c, k = plant.mass, plant.damping, plant.compliance
     f = plant.contacts.forces
     tau = plant.motors.lag
     mu = 1.0 / tau if tau > 0 else 0.0
     n = plant.n
-    V = v0
-    stuck: int | None = None
-    hint: int | None = None          # contact whose event ended the previous segment
-    releasing = 0.0                  # +-1: the body leaves `stuck` upward / downward
-    for a, b, motor in _motor_pieces(plant, t_end):
-        E = plant.external(a)
-        if a > 0:
-            rec.event(a, "command", None, V)
-        t, off, length = a, 0.0, b - a     # offsets from a keep phase ends exact
-        while off < length:
-            v, q, e, phase_end = motor.coefficients(off)
-            off_next = min(length, phase_end)
-            t_next = b if off_next == length else a + off_next
-            horizon = off_next - off
-            slope_now = q + e
-            scale = max(abs(V), float(np.max(np.abs(v))))
-            tie_v = 64.0 * _EPS * scale
-            tol = 4.0 * (n + 1) * _EPS * (plant.contacts.total_force + abs(E) + c * abs(V)
-                                          + m * float(np.max(np.abs(slope_now))))
-            rec.n_evaluations += 1
-            if k > 0:
-                fns, seg, kinds = _compliant_step(plant, V, v, q, e, E, mu, hint, tie_v)
-                rec.segment(t, V, *seg)
-                s, i = _first_root(fns, horizon)
-                if i >= 0:
-                    off += s
-                    t, V, hint = a + off, _segment_value(V, seg, mu, s), int(kinds[i])
-                    rec.event(t, "saturation", hint, V)
-                else:
-                    off = off_next
-                    t, V, hint = t_next, _segment_value(V, seg, mu, horizon), None
-                if rec.stop(t):
-                    return t, V
-                continue
-            # Coulomb contacts: which are tied with the body now?
-            tied = np.abs(v - V) <= tie_v
-            if hint is not None:
-                tied[hint] = True
-            if stuck is not None:
-                tied[stuck] = True
-            tied &= f > 0
-            anchor = hint if hint is not None else stuck
-            if anchor is not None and tied[anchor]:
-                V = float(v[anchor])
-            side = np.sign(v - V)
-            G_out = float(np.sum(f[~tied] * side[~tied])) + E - c * V
-            t_slopes = slope_now[tied].copy()
-            if releasing != 0.0:
-                t_slopes[np.flatnonzero(tied) == stuck] = -releasing * math.inf
-            acc, group = _filippov(G_out, t_slopes, f[tied], m, tol)
-            tied_idx = np.flatnonzero(tied)
-            new_stuck = int(tied_idx[group][0]) if group is not None else None
-            # Events at this instant.
-            if stuck is not None and new_stuck != stuck:
-                rec.event(t, "release", stuck, V)
-            if new_stuck is not None and new_stuck != stuck:
-                rec.event(t, "stick", new_stuck, V)
-            if hint is not None and (new_stuck is None or hint != new_stuck) and hint != stuck:
-                rec.event(t, "cross", hint, V)
-            stuck, hint, releasing = new_stuck, None, 0.0
-            if stuck is None:
-                signs = side.copy()
-                signs[tied] = np.sign(t_slopes - acc)
-                r0 = (float(np.sum(f * signs)) + E - c * V) / m
-                lam = c / m
-                alpha = np.where(tied, 0.0, V - v)
-                beta = -q.copy()
-                grazing = tied & (np.abs(acc - slope_now) <= 1e-9 * (abs(acc) + np.abs(slope_now)))
-                beta[grazing] = -(r0 - e[grazing])           # g'(0) = 0 exactly when grazing
-                fns = _Fns(alpha, beta, np.full(n, r0), -e, lam, mu)
-                rec.segment(t, V, r0, lam)
-                s, i = _first_root(fns, horizon)
-                step = horizon if i < 0 else s
-                V_new = V + r0 * _em1(lam, step)
+    stuck, hint, releasing = mode
+    a = motor.a
+    t, off, length = a, 0.0, b - a     # offsets from a keep phase ends exact
+    while off < length:
+        v, q, e, phase_end = motor.coefficients(off)
+        off_next = min(length, phase_end)
+        t_next = b if off_next == length else a + off_next
+        horizon = off_next - off
+        slope_now = q + e
+        scale = max(abs(V), float(np.max(np.abs(v))))
+        tie_v = 64.0 * _EPS * scale
+        tol = 4.0 * (n + 1) * _EPS * (plant.contacts.total_force + abs(E) + c * abs(V)
+                                      + m * float(np.max(np.abs(slope_now))))
+        rec.n_evaluations += 1
+        if k > 0:
+            fns, seg, kinds = _compliant_step(plant, V, v, q, e, E, mu, hint, tie_v)
+            rec.segment(t, V, *seg)
+            s, i = _first_root(fns, horizon)
+            if i >= 0:
+                off += s
+                t, V, hint = a + off, _segment_value(V, seg, mu, s), int(kinds[i])
+                rec.event(t, "saturation", hint, V)
             else:
-                group_mask = np.zeros(n, dtype=bool)
-                group_mask[tied_idx[group]] = True
-                W = float(np.sum(f[group_mask]))
-                signs = side.copy()
-                signs[tied & ~group_mask] = np.sign(slope_now[tied & ~group_mask] - acc)
-                G_fixed = float(np.sum(f[~group_mask] * signs[~group_mask])) + E
-                qc, ec, vc = float(q[stuck]), float(e[stuck]), float(v[stuck])
-                h0 = G_fixed - c * vc - m * (qc + ec)
-                others = ~group_mask
-                alpha = np.concatenate((np.where(tied[others], 0.0, vc - v[others]),
-                                        [W + tol - h0, h0 + W + tol]))
-                beta = np.concatenate((qc - q[others], [c * qc, -c * qc]))
-                delta = np.concatenate((ec - e[others], [ec * (c - m * mu), ec * (m * mu - c)]))
-                fns = _Fns(alpha, beta, np.zeros(alpha.size), delta, 0.0, mu)
-                rec.segment(t, V, 0.0, 0.0, qc, ec)
-                s, i = _first_root(fns, horizon)
-                step = horizon if i < 0 else s
-                V_new = vc + qc * step + ec * _em1(mu, step)
-                if i >= 0:
-                    n_others = int(others.sum())
-                    if i >= n_others:
-                        releasing = 1.0 if i == n_others else -1.0
-                        i = -1
-                    else:
-                        i = int(np.flatnonzero(others)[i])
-            if i >= 0 or releasing:
-                off += step
-                t = a + off
-            else:
-                off, t = off_next, t_next
-            V = float(V_new)
-            hint = i if i >= 0 else None
+                off = off_next
+                t, V, hint = t_next, _segment_value(V, seg, mu, horizon), None
             if rec.stop(t):
-                return t, V
-    return t_end, V
+                return t, V, (stuck, hint, releasing), True
+            continue
+        # Coulomb contacts: which are tied with the body now?
+        tied = np.abs(v - V) <= tie_v
+        if hint is not None:
+            tied[hint] = True
+        if stuck is not None:
+            tied[stuck] = True
+        tied &= f > 0
+        anchor = hint if hint is not None else stuck
+        if anchor is not None and tied[anchor]:
+            V = float(v[anchor])
+        side = np.sign(v - V)
+        G_out = float(np.sum(f[~tied] * side[~tied])) + E - c * V
+        t_slopes = slope_now[tied].copy()
+        if releasing != 0.0:
+            t_slopes[np.flatnonzero(tied) == stuck] = -releasing * math.inf
+        acc, group = _filippov(G_out, t_slopes, f[tied], m, tol)
+        tied_idx = np.flatnonzero(tied)
+        new_stuck = int(tied_idx[group][0]) if group is not None else None
+        # Events at this instant.
+        if stuck is not None and new_stuck != stuck:
+            rec.event(t, "release", stuck, V)
+        if new_stuck is not None and new_stuck != stuck:
+            rec.event(t, "stick", new_stuck, V)
+        if hint is not None and (new_stuck is None or hint != new_stuck) and hint != stuck:
+            rec.event(t, "cross", hint, V)
+        stuck, hint, releasing = new_stuck, None, 0.0
+        if stuck is None:
+            signs = side.copy()
+            signs[tied] = np.sign(t_slopes - acc)
+            r0 = (float(np.sum(f * signs)) + E - c * V) / m
+            lam = c / m
+            alpha = np.where(tied, 0.0, V - v)
+            beta = -q.copy()
+            grazing = tied & (np.abs(acc - slope_now) <= 1e-9 * (abs(acc) + np.abs(slope_now)))
+            beta[grazing] = -(r0 - e[grazing])           # g'(0) = 0 exactly when grazing
+            fns = _EventFunctions(alpha, beta, np.full(n, r0), -e, lam, mu)
+            rec.segment(t, V, r0, lam)
+            s, i = _first_root(fns, horizon)
+            step = horizon if i < 0 else s
+            V_new = V + r0 * _scalar_expm1_ratio(lam, step)
+        else:
+            group_mask = np.zeros(n, dtype=bool)
+            group_mask[tied_idx[group]] = True
+            W = float(np.sum(f[group_mask]))
+            signs = side.copy()
+            signs[tied & ~group_mask] = np.sign(slope_now[tied & ~group_mask] - acc)
+            G_fixed = float(np.sum(f[~group_mask] * signs[~group_mask])) + E
+            qc, ec, vc = float(q[stuck]), float(e[stuck]), float(v[stuck])
+            h0 = G_fixed - c * vc - m * (qc + ec)
+            others = ~group_mask
+            alpha = np.concatenate((np.where(tied[others], 0.0, vc - v[others]),
+                                    [W + tol - h0, h0 + W + tol]))
+            beta = np.concatenate((qc - q[others], [c * qc, -c * qc]))
+            delta = np.concatenate((ec - e[others], [ec * (c - m * mu), ec * (m * mu - c)]))
+            fns = _EventFunctions(alpha, beta, np.zeros(alpha.size), delta, 0.0, mu)
+            rec.segment(t, V, 0.0, 0.0, qc, ec)
+            s, i = _first_root(fns, horizon)
+            step = horizon if i < 0 else s
+            V_new = vc + qc * step + ec * _scalar_expm1_ratio(mu, step)
+            if i >= 0:
+                n_others = int(others.sum())
+                if i >= n_others:
+                    releasing = 1.0 if i == n_others else -1.0
+                    i = -1
+                else:
+                    i = int(np.flatnonzero(others)[i])
+        if i >= 0 or releasing:
+            off += step
+            t = a + off
+        else:
+            off, t = off_next, t_next
+        V = float(V_new)
+        hint = i if i >= 0 else None
+        if rec.stop(t):
+            return t, V, (stuck, hint, releasing), True
+    return b, V, (stuck, hint, releasing), False
 
 
 def _segment_value(V0: float, seg: tuple[float, ...], mu: float, s: float) -> float:
     B, lam, c1, C, D = seg
-    return V0 + c1 * s + B * _em1(lam, s) + C * _em1(mu, s) + D * s * math.exp(-mu * s)
+    return (V0 + c1 * s + B * _scalar_expm1_ratio(lam, s) + C * _scalar_expm1_ratio(mu, s)
+            + D * s * math.exp(-mu * s))
 
 
 def _compliant_step(plant: Plant, V: float, v: np.ndarray, q: np.ndarray, e: np.ndarray,
                     E: float, mu: float, hint: int | None,
-                    tie_v: float) -> tuple[_Fns, tuple[float, ...], np.ndarray]:
+                    tie_v: float) -> tuple[_EventFunctions, tuple[float, ...], np.ndarray]:
     """Closed-form segment and saturation event functions of compliant contacts."""
     m, c, k = plant.mass, plant.damping, plant.compliance
     f = plant.contacts.forces
@@ -1053,7 +1063,7 @@ def _compliant_step(plant: Plant, V: float, v: np.ndarray, q: np.ndarray, e: np.
     want_lower = (region == 0.0) | (region == -1.0)
     rows = np.concatenate((np.flatnonzero(want_upper), np.flatnonzero(want_lower)))
     alpha = np.concatenate((upper[want_upper], lower[want_lower]))
-    fns = _Fns(alpha, c1 - q[rows], np.full(rows.size, B), C - e[rows], lam, mu, D)
+    fns = _EventFunctions(alpha, c1 - q[rows], np.full(rows.size, B), C - e[rows], lam, mu, D)
     return fns, (B, lam, c1, C, D), rows
 
 

@@ -32,8 +32,8 @@ from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import carousel_startup_plant
 from .precision import PrecisionReport, PrecisionRow, precision_report
-from .simulation import (BatchResult, Budget, Event, SimulationResult, SimulationStatus, simulate,
-                         simulate_batch)
+from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, SimulationResult,
+                         SimulationStatus, advance, simulate, simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
 
@@ -44,7 +44,7 @@ __all__ = [
     "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "force_curve",
     # plant and simulation
     "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "SimulationStatus", "Budget", "Event",
-    "simulate_batch", "BatchResult",
+    "simulate_batch", "BatchResult", "advance", "ExactState", "ExactStep",
     # work-precision report and stability suite
     "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant",
     "stability_suite", "StabilityReport", "StabilityCase",

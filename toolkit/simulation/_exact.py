@@ -99,6 +99,24 @@ def _scalar_expm1_ratio(rate: float, s: float) -> float:
     return -math.expm1(-rate * s) / rate if rate > 0 else s
 
 
+#: ``(-1)^k / (k + 2)!`` for k = 0..14, highest first: the series of
+#: ``(x + expm1(-x)) / x^2``, truncated below ``1e-17`` relative for ``0 <= x < 0.5``.
+_RATIO_INTEGRAL_SERIES = tuple((-1.0) ** k / math.factorial(k + 2) for k in range(14, -1, -1))
+
+
+def _expm1_ratio_integral(rate: float, s: float) -> float:
+    """``int_0^s expm1_ratio(rate, x) dx = (s - expm1_ratio(rate, s)) / rate`` (``s^2 / 2`` at
+    ``rate = 0``), to a few ulp: a series where the difference would cancel (``rate s < 0.5``),
+    written without overflow for rates up to the largest double."""
+    x = rate * s
+    if x < 0.5:
+        h = 0.0
+        for c in _RATIO_INTEGRAL_SERIES:            # Horner
+            h = h * x + c
+        return s * s * h
+    return s * ((x + math.expm1(-x)) / x) / rate
+
+
 def _reach_time(V: float, r0: float, lam: float, target: float) -> float:
     """Time for ``V + r0 expm1_ratio(lam, s)`` to reach ``target`` (``inf`` if it never does, or
     when ``target`` or ``r0`` is not finite)."""
@@ -162,6 +180,26 @@ class _Recorder:
         return True
 
     # -- output -----------------------------------------------------------------------------
+    def displacement(self, t_stop: float) -> float:
+        """The exact integral of ``V`` (m) from the first segment's start to ``t_stop`` (s):
+        each closed-form segment integrated in closed form, ``V0 S + c1 S^2 / 2
+        + B I(lam, S) + C I(mu, S) + D (S expm1_ratio(mu, S) - I(mu, S))`` with ``S`` its
+        length and ``I`` :func:`_expm1_ratio_integral`."""
+        rows, mu = self.rows, self.mu
+        total = 0.0
+        for k, (t0, V0, c1, B, lam, C, D) in enumerate(rows):
+            S = (rows[k + 1][0] if k + 1 < len(rows) else t_stop) - t0
+            if S <= 0.0:
+                continue
+            part = V0 * S + 0.5 * c1 * S * S
+            if B != 0.0:
+                part += B * _expm1_ratio_integral(lam, S)
+            if C != 0.0 or D != 0.0:
+                settle = _expm1_ratio_integral(mu, S)
+                part += C * settle + D * (S * _scalar_expm1_ratio(mu, S) - settle)
+            total += part
+        return total
+
     def dense(self, t_stop: float, success: bool, t_end: float, linear: bool) -> _Dense:
         return _Dense(self.rows, self.mu, t_stop, success, t_end, linear)
 

@@ -802,11 +802,22 @@ def _first_root_all(fns: _EventFunctions, horizon: float) -> tuple[float, int]:
     rows = np.arange(n)
     knots = np.full((n, 4), horizon)
     knots[:, 0] = 0.0
-    infl = fns.inflection()
-    inside = (infl > 0) & (infl < horizon)
-    knots[:, 1] = np.where(inside, infl, horizon)
+    single = _single_exponential(fns)
+    if single is not None:
+        # g' = base + amp exp(-rate s) is monotone: its root, if any, in closed form.
+        base, amp, rate = single
+        if rate > 0:
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                root = np.log(amp / -base) / rate         # NaN or <= 0 where there is none
+            knots[:, 2] = np.where((root > 0) & (root < horizon), root, horizon)
+        pieces: tuple[tuple[int, int], ...] = ()
+    else:
+        infl = fns.inflection()
+        inside = (infl > 0) & (infl < horizon)
+        knots[:, 1] = np.where(inside, infl, horizon)
+        pieces = ((0, 1), (1, 3))
     # Roots of g' on [0, infl] and [infl, horizon].
-    for col, (left, right) in enumerate(((0, 1), (1, 3)), start=2):
+    for col, (left, right) in enumerate(pieces, start=2):
         lo, hi = knots[:, left], knots[:, right]
         d_lo, d_hi = fns.slope(lo), fns.slope(hi)
         with np.errstate(over="ignore"):                # only the product's sign is used
@@ -846,9 +857,49 @@ def _first_root_all(fns: _EventFunctions, horizon: float) -> tuple[float, int]:
     return _brent_root(fns, int(idx[0]), float(lo[0]), float(hi[0])), int(idx[0])
 
 
+def _single_exponential(fns: _EventFunctions) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """``(base, amp, rate)`` with ``g'(s) = base + amp exp(-rate s)`` for every function, when
+    ``g'`` has one exponential only (no drag or compliance: ``lam = 0``; ideal-lag motors:
+    ``mu = 0``; or one of the two terms absent); None otherwise. Then ``g''`` keeps one sign:
+    ``g`` is convex or concave."""
+    if fns.D != 0.0:
+        return None
+    lam, mu = fns.lam, fns.mu
+    if lam == 0.0 or not fns.gamma.any():
+        return fns.beta + (fns.gamma if lam == 0.0 else 0.0), fns.delta, mu
+    if mu == 0.0 or not fns.delta.any():
+        return fns.beta + (fns.delta if mu == 0.0 else 0.0), fns.gamma, lam
+    return None
+
+
+def _newton_root(g: Callable[[float], float], slope: Callable[[float], float], curvature: float,
+                 lo: float, hi: float, g_lo: float, g_hi: float) -> float | None:
+    """Newton's method for a root of a convex or concave ``g`` (``curvature``: the constant
+    sign of ``g''``) in the sign-changing bracket ``[lo, hi]``, started from the end where
+    ``g g'' > 0`` (Fourier's condition: the iterates then approach the root monotonically,
+    quadratically near it, without leaving the bracket). Returns the root to a few ulp, or
+    None when the iteration does not settle (the caller then uses Brent's method)."""
+    x, gx = (hi, g_hi) if g_hi * curvature > 0 else (lo, g_lo)
+    for _ in range(60):
+        d = slope(x)
+        if d == 0.0 or not math.isfinite(d):
+            return None
+        x_new = x - gx / d
+        if not lo <= x_new <= hi:
+            return None
+        if abs(x_new - x) <= 4.0 * _EPS * abs(x_new):
+            return x_new
+        x = x_new
+        gx = g(x)
+        if gx == 0.0:
+            return x
+    return None
+
+
 def _brent_root(fns: _EventFunctions, i: int, lo: float, hi: float) -> float:
-    """The root of ``g_i`` in the sign-changing bracket ``(lo, hi]`` to a few ulp."""
-    from scipy.optimize import brentq
+    """The root of ``g_i`` in the sign-changing bracket ``(lo, hi]`` to a few ulp: Newton's
+    method when ``g_i`` is convex or concave (:func:`_single_exponential`), Brent's method
+    otherwise or when Newton's does not settle."""
 
     alpha, beta, gamma, delta = (float(c[i]) for c in (fns.alpha, fns.beta, fns.gamma, fns.delta))
     lam, mu, D = fns.lam, fns.mu, fns.D
@@ -863,6 +914,18 @@ def _brent_root(fns: _EventFunctions, i: int, lo: float, hi: float) -> float:
         # math.expm1: the two differ by a few ulp, so on near-tied contacts the scalar form
         # may see no sign change. The change is then rounding noise and hi a root within it.
         return hi
+    if D == 0.0 and (lam == 0.0 or mu == 0.0 or gamma == 0.0 or delta == 0.0):
+        def slope(s: float) -> float:
+            return beta + gamma * math.exp(-lam * s) + delta * math.exp(-mu * s)
+
+        curvature = -(gamma * lam + delta * mu)
+        if curvature != 0.0:
+            root = _newton_root(g, slope, curvature, lo, hi, g_lo, g_hi)
+            if root is not None:
+                return root
+    # scipy.optimize takes ~0.4 s to import: here, so that only runs needing a polish pay it.
+    from scipy.optimize import brentq
+
     # No absolute floor (xtol: the smallest subnormal, 5e-324 s), so rtol sets the precision
     # at every scale: with lag 1e-300 s the roots lie near 1e-300 s, where an absolute 1e-300 s
     # would blur them entirely (and 2e-308 s, the smallest normal, would leave them to 1e-8).

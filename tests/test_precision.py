@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from fractions import Fraction
@@ -10,15 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
-from toolkit.model import Plant
-from toolkit.precision import (CAROUSEL_ACCELERATION, MethodSetting, PrecisionReport,
-                               carousel_startup_plant, default_settings, exact_speedup,
+from toolkit.model import ContactSet, Plant
+import toolkit.precision as precision
+from toolkit.model.carousel import CAROUSEL_ACCELERATION, carousel_startup_plant
+from toolkit.precision import (MethodSetting, PrecisionReport, default_settings, exact_speedup,
                                precision_report, rational_trajectory, work_precision_curves)
 from toolkit.scene import load_scene
-from toolkit.simulation import Budget, Status, simulate
 from toolkit.scene_build import scene_plant
+from toolkit.simulation import Budget, SimulationStatus, simulate
+from toolkit.simulation._exact import _LANDSCAPES
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +79,7 @@ def test_rational_trajectory_crossing_times_are_exact_fractions() -> None:
 
 def test_exact_row_is_exact_and_references_are_measured(quick_report: PrecisionReport) -> None:
     exact = quick_report.row("exact")
-    assert exact.status is Status.SUCCESS
+    assert exact.status is SimulationStatus.SUCCESS
     assert exact.max_error <= 1e-12                       # issue 3 criterion
     radau = quick_report.row("radau")
     # tanh with eps = 1e-4: the smoothed solution lags the Coulomb one by about eps near each
@@ -112,7 +114,7 @@ def test_moreau_error_includes_the_kink_between_steps() -> None:
 
 def test_sign_rk45_stalls_and_chatters(quick_report: PrecisionReport) -> None:
     rk45 = quick_report.row("rk45")
-    assert rk45.stalled and rk45.status in (Status.WALL_TIME, Status.MAX_STEPS)
+    assert rk45.stalled and rk45.status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS)
     assert rk45.chattering
     assert rk45.final_error == math.inf
     assert not quick_report.row("moreau").chattering
@@ -134,7 +136,7 @@ def test_curves_and_speedup_are_consistent(quick_report: PrecisionReport) -> Non
         assert np.all(np.diff(curve.wall_time) >= 0)
     speedup = exact_speedup(quick_report, error=1e-2)
     accurate = [row for row in quick_report.rows
-                if row.method != "exact" and row.status is Status.SUCCESS and row.max_error <= 1e-2]
+                if row.method != "exact" and row.status is SimulationStatus.SUCCESS and row.max_error <= 1e-2]
     fastest = min(accurate, key=lambda row: row.wall_time)
     assert speedup.reference is fastest
     assert speedup.ratio == pytest.approx(fastest.wall_time / speedup.exact.wall_time, rel=1e-15)
@@ -171,17 +173,13 @@ def test_timing_runs_repeats_round_robin_from_scratch(monkeypatch) -> None:
     # The call log of the timing loop, with simulate replaced by an instant fake: each
     # setting runs once (+ one warm call when it succeeded), then `repeats` rounds visit the
     # successful settings in order, each with its own batch size; a failed run is never
-    # repeated, and every call starts with the plant's derived caches empty.
-    import itertools
-
-    import toolkit.precision as precision
-
+    # repeated, and every call starts with the exact method's cache of the plant empty.
     plant = carousel_startup_plant(seed=1)
     log: list[tuple[str, int]] = []
 
     def fake_simulate(plant_, t_end, *, v0, method, t_eval, budget, **options):
-        log.append((method, len(plant_._derived)))
-        plant_.derived("fake")["filled"] = True          # what a warm cache would keep
+        log.append((method, len(_LANDSCAPES.get(plant_, {}))))
+        _LANDSCAPES.setdefault(plant_, {})[b"fake"] = True   # what a warm cache would keep
         return type("Result", (), {"success": method != "rk45"})()
 
     monkeypatch.setattr(precision, "simulate", fake_simulate)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
 from toolkit.model import Plant
-from toolkit.simulation import Status, simulate, simulate_batch
+from toolkit.simulation import SimulationStatus, simulate, simulate_batch
 
 RTOL = 1e-12      # the target: each scene equal to the single-run result to 1e-12
 
@@ -63,7 +64,7 @@ def test_even_sets_stop_at_the_first_band_edge():
     batch = simulate_batch(speeds, None, 1.0, 10.0, v0=[0.0, 0.0])
     # From rest: below the first band [0.2, 0.3] -> 0.2; above the second [-0.3, -0.2] -> -0.2.
     np.testing.assert_array_equal(batch.final_speeds, [0.2, -0.2])
-    assert batch.stuck.all() and batch.status is Status.SUCCESS
+    assert batch.stuck.all() and batch.status is SimulationStatus.SUCCESS
 
 
 def test_docstring_example():
@@ -96,8 +97,6 @@ def test_result_is_read_only():
 
 
 def test_to_dict_is_json_able():
-    import json
-
     result = simulate_batch([[-1.0, 0.5, 2.0]], None, 1.0, 5.0)
     summary = json.loads(json.dumps(result.to_dict()))
     assert summary["final_speeds"] == [0.5] and summary["n_events"] == [1]

@@ -7,6 +7,8 @@ the closed forms involve a handful of operations, so rounding is ~1e-15.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 
 import numpy as np
@@ -18,7 +20,10 @@ from scipy import integrate, optimize, special
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError, ParameterTypeError
 from toolkit.model import Motors, PiecewiseConstant, Plant
-from toolkit.simulation import METHODS, Budget, Event, SimulationResult, Status, simulate
+from toolkit.simulation import (METHODS, Budget, Event, SimulationResult, SimulationStatus,
+                                simulate)
+from toolkit.simulation._exact import (_LANDSCAPES, _CoulombLandscape, _EventFunctions,
+                                       _first_root, _reach_time, _scalar_expm1_ratio)
 
 RTOL = 1e-12      # the issue's precision target for the exact method
 
@@ -63,13 +68,13 @@ def test_budget_event_and_result_validation():
         Event(0.0, "crss", 1, 0.0)
     with pytest.raises(ParameterError):
         SimulationResult("x", "", [0.0, 1.0], [0.0], np.zeros((2, 1)), [0.0, 0.0], (),
-                         Status.SUCCESS, "", 0, 0, 0, 0.0)
+                         SimulationStatus.SUCCESS, "", 0, 0, 0, 0.0)
     result = SimulationResult("x", "", [0.0, 1.0], [0.0, 2.0], np.zeros((2, 1)), [2.0, 2.0],
-                              (), Status.SUCCESS, "", 0, 0, 1, 0.0)
+                              (), SimulationStatus.SUCCESS, "", 0, 0, 1, 0.0)
     # No dense output: linear interpolation between samples (exact for this line).
     np.testing.assert_allclose(result.speed_at([0.25, 0.5]), [0.5, 1.0], rtol=0, atol=0)
     assert result.success and not result.V.flags.writeable
-    assert Status.ZENO.value.startswith("stopped") and Status.SUCCESS.value.startswith("finished")
+    assert SimulationStatus.ZENO.value.startswith("stopped") and SimulationStatus.SUCCESS.value.startswith("finished")
 
 
 def test_t_eval_gives_exactly_those_times():
@@ -390,7 +395,7 @@ def test_zeno_guard_returns_zeno_status():
     rows = np.where((np.arange(20_001) % 2)[:, None] == 0, [[0.0, 1.0, 2.0]], [[0.0, -1.0, 2.0]])
     plant = Plant(ContactSet([0.0, 1.0, 2.0]), 1.0, commands=PiecewiseConstant(times, rows))
     result = simulate(plant, 1.0, budget=Budget(max_event_rate=1e6))
-    assert result.status is Status.ZENO and not result.success
+    assert result.status is SimulationStatus.ZENO and not result.success
     assert "Zeno" in result.message and result.t_final < 3e-3
     assert np.isnan(result.speed_at(0.5))              # nothing is claimed past the stop
 
@@ -399,9 +404,9 @@ def test_step_and_wall_time_budgets():
     speeds = np.linspace(-1.0, 1.0, 2001)
     plant = Plant(ContactSet(speeds), 1.0)
     steps = simulate(plant, 100.0, v0=-2.0, budget=Budget(max_steps=50))
-    assert steps.status is Status.MAX_STEPS and steps.n_steps <= 51
+    assert steps.status is SimulationStatus.MAX_STEPS and steps.n_steps <= 51
     wall = simulate(plant, 100.0, v0=-2.0, budget=Budget(wall_time=1e-9))
-    assert wall.status is Status.WALL_TIME
+    assert wall.status is SimulationStatus.WALL_TIME
     assert np.all(np.isfinite(wall.V))
 
 
@@ -461,12 +466,12 @@ def test_random_dynamic_scenes_finish_finite(seed):
 def test_repeated_runs_reuse_the_plant_cache_without_changing_results():
     plant = Plant(ContactSet([0.3, -0.2, 0.1, 0.25, -0.05]), 0.4, damping=0.05)
     first = simulate(plant, 2.0)
-    assert plant.derived("exact landscapes")             # the sorted landscape is kept
+    assert _LANDSCAPES.get(plant)                        # the sorted landscape is kept
     second = simulate(plant, 2.0)
     np.testing.assert_array_equal(first.V, second.V)
     assert first.events == second.events
     other = Plant(ContactSet([0.3, -0.2, 0.1]), 0.4)
-    assert not other.derived("exact landscapes")         # each plant has its own cache
+    assert not _LANDSCAPES.get(other)                    # each plant has its own cache
 
 
 def test_coincident_moving_contacts_act_as_one():
@@ -516,7 +521,7 @@ def test_contacts_a_few_ulp_apart_are_simulated():
     grid = np.linspace(0.0, 0.3, 3001)
     result = simulate(plant, 0.3, t_eval=grid)
     second = simulate(rounded, 0.3, t_eval=grid)
-    assert result.status is Status.SUCCESS and second.status is Status.SUCCESS
+    assert result.status is SimulationStatus.SUCCESS and second.status is SimulationStatus.SUCCESS
     assert all(math.isfinite(e.time) for e in result.events)
     shift = float(np.max(np.abs(values - np.round(values, 9))))
     # atol: the shift bound plus rounding of the two closed forms (|V| <= 0.35, ~1e-15).
@@ -524,8 +529,6 @@ def test_contacts_a_few_ulp_apart_are_simulated():
 
 
 def test_to_dict_is_json_able():
-    import json
-
     result = simulate(Plant(ContactSet([-1.0, 0.5, 2.0]), 1.0), 2.0)
     summary = json.loads(json.dumps(result.to_dict(samples=True)))
     assert summary["status"] == "SUCCESS" and summary["V_final"] == 0.5
@@ -536,8 +539,6 @@ def test_to_dict_is_json_able():
 # -- fast paths: the result built without re-validation, the landscape read from ContactSet ----
 def _revalidated(result: SimulationResult) -> SimulationResult:
     """The same fields through the public, validating constructor."""
-    import dataclasses
-
     return SimulationResult(**{f.name: getattr(result, f.name)
                                for f in dataclasses.fields(SimulationResult)})
 
@@ -604,8 +605,6 @@ def test_coulomb_landscape_is_the_contact_set_staircase(pairs):
     # forces are ContactSet.force between the levels, bit for bit, and its stiction is the
     # half-width of ContactSet.force_bounds at each level (magnitudes are halves and integers,
     # so every sum is exact in binary; 1e-15 only allows for the ulp of a different order).
-    from toolkit.simulation._exact import _CoulombLandscape
-
     contacts = ContactSet([v for v, _ in pairs], [f for _, f in pairs])
     land = _CoulombLandscape(contacts)
     levels = contacts.staircase().levels
@@ -629,8 +628,8 @@ def test_overflow_over_the_horizon_is_failed_not_success():
     # a double. The run must say FAILED, never SUCCESS with V = inf.
     plant = Plant(ContactSet([0.1]), mass=1.0, external_force=1e300)
     result = simulate(plant, 1e10)
-    assert result.status is Status.FAILED
-    assert result.message.startswith(Status.FAILED.value)
+    assert result.status is SimulationStatus.FAILED
+    assert result.message.startswith(SimulationStatus.FAILED.value)
     assert "floating-point range" in result.message
     assert np.all(np.isfinite(result.V)) and np.all(np.isfinite(result.t))   # the finite part
     # Kept: the segments that start finite; before the crossing at 1e-301 s, V = 1e300 t.
@@ -639,13 +638,11 @@ def test_overflow_over_the_horizon_is_failed_not_success():
     # The same plant over 1 s stays finite: V(1) = 1e300 exactly (constant acceleration,
     # the contact force 1 N is rounding next to 1e300).
     short = simulate(plant, 1.0)
-    assert short.status is Status.SUCCESS
+    assert short.status is SimulationStatus.SUCCESS
     assert short.V[-1] == pytest.approx(1e300, rel=RTOL, abs=0)
 
 
 def test_reach_time_of_non_finite_targets_and_rates_is_never():
-    from toolkit.simulation._exact import _reach_time
-
     inf = math.inf
     assert _reach_time(0.0, inf, 0.0, 0.1) == inf          # infinite rate
     assert _reach_time(0.0, 1.0, 0.0, inf) == inf          # infinite target
@@ -722,7 +719,7 @@ def test_speed_at_refuses_times_outside_the_simulated_span():
             result.speed_at(outside)
     # Without a dense output: the samples' span [t[0], t_final], linear interpolation inside.
     plain = SimulationResult("x", "y", [0.5, 1.0], [1.0, 2.0], np.zeros((2, 1)), [0.0, 0.0],
-                             (), Status.SUCCESS, "ok", 0, 0, 1, 0.0)
+                             (), SimulationStatus.SUCCESS, "ok", 0, 0, 1, 0.0)
     assert plain.speed_at(0.75) == pytest.approx(1.5, rel=1e-15, abs=0)
     with pytest.raises(ParameterError, match=r"\[0.5, 1\] s"):
         plain.speed_at(0.25)
@@ -747,7 +744,7 @@ def test_extreme_motor_scales_run_without_warnings(motors, t_end, damping):
     plant = Plant(ContactSet([0.0, 0.2, 0.4]), 1.0, damping=damping, motors=motors,
                   commands=commands)
     result = simulate(plant, t_end)
-    assert result.status is Status.SUCCESS
+    assert result.status is SimulationStatus.SUCCESS
     assert np.all(np.isfinite(result.V)) and np.all(np.isfinite(result.t))
     expected = 0.2
     if motors.compliance > 0:
@@ -781,7 +778,7 @@ def test_compliant_lag_tends_to_instantaneous_motors(lag, compliance, damping):
     for seed in (6, 7, 9, 10):
         runs = [simulate(_compliant_schedule_plant(seed, tau, compliance, damping), 1.5,
                          t_eval=times) for tau in (lag, 0.0)]
-        assert all(run.status is Status.SUCCESS for run in runs)
+        assert all(run.status is SimulationStatus.SUCCESS for run in runs)
         np.testing.assert_allclose(runs[0].V, runs[1].V, rtol=1e-12, atol=1e-15)
 
 
@@ -796,26 +793,24 @@ def test_compliant_lag_too_small_for_doubles_is_refused():
 @pytest.mark.parametrize("mu", [1.0, 1e3, 1e10, 1e100, 1e300])
 @pytest.mark.parametrize("gamma", [0.0, 0.027])
 def test_event_roots_are_located_at_every_motor_rate(mu, gamma):
-    # g(s) = 0.1 + gamma em(20, s) - 0.2 mu em(mu, s): a saturation event function with a body
-    # term (rate lam = 20 /s) and a motor term (rate mu = 1 / lag); its root lies near
-    # ln 2 / mu, down to 7e-301 s, inside a 1.5 s horizon. Regression: with mu = 1e300 the
-    # inflection overflowed and bisection by widths stopped near 1e-24 s. References:
-    # gamma = 0, the closed form em(mu, s) = 1 / (2 mu), s = ln 2 / mu; gamma > 0, a second
-    # method, brentq on the rescaled time x = mu s (a bracket [0, 50] on the root's scale).
+    # g(s) = 0.1 + gamma expm1_ratio(20, s) - 0.2 mu expm1_ratio(mu, s): a saturation event
+    # function with a body term (rate lam = 20 /s) and a motor term (rate mu = 1 / lag); its
+    # root lies near ln 2 / mu, down to 7e-301 s, inside a 1.5 s horizon. Regression: with
+    # mu = 1e300 the inflection overflowed and bisection by widths stopped near 1e-24 s.
+    # References: gamma = 0, the closed form expm1_ratio(mu, s) = 1 / (2 mu), s = ln 2 / mu;
+    # gamma > 0, a second method, brentq on the rescaled time x = mu s (a bracket [0, 50] on the root's scale).
     # rtol 16 eps: the root finder's "a few ulp" (brentq's rtol 4 eps) plus the rounding of g
     # near its root (|g| rounds at ~eps 0.1 where |g'| s ~ 0.1: a few eps of s).
-    from toolkit.simulation._exact import _em1, _first_root, _Fns
-
     eps = float(np.finfo(float).eps)
     lam, delta = 20.0, -0.2 * mu
-    fns = _Fns(np.array([0.3, 0.1]), np.zeros(2), np.array([0.0, gamma]),
+    fns = _EventFunctions(np.array([0.3, 0.1]), np.zeros(2), np.array([0.0, gamma]),
                np.array([0.0, delta]), lam, mu)      # function 0 never changes sign
     s, i = _first_root(fns, 1.5)
     if gamma == 0.0:
         expected = math.log(2.0) / mu
     else:
         def scaled(x: float) -> float:
-            return 0.1 + gamma * _em1(lam, x / mu) + (delta / mu) * -math.expm1(-x)
+            return 0.1 + gamma * _scalar_expm1_ratio(lam, x / mu) + (delta / mu) * -math.expm1(-x)
 
         expected = optimize.brentq(scaled, 0.0, 50.0, xtol=1e-300, rtol=4 * eps) / mu
         # The inflection is where the two terms of g'' balance (computed without overflow).

@@ -6,13 +6,17 @@ import time
 
 import numpy as np
 import pytest
+import scipy.integrate
+from scipy.optimize import brentq
 
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
 from toolkit.model import Motors, PiecewiseConstant, Plant
-from toolkit.simulation import Budget, Status, simulate
+from toolkit.precision import rational_trajectory
+from toolkit.simulation import Budget, SimulationStatus, simulate
 from toolkit.simulation._moreau import _compliant_step, _staircase, moreau_step_staircase
-from toolkit.simulation._reference import Meter
+from toolkit.simulation._reference import BudgetExceeded, Meter
+from toolkit.simulation._scipy import _solver_call
 
 SCIPY = ("rk45", "lsoda", "radau", "bdf")
 EPS = np.finfo(float).eps
@@ -51,7 +55,7 @@ def test_constant_deceleration(method: str) -> None:
     if method == "moreau":
         options = {"step": 0.01}
     result = simulate(plant, 0.5, v0=0.5, method=method, t_eval=t_eval, **options)
-    assert result.status is Status.SUCCESS
+    assert result.status is SimulationStatus.SUCCESS
     np.testing.assert_array_equal(result.t, t_eval)
     np.testing.assert_allclose(result.V, 0.5 - 2.0 * t_eval, rtol=0,
                                atol=(result.n_steps + 5) * EPS)
@@ -106,8 +110,6 @@ def test_moreau_first_order_on_startup_events() -> None:
     # Startup through several contact speeds: the error of each crossing time is below one
     # step, so the max |V error| against the rational exact solution is <= h * F_tot / m
     # (the speed change over one step) for every h.
-    from toolkit.precision import rational_trajectory
-
     plant = Plant(ContactSet([-0.3, -0.1, 0.05, 0.2, 0.3], np.full(5, 0.4)), mass=1.0)
     for h in (1e-2, 1e-3, 1e-4):
         result = simulate(plant, 2.0, v0=-0.35, method="moreau", step=h)
@@ -163,8 +165,6 @@ def test_moving_staircase_matches_contact_set(rng: np.random.Generator) -> None:
 @pytest.mark.parametrize("n", [5, 70])      # 10 kinks (all evaluated) / 140 (binary search)
 def test_compliant_step_solves_the_equation(n: int, rng: np.random.Generator) -> None:
     # Second method: scipy's brentq on a W - b - F(W) (strictly increasing, continuous).
-    from scipy.optimize import brentq
-
     plant = Plant(ContactSet(rng.uniform(-0.3, 0.3, n), rng.uniform(0.1, 1.0, n)), mass=1.0,
                   motors=Motors(compliance=0.02))
     speeds = plant.contacts.speeds
@@ -238,7 +238,7 @@ def test_sign_rk45_returns_budget_status_instead_of_hanging(rng: np.random.Gener
     start = time.perf_counter()
     result = simulate(plant, 5.0, method="rk45", friction="sign", budget=Budget(wall_time=0.5))
     elapsed = time.perf_counter() - start
-    assert result.status in (Status.WALL_TIME, Status.MAX_STEPS)
+    assert result.status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS)
     assert result.t_final < 5.0
     assert elapsed < 0.5 + 0.5                           # budget + one step + result assembly
     assert np.all(np.isfinite(result.V))
@@ -248,26 +248,26 @@ def test_sign_rk45_returns_budget_status_instead_of_hanging(rng: np.random.Gener
 def test_step_budget_counts_evaluations(rng: np.random.Generator) -> None:
     plant = _random_plant(rng)
     result = simulate(plant, 5.0, method="lsoda", friction="sign", budget=Budget(max_steps=2000))
-    assert result.status is Status.MAX_STEPS
+    assert result.status is SimulationStatus.MAX_STEPS
     assert result.n_evaluations <= 2001                  # the refused call is counted, not run
     moreau = simulate(plant, 5.0, method="moreau", step=1e-3, budget=Budget(max_steps=100))
-    assert moreau.status is Status.MAX_STEPS
+    assert moreau.status is SimulationStatus.MAX_STEPS
     assert moreau.n_steps <= 101 and moreau.t_final == pytest.approx(0.1, abs=1e-12)
 
 
 def test_casadi_step_budget(rng: np.random.Generator) -> None:
     plant = _random_plant(rng)
     result = simulate(plant, 5.0, method="casadi", epsilon=1e-8, budget=Budget(max_steps=3))
-    assert result.status is Status.MAX_STEPS
+    assert result.status is SimulationStatus.MAX_STEPS
     assert result.t.size == 1                            # casadi returns no partial trajectory
 
 
 # -- casadi against the plant's own friction laws ----------------------------------------------
 @pytest.mark.parametrize("friction", ["tanh", "stribeck"])
 def test_casadi_right_hand_side_is_the_plant_law(friction: str, rng: np.random.Generator) -> None:
-    import casadi as ca
+    import casadi as ca          # (here: only the casadi tests load casadi)
 
-    from toolkit.simulation._casadi import casadi_right_hand_side
+    from toolkit.simulation._casadi import casadi_right_hand_side   # (imports casadi)
 
     plant = Plant(ContactSet(rng.uniform(-1, 1, 6), rng.uniform(0.1, 1, 6)), mass=2.0,
                   damping=0.3)
@@ -357,10 +357,10 @@ def test_overflowing_plant_fails_with_a_status(method: str, options: dict) -> No
     if method == "lsoda":
         # LSODA shrinks its step until t + h == t and never reaches the overflow: it stalls,
         # and the budget stops it with its own status, within the budget.
-        assert result.status in (Status.FAILED, Status.WALL_TIME), result.message
+        assert result.status in (SimulationStatus.FAILED, SimulationStatus.WALL_TIME), result.message
         assert result.wall_time <= 1.0 + 0.5
     else:
-        assert result.status is Status.FAILED, result.message
+        assert result.status is SimulationStatus.FAILED, result.message
         assert result.message.startswith(result.status.value)
     assert np.all(np.isfinite(result.V))                  # only the finite part is returned
 
@@ -375,25 +375,17 @@ def test_plant_whose_acceleration_overflows_is_refused() -> None:
                                    np.linalg.LinAlgError("Singular matrix"),
                                    ZeroDivisionError("float division by zero")])
 def test_scipy_solver_errors_map_to_failed(error: Exception) -> None:
-    from toolkit.simulation._reference import BudgetExceeded
-    from toolkit.simulation._scipy import _solver_call
-
     def raising() -> None:
         raise error
 
     with pytest.raises(BudgetExceeded) as stop:
         _solver_call("radau", raising)
-    assert stop.value.status is Status.FAILED
+    assert stop.value.status is SimulationStatus.FAILED
     assert stop.value.detail == f"Radau: {error}"
 
 
 def test_scipy_own_value_error_maps_to_failed() -> None:
     # A real scipy refusal (non-finite initial state) goes through the same mapping.
-    import scipy.integrate
-
-    from toolkit.simulation._reference import BudgetExceeded
-    from toolkit.simulation._scipy import _solver_call
-
     with pytest.raises(BudgetExceeded, match="must be finite") as stop:
         _solver_call("bdf", scipy.integrate.BDF, lambda t, y: y, 0.0, np.array([np.nan]), 1.0)
-    assert stop.value.status is Status.FAILED
+    assert stop.value.status is SimulationStatus.FAILED

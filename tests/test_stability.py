@@ -9,7 +9,7 @@ import pytest
 
 from toolkit.model import ContactSet
 from toolkit.model import Motors, PiecewiseConstant, Plant
-from toolkit.simulation import Status, simulate
+from toolkit.simulation import SimulationStatus, simulate
 from toolkit.stability import StabilityReport, _case, _mirror, _Spec, stability_suite
 
 
@@ -44,7 +44,7 @@ def test_no_case_is_stopped_by_its_budget(report: StabilityReport) -> None:
     # is SUCCESS, none of the statuses a budget sets. (No overall wall-clock assertion: the
     # per-case budgets already bound the suite, and machine load must not fail the test.)
     for case in report.cases:
-        assert case.status == Status.SUCCESS.name, case
+        assert case.status == SimulationStatus.SUCCESS.name, case
 
 
 def test_to_dict_is_json(report: StabilityReport) -> None:

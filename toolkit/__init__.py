@@ -30,9 +30,10 @@ from .errors import (
 from .plots import plot_force_curve, plot_precision, plot_schedule, plot_simulation
 from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
-from .precision import PrecisionReport, PrecisionRow, carousel_startup_plant, precision_report
-from .simulation import BatchResult, Budget, Event, SimulationResult, simulate, simulate_batch
-from .simulation import Status as SimulationStatus
+from .model.carousel import carousel_startup_plant
+from .precision import PrecisionReport, PrecisionRow, precision_report
+from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, SimulationResult,
+                         SimulationStatus, advance, simulate, simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
 
@@ -43,7 +44,7 @@ __all__ = [
     "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "force_curve",
     # plant and simulation
     "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "SimulationStatus", "Budget", "Event",
-    "simulate_batch", "BatchResult",
+    "simulate_batch", "BatchResult", "advance", "ExactState", "ExactStep",
     # work-precision report and stability suite
     "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant",
     "stability_suite", "StabilityReport", "StabilityCase",

@@ -6,7 +6,8 @@ its error against the exact event-driven solution and its run time, and flags th
 modes that make plain integrators unfit for Coulomb contacts (see :class:`PrecisionRow` for the
 precise definitions). :func:`work_precision_curves` gives the data of the log-log plot (error
 against run time); :func:`exact_speedup` the speed ratio the acceptance criterion of issue 3
-asks for. :func:`carousel_startup_plant` is the reference scene.
+asks for. The reference scene, :func:`toolkit.model.carousel.carousel_startup_plant`, lives
+with the model.
 
 The exact method itself is checked against an independent solution computed in rational
 arithmetic (:func:`rational_trajectory`), so its error is measured, not assumed zero.
@@ -28,14 +29,15 @@ from typing import Any
 import numpy as np
 
 from ._validation import as_float, as_int
-from .model import ContactSet, PiecewiseConstant, Plant
+from .model import PiecewiseConstant, Plant
 from .errors import ParameterError, ParameterTypeError, SolverError, parameter_message
-from .simulation import METHODS, Budget, SimulationResult, Status, simulate
+from .simulation import METHODS, Budget, SimulationResult, SimulationStatus, simulate
+from .simulation._exact import clear_cache
 
 __all__ = [
     "MethodSetting", "PrecisionRow", "PrecisionReport", "Speedup", "WorkPrecisionCurve",
     "precision_report", "default_settings", "work_precision_curves", "exact_speedup",
-    "carousel_startup_plant", "rational_trajectory",
+    "rational_trajectory",
     "CHATTER_MARGIN", "STEP_COLLAPSE_RATIO", "STEP_COLLAPSE_RUN", "CREEP_TOLERANCE",
     "MOTION_FLOOR", "EVALUATION_POINTS", "evaluation_times",
 ]
@@ -60,44 +62,8 @@ _MIN_REPEAT_TIME = 0.02
 _WARM_RUN = 0.2
 #: Uniform times on [0, t_end] of the common evaluation grid (with the exact event times).
 EVALUATION_POINTS = 1001
-#: Reference carousel: F_tot / m (m/s^2), from dT = 0.35 s for 2 v_max = 0.7 m/s (PHYSICS.md 4).
-CAROUSEL_ACCELERATION = 2.0
-#: Reference carousel: contact speed limit v_max (m/s), PHYSICS.md section 3.
-CAROUSEL_SPEED_LIMIT = 0.35
-
 _BUDGET_STALLING = Budget(wall_time=1.0, max_steps=300_000)
 _BUDGET_SMOOTH = Budget(wall_time=3.0, max_steps=2_000_000)
-
-
-# -- scene ------------------------------------------------------------------------------------
-def carousel_startup_plant(seed: int = 0, *, n: int = 11, mass: float = 1.0) -> Plant:
-    """The carousel startup scene of issue 3: ``n`` random speeds, equal loads, from rest.
-
-    Speeds are uniform in ``[-v_max, v_max]`` with ``v_max = 0.35`` m/s; the contacts carry
-    equal magnitudes with ``F_tot / m = 2`` m/s^2 (the paper's transition time, PHYSICS.md
-    section 4). Without drag or external force the motion depends on ``F_tot / m`` only, so
-    ``mass`` just sets the units of the forces.
-
-    Parameters
-    ----------
-    seed : int
-        Seed of ``numpy.random.default_rng``.
-    n : int
-        Number of contacts, ``>= 1``.
-    mass : float, kg
-        Moving inertia, ``> 0``.
-
-    Returns
-    -------
-    Plant
-    """
-    seed = as_int(seed, "seed", "carousel_startup_plant", low=0)
-    n = as_int(n, "n", "carousel_startup_plant", low=1)
-    mass = as_float(mass, "mass", "carousel_startup_plant", low=0.0, low_open=True)
-    rng = np.random.default_rng(seed)
-    speeds = rng.uniform(-CAROUSEL_SPEED_LIMIT, CAROUSEL_SPEED_LIMIT, n)
-    forces = np.full(n, CAROUSEL_ACCELERATION * mass / n)
-    return Plant(ContactSet(speeds, forces), mass=mass)
 
 
 # -- independent exact reference -------------------------------------------------------------
@@ -272,7 +238,7 @@ class PrecisionRow:
         ``|V(t_end) - V_exact(t_end)|``; ``inf`` when the run stopped before ``t_end``.
     wall_time : float, s
         Minimum over the repeats of the run time of one call of ``simulate`` from scratch
-        (the plant's derived caches emptied before each call): after a first and a second
+        (the exact method's cache for the plant emptied before each call): after a first and a second
         (warm) call, each repeat times back-to-back calls for at least 20 ms
         with :class:`timeit.Timer` (garbage collection off while timing, as ``timeit`` does)
         and divides; the repeats of all settings run round-robin. The minimum, as ``timeit``
@@ -281,7 +247,7 @@ class PrecisionRow:
         the others run once each.
     n_steps, n_evaluations, n_events : int
         From the result.
-    status : Status
+    status : SimulationStatus
     message : str
     chattering : bool
         The body speed reverses direction (sign change between successive increments larger
@@ -318,7 +284,7 @@ class PrecisionRow:
     n_steps: int
     n_evaluations: int
     n_events: int
-    status: Status
+    status: SimulationStatus
     message: str
     chattering: bool
     step_collapse: bool | None
@@ -495,8 +461,8 @@ def _timed(plant: Plant, t_end: float, v0: float, settings: Sequence[MethodSetti
     repeats are spread over the whole report: a burst of load from other processes slows
     one repeat of several settings, not every repeat of one, and the minimum discards it.
     Every call asks for the report's common times ``t_eval``, so the measured time includes
-    producing those outputs, and starts from scratch: the plant's derived caches (the exact
-    method's force landscapes) are emptied first, as casadi rebuilds its integrator.
+    producing those outputs, and starts from scratch: the exact method's cached force
+    landscapes of the plant are emptied first (:func:`toolkit.simulation._exact.clear_cache`), as casadi rebuilds its integrator.
 
     Returns
     -------
@@ -509,7 +475,7 @@ def _timed(plant: Plant, t_end: float, v0: float, settings: Sequence[MethodSetti
                                 t_eval=t_eval, budget=setting.budget, **setting.kwargs)
 
         def call(run: Callable[[], SimulationResult] = run) -> SimulationResult:
-            plant.clear_derived()
+            clear_cache(plant)
             return run()
 
         start = time.perf_counter()
@@ -559,7 +525,7 @@ def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: P
     else:
         reversals = _reversals(result.V)
         chattering = reversals > _reversals(reference) + CHATTER_MARGIN
-    stalled = result.status in (Status.WALL_TIME, Status.MAX_STEPS, Status.ZENO)
+    stalled = result.status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS, SimulationStatus.ZENO)
     return PrecisionRow(
         method=result.method, setting=result.setting, max_error=max_error,
         final_error=final_error, wall_time=float(wall), n_steps=result.n_steps,
@@ -642,7 +608,7 @@ def exact_speedup(report: PrecisionReport, error: float = 1e-6) -> Speedup:
     error = as_float(error, "error", "exact_speedup", low=0.0, low_open=True)
     exact = report.row("exact")
     accurate = [row for row in report.rows if row.method != "exact"
-                and row.status is Status.SUCCESS and row.max_error <= error]
+                and row.status is SimulationStatus.SUCCESS and row.max_error <= error]
     if not accurate:
         return Speedup(math.nan, error, exact, None)
     fastest = min(accurate, key=lambda row: row.wall_time)
@@ -663,7 +629,7 @@ def work_precision_curves(report: PrecisionReport) -> tuple[WorkPrecisionCurve, 
             continue
         arrays = [np.array([row.wall_time for row in rows]),
                   np.array([row.max_error for row in rows]),
-                  np.array([row.status is Status.SUCCESS for row in rows])]
+                  np.array([row.status is SimulationStatus.SUCCESS for row in rows])]
         for array in arrays:
             array.setflags(write=False)
         curves.append(WorkPrecisionCurve(method, tuple(row.setting for row in rows), *arrays))

@@ -68,7 +68,7 @@ class StabilityCase:
     message : str
         The run's status message.
     status : str
-        Name of the run's :class:`~toolkit.simulation.Status` (``"SUCCESS"`` when it finished;
+        Name of the run's :class:`~toolkit.simulation.SimulationStatus` (``"SUCCESS"`` when it finished;
         ``"WALL_TIME"``, ``"MAX_STEPS"`` or ``"ZENO"`` when its budget stopped it). For a
         mirror check, that of the first run that did not succeed.
     """

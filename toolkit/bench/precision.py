@@ -14,7 +14,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from toolkit.precision import carousel_startup_plant, default_settings, exact_speedup, precision_report
+from toolkit.model.carousel import carousel_startup_plant
+from toolkit.precision import default_settings, exact_speedup, precision_report
 
 
 def _format(value: float) -> str:

@@ -215,6 +215,22 @@ class MotorPiece:
         pending = self.ramp_end[ramping]
         return v0, q, e, float(pending.min()) if pending.size else math.inf
 
+    def displacement(self, s: float) -> np.ndarray:
+        """Distance each contact travels over the offsets ``[0, s]`` from ``a``: the exact
+        integral of :meth:`speeds`, m, shape (n,).
+
+        ``start x + ramp x^2 / 2`` over the ramp (``x = min(s, ramp_end)``), then
+        ``u y + (after - u) tau (1 - exp(-y / tau))`` over the remaining ``y = s - x``
+        (``after y`` when ``tau = 0``).
+        """
+        on_ramp = np.minimum(s, self.ramp_end)
+        rest = s - on_ramp
+        distance = self.start * on_ramp + 0.5 * self.ramp * on_ramp * on_ramp
+        if self.tau > 0:
+            return distance + (self.u * rest
+                               + (self.after - self.u) * (self.tau * -np.expm1(-rest / self.tau)))
+        return distance + self.after * rest
+
 
 def implicit_step(motors: Motors, speeds: np.ndarray, command: np.ndarray, h: float) -> np.ndarray:
     """One backward-Euler step of :func:`motor_rate` over ``h`` seconds, solved exactly.

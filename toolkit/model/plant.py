@@ -68,7 +68,6 @@ class Plant:
     motors: Motors | None = None
     commands: PiecewiseConstant | None = None
     _limits: tuple[float, float] = field(init=False, repr=False)
-    _derived: dict[str, dict[Any, Any]] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.contacts, ContactSet):
@@ -99,7 +98,6 @@ class Plant:
         limits = self.motors.speed_limits if self.motors is not None else (-np.inf, np.inf)
         object.__setattr__(self, "_limits", limits)
         self._check_scales()
-        object.__setattr__(self, "_derived", {})
 
     def _check_scales(self) -> None:
         """Refuse parameters whose rates overflow or whose compliance is below rounding.
@@ -145,23 +143,6 @@ class Plant:
                         "motors", "Plant", f"have a lag tau with 16 n 2 max|v| / (tau k) finite "
                         f"(n = {self.n}, max|v| = {scale:g} m/s, k = {k:g} (m/s)/N); use lag=0 "
                         f"for instantaneous motors", lag))
-
-    def derived(self, name: str) -> dict[Any, Any]:
-        """A named cache of quantities derived from this (immutable) plant.
-
-        Solvers store what depends only on the plant here (e.g. the sorted force landscape
-        of each command), so repeated simulations of one plant skip recomputing it. The
-        plant's own fields never change; only this private cache grows.
-        """
-        cache = self._derived.get(name)
-        if cache is None:
-            cache = self._derived[name] = {}
-        return cache
-
-    def clear_derived(self) -> None:
-        """Empty the caches of :meth:`derived`: the next run pays what a new plant would
-        (benchmarks time runs from scratch this way)."""
-        self._derived.clear()
 
     # -- properties ---------------------------------------------------------------------------
     @property

@@ -14,6 +14,10 @@ Methods (``method=``):
 
 :func:`simulate_batch` runs many constant-speed startup scenes at once (vectorized exact
 method) and returns their final speeds.
+
+:func:`advance` continues an exact simulation from an :class:`ExactState` over one sample
+period under a held command (the exact engine, no restart cost), with the exact body and
+contact displacements over the step: the plant of a sampled closed loop.
 """
 
 from __future__ import annotations
@@ -28,10 +32,11 @@ from .._validation import as_float, as_float_array, check_option, suggestion
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant
 from ._batch import BatchResult, simulate_batch
-from ._result import Budget, Event, SimulationResult, Status
+from ._result import Budget, Event, SimulationResult, SimulationStatus
+from ._stepper import ExactState, ExactStep, advance
 
-__all__ = ["simulate", "simulate_batch", "BatchResult", "Status", "Budget", "Event",
-           "SimulationResult", "METHODS"]
+__all__ = ["simulate", "simulate_batch", "BatchResult", "SimulationStatus", "Budget", "Event",
+           "SimulationResult", "METHODS", "advance", "ExactState", "ExactStep"]
 
 _SCIPY_OPTIONS = ("friction", "epsilon", "rtol", "atol")
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from .._validation import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, parameter_message
-from ._result import Status, status_message
+from ._result import SimulationStatus, status_message
 
 __all__ = ["BatchResult", "simulate_batch"]
 
@@ -37,7 +37,7 @@ class BatchResult:
         Events of each scene (crossings and sticks, counted as the exact method does).
     stuck : ndarray of shape (scenes,), bool
         True where the body ends stuck at a contact speed (sliding mode).
-    status : Status
+    status : SimulationStatus
     message : str
     wall_time : float, s
     """
@@ -45,7 +45,7 @@ class BatchResult:
     final_speeds: np.ndarray
     n_events: np.ndarray
     stuck: np.ndarray
-    status: Status
+    status: SimulationStatus
     message: str
     wall_time: float
 
@@ -58,7 +58,7 @@ class BatchResult:
     @property
     def success(self) -> bool:
         """True when every scene reached ``t_end``."""
-        return self.status is Status.SUCCESS
+        return self.status is SimulationStatus.SUCCESS
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able: ``final_speeds``, ``n_events``, ``stuck`` (lists), ``status`` (name),
@@ -214,7 +214,7 @@ def simulate_batch(speeds: Any, forces: Any, mass: Any, t_end: float, *, v0: Any
         at[go] = True
         down = go[~up[~finish]]
         j[down] = start[down, j[down] - 1]
-    status = Status.SUCCESS if not active.any() else Status.MAX_STEPS
+    status = SimulationStatus.SUCCESS if not active.any() else SimulationStatus.MAX_STEPS
     return BatchResult(V, events, stuck, status,
                        status_message(status, f"{S} scenes, {int(events.sum())} events"),
                        time.perf_counter() - started)

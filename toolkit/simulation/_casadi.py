@@ -2,9 +2,10 @@
 
 ``simulate(plant, t_end, method="casadi", integrator="cvodes" | "idas", friction=..., ...)``.
 
-The smoothed friction laws are those of :meth:`toolkit.model.Plant.contact_forces` written
-symbolically (``"tanh"`` and ``"stribeck"``; a compliant motor's saturated linear law when the
-plant has compliance). ``"sign"`` is refused: SUNDIALS' error control assumes a smooth
+The right-hand side is the plant's own :meth:`toolkit.model.Plant.rhs` evaluated over casadi
+symbols (the friction laws ``"tanh"`` and ``"stribeck"`` of :mod:`toolkit.model.friction`; a
+compliant motor's saturated linear law when the plant has compliance; the motor law of
+:mod:`toolkit.model.motors`). ``"sign"`` is refused: SUNDIALS' error control assumes a smooth
 right-hand side. The state is ``[V]`` or, with dynamic motors, ``[V, v_1, ..., v_n]``.
 
 One ``casadi.integrator`` is built over the whole output grid (the requested times, or 201
@@ -28,13 +29,14 @@ from __future__ import annotations
 
 from typing import Any
 
+import casadi as ca   # this module is loaded by casadi runs only (simulate imports it lazily)
 import numpy as np
 
 from .._validation import as_float, check_option
-from ..model import STRIBECK_PEAK, STRIBECK_SPEED, Plant
+from ..model import Plant
 from ._reference import (Meter, build_result, check_smoothing, external_forces, format_setting,
                          ideal_speeds)
-from ._result import Budget, SimulationResult, Status
+from ._result import Budget, SimulationResult, SimulationStatus
 
 __all__ = ["simulate_casadi", "CASADI_INTEGRATORS", "casadi_right_hand_side"]
 
@@ -46,49 +48,29 @@ _DEFAULT_SAMPLES = 201
 
 
 def casadi_right_hand_side(plant: Plant, friction: str, epsilon: float) -> tuple[Any, Any, Any]:
-    """The symbolic ODE of the smoothed plant.
+    """The symbolic ODE of the smoothed plant: :meth:`Plant.rhs` built over casadi.
+
+    Parameters
+    ----------
+    plant : Plant
+    friction : {"tanh", "stribeck"}
+    epsilon : float, m/s
+        Smoothing width, ``> 0``.
 
     Returns
     -------
     x : casadi.SX of shape (d, 1)
-        State ``[V]`` or ``[V, v_1..v_n]``.
+        State ``[V]`` or ``[V, v_1..v_n]``, m/s.
     u : casadi.SX of shape (n + 1, 1)
         Controls: the commanded speeds (m/s) and ``F_ext`` (N).
     ode : casadi.SX of shape (d, 1)
-        ``dx/dt``.
+        ``dx/dt``, m/s^2.
     """
-    import casadi as ca
-
     n = plant.n
-    dynamic = plant.dynamic_motors
-    x = ca.SX.sym("x", 1 + (n if dynamic else 0))
+    x = ca.SX.sym("x", 1 + (n if plant.dynamic_motors else 0))
     u = ca.SX.sym("u", n + 1)
-    V = x[0]
-    command, ext = u[:n], u[n]
-    speeds = x[1:] if dynamic else command
-    f = ca.DM(plant.contacts.forces)
-    slip = speeds - V
-    k = plant.compliance
-    if k > 0:
-        scale = np.where(plant.contacts.forces > 0, k * plant.contacts.forces, 1.0)
-        contact = f * ca.fmin(ca.fmax(slip / ca.DM(scale), -1.0), 1.0)
-    else:
-        contact = f * ca.tanh(slip / epsilon)
-        if friction == "stribeck":
-            contact = contact * (1.0 + (STRIBECK_PEAK - 1.0)
-                                 * ca.exp(-(slip / (STRIBECK_SPEED * epsilon)) ** 2))
-    dV = (ca.sum1(contact) + ext - plant.damping * V) / plant.mass
-    if not dynamic:
-        return x, u, dV
-    motors = plant.motors
-    gap = command - x[1:]
-    if motors.lag > 0:
-        rate = gap / motors.lag
-        if np.isfinite(motors.rate_limit):
-            rate = ca.fmin(ca.fmax(rate, -motors.rate_limit), motors.rate_limit)
-    else:
-        rate = motors.rate_limit * ca.sign(gap)
-    return x, u, ca.vertcat(dV, rate)
+    ode = plant.rhs(0.0, x, u[:n], external=u[n], friction=friction, epsilon=epsilon, xp=ca)
+    return x, u, ode
 
 
 def _output_grid(plant: Plant, t_end: float, t_eval: np.ndarray | None) -> np.ndarray:
@@ -123,8 +105,6 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     SimulationResult
         ``n_steps`` and ``n_evaluations`` from the integrator's statistics.
     """
-    import casadi as ca
-
     owner = "simulate_casadi"
     check_option(integrator, "integrator", owner, CASADI_INTEGRATORS)
     epsilon = check_smoothing(friction, epsilon, owner, ("tanh", "stribeck"))
@@ -140,7 +120,7 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     function = ca.integrator("contacts", integrator, {"x": x, "u": u, "ode": ode}, 0.0,
                              grid.tolist(), options)
     x0 = np.concatenate(([v0], plant.initial_speeds() if dynamic else []))
-    status, detail = Status.SUCCESS, ""
+    status, detail = SimulationStatus.SUCCESS, ""
     try:
         solution = function(x0=x0, u=controls)
         states = np.array(solution["xf"]).reshape(x0.size, grid.size).T
@@ -148,18 +128,18 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
         y_out = np.vstack((x0, states))
     except RuntimeError as error:
         too_much = "TOO_MUCH_WORK" in str(error) or "too_much_work" in str(error).lower()
-        status = Status.MAX_STEPS if too_much else Status.FAILED
+        status = SimulationStatus.MAX_STEPS if too_much else SimulationStatus.FAILED
         detail = f"{integrator}: {str(error).strip().splitlines()[-1][:200]}"
         t_out, y_out = np.zeros(1), x0[None, :]
     stats = function.stats()
     meter.steps = int(stats.get("nsteps", 0))
     meter.evaluations = int(stats.get("nfevals", 0))
-    if status is Status.SUCCESS:
+    if status is SimulationStatus.SUCCESS:
         if meter.steps > budget.max_steps:
-            status, detail = Status.MAX_STEPS, (f"{meter.steps} steps used of max_steps = "
+            status, detail = SimulationStatus.MAX_STEPS, (f"{meter.steps} steps used of max_steps = "
                                                 f"{budget.max_steps} (checked after the call)")
         elif meter.elapsed() > budget.wall_time:
-            status, detail = Status.WALL_TIME, (f"{meter.elapsed():.3g} s used of wall_time = "
+            status, detail = SimulationStatus.WALL_TIME, (f"{meter.elapsed():.3g} s used of wall_time = "
                                                 f"{budget.wall_time:g} s (checked after the call)")
     if t_eval is not None and t_out.size > 1:            # a trajectory, complete or over budget
         keep = np.searchsorted(t_out, t_eval)            # every t_eval is on the grid

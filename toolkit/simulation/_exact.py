@@ -3,8 +3,8 @@
 Between two events the body obeys a linear ODE with closed-form solution, and every segment
 is stored in the one form
 
-    V(t0 + s) = V0 + c1 s + B em(lam, s) + C em(mu, s) + D s exp(-mu s),
-    em(x, s) = (1 - exp(-x s)) / x     (em(0, s) = s),
+    V(t0 + s) = V0 + c1 s + B expm1_ratio(lam, s) + C expm1_ratio(mu, s) + D s exp(-mu s),
+    expm1_ratio(x, s) = (1 - exp(-x s)) / x = -expm1(-x s) / x   (= s at x = 0),
 
 where ``lam = b / m`` is the body's own rate (drag, plus ``1/k`` per unsaturated compliant
 contact) and ``mu = 1 / tau`` the motor rate. Contact speeds take the same form with
@@ -21,7 +21,8 @@ Two engines share that form:
   between events (with constant commands the motors never leave their settled speeds and
   the ideal engine applies). Every event function (a crossing ``V(t) = v_i(t)``, a
   saturation limit, the end of a sliding mode) is
-  ``g(s) = alpha + beta s + gamma em(lam, s) + delta em(mu, s) + D s exp(-mu s)``, which has
+  ``g(s) = alpha + beta s + gamma expm1_ratio(lam, s) + delta expm1_ratio(mu, s)
+  + D s exp(-mu s)``, which has
   at most three roots: the root of ``g''`` is explicit, the roots of ``g'`` and then of ``g``
   are bracketed on monotone pieces, and the earliest is located by bisection and Brent's
   method. With many contacts a bound on ``|g'|`` first discards the functions that cannot
@@ -43,7 +44,7 @@ With constant commands the body passes each breakpoint at most once, so a burst 
 than ``2 K + 1000`` events (``K = 2 N + 2`` bounds the breakpoints) can only come from fast
 switching or chatter;
 such a burst inside ``(2 K + 1000) / Budget.max_event_rate`` seconds stops the run with
-``Status.ZENO``.
+``SimulationStatus.ZENO``.
 
 Tie convention
 --------------
@@ -65,25 +66,26 @@ import bisect
 import math
 import struct
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ..model import ContactSet, PiecewiseConstant, Plant, compliant_breakpoints
-from ._result import Budget, Event, SimulationResult, Status, status_message
+from ..model import ContactSet, MotorPiece, PiecewiseConstant, Plant, compliant_breakpoints
+from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
 
 __all__ = ["simulate_exact"]
 
 _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _SMALL = 64                 # contacts up to which plain Python beats NumPy calls
-_SUCCESS = Status.SUCCESS   # (a module constant is faster to read than an Enum member)
+_SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than an Enum member)
 
 
 # -- closed forms ---------------------------------------------------------------------------
-def _em(rate: Any, s: Any) -> Any:
+def _expm1_ratio(rate: Any, s: Any) -> Any:
     """``(1 - exp(-rate s)) / rate``, continuous at ``rate = 0`` (``= s``); vectorized."""
     rate = np.asarray(rate, dtype=float)
     s = np.asarray(s, dtype=float)
@@ -92,14 +94,32 @@ def _em(rate: Any, s: Any) -> Any:
     return np.where(rate > 0, -np.expm1(-x) / safe, s)
 
 
-def _em1(rate: float, s: float) -> float:
-    """Scalar :func:`_em`."""
+def _scalar_expm1_ratio(rate: float, s: float) -> float:
+    """Scalar :func:`_expm1_ratio`."""
     return -math.expm1(-rate * s) / rate if rate > 0 else s
 
 
+#: ``(-1)^k / (k + 2)!`` for k = 0..14, highest first: the series of
+#: ``(x + expm1(-x)) / x^2``, truncated below ``1e-17`` relative for ``0 <= x < 0.5``.
+_RATIO_INTEGRAL_SERIES = tuple((-1.0) ** k / math.factorial(k + 2) for k in range(14, -1, -1))
+
+
+def _expm1_ratio_integral(rate: float, s: float) -> float:
+    """``int_0^s expm1_ratio(rate, x) dx = (s - expm1_ratio(rate, s)) / rate`` (``s^2 / 2`` at
+    ``rate = 0``), to a few ulp: a series where the difference would cancel (``rate s < 0.5``),
+    written without overflow for rates up to the largest double."""
+    x = rate * s
+    if x < 0.5:
+        h = 0.0
+        for c in _RATIO_INTEGRAL_SERIES:            # Horner
+            h = h * x + c
+        return s * s * h
+    return s * ((x + math.expm1(-x)) / x) / rate
+
+
 def _reach_time(V: float, r0: float, lam: float, target: float) -> float:
-    """Time for ``V + r0 em(lam, s)`` to reach ``target`` (``inf`` if it never does, or when
-    ``target`` or ``r0`` is not finite)."""
+    """Time for ``V + r0 expm1_ratio(lam, s)`` to reach ``target`` (``inf`` if it never does, or
+    when ``target`` or ``r0`` is not finite)."""
     if not (math.isfinite(target) and math.isfinite(r0)):
         return math.inf
     y = (target - V) / r0
@@ -146,18 +166,40 @@ class _Recorder:
         self.rounds += 1
         events, w = self.events, self.window
         if self.rounds > budget.max_steps:
-            self.status, self.detail = Status.MAX_STEPS, f"{budget.max_steps} rounds at t = {t:.6g} s"
+            self.status = SimulationStatus.MAX_STEPS
+            self.detail = f"{budget.max_steps} rounds at t = {t:.6g} s"
         elif time.perf_counter() > self.deadline:
-            self.status, self.detail = Status.WALL_TIME, f"{budget.wall_time:g} s at t = {t:.6g} s"
+            self.status = SimulationStatus.WALL_TIME
+            self.detail = f"{budget.wall_time:g} s at t = {t:.6g} s"
         elif len(events) > w and ((span := events[-1].time - events[-1 - w].time)
                                   * budget.max_event_rate < w):
-            self.status = Status.ZENO
+            self.status = SimulationStatus.ZENO
             self.detail = f"{w} events within {span:.3g} s before t = {t:.6g} s"
         else:
             return False
         return True
 
     # -- output -----------------------------------------------------------------------------
+    def displacement(self, t_stop: float) -> float:
+        """The exact integral of ``V`` (m) from the first segment's start to ``t_stop`` (s):
+        each closed-form segment integrated in closed form, ``V0 S + c1 S^2 / 2
+        + B I(lam, S) + C I(mu, S) + D (S expm1_ratio(mu, S) - I(mu, S))`` with ``S`` its
+        length and ``I`` :func:`_expm1_ratio_integral`."""
+        rows, mu = self.rows, self.mu
+        total = 0.0
+        for k, (t0, V0, c1, B, lam, C, D) in enumerate(rows):
+            S = (rows[k + 1][0] if k + 1 < len(rows) else t_stop) - t0
+            if S <= 0.0:
+                continue
+            part = V0 * S + 0.5 * c1 * S * S
+            if B != 0.0:
+                part += B * _expm1_ratio_integral(lam, S)
+            if C != 0.0 or D != 0.0:
+                settle = _expm1_ratio_integral(mu, S)
+                part += C * settle + D * (S * _scalar_expm1_ratio(mu, S) - settle)
+            total += part
+        return total
+
     def dense(self, t_stop: float, success: bool, t_end: float, linear: bool) -> _Dense:
         return _Dense(self.rows, self.mu, t_stop, success, t_end, linear)
 
@@ -343,7 +385,8 @@ class _Dense:
         query, s, (_, V0, c1, B, lam, C, D) = self._parts(query)
         mu = self.mu
         with np.errstate(over="ignore", invalid="ignore"):     # masked past a stopped run
-            value = V0 + c1 * s + B * _em(lam, s) + C * _em(mu, s) + D * s * np.exp(-mu * s)
+            value = (V0 + c1 * s + B * _expm1_ratio(lam, s) + C * _expm1_ratio(mu, s)
+                     + D * s * np.exp(-mu * s))
         return np.where((query <= self.t_stop) | self.success, value, np.nan)
 
     def gathered_derivative(self, query: np.ndarray) -> np.ndarray:
@@ -470,26 +513,45 @@ def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _CompliantLandscap
                                base_F.tolist(), slope.tolist(), total)
 
 
+# The exact method's own cache (a Plant holds no solver state): per plant, the landscape of
+# each distinct command, so repeated simulations of one plant skip rebuilding them. Keyed
+# weakly: a plant's entry goes with the plant.
+_LANDSCAPES: weakref.WeakKeyDictionary[Plant, dict[bytes | None, _Landscape]] = (
+    weakref.WeakKeyDictionary())
+
+
+def clear_cache(plant: Plant) -> None:
+    """Forget the landscapes cached for ``plant``: its next run pays what a new plant would
+    (benchmarks time runs from scratch this way)."""
+    _LANDSCAPES.pop(plant, None)
+
+
+def _build_landscape(plant: Plant, speeds: np.ndarray | None) -> _Landscape:
+    """The landscape of contact speeds ``speeds`` (m/s; ``None``: the plant's own constant
+    contact speeds)."""
+    if plant.compliance > 0:
+        return _compliant_landscape(plant, speeds)
+    contacts = plant.contacts
+    return _CoulombLandscape(contacts if speeds is None else contacts.with_speeds(speeds))
+
+
 def _landscape(plant: Plant, a: float) -> _Landscape:
-    """The landscape of the contact speeds commanded at time ``a`` (s), kept in the plant's
-    cache (one entry per distinct command)."""
-    cache = plant.derived("exact landscapes")
+    """The landscape of the contact speeds commanded at time ``a`` (s), kept in this module's
+    cache (one entry per plant and distinct command)."""
+    cache = _LANDSCAPES.get(plant)
+    if cache is None:
+        cache = _LANDSCAPES[plant] = {}
     constant = plant.commands is None and plant.motors is None
     speeds = None if constant else plant.command(a)
     key = None if constant else speeds.tobytes()
     land = cache.get(key)
     if land is None:
-        if plant.compliance > 0:
-            land = _compliant_landscape(plant, speeds)
-        else:
-            contacts = plant.contacts
-            land = _CoulombLandscape(contacts if constant else contacts.with_speeds(speeds))
-        cache[key] = land
+        land = cache[key] = _build_landscape(plant, speeds)
     return land
 
 
 # -- the ideal-motor engine -------------------------------------------------------------------
-def _pieces(plant: Plant, t_end: float) -> list[float]:
+def _piece_bounds(plant: Plant, t_end: float) -> list[float]:
     if plant.commands is None and not isinstance(plant.external_force, PiecewiseConstant):
         return [0.0, t_end]
     switches = plant.switching_times()
@@ -498,140 +560,101 @@ def _pieces(plant: Plant, t_end: float) -> list[float]:
 
 def _run_ideal(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
     """Integrate with piecewise-constant contact speeds; returns the final ``(t, V)``."""
-    m, c = plant.mass, plant.damping
-    bounds = _pieces(plant, t_end)
+    bounds = _piece_bounds(plant, t_end)
     V = v0
     stuck: int | None = None         # contact the body is stuck to (Coulomb only)
-    event, segment, stop = rec.event, rec.segment, rec.stop      # (bound once: hot loop)
     for a, b in zip(bounds[:-1], bounds[1:]):
         land = _landscape(plant, a)
-        stiction, force_at, contact_at, kind = land.stiction, land.force, land.contact, land.kind
-        xs = land.xs
-        K = len(xs)
-        E = plant.external(a)
-        tol_scale = 4.0 * (K + 1) * _EPS                # tie tolerance per N of force scale
-        push_scale = land.total + abs(E)
-        t = t_sum = a
-        t_err = 0.0                     # compensated sum of the segment times
         if a > 0:
-            event(a, "command", None, V)
-        j, at = land.locate(V)
-        if stuck is not None and not (at and stiction(j)[0] > 0):
-            event(a, "release", stuck, V)
-            stuck = None
-        while True:
-            if at:
-                W, G = stiction(j)
-                G += E - c * V
-                tol = tol_scale * (push_scale + c * abs(V))
-                rec.n_evaluations += 1
-                if abs(G) <= W + tol:                       # stick (or rest at a balance)
-                    contact = contact_at(j)
-                    if W > 0 and stuck != contact:
-                        if stuck is not None:
-                            event(t, "release", stuck, V)
-                        event(t, "stick", contact, V)
-                        stuck = contact
-                    segment(t, V)
-                    break
-                if stuck is not None:
-                    event(t, "release", stuck, V)
-                    stuck = None
-                else:
-                    event(t, kind, contact_at(j), V)
-                j = j + 1 if G > 0 else j
-            # Free motion inside interval j.
-            force, slope = force_at(j, V)
-            r0 = (force + E - c * V) / m
-            lam = (c - slope) / m
-            rec.n_evaluations += 1
-            segment(t, V, r0, lam)
-            if r0 == 0.0:
-                break
-            up = r0 > 0
-            target = (xs[j] if j < K else math.inf) if up else (xs[j - 1] if j > 0 else -math.inf)
-            s = _reach_time(V, r0, lam, target)                # inf for an infinite target
-            if t + s >= b:
-                V = V + r0 * _em1(lam, b - t)
-                lo = xs[j - 1] if j > 0 else -math.inf
-                hi = xs[j] if j < K else math.inf
-                V = min(max(V, lo), hi)
-                break
-            # Compensated (Neumaier) sum of the segment times: exact over 1e5 segments.
-            t_new = t_sum + s
-            t_err += (t_sum - t_new) + s if abs(t_sum) >= abs(s) else (s - t_new) + t_sum
-            t_sum = t_new
-            t, V, at = t_sum + t_err, target, True
-            j = j if up else j - 1
-            if stop(t):
-                return t, V
-        if stop(b):
-            return b, V
+            rec.event(a, "command", None, V)
+        t, V, stuck, stopped = _ideal_piece(plant, land, plant.external(a), a, b, V, stuck, rec)
+        if stopped:
+            return t, V
     return t_end, V
 
 
-# -- dynamic motors: closed-form motor tracks -------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class _MotorPiece:
-    """Contact speeds over one command piece starting at ``a`` from speeds ``start``.
+def _ideal_piece(plant: Plant, land: _Landscape, E: float, a: float, b: float, V: float,
+                 stuck: int | None, rec: _Recorder) -> tuple[float, float, int | None, bool]:
+    """Integrate over ``[a, b]`` (s) with constant contact speeds (landscape ``land``) and
+    external force ``E`` (N) from speed ``V`` (m/s), the body stuck to contact ``stuck`` (or
+    None); the one engine of :func:`simulate_exact` and :func:`advance`.
 
-    Each motor first ramps at the rate limit while its gap to the command exceeds
-    ``rate * tau`` (the whole gap when ``tau = 0``), then approaches the command
-    exponentially with time constant ``tau`` (or holds it when ``tau = 0``).
+    Returns
+    -------
+    (t, V, stuck, stopped)
+        The time and speed reached (``b`` unless the budget stopped the run, then
+        ``stopped``), and the contact the body is stuck to there.
     """
+    m, c = plant.mass, plant.damping
+    event, segment, stop = rec.event, rec.segment, rec.stop      # (bound once: hot loop)
+    stiction, force_at, contact_at, kind = land.stiction, land.force, land.contact, land.kind
+    xs = land.xs
+    K = len(xs)
+    tol_scale = 4.0 * (K + 1) * _EPS                # tie tolerance per N of force scale
+    push_scale = land.total + abs(E)
+    t = t_sum = a
+    t_err = 0.0                     # compensated sum of the segment times
+    j, at = land.locate(V)
+    if stuck is not None and not (at and stiction(j)[0] > 0):
+        event(a, "release", stuck, V)
+        stuck = None
+    while True:
+        if at:
+            W, G = stiction(j)
+            G += E - c * V
+            tol = tol_scale * (push_scale + c * abs(V))
+            rec.n_evaluations += 1
+            if abs(G) <= W + tol:                       # stick (or rest at a balance)
+                contact = contact_at(j)
+                if W > 0 and stuck != contact:
+                    if stuck is not None:
+                        event(t, "release", stuck, V)
+                    event(t, "stick", contact, V)
+                    stuck = contact
+                segment(t, V)
+                break
+            if stuck is not None:
+                event(t, "release", stuck, V)
+                stuck = None
+            else:
+                event(t, kind, contact_at(j), V)
+            j = j + 1 if G > 0 else j
+        # Free motion inside interval j.
+        force, slope = force_at(j, V)
+        r0 = (force + E - c * V) / m
+        lam = (c - slope) / m
+        rec.n_evaluations += 1
+        segment(t, V, r0, lam)
+        if r0 == 0.0:
+            break
+        up = r0 > 0
+        target = (xs[j] if j < K else math.inf) if up else (xs[j - 1] if j > 0 else -math.inf)
+        s = _reach_time(V, r0, lam, target)                # inf for an infinite target
+        if t + s >= b:
+            V = V + r0 * _scalar_expm1_ratio(lam, b - t)
+            lo = xs[j - 1] if j > 0 else -math.inf
+            hi = xs[j] if j < K else math.inf
+            V = min(max(V, lo), hi)
+            break
+        # Compensated (Neumaier) sum of the segment times: exact over 1e5 segments.
+        t_new = t_sum + s
+        t_err += (t_sum - t_new) + s if abs(t_sum) >= abs(s) else (s - t_new) + t_sum
+        t_sum = t_new
+        t, V, at = t_sum + t_err, target, True
+        j = j if up else j - 1
+        if stop(t):
+            return t, V, stuck, True
+    return b, V, stuck, stop(b)
 
-    a: float
-    start: np.ndarray
-    u: np.ndarray
-    tau: float
-    ramp: np.ndarray           # ramp slope, m/s^2 (0 where no ramp)
-    ramp_end: np.ndarray       # offset (s) at which the ramp ends (0 where none)
-    after: np.ndarray          # speed at the ramp end, m/s
 
-    @classmethod
-    def build(cls, a: float, start: np.ndarray, u: np.ndarray, tau: float, rate: float) -> _MotorPiece:
-        gap = u - start
-        if not math.isfinite(rate):                        # lag only: no ramp phase
-            zeros = np.zeros_like(gap)
-            return cls(a, start, u, tau, zeros, zeros, start)
-        direction = np.sign(gap)
-        excess = np.abs(gap) - rate * tau
-        ramping = excess > 0
-        slope = np.where(ramping, direction * rate, 0.0)
-        end = np.where(ramping, excess / rate, 0.0)
-        after = np.where(ramping, u - direction * rate * tau, start)
-        return cls(a, start, u, tau, slope, end, after)
-
-    def speeds(self, s: np.ndarray) -> np.ndarray:
-        """Speeds at offsets ``s`` (shape (T,)) from ``a``: shape (T, n), m/s."""
-        s = np.asarray(s, dtype=float)[:, None]
-        ramping = s < self.ramp_end
-        on_ramp = self.start + self.ramp * s
-        if self.tau > 0:
-            with np.errstate(over="ignore", invalid="ignore"):    # only on the ramp, masked
-                settle = self.u + (self.after - self.u) * np.exp(-(s - self.ramp_end) / self.tau)
-        else:
-            settle = np.broadcast_to(self.after, on_ramp.shape)
-        return np.where(ramping, on_ramp, settle)
-
-    def coefficients(self, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """At offset ``s``: speeds ``v0``, ramp slopes ``q``, exponential rates ``e`` (so that
-        ``v(s + x) = v0 + q x + e em(1/tau, x)``) and the offset of the next phase change."""
-        v0 = self.speeds(np.array([s]))[0]
-        ramping = s < self.ramp_end
-        q = np.where(ramping, self.ramp, 0.0)
-        e = np.where(ramping, 0.0, (self.u - v0) / self.tau) if self.tau > 0 else np.zeros_like(v0)
-        pending = self.ramp_end[ramping]
-        return v0, q, e, float(pending.min()) if pending.size else math.inf
-
-
-def _motor_pieces(plant: Plant, t_end: float) -> list[tuple[float, float, _MotorPiece]]:
+# -- dynamic motors: closed-form motor tracks -------------------------------------------------
+def _motor_pieces(plant: Plant, t_end: float) -> list[tuple[float, float, MotorPiece]]:
     motors = plant.motors
-    bounds = _pieces(plant, t_end)
+    bounds = _piece_bounds(plant, t_end)
     v = plant.initial_speeds()
     pieces = []
     for a, b in zip(bounds[:-1], bounds[1:]):
-        piece = _MotorPiece.build(a, v, plant.command(a), motors.lag, motors.rate_limit)
+        piece = MotorPiece.build(a, v, plant.command(a), motors.lag, motors.rate_limit)
         pieces.append((a, b, piece))
         v = piece.speeds(np.array([b - a]))[0]
     return pieces
@@ -649,9 +672,10 @@ def _motor_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:
 
 # -- dynamic motors: first root of the event functions --------------------------------------
 @dataclass(frozen=True)
-class _Fns:
-    """Event functions ``g(s) = alpha + beta s + gamma em(lam, s) + delta em(mu, s)
-    + D s exp(-mu s)`` (vectors of coefficients, scalars ``lam``, ``mu``, ``D``)."""
+class _EventFunctions:
+    """Event functions ``g(s) = alpha + beta s + gamma expm1_ratio(lam, s)
+    + delta expm1_ratio(mu, s) + D s exp(-mu s)`` (vectors of coefficients, scalars ``lam``,
+    ``mu``, ``D``)."""
 
     alpha: np.ndarray
     beta: np.ndarray
@@ -663,13 +687,13 @@ class _Fns:
 
     def value(self, s: Any, i: Any = slice(None)) -> np.ndarray:
         mu = self.mu
-        return (self.alpha[i] + self.beta[i] * s + self.gamma[i] * _em(self.lam, s)
-                + self.delta[i] * _em(mu, s) + self.D * s * np.exp(-mu * s))
+        return (self.alpha[i] + self.beta[i] * s + self.gamma[i] * _expm1_ratio(self.lam, s)
+                + self.delta[i] * _expm1_ratio(mu, s) + self.D * s * np.exp(-mu * s))
 
-    def take(self, index: np.ndarray) -> _Fns:
+    def take(self, index: np.ndarray) -> _EventFunctions:
         """The functions at ``index`` only."""
-        return _Fns(self.alpha[index], self.beta[index], self.gamma[index], self.delta[index],
-                    self.lam, self.mu, self.D)
+        return _EventFunctions(self.alpha[index], self.beta[index], self.gamma[index],
+                               self.delta[index], self.lam, self.mu, self.D)
 
     def slope(self, s: Any, i: Any = slice(None)) -> np.ndarray:
         mu = self.mu
@@ -739,7 +763,7 @@ def _bisect(fn: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray, 
     return hi
 
 
-def _first_root(fns: _Fns, horizon: float) -> tuple[float, int]:
+def _first_root(fns: _EventFunctions, horizon: float) -> tuple[float, int]:
     """Earliest ``s`` in ``(0, horizon]`` at which some ``g_i`` changes sign or reaches zero,
     and the index ``i`` (``(inf, -1)`` when none does).
 
@@ -767,7 +791,7 @@ def _first_root(fns: _Fns, horizon: float) -> tuple[float, int]:
         window = max(2.0 * window, float(later.min()))
 
 
-def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
+def _first_root_all(fns: _EventFunctions, horizon: float) -> tuple[float, int]:
     """:func:`_first_root` over every function (no prefilter).
 
     ``g`` has at most one inflection, so ``g'`` is monotone on at most two pieces and ``g``
@@ -778,11 +802,22 @@ def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
     rows = np.arange(n)
     knots = np.full((n, 4), horizon)
     knots[:, 0] = 0.0
-    infl = fns.inflection()
-    inside = (infl > 0) & (infl < horizon)
-    knots[:, 1] = np.where(inside, infl, horizon)
+    single = _single_exponential(fns)
+    if single is not None:
+        # g' = base + amp exp(-rate s) is monotone: its root, if any, in closed form.
+        base, amp, rate = single
+        if rate > 0:
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                root = np.log(amp / -base) / rate         # NaN or <= 0 where there is none
+            knots[:, 2] = np.where((root > 0) & (root < horizon), root, horizon)
+        pieces: tuple[tuple[int, int], ...] = ()
+    else:
+        infl = fns.inflection()
+        inside = (infl > 0) & (infl < horizon)
+        knots[:, 1] = np.where(inside, infl, horizon)
+        pieces = ((0, 1), (1, 3))
     # Roots of g' on [0, infl] and [infl, horizon].
-    for col, (left, right) in enumerate(((0, 1), (1, 3)), start=2):
+    for col, (left, right) in enumerate(pieces, start=2):
         lo, hi = knots[:, left], knots[:, right]
         d_lo, d_hi = fns.slope(lo), fns.slope(hi)
         with np.errstate(over="ignore"):                # only the product's sign is used
@@ -819,19 +854,59 @@ def _first_root_all(fns: _Fns, horizon: float) -> tuple[float, int]:
             return float(hi[best]), int(idx[best])
         changed = np.sign(fns.value(mid, idx)) != np.sign(fns.value(lo, idx))
         lo, hi = np.where(changed, lo, mid), np.where(changed, mid, hi)
-    return _brent(fns, int(idx[0]), float(lo[0]), float(hi[0])), int(idx[0])
+    return _brent_root(fns, int(idx[0]), float(lo[0]), float(hi[0])), int(idx[0])
 
 
-def _brent(fns: _Fns, i: int, lo: float, hi: float) -> float:
-    """The root of ``g_i`` in the sign-changing bracket ``(lo, hi]`` to a few ulp."""
-    from scipy.optimize import brentq
+def _single_exponential(fns: _EventFunctions) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """``(base, amp, rate)`` with ``g'(s) = base + amp exp(-rate s)`` for every function, when
+    ``g'`` has one exponential only (no drag or compliance: ``lam = 0``; ideal-lag motors:
+    ``mu = 0``; or one of the two terms absent); None otherwise. Then ``g''`` keeps one sign:
+    ``g`` is convex or concave."""
+    if fns.D != 0.0:
+        return None
+    lam, mu = fns.lam, fns.mu
+    if lam == 0.0 or not fns.gamma.any():
+        return fns.beta + (fns.gamma if lam == 0.0 else 0.0), fns.delta, mu
+    if mu == 0.0 or not fns.delta.any():
+        return fns.beta + (fns.delta if mu == 0.0 else 0.0), fns.gamma, lam
+    return None
+
+
+def _newton_root(g: Callable[[float], float], slope: Callable[[float], float], curvature: float,
+                 lo: float, hi: float, g_lo: float, g_hi: float) -> float | None:
+    """Newton's method for a root of a convex or concave ``g`` (``curvature``: the constant
+    sign of ``g''``) in the sign-changing bracket ``[lo, hi]``, started from the end where
+    ``g g'' > 0`` (Fourier's condition: the iterates then approach the root monotonically,
+    quadratically near it, without leaving the bracket). Returns the root to a few ulp, or
+    None when the iteration does not settle (the caller then uses Brent's method)."""
+    x, gx = (hi, g_hi) if g_hi * curvature > 0 else (lo, g_lo)
+    for _ in range(60):
+        d = slope(x)
+        if d == 0.0 or not math.isfinite(d):
+            return None
+        x_new = x - gx / d
+        if not lo <= x_new <= hi:
+            return None
+        if abs(x_new - x) <= 4.0 * _EPS * abs(x_new):
+            return x_new
+        x = x_new
+        gx = g(x)
+        if gx == 0.0:
+            return x
+    return None
+
+
+def _brent_root(fns: _EventFunctions, i: int, lo: float, hi: float) -> float:
+    """The root of ``g_i`` in the sign-changing bracket ``(lo, hi]`` to a few ulp: Newton's
+    method when ``g_i`` is convex or concave (:func:`_single_exponential`), Brent's method
+    otherwise or when Newton's does not settle."""
 
     alpha, beta, gamma, delta = (float(c[i]) for c in (fns.alpha, fns.beta, fns.gamma, fns.delta))
     lam, mu, D = fns.lam, fns.mu, fns.D
 
     def g(s: float) -> float:
-        return (alpha + beta * s + gamma * _em1(lam, s) + delta * _em1(mu, s)
-                + D * s * math.exp(-mu * s))
+        return (alpha + beta * s + gamma * _scalar_expm1_ratio(lam, s)
+                + delta * _scalar_expm1_ratio(mu, s) + D * s * math.exp(-mu * s))
 
     g_lo, g_hi = g(lo), g(hi)
     if g_hi == 0.0 or g_lo * g_hi > 0.0:
@@ -839,6 +914,18 @@ def _brent(fns: _Fns, i: int, lo: float, hi: float) -> float:
         # math.expm1: the two differ by a few ulp, so on near-tied contacts the scalar form
         # may see no sign change. The change is then rounding noise and hi a root within it.
         return hi
+    if D == 0.0 and (lam == 0.0 or mu == 0.0 or gamma == 0.0 or delta == 0.0):
+        def slope(s: float) -> float:
+            return beta + gamma * math.exp(-lam * s) + delta * math.exp(-mu * s)
+
+        curvature = -(gamma * lam + delta * mu)
+        if curvature != 0.0:
+            root = _newton_root(g, slope, curvature, lo, hi, g_lo, g_hi)
+            if root is not None:
+                return root
+    # scipy.optimize takes ~0.4 s to import: here, so that only runs needing a polish pay it.
+    from scipy.optimize import brentq
+
     # No absolute floor (xtol: the smallest subnormal, 5e-324 s), so rtol sets the precision
     # at every scale: with lag 1e-300 s the roots lie near 1e-300 s, where an absolute 1e-300 s
     # would blur them entirely (and 2e-308 s, the smallest normal, would leave them to 1e-8).
@@ -880,131 +967,157 @@ def _filippov(G_out: float, slopes: np.ndarray, weights: np.ndarray, mass: float
 
 def _run_dynamic(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
     """Integrate with lagging / rate-limited motors; returns the final ``(t, V)``."""
+    V = v0
+    mode = _FREE
+    for a, b, motor in _motor_pieces(plant, t_end):
+        E = plant.external(a)
+        if a > 0:
+            rec.event(a, "command", None, V)
+        t, V, mode, stopped = _dynamic_piece(plant, motor, E, b, V, mode, rec)
+        if stopped:
+            return t, V
+    return t_end, V
+
+
+#: The engine's mode between events: ``(stuck, hint, releasing)``: the contact the body is
+#: stuck to (or None), the contact whose event ended the previous segment (or None), and
+#: +-1 when the body leaves ``stuck`` upward / downward (else 0).
+_Mode = tuple[int | None, int | None, float]
+_FREE: _Mode = (None, None, 0.0)
+
+
+def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float, mode: _Mode,
+                   rec: _Recorder) -> tuple[float, float, _Mode, bool]:
+    """Integrate from ``motor.a`` to ``b`` (s) under one constant command (the contact speeds
+    of ``motor``) and external force ``E`` (N), from body speed ``V`` (m/s) in engine mode
+    ``mode``; the one engine of :func:`simulate_exact` and :func:`advance`.
+
+    Returns
+    -------
+    (t, V, mode, stopped)
+        The time and speed reached (``b`` unless the budget stopped the run, then
+        ``stopped``), and the engine's mode there.
+    """
     m, c, k = plant.mass, plant.damping, plant.compliance
     f = plant.contacts.forces
     tau = plant.motors.lag
     mu = 1.0 / tau if tau > 0 else 0.0
     n = plant.n
-    V = v0
-    stuck: int | None = None
-    hint: int | None = None          # contact whose event ended the previous segment
-    releasing = 0.0                  # +-1: the body leaves `stuck` upward / downward
-    for a, b, motor in _motor_pieces(plant, t_end):
-        E = plant.external(a)
-        if a > 0:
-            rec.event(a, "command", None, V)
-        t, off, length = a, 0.0, b - a     # offsets from a keep phase ends exact
-        while off < length:
-            v, q, e, phase_end = motor.coefficients(off)
-            off_next = min(length, phase_end)
-            t_next = b if off_next == length else a + off_next
-            horizon = off_next - off
-            slope_now = q + e
-            scale = max(abs(V), float(np.max(np.abs(v))))
-            tie_v = 64.0 * _EPS * scale
-            tol = 4.0 * (n + 1) * _EPS * (plant.contacts.total_force + abs(E) + c * abs(V)
-                                          + m * float(np.max(np.abs(slope_now))))
-            rec.n_evaluations += 1
-            if k > 0:
-                fns, seg, kinds = _compliant_step(plant, V, v, q, e, E, mu, hint, tie_v)
-                rec.segment(t, V, *seg)
-                s, i = _first_root(fns, horizon)
-                if i >= 0:
-                    off += s
-                    t, V, hint = a + off, _segment_value(V, seg, mu, s), int(kinds[i])
-                    rec.event(t, "saturation", hint, V)
-                else:
-                    off = off_next
-                    t, V, hint = t_next, _segment_value(V, seg, mu, horizon), None
-                if rec.stop(t):
-                    return t, V
-                continue
-            # Coulomb contacts: which are tied with the body now?
-            tied = np.abs(v - V) <= tie_v
-            if hint is not None:
-                tied[hint] = True
-            if stuck is not None:
-                tied[stuck] = True
-            tied &= f > 0
-            anchor = hint if hint is not None else stuck
-            if anchor is not None and tied[anchor]:
-                V = float(v[anchor])
-            side = np.sign(v - V)
-            G_out = float(np.sum(f[~tied] * side[~tied])) + E - c * V
-            t_slopes = slope_now[tied].copy()
-            if releasing != 0.0:
-                t_slopes[np.flatnonzero(tied) == stuck] = -releasing * math.inf
-            acc, group = _filippov(G_out, t_slopes, f[tied], m, tol)
-            tied_idx = np.flatnonzero(tied)
-            new_stuck = int(tied_idx[group][0]) if group is not None else None
-            # Events at this instant.
-            if stuck is not None and new_stuck != stuck:
-                rec.event(t, "release", stuck, V)
-            if new_stuck is not None and new_stuck != stuck:
-                rec.event(t, "stick", new_stuck, V)
-            if hint is not None and (new_stuck is None or hint != new_stuck) and hint != stuck:
-                rec.event(t, "cross", hint, V)
-            stuck, hint, releasing = new_stuck, None, 0.0
-            if stuck is None:
-                signs = side.copy()
-                signs[tied] = np.sign(t_slopes - acc)
-                r0 = (float(np.sum(f * signs)) + E - c * V) / m
-                lam = c / m
-                alpha = np.where(tied, 0.0, V - v)
-                beta = -q.copy()
-                grazing = tied & (np.abs(acc - slope_now) <= 1e-9 * (abs(acc) + np.abs(slope_now)))
-                beta[grazing] = -(r0 - e[grazing])           # g'(0) = 0 exactly when grazing
-                fns = _Fns(alpha, beta, np.full(n, r0), -e, lam, mu)
-                rec.segment(t, V, r0, lam)
-                s, i = _first_root(fns, horizon)
-                step = horizon if i < 0 else s
-                V_new = V + r0 * _em1(lam, step)
+    stuck, hint, releasing = mode
+    a = motor.a
+    t, off, length = a, 0.0, b - a     # offsets from a keep phase ends exact
+    while off < length:
+        v, q, e, phase_end = motor.coefficients(off)
+        off_next = min(length, phase_end)
+        t_next = b if off_next == length else a + off_next
+        horizon = off_next - off
+        slope_now = q + e
+        scale = max(abs(V), float(np.max(np.abs(v))))
+        tie_v = 64.0 * _EPS * scale
+        tol = 4.0 * (n + 1) * _EPS * (plant.contacts.total_force + abs(E) + c * abs(V)
+                                      + m * float(np.max(np.abs(slope_now))))
+        rec.n_evaluations += 1
+        if k > 0:
+            fns, seg, kinds = _compliant_step(plant, V, v, q, e, E, mu, hint, tie_v)
+            rec.segment(t, V, *seg)
+            s, i = _first_root(fns, horizon)
+            if i >= 0:
+                off += s
+                t, V, hint = a + off, _segment_value(V, seg, mu, s), int(kinds[i])
+                rec.event(t, "saturation", hint, V)
             else:
-                group_mask = np.zeros(n, dtype=bool)
-                group_mask[tied_idx[group]] = True
-                W = float(np.sum(f[group_mask]))
-                signs = side.copy()
-                signs[tied & ~group_mask] = np.sign(slope_now[tied & ~group_mask] - acc)
-                G_fixed = float(np.sum(f[~group_mask] * signs[~group_mask])) + E
-                qc, ec, vc = float(q[stuck]), float(e[stuck]), float(v[stuck])
-                h0 = G_fixed - c * vc - m * (qc + ec)
-                others = ~group_mask
-                alpha = np.concatenate((np.where(tied[others], 0.0, vc - v[others]),
-                                        [W + tol - h0, h0 + W + tol]))
-                beta = np.concatenate((qc - q[others], [c * qc, -c * qc]))
-                delta = np.concatenate((ec - e[others], [ec * (c - m * mu), ec * (m * mu - c)]))
-                fns = _Fns(alpha, beta, np.zeros(alpha.size), delta, 0.0, mu)
-                rec.segment(t, V, 0.0, 0.0, qc, ec)
-                s, i = _first_root(fns, horizon)
-                step = horizon if i < 0 else s
-                V_new = vc + qc * step + ec * _em1(mu, step)
-                if i >= 0:
-                    n_others = int(others.sum())
-                    if i >= n_others:
-                        releasing = 1.0 if i == n_others else -1.0
-                        i = -1
-                    else:
-                        i = int(np.flatnonzero(others)[i])
-            if i >= 0 or releasing:
-                off += step
-                t = a + off
-            else:
-                off, t = off_next, t_next
-            V = float(V_new)
-            hint = i if i >= 0 else None
+                off = off_next
+                t, V, hint = t_next, _segment_value(V, seg, mu, horizon), None
             if rec.stop(t):
-                return t, V
-    return t_end, V
+                return t, V, (stuck, hint, releasing), True
+            continue
+        # Coulomb contacts: which are tied with the body now?
+        tied = np.abs(v - V) <= tie_v
+        if hint is not None:
+            tied[hint] = True
+        if stuck is not None:
+            tied[stuck] = True
+        tied &= f > 0
+        anchor = hint if hint is not None else stuck
+        if anchor is not None and tied[anchor]:
+            V = float(v[anchor])
+        side = np.sign(v - V)
+        G_out = float(np.sum(f[~tied] * side[~tied])) + E - c * V
+        t_slopes = slope_now[tied].copy()
+        if releasing != 0.0:
+            t_slopes[np.flatnonzero(tied) == stuck] = -releasing * math.inf
+        acc, group = _filippov(G_out, t_slopes, f[tied], m, tol)
+        tied_idx = np.flatnonzero(tied)
+        new_stuck = int(tied_idx[group][0]) if group is not None else None
+        # Events at this instant.
+        if stuck is not None and new_stuck != stuck:
+            rec.event(t, "release", stuck, V)
+        if new_stuck is not None and new_stuck != stuck:
+            rec.event(t, "stick", new_stuck, V)
+        if hint is not None and (new_stuck is None or hint != new_stuck) and hint != stuck:
+            rec.event(t, "cross", hint, V)
+        stuck, hint, releasing = new_stuck, None, 0.0
+        if stuck is None:
+            signs = side.copy()
+            signs[tied] = np.sign(t_slopes - acc)
+            r0 = (float(np.sum(f * signs)) + E - c * V) / m
+            lam = c / m
+            alpha = np.where(tied, 0.0, V - v)
+            beta = -q.copy()
+            grazing = tied & (np.abs(acc - slope_now) <= 1e-9 * (abs(acc) + np.abs(slope_now)))
+            beta[grazing] = -(r0 - e[grazing])           # g'(0) = 0 exactly when grazing
+            fns = _EventFunctions(alpha, beta, np.full(n, r0), -e, lam, mu)
+            rec.segment(t, V, r0, lam)
+            s, i = _first_root(fns, horizon)
+            step = horizon if i < 0 else s
+            V_new = V + r0 * _scalar_expm1_ratio(lam, step)
+        else:
+            group_mask = np.zeros(n, dtype=bool)
+            group_mask[tied_idx[group]] = True
+            W = float(np.sum(f[group_mask]))
+            signs = side.copy()
+            signs[tied & ~group_mask] = np.sign(slope_now[tied & ~group_mask] - acc)
+            G_fixed = float(np.sum(f[~group_mask] * signs[~group_mask])) + E
+            qc, ec, vc = float(q[stuck]), float(e[stuck]), float(v[stuck])
+            h0 = G_fixed - c * vc - m * (qc + ec)
+            others = ~group_mask
+            alpha = np.concatenate((np.where(tied[others], 0.0, vc - v[others]),
+                                    [W + tol - h0, h0 + W + tol]))
+            beta = np.concatenate((qc - q[others], [c * qc, -c * qc]))
+            delta = np.concatenate((ec - e[others], [ec * (c - m * mu), ec * (m * mu - c)]))
+            fns = _EventFunctions(alpha, beta, np.zeros(alpha.size), delta, 0.0, mu)
+            rec.segment(t, V, 0.0, 0.0, qc, ec)
+            s, i = _first_root(fns, horizon)
+            step = horizon if i < 0 else s
+            V_new = vc + qc * step + ec * _scalar_expm1_ratio(mu, step)
+            if i >= 0:
+                n_others = int(others.sum())
+                if i >= n_others:
+                    releasing = 1.0 if i == n_others else -1.0
+                    i = -1
+                else:
+                    i = int(np.flatnonzero(others)[i])
+        if i >= 0 or releasing:
+            off += step
+            t = a + off
+        else:
+            off, t = off_next, t_next
+        V = float(V_new)
+        hint = i if i >= 0 else None
+        if rec.stop(t):
+            return t, V, (stuck, hint, releasing), True
+    return b, V, (stuck, hint, releasing), False
 
 
 def _segment_value(V0: float, seg: tuple[float, ...], mu: float, s: float) -> float:
     B, lam, c1, C, D = seg
-    return V0 + c1 * s + B * _em1(lam, s) + C * _em1(mu, s) + D * s * math.exp(-mu * s)
+    return (V0 + c1 * s + B * _scalar_expm1_ratio(lam, s) + C * _scalar_expm1_ratio(mu, s)
+            + D * s * math.exp(-mu * s))
 
 
 def _compliant_step(plant: Plant, V: float, v: np.ndarray, q: np.ndarray, e: np.ndarray,
                     E: float, mu: float, hint: int | None,
-                    tie_v: float) -> tuple[_Fns, tuple[float, ...], np.ndarray]:
+                    tie_v: float) -> tuple[_EventFunctions, tuple[float, ...], np.ndarray]:
     """Closed-form segment and saturation event functions of compliant contacts."""
     m, c, k = plant.mass, plant.damping, plant.compliance
     f = plant.contacts.forces
@@ -1051,7 +1164,7 @@ def _compliant_step(plant: Plant, V: float, v: np.ndarray, q: np.ndarray, e: np.
     want_lower = (region == 0.0) | (region == -1.0)
     rows = np.concatenate((np.flatnonzero(want_upper), np.flatnonzero(want_lower)))
     alpha = np.concatenate((upper[want_upper], lower[want_lower]))
-    fns = _Fns(alpha, c1 - q[rows], np.full(rows.size, B), C - e[rows], lam, mu, D)
+    fns = _EventFunctions(alpha, c1 - q[rows], np.full(rows.size, B), C - e[rows], lam, mu, D)
     return fns, (B, lam, c1, C, D), rows
 
 
@@ -1090,7 +1203,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     if rec.status is _SUCCESS and not (math.isfinite(t_stop) and math.isfinite(V_stop)):
         # Finite parameters (Plant refuses overflowing rates) can still overflow over a long
         # horizon, e.g. a huge external force for 1e10 s: report it, never as a success.
-        rec.status = Status.FAILED
+        rec.status = SimulationStatus.FAILED
         rec.detail = (f"the body speed left the floating-point range (V = {V_stop:g} m/s "
                       f"at t = {t_stop:g} s); shorten t_end or rescale the forces")
         rows = rec.rows                  # keep the finite part: up to the last finite segment

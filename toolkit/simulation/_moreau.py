@@ -26,9 +26,9 @@ by ``(1 + c h / m)^(-k)``.
 
 Motor compliance makes ``F`` continuous and piecewise linear (kinks at ``v_i +- k f_i``); the
 zero of ``g`` is then found by binary search over the kinks and a linear solve between them.
-Dynamic motors are advanced first, by implicit Euler of ``dv/dt = clip((u - v) / tau, -r, r)``
-(or ``r sign(u - v)`` without a lag), which is exact in ``v_+`` (a monotone scalar equation
-per contact); their speeds then enter the body's step.
+Dynamic motors are advanced first, by the model's implicit Euler step of the motor law
+(:func:`toolkit.model.motors.implicit_step`, solved exactly: a monotone scalar equation per
+contact); their speeds then enter the body's step.
 
 Steps land exactly on every command or external-force switch; the step before a switch (and
 before ``t_end``) is shortened. ``budget.max_steps`` counts steps.
@@ -42,10 +42,10 @@ import math
 import numpy as np
 
 from .._validation import as_float
-from ..model import Plant
+from ..model import Plant, implicit_step
 from ._reference import (BudgetExceeded, Meter, build_result, format_setting,
                          samples_from_steps, segment_edges)
-from ._result import Budget, SimulationResult, Status
+from ._result import Budget, SimulationResult, SimulationStatus
 
 __all__ = ["simulate_moreau", "moreau_step_staircase"]
 
@@ -149,18 +149,6 @@ def _compliant_step(plant: Plant, speeds: np.ndarray, a: float, b: float,
     return float(kinks[lo] - g_lo * (kinks[hi] - kinks[lo]) / (g_hi - g_lo))
 
 
-def _motor_step(plant: Plant, speeds: np.ndarray, command: np.ndarray, h: float) -> np.ndarray:
-    """Implicit Euler step of the motor model (exact solve of the monotone scalar equations)."""
-    motors = plant.motors
-    if motors.lag > 0:
-        ratio = h / motors.lag
-        target = (speeds + ratio * command) / (1.0 + ratio)
-    else:
-        target = command
-    reach = h * motors.rate_limit
-    return speeds + np.clip(target - speeds, -reach, reach)
-
-
 def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray | None,
                     budget: Budget, step: float = 1e-3) -> SimulationResult:
     """Moreau-Jean time stepping with the set-valued Coulomb force resolved exactly.
@@ -187,7 +175,7 @@ def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     dynamic = plant.dynamic_motors
     speeds = plant.initial_speeds()
     times, values, forces, rows = [0.0], [v0], [plant.net_force(0.0, v0, speeds)], [speeds]
-    status, detail = Status.SUCCESS, ""
+    status, detail = SimulationStatus.SUCCESS, ""
     edges = segment_edges(plant, t_end)
     try:
         with np.errstate(over="ignore", invalid="ignore"):   # non-finite W: caught per step
@@ -229,7 +217,7 @@ def _segments(plant: Plant, edges: np.ndarray, h: float, V: float, speeds: np.nd
 def _finite_step(t: float, W: float, force: float) -> float:
     """``force``, after checking that the step's speed and force are finite (else FAILED)."""
     if not (math.isfinite(W) and math.isfinite(force)):
-        raise BudgetExceeded(Status.FAILED, f"the state became non-finite at t = {t:.6g} s "
+        raise BudgetExceeded(SimulationStatus.FAILED, f"the state became non-finite at t = {t:.6g} s "
                              f"(V = {W:.3g} m/s, force = {force:.3g} N)")
     return force
 
@@ -267,7 +255,7 @@ def _general_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V
     ext, m, c = plant.external(t0), plant.mass, plant.damping
     for t_next, h in grid:
         if plant.dynamic_motors:
-            speeds = _motor_step(plant, speeds, command, h)
+            speeds = implicit_step(plant.motors, speeds, command, h)
         else:
             speeds = command
         a, b = m / h + c, m * V / h + ext

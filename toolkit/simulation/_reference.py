@@ -20,7 +20,7 @@ import numpy as np
 
 from .._validation import as_float, check_option
 from ..model import FRICTION_LAWS, Plant
-from ._result import Budget, SimulationResult, Status, status_message
+from ._result import Budget, SimulationResult, SimulationStatus, status_message
 
 __all__ = ["BudgetExceeded", "Meter", "segment_edges", "build_result", "check_smoothing",
            "format_setting", "samples_from_steps", "ideal_speeds", "net_forces"]
@@ -32,7 +32,7 @@ _CLOCK_EVERY = 16
 class BudgetExceeded(Exception):
     """Raised inside an integrator to abort it when a budget is spent (never leaves a method)."""
 
-    def __init__(self, status: Status, detail: str) -> None:
+    def __init__(self, status: SimulationStatus, detail: str) -> None:
         super().__init__(detail)
         self.status = status
         self.detail = detail
@@ -61,10 +61,10 @@ class Meter:
 
     def _check(self, count: int) -> None:
         if count > self.budget.max_steps:
-            raise BudgetExceeded(Status.MAX_STEPS,
+            raise BudgetExceeded(SimulationStatus.MAX_STEPS,
                                  f"{count - 1} {self.counts} used of max_steps = {self.budget.max_steps}")
         if count % _CLOCK_EVERY == 0 and self.elapsed() > self.budget.wall_time:
-            raise BudgetExceeded(Status.WALL_TIME,
+            raise BudgetExceeded(SimulationStatus.WALL_TIME,
                                  f"{self.elapsed():.3g} s used of wall_time = {self.budget.wall_time:g} s")
 
     def evaluation(self, n: int = 1) -> None:
@@ -84,7 +84,7 @@ class Meter:
     def check_clock(self) -> None:
         """Raise :class:`BudgetExceeded` if the wall-clock budget is spent."""
         if self.elapsed() > self.budget.wall_time:
-            raise BudgetExceeded(Status.WALL_TIME,
+            raise BudgetExceeded(SimulationStatus.WALL_TIME,
                                  f"{self.elapsed():.3g} s used of wall_time = {self.budget.wall_time:g} s")
 
 
@@ -176,7 +176,7 @@ def net_forces(plant: Plant, t: np.ndarray, V: np.ndarray, speeds: np.ndarray, *
 
 def build_result(plant: Plant, *, method: str, setting: str, t: np.ndarray, V: np.ndarray,
                  contact_speeds: np.ndarray | None, force: np.ndarray | None,
-                 meter: Meter, status: Status, detail: str = "", friction: str = "sign",
+                 meter: Meter, status: SimulationStatus, detail: str = "", friction: str = "sign",
                  epsilon: float = 0.0,
                  dense: Callable[[np.ndarray], np.ndarray] | None = None) -> SimulationResult:
     """Assemble the result of a reference method.
@@ -191,8 +191,8 @@ def build_result(plant: Plant, *, method: str, setting: str, t: np.ndarray, V: n
     if force is None:
         force = net_forces(plant, t, V, contact_speeds, friction=friction, epsilon=epsilon)
     finite = bool(np.all(np.isfinite(V)))
-    if status is Status.SUCCESS and not finite:
-        status, detail = Status.FAILED, "the state became non-finite"
+    if status is SimulationStatus.SUCCESS and not finite:
+        status, detail = SimulationStatus.FAILED, "the state became non-finite"
     return SimulationResult(
         method=method, setting=setting, t=t, V=V,
         contact_speeds=np.asarray(contact_speeds, dtype=float).reshape(t.size, plant.n),

@@ -12,13 +12,13 @@ import numpy as np
 from .._validation import as_float, as_int, check_option
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
-__all__ = ["Status", "Budget", "Event", "SimulationResult", "EVENT_KINDS", "status_message"]
+__all__ = ["SimulationStatus", "Budget", "Event", "SimulationResult", "EVENT_KINDS", "status_message"]
 
 #: The kinds of :class:`Event`.
 EVENT_KINDS = ("cross", "stick", "release", "command", "saturation")
 
 
-class Status(enum.Enum):
+class SimulationStatus(enum.Enum):
     """How a simulation ended; the value is a message a user can act on."""
 
     SUCCESS = "finished: reached t_end"
@@ -128,7 +128,7 @@ class SimulationResult:
         Net force on the body at ``t`` (for the exact method, the force actually applied,
         i.e. ``m dV/dt`` from the right; inside a sliding mode the Filippov value).
     events : tuple of Event
-    status : Status
+    status : SimulationStatus
     message : str
         ``status.value`` plus specifics.
     n_events, n_evaluations, n_steps : int
@@ -145,7 +145,7 @@ class SimulationResult:
     contact_speeds: np.ndarray
     force: np.ndarray
     events: tuple[Event, ...]
-    status: Status
+    status: SimulationStatus
     message: str
     n_events: int
     n_evaluations: int
@@ -163,9 +163,9 @@ class SimulationResult:
                     f"an array of shape {array.shape}"))
             object.__setattr__(self, name, array)
         object.__setattr__(self, "t", t)
-        if not isinstance(self.status, Status):
+        if not isinstance(self.status, SimulationStatus):
             raise ParameterTypeError(parameter_message(
-                "status", "SimulationResult", "be a Status", self.status))
+                "status", "SimulationResult", "be a SimulationStatus", self.status))
         object.__setattr__(self, "events", tuple(self.events))
         for name in ("n_events", "n_evaluations", "n_steps"):
             count = getattr(self, name)
@@ -185,7 +185,7 @@ class SimulationResult:
     @property
     def success(self) -> bool:
         """True when the run reached ``t_end``."""
-        return self.status is Status.SUCCESS
+        return self.status is SimulationStatus.SUCCESS
 
     @property
     def t_final(self) -> float:
@@ -195,7 +195,7 @@ class SimulationResult:
     def to_dict(self, *, samples: bool = False) -> dict[str, Any]:
         """A JSON-able summary (``samples=True`` adds ``t``, ``V`` and ``force`` lists).
 
-        Keys: ``method``, ``setting``, ``status`` (the Status name), ``message``,
+        Keys: ``method``, ``setting``, ``status`` (the SimulationStatus name), ``message``,
         ``t_final``, ``V_final``, ``n_events``, ``n_evaluations``, ``n_steps``,
         ``wall_time`` and ``events`` (``time``, ``kind``, ``contact``, ``speed`` each).
         """
@@ -248,10 +248,10 @@ class SimulationResult:
                 f"events={self.n_events}, steps={self.n_steps}, wall_time={self.wall_time:.3g} s)")
 
 
-_MESSAGES = {status: status.value for status in Status}     # Enum .value is a slow property
+_MESSAGES = {status: status.value for status in SimulationStatus}     # Enum .value is a slow property
 
 
-def status_message(status: Status, detail: str = "") -> str:
+def status_message(status: SimulationStatus, detail: str = "") -> str:
     """``status.value`` followed by ``detail`` (a sentence of specifics), if any."""
     message = _MESSAGES[status]
     return message if not detail else f"{message} ({detail})"

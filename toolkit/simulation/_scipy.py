@@ -6,9 +6,10 @@ The state is ``y = [V]`` with ideal motors and ``y = [V, v_1, ..., v_n]`` when t
 are dynamic (a lag or a rate limit), with
 
     dV/dt   = (sum_i phi_i(v_i - V) + F_ext - c V) / m
-    dv_i/dt = Plant.motor_rate(t, v)
+    dv_i/dt = the motor law of toolkit.model.motors
 
-where ``phi_i`` is the friction law of :meth:`toolkit.model.Plant.contact_forces`:
+evaluated by the plant's own :meth:`toolkit.model.Plant.rhs`, where ``phi_i`` is the friction
+law of :mod:`toolkit.model.friction`:
 
 - ``"sign"``: ``f_i sign(s)`` (``sign(0) = 0``). A discontinuous right-hand side: adaptive
   solvers chatter around the median and their step size collapses. This is the case the
@@ -33,16 +34,16 @@ exception aborts the solver and the accepted steps so far are returned with stat
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
+import scipy.integrate
 
 from .._validation import as_float, check_option
 from ..model import Plant
 from ._reference import (BudgetExceeded, Meter, build_result, check_smoothing, format_setting,
                          samples_from_steps, segment_edges)
-from ._result import Budget, SimulationResult, Status
+from ._result import Budget, SimulationResult, SimulationStatus
 
 __all__ = ["simulate_scipy", "SCIPY_SOLVERS"]
 
@@ -50,36 +51,24 @@ __all__ = ["simulate_scipy", "SCIPY_SOLVERS"]
 SCIPY_SOLVERS = {"rk45": "RK45", "lsoda": "LSODA", "radau": "Radau", "bdf": "BDF"}
 
 
-def _right_hand_side(plant: Plant, t0: float, friction: str, epsilon: float, meter: Meter,
-                     dynamic: bool) -> Any:
-    """The ODE right-hand side on a segment starting at ``t0`` (commands and F_ext frozen)."""
-    mass = plant.mass
+def _right_hand_side(plant: Plant, t0: float, friction: str, epsilon: float,
+                     meter: Meter) -> Any:
+    """The ODE right-hand side on a segment starting at ``t0`` (commands and F_ext frozen):
+    :meth:`Plant.rhs` with the segment's commands and external force, metered."""
     # Within a segment nothing depends on t except through the (constant) commands and F_ext,
-    # so every evaluation uses t0: the solver may probe the segment's right end, where
-    # PiecewiseConstant already holds the next value.
+    # so every evaluation uses t0's values: the solver may probe the segment's right end,
+    # where PiecewiseConstant already holds the next value.
     # A non-finite value stops the run (status FAILED): no solver recovers from it, and some
     # (LSODA) would otherwise retry until the wall-clock budget is spent.
-    if not dynamic:
-        speeds = plant.command(t0)
+    command, external = plant.command(t0), plant.external(t0)
 
-        def rhs(t: float, y: np.ndarray) -> np.ndarray:
-            meter.evaluation()
-            value = plant.net_force(t0, y[0], speeds, friction=friction, epsilon=epsilon) / mass
-            if not math.isfinite(value):
-                raise BudgetExceeded(Status.FAILED, _non_finite(t, y))
-            return np.array([value])
-        return rhs
-
-    def rhs_dynamic(t: float, y: np.ndarray) -> np.ndarray:
+    def rhs(t: float, y: np.ndarray) -> np.ndarray:
         meter.evaluation()
-        speeds = y[1:]
-        out = np.empty_like(y)
-        out[0] = plant.net_force(t0, y[0], speeds, friction=friction, epsilon=epsilon) / mass
-        out[1:] = plant.motor_rate(t0, speeds)
+        out = plant.rhs(t0, y, command, external=external, friction=friction, epsilon=epsilon)
         if not np.all(np.isfinite(out)):
-            raise BudgetExceeded(Status.FAILED, _non_finite(t, y))
+            raise BudgetExceeded(SimulationStatus.FAILED, _non_finite(t, y))
         return out
-    return rhs_dynamic
+    return rhs
 
 
 def _non_finite(t: float, y: np.ndarray) -> str:
@@ -112,8 +101,6 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     SimulationResult
         ``n_steps`` accepted steps, ``n_evaluations`` right-hand-side calls, no events.
     """
-    import scipy.integrate
-
     owner = "simulate_scipy"
     check_option(solver, "solver", owner, tuple(SCIPY_SOLVERS))
     epsilon = check_smoothing(friction, epsilon, owner)
@@ -128,19 +115,19 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     times, states = [0.0], [y.copy()]
     dense_t: list[float] = []
     dense_y: list[np.ndarray] = []
-    status, detail = Status.SUCCESS, ""
+    status, detail = SimulationStatus.SUCCESS, ""
     edges = segment_edges(plant, t_end)
     try:
         for t0, t1 in zip(edges[:-1], edges[1:]):
-            rhs = _right_hand_side(plant, float(t0), friction, epsilon, meter, dynamic)
+            rhs = _right_hand_side(plant, float(t0), friction, epsilon, meter)
             stepper = _solver_call(solver, solver_class, rhs, float(t0), y, float(t1),
                                    rtol=rtol, atol=atol)
             while stepper.status == "running":
                 message = _solver_call(solver, stepper.step)
                 if stepper.status == "failed":
-                    raise BudgetExceeded(Status.FAILED, f"{SCIPY_SOLVERS[solver]}: {message}")
+                    raise BudgetExceeded(SimulationStatus.FAILED, f"{SCIPY_SOLVERS[solver]}: {message}")
                 if not np.all(np.isfinite(stepper.y)):   # the state overflowed (LSODA does not stop)
-                    raise BudgetExceeded(Status.FAILED, f"{SCIPY_SOLVERS[solver]}: the state is not "
+                    raise BudgetExceeded(SimulationStatus.FAILED, f"{SCIPY_SOLVERS[solver]}: the state is not "
                                          f"finite at t = {stepper.t:g} s")
                 meter.step()
                 if t_eval is not None:
@@ -174,7 +161,7 @@ def _solver_call(solver: str, function: Any, *args: Any, **kwargs: Any) -> Any:
         with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
             return function(*args, **kwargs)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
-        raise BudgetExceeded(Status.FAILED, f"{SCIPY_SOLVERS[solver]}: {error}") from error
+        raise BudgetExceeded(SimulationStatus.FAILED, f"{SCIPY_SOLVERS[solver]}: {error}") from error
 
 
 def _sample_step(stepper: Any, t_eval: np.ndarray, out_t: list[float],

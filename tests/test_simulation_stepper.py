@@ -1,0 +1,144 @@
+"""Tests of :func:`toolkit.simulation.advance`: stepping the exact engine sample by sample.
+
+References: one exact ``simulate`` run of the same command schedule (the same engine, so
+agreement to rounding, ``rtol = 1e-12`` with ``atol = 1e-12 * 0.35 m/s`` for speeds that
+cross zero), a high-accuracy quadrature of the exact dense output for the displacements, and
+the closed form of a first-order lag for the contacts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate
+
+from toolkit import ContactSet, Motors, PiecewiseConstant, Plant
+from toolkit.errors import ParameterError
+from toolkit.model.carousel import CAROUSEL, carousel_startup_plant
+from toolkit.simulation import ExactState, SimulationStatus, advance, simulate
+from toolkit.simulation._exact import _motor_speeds
+
+RTOL = 1e-12
+ATOL = 1e-12 * 0.35         # 1e-12 relative to the carousel's speed scale, m/s
+DT = 0.02                   # s, the carousel's 50 Hz sample period
+
+
+def _schedule(rng: np.random.Generator, n: int, steps: int, hold: int) -> np.ndarray:
+    """Commands of ``steps`` periods, each value held for ``hold`` periods: shape (steps, n)."""
+    values = rng.uniform(-0.35, 0.35, (steps // hold + 1, n))
+    return np.repeat(values, hold, axis=0)[:steps]
+
+
+def _step_through(plant: Plant, commands: np.ndarray, external: float = 0.0):
+    """Step ``plant`` through ``commands`` from rest, motors settled on the first command."""
+    state = ExactState.initial(_scheduled(plant, commands))
+    states, steps = [state], []
+    for k, command in enumerate(commands):
+        step = advance(plant, state, command, (k + 1) * DT, external=external)
+        assert step.status is SimulationStatus.SUCCESS
+        state = step.state
+        states.append(state)
+        steps.append(step)
+    return states, steps
+
+
+def _scheduled(plant: Plant, commands: np.ndarray, external: float = 0.0) -> Plant:
+    times = DT * np.arange(1, commands.shape[0])
+    return dataclasses.replace(plant, commands=PiecewiseConstant(times, commands),
+                               external_force=external)
+
+
+@pytest.mark.parametrize("case", ["lag", "lag+rate", "rate", "ideal", "drag+force"])
+def test_stepping_equals_one_simulate_run(case: str) -> None:
+    rng = np.random.default_rng(7)
+    plant = dataclasses.replace(carousel_startup_plant(3), motors=CAROUSEL.motors())
+    external = 0.0
+    if case == "lag+rate":
+        plant = dataclasses.replace(plant, motors=Motors(lag=0.0075, rate_limit=20.0,
+                                                         speed_limits=(-0.35, 0.35)))
+    elif case == "rate":
+        plant = dataclasses.replace(plant, motors=Motors(rate_limit=20.0))
+    elif case == "ideal":
+        plant = dataclasses.replace(plant, motors=None)
+    elif case == "drag+force":
+        plant = dataclasses.replace(plant, damping=0.3)
+        external = 0.1
+    commands = _schedule(rng, plant.n, 100, hold=5)          # 2 s, a switch every 0.1 s
+    states, _ = _step_through(plant, commands, external)
+    times = np.array([s.t for s in states])
+    reference = simulate(_scheduled(plant, commands, external), times[-1], t_eval=times)
+    assert reference.success
+    np.testing.assert_allclose([s.V for s in states], reference.V, rtol=RTOL, atol=ATOL)
+    if plant.dynamic_motors:    # (ideal contacts jump at t1: simulate reports the new command)
+        np.testing.assert_allclose(np.array([s.contact_speeds for s in states]),
+                                   reference.contact_speeds, rtol=RTOL, atol=ATOL)
+
+
+def test_constant_commands_from_rest_equal_one_run() -> None:
+    plant = dataclasses.replace(carousel_startup_plant(0), motors=CAROUSEL.motors())
+    commands = np.tile(plant.contacts.speeds, (150, 1))      # 3 s, motors settled throughout
+    states, steps = _step_through(plant, commands)
+    times = np.array([s.t for s in states])
+    reference = simulate(plant, times[-1], t_eval=times)
+    np.testing.assert_allclose([s.V for s in states], reference.V, rtol=RTOL, atol=ATOL)
+    assert [e.kind for step in steps for e in step.events] == [
+        e.kind for e in reference.events]
+
+
+def test_displacements_equal_a_quadrature_of_the_exact_speed() -> None:
+    # quad with every event and command time as a breakpoint integrates a smooth closed form
+    # on each piece: epsabs 1e-15 m, epsrel 1e-13. Tolerance: 1e-12 relative to the distance
+    # scale 0.35 m/s * DT plus that quadrature error.
+    rng = np.random.default_rng(11)
+    plant = dataclasses.replace(carousel_startup_plant(5), motors=CAROUSEL.motors(),
+                                damping=0.2)
+    commands = _schedule(rng, plant.n, 50, hold=3)
+    states, steps = _step_through(plant, commands, external=-0.05)
+    scheduled = _scheduled(plant, commands, -0.05)
+    reference = simulate(scheduled, states[-1].t)
+    kinks = np.array(sorted({e.time for e in reference.events}))
+    for k, step in enumerate(steps):
+        t0, t1 = states[k].t, states[k + 1].t
+        inside = kinks[(kinks > t0) & (kinks < t1)]
+        distance, error = integrate.quad(reference.speed_at, t0, t1,
+                                         points=inside if inside.size else None,
+                                         epsabs=1e-15, epsrel=1e-13, limit=200)
+        assert step.body_displacement == pytest.approx(distance, rel=0,
+                                                       abs=1e-12 * 0.35 * DT + 1e-15 + error)
+        # The contacts: their exact tracks (smooth inside a step: a lag, no rate limit).
+        tracks, errors = integrate.quad_vec(
+            lambda t: _motor_speeds(scheduled, np.array([t]))[0], t0, t1, epsabs=1e-15,
+            epsrel=1e-13)
+        np.testing.assert_allclose(step.contact_displacements, tracks, rtol=0,
+                                   atol=1e-12 * 0.35 * DT + 1e-15 + errors)
+
+
+def test_unsettled_motor_displacement_is_the_lag_closed_form() -> None:
+    # v = u + (v0 - u) exp(-t / tau), int_0^T v dt = u T + (v0 - u) tau (1 - exp(-T / tau)).
+    tau = 0.0075
+    plant = Plant(ContactSet([-0.2, 0.05, 0.3], [1.0, 1.0, 1.0]), mass=1.0,
+                  motors=Motors(lag=tau))
+    v0 = np.array([-0.3, 0.25, 0.0])
+    u = np.array([0.1, -0.15, 0.3])
+    state = ExactState(0.0, 0.12, v0)
+    step = advance(plant, state, u, DT)
+    decay = math.exp(-DT / tau)
+    np.testing.assert_allclose(step.state.contact_speeds, u + (v0 - u) * decay,
+                               rtol=RTOL, atol=1e-16)
+    np.testing.assert_allclose(step.contact_displacements,
+                               u * DT + (v0 - u) * tau * -math.expm1(-DT / tau),
+                               rtol=RTOL, atol=1e-18)
+
+
+def test_bad_inputs_are_refused() -> None:
+    plant = dataclasses.replace(carousel_startup_plant(0), motors=CAROUSEL.motors())
+    state = ExactState.initial(plant)
+    with pytest.raises(ParameterError, match="'command' parameter of advance"):
+        advance(plant, state, np.zeros(3), DT)
+    with pytest.raises(ParameterError, match="'t1' parameter of advance"):
+        advance(plant, state, np.zeros(plant.n), 0.0)
+    with pytest.raises(ParameterError, match="'stuck' parameter of ExactState"):
+        ExactState(0.0, 0.0, np.zeros(2), stuck=5)

@@ -1,0 +1,218 @@
+"""Continue an exact simulation from a state, one sample period at a time.
+
+A closed loop (encoders, estimator, controller) samples the plant at a fixed rate and holds
+each command for one period. :func:`advance` takes the state at ``t0`` (body speed, contact
+speeds: with lagging motors these are states, not the commands), one command held on
+``[t0, t1)`` and a constant external force, and returns the state at ``t1`` together with the
+exact displacements over the step (what encoders count) and the events inside it.
+
+It runs the engine of :func:`toolkit.simulation.simulate` (``method="exact"``) itself, one
+piece of constant command: ``_dynamic_piece`` with lagging or rate-limited motors,
+``_ideal_piece`` otherwise. Stepping ``0 .. T`` under a command schedule therefore gives
+the trajectory of one ``simulate`` run of that schedule, to rounding. No restart cost: the
+state carries the engine's sliding mode, and nothing is built per call but the step's own
+closed forms (with ideal motors, the force landscape of the new command).
+
+Displacements are exact closed forms: the integral of each stored segment of ``V``
+(:meth:`_Recorder.displacement`) and of each contact's motor track
+(:meth:`toolkit.model.motors.MotorPiece.displacement`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, as_float_array, as_int
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..model import MotorPiece, Plant
+from ._exact import _FREE, _build_landscape, _dynamic_piece, _ideal_piece, _Recorder
+from ._result import Budget, Event, SimulationStatus, status_message
+
+__all__ = ["ExactState", "ExactStep", "advance"]
+
+_DEFAULT_BUDGET = Budget()
+_SUCCESS = SimulationStatus.SUCCESS
+
+
+@dataclass(frozen=True, eq=False)
+class ExactState:
+    """Where an exact simulation stands at one instant: enough to continue it exactly.
+
+    Parameters
+    ----------
+    t : float, s
+    V : float, m/s
+        Body speed.
+    contact_speeds : array_like of shape (n,), m/s
+        Actual contact speeds: the states of lagging or rate-limited motors (not necessarily
+        settled on their command); with ideal motors, ignored by :func:`advance` (the
+        contacts take each command at once).
+    stuck : int or None
+        The contact the body follows in a sliding mode, ``None`` when it slides freely. A
+        state built by hand may leave it ``None``: the engine finds a body tied with a
+        contact (within rounding) itself.
+
+    Examples
+    --------
+    >>> from toolkit import ContactSet, Plant
+    >>> state = ExactState.initial(Plant(ContactSet([-0.1, 0.2]), mass=1.0))
+    >>> state.t, state.V
+    (0.0, 0.0)
+    """
+
+    t: float
+    V: float
+    contact_speeds: np.ndarray
+    stuck: int | None = None
+    _pending: tuple[int | None, float] = field(default=(None, 0.0), repr=False)
+
+    def __post_init__(self) -> None:
+        owner = "ExactState"
+        object.__setattr__(self, "t", as_float(self.t, "t", owner))
+        object.__setattr__(self, "V", as_float(self.V, "V", owner))
+        object.__setattr__(self, "contact_speeds",
+                           as_float_array(self.contact_speeds, "contact_speeds", owner))
+        if self.stuck is not None:
+            stuck = as_int(self.stuck, "stuck", owner, low=0)
+            if stuck >= self.contact_speeds.size:
+                raise ParameterError(parameter_message(
+                    "stuck", owner, f"be None or a contact index < {self.contact_speeds.size}",
+                    stuck))
+            object.__setattr__(self, "stuck", stuck)
+
+    @classmethod
+    def initial(cls, plant: Plant, v0: float = 0.0, t: float = 0.0) -> ExactState:
+        """The state :func:`~toolkit.simulation.simulate` starts from: body speed ``v0``
+        (m/s) at time ``t`` (s), motors settled on the plant's command at ``t``."""
+        return cls(t, v0, plant.command(t))
+
+    @classmethod
+    def _trusted(cls, t: float, V: float, contact_speeds: np.ndarray, stuck: int | None,
+                 pending: tuple[int | None, float]) -> ExactState:
+        """A state the engine produced (floats, a fresh read-only array): no re-validation."""
+        state = object.__new__(cls)
+        state.__dict__.update(t=t, V=V, contact_speeds=contact_speeds, stuck=stuck,
+                              _pending=pending)
+        return state
+
+
+@dataclass(frozen=True, eq=False)
+class ExactStep:
+    """The outcome of one :func:`advance`.
+
+    Attributes
+    ----------
+    state : ExactState
+        The state at ``t1`` (at the stop time when a budget stopped the step).
+    body_displacement : float, m
+        ``int V dt`` over the step, exact (closed form per segment).
+    contact_displacements : ndarray of shape (n,), m
+        ``int v_i dt`` over the step for each contact, exact (closed form of the motor law).
+    events : tuple of Event
+        Crossings, sticks, releases and saturations inside the step.
+    status : SimulationStatus
+    message : str
+        ``status.value`` plus specifics.
+    """
+
+    state: ExactState
+    body_displacement: float
+    contact_displacements: np.ndarray
+    events: tuple[Event, ...]
+    status: SimulationStatus
+    message: str
+
+    @property
+    def success(self) -> bool:
+        """True when the step reached ``t1``."""
+        return self.status is _SUCCESS
+
+
+def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
+            external: float = 0.0, budget: Budget | None = None) -> ExactStep:
+    """Continue an exact simulation from ``state`` to ``t1`` under one held command.
+
+    Parameters
+    ----------
+    plant : Plant
+        The contacts, mass, drag and motors; its own ``commands`` and ``external_force``
+        are not used (``command`` and ``external`` are).
+    state : ExactState
+        The state at ``t0 = state.t``.
+    command : array_like of shape (n,), m/s
+        Commanded contact speeds, held on ``[t0, t1)``; clipped to the motor speed limits.
+    t1 : float, s
+        End of the step, ``> state.t``.
+    external : float, N
+        External force, constant over the step.
+    budget : Budget, optional
+        Limits of the step (default ``Budget()``): the same guards as ``simulate``.
+
+    Returns
+    -------
+    ExactStep
+        The state at ``t1``, the exact displacements over the step and its events.
+
+    Notes
+    -----
+    Stepping ``0 .. T`` with the values of a command schedule whose switches lie on the
+    step times gives, to rounding, the trajectory of one exact ``simulate`` run of that
+    schedule (the same engine runs each piece of constant command).
+    """
+    if type(plant) is not Plant and not isinstance(plant, Plant):
+        raise ParameterTypeError(parameter_message("plant", "advance", "be a Plant", plant))
+    if not isinstance(state, ExactState):
+        raise ParameterTypeError(parameter_message("state", "advance", "be an ExactState",
+                                                   state))
+    n = plant.n
+    u = command if type(command) is np.ndarray and command.dtype == np.float64 else \
+        np.asarray(command, dtype=float)
+    if u.shape != (n,) or not np.isfinite(u).all():
+        raise ParameterError(parameter_message(
+            "command", "advance", f"be {n} finite speeds (one per contact)", command))
+    t0 = state.t
+    if not (type(t1) is float and t0 < t1 < math.inf):
+        t1 = as_float(t1, "t1", "advance", low=t0, low_open=True)
+    if not (type(external) is float and math.isfinite(external)):
+        external = as_float(external, "external", "advance")
+    budget = _DEFAULT_BUDGET if budget is None else budget
+    if not isinstance(budget, Budget):
+        raise ParameterTypeError(parameter_message("budget", "advance", "be a Budget", budget))
+    motors = plant.motors
+    if motors is not None:
+        u = np.clip(u, *motors.speed_limits)
+    if plant.dynamic_motors:
+        mu = 1.0 / motors.lag if motors.lag > 0 else 0.0
+        rec = _Recorder(budget, 2 * n + 2, mu)
+        speeds = state.contact_speeds
+        if speeds.shape != (n,):
+            raise ParameterError(parameter_message(
+                "state", "advance", f"hold {n} contact speeds", speeds.shape))
+        motor = MotorPiece.build(t0, speeds, u, motors.lag, motors.rate_limit)
+        t, V, (stuck, hint, releasing), _ = _dynamic_piece(
+            plant, motor, external, t1, state.V, (state.stuck, *state._pending), rec)
+        offset = np.array([t - t0])
+        speeds_end = motor.speeds(offset)[0]
+        travelled = motor.displacement(t - t0)
+        pending = (hint, releasing)
+    else:
+        rec = _Recorder(budget, 2 * n + 2, 0.0)
+        t, V, stuck, _ = _ideal_piece(plant, _build_landscape(plant, u), external, t0, t1,
+                                      state.V, state.stuck, rec)
+        speeds_end = u.copy()
+        travelled = u * (t - t0)
+        pending = _FREE[1:]
+    speeds_end.setflags(write=False)
+    travelled.setflags(write=False)
+    status = rec.status
+    if status is _SUCCESS and not (math.isfinite(t) and math.isfinite(V)):
+        status = SimulationStatus.FAILED
+        rec.detail = f"the body speed left the floating-point range (V = {V:g} m/s)"
+    detail = rec.detail if status is not _SUCCESS else f"{len(rec.events)} events"
+    return ExactStep(ExactState._trusted(float(t), float(V), speeds_end, stuck, pending),
+                     rec.displacement(t), travelled, tuple(rec.events), status,
+                     status_message(status, detail))

@@ -398,9 +398,12 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
             ha="right", va="bottom", fontsize="x-small", color="0.3")
     if reference_time is not None:
         ax.axvline(reference_time, color="k", ls="--", lw=1, label="exact (the reference)")
+    left, right = np.log10(ax.get_xlim())
     for rank, (w, e, text) in enumerate(sorted(fronts)):
-        ax.annotate(text, (w, e), xytext=(5, 5 if rank % 2 == 0 else -9),
-                    textcoords="offset points", fontsize=6, color="0.2", gid="setting label")
+        flip = math.log10(w) > (left + right) / 2        # right half: label to the left
+        ax.annotate(text, (w, e), xytext=(-5 if flip else 5, 5 if rank % 2 == 0 else -9),
+                    textcoords="offset points", ha="right" if flip else "left", fontsize=6,
+                    color="0.2", gid="setting label")
     ax.set_xlabel("wall time per run (s)")
     ax.set_ylabel("max |V - V_exact| over the run (m/s)")
     _title(ax, title, "work-precision (error vs. run time)")

@@ -37,6 +37,11 @@ from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, Simu
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
 
+# sensors and estimation (filterpy is imported only where a filter is built)
+from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
+from .estimation import (CentralDifference, EstimationResult, Estimator, EstimatorModel, KalmanEstimator,
+                         RTSSmoother, UnscentedEstimator, WheelDifference, carousel_brake_scenario, chi2_band)
+
 __version__ = "0.1.0"
 
 __all__ = [
@@ -53,8 +58,10 @@ __all__ = [
     "ForceCurve", "Viscosity", "FrictionFraction", "EquilibriumSpeed",
     # schedules (time-varying designs)
     "design_schedule", "ScheduleResult", "ScheduleStatus", "SpeedTrajectory", "Braking", "braking_time",
-    # sensors
-    "Encoder",
+    # sensors and estimation
+    "Encoder", "Sensors", "EncoderRecord", "EncoderSample", "measure", "record_simulation",
+    "Estimator", "EstimationResult", "EstimatorModel", "CentralDifference", "WheelDifference",
+    "KalmanEstimator", "RTSSmoother", "UnscentedEstimator", "chi2_band", "carousel_brake_scenario",
     # plots (matplotlib is imported when one is drawn)
     "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision",
     # scenes and studies

@@ -11,7 +11,8 @@ Read this package alone to know the whole model:
 - :mod:`~toolkit.model.signals`: piecewise-constant signals (external force, commands);
 - :mod:`~toolkit.model.plant`: the body on its contacts, ``m dV/dt in F(V) + F_ext - c V``,
   and its right-hand side :meth:`Plant.rhs`;
-- :mod:`~toolkit.model.sensors`: encoders as integer counts of position.
+- :mod:`~toolkit.model.sensors`: encoders as integer counts of position (the sensor law
+  :func:`measure`, gearbox backlash, records of exact simulations).
 
 Every solver, estimator and controller calls these; none re-derives them.
 """
@@ -23,7 +24,7 @@ from .friction import (FRICTION_LAWS, STRIBECK_PEAK, STRIBECK_SPEED, compliant_b
                        compliant_zero_set, contact_forces)
 from .motors import MotorPiece, Motors, implicit_step, motor_rate, reach, unsaturated_response
 from .plant import Plant
-from .sensors import Encoder
+from .sensors import Encoder, EncoderRecord, EncoderSample, Sensors, SensorState, measure, play, record_simulation
 from .signals import PiecewiseConstant
 
 __all__ = [
@@ -32,4 +33,5 @@ __all__ = [
     "compliant_breakpoints", "compliant_zero_set",
     "Motors", "motor_rate", "MotorPiece", "unsaturated_response", "implicit_step", "reach",
     "PiecewiseConstant", "Plant", "Encoder",
+    "Sensors", "SensorState", "EncoderRecord", "EncoderSample", "measure", "play", "record_simulation",
 ]

@@ -4,6 +4,22 @@ An encoder with ``counts_per_rev`` counts on a shaft whose contact point sits at
 resolves ``2 pi radius / counts_per_rev`` metres; differencing counts at ``rate`` Hz gives
 speed in steps of that distance times the rate. At constant speed the quantization error
 is a deterministic sawtooth, not white noise (PHYSICS.md section 3).
+
+The sensor law is written once, in :func:`measure`: positions in, integer counts out, one
+sample (a closed loop) or a whole record (offline) through the same code. It quantizes
+position, never speed (``floor(x / q)``), and models:
+
+- gearbox backlash of the wheels as the play (hysteresis) operator :func:`play` of width
+  ``b``: the encoder sits on the motor side and sees the contact position through the dead
+  band; the motor side is dragged along at the edge of the play and stands still for ``b``
+  of contact travel after each reversal;
+- missed counts (each count transition lost with probability ``p``, for good), additive
+  read noise in counts, and sample-time jitter (the read instants, not the stamps), all
+  drawn from a ``numpy.random.Generator`` passed in.
+
+:class:`Sensors` describes the suite (the carousel's: :meth:`Sensors.carousel`);
+:class:`EncoderRecord` holds what it reports; :func:`record_simulation` turns an exact
+simulation into a record, with positions integrated exactly from its dense output.
 """
 
 from __future__ import annotations
@@ -14,9 +30,11 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float
+from .._validation import as_float, as_float_array, as_int
+from ..errors import ParameterError, ParameterTypeError, parameter_message
 
-__all__ = ["Encoder"]
+__all__ = ["Encoder", "Sensors", "SensorState", "play", "measure", "EncoderRecord", "EncoderSample",
+           "record_simulation", "contact_speeds_at", "GAUSS_NODES"]
 
 
 @dataclass(frozen=True)
@@ -69,3 +87,533 @@ class Encoder:
         """The resolutions as a JSON-able dict (SI units)."""
         return {"distance_per_count": self.distance_per_count, "speed_step": self.speed_step,
                 "backlash_speed_step": self.backlash_speed_step, "rate": self.rate}
+
+
+# -- the carousel's sensor suite -------------------------------------------------------------
+@dataclass(frozen=True)
+class Sensors:
+    """The sensor suite of a body on ``n_wheels`` motor-driven contacts, all read at one rate.
+
+    Parameters
+    ----------
+    central : Encoder
+        The body's encoder (for the carousel the central AMT103-V, 8192 counts/rev at the
+        contact radius ``L``).
+    wheel : Encoder
+        The encoder of each contact's motor (identical for every wheel); ``wheel.backlash``
+        is the gearbox play between motor and contact (m at the contact).
+    n_wheels : int
+        Number of wheel encoders (= contacts), ``>= 1``.
+    missed_count_prob : float
+        Probability, in ``[0, 1]``, that the counter misses one count transition; a missed
+        transition shifts that channel's count for good (the counter never sees it again).
+    count_noise : float, counts
+        Standard deviation (``>= 0``) of an additive read noise, rounded to whole counts and
+        not accumulated (e.g. a glitching line read once).
+    jitter : float, s
+        Standard deviation (``>= 0``) of the sample-time jitter: the positions are read at
+        ``t_k + d_k`` while the record stamps ``t_k``; ``d_k`` is drawn Gaussian and clipped
+        to a quarter period so that samples keep their order.
+
+    Notes
+    -----
+    The rates of the two encoders must agree: one rate for all encoders and the motor
+    commands (PHYSICS.md section 3: 50 Hz).
+    """
+
+    central: Encoder
+    wheel: Encoder
+    n_wheels: int
+    missed_count_prob: float = 0.0
+    count_noise: float = 0.0
+    jitter: float = 0.0
+
+    def __post_init__(self) -> None:
+        owner = "Sensors"
+        for name in ("central", "wheel"):
+            if not isinstance(getattr(self, name), Encoder):
+                raise ParameterTypeError(parameter_message(name, owner, "be an Encoder", getattr(self, name)))
+        if self.central.rate != self.wheel.rate:
+            raise ParameterError(parameter_message(
+                "wheel", owner, f"have the central encoder's rate ({self.central.rate:g} Hz)",
+                f"rate {self.wheel.rate:g} Hz"))
+        object.__setattr__(self, "n_wheels", as_int(self.n_wheels, "n_wheels", owner, low=1))
+        object.__setattr__(self, "missed_count_prob", as_float(
+            self.missed_count_prob, "missed_count_prob", owner, low=0.0, high=1.0))
+        object.__setattr__(self, "count_noise", as_float(self.count_noise, "count_noise", owner, low=0.0))
+        object.__setattr__(self, "jitter", as_float(self.jitter, "jitter", owner, low=0.0))
+
+    # -- constructors ---------------------------------------------------------------------
+    @classmethod
+    def carousel(cls, n_wheels: int = 10, **noise: float) -> Sensors:
+        """The paper's encoders (PHYSICS.md section 3) at 50 Hz.
+
+        Central AMT103-V: 8192 counts/rev at ``L = 0.266 m`` (0.204 mm per count); wheels:
+        48 CPR x 74.83:1 = 3591.84 counts/rev at ``R = 0.045 m`` (78.7 um per count) with
+        0.8 mm of gearbox backlash. ``noise`` takes ``missed_count_prob``, ``count_noise``
+        and ``jitter``.
+        """
+        return cls(Encoder(8192, 0.266, 50.0), Encoder(48 * 74.83, 0.045, 50.0, backlash=0.0008),
+                   n_wheels, **noise)
+
+    @classmethod
+    def from_spec(cls, spec: Any, n_wheels: int, **noise: float) -> Sensors:
+        """From a scene's ``[sensors]`` section (any object with its fields: ``rate``,
+        ``wheel_counts_per_rev``, ``wheel_radius``, ``wheel_backlash``,
+        ``central_counts_per_rev``, ``contact_radius``)."""
+        central = Encoder(spec.central_counts_per_rev, spec.contact_radius, spec.rate)
+        wheel = Encoder(spec.wheel_counts_per_rev, spec.wheel_radius, spec.rate,
+                        backlash=spec.wheel_backlash)
+        return cls(central, wheel, n_wheels, **noise)
+
+    # -- properties -----------------------------------------------------------------------
+    @property
+    def rate(self) -> float:
+        """Sampling rate of every encoder, Hz."""
+        return self.central.rate
+
+    @property
+    def period(self) -> float:
+        """Sampling period ``1 / rate``, s."""
+        return 1.0 / self.central.rate
+
+    @property
+    def backlash(self) -> float:
+        """Gearbox play of each wheel at the contact, m."""
+        return self.wheel.backlash
+
+    def initial_state(self, contact_speeds: Any = None, *, central_position: float = 0.0,
+                      contact_positions: Any = None) -> SensorState:
+        """The sensors' state before the first sample.
+
+        Parameters
+        ----------
+        contact_speeds : array_like of shape (n,), m/s, optional
+            Contact speeds at the start. A contact already moving has its gearbox loaded:
+            the motor side trails the contact by half the play, ``-sign(v_i) b / 2``
+            (the play operator's steady state); at rest (or ``None``) the play is centred.
+        central_position, contact_positions : float and array_like of shape (n,), m
+            Positions at the start (default 0): they set the reference of the missed-count
+            bookkeeping.
+        """
+        n = self.n_wheels
+        x0 = np.zeros(n) if contact_positions is None else np.asarray(contact_positions, dtype=float).reshape(n)
+        v0 = np.zeros(n) if contact_speeds is None else np.asarray(contact_speeds, dtype=float).reshape(n)
+        motor = x0 - np.sign(v0) * 0.5 * self.backlash
+        return SensorState(motor=motor,
+                           central_count=int(self.central.counts(central_position)),
+                           wheel_count=self.wheel.counts(motor),
+                           central_offset=0, wheel_offset=np.zeros(n, dtype=np.int64))
+
+
+@dataclass(frozen=True, eq=False)
+class SensorState:
+    """What the sensors remember between samples (a value: :func:`measure` returns a new one).
+
+    Attributes
+    ----------
+    motor : ndarray of shape (n,), m
+        Motor-side position of each wheel's gearbox (the play operator's output).
+    central_count, wheel_count : int and ndarray of shape (n,)
+        The true (un-missed) counts at the previous sample.
+    central_offset, wheel_offset : int and ndarray of shape (n,)
+        Counts lost so far to missed transitions (added to the true counts).
+    """
+
+    motor: np.ndarray
+    central_count: int
+    wheel_count: np.ndarray
+    central_offset: int
+    wheel_offset: np.ndarray
+
+
+def play(positions: Any, width: float, start: Any) -> np.ndarray:
+    """The play (backlash) operator: the motor-side position seen through a dead band.
+
+    ``y_k = clip(y_{k-1}, x_k - width / 2, x_k + width / 2)``: the motor side stays put while
+    the contact moves inside the gearbox play and is dragged along at its edge. After a
+    reversal the output stands still until the input has travelled ``width``.
+
+    Parameters
+    ----------
+    positions : array_like of shape (k, n), m
+        Contact positions ``x`` at successive samples.
+    width : float, m
+        Play ``b >= 0``.
+    start : array_like of shape (n,), m
+        Output ``y`` before the first sample.
+
+    Returns
+    -------
+    ndarray of shape (k, n), m
+        ``y`` at each sample (row by row: the same code serves one sample or a whole record).
+    """
+    x = np.asarray(positions, dtype=float)
+    out = np.empty_like(x)
+    y = np.asarray(start, dtype=float)
+    half = 0.5 * width
+    for j in range(x.shape[0]):
+        y = np.minimum(np.maximum(y, x[j] - half), x[j] + half)
+        out[j] = y
+    return out
+
+
+def measure(sensors: Sensors, central_positions: Any, contact_positions: Any, state: SensorState,
+            rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray, SensorState]:
+    """The sensor law: body and contact positions to the integer counts the encoders report.
+
+    One sample (``k = 1``) in a closed loop or a whole record: the same code, row by row.
+
+    Parameters
+    ----------
+    sensors : Sensors
+    central_positions : array_like of shape (k,), m
+        Body position (at the central encoder's radius) at each read instant.
+    contact_positions : array_like of shape (k, n), m
+        Contact positions (at the wheels' contact point) at each read instant.
+    state : SensorState
+        From :meth:`Sensors.initial_state` or a previous call.
+    rng : numpy.random.Generator, optional
+        Draws the missed counts and the read noise; needed when either is non-zero.
+
+    Returns
+    -------
+    central_counts : ndarray of shape (k,), int64
+        ``floor(X / q_c)`` plus missed-count offsets and read noise.
+    wheel_counts : ndarray of shape (k, n), int64
+        ``floor(play(x) / q_w)`` (the motor-side encoder sees the contact through the
+        gearbox play), plus offsets and noise.
+    state : SensorState
+        The state after the last sample.
+
+    Notes
+    -----
+    Per sample and in this order: the play operator; the true counts (position quantized by
+    ``floor``, never speed); for each channel the transitions since the last sample,
+    ``|c_k - c_{k-1}|``, each missed with probability ``p`` (one binomial draw per channel,
+    central first), the missed ones shifting the count against the motion for good; then
+    the read noise (one normal draw per channel, rounded). Draws happen only for non-zero
+    ``p`` or noise, so a noiseless suite consumes no random numbers.
+    """
+    owner = "measure"
+    X = as_float_array(central_positions, "central_positions", owner)
+    x = as_float_array(contact_positions, "contact_positions", owner, ndim=2)
+    if x.shape != (X.size, sensors.n_wheels):
+        raise ParameterError(parameter_message(
+            "contact_positions", owner, f"have shape ({X.size}, {sensors.n_wheels})",
+            f"an array of shape {x.shape}"))
+    p, noise = sensors.missed_count_prob, sensors.count_noise
+    if (p > 0 or noise > 0) and not isinstance(rng, np.random.Generator):
+        raise ParameterTypeError(parameter_message(
+            "rng", owner, "be a numpy.random.Generator when counts can be missed or noisy", rng))
+    motor = play(x, sensors.backlash, state.motor)
+    true_c = sensors.central.counts(X)
+    true_w = sensors.wheel.counts(motor)
+    central = np.empty_like(true_c)
+    wheel = np.empty_like(true_w)
+    last_c, last_w = state.central_count, state.wheel_count
+    off_c, off_w = state.central_offset, state.wheel_offset.copy()
+    n = sensors.n_wheels
+    for j in range(X.size):
+        c, w = int(true_c[j]), true_w[j]
+        if p > 0:
+            dc, dw = c - last_c, w - last_w
+            off_c -= int(np.sign(dc)) * int(rng.binomial(abs(dc), p))
+            off_w -= np.sign(dw) * rng.binomial(np.abs(dw), p)
+        central[j], wheel[j] = c + off_c, w + off_w
+        if noise > 0:
+            central[j] += int(np.rint(rng.normal(0.0, noise)))
+            wheel[j] += np.rint(rng.normal(0.0, noise, n)).astype(np.int64)
+        last_c, last_w = c, w
+    new = SensorState(motor=motor[-1].copy() if X.size else state.motor, central_count=last_c,
+                      wheel_count=np.array(last_w, dtype=np.int64), central_offset=off_c,
+                      wheel_offset=off_w)
+    return central, wheel, new
+
+
+# -- records ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class EncoderSample:
+    """One sample of an :class:`EncoderRecord`: what a controller receives at ``time``.
+
+    Attributes
+    ----------
+    time : float, s
+    central_count : int
+    wheel_counts : ndarray of shape (n,), int64
+    command : ndarray of shape (n,), m/s
+        The contact speeds commanded at this sample.
+    """
+
+    time: float
+    central_count: int
+    wheel_counts: np.ndarray
+    command: np.ndarray
+
+
+def _int_array(value: Any, name: str, ndim: int) -> np.ndarray:
+    array = np.asarray(value)
+    if array.dtype.kind not in "iu" or array.ndim != ndim:
+        raise ParameterError(parameter_message(
+            name, "EncoderRecord", f"be a {ndim}-dimensional array of integer counts",
+            f"an array of dtype {array.dtype} and shape {array.shape}"))
+    array = array.astype(np.int64, copy=True)
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class EncoderRecord:
+    """Encoder counts and commands sampled at one rate, with the truth when simulated.
+
+    Parameters
+    ----------
+    times : array_like of shape (k,), s
+        Sample stamps, strictly increasing (the nominal instants; with jitter the encoders
+        were read slightly off them).
+    central_counts : array_like of shape (k,), int
+    wheel_counts : array_like of shape (k, n), int
+    commands : array_like of shape (k, n), m/s
+        Contact speeds commanded at each sample.
+    central_resolution, wheel_resolution : float, m per count
+        Distance of one count at the body's contact radius and at the wheels' contacts.
+    wheel_backlash : float, m
+        Gearbox play of the wheels, ``>= 0``.
+    truth_speed, truth_position : array_like of shape (k,), optional
+        True body speed (m/s) and position (m) at ``times``: for scoring only, never read
+        by an estimator.
+    truth_contact_speeds : array_like of shape (k, n), m/s, optional
+        True contact speeds at ``times`` (scoring only).
+    """
+
+    times: np.ndarray
+    central_counts: np.ndarray
+    wheel_counts: np.ndarray
+    commands: np.ndarray
+    central_resolution: float
+    wheel_resolution: float
+    wheel_backlash: float = 0.0
+    truth_speed: np.ndarray | None = None
+    truth_position: np.ndarray | None = None
+    truth_contact_speeds: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        owner = "EncoderRecord"
+        times = as_float_array(self.times, "times", owner)
+        if np.any(np.diff(times) <= 0):
+            raise ParameterError(parameter_message("times", owner, "be strictly increasing",
+                                                   times.tolist()[:8]))
+        k = times.size
+        central = _int_array(self.central_counts, "central_counts", 1)
+        wheel = _int_array(self.wheel_counts, "wheel_counts", 2)
+        commands = as_float_array(self.commands, "commands", owner, ndim=2)
+        for name, array, shape in (("central_counts", central, (k,)),
+                                   ("wheel_counts", wheel, (k, wheel.shape[1])),
+                                   ("commands", commands, wheel.shape)):
+            if array.shape != shape:
+                raise ParameterError(parameter_message(
+                    name, owner, f"have shape {shape}", f"an array of shape {array.shape}"))
+        for name, value in (("times", times), ("central_counts", central), ("wheel_counts", wheel),
+                            ("commands", commands)):
+            object.__setattr__(self, name, value)
+        for name in ("central_resolution", "wheel_resolution"):
+            object.__setattr__(self, name, as_float(getattr(self, name), name, owner, low=0.0, low_open=True))
+        object.__setattr__(self, "wheel_backlash", as_float(self.wheel_backlash, "wheel_backlash", owner, low=0.0))
+        for name, ndim, shape in (("truth_speed", 1, (k,)), ("truth_position", 1, (k,)),
+                                  ("truth_contact_speeds", 2, wheel.shape)):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            array = as_float_array(value, name, owner, ndim=ndim)
+            if array.shape != shape:
+                raise ParameterError(parameter_message(
+                    name, owner, f"have shape {shape}", f"an array of shape {array.shape}"))
+            object.__setattr__(self, name, array)
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples ``k``."""
+        return int(self.times.size)
+
+    @property
+    def n_wheels(self) -> int:
+        """Number of wheel channels ``n``."""
+        return int(self.wheel_counts.shape[1])
+
+    @property
+    def period(self) -> float:
+        """Median sample period, s."""
+        return float(np.median(np.diff(self.times))) if self.times.size > 1 else math.nan
+
+    @property
+    def duration(self) -> float:
+        """Span of the stamps, s."""
+        return float(self.times[-1] - self.times[0])
+
+    @property
+    def has_truth(self) -> bool:
+        """True when the true body speed is recorded."""
+        return self.truth_speed is not None
+
+    def sample(self, k: int) -> EncoderSample:
+        """Sample ``k`` as an :class:`EncoderSample` (what a closed loop sees)."""
+        return EncoderSample(float(self.times[k]), int(self.central_counts[k]),
+                             self.wheel_counts[k], self.commands[k])
+
+    def __len__(self) -> int:
+        return self.n_samples
+
+
+# -- exact positions from a simulation -------------------------------------------------------
+#: Gauss-Legendre nodes per smooth piece of :func:`record_simulation`: exact for polynomials
+#: of degree 15; on exponential pieces of rate mu over h it errs by about
+#: ``h (mu h)^16 (8!)^4 / (17 (16!)^3)`` times the speed scale, below 1e-17 m for the
+#: carousel (``h <= 20 ms``, ``mu = 1 / 7.5 ms``).
+GAUSS_NODES = 8
+
+
+def _contact_pieces(plant: Any, t_end: float) -> tuple[list[tuple[float, float, Any]], np.ndarray]:
+    """The motor law solved piece by piece between switches: ``[(a, b, MotorPiece)]`` and
+    the kinks of the contact speeds (switches and ramp ends), for dynamic motors."""
+    from .motors import MotorPiece
+
+    switches = plant.switching_times()
+    bounds = [0.0, *switches[(switches > 0) & (switches < t_end)].tolist(), t_end]
+    speeds = plant.initial_speeds()
+    tau, rate = plant.motors.lag, plant.motors.rate_limit
+    pieces, kinks = [], []
+    for a, b in zip(bounds, bounds[1:]):
+        piece = MotorPiece.build(a, speeds, plant.command(a), tau, rate)
+        pieces.append((a, b, piece))
+        ends = a + piece.ramp_end[(piece.ramp_end > 0) & (a + piece.ramp_end < b)]
+        kinks.extend(ends.tolist())
+        speeds = piece.speeds(np.array([b - a]))[0]
+    return pieces, np.array(kinks)
+
+
+def contact_speeds_at(plant: Any, times: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Contact speeds of a :class:`~toolkit.model.Plant` at any times, from the motor law.
+
+    Parameters
+    ----------
+    plant : Plant
+    times : array_like of shape (T,), s, ``>= 0``
+
+    Returns
+    -------
+    speeds : ndarray of shape (T, n), m/s
+        Ideal motors: the (clipped) commands, piecewise constant; dynamic motors: the
+        closed-form solution (:class:`~toolkit.model.motors.MotorPiece`) of each piece.
+    kinks : ndarray, s
+        Times where the speeds jump or change slope (switches, ramp ends).
+    """
+    t = np.asarray(times, dtype=float)
+    switches = plant.switching_times()
+    if not plant.dynamic_motors or plant.commands is None:
+        if plant.commands is None:
+            return np.broadcast_to(plant.command(0.0), (t.size, plant.n)).copy(), switches
+        raw = np.asarray(plant.commands(t), dtype=float).reshape(t.size, plant.n)
+        low, high = plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf)
+        return np.clip(raw, low, high), switches
+    horizon = float(max(t.max(initial=0.0), 1e-300))
+    pieces, kinks = _contact_pieces(plant, horizon)
+    out = np.empty((t.size, plant.n))
+    for a, b, piece in pieces:
+        inside = (t >= a) & ((t < b) | (b == horizon))
+        if inside.any():
+            out[inside] = piece.speeds(t[inside] - a)
+    return out, np.unique(np.concatenate((switches, kinks)))
+
+
+def _antiderivative(speed: Any, times: np.ndarray, breaks: np.ndarray) -> np.ndarray:
+    """``integral_0^t speed`` at sorted ``times`` by Gauss-Legendre on each smooth piece.
+
+    ``speed(nodes) -> (M,) or (M, n)``; ``breaks`` are the kinks of ``speed`` (every piece
+    between consecutive breaks and times is smooth)."""
+    from numpy.polynomial.legendre import leggauss
+
+    top = float(times[-1])
+    grid = np.unique(np.concatenate(([0.0], breaks[(breaks > 0) & (breaks < top)], times)))
+    a, b = grid[:-1], grid[1:]
+    x, w = leggauss(GAUSS_NODES)
+    half = 0.5 * (b - a)
+    nodes = (0.5 * (a + b))[:, None] + half[:, None] * x
+    values = np.asarray(speed(nodes.ravel()), dtype=float)
+    values = values.reshape(a.size, GAUSS_NODES, *values.shape[1:])
+    pieces = np.einsum("j,sj...->s...", w, values) * half.reshape(-1, *([1] * (values.ndim - 2)))
+    cumulative = np.concatenate((np.zeros((1, *pieces.shape[1:])), np.cumsum(pieces, axis=0)))
+    return cumulative[np.searchsorted(grid, times)]
+
+
+def record_simulation(result: Any, plant: Any, sensors: Sensors, *,
+                      rng: np.random.Generator | None = None, t_end: float | None = None,
+                      truth: bool = True) -> EncoderRecord:
+    """Sample an exact simulation through the sensor law (:func:`measure`) into a record.
+
+    Parameters
+    ----------
+    result : SimulationResult
+        An exact run (``simulate(plant, ..., method="exact")``) with its dense output
+        ``speed_at``.
+    plant : Plant
+        The plant simulated: its commands and motor law give the contact speeds.
+    sensors : Sensors
+        ``n_wheels`` must equal ``plant.n``.
+    rng : numpy.random.Generator, optional
+        Draws jitter, missed counts and read noise (needed when any is non-zero).
+    t_end : float, s, optional
+        Last sample time bound; default the run's horizon.
+    truth : bool
+        Keep the true body speed, position and contact speeds at the stamps (scoring only).
+
+    Returns
+    -------
+    EncoderRecord
+        Samples at ``k / rate`` for ``k = 0 .. floor(t_end rate)``.
+
+    Notes
+    -----
+    Positions are exact integrals of the dense output: the body position is
+    ``integral_0^t V``, each contact's position ``integral_0^t v_i``, computed by
+    Gauss-Legendre (:data:`GAUSS_NODES` nodes) on every piece between consecutive read
+    instants, events, switches and motor ramp ends, on each of which the speeds are smooth
+    (lines or exponentials); the error is far below 1e-12 m. Jitter moves the read instants,
+    not the stamps.
+    """
+    owner = "record_simulation"
+    if not isinstance(sensors, Sensors):
+        raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors", sensors))
+    if getattr(result, "dense", None) is None or not hasattr(result, "speed_at"):
+        raise ParameterTypeError(parameter_message(
+            "result", owner, "be an exact SimulationResult with a dense output", result))
+    if sensors.n_wheels != plant.n:
+        raise ParameterError(parameter_message(
+            "sensors", owner, f"have n_wheels = plant.n = {plant.n}", sensors.n_wheels))
+    horizon = getattr(result.dense, "t_end", None) or result.t_final
+    t_end = horizon if t_end is None else as_float(t_end, "t_end", owner, low=0.0, high=horizon)
+    rate = sensors.rate
+    stamps = np.arange(int(math.floor(t_end * rate * (1 + 1e-12))) + 1) / rate
+    reads = stamps
+    if sensors.jitter > 0:
+        if not isinstance(rng, np.random.Generator):
+            raise ParameterTypeError(parameter_message(
+                "rng", owner, "be a numpy.random.Generator when the sensors jitter", rng))
+        quarter = 0.25 / rate
+        reads = np.clip(stamps + np.clip(rng.normal(0.0, sensors.jitter, stamps.size), -quarter, quarter),
+                        0.0, t_end)
+    _, contact_kinks = contact_speeds_at(plant, np.array([t_end]))
+    events = np.array([e.time for e in result.events], dtype=float)
+    breaks = np.unique(np.concatenate((events, np.asarray(result.t, dtype=float), contact_kinks)))
+    body = _antiderivative(result.speed_at, reads, breaks)
+    contacts = _antiderivative(lambda t: contact_speeds_at(plant, t)[0], reads, contact_kinks)
+    state = sensors.initial_state(plant.initial_speeds())
+    central, wheel, _ = measure(sensors, body, contacts, state, rng)
+    truth_fields: dict[str, Any] = {}
+    if truth:
+        truth_fields = {
+            "truth_speed": result.speed_at(stamps),
+            "truth_position": body if sensors.jitter == 0 else _antiderivative(result.speed_at, stamps, breaks),
+            "truth_contact_speeds": contact_speeds_at(plant, stamps)[0]}
+    commands = np.asarray([plant.command(t) for t in stamps], dtype=float).reshape(stamps.size, plant.n)
+    return EncoderRecord(stamps, central, wheel, commands, sensors.central.distance_per_count,
+                         sensors.wheel.distance_per_count, sensors.backlash, **truth_fields)

@@ -1,0 +1,27 @@
+"""Body-speed estimation from encoder counts: interchangeable estimators behind one interface.
+
+Each estimator can ``run(record) -> EstimationResult`` offline and be stepped sample by
+sample (``reset``, ``step``) in a closed loop:
+
+- :mod:`~toolkit.estimation.finite_difference`: the baselines, finite differences of the
+  central encoder and of the wheel encoders;
+- :mod:`~toolkit.estimation.kalman`: the linear Kalman filter (filterpy) with the contact
+  force as known input, and the Rauch-Tung-Striebel smoother (offline reference);
+- :mod:`~toolkit.estimation.unscented`: the unscented Kalman filter whose process model is
+  the exact simulator over one sample.
+
+filterpy is imported only where a filter is built.
+"""
+
+from __future__ import annotations
+
+from ._base import EstimationResult, Estimator, chi2_band
+from ._input import EstimatorModel, contact_speed_estimates
+from .finite_difference import CentralDifference, WheelDifference
+from .kalman import KalmanEstimator, RTSSmoother, steady_state_gain
+from .scenario import BrakeScenario, carousel_brake_scenario
+from .unscented import UnscentedEstimator
+
+__all__ = ["Estimator", "EstimationResult", "EstimatorModel", "chi2_band", "contact_speed_estimates",
+           "CentralDifference", "WheelDifference", "KalmanEstimator", "RTSSmoother",
+           "steady_state_gain", "UnscentedEstimator", "BrakeScenario", "carousel_brake_scenario"]

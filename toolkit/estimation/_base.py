@@ -1,0 +1,179 @@
+"""The estimator interface, its result and the consistency statistics (private base).
+
+Every estimator maps an :class:`~toolkit.model.sensors.EncoderRecord` to body-speed estimates
+with their variances, offline (:meth:`Estimator.run`) or sample by sample in a loop
+(:meth:`Estimator.reset`, :meth:`Estimator.step`), as a 50 Hz controller calls it. Scores
+against the truth (RMS and max speed error, NEES, NIS) are computed when the record carries
+the truth; estimators never read it.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, as_float_array
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..model.sensors import EncoderRecord, EncoderSample
+
+__all__ = ["Estimator", "EstimationResult", "chi2_band", "check_covariance"]
+
+
+def chi2_band(samples: int, dim: int, level: float = 0.95) -> tuple[float, float]:
+    """Two-sided band of the mean of ``samples`` independent ``dim``-dimensional NEES (or NIS).
+
+    The sum of ``K`` such statistics is chi-square with ``K dim`` degrees of freedom, so the
+    mean lies in ``chi2.ppf([(1 - level) / 2, (1 + level) / 2], K dim) / K`` with
+    probability ``level`` for a consistent filter.
+    """
+    from scipy.stats import chi2
+
+    tail = 0.5 * (1.0 - level)
+    lo, hi = chi2.ppf([tail, 1.0 - tail], samples * dim) / samples
+    return float(lo), float(hi)
+
+
+def check_covariance(value: Any, name: str, owner: str, dim: int) -> np.ndarray:
+    """A ``dim x dim`` symmetric positive definite matrix, or the template error naming it."""
+    array = as_float_array(value, name, owner, ndim=2)
+    if array.shape != (dim, dim):
+        raise ParameterError(parameter_message(name, owner, f"have shape ({dim}, {dim})",
+                                               f"an array of shape {array.shape}"))
+    scale = float(np.max(np.abs(array)))
+    if not np.allclose(array, array.T, rtol=1e-12, atol=1e-14 * scale):
+        raise ParameterError(parameter_message(name, owner, "be symmetric", array.tolist()))
+    try:
+        np.linalg.cholesky(array)
+    except np.linalg.LinAlgError:
+        raise ParameterError(parameter_message(name, owner, "be positive definite",
+                                               array.tolist())) from None
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class EstimationResult:
+    """Body-speed estimates over a record and, when the record has the truth, their scores.
+
+    Attributes
+    ----------
+    method : str
+    times : ndarray of shape (k,), s
+    speed : ndarray of shape (k,), m/s
+    variance : ndarray of shape (k,), (m/s)^2
+        The estimator's own variance of ``speed``.
+    wall_time : float, s
+        Time :meth:`Estimator.run` took (estimation only, scoring excluded).
+    position : ndarray of shape (k,), m, or None
+        Position estimates (state-space estimators).
+    covariance : ndarray of shape (k, d, d) or None
+        State covariances (state-space estimators).
+    rms_error, max_error : float or None, m/s
+        RMS and largest ``|speed - truth|``.
+    nees, nis : ndarray of shape (k,) or None
+        Normalized estimation error squared of the state ``(position, speed)`` against the
+        truth, and normalized innovation squared of the central-encoder measurement.
+    nees_mean, nis_mean : float or None
+    nees_band, nis_band : tuple of float or None
+        The 95 % chi-square bands of those means (:func:`chi2_band`).
+    """
+
+    method: str
+    times: np.ndarray
+    speed: np.ndarray
+    variance: np.ndarray
+    wall_time: float
+    position: np.ndarray | None = None
+    covariance: np.ndarray | None = None
+    rms_error: float | None = None
+    max_error: float | None = None
+    nees: np.ndarray | None = None
+    nis: np.ndarray | None = None
+    nees_mean: float | None = None
+    nis_mean: float | None = None
+    nees_band: tuple[float, float] | None = None
+    nis_band: tuple[float, float] | None = None
+
+    @property
+    def real_time_ratio(self) -> float:
+        """Record duration over wall time: how many times faster than real time."""
+        span = float(self.times[-1] - self.times[0]) if self.times.size > 1 else 0.0
+        return span / self.wall_time if self.wall_time > 0 else math.inf
+
+    @property
+    def nees_consistent(self) -> bool | None:
+        """True when the mean NEES lies in its 95 % band (None without the truth)."""
+        if self.nees_mean is None or self.nees_band is None:
+            return None
+        return self.nees_band[0] <= self.nees_mean <= self.nees_band[1]
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able summary (scalars only)."""
+        return {"method": self.method, "samples": int(self.times.size), "wall_time": self.wall_time,
+                "real_time_ratio": self.real_time_ratio, "rms_error": self.rms_error,
+                "max_error": self.max_error, "nees_mean": self.nees_mean, "nees_band": self.nees_band,
+                "nis_mean": self.nis_mean, "nis_band": self.nis_band}
+
+
+def score(record: EncoderRecord, method: str, speed: np.ndarray, variance: np.ndarray,
+          wall_time: float, *, position: np.ndarray | None = None,
+          covariance: np.ndarray | None = None, nis: np.ndarray | None = None) -> EstimationResult:
+    """Build the result and score it against the record's truth when there is one."""
+    fields: dict[str, Any] = {}
+    for name, value in (("speed", speed), ("variance", variance)):
+        fields[name] = np.array(value, dtype=float)
+        fields[name].setflags(write=False)
+    K = record.n_samples
+    if record.truth_speed is not None:
+        error = fields["speed"] - record.truth_speed
+        fields["rms_error"] = float(np.sqrt(np.mean(error**2)))
+        fields["max_error"] = float(np.max(np.abs(error)))
+        if covariance is not None and position is not None and record.truth_position is not None:
+            e = np.stack((position - record.truth_position, error), axis=1)
+            nees = np.einsum("ki,kij,kj->k", e, np.linalg.inv(covariance[:, :2, :2]), e)
+            fields.update(nees=nees, nees_mean=float(np.mean(nees)), nees_band=chi2_band(K, 2))
+    if nis is not None:
+        fields.update(nis=np.asarray(nis, dtype=float), nis_mean=float(np.mean(nis)),
+                      nis_band=chi2_band(K, 1))
+    return EstimationResult(method, record.times, wall_time=wall_time, position=position,
+                            covariance=covariance, **fields)
+
+
+class Estimator(abc.ABC):
+    """What every speed estimator offers.
+
+    Offline: :meth:`run` over a whole record. In a loop (a 50 Hz controller):
+    :meth:`reset`, then :meth:`step` once per sample, in order. Both paths run the same
+    per-sample code, so they give the same estimates.
+    """
+
+    #: Short name used in results and benchmarks.
+    name: str = "estimator"
+
+    @abc.abstractmethod
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
+        """Forget the past; the body is believed at ``speed`` (m/s) with std ``speed_std``."""
+
+    @abc.abstractmethod
+    def step(self, sample: EncoderSample) -> tuple[float, float]:
+        """Take one sample; return the speed estimate (m/s) at its time and its variance."""
+
+    def run(self, record: EncoderRecord, *, speed: float = 0.0,
+            speed_std: float | None = None) -> EstimationResult:
+        """Estimate the body speed at every sample of ``record`` (reset first)."""
+        if not isinstance(record, EncoderRecord):
+            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
+                                                       "be an EncoderRecord", record))
+        started = time.perf_counter()
+        self.reset(speed=speed, speed_std=speed_std)
+        out = np.array([self.step(record.sample(k)) for k in range(record.n_samples)])
+        wall = time.perf_counter() - started
+        return score(record, self.name, out[:, 0], out[:, 1], wall)
+
+
+def positive(value: Any, name: str, owner: str) -> float:
+    return as_float(value, name, owner, low=0.0, low_open=True)

@@ -1,0 +1,268 @@
+"""What the model-based estimators know, and the known input they compute from the wheels.
+
+The active-contact force is the known input of the Kalman filters: it is computed from the
+contact speeds the wheel encoders measure, through the model's own contact law
+(:func:`toolkit.model.friction.contact_forces`), never re-derived here.
+
+Contact speeds from the wheels (:func:`contact_speed_estimates`, vectorized over a record;
+the loop calls it on its recent history, the same code): counts differenced over a window
+that starts ``settle`` samples after the last command change (the motor lag and the
+gearbox play have then been taken up: 4 lags = 30 ms, and 0.8 mm of play at 0.1 m/s is
+8 ms) and spans at most ``max_window`` samples. Inside the transient after a change the
+contact speeds are the motor law from the last settled estimate towards the command.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float, as_float_array, as_int, check_nonnegative
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..model.contacts import ContactSet
+from ..model.friction import contact_forces
+from ..model.sensors import Sensors
+
+__all__ = ["EstimatorModel", "contact_speed_estimates"]
+
+
+@dataclass(frozen=True, eq=False)
+class EstimatorModel:
+    """The plant as an estimator knows it (no truth, only parameters).
+
+    Parameters
+    ----------
+    forces : array_like of shape (n,), N
+        Nominal friction magnitudes ``f_i >= 0``.
+    mass : float, kg
+        Moving inertia ``m > 0``.
+    sensors : Sensors
+        The encoders (resolutions, backlash, rate, noise figures).
+    motor_lag : float, s
+        First-order lag of the motors, ``>= 0``.
+    damping : float, N s/m
+        Bearing drag ``c >= 0``.
+    friction_uncertainty : float
+        Relative std of each ``f_i`` (unequal, unknown friction), ``>= 0``.
+    max_window : int
+        Longest window of the wheel-speed differences, samples (``>= 1``).
+    substeps : int
+        Sub-intervals per sample over which the input force is averaged (``>= 1``).
+    """
+
+    forces: np.ndarray
+    mass: float
+    sensors: Sensors
+    motor_lag: float = 0.0
+    damping: float = 0.0
+    friction_uncertainty: float = 0.05
+    max_window: int = 25
+    substeps: int = 8
+    _settle: int = field(init=False, repr=False)
+    _ds: float = field(init=False, repr=False)
+    _rest: np.ndarray = field(init=False, repr=False)
+    _friction_var: float = field(init=False, repr=False)
+    _probe_offsets: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        owner = "EstimatorModel"
+        forces = as_float_array(self.forces, "forces", owner)
+        check_nonnegative(forces, "forces", owner)
+        object.__setattr__(self, "forces", forces)
+        object.__setattr__(self, "mass", as_float(self.mass, "mass", owner, low=0.0, low_open=True))
+        if not isinstance(self.sensors, Sensors):
+            raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors", self.sensors))
+        if self.sensors.n_wheels != forces.size:
+            raise ParameterError(parameter_message(
+                "sensors", owner, f"have n_wheels = len(forces) = {forces.size}", self.sensors.n_wheels))
+        for name in ("motor_lag", "damping", "friction_uncertainty"):
+            object.__setattr__(self, name, as_float(getattr(self, name), name, owner, low=0.0))
+        object.__setattr__(self, "max_window", as_int(self.max_window, "max_window", owner, low=1))
+        object.__setattr__(self, "substeps", as_int(self.substeps, "substeps", owner, low=1))
+        # 4 lags for the motors plus one sample for the gearbox play, in whole samples.
+        object.__setattr__(self, "_settle", 1 + math.ceil(4.0 * self.motor_lag * self.sensors.rate))
+        M = self.substeps
+        object.__setattr__(self, "_ds", self.sensors.period / M)
+        object.__setattr__(self, "_rest", M - np.arange(M) - 0.5)
+        object.__setattr__(self, "_friction_var", self.friction_uncertainty**2 * float(np.dot(forces, forces)))
+        object.__setattr__(self, "_probe_offsets", np.zeros((M + 2, 1)))
+
+    @property
+    def n(self) -> int:
+        """Number of contacts."""
+        return int(self.forces.size)
+
+    @property
+    def settle(self) -> int:
+        """Samples after a command change before the wheel differences are trusted."""
+        return self._settle
+
+    # -- the known input --------------------------------------------------------------------
+    def substep_speeds(self, speeds: np.ndarray, commands: np.ndarray, steady: np.ndarray) -> np.ndarray:
+        """Contact speeds at the midpoints of the sub-intervals of each sample period.
+
+        Parameters
+        ----------
+        speeds : ndarray of shape (k, n), m/s
+            Estimated contact speeds at the samples.
+        commands : ndarray of shape (k, n), m/s
+            Commands sent at the samples.
+        steady : ndarray of shape (k,), bool
+            False within ``settle`` samples of a command change: the motors then move
+            towards the command (motor law), else they hold the measured speeds.
+
+        Returns
+        -------
+        ndarray of shape (k, substeps, n), m/s
+        """
+        h, M = self.sensors.period, self.substeps
+        target = np.where(steady[:, None], speeds, commands)
+        if self.motor_lag > 0:
+            decay = np.exp(-(np.arange(M) + 0.5) * (h / M) / self.motor_lag)
+        else:
+            decay = np.zeros(M)
+        return target[:, None, :] + (speeds - target)[:, None, :] * decay[None, :, None]
+
+    def increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
+                  steady: bool) -> tuple[float, float, float]:
+        """Known input over one sample period from body speed ``V`` (m/s).
+
+        Parameters
+        ----------
+        V : float, m/s
+            Body speed estimate at the start of the period.
+        sub : ndarray of shape (substeps, n), m/s
+            Contact speeds at the sub-interval midpoints (:meth:`substep_speeds`).
+        contact_std, speed_std : float, m/s
+            Std of the contact-speed estimates and of ``V``.
+        steady : bool
+            Contacts steady over the period.
+
+        Returns
+        -------
+        dx, dV : float
+            Position (m) and speed (m/s) increments due to the contact force (``x+ = x +
+            h V + dx``, ``V+ = V + dV``).
+        force_var : float, N^2
+            Variance of the mean force over the period.
+
+        Notes
+        -----
+        Set-valued force (PHYSICS.md section 2). With steady contacts, if the net force
+        over ``V +- w``, ``w = 2 sqrt(speed_std^2 + contact_std^2)``, spans
+        ``[F(V + w), F(V - w)]`` containing the force that holds the body (``c V``, the
+        drag), the body sits on its equilibrium set as far as the wheels can tell: the
+        stiction rule keeps it there, ``dV = 0``, and no force uncertainty enters (a stuck
+        body keeps its speed whatever the friction spread). Otherwise the force is averaged
+        over the sub-intervals along the body's path, found by two passes (the path from
+        the first pass's forces, then the forces along that path), which resolves contact
+        crossings inside the period to a sub-interval (and lets the path settle onto a
+        contact speed it reaches). Its variance: unequal friction, ``epsilon^2 sum f_i^2``,
+        plus the force range over ``V +- w`` counted as uniform, ``(F_hi - F_lo)^2 / 12``.
+        """
+        f, m, c = self.forces, self.mass, self.damping
+        M = sub.shape[0]
+        w = 2.0 * math.sqrt(speed_std * speed_std + contact_std * contact_std)
+        last = sub[-1]
+        # One call of the contact law: the sub-interval rows at V, then the window's edges.
+        probe = np.concatenate((sub, last[None], last[None]))
+        probe -= self._offsets(V, w, M)
+        net = contact_forces(probe, f).sum(axis=1)
+        hi, lo = net[M], net[M + 1]
+        if steady and lo <= c * V <= hi:
+            return 0.0, 0.0, 0.0
+        dt_m = self._ds / m
+        first = net[:M] - c * V
+        travel = float(np.sum(first)) * dt_m
+        gaps = np.abs(sub - V)
+        if c == 0.0 and float(np.min(gaps)) > abs(travel):
+            # No contact speed within reach of the path: the force is the same all along.
+            second = first
+        else:
+            path = V + (np.cumsum(first) - 0.5 * first) * dt_m
+            second = contact_forces(sub - path[:, None], f).sum(axis=1) - c * path
+            if steady and c == 0.0 and first[0] != 0.0 and bool(np.any(second * first[0] <= 0.0)):
+                # The path reaches the equilibrium set within the period: the body sticks
+                # there (a single-valued force would chatter across it). Rare: once per
+                # approach, so the ContactSet is built only here.
+                lo_eq, hi_eq = ContactSet(last, f).equilibrium()
+                target = min(max(V, lo_eq), hi_eq)
+                dV = target - V
+                return 0.5 * dV * self.sensors.period, dV, self._friction_var + (hi - lo) ** 2 / 12.0
+        dV = float(np.sum(second)) * dt_m
+        # Double integral of piecewise-constant accelerations: each acts for the rest of the period.
+        dx = float(np.dot(second, self._rest)) * self._ds * dt_m
+        return dx, dV, self._friction_var + (hi - lo) ** 2 / 12.0
+
+    def _offsets(self, V: float, w: float, M: int) -> np.ndarray:
+        out = self._probe_offsets
+        out[:M] = V
+        out[M] = V - w
+        out[M + 1] = V + w
+        return out
+
+
+def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model: EstimatorModel,
+                            *, first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contact speeds at the samples from wheel counts and commands (vectorized).
+
+    Parameters
+    ----------
+    wheel_counts : array_like of shape (k, n), counts
+    commands : array_like of shape (k, n), m/s
+    times : array_like of shape (k,), s
+    model : EstimatorModel
+    first : int
+        Index of the first row in the whole stream (a loop passes its recent history; no
+        command change is assumed before row 0 of the stream).
+
+    Returns
+    -------
+    speeds : ndarray of shape (k, n), m/s
+    variance : ndarray of shape (k,), (m/s)^2
+        Per-contact variance: quantization of the window's two readings, ``q^2 / 6`` over
+        the window length squared; in a transient the motor law's own uncertainty, taken
+        as 10 % of the remaining gap, squared.
+    steady : ndarray of shape (k,), bool
+        False within ``settle`` samples after a command change (the motors move).
+    """
+    w = np.asarray(wheel_counts, dtype=float)
+    u = np.asarray(commands, dtype=float)
+    t = np.asarray(times, dtype=float)
+    k = t.size
+    q = model.sensors.wheel.distance_per_count
+    idx = np.arange(k)
+    changed = np.zeros(k, dtype=bool)
+    changed[1:] = np.any(u[1:] != u[:-1], axis=1)
+    # Last change strictly before row j (changes at j act after t_j), -inf-like when none.
+    marks = np.where(changed, idx, -10**9 if first == 0 else -10**9)
+    last_change = np.maximum.accumulate(np.concatenate(([-10**9], marks[:-1])))
+    settle = model.settle
+    start = np.maximum(last_change + settle, idx - model.max_window)
+    start = np.clip(start, 0, idx)
+    ok = start < idx
+    span = np.where(ok, t - t[start], 1.0)
+    speeds = np.where(ok[:, None], (w - w[start]) * q / span[:, None], 0.0)
+    variance = np.where(ok, q * q / 6.0 / span**2, 0.0)
+    steady = (idx - last_change) >= settle
+    steady &= ~changed
+    transient = ~ok
+    if transient.any():
+        # Motor law from the settled estimate at the change towards the command.
+        j = np.maximum(last_change, 0)
+        before = np.where((ok[j])[:, None], speeds[j], np.where(j[:, None] > 0, (w[j] - w[np.maximum(j - 1, 0)]) * q / np.maximum(t[j] - t[np.maximum(j - 1, 0)], 1e-300)[:, None], 0.0))
+        lag = model.motor_lag
+        gap_decay = np.exp(-(t - t[j]) / lag) if lag > 0 else np.zeros(k)
+        law = u[j] + (before - u[j]) * gap_decay[:, None]
+        law_var = (0.1 * np.abs(before - u[j]) * gap_decay[:, None]).max(axis=1) ** 2 + q * q / 6.0 / model.sensors.period**2
+        has_change = last_change >= 0
+        speeds = np.where((transient & has_change)[:, None], law, speeds)
+        variance = np.where(transient & has_change, law_var, variance)
+        # Row 0 with no history: the commands are all we know.
+        none = transient & ~has_change
+        speeds = np.where(none[:, None], u, speeds)
+        variance = np.where(none, (q * model.sensors.rate) ** 2, variance)
+    return speeds, variance, steady

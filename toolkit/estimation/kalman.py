@@ -1,0 +1,326 @@
+"""Linear Kalman filter and Rauch-Tung-Striebel smoother of the body's position and speed.
+
+State ``s = (X, V)``: body position (m, at the central encoder's radius) and speed (m/s).
+Per sample period ``h`` (the encoders' rate)::
+
+    X+ = X + h V + dx_k        V+ = V + dV_k        (+ process noise)
+    z_k = X_k + quantization    (central encoder, z = (count + 1/2) q)
+
+The known input ``(dx_k, dV_k)`` is the active-contact force over the period, from the
+contact speeds the wheels measure, through the model's contact law
+(:meth:`~toolkit.estimation._input.EstimatorModel.increment`, which also handles the
+set-valued force at a contact speed by the stiction rule). Built on
+``filterpy.kalman.KalmanFilter`` (``predict(u, Q)``, ``update(z, R)``).
+
+Noise from physical parameters
+------------------------------
+Measurement. ``z = (c + 1/2) q`` with ``c = floor(X / q)`` errs by ``e = X - z``, uniform
+on ``[-q/2, q/2)`` (variance ``q^2 / 12``) only when the body crosses many counts between
+samples in an irregular pattern. At constant speed ``e_k`` is a deterministic sawtooth, and
+while the count repeats (``|V| h < q``, or stuck) the errors of consecutive samples are the
+same number: ``r`` repeated readings carry the information of one. So each reading gets
+``R_k = (q^2 / 12) (1 + r_k)`` with ``r_k`` the number of preceding samples with the same
+count: the ``r + 1`` readings of one count together weigh as one, never as ``r + 1``
+independent ones. Read noise adds ``(sigma_n q)^2`` and jitter ``(V sigma_t)^2`` (a read
+``d`` seconds off its stamp is ``V d`` off in position), with ``V`` the speed estimate.
+
+Process. The force is known up to (a) unequal, unknown friction: each ``f_i`` has a
+relative std ``epsilon``, so the force varies by ``epsilon^2 sum f_i^2``; (b) the contact
+speeds' uncertainty (wheel quantization and backlash, ``sigma_v``) and the speed
+estimate's (``P_VV``): across ``V +- w`` with ``w = 2 sqrt(P_VV + sigma_v^2)`` the force
+spans ``[F(V + w), F(V - w)]``, a spread counted as uniform, ``(F_hi - F_lo)^2 / 12``.
+That force error, held over the period, enters as ``Q = (sigma_F / m)^2 g g^T`` with
+``g = (h^2 / 2, h)``.
+
+Smoother. filterpy's ``rts_smoother`` ignores ``B u``; the input is therefore moved into
+the transition of an augmented state ``(X, V, 1)``, ``F_k = [[1, h, dx_k], [0, 1, dV_k],
+[0, 0, 1]]``, which makes the smoother exact for the affine model (the constant state has
+zero variance: the smoother gain uses the pseudo-inverse).
+
+filterpy is imported inside the functions that build filters, so that importing the
+toolkit (or a scene without sensors) never loads it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_float
+from ..errors import ParameterTypeError, parameter_message
+from ..model.sensors import EncoderRecord, EncoderSample
+from ._base import EstimationResult, Estimator, check_covariance, score
+from ._input import EstimatorModel, contact_speed_estimates
+
+__all__ = ["KalmanEstimator", "RTSSmoother", "steady_state_gain", "measurement_variance"]
+
+
+def _scalar_inverse(S: np.ndarray) -> np.ndarray:
+    """Inverse of the 1 x 1 innovation covariance (filterpy's ``inv`` hook)."""
+    return 1.0 / S
+
+
+def measurement_variance(counts: np.ndarray, speed: np.ndarray, model: EstimatorModel) -> np.ndarray:
+    """``R_k`` of the central encoder for each sample (see the module docstring), m^2.
+
+    Parameters
+    ----------
+    counts : ndarray of shape (k,), int
+    speed : ndarray of shape (k,), m/s
+        Speed used for the jitter term.
+    """
+    sensors = model.sensors
+    q = sensors.central.distance_per_count
+    k = counts.size
+    same = np.zeros(k, dtype=np.int64)
+    same[1:] = counts[1:] == counts[:-1]
+    # r_k: run length of repeats ending at k (a cumulative count reset where the count changes).
+    run = np.cumsum(same)
+    reset = np.maximum.accumulate(np.where(same == 0, run, 0))
+    repeats = run - reset
+    return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
+
+
+def _make_filter(model: EstimatorModel) -> Any:
+    # filterpy is imported here, not at module level: toolkit imports must not load it.
+    from filterpy.kalman import KalmanFilter
+
+    h = model.sensors.period
+    kf = KalmanFilter(dim_x=2, dim_z=1, dim_u=2)
+    kf.F = np.array([[1.0, h], [0.0, 1.0]])
+    kf.H = np.array([[1.0, 0.0]])
+    kf.B = np.eye(2)
+    kf.inv = _scalar_inverse          # 1-D measurement: no LAPACK call per step
+    return kf
+
+
+class KalmanEstimator(Estimator):
+    """Kalman filter of ``(X, V)`` with the contact force as known input (see the module).
+
+    Parameters
+    ----------
+    model : EstimatorModel
+    initial_covariance : array_like of shape (2, 2), optional
+        Prior covariance of ``(X, V)`` (m^2, m^2/s, (m/s)^2), symmetric positive definite;
+        default ``diag(q^2 / 12, speed_std^2)`` at :meth:`reset`.
+    """
+
+    name = "kalman"
+
+    def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None) -> None:
+        if not isinstance(model, EstimatorModel):
+            raise ParameterTypeError(parameter_message("model", type(self).__name__,
+                                                       "be an EstimatorModel", model))
+        self.model = model
+        self.initial_covariance = (None if initial_covariance is None else check_covariance(
+            initial_covariance, "initial_covariance", type(self).__name__, 2))
+        h = model.sensors.period
+        self._g = np.array([[0.5 * h * h], [h]])
+        self._gg = self._g @ self._g.T
+        self._q = model.sensors.central.distance_per_count
+        self._inv_m2 = 1.0 / model.mass**2
+        self._H = np.array([[1.0, 0.0]])
+        self._u = np.zeros((2, 1))
+        self._z = np.zeros((1, 1))
+        self.reset()
+
+    def _build(self) -> Any:
+        return _make_filter(self.model)
+
+    # -- the per-sample recursion, shared by run() and step() ------------------------------
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
+        owner = f"{type(self).__name__}.reset"
+        speed = as_float(speed, "speed", owner)
+        std = 0.05 if speed_std is None else as_float(speed_std, "speed_std", owner, low=0.0, low_open=True)
+        self._speed0, self._std0 = speed, std
+        self.kf = self._build()
+        self._pending: tuple[np.ndarray, float, float] | None = None  # (sub speeds, var_v, steady)
+        self._history: list[tuple[float, int, np.ndarray, np.ndarray]] = []
+        self._count_prev: int | None = None
+        self._repeats = 0
+        self.last_input = np.zeros(2)
+        self.last_Q = np.zeros((2, 2))
+        self.last_nis = np.nan
+
+    def _start(self, z: float) -> None:
+        kf = self.kf
+        kf.x = np.array([[z], [self._speed0]])
+        kf.P = (self.initial_covariance.copy() if self.initial_covariance is not None
+                else np.diag([self._q * self._q / 12.0, self._std0**2]))
+
+    def _advance(self, z: float, R: float, sub: np.ndarray | None, var_v: float, steady: bool) -> None:
+        """Predict over the last period with the input computed from its start, then update."""
+        kf = self.kf
+        if sub is None:
+            self._start(z)
+            self.last_nis = np.nan
+            return
+        V = float(kf.x[1, 0])
+        dx, dV, force_var = self.model.increment(V, sub, math.sqrt(var_v), math.sqrt(kf.P[1, 1]), steady)
+        # Hot path (>= 1000x real time): the filter's own Q, R and B u are set in place and
+        # H is passed, so filterpy skips its scalar checks and the reshape of z.
+        u, zc = self._u, self._z
+        u[0, 0], u[1, 0], zc[0, 0] = dx, dV, z
+        Q = (force_var * self._inv_m2) * self._gg
+        kf.Q = Q
+        kf.R[0, 0] = R
+        kf.predict(u=u)
+        kf.update(zc, H=self._H)
+        self.last_input = (dx, dV)
+        self.last_Q = Q
+        self.last_nis = float(kf.y[0, 0] ** 2 * kf.SI[0, 0])
+
+    def step(self, sample: EncoderSample) -> tuple[float, float]:
+        """Take one sample (in order); return ``(speed, variance)`` at its time."""
+        model = self.model
+        hist = self._history
+        hist.append((sample.time, sample.central_count, np.asarray(sample.wheel_counts), np.asarray(sample.command)))
+        del hist[:-(model.max_window + model.settle + 2)]
+        count = sample.central_count
+        fd = 0.0
+        if self._count_prev is not None:
+            fd = (count - self._count_prev) * self._q / (sample.time - hist[-2][0])
+        self._repeats = self._repeats + 1 if count == self._count_prev else 0
+        self._count_prev = count
+        R = float(measurement_variance(np.array([count]), np.array([fd]), model)[0]
+                  + (self._q * self._q / 12.0) * self._repeats)
+        z = (count + 0.5) * self._q
+        pending = self._pending
+        self._advance(z, R, *(pending if pending is not None else (None, 0.0, True)))
+        times, _, wheels, commands = zip(*hist)
+        speeds, var, steady = contact_speed_estimates(np.array(wheels), np.array(commands), np.array(times), model)
+        sub = model.substep_speeds(speeds[-1:], np.array(commands[-1:]), steady[-1:])[0]
+        self._pending = (sub, float(var[-1]), bool(steady[-1]))
+        return float(self.kf.x[1, 0]), float(self.kf.P[1, 1])
+
+    # -- offline --------------------------------------------------------------------------
+    def filter(self, record: EncoderRecord, *, speed: float = 0.0, speed_std: float | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """Run over a record: states (k, 2), covariances (k, 2, 2), inputs (k, 2) (row k:
+        the period ending at sample k), process noises (k, 2, 2), NIS (k,), wall time (s)."""
+        if not isinstance(record, EncoderRecord):
+            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
+                                                       "be an EncoderRecord", record))
+        started = time.perf_counter()
+        model = self.model
+        self.reset(speed=speed, speed_std=speed_std)
+        K = record.n_samples
+        counts = record.central_counts
+        speeds, var_v, steady = contact_speed_estimates(record.wheel_counts, record.commands, record.times, model)
+        sub = model.substep_speeds(speeds, record.commands, steady)
+        q = self._q
+        z = (counts + 0.5) * q
+        # Jitter term: speed from the counts over the last period (known before the update).
+        fd = np.zeros(K)
+        fd[1:] = np.diff(counts) * q / np.diff(record.times)
+        R = measurement_variance(counts, fd, model)
+        X = np.empty((K, 2))
+        P = np.empty((K, 2, 2))
+        U = np.zeros((K, 2))
+        Qs = np.zeros((K, 2, 2))
+        nis = np.full(K, np.nan)
+        kf = self.kf
+        steady_l = steady.tolist()
+        var_l = var_v.tolist()
+        z_l, R_l = z.tolist(), R.tolist()
+        advance = self._advance
+        for k in range(K):
+            if k == 0:
+                advance(z_l[0], R_l[0], None, 0.0, True)
+            else:
+                advance(z_l[k], R_l[k], sub[k - 1], var_l[k - 1], steady_l[k - 1])
+                U[k] = self.last_input
+                Qs[k] = self.last_Q
+                nis[k] = self.last_nis
+            X[k] = kf.x[:, 0]
+            P[k] = kf.P
+        self._pending = (sub[-1], float(var_v[-1]), bool(steady[-1]))
+        return X, P, U, Qs, nis, time.perf_counter() - started
+
+    def run(self, record: EncoderRecord, *, speed: float = 0.0,
+            speed_std: float | None = None) -> EstimationResult:
+        X, P, _, _, nis, wall = self.filter(record, speed=speed, speed_std=speed_std)
+        return score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0],
+                     covariance=P, nis=nis[1:])
+
+
+class RTSSmoother(Estimator):
+    """Rauch-Tung-Striebel smoother over the :class:`KalmanEstimator`'s pass (offline only).
+
+    The forward pass is the filter's; the backward pass is filterpy's
+    ``KalmanFilter.rts_smoother`` on the augmented state ``(X, V, 1)`` whose transitions
+    carry the known input (exact for the affine model; see the module docstring).
+    """
+
+    name = "rts"
+
+    def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None) -> None:
+        self.forward = KalmanEstimator(model, initial_covariance=initial_covariance)
+        self.model = model
+
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
+        self.forward.reset(speed=speed, speed_std=speed_std)
+
+    def step(self, sample: EncoderSample) -> tuple[float, float]:
+        """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
+        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
+
+    def run(self, record: EncoderRecord, *, speed: float = 0.0,
+            speed_std: float | None = None) -> EstimationResult:
+        # filterpy is imported here, not at module level: toolkit imports must not load it.
+        from filterpy.kalman import KalmanFilter
+
+        X, P, U, Qs, _, _ = self.forward.filter(record, speed=speed, speed_std=speed_std)
+        started = time.perf_counter()
+        K = X.shape[0]
+        h = self.model.sensors.period
+        Xa = np.concatenate((X, np.ones((K, 1))), axis=1)
+        Pa = np.zeros((K, 3, 3))
+        Pa[:, :2, :2] = P
+        Fa = np.broadcast_to(np.eye(3), (K, 3, 3)).copy()
+        Fa[:, 0, 1] = h
+        Fa[:, :2, 2] = U
+        Qa = np.zeros((K, 3, 3))
+        Qa[:, :2, :2] = Qs
+        xs, ps, _, _ = KalmanFilter(dim_x=3, dim_z=1).rts_smoother(Xa, Pa, Fa, Qa, inv=np.linalg.pinv)
+        wall = time.perf_counter() - started
+        return score(record, self.name, xs[:, 1], ps[:, 1, 1], wall, position=xs[:, 0],
+                     covariance=ps[:, :2, :2])
+
+
+def steady_state_gain(model: EstimatorModel, accel_std: float, *, tol: float = 1e-15,
+                      max_steps: int = 100_000) -> tuple[np.ndarray, np.ndarray]:
+    """Steady-state gain of the filter with constant noise, by iterating filterpy.
+
+    Parameters
+    ----------
+    model : EstimatorModel
+    accel_std : float, m/s^2
+        Std of the piecewise-constant acceleration noise (``Q = accel_std^2 g g^T``).
+
+    Returns
+    -------
+    gain : ndarray of shape (2, 1)
+        ``K = P C^T (C P C^T + R)^-1`` with the converged prior ``P``.
+    prior : ndarray of shape (2, 2)
+        The converged prior covariance (the Riccati equation's fixed point).
+    """
+    accel_std = as_float(accel_std, "accel_std", "steady_state_gain", low=0.0, low_open=True)
+    kf = _make_filter(model)
+    h, q = model.sensors.period, model.sensors.central.distance_per_count
+    g = np.array([[0.5 * h * h], [h]])
+    kf.Q = accel_std**2 * (g @ g.T)
+    kf.R = np.array([[q * q / 12.0]])
+    kf.P = np.diag([q * q, 1.0])
+    previous = kf.P.copy()
+    for _ in range(max_steps):
+        kf.predict()
+        prior = kf.P.copy()
+        kf.update(np.array([[0.0]]))
+        if np.allclose(prior, previous, rtol=tol, atol=0.0):
+            break
+        previous = prior
+    return kf.K.copy(), prior

@@ -1,0 +1,62 @@
+"""Closed loop: the sample-rate driver against one exact simulation and closed forms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from toolkit import ContactSet, Motors, ParameterError, PiecewiseConstant, Plant, simulate
+from toolkit.closed_loop import simulate_closed_loop
+from toolkit.controllers import FrictionBrake, OpenLoop, VirtualViscosity
+from toolkit.predictions.theory import transition_time
+
+F, M, VMAX = 0.2, 1.0, 0.35
+SCHEDULE = PiecewiseConstant([0.5, 1.0], np.array([[0.1] * 10, [-0.2] * 5 + [0.3] * 5, [0.05] * 10]))
+
+
+@pytest.mark.parametrize("motors", [Motors(lag=0.0075), Motors(lag=0.0075, rate_limit=5.0), None],
+                         ids=["lag", "lag+rate", "ideal"])
+def test_open_loop_equals_one_exact_simulation(motors):
+    # The loop steps the same exact engine one held command at a time, so it reproduces one
+    # simulate() run of the schedule to rounding: 1e-12 of the speed scale (0.35 m/s).
+    plant = Plant(ContactSet([0.1] * 10, [F] * 10), M, motors=motors)
+    run = simulate_closed_loop(plant, OpenLoop(SCHEDULE), 2.0)
+    reference = simulate(Plant(plant.contacts, M, motors=motors, commands=SCHEDULE), 2.0, t_eval=run.times)
+    np.testing.assert_allclose(run.speed, reference.V, rtol=0, atol=1e-12 * VMAX)
+    assert run.times.size == 101 and run.record is None
+    np.testing.assert_array_equal(run.estimate, run.speed)          # ideal loop: the truth
+
+
+@pytest.mark.parametrize("j", [1, 2, 3, 5])
+def test_friction_brake_arrives_at_the_predicted_time(j):
+    # Ideal sensors: the body leaves +v_max at t = 0 (the commands switch there; the motors
+    # reverse with a 7.5 ms lag) and sticks at -v_max after dT = m 2 v_max / (F_tot j/5).
+    # Read at 50 Hz, arrival is seen at the first sample after it: within one period plus
+    # the motors' reversal delay (a lag of 7.5 ms delays the force by less than 2 lags).
+    plant = Plant(ContactSet([VMAX] * 10, [F] * 10), M,
+                  motors=Motors(lag=0.0075, speed_limits=(-VMAX, VMAX)))
+    run = simulate_closed_loop(plant, FrictionBrake(j / 5), 6.0, v0=VMAX)
+    arrival = run.times[np.flatnonzero(run.speed <= -VMAX + 1e-12)[0]]
+    predicted = transition_time(M, VMAX, 10 * F, j / 5)
+    assert predicted <= arrival <= predicted + 0.02 + 2 * 0.0075
+
+
+def test_virtual_viscosity_settles_on_the_staircase_median():
+    plant = Plant(ContactSet([0.0] * 10, [F] * 10), M, motors=Motors(lag=0.0075, speed_limits=(-VMAX, VMAX)))
+    control = VirtualViscosity(10.0, 0.1)
+    run = simulate_closed_loop(plant, control, 3.0)
+    lo, hi = ContactSet(control.speeds(plant), [F] * 10).equilibrium()
+    # From rest the body stops at the near edge of the zero band (exact engine: to rounding).
+    assert run.speed[-1] == pytest.approx(lo, abs=1e-12)
+
+
+def test_bad_loops_are_refused():
+    plant = Plant(ContactSet([0.0] * 3), M)
+    with pytest.raises(ParameterError, match="'estimator' parameter of simulate_closed_loop"):
+        simulate_closed_loop(plant, VirtualViscosity(1.0), 1.0, estimator=object())
+    with pytest.raises(ParameterError, match="'rate' parameter of simulate_closed_loop"):
+        simulate_closed_loop(plant, VirtualViscosity(1.0), 1.0, rate=0.0)
+    with pytest.raises(ParameterError, match="'rate' parameter of simulate_closed_loop"):
+        simulate_closed_loop(plant, VirtualViscosity(1.0), 1e6, rate=1e3)
+    with pytest.raises(ParameterError, match="'t_end' parameter of simulate_closed_loop"):
+        simulate_closed_loop(plant, VirtualViscosity(1.0), float("nan"))

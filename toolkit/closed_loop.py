@@ -1,0 +1,213 @@
+"""Closed loop at the sample rate: exact plant, motors, encoders, estimator and controller.
+
+At each sample ``t_k`` (50 Hz by default)::
+
+    counts  = measure(sensors, X(t_k), x(t_k))        # the sensor law (toolkit.model.sensors)
+    V_hat   = estimator.observe(counts)                 # e.g. the Kalman filter
+    u_k, F  = controller.output(t_k, z, V_hat)          # contact-speed commands, rig force
+    estimator.commanded(u_k); z = controller.update(...)
+    plant   : advance(plant, state, u_k, t_{k+1}, external=F)   # exact, one held command
+
+The plant continues from its state sample to sample (:func:`toolkit.simulation.advance`:
+the exact engine with motor lag and limits, which also returns the exact body and contact
+displacements that the encoders count). Without sensors the controller acts on the true
+speed (an ideal loop). With sample-time jitter the whole sample (read and command) happens
+at ``t_k + d_k`` while the record stamps ``t_k``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ._validation import as_float
+from .controllers.base import ControlLaw, Controller
+from .errors import ParameterError, ParameterTypeError, parameter_message
+from .model import Plant
+from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure
+from .simulation import Budget, SimulationStatus
+from .simulation._stepper import ExactState, advance
+
+__all__ = ["ClosedLoopResult", "simulate_closed_loop", "MAX_SAMPLES"]
+
+#: Most samples one closed-loop run may take (the arrays it keeps grow with them).
+MAX_SAMPLES = 10_000_000
+
+
+@dataclass(frozen=True, eq=False)
+class ClosedLoopResult:
+    """One closed-loop run, sampled at the controller rate.
+
+    Attributes
+    ----------
+    times : ndarray of shape (k,), s
+        Nominal sample times ``k / rate``.
+    speed : ndarray of shape (k,), m/s
+        True body speed at each (actual) sample instant.
+    estimate, variance : ndarray of shape (k,), m/s and (m/s)^2
+        What the controller was given (the true speed and 0 without sensors).
+    commands : ndarray of shape (k, n), m/s
+        Commands sent at each sample (held until the next).
+    force : ndarray of shape (k,), N
+        Outside force applied by the controller over each period.
+    contact_speeds : ndarray of shape (k, n), m/s
+        Actual contact speeds at each sample.
+    position : ndarray of shape (k,), m
+        True body position.
+    record : EncoderRecord or None
+        The encoder counts with the commands and the truth (None without sensors).
+    status : SimulationStatus
+    message : str
+    wall_time : float, s
+    """
+
+    times: np.ndarray
+    speed: np.ndarray
+    estimate: np.ndarray
+    variance: np.ndarray
+    commands: np.ndarray
+    force: np.ndarray
+    contact_speeds: np.ndarray
+    position: np.ndarray
+    record: EncoderRecord | None
+    status: SimulationStatus
+    message: str
+    wall_time: float
+
+    @property
+    def estimation_error(self) -> np.ndarray:
+        """``estimate - speed`` at each sample, m/s."""
+        return self.estimate - self.speed
+
+
+def _check(plant: Any, controller: Any, sensors: Any, estimator: Any, rate: Any, t_end: Any
+           ) -> tuple[float, int]:
+    owner = "simulate_closed_loop"
+    if not isinstance(plant, Plant):
+        raise ParameterTypeError(parameter_message("plant", owner, "be a Plant", plant))
+    if not hasattr(controller, "bind"):
+        raise ParameterTypeError(parameter_message(
+            "controller", owner, "be a controller (toolkit.controllers)", controller))
+    if sensors is not None:
+        if not isinstance(sensors, Sensors):
+            raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors or None", sensors))
+        if sensors.n_wheels != plant.n:
+            raise ParameterError(parameter_message(
+                "sensors", owner, f"have one wheel encoder per contact ({plant.n})", sensors.n_wheels))
+        if rate is not None and as_float(rate, "rate", owner) != sensors.rate:
+            raise ParameterError(parameter_message(
+                "rate", owner, f"equal the sensors' rate ({sensors.rate:g} Hz) or be None", rate))
+        rate = sensors.rate
+    elif estimator is not None:
+        raise ParameterError(parameter_message(
+            "estimator", owner, "come with the sensors it reads (sensors=Sensors(...))", estimator))
+    rate = 50.0 if rate is None else as_float(rate, "rate", owner, low=0.0, low_open=True)
+    t_end = as_float(t_end, "t_end", owner, low=0.0, low_open=True)
+    samples = math.floor(t_end * rate + 1e-9) + 1
+    period = 1.0 / rate
+    if samples > MAX_SAMPLES or not (period > 0 and t_end + period > t_end):
+        raise ParameterError(parameter_message(
+            "rate", owner, f"give at most {MAX_SAMPLES} samples over t_end = {t_end:g} s with a "
+            "period the simulation clock resolves", rate))
+    return rate, samples
+
+
+def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
+                         sensors: Sensors | None = None, estimator: Any = None,
+                         rate: float | None = None, v0: float = 0.0, seed: Any = None,
+                         budget: Budget | None = None) -> ClosedLoopResult:
+    """Run ``controller`` on ``plant`` from ``t = 0`` to ``t_end`` at the sample rate.
+
+    Parameters
+    ----------
+    plant : Plant
+        Contacts (their speeds are the contact speeds at ``t = 0``: motors start settled
+        there), mass, drag, motors. Its own ``commands`` are ignored (the controller's
+        are used) and so is its ``external_force`` (a controller's rig force replaces it).
+    controller : Controller
+        E.g. :class:`~toolkit.controllers.VirtualViscosity`.
+    t_end : float, s
+    sensors : Sensors, optional
+        Encoders read at each sample; ``None``: the controller sees the true speed.
+    estimator : Estimator, optional
+        Turns the counts into a speed estimate (needs ``sensors``); default with sensors: a
+        :class:`~toolkit.estimation.KalmanEstimator` on the plant's nominal parameters.
+    rate : float, Hz, optional
+        Sample rate without sensors (default 50 Hz); with sensors their rate is used.
+    v0 : float, m/s
+        Body speed at ``t = 0``.
+    seed : int or numpy.random.SeedSequence, optional
+        Seeds the sensors' missed counts, read noise and jitter.
+    budget : Budget, optional
+        Guards of each plant step.
+
+    Returns
+    -------
+    ClosedLoopResult
+    """
+    rate, samples = _check(plant, controller, sensors, estimator, rate, t_end)
+    started = time.perf_counter()
+    period = 1.0 / rate
+    law: ControlLaw = controller.bind(plant, period)
+    if sensors is not None and estimator is None:
+        from .estimation import EstimatorModel, KalmanEstimator   # filterpy: only with sensors
+        motors = plant.motors
+        estimator = KalmanEstimator(EstimatorModel(
+            plant.contacts.forces, plant.mass, sensors,
+            motor_lag=motors.lag if motors is not None else 0.0, damping=plant.damping))
+    rng = np.random.default_rng(seed)
+    n = plant.n
+    times = np.arange(samples) * period
+    speed, estimate, variance = np.empty(samples), np.empty(samples), np.zeros(samples)
+    position, force = np.empty(samples), np.zeros(samples)
+    commands, contact = np.empty((samples, n)), np.empty((samples, n))
+    central, wheel = np.zeros(samples, dtype=np.int64), np.zeros((samples, n), dtype=np.int64)
+    state = ExactState(0.0, float(v0), plant.initial_speeds())
+    X, x = 0.0, np.zeros(n)
+    if sensors is not None:
+        sensor_state = sensors.initial_state(state.contact_speeds)
+        estimator.reset(speed=float(v0))
+        jitter = sensors.jitter
+    else:
+        jitter = 0.0
+    z = law.initial_state()
+    status, message, last = SimulationStatus.SUCCESS, "", samples
+    for k in range(samples):
+        speed[k], position[k], contact[k] = state.V, X, state.contact_speeds
+        if sensors is not None:
+            c, w, sensor_state = measure(sensors, [X], x[None, :], sensor_state, rng)
+            central[k], wheel[k] = c[0], w[0]
+            estimate[k], variance[k] = estimator.observe(
+                EncoderSample(times[k], int(c[0]), w[0], commands[k - 1] if k else state.contact_speeds))
+        else:
+            estimate[k] = state.V
+        action = law.output(times[k], z, estimate[k])
+        commands[k], force[k] = action.commands, action.force
+        if sensors is not None:
+            estimator.commanded(commands[k])
+        z = law.update(times[k], z, estimate[k])
+        if k + 1 == samples:
+            break
+        t_next = times[k + 1]
+        if jitter > 0:
+            t_next += float(np.clip(rng.normal(0.0, jitter), -0.25 * period, 0.25 * period))
+        step = advance(plant, state, commands[k], t_next, external=float(action.force), budget=budget)
+        if step.status is not SimulationStatus.SUCCESS:
+            status, message, last = step.status, step.message, k + 1
+            break
+        state, X, x = step.state, X + step.body_displacement, x + step.contact_displacements
+    keep = slice(0, last)
+    record = None
+    if sensors is not None:
+        record = EncoderRecord(times=times[keep], central_counts=central[keep],
+                               wheel_counts=wheel[keep], commands=commands[keep],
+                               central_resolution=sensors.central.distance_per_count,
+                               wheel_resolution=sensors.wheel.distance_per_count,
+                               true_speed=speed[keep], true_position=position[keep])
+    return ClosedLoopResult(times[keep], speed[keep], estimate[keep], variance[keep],
+                            commands[keep], force[keep], contact[keep], position[keep], record,
+                            status, message or status.value, time.perf_counter() - started)

@@ -32,6 +32,8 @@ from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import carousel_startup_plant
 from .precision import PrecisionReport, PrecisionRow, precision_report
+from .closed_loop import ClosedLoopResult, simulate_closed_loop
+from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, VirtualViscosity
 from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, SimulationResult,
                          SimulationStatus, advance, simulate, simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
@@ -59,6 +61,9 @@ __all__ = [
     # schedules (time-varying designs)
     "design_schedule", "ScheduleResult", "ScheduleStatus", "SpeedTrajectory", "Braking", "braking_time",
     # sensors and estimation
+    # closed loop and controllers
+    "simulate_closed_loop", "ClosedLoopResult", "OpenLoop", "VirtualViscosity", "SpeedHold",
+    "FrictionBrake", "ForceDrive",
     "Encoder", "Sensors", "EncoderRecord", "EncoderSample", "measure", "record_simulation",
     "Estimator", "EstimationResult", "EstimatorModel", "CentralDifference", "WheelDifference",
     "KalmanEstimator", "RTSSmoother", "UnscentedEstimator", "chi2_band", "carousel_brake_scenario",

@@ -41,8 +41,11 @@ def test_run_succeeds_on_every_design(path, tmp_path, capsys):
 def test_curve_json_has_the_documented_keys(capsys):
     assert main(["curve", str(ROOT / "designs" / "five_five.toml"), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert set(data) == {"speeds", "force", "equilibrium", "total_force"}
+    assert set(data) == {"speeds", "force", "equilibrium", "total_force", "steps"}
     assert data["equilibrium"] == [-0.35, 0.35]
+    # The whole staircase: two steps of 10 N, exactly.
+    assert data["steps"] == [{"speed": -0.35, "force_below": 10.0, "force_above": 0.0},
+                             {"speed": 0.35, "force_below": 0.0, "force_above": -10.0}]
     assert data["total_force"] == 10.0
     speeds, force = np.array(data["speeds"]), np.array(data["force"])
     # Closed form of the five-against-five curve: +10 below -0.35, 0 inside, -10 above 0.35.

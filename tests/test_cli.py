@@ -29,6 +29,9 @@ def test_run_succeeds_on_every_design(path, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "wrote" in out
     result = json.loads((tmp_path / "result.json").read_text())
+    # The request was met: no shortfall (carousel's schedule is VERIFIED or OPTIMAL, a success).
+    assert result["met"] is True and result["shortfalls"] == []
+    assert capsys.readouterr().err == ""
     scene = load_scene(path)
     contacts = ContactSet(result["contacts"]["speeds"], result["contacts"]["forces"])
     assert result["curve"]["equilibrium"] == list(contacts.equilibrium())
@@ -41,8 +44,11 @@ def test_run_succeeds_on_every_design(path, tmp_path, capsys):
 def test_curve_json_has_the_documented_keys(capsys):
     assert main(["curve", str(ROOT / "designs" / "five_five.toml"), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert set(data) == {"speeds", "force", "equilibrium", "total_force"}
+    assert set(data) == {"speeds", "force", "equilibrium", "total_force", "steps"}
     assert data["equilibrium"] == [-0.35, 0.35]
+    # The whole staircase: two steps of 10 N, exactly.
+    assert data["steps"] == [{"speed": -0.35, "force_below": 10.0, "force_above": 0.0},
+                             {"speed": 0.35, "force_below": 0.0, "force_above": -10.0}]
     assert data["total_force"] == 10.0
     speeds, force = np.array(data["speeds"]), np.array(data["force"])
     # Closed form of the five-against-five curve: +10 below -0.35, 0 inside, -10 above 0.35.
@@ -174,3 +180,124 @@ def test_precision_plot_with_motors_where_exact_is_the_reference(tmp_path):
     exact = [r for r in json.loads(done.stdout)["rows"] if r["method"] == "exact"]
     assert exact[0]["max_error"] is None and exact[0]["status"] == "SUCCESS"
     assert (tmp_path / "precision.png").read_bytes()[:4] == b"\x89PNG"
+
+
+# -- exit codes that tell the truth (issue 10) --------------------------------------------------
+
+TEN_AT_REST = "[contacts]\nspeeds = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]\nforces = 1.0\n"
+FRACTION_17 = (TEN_AT_REST + "[motors]\nspeed_limit = 0.35\n"
+               '[target]\nkind = "friction_fraction"\nfraction = 1.7\nband = 0.35\n')
+TRACK_2 = ("[contacts]\nspeeds = [0.0, 0.0, 0.0, 0.0]\nforces = 1.0\n[body]\nmass = 1.0\n"
+           "[motors]\nspeed_limit = 0.35\n"
+           '[schedule]\nkind = "track"\ntimes = [0.0, 0.5, 1.0]\nspeeds = [0.0, 2.0, 2.0]\n')
+BUDGET = ("[contacts]\nspeeds = [0.1, -0.2, 0.3]\n[body]\nmass = 1.0\n"
+          '[simulation]\nt_end = 1e9\nmethod = "rk45"\noptions = { budget = { max_steps = 200 } }\n')
+FAST = "[contacts]\nspeeds = [0.5, 0.1, -0.2]\n[body]\nmass = 1.0\n[motors]\nspeed_limit = 0.35\n"
+
+
+def scene_file(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_exit_codes_are_listed_in_help():
+    done = cli("--help")
+    assert done.returncode == 0
+    for line in ("  0    the request was met", "  2    user error", "  3    finished but missed the request"):
+        assert line in done.stdout
+
+
+def test_projected_friction_fraction_exits_3_with_the_distance(tmp_path):
+    out = tmp_path / "out"
+    done = cli("run", str(scene_file(tmp_path, FRACTION_17)), "--out", str(out))
+    assert done.returncode == 3
+    # -1.7 F_tot = -17 N requested, -F_tot = -10 N realizable: 7 N away.
+    assert done.stderr == ("active-contacts: shortfall: allocation: friction fraction 1.7 is not "
+                           "realizable: projected to 1 (distance 7 N)\n")
+    assert "sup error 0 N (from the projected target, 7 N from the request)" in done.stdout
+    assert json.loads((out / "result.json").read_text())["shortfalls"][0]["amount"] == 7.0
+    done = cli("allocate", str(scene_file(tmp_path, FRACTION_17)))
+    assert done.returncode == 3 and "distance 7 N" in done.stderr
+
+
+def test_strict_refuses_a_projection_before_any_work(tmp_path):
+    out = tmp_path / "out"
+    for command in (["run", "--out", str(out)], ["allocate"]):
+        done = cli(command[0], str(scene_file(tmp_path, FRACTION_17)), "--strict", *command[1:])
+        assert done.returncode == 2 and "Traceback" not in done.stderr
+        assert done.stderr.startswith("active-contacts: error: --strict: allocation: the target is not "
+                                      "realizable: The 'target' parameter of allocate must stay within "
+                                      "+-F_tot = +-10 N (strict=True). Got -17.0 instead.")
+    assert not out.exists()
+
+
+def test_unreachable_tracking_target_is_not_optimal(tmp_path):
+    out = tmp_path / "out"
+    done = cli("schedule", str(scene_file(tmp_path, TRACK_2)), "--out", str(out), "--json")
+    assert done.returncode == 3
+    data = json.loads(done.stdout)
+    # The body cannot pass the contacts' 0.35 m/s: the exact error is 2 - 0.35 = 1.65 m/s, and
+    # the best achievable error reported is the schedule's certified lower bound.
+    np.testing.assert_allclose(data["exact_tracking_error"], 1.65, rtol=1e-12, atol=0)
+    (shortfall,) = data["shortfalls"]
+    assert shortfall["amount"] == data["lower_bound"] <= data["exact_tracking_error"]
+    assert shortfall["what"] == (f"unreachable: best achievable error {data['lower_bound']:.3g} m/s, because "
+                                 "the target exceeds the speed limit 0.35 m/s (target speed 2 m/s)")
+    done = cli("schedule", str(scene_file(tmp_path, TRACK_2)), "--out", str(out))
+    assert done.returncode == 3
+    assert done.stdout.splitlines()[2].startswith("unreachable: best achievable error 1.65 m/s")
+    assert "optimal" not in done.stdout
+    done = cli("schedule", str(scene_file(tmp_path, TRACK_2)), "--out", str(tmp_path / "o2"), "--strict")
+    assert done.returncode == 2
+    assert "--strict: schedule: unreachable: the target speed 2 m/s exceeds the speed limit 0.35 m/s" in done.stderr
+    assert not (tmp_path / "o2").exists()
+
+
+def test_budget_stop_exits_3(tmp_path):
+    out = tmp_path / "out"
+    done = cli("run", str(scene_file(tmp_path, BUDGET)), "--out", str(out), "--json")
+    assert done.returncode == 3
+    data = json.loads(done.stdout)
+    t_last = data["simulation"]["t"][-1]
+    assert data["simulation"]["status"] == "stopped: step budget exhausted"
+    assert data["shortfalls"] == [{"stage": "simulation", "unit": "s", "amount": 1e9 - t_last,
+                                   "what": f"stopped: step budget exhausted at t = {t_last:.6g} s of "
+                                           f"t_end = 1e+09 s ({1e9 - t_last:.6g} s not simulated)"}]
+    assert done.stderr.startswith("active-contacts: shortfall: simulation: stopped: step budget exhausted")
+
+
+def test_speeds_beyond_the_motor_limits_are_refused_or_clipped(tmp_path):
+    done = cli("run", str(scene_file(tmp_path, FAST)), "--out", str(tmp_path / "a"))
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert done.stderr == ("active-contacts: error: The 'contacts.speeds' value in the scene must lie within "
+                           "the motors' speed limits [-0.35, 0.35] m/s (or set [motors] clip = true to clip "
+                           "it). Got 0.5 m/s (entry [0], beyond the limit 0.35 m/s) instead.\n")
+    clipped = scene_file(tmp_path, FAST + "clip = true\n", "clipped.toml")
+    done = cli("run", str(clipped), "--out", str(tmp_path / "b"), "--json")
+    assert done.returncode == 3
+    data = json.loads(done.stdout)
+    assert data["contacts"]["speeds"] == [0.35, 0.1, -0.2]
+    (shortfall,) = data["shortfalls"]
+    assert shortfall["what"] == ("1 speed(s) in 'contacts.speeds' beyond the motors' speed limit clipped: "
+                                 "0.5 m/s to 0.35 m/s (excess 0.15 m/s)")
+    np.testing.assert_allclose(shortfall["amount"], 0.15, rtol=1e-12, atol=0)   # 0.5 - 0.35 in floats
+    done = cli("run", str(clipped), "--out", str(tmp_path / "c"), "--strict")
+    assert done.returncode == 2 and "--strict: scene: 1 speed(s) in 'contacts.speeds'" in done.stderr
+    assert not (tmp_path / "c").exists()
+
+
+def test_curve_text_lists_every_step_even_narrow_ones(tmp_path):
+    # Steps 0.1 mm/s apart: a 41-row sample of the curve missed them.
+    path = scene_file(tmp_path, "[contacts]\nspeeds = [0.0, 0.0001, 0.3]\nforces = [1.0, 2.0, 1.0]\n")
+    done = cli("curve", str(path))
+    assert done.returncode == 0
+    assert done.stdout.splitlines() == [
+        "F_tot = 4 N; equilibrium [0.0001, 0.0001] m/s",
+        "3 steps; F is constant between them",
+        "     V (m/s)  F below (N)  F above (N)",
+        "           0            4            2",
+        "      0.0001            2           -2",
+        "         0.3           -2           -4",
+    ]
+

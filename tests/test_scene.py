@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -188,3 +189,139 @@ def test_declared_objects_are_built_once_at_load():
     # F_tot / m = 2 m/s^2 (PHYSICS.md section 4), rtol 1e-5 as in the carousel test above.
     np.testing.assert_allclose(objects.contacts.total_force / objects.plant.mass, 2.0, rtol=1e-5)
     assert load_scene(path) == scene            # the built objects are not part of equality
+
+
+# -- speed limits (issue 10) -------------------------------------------------------------------
+
+LIMITED = "[motors]\nspeed_limit = 0.35\n"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[contacts]\nspeeds = [0.1, -0.5, 0.2]\n" + LIMITED,
+         "The 'contacts.speeds' value in the scene must lie within the motors' speed limits [-0.35, 0.35] "
+         "m/s (or set [motors] clip = true to clip it). Got -0.5 m/s (entry [1], beyond the limit -0.35 m/s) "
+         "instead."),
+        ("[contacts]\nrandom = { n = 5, low = 0.0, high = 1.0, seed = 0 }\n[motors]\nspeed_limits = [-0.1, 0.2]\n",
+         None),
+        (MINIMAL + LIMITED + "[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\n"
+                             "commands = { times = [0.5], values = [[0.0, 0.1, 0.2], [0.0, 0.4, 0.2]] }\n",
+         "The 'simulation.commands' value in the scene must lie within the motors' speed limits [-0.35, "
+         "0.35] m/s (or set [motors] clip = true to clip it). Got 0.4 m/s (entry [1, 1], beyond the limit "
+         "0.35 m/s) instead."),
+    ],
+)
+def test_speeds_beyond_the_motor_limits_are_refused(text, message):
+    with pytest.raises(SceneError) as info:
+        loads_scene(text)
+    if message is None:                         # random speeds: the largest draw above 0.2
+        speeds = np.random.default_rng(0).uniform(0.0, 1.0, 5)
+        message = (f"The 'contacts.random' value in the scene must lie within the motors' speed limits "
+                   f"[-0.1, 0.2] m/s (or set [motors] clip = true to clip it). Got {speeds.max():g} m/s "
+                   f"(entry [{speeds.argmax()}], beyond the limit 0.2 m/s) instead.")
+    assert str(info.value) == message
+
+
+def test_clip_true_clips_speeds_and_commands_and_round_trips():
+    text = ("[contacts]\nspeeds = [0.1, -0.5, 0.2]\n" + LIMITED + "clip = true\n[body]\nmass = 1.0\n"
+            "[simulation]\nt_end = 1.0\ncommands = { times = [0.5], values = [[0.0, 0.1, 0.2], [0.0, 0.4, 0.6]] }\n")
+    scene = loads_scene(text)
+    assert scene.motors.clip is True
+    np.testing.assert_array_equal(scene.contact_set().speeds, [0.1, -0.35, 0.2])
+    np.testing.assert_array_equal(scene.objects.plant.commands.values, [[0.0, 0.1, 0.2], [0.0, 0.35, 0.35]])
+    clips = {clip.key: (clip.value, clip.limit, clip.count) for clip in scene.objects.clipped}
+    assert clips == {"contacts.speeds": (-0.5, -0.35, 1), "simulation.commands": (0.6, 0.35, 2)}
+    assert loads_scene(dumps_scene(scene), name=scene.name) == scene
+    assert "clip = true" in dumps_scene(scene)
+
+
+def test_simulation_budget_table_becomes_a_budget():
+    from toolkit.simulation import Budget
+
+    scene = loads_scene(MINIMAL + "[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\n"
+                                  "options = { budget = { wall_time = 2.5, max_steps = 7 } }\n")
+    assert scene.objects.simulation_options == {"budget": Budget(wall_time=2.5, max_steps=7)}
+    with pytest.raises(SceneError, match="Unknown key 'wall' in \\[simulation.options.budget\\]"):
+        loads_scene(MINIMAL + "[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\noptions = { budget = { wall = 1 } }\n")
+
+
+# -- scene file edge cases (issue 10): one line, exit 2, no traceback ---------------------------
+
+def _cli_error(path: Path) -> str:
+    done = subprocess.run([sys.executable, "-m", "toolkit.cli", "curve", str(path)], capture_output=True,
+                          text=True, cwd=Path(__file__).parents[1])
+    assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
+    assert done.stderr.count("\n") == 1
+    return done.stderr
+
+
+def test_non_utf8_scene(tmp_path):
+    path = tmp_path / "latin.toml"
+    path.write_bytes(b"# caf\xe9\n" + MINIMAL.encode())
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    assert str(info.value) == f"The scene file {str(path)!r} is not UTF-8 text: byte 0xe9 at offset 5."
+    assert "not UTF-8 text" in _cli_error(path)
+
+
+def test_directory_as_scene(tmp_path):
+    with pytest.raises(SceneError) as info:
+        load_scene(tmp_path)
+    assert str(info.value) == f"The scene path {str(tmp_path)!r} is a directory, not a scene file."
+    assert "is a directory" in _cli_error(tmp_path)
+
+
+def test_empty_scene(tmp_path):
+    path = tmp_path / "empty.toml"
+    path.write_text("\n  \n")
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    assert str(info.value) == (f"The scene file {str(path)!r} is empty; a scene needs at least a [contacts] "
+                               "section.")
+    assert "is empty" in _cli_error(path)
+
+
+def test_scene_larger_than_the_cap(tmp_path):
+    from toolkit.scene import MAX_SCENE_BYTES
+
+    path = tmp_path / "huge.toml"
+    path.write_bytes(MINIMAL.encode() + b"#" * (MAX_SCENE_BYTES + 1 - len(MINIMAL)))
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    assert MAX_SCENE_BYTES == 1048576
+    assert str(info.value) == (f"The scene file {str(path)!r} is 1048577 bytes; scene files are limited to "
+                               "1048576 bytes (1 MiB).")
+    path.write_bytes(MINIMAL.encode() + b"#" * (MAX_SCENE_BYTES - len(MINIMAL)))   # exactly the cap: read
+    assert load_scene(path).contacts.speeds == (0.1, 0.2, 0.3)
+    path.write_bytes(b"#" * (5 << 20))
+    assert "limited to 1048576 bytes (1 MiB)" in _cli_error(path)
+
+
+def test_symlink_loop(tmp_path):
+    a, b = tmp_path / "a.toml", tmp_path / "b.toml"
+    a.symlink_to(b)
+    b.symlink_to(a)
+    with pytest.raises(SceneError) as info:
+        load_scene(a)
+    assert str(info.value) == f"The scene file {str(a)!r} is a symbolic link loop."
+    assert "symbolic link loop" in _cli_error(a)
+
+
+def test_unreadable_scene(tmp_path, monkeypatch):
+    path = tmp_path / "locked.toml"
+    path.write_text(MINIMAL)
+    path.chmod(0)
+    try:
+        if os.geteuid() != 0:                   # root reads mode-0 files: patch open instead
+            assert "Permission denied" in _cli_error(path)
+
+        def refuse(*args, **kwargs):
+            raise PermissionError(13, "Permission denied")
+
+        monkeypatch.setattr("toolkit.scene.open", refuse, raising=False)
+        with pytest.raises(SceneError) as info:
+            load_scene(path)
+        assert str(info.value) == f"The scene file {str(path)!r} cannot be read: Permission denied."
+    finally:
+        path.chmod(0o644)

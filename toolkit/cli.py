@@ -1,8 +1,21 @@
 """The ``active-contacts`` command line.
 
-Exit codes: 0 on success, 2 for a user error (bad arguments, bad scene, missing file),
-printed as one line on stderr without a traceback. ``--json`` prints machine-readable
-output on stdout.
+One function per subcommand (``_cmd_<name>``), registered in :func:`_parser`; every exit
+code is in :data:`EXIT_CODES` (also shown by ``--help``):
+
+0. the request was met;
+1. ``stability``: a case of the suite failed;
+2. a user error (bad arguments, bad scene, unreadable scene file, unwritable output, or
+   with ``--strict`` a request known to fall short), one line on stderr, no traceback,
+   nothing written;
+3. the run finished but missed the request (a simulation stopped before ``t_end``, a
+   projected or unreachable allocation target, speeds clipped to the motor limits, an
+   unreachable or unverified schedule): the outputs are written and one line on stderr
+   says what was missed and by how much (``StudyResult.shortfalls``);
+130. interrupted.
+
+``--json`` prints machine-readable output on stdout. Outputs are all or nothing: the output
+folder is checked before any work and replaced as a whole at the end.
 """
 
 from __future__ import annotations
@@ -14,18 +27,32 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
+from ._io import check_output_dir
 from .errors import SceneError, ToolkitError
 from .precision import exact_speedup, precision_report
-from .report import (schedule_check, schedule_lines, study_summary, study_to_dict, to_json,
-                     write_precision, write_schedule, write_study)
+from .report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
+                     study_to_dict, to_json, write_precision, write_schedule, write_study)
 from .scene import Scene, load_scene
 from .scene_build import scene_plant
 from .stability import stability_suite
-from .study import allocate_scene, design_scene_schedule, force_curve, run_study
+from .study import (Shortfall, allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
+                    request_shortfalls, run_study, schedule_shortfalls)
 
-__all__ = ["main"]
+__all__ = ["main", "EXIT_CODES"]
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_SHORTFALL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+#: Every exit code of the command line and what it means (shown by ``--help``).
+EXIT_CODES = {
+    EXIT_OK: "the request was met",
+    EXIT_FAILED: "stability: a case of the suite failed",
+    EXIT_USAGE: "user error (bad arguments or scene, unreadable scene file, unwritable output; "
+                "with --strict, a request known to fall short): one line on stderr, nothing written",
+    EXIT_SHORTFALL: "finished but missed the request (simulation stopped early, target projected or "
+                    "unreachable, speeds clipped to the limits, schedule unreachable or unverified): "
+                    "outputs written, one 'shortfall:' line on stderr",
+    EXIT_INTERRUPTED: "interrupted",
+}
 
 
 def _print_json(data: Any) -> None:
@@ -41,21 +68,38 @@ def _scene(args: argparse.Namespace, section: str | None = None, purpose: str = 
 
 
 def _out_dir(args: argparse.Namespace, scene: Scene) -> Path:
-    """``--out``, or ``out/<scene name>``."""
-    return Path(args.out) if args.out else Path("out") / scene.name
+    """``--out``, or ``out/<scene name>``, checked before any work (exit 2 if unwritable)."""
+    return check_output_dir(Path(args.out) if args.out else Path("out") / scene.name)
+
+
+def _known_shortfalls(scene: Scene, args: argparse.Namespace, stages: tuple[str, ...]) -> list[Shortfall]:
+    """The shortfalls of ``stages`` known before any work; with ``--strict`` a refusal (exit 2)."""
+    known = [s for s in request_shortfalls(scene) if s.stage in stages]
+    if args.strict and known:
+        raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
+    return known
+
+
+def _finish(shortfalls: Sequence[Shortfall]) -> int:
+    """Exit 0, or 3 with one line on stderr naming every shortfall."""
+    if not shortfalls:
+        return EXIT_OK
+    print(f"active-contacts: {shortfall_line(shortfalls)}", file=sys.stderr)
+    return EXIT_SHORTFALL
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     scene = _scene(args)
-    result = run_study(scene)
-    written = write_study(result, _out_dir(args, scene))
+    out = _out_dir(args, scene)
+    result = run_study(scene, strict=args.strict)
+    written = write_study(result, out)
     if args.json:
         _print_json({**study_to_dict(result), "written": [str(p) for p in written]})
     else:
         for line in study_summary(result):
             print(line)
         print(f"wrote {', '.join(str(p) for p in written)}")
-    return EXIT_OK
+    return _finish(result.shortfalls)
 
 
 def _cmd_curve(args: argparse.Namespace) -> int:
@@ -65,41 +109,52 @@ def _cmd_curve(args: argparse.Namespace) -> int:
     else:
         lo, hi = curve.equilibrium
         print(f"F_tot = {curve.total_force:.6g} N; equilibrium [{lo:.6g}, {hi:.6g}] m/s")
-        print(f"{'V (m/s)':>12} {'F (N)':>12}")
-        stride = max(1, curve.speeds.size // 40)
-        for v, f in zip(curve.speeds[::stride], curve.force[::stride]):
-            print(f"{v:12.5f} {f:12.5f}")
+        print(f"{len(curve.steps)} steps; F is constant between them")
+        print(f"{'V (m/s)':>12} {'F below (N)':>12} {'F above (N)':>12}")
+        for step in curve.steps:
+            print(f"{step.speed:12.6g} {step.force_below:12.6g} {step.force_above:12.6g}")
     return EXIT_OK
 
 
 def _cmd_allocate(args: argparse.Namespace) -> int:
-    result = allocate_scene(_scene(args, "target", "to allocate"))
+    scene = _scene(args, "target", "to allocate")
+    known = _known_shortfalls(scene, args, ("scene", "allocation"))
+    result = allocate_scene(scene, strict=args.strict)
+    shortfalls = [s for s in known if s.stage == "scene"] + allocation_shortfalls(scene, result)
     if args.json:
-        _print_json(result.to_dict())
+        _print_json({**result.to_dict(), "shortfalls": shortfall_dicts(shortfalls)})
     else:
         print(f"{result.method}: {result.status.value}")
-        print(f"sup error {result.error_sup:.6g} N, L1 error {result.error_l1:.6g} N m/s, "
+        projected = ("" if result.projection is None else
+                     f" (from the projected target, {result.projection.distance_sup:.6g} N from the request)")
+        print(f"sup error {result.error_sup:.6g} N{projected}, L1 error {result.error_l1:.6g} N m/s, "
               f"bound {result.bound:.6g} N, gap {result.gap:.3g} N, {result.wall_time * 1e3:.2f} ms")
         print("speeds (m/s): " + ", ".join(f"{v:.6g}" for v in result.speeds))
-    return EXIT_OK
+    return _finish(shortfalls)
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
     scene = _scene(args, "schedule", "to design")
+    known = _known_shortfalls(scene, args, ("scene", "schedule"))
+    out = _out_dir(args, scene)
     result, check = design_scene_schedule(scene)
-    written = write_schedule(result, _out_dir(args, scene))
+    shortfalls = [s for s in known if s.stage == "scene"] + schedule_shortfalls(scene, result, check)
+    written = write_schedule(result, out)
     verified = schedule_check(result, check)
     if args.json:
-        _print_json({**result.to_dict(), "exact_check": verified, "written": [str(p) for p in written]})
+        _print_json({**result.to_dict(), "exact_check": verified, "shortfalls": shortfall_dicts(shortfalls),
+                     "written": [str(p) for p in written]})
     else:
-        for line in schedule_lines(result, check):
+        for line in schedule_lines(result, check, shortfalls):
             print(line)
         print(f"wrote {', '.join(str(p) for p in written)}")
-    return EXIT_OK
+    return _finish(shortfalls)
 
 
 def _cmd_precision(args: argparse.Namespace) -> int:
     scene = _scene(args, "simulation", "(t_end, v0) to compare methods on")
+    if args.out:
+        check_output_dir(args.out)
     report = precision_report(scene_plant(scene), scene.simulation.t_end, v0=scene.simulation.v0,
                               repeats=args.repeats)
     written = write_precision(report, args.out) if args.out else []
@@ -156,31 +211,44 @@ def _at_least(low: int) -> Callable[[str], int]:
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="active-contacts",
-        description="Design, simulate and analyse friction created by active contacts.")
+        description="Design, simulate and analyse friction created by active contacts.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="exit codes:\n" + "\n".join(f"  {code:<4} {meaning}" for code, meaning in EXIT_CODES.items()))
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     def command(name: str, handler: Callable[[argparse.Namespace], int], help_text: str,
-                scene: bool = True) -> argparse.ArgumentParser:
+                scene: bool = True, strict: bool = False) -> argparse.ArgumentParser:
         sub = commands.add_parser(name, help=help_text, description=help_text)
         if scene:
             sub.add_argument("scene", metavar="SCENE", help="a scene file (TOML), e.g. designs/carousel.toml")
         sub.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+        if strict:
+            sub.add_argument("--strict", action="store_true",
+                             help="refuse (exit 2, before any work) a request known to fall short: a "
+                                  "target that needs projection or lies beyond reach, speeds clipped "
+                                  "to the motor limits, a schedule target beyond them")
         sub.set_defaults(handler=handler)
         return sub
 
-    run = command("run", _cmd_run, "run every stage the scene declares and write results and plots")
-    run.add_argument("--out", metavar="DIR", help="output folder (default: out/<scene name>)")
-    curve = command("curve", _cmd_curve, "print the force-speed curve of the scene's contacts")
-    curve.add_argument("--points", type=_at_least(2), default=801, help="samples (default 801)")
-    command("allocate", _cmd_allocate, "allocate contact speeds that realize the scene's [target]")
+    out_help = ("output folder, replaced as a whole (default: out/<scene name>); it must be new "
+                "or hold only toolkit outputs")
+    run = command("run", _cmd_run, "run every stage the scene declares and write results and plots",
+                  strict=True)
+    run.add_argument("--out", metavar="DIR", help=out_help)
+    curve = command("curve", _cmd_curve, "print every step of the force-speed curve of the scene's "
+                    "contacts (--json: also the sampled curve)")
+    curve.add_argument("--points", type=_at_least(2), default=801, help="samples in --json (default 801)")
+    command("allocate", _cmd_allocate, "allocate contact speeds that realize the scene's [target]",
+            strict=True)
     schedule = command("schedule", _cmd_schedule,
-                       "design the scene's [schedule] and write schedule.csv and schedule.json")
-    schedule.add_argument("--out", metavar="DIR", help="output folder (default: out/<scene name>)")
+                       "design the scene's [schedule] and write schedule.csv and schedule.json", strict=True)
+    schedule.add_argument("--out", metavar="DIR", help=out_help)
     precision = command("precision", _cmd_precision,
                         "work-precision report: every simulation method against the exact one")
     precision.add_argument("--repeats", type=_at_least(1), default=3, help="timing repeats (default 3)")
-    precision.add_argument("--out", metavar="DIR", help="also write precision.json and precision.png here")
+    precision.add_argument("--out", metavar="DIR", help="also write precision.json and precision.png into "
+                           "this folder, replaced as a whole")
     stability = command("stability", _cmd_stability,
                         "stability suite over stiff and extreme cases (exit 1 if a case fails)", scene=False)
     stability.add_argument("--quick", action="store_true", help="the smaller, faster set of cases")
@@ -196,12 +264,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ToolkitError as error:
         print(f"active-contacts: error: {error}", file=sys.stderr)
         return EXIT_USAGE
-    except OSError as error:  # an output folder that is a file, no permission, a full disk
+    except OSError as error:  # found only while writing: a full disk, a folder removed meanwhile
         print(f"active-contacts: error: cannot write the output: {error}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("active-contacts: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -1,7 +1,9 @@
 """Turn study results into JSON and PNG files (the I/O side of :mod:`toolkit.study`).
 
-Everything is rendered in memory first and then each file is written atomically, so a
-failure leaves no half-written output.
+Everything is rendered in memory first and then the output folder is replaced as a whole
+(:func:`toolkit._io.write_tree`), so a failure leaves either the previous outputs or none.
+An output folder holds the files of one command; a folder holding files the toolkit did not
+write is refused.
 """
 
 from __future__ import annotations
@@ -14,12 +16,13 @@ from typing import Any
 import numpy as np
 
 from . import plots
-from ._io import atomic_write_bytes, atomic_write_text
+from ._io import atomic_write_text, write_tree
 from .precision import work_precision_curves
-from .study import StudyResult
+from .study import Shortfall, StudyResult
 
-__all__ = ["study_summary", "study_to_dict", "write_study", "to_json", "schedule_csv", "schedule_check", "schedule_lines",
-           "write_precision", "write_schedule"]
+__all__ = ["study_summary", "study_to_dict", "study_files", "write_study", "to_json", "schedule_csv",
+           "schedule_check", "schedule_lines", "shortfall_dicts", "shortfall_line", "write_precision",
+           "write_schedule"]
 
 
 def _clean(value: Any) -> Any:
@@ -68,8 +71,13 @@ def schedule_check(schedule: Any, check: Any) -> dict[str, Any]:
             "within_bound": bool(deviation <= schedule.prediction_bound), "V": check.V}
 
 
-def schedule_lines(schedule: Any, check: Any) -> list[str]:
-    """Human lines on a designed schedule and its exact check."""
+def schedule_lines(schedule: Any, check: Any, shortfalls: Any = ()) -> list[str]:
+    """Human lines on a designed schedule and its exact check.
+
+    The last line is the status; for a target beyond the speed limits it is the
+    ``"unreachable: ..."`` shortfall instead (such a schedule is the best possible, not
+    what was asked for).
+    """
     verified = schedule_check(schedule, check)
     head = f"schedule: {schedule.times.size - 1} periods of {schedule.period * 1e3:g} ms, {schedule.n} contacts; "
     if schedule.minimum_time is not None:
@@ -78,15 +86,27 @@ def schedule_lines(schedule: Any, check: Any) -> list[str]:
     else:
         head += (f"tracking error {schedule.exact_tracking_error:.3g} m/s (exact model), lower bound "
                  f"{schedule.lower_bound:.3g} m/s")
+    unreachable = [s.what for s in shortfalls if s.stage == "schedule" and s.what.startswith("unreachable")]
     return [head,
             f"exact simulation within {verified['max_deviation']:.2g} m/s of the prediction "
             f"(bound {verified['prediction_bound']:.2g} m/s)",
-            schedule.status.value]
+            unreachable[0] if unreachable else schedule.status.value]
+
+
+def shortfall_dicts(shortfalls: Any) -> list[dict[str, Any]]:
+    """JSON-able list of :class:`~toolkit.study.Shortfall`."""
+    return [shortfall.to_dict() for shortfall in shortfalls]
+
+
+def shortfall_line(shortfalls: list[Shortfall] | tuple[Shortfall, ...]) -> str:
+    """One line on everything missed: ``"shortfall: <stage>: <what>; ..."``."""
+    return "shortfall: " + "; ".join(map(str, shortfalls))
 
 
 def study_to_dict(result: StudyResult) -> dict[str, Any]:
     """Everything the study computed, JSON-able."""
     out: dict[str, Any] = {"scene": result.scene.name, "stages": list(result.stages),
+                           "met": result.met, "shortfalls": shortfall_dicts(result.shortfalls),
                            "curve": result.curve.to_dict(), "contacts": {
                                "speeds": result.contacts.speeds, "forces": result.contacts.forces}}
     if result.sensors is not None:
@@ -113,23 +133,22 @@ def study_summary(result: StudyResult) -> list[str]:
                      + (f", backlash {enc['backlash_speed_step'] * 1e3:.0f} mm/s" if enc["backlash_speed_step"] else ""))
     if result.allocation is not None:
         a = result.allocation
-        lines.append(f"allocation ({a.method}): sup error {a.error_sup:.4g} N, bound {a.bound:.4g} N, "
+        projected = ("" if a.projection is None else
+                     f" (from the projected target, {a.projection.distance_sup:.4g} N from the request)")
+        lines.append(f"allocation ({a.method}): sup error {a.error_sup:.4g} N{projected}, bound {a.bound:.4g} N, "
                      f"gap {a.gap:.2g} N; {a.status.value}")
     if result.schedule is not None:
-        lines.extend(schedule_lines(result.schedule, result.schedule_check))
+        lines.extend(schedule_lines(result.schedule, result.schedule_check, result.shortfalls))
     if result.simulation is not None:
         s = result.simulation
         lines.append(f"simulation ({s.method}): V({s.t[-1]:g} s) = {s.V[-1]:.6g} m/s after "
                      f"{s.n_events} events in {s.wall_time * 1e3:.1f} ms; {s.status.value}")
+    lines.extend(f"shortfall: {shortfall}" for shortfall in result.shortfalls)
     return lines
 
 
-def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
-    """Write ``result.json`` and, when the scene's ``[report]`` asks for plots, PNG figures.
-
-    Returns the paths written. All content is rendered before the first file is written.
-    """
-    out = Path(out_dir)
+def study_files(result: StudyResult) -> dict[str, bytes]:
+    """Every output file of a study, rendered in memory: name -> bytes."""
     payload: dict[str, bytes] = {"result.json": to_json(study_to_dict(result)).encode()}
     report = result.scene.report
     if report is not None and report.plots:
@@ -142,7 +161,17 @@ def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
     if result.schedule is not None:
         payload["schedule.csv"] = schedule_csv(result.schedule).encode()
         payload["schedule.json"] = to_json(result.schedule.to_dict()).encode()
-    return [atomic_write_bytes(out / name, data) for name, data in payload.items()]
+    return payload
+
+
+def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
+    """Write ``result.json`` and, when the scene's ``[report]`` asks for plots, PNG figures
+    (and the schedule's CSV and JSON), replacing ``out_dir`` as a whole.
+
+    Returns the paths written. All content is rendered before the first file is written;
+    a failure leaves ``out_dir`` as it was.
+    """
+    return write_tree(out_dir, study_files(result))
 
 
 def write_precision(report: Any, out_dir: str | Path) -> list[Path]:
@@ -151,15 +180,13 @@ def write_precision(report: Any, out_dir: str | Path) -> list[Path]:
     exact = [row for row in report.rows if row.method == "exact" and not math.isfinite(row.max_error)]
     reference = exact[0].wall_time if exact else None
     png = plots.figure_png(plots.plot_precision(work_precision_curves(report), reference_time=reference))
-    out = Path(out_dir)
-    return [atomic_write_text(out / "precision.json", to_json(data)), atomic_write_bytes(out / "precision.png", png)]
+    return write_tree(out_dir, {"precision.json": to_json(data).encode(), "precision.png": png})
 
 
 def write_schedule(schedule: Any, out_dir: str | Path) -> list[Path]:
     """Write ``schedule.csv`` and ``schedule.json`` (firmware-playable) into ``out_dir``."""
-    out = Path(out_dir)
     csv_text, json_text = schedule_csv(schedule), to_json(schedule.to_dict())
-    return [atomic_write_text(out / "schedule.csv", csv_text), atomic_write_text(out / "schedule.json", json_text)]
+    return write_tree(out_dir, {"schedule.csv": csv_text.encode(), "schedule.json": json_text.encode()})
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -9,14 +9,26 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
     [scene]          name, description
     [contacts]       speeds | random, and forces | (mu, normal_loads)        (required)
     [body]           mass | (inertia, contact_radius); damping; external_force
-    [motors]         speed_limit | speed_limits; lag; rate_limit; compliance
+    [motors]         speed_limit | speed_limits; lag; rate_limit; compliance; clip
     [sensors]        rate; wheel_counts_per_rev; wheel_radius; wheel_backlash;
                      central_counts_per_rev; contact_radius
     [target]         kind = force_curve | viscosity | friction_fraction | equilibrium_speed,
                      its parameters, method, strict, dt, fixed, failed, liftable, time_limit
     [schedule]       kind = braking | track, its parameters, v0, period, epsilon, horizon
-    [simulation]     t_end; v0; method; options; commands
+    [simulation]     t_end; v0; method; options (budget); commands
     [report]         plots; curve_points
+
+Signals given as tables (``body.external_force``, ``simulation.commands``) are piecewise
+constant: ``{times = [t_1, ..., t_k], values = [x_0, x_1, ..., x_k]}`` holds ``x_0`` before
+``t_1``, ``x_j`` on ``[t_j, t_{j+1})`` and ``x_k`` from ``t_k`` on, so ``values`` has one
+entry more than ``times``.
+
+Contact speeds (``contacts.speeds``, ``contacts.random``) and command tables
+(``simulation.commands``) must lie within the motors' speed limits: a scene that asks for
+more than its motors can do is refused, unless ``[motors] clip = true``, which clips them
+to the limits (and the study reports each clip as a shortfall).
+
+A scene file is read as UTF-8 and may be at most :data:`MAX_SCENE_BYTES` (1 MiB) long.
 
 :func:`load_scene` validates every value and refuses unknown keys with a suggestion;
 :func:`dumps_scene` writes a scene back (round trip: ``load(dump(s)) == s``).
@@ -31,8 +43,10 @@ Every other value is checked by the constructor that takes it, when
 
 from __future__ import annotations
 
+import errno
 import functools
 import math
+import stat
 import re
 import tomllib
 from collections.abc import Callable, Mapping
@@ -49,10 +63,12 @@ from .scene_build import SceneObjects, build_scene
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
-    "SimulationSpec", "ReportSpec", "load_scene", "loads_scene", "dumps_scene",
+    "SimulationSpec", "ReportSpec", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
 ]
 
 PLANNED_SECTIONS = ("estimator", "controller")
+#: Largest scene file :func:`load_scene` reads, bytes (1 MiB): a scene is a short text.
+MAX_SCENE_BYTES = 1 << 20
 #: Largest generated array a scene may ask for (random contacts, curve samples): 1e7.
 MAX_SAMPLES = 10_000_000
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
@@ -223,7 +239,8 @@ class ContactsSpec:
 class BodySpec:
     """``[body]``: moving inertia ``mass`` (kg) or ``inertia`` (kg m^2) with ``contact_radius``
     (m, ``mass = inertia / contact_radius**2``); ``damping`` (N s/m); ``external_force`` (N,
-    a constant or ``{times, values}`` piecewise constant)."""
+    a constant or a piecewise-constant table ``{times = [t_1..t_k], values = [f_0..f_k]}``:
+    ``f_0`` before ``t_1``, ``f_j`` from ``t_j`` on, so one value more than times)."""
 
     mass: float | None = None
     inertia: float | None = None
@@ -263,14 +280,17 @@ class BodySpec:
 class MotorsSpec:
     """``[motors]``: ``speed_limit`` (m/s, symmetric) or ``speed_limits = [lo, hi]``; ``lag``
     (s, first-order time constant); ``rate_limit`` (m/s^2); ``compliance`` ((m/s)/N, speed
-    droop per newton of contact force)."""
+    droop per newton of contact force); ``clip`` (default false: contact speeds and
+    ``simulation.commands`` beyond the speed limits are refused; true: they are clipped to
+    the limits and the study reports a shortfall)."""
 
     speed_limits: tuple[float, float] = (-math.inf, math.inf)
     lag: float = 0.0
     rate_limit: float = math.inf
     compliance: float = 0.0
+    clip: bool = False
 
-    KEYS = ("speed_limit", "speed_limits", "lag", "rate_limit", "compliance")
+    KEYS = ("speed_limit", "speed_limits", "lag", "rate_limit", "compliance", "clip")
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> MotorsSpec:
@@ -290,6 +310,7 @@ class MotorsSpec:
             lag=_number("motors.lag", table.get("lag", 0.0)),
             rate_limit=_number("motors.rate_limit", table.get("rate_limit", math.inf), allow_inf=True),
             compliance=_number("motors.compliance", table.get("compliance", 0.0)),
+            clip=_flag("motors.clip", table.get("clip", False)),
         )
 
 
@@ -334,7 +355,10 @@ class TargetSpec:
     ``kind = "force_curve"``: ``speeds`` (m/s), ``forces`` (N), optional ``weights``;
     ``kind = "viscosity"``: ``slope`` (N s/m), ``center`` (m/s), ``band`` (m/s, half-width);
     ``kind = "friction_fraction"``: ``fraction`` (mu/mu0 in [0, 1]), ``band`` (m/s);
-    ``kind = "equilibrium_speed"``: ``speed`` (m/s), ``margin`` (contacts that may fail).
+    ``kind = "equilibrium_speed"``: ``speed`` (m/s), ``margin`` (an integer >= 0, default 0:
+    a count of contacts, not a speed: the equilibrium must stay at ``speed`` even when that
+    many contacts fail, i.e. the magnitude ``W`` at ``speed`` and those ``L`` below and ``U``
+    above satisfy ``W >= |U - L| + 2 * (sum of the margin largest magnitudes)``).
     Common keys: ``method`` (solver name; default: chosen), ``strict`` (refuse instead of
     project), ``dt`` (s: with ``[motors] rate_limit``, each contact may move at most
     ``rate_limit * dt`` from its current speed), ``fixed``, ``failed``, ``liftable`` (lists
@@ -443,8 +467,11 @@ class ScheduleSpec:
 @dataclass(frozen=True)
 class SimulationSpec:
     """``[simulation]``: ``t_end`` (s), ``v0`` (m/s), ``method`` (default ``"exact"``),
-    ``options`` (a table passed to :func:`toolkit.simulate`), ``commands`` (piecewise-constant
-    contact-speed commands ``{times, values}``, each value a list of n speeds in m/s)."""
+    ``options`` (a table passed to :func:`toolkit.simulate`; its ``budget`` table, with keys
+    ``wall_time`` (s), ``max_steps`` and ``max_event_rate`` (1/s), becomes a
+    :class:`toolkit.simulation.Budget`), ``commands`` (piecewise-constant contact-speed
+    commands ``{times, values}``: ``values`` has one entry more than ``times``, each a list of
+    n speeds in m/s within the motors' speed limits)."""
 
     t_end: float
     v0: float = 0.0
@@ -607,13 +634,51 @@ def load_scene(path: str | Path) -> Scene:
     SceneFileNotFoundError
         The file does not exist.
     SceneError
-        Invalid TOML, an unknown section or key (with a suggestion), or a bad value.
+        The path is a directory, a symbolic link loop or not a regular file; the file cannot
+        be read, is empty, larger than :data:`MAX_SCENE_BYTES` or not UTF-8; invalid TOML, an unknown section or key (with a suggestion), or a bad value.
     """
     file = Path(path)
-    if not file.is_file():
-        raise SceneFileNotFoundError(f"The scene file {str(file)!r} does not exist.")
     stem = file.stem if _NAME.fullmatch(file.stem) else "scene"
-    return loads_scene(file.read_text(encoding="utf-8"), name=stem)
+    return loads_scene(_read_scene_text(file), name=stem)
+
+
+def _read_scene_text(file: Path) -> str:
+    """The text of a scene file, or a one-line error naming the file and what is wrong."""
+    shown = repr(str(file))
+    try:
+        info = file.stat()
+    except FileNotFoundError:
+        if file.is_symlink():
+            raise SceneFileNotFoundError(f"The scene file {shown} is a symbolic link to a file "
+                                         "that does not exist.") from None
+        raise SceneFileNotFoundError(f"The scene file {shown} does not exist.") from None
+    except OSError as error:
+        if error.errno == errno.ELOOP:
+            raise SceneError(f"The scene file {shown} is a symbolic link loop.") from None
+        raise SceneError(f"The scene file {shown} cannot be read: {error.strerror}.") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise SceneError(f"The scene path {shown} is a directory, not a scene file.")
+    if not stat.S_ISREG(info.st_mode):
+        raise SceneError(f"The scene path {shown} is not a regular file.")
+    if info.st_size > MAX_SCENE_BYTES:
+        raise SceneError(f"The scene file {shown} is {info.st_size} bytes; scene files are limited "
+                         f"to {MAX_SCENE_BYTES} bytes (1 MiB).")
+    try:
+        with open(file, "rb") as stream:
+            data = stream.read(MAX_SCENE_BYTES + 1)
+    except OSError as error:
+        raise SceneError(f"The scene file {shown} cannot be read: {error.strerror}.") from None
+    if len(data) > MAX_SCENE_BYTES:          # grew since stat
+        raise SceneError(f"The scene file {shown} is more than {MAX_SCENE_BYTES} bytes; scene files "
+                         "are limited to 1 MiB.")
+    if not data.strip():
+        raise SceneError(f"The scene file {shown} is empty; a scene needs at least a [contacts] "
+                         "section.")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise SceneError(f"The scene file {shown} is not UTF-8 text: byte "
+                         f"0x{data[error.start]:02x} at offset {error.start}.") from None
 
 
 def _plain(value: Any) -> Any:

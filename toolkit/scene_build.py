@@ -6,7 +6,8 @@ keys no constructor takes, such as ``motors.speed_limit`` or ``contacts.random``
 :func:`build_scene` then builds the objects those specs declare, once:
 
 ==========================  ===============================================================
-``[contacts]``              :class:`~toolkit.model.ContactSet`
+``[contacts]``              :class:`~toolkit.model.ContactSet` (speeds within the motor
+                            limits, or clipped to them with ``[motors] clip = true``)
 ``[motors]``                :class:`~toolkit.model.Motors`
 ``[body]`` (+ motors,       :class:`~toolkit.model.Plant`, its external force and commands
 ``simulation.commands``)    as :class:`~toolkit.model.PiecewiseConstant` signals
@@ -14,7 +15,14 @@ keys no constructor takes, such as ``motors.speed_limit`` or ``contacts.random``
 ``[target]``                the allocation target (:class:`~toolkit.ForceCurve`, ...)
 ``[schedule]``              the schedule target (:class:`~toolkit.Braking` or
                             :class:`~toolkit.SpeedTrajectory`)
+``simulation.options``      the options of :func:`toolkit.simulate`; a ``budget`` table
+                            becomes a :class:`~toolkit.simulation.Budget`
 ==========================  ===============================================================
+
+Contact speeds and ``simulation.commands`` beyond the motors' speed limits are refused
+(a :class:`~toolkit.errors.SceneError` naming the key, the limit and the value) unless the
+scene sets ``[motors] clip = true``; then they are clipped and every clip is recorded in
+:attr:`SceneObjects.clipped` (the study reports them as shortfalls).
 
 Each value's rules live in the constructor that takes it (the motor lag in
 :class:`~toolkit.model.Motors`, the mass in :class:`~toolkit.model.Plant`, ...). A
@@ -41,14 +49,63 @@ from .allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction,
 from .errors import ParameterError, ParameterTypeError, SceneError
 from .model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant
 from .schedule import Braking, SpeedTrajectory
+from .simulation import Budget
 
 if TYPE_CHECKING:                      # scene.py imports this module: types only, no cycle
     from .scene import Scene, ScheduleSpec
 
-__all__ = ["SceneObjects", "build_scene", "scene_plant", "schedule_target"]
+__all__ = ["Clip", "SceneObjects", "build_scene", "scene_plant", "schedule_target"]
 
 #: The parameter name in the single error template (:func:`toolkit.errors.parameter_message`).
 _PARAMETER = re.compile(r"The '(?P<name>[^']+)' parameter of ")
+
+
+@dataclass(frozen=True)
+class Clip:
+    """Speeds a scene asked for beyond its motors' limits, clipped (``[motors] clip = true``).
+
+    Attributes
+    ----------
+    key : str
+        The scene key that set them (``"contacts.speeds"``, ``"simulation.commands"``, ...).
+    value : float, m/s
+        The requested speed farthest beyond the limits.
+    limit : float, m/s
+        The limit it was clipped to.
+    count : int
+        How many speeds were clipped.
+    """
+
+    key: str
+    value: float
+    limit: float
+    count: int
+
+    @property
+    def excess(self) -> float:
+        """``|value - limit|``, m/s."""
+        return abs(self.value - self.limit)
+
+
+def _within_limits(key: str, speeds: np.ndarray, motors: Any) -> tuple[np.ndarray, Clip | None]:
+    """``speeds`` checked against ``[motors]``'s limits: refused, or clipped with ``clip = true``."""
+    if motors is None:
+        return speeds, None
+    low, high = motors.speed_limits
+    beyond = (speeds < low) | (speeds > high)
+    if not beyond.any():
+        return speeds, None
+    excess = np.where(speeds > high, speeds - high, low - speeds)
+    worst = np.unravel_index(int(np.argmax(excess)), speeds.shape)
+    value = float(speeds[worst])
+    limit = high if value > high else low
+    if not motors.clip:
+        index = ", ".join(map(str, worst))
+        raise SceneError(
+            f"The {key!r} value in the scene must lie within the motors' speed limits "
+            f"[{low:g}, {high:g}] m/s (or set [motors] clip = true to clip it). Got {value:g} m/s "
+            f"(entry [{index}], beyond the limit {limit:g} m/s) instead.")
+    return np.clip(speeds, low, high), Clip(key, value, limit, int(beyond.sum()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,6 +127,11 @@ class SceneObjects:
         The allocation target of ``[target]``.
     schedule_target : Braking, SpeedTrajectory or None
         The schedule target of ``[schedule]``.
+    simulation_options : dict
+        ``[simulation] options`` as :func:`toolkit.simulate` takes them (``budget`` a
+        :class:`~toolkit.simulation.Budget`); empty without ``[simulation]``.
+    clipped : tuple of Clip
+        Speeds clipped to the motor limits (``[motors] clip = true``); empty otherwise.
     """
 
     contacts: ContactSet
@@ -78,6 +140,8 @@ class SceneObjects:
     encoders: dict[str, Encoder] = field(default_factory=dict)
     target: Any = None
     schedule_target: Braking | SpeedTrajectory | None = None
+    simulation_options: dict[str, Any] = field(default_factory=dict)
+    clipped: tuple[Clip, ...] = ()
 
     def plant_on(self, contacts: ContactSet | None = None) -> Plant:
         """The scene's plant, on other contacts (e.g. allocated ones) when given.
@@ -129,13 +193,16 @@ def _signal(value: float | Mapping[str, Any], key: str) -> float | PiecewiseCons
         return PiecewiseConstant(np.asarray(value["times"]), np.asarray(value["values"], dtype=float))
 
 
-def _contacts(scene: Scene) -> ContactSet:
+def _contacts(scene: Scene, clips: list[Clip]) -> ContactSet:
     spec = scene.contacts
     if spec.random is not None:
         rng = np.random.default_rng(spec.random["seed"])
         speeds = rng.uniform(spec.random["low"], spec.random["high"], spec.random["n"])
     else:
         speeds = np.asarray(spec.speeds)
+    key = "contacts.random" if spec.random is not None else "contacts.speeds"
+    speeds, clip = _within_limits(key, speeds, scene.motors)
+    clips.extend([clip] if clip is not None else [])
     with _scene_keys("contacts", _same_keys("contacts", ("speeds", "forces", "mu", "normal_loads"))):
         if spec.mu is not None:
             return ContactSet.from_friction(speeds, spec.mu, spec.normal_loads)
@@ -154,13 +221,17 @@ def _motors(scene: Scene) -> Motors | None:
                       compliance=spec.compliance)
 
 
-def _plant(scene: Scene, contacts: ContactSet, motors: Motors | None) -> Plant | None:
+def _plant(scene: Scene, contacts: ContactSet, motors: Motors | None, clips: list[Clip]) -> Plant | None:
     body = scene.body
     if body is None:
         return None
     commands = None
     if scene.simulation is not None and scene.simulation.commands is not None:
-        commands = _signal(scene.simulation.commands, "simulation.commands")
+        table = scene.simulation.commands
+        values, clip = _within_limits("simulation.commands", np.asarray(table["values"], dtype=float),
+                                      scene.motors)
+        clips.extend([clip] if clip is not None else [])
+        commands = _signal({"times": table["times"], "values": values}, "simulation.commands")
     keys = {"mass": "body.mass" if body.mass is not None else ("body.inertia", "body.contact_radius"),
             "damping": "body.damping", "external_force": "body.external_force",
             "motors": ("motors.compliance", "motors.lag"), "commands": "simulation.commands"}
@@ -233,11 +304,30 @@ def build_scene(scene: Scene) -> SceneObjects:
         A constructor refused a value; the message names the scene key, the rule and the
         value received.
     """
-    contacts = _contacts(scene)
+    clips: list[Clip] = []
+    contacts = _contacts(scene, clips)
     motors = _motors(scene)
-    return SceneObjects(contacts=contacts, motors=motors, plant=_plant(scene, contacts, motors),
+    plant = _plant(scene, contacts, motors, clips)
+    return SceneObjects(contacts=contacts, motors=motors, plant=plant,
                         encoders=_encoders(scene), target=_target(scene),
-                        schedule_target=schedule_target(scene.schedule))
+                        schedule_target=schedule_target(scene.schedule),
+                        simulation_options=_simulation_options(scene), clipped=tuple(clips))
+
+
+def _simulation_options(scene: Scene) -> dict[str, Any]:
+    """``[simulation] options`` with a ``budget`` table turned into a :class:`Budget`."""
+    if scene.simulation is None:
+        return {}
+    options = dict(scene.simulation.options)
+    if isinstance(options.get("budget"), Mapping):
+        table = options["budget"]
+        unknown = [key for key in table if key not in ("wall_time", "max_steps", "max_event_rate")]
+        if unknown:
+            raise SceneError(f"Unknown key {unknown[0]!r} in [simulation.options.budget]. "
+                             "Valid keys: wall_time, max_steps, max_event_rate.")
+        with _scene_keys("simulation", _same_keys("simulation.options.budget", tuple(table))):
+            options["budget"] = Budget(**table)
+    return options
 
 
 def scene_plant(scene: Scene, contacts: ContactSet | None = None) -> Plant:

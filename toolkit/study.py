@@ -9,23 +9,100 @@ A ``[schedule]`` is designed and then simulated exactly under its own commands.
 
 Every object a stage needs (contacts, motors, plant, encoders, targets) comes from
 ``scene.objects`` (:mod:`toolkit.scene_build`), built once when the scene was loaded.
+
+A study that finishes may still miss what the scene asked for. Each miss is a
+:class:`Shortfall` (``StudyResult.shortfalls``), one kind per way of missing:
+
+=============  ===================================================================  ======
+stage          what                                                                 unit
+=============  ===================================================================  ======
+scene          speeds beyond the motor limits clipped (``[motors] clip = true``)   m/s
+allocation     a target that is not realizable, projected (distance to it)          N
+allocation     a target the contacts cannot reach (best achievable error)           N
+allocation     no allocation (infeasible, time limit, solver error)                 N
+schedule       a target beyond the speed limits (best achievable error)             m/s
+schedule       an unverified schedule (exact run left the prediction bound)         m/s
+schedule       a braking target not reached (final distance to it)                  m/s
+simulation     a run stopped before ``t_end`` (budget, Zeno, failure; time left)    s
+=============  ===================================================================  ======
+
+The ones that can be known before any work (clipped speeds, a target that needs projection
+or lies beyond reach, a schedule target beyond the speed limits) are
+:func:`request_shortfalls`; ``run_study(scene, strict=True)`` refuses them with a
+:class:`~toolkit.errors.SceneError` instead.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from .allocation import AllocationResult, allocate
+from .allocation import (AllocationResult, AllocationStatus, EquilibriumSpeed, FrictionFraction,
+                         allocate, build_problem)
+from .errors import ParameterError, SceneError
 from .model import ContactSet
 from .scene import Scene
-from .schedule import ScheduleResult, design_schedule
-from .simulation import SimulationResult, simulate
+from .schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
+from .simulation import SimulationResult, Status, simulate
 
-__all__ = ["CurveSamples", "StudyResult", "force_curve", "run_study",
-           "allocate_scene", "design_scene_schedule"]
+__all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve", "run_study",
+           "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
+           "schedule_shortfalls", "simulation_shortfalls"]
+
+
+@dataclass(frozen=True)
+class Shortfall:
+    """A way a finished study missed what the scene asked for.
+
+    Attributes
+    ----------
+    stage : str
+        ``"scene"``, ``"allocation"``, ``"schedule"`` or ``"simulation"``.
+    what : str
+        What was missed and by how much, in words, e.g. ``"friction fraction 1.7 is not
+        realizable: projected to 1 (distance 7 N)"``.
+    amount : float
+        By how much (NaN when no amount applies), in ``unit``.
+    unit : str
+        ``"N"``, ``"m/s"`` or ``"s"``.
+    """
+
+    stage: str
+    what: str
+    amount: float
+    unit: str
+
+    def __str__(self) -> str:
+        return f"{self.stage}: {self.what}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form: ``stage``, ``what``, ``amount`` (None when NaN), ``unit``."""
+        amount = float(self.amount)
+        return {"stage": self.stage, "what": self.what,
+                "amount": amount if math.isfinite(amount) else None, "unit": self.unit}
+
+
+@dataclass(frozen=True)
+class CurveStep:
+    """One step of a Coulomb staircase: the force just below and just above a contact speed.
+
+    Attributes
+    ----------
+    speed : float, m/s
+    force_below, force_above : float, N
+        ``F(speed-)`` and ``F(speed+)`` (``force_below >= force_above``).
+    """
+
+    speed: float
+    force_below: float
+    force_above: float
+
+    def to_dict(self) -> dict[str, float]:
+        """``{speed, force_below, force_above}``."""
+        return {"speed": self.speed, "force_below": self.force_below, "force_above": self.force_above}
 
 
 @dataclass(frozen=True)
@@ -43,6 +120,9 @@ class CurveSamples:
     equilibrium : tuple of float, m/s
         The weighted-median set ``(lo, hi)``.
     total_force : float, N
+    steps : tuple of CurveStep
+        Every distinct contact speed, ascending, with the exact force just below and just
+        above it: the whole staircase (between two steps ``F`` is constant).
     """
 
     speeds: np.ndarray
@@ -51,11 +131,14 @@ class CurveSamples:
     upper: np.ndarray
     equilibrium: tuple[float, float]
     total_force: float
+    steps: tuple[CurveStep, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able form: ``speeds``, ``force``, ``equilibrium`` as ``[lo, hi]``, ``total_force``."""
+        """JSON-able form: ``speeds``, ``force``, ``equilibrium`` as ``[lo, hi]``,
+        ``total_force`` and ``steps`` (a list of ``{speed, force_below, force_above}``)."""
         return {"speeds": self.speeds.tolist(), "force": self.force.tolist(),
-                "equilibrium": list(self.equilibrium), "total_force": self.total_force}
+                "equilibrium": list(self.equilibrium), "total_force": self.total_force,
+                "steps": [step.to_dict() for step in self.steps]}
 
 
 def force_curve(contacts: ContactSet, points: int = 801, *, margin: float | None = None) -> CurveSamples:
@@ -75,7 +158,11 @@ def force_curve(contacts: ContactSet, points: int = 801, *, margin: float | None
         margin = 0.15 * (hi - lo) if hi > lo else 0.1
     grid = np.union1d(np.linspace(lo - margin, hi + margin, points), contacts.speeds)
     lower, upper = contacts.force_bounds(grid)
-    return CurveSamples(grid, contacts.force(grid), lower, upper, contacts.equilibrium(), contacts.total_force)
+    distinct = np.unique(contacts.speeds)
+    below, above = contacts.force_bounds(distinct)[::-1]       # F(v-) = upper, F(v+) = lower
+    steps = tuple(CurveStep(float(v), float(b), float(a)) for v, b, a in zip(distinct, below, above))
+    return CurveSamples(grid, contacts.force(grid), lower, upper, contacts.equilibrium(),
+                        contacts.total_force, steps)
 
 
 @dataclass(frozen=True)
@@ -90,18 +177,25 @@ class StudyResult:
     schedule: ScheduleResult | None = None
     schedule_check: SimulationResult | None = None
     simulation: SimulationResult | None = None
+    shortfalls: tuple[Shortfall, ...] = ()
 
     @property
     def stages(self) -> tuple[str, ...]:
         """The stages that ran."""
         return self.scene.stages
 
+    @property
+    def met(self) -> bool:
+        """True when the study met every request (no shortfall)."""
+        return not self.shortfalls
+
 
 def _sensors(scene: Scene) -> dict[str, dict[str, float]]:
     return {name: encoder.summary() for name, encoder in scene.objects.encoders.items()}
 
 
-def allocate_scene(scene: Scene, contacts: ContactSet | None = None) -> AllocationResult:
+def allocate_scene(scene: Scene, contacts: ContactSet | None = None, *, strict: bool = False
+                   ) -> AllocationResult:
     """Solve a scene's ``[target]`` under its ``[motors]`` limits and compliance; see :func:`toolkit.allocate`.
 
     Parameters
@@ -110,15 +204,23 @@ def allocate_scene(scene: Scene, contacts: ContactSet | None = None) -> Allocati
         Needs ``[target]``.
     contacts : ContactSet, optional
         Start from these contacts instead of the declared ones.
+    strict : bool
+        Refuse a target that needs projection or lies beyond the contacts' reach
+        (:class:`~toolkit.errors.ParameterError`), as ``[target] strict = true`` does.
     """
+    motors = scene.objects.motors
+    return allocate(scene.objects.target, contacts if contacts is not None else scene.objects.contacts,
+                    method=scene.target.method, compliance=motors.compliance if motors is not None else 0.0,
+                    **_allocation_arguments(scene, strict))
+
+
+def _allocation_arguments(scene: Scene, strict: bool = False) -> dict[str, Any]:
     spec, motors = scene.target, scene.objects.motors
     limits = motors.speed_limits if motors is not None else None
     rate = motors.rate_limit if motors is not None and spec.dt is not None else None
-    return allocate(scene.objects.target, contacts if contacts is not None else scene.objects.contacts,
-                    speed_limits=limits, rate_limit=rate, dt=spec.dt, fixed=list(spec.fixed),
-                    failed=list(spec.failed), liftable=list(spec.liftable), method=spec.method,
-                    strict=spec.strict, time_limit=spec.time_limit,
-                    compliance=motors.compliance if motors is not None else 0.0)
+    return dict(speed_limits=limits, rate_limit=rate, dt=spec.dt, fixed=list(spec.fixed),
+                failed=list(spec.failed), liftable=list(spec.liftable),
+                strict=spec.strict or strict, time_limit=spec.time_limit)
 
 
 def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None
@@ -149,31 +251,185 @@ def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None
 def _simulation(scene: Scene, contacts: ContactSet) -> SimulationResult:
     spec = scene.simulation
     return simulate(scene.objects.plant_on(contacts), spec.t_end, v0=spec.v0, method=spec.method,
-                    **spec.options)
+                    **scene.objects.simulation_options)
 
 
-def run_study(scene: Scene) -> StudyResult:
+# -- shortfalls ----------------------------------------------------------------------------------
+
+def _limits(scene: Scene) -> tuple[float, float]:
+    motors = scene.objects.motors
+    return motors.speed_limits if motors is not None else (-math.inf, math.inf)
+
+
+def _beyond(values: Any, limits: tuple[float, float]) -> tuple[float, float] | None:
+    """The value farthest beyond ``limits`` and the limit it passes, or None."""
+    values = np.atleast_1d(np.asarray(values, dtype=float))
+    low, high = limits
+    excess = np.maximum(values - high, low - values)
+    i = int(np.argmax(excess))
+    if excess[i] <= 0:
+        return None
+    return float(values[i]), high if values[i] > high else low
+
+
+def _allocation_refusal(scene: Scene, contacts: ContactSet) -> str | None:
+    """Why ``allocate(..., strict=True)`` would refuse the scene's target (None if it would not).
+
+    Only builds the problem (no solve): the realizability rules are checked there.
+    """
+    try:
+        build_problem(scene.objects.target, contacts, **_allocation_arguments(scene, strict=True))
+    except ParameterError as error:
+        return str(error)
+    return None
+
+
+def request_shortfalls(scene: Scene) -> list[Shortfall]:
+    """The shortfalls a scene's request implies before any work: clipped speeds (stage
+    ``"scene"``), a target that needs projection or lies beyond reach (``"allocation"``),
+    a schedule target beyond the speed limits (``"schedule"``). Amounts that only a solve
+    gives are NaN here."""
+    found = [Shortfall("scene", f"{clip.count} speed(s) in {clip.key!r} beyond the motors' speed limit "
+                       f"clipped: {clip.value:g} m/s to {clip.limit:g} m/s (excess {clip.excess:.3g} m/s)",
+                       clip.excess, "m/s") for clip in scene.objects.clipped]
+    if scene.target is not None:
+        refusal = _allocation_refusal(scene, scene.objects.contacts)
+        if refusal is not None:
+            found.append(Shortfall("allocation", f"the target is not realizable: {refusal}",
+                                   math.nan, "N"))
+    target = scene.objects.schedule_target
+    if target is not None:
+        values = target.speed if isinstance(target, Braking) else target.speeds
+        beyond = _beyond(values, _limits(scene))
+        if beyond is not None:
+            found.append(Shortfall("schedule", f"unreachable: the target speed {beyond[0]:g} m/s exceeds "
+                                   f"the speed limit {beyond[1]:g} m/s", abs(beyond[0] - beyond[1]),
+                                   "m/s"))
+    return found
+
+
+def allocation_shortfalls(scene: Scene, result: AllocationResult,
+                          contacts: ContactSet | None = None) -> list[Shortfall]:
+    """How an allocation of the scene's ``[target]`` missed it (an empty list when it did not).
+
+    A projected target (its distance to the projection, N), a target the contacts cannot
+    reach (the certified best achievable error, N), or no allocation at all (infeasible,
+    time limit, solver error; the achieved error, N).
+    """
+    found: list[Shortfall] = []
+    target, projection = scene.objects.target, result.projection
+    if projection is not None:
+        distance = float(projection.distance_sup)
+        if isinstance(target, FrictionFraction):
+            level = float(np.max(np.abs(projection.curve.forces))) / float(result.contacts.total_force)
+            what = (f"friction fraction {target.fraction:g} is not realizable: projected to "
+                    f"{math.copysign(level, target.fraction):.6g} (distance {distance:.3g} N)")
+        elif isinstance(target, EquilibriumSpeed):
+            xs, ys = projection.curve.speeds, projection.curve.forces
+            what = (f"equilibrium speed {target.speed:g} m/s is beyond the contacts' reach: "
+                    f"projected to {float(xs[np.argmax(ys <= 0)]):g} m/s (distance {distance:.3g} N)")
+        else:
+            what = (f"the {scene.target.kind} target is not realizable ({', '.join(projection.reasons)}): "
+                    f"projected (distance {distance:.3g} N)")
+        found.append(Shortfall("allocation", what, distance, "N"))
+    elif (refusal := _allocation_refusal(scene, contacts if contacts is not None
+                                         else scene.objects.contacts)) is not None:
+        found.append(Shortfall("allocation", f"unreachable: best achievable error {result.bound:.3g} N "
+                               f"({refusal})", float(result.bound), "N"))
+    if result.status in (AllocationStatus.INFEASIBLE, AllocationStatus.TIME_LIMIT,
+                         AllocationStatus.SOLVER_ERROR):
+        found.append(Shortfall("allocation", f"{result.status.name.lower()}: {result.status.value} "
+                               f"(sup error {result.error_sup:.3g} N, gap {result.gap:.3g} N)",
+                               float(result.error_sup), "N"))
+    return found
+
+
+def schedule_shortfalls(scene: Scene, result: ScheduleResult, check: SimulationResult) -> list[Shortfall]:
+    """How a designed schedule missed the scene's ``[schedule]`` (an empty list when it did not).
+
+    A target beyond the speed limits (``"unreachable: best achievable error X m/s, because
+    the target exceeds the speed limit Y m/s"``: the schedule's certified lower bound, or
+    its exact error without one), an unverified schedule (its deviation beyond the
+    prediction bound) and a braking target not reached (the final distance to it).
+    A VERIFIED schedule that is not proven optimal is a success.
+    """
+    found: list[Shortfall] = []
+    target = scene.objects.schedule_target
+    values = target.speed if isinstance(target, Braking) else target.speeds
+    beyond = _beyond(values, _limits(scene))
+    if beyond is not None:
+        if isinstance(target, Braking):
+            best = abs(beyond[0] - beyond[1])
+        else:
+            best = float(result.lower_bound if result.lower_bound is not None else result.exact_tracking_error)
+        found.append(Shortfall("schedule", f"unreachable: best achievable error {best:.3g} m/s, because "
+                               f"the target exceeds the speed limit {beyond[1]:g} m/s "
+                               f"(target speed {beyond[0]:g} m/s)", best, "m/s"))
+    if result.status is ScheduleStatus.UNVERIFIED:
+        deviation = float(result.exact_deviation)
+        excess = deviation - float(result.prediction_bound) if math.isfinite(deviation) else math.nan
+        found.append(Shortfall("schedule", f"unverified: the exact simulation ({check.status.value}) left the "
+                               f"prediction bound {result.prediction_bound:.3g} m/s "
+                               f"(deviation {deviation:.3g} m/s); the schedule must not be played",
+                               excess, "m/s"))
+    elif isinstance(target, Braking) and beyond is None and result.arrival_time is None:
+        final = float(result.exact_body_speed[-1]) if result.exact_body_speed.size else math.nan
+        miss = abs(final - target.speed)
+        found.append(Shortfall("schedule", f"not reached: the braking target {target.speed:g} m/s is "
+                               f"{miss:.3g} m/s away at the end of the schedule", miss, "m/s"))
+    return found
+
+
+def simulation_shortfalls(scene: Scene, result: SimulationResult) -> list[Shortfall]:
+    """A simulation that stopped before ``t_end`` (the simulated time left, s)."""
+    if result.status is Status.SUCCESS:
+        return []
+    t_end, reached = scene.simulation.t_end, float(result.t[-1]) if len(result.t) else 0.0
+    return [Shortfall("simulation", f"{result.status.value} at t = {reached:.6g} s of t_end = {t_end:g} s "
+                      f"({t_end - reached:.6g} s not simulated)", t_end - reached, "s")]
+
+
+def run_study(scene: Scene, *, strict: bool = False) -> StudyResult:
     """Run every stage the scene declares and return their results.
 
     Parameters
     ----------
     scene : Scene
         From :func:`toolkit.load_scene`.
+    strict : bool
+        Refuse, before any work, a request that is known to fall short
+        (:func:`request_shortfalls`) instead of running it and reporting the shortfall.
 
     Returns
     -------
     StudyResult
+        With :attr:`StudyResult.shortfalls`: every way the result misses the request.
+
+    Raises
+    ------
+    SceneError
+        ``strict=True`` and the request falls short before any work.
     """
+    if strict:
+        known = request_shortfalls(scene)
+        if known:
+            raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
     contacts = scene.objects.contacts
+    found = [s for s in request_shortfalls(scene) if s.stage == "scene"]
     points = scene.report.curve_points if scene.report is not None else 801
     sensors = _sensors(scene) if scene.sensors is not None else None
     allocation = None
     if scene.target is not None:
         allocation = allocate_scene(scene, contacts)
+        found += allocation_shortfalls(scene, allocation, contacts)
         contacts = allocation.contacts
     schedule = check = None
     if scene.schedule is not None:
         schedule, check = design_scene_schedule(scene, contacts)
-    simulation = _simulation(scene, contacts) if scene.simulation is not None else None
+        found += schedule_shortfalls(scene, schedule, check)
+    simulation = None
+    if scene.simulation is not None:
+        simulation = _simulation(scene, contacts)
+        found += simulation_shortfalls(scene, simulation)
     return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation,
-                       schedule, check, simulation)
+                       schedule, check, simulation, tuple(found))

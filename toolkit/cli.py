@@ -157,7 +157,7 @@ def _cmd_precision(args: argparse.Namespace) -> int:
         check_output_dir(args.out)
     report = precision_report(scene_plant(scene), scene.simulation.t_end, v0=scene.simulation.v0,
                               repeats=args.repeats)
-    written = write_precision(report, args.out) if args.out else []
+    written = write_precision(report, args.out, title=scene.name) if args.out else []
     if args.json:
         _print_json(report.to_dict())
     else:

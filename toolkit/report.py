@@ -18,6 +18,7 @@ import numpy as np
 from . import plots
 from ._io import atomic_write_text, write_tree
 from .precision import work_precision_curves
+from .scene_build import scene_plant
 from .study import Shortfall, StudyResult
 
 __all__ = ["study_summary", "study_to_dict", "study_files", "write_study", "to_json", "schedule_csv",
@@ -152,12 +153,16 @@ def study_files(result: StudyResult) -> dict[str, bytes]:
     payload: dict[str, bytes] = {"result.json": to_json(study_to_dict(result)).encode()}
     report = result.scene.report
     if report is not None and report.plots:
-        payload["force_curve.png"] = plots.figure_png(plots.plot_force_curve(result.curve))
+        name = result.scene.name
+        payload["force_curve.png"] = plots.figure_png(plots.plot_force_curve(result.curve, title=name))
+        if result.simulation is not None or result.schedule is not None:
+            plant = scene_plant(result.scene, result.contacts)     # the plant the study ran on
         if result.simulation is not None:
-            payload["simulation.png"] = plots.figure_png(plots.plot_simulation(result.simulation))
+            payload["simulation.png"] = plots.figure_png(
+                plots.plot_simulation(result.simulation, plant=plant, title=name))
         if result.schedule is not None:
             payload["schedule.png"] = plots.figure_png(
-                plots.plot_schedule(result.schedule, result.schedule_check))
+                plots.plot_schedule(result.schedule, result.schedule_check, plant=plant, title=name))
     if result.schedule is not None:
         payload["schedule.csv"] = schedule_csv(result.schedule).encode()
         payload["schedule.json"] = to_json(result.schedule.to_dict()).encode()
@@ -174,12 +179,14 @@ def write_study(result: StudyResult, out_dir: str | Path) -> list[Path]:
     return write_tree(out_dir, study_files(result))
 
 
-def write_precision(report: Any, out_dir: str | Path) -> list[Path]:
-    """Write ``precision.json`` and the log-log plot ``precision.png`` of a precision report."""
+def write_precision(report: Any, out_dir: str | Path, *, title: str | None = None) -> list[Path]:
+    """Write ``precision.json`` and the log-log plot ``precision.png`` of a precision report
+    (``title``: the scene name shown in the plot's title)."""
     data = report.to_dict()
     exact = [row for row in report.rows if row.method == "exact" and not math.isfinite(row.max_error)]
     reference = exact[0].wall_time if exact else None
-    png = plots.figure_png(plots.plot_precision(work_precision_curves(report), reference_time=reference))
+    png = plots.figure_png(plots.plot_precision(work_precision_curves(report), reference_time=reference,
+                                                 title=title))
     return write_tree(out_dir, {"precision.json": to_json(data).encode(), "precision.png": png})
 
 

@@ -46,7 +46,7 @@ from .errors import ParameterError, SceneError
 from .model import ContactSet
 from .scene import Scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
-from .simulation import SimulationResult, Status, simulate
+from .simulation import SimulationResult, SimulationStatus, simulate
 
 __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve", "run_study",
            "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
@@ -382,7 +382,7 @@ def schedule_shortfalls(scene: Scene, result: ScheduleResult, check: SimulationR
 
 def simulation_shortfalls(scene: Scene, result: SimulationResult) -> list[Shortfall]:
     """A simulation that stopped before ``t_end`` (the simulated time left, s)."""
-    if result.status is Status.SUCCESS:
+    if result.status is SimulationStatus.SUCCESS:
         return []
     t_end, reached = scene.simulation.t_end, float(result.t[-1]) if len(result.t) else 0.0
     return [Shortfall("simulation", f"{result.status.value} at t = {reached:.6g} s of t_end = {t_end:g} s "

@@ -46,7 +46,8 @@ class EstimatorModel:
     damping : float, N s/m
         Bearing drag ``c >= 0``.
     friction_uncertainty : float
-        Relative std of each ``f_i`` (unequal, unknown friction), ``>= 0``.
+        Relative std of each ``f_i`` (unequal, unknown friction), ``>= 0``; default 0:
+        the friction is the nominal one (pass the plant's true spread when it has one).
     max_window : int
         Longest window of the wheel-speed differences, samples (``>= 1``).
     substeps : int
@@ -58,7 +59,7 @@ class EstimatorModel:
     sensors: Sensors
     motor_lag: float = 0.0
     damping: float = 0.0
-    friction_uncertainty: float = 0.05
+    friction_uncertainty: float = 0.0
     max_window: int = 25
     substeps: int = 8
     _settle: int = field(init=False, repr=False)
@@ -66,6 +67,7 @@ class EstimatorModel:
     _rest: np.ndarray = field(init=False, repr=False)
     _friction_var: float = field(init=False, repr=False)
     _probe_offsets: np.ndarray = field(init=False, repr=False)
+    _stuck_scale: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
@@ -89,6 +91,7 @@ class EstimatorModel:
         object.__setattr__(self, "_rest", M - np.arange(M) - 0.5)
         object.__setattr__(self, "_friction_var", self.friction_uncertainty**2 * float(np.dot(forces, forces)))
         object.__setattr__(self, "_probe_offsets", np.zeros((M + 2, 1)))
+        object.__setattr__(self, "_stuck_scale", (self.mass / self.sensors.period) ** 2 / self.max_window)
 
     @property
     def n(self) -> int:
@@ -155,8 +158,9 @@ class EstimatorModel:
         over ``V +- w``, ``w = 2 sqrt(speed_std^2 + contact_std^2)``, spans
         ``[F(V + w), F(V - w)]`` containing the force that holds the body (``c V``, the
         drag), the body sits on its equilibrium set as far as the wheels can tell: the
-        stiction rule keeps it there, ``dV = 0``, and no force uncertainty enters (a stuck
-        body keeps its speed whatever the friction spread). Otherwise the force is averaged
+        stiction rule keeps it there, ``dV = 0``, and no friction uncertainty enters (a stuck
+        body keeps its speed whatever the friction spread); the floor is the stuck-on
+        contact's undetected speed change, variance ``contact_std^2 / max_window`` per period. Otherwise the force is averaged
         over the sub-intervals along the body's path, found by two passes (the path from
         the first pass's forces, then the forces along that path), which resolves contact
         crossings inside the period to a sub-interval (and lets the path settle onto a
@@ -173,7 +177,12 @@ class EstimatorModel:
         net = contact_forces(probe, f).sum(axis=1)
         hi, lo = net[M], net[M + 1]
         if steady and lo <= c * V <= hi:
-            return 0.0, 0.0, 0.0
+            # Stuck: V+ = V errs by the stuck-on contact's own speed change over the period
+            # (motor drift, a bias of the wheel estimate). The wheels would see a random walk
+            # that accumulates more than their window estimate's variance ``contact_std^2``
+            # over the ``max_window`` periods of the window, so the floor is
+            # ``contact_std^2 / max_window`` per period, an acceleration held over it.
+            return 0.0, 0.0, self._stuck_scale * contact_std * contact_std
         dt_m = self._ds / m
         first = net[:M] - c * V
         travel = float(np.sum(first)) * dt_m

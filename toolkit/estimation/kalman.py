@@ -141,6 +141,7 @@ class KalmanEstimator(Estimator):
         self._history: list[tuple[float, int, np.ndarray, np.ndarray]] = []
         self._count_prev: int | None = None
         self._repeats = 0
+        self._awaiting_command = False
         self.last_input = np.zeros(2)
         self.last_Q = np.zeros((2, 2))
         self.last_nis = np.nan
@@ -173,11 +174,19 @@ class KalmanEstimator(Estimator):
         self.last_Q = Q
         self.last_nis = float(kf.y[0, 0] ** 2 * kf.SI[0, 0])
 
-    def step(self, sample: EncoderSample) -> tuple[float, float]:
-        """Take one sample (in order); return ``(speed, variance)`` at its time."""
+    def observe(self, sample: EncoderSample) -> tuple[float, float]:
+        """Take one sample's counts (in order); return ``(speed, variance)`` at its time.
+
+        The prediction up to this sample uses the command given to :meth:`commanded` after
+        the previous sample (the previous command again if none was given); this sample's
+        ``command`` is not read.
+        """
+        if self._awaiting_command:
+            self.commanded(self._history[-1][3])
         model = self.model
         hist = self._history
-        hist.append((sample.time, sample.central_count, np.asarray(sample.wheel_counts), np.asarray(sample.command)))
+        command = hist[-1][3] if hist else None
+        hist.append((sample.time, sample.central_count, np.asarray(sample.wheel_counts), command))
         del hist[:-(model.max_window + model.settle + 2)]
         count = sample.central_count
         fd = 0.0
@@ -190,11 +199,25 @@ class KalmanEstimator(Estimator):
         z = (count + 0.5) * self._q
         pending = self._pending
         self._advance(z, R, *(pending if pending is not None else (None, 0.0, True)))
+        self._awaiting_command = True
+        return float(self.kf.x[1, 0]), float(self.kf.P[1, 1])
+
+    def commanded(self, command: Any) -> None:
+        """The contact speeds commanded at the last observed sample, m/s, shape (n,): they
+        drive the prediction to the next sample."""
+        hist = self._history
+        if not hist:
+            raise RuntimeError("commanded() follows observe(): no sample observed since reset().")
+        t, c, w, _ = hist[-1]
+        hist[-1] = (t, c, w, np.asarray(command, dtype=float))
+        if any(entry[3] is None for entry in hist):
+            hist[:] = [(a, b, d, hist[-1][3] if e is None else e) for a, b, d, e in hist]
+        model = self.model
         times, _, wheels, commands = zip(*hist)
         speeds, var, steady = contact_speed_estimates(np.array(wheels), np.array(commands), np.array(times), model)
         sub = model.substep_speeds(speeds[-1:], np.array(commands[-1:]), steady[-1:])[0]
         self._pending = (sub, float(var[-1]), bool(steady[-1]))
-        return float(self.kf.x[1, 0]), float(self.kf.P[1, 1])
+        self._awaiting_command = False
 
     # -- offline --------------------------------------------------------------------------
     def filter(self, record: EncoderRecord, *, speed: float = 0.0, speed_std: float | None = None
@@ -264,7 +287,11 @@ class RTSSmoother(Estimator):
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
         self.forward.reset(speed=speed, speed_std=speed_std)
 
-    def step(self, sample: EncoderSample) -> tuple[float, float]:
+    def observe(self, sample: EncoderSample) -> tuple[float, float]:
+        """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
+        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
+
+    def commanded(self, command: Any) -> None:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
         raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
 

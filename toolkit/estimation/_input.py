@@ -190,6 +190,12 @@ class EstimatorModel:
         if c == 0.0 and float(np.min(gaps)) > abs(travel):
             # No contact speed within reach of the path: the force is the same all along.
             second = first
+        elif steady and c == 0.0:
+            # Contacts held over the period: the exact piecewise-constant motion, crossing
+            # by crossing (a body crosses several contacts per period while braking, which
+            # a fixed sub-interval grid times only to a sub-interval).
+            dx, dV = self._coast(V, last)
+            return dx, dV, self._friction_var + (hi - lo) ** 2 / 12.0
         else:
             path = V + (np.cumsum(first) - 0.5 * first) * dt_m
             second = contact_forces(sub - path[:, None], f).sum(axis=1) - c * path
@@ -205,6 +211,34 @@ class EstimatorModel:
         # Double integral of piecewise-constant accelerations: each acts for the rest of the period.
         dx = float(np.dot(second, self._rest)) * self._ds * dt_m
         return dx, dV, self._friction_var + (hi - lo) ** 2 / 12.0
+
+    def _coast(self, V: float, speeds: np.ndarray) -> tuple[float, float]:
+        """Exact motion over one period with the contact speeds held (no drag): ``(dx, dV)``
+        from ``V``; the force is constant between contact speeds, and the body sticks where
+        it reaches the equilibrium set (:meth:`ContactSet.equilibrium`)."""
+        f, m, h = self.forces, self.mass, self.sensors.period
+        lo_eq, hi_eq = ContactSet(speeds, f).equilibrium()
+        t, v, x = 0.0, V, 0.0
+        for _ in range(2 * speeds.size + 2):
+            if lo_eq <= v <= hi_eq:
+                break                           # stuck for the rest of the period
+            d = 1.0 if v < lo_eq else -1.0      # the body moves towards the set
+            gap = speeds - v
+            F = float(np.dot(f, np.where(gap == 0.0, -d, np.sign(gap))))
+            a = F / m
+            ahead = speeds[(speeds - v) * d > 0.0]
+            s = float(ahead.min() if d > 0 else ahead.max())  # the set lies ahead: never empty
+            dt = (s - v) / a
+            if t + dt >= h:
+                rest = h - t
+                x += v * rest + 0.5 * a * rest * rest
+                v += a * rest
+                t = h
+                break
+            x += v * dt + 0.5 * a * dt * dt
+            v, t = s, t + dt
+        x += v * (h - t)
+        return x - V * h, v - V
 
     def _offsets(self, V: float, w: float, M: int) -> np.ndarray:
         out = self._probe_offsets

@@ -68,6 +68,7 @@ class EstimatorModel:
     _friction_var: float = field(init=False, repr=False)
     _probe_offsets: np.ndarray = field(init=False, repr=False)
     _stuck_scale: float = field(init=False, repr=False)
+    _reach: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
@@ -91,6 +92,8 @@ class EstimatorModel:
         object.__setattr__(self, "_rest", M - np.arange(M) - 0.5)
         object.__setattr__(self, "_friction_var", self.friction_uncertainty**2 * float(np.dot(forces, forces)))
         object.__setattr__(self, "_probe_offsets", np.zeros((M + 2, 1)))
+        # Largest speed change over a period: the whole friction, one way.
+        object.__setattr__(self, "_reach", float(forces.sum()) * self.sensors.period / self.mass)
         object.__setattr__(self, "_stuck_scale", (self.mass / self.sensors.period) ** 2 / self.max_window)
 
     @property
@@ -211,6 +214,57 @@ class EstimatorModel:
         # Double integral of piecewise-constant accelerations: each acts for the rest of the period.
         dx = float(np.dot(second, self._rest)) * self._ds * dt_m
         return dx, dV, self._friction_var + (hi - lo) ** 2 / 12.0
+
+    def bounds(self, sub: np.ndarray) -> np.ndarray:
+        """Per sample, what decides the input without the contact law (vectorized).
+
+        Parameters
+        ----------
+        sub : ndarray of shape (k, substeps, n), m/s
+            :meth:`substep_speeds`.
+
+        Returns
+        -------
+        ndarray of shape (k, 4), m/s
+            Slowest and fastest contact speed over the period, and the equilibrium set
+            ``(lo, hi)`` of the speeds at its end (the weighted median, as
+            :meth:`ContactSet.equilibrium <toolkit.model.ContactSet.equilibrium>`).
+        """
+        last = sub[:, -1, :]
+        order = np.argsort(last, axis=1)
+        s = np.take_along_axis(last, order, axis=1)
+        W = np.cumsum(self.forces[order], axis=1)
+        half = 0.5 * W[:, -1:]
+        tol = 1e-12 * half
+        j1 = np.argmax(W >= half - tol, axis=1)
+        j2 = np.argmax(W > half + tol, axis=1)
+        rows = np.arange(last.shape[0])
+        return np.column_stack((sub.min(axis=(1, 2)), sub.max(axis=(1, 2)), s[rows, j1], s[rows, j2]))
+
+    def quick_increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
+                        steady: bool, bounds: Any) -> tuple[float, float, float]:
+        """:meth:`increment`, without the contact law where :meth:`bounds` decide it.
+
+        Without drag: stuck when ``V +- w`` meets the equilibrium set (the same rule as
+        :meth:`increment`: ``F(V + w) <= 0 <= F(V - w)``); the whole friction one way when
+        every contact speed of the period lies beyond ``V`` by more than both ``w`` and the
+        largest speed change of a period (no crossing, no force spread: ``dV = +-F_tot h /
+        m``, ``dx = dV h / 2``). Otherwise :meth:`increment`.
+        """
+        if self.damping == 0.0:
+            smin, smax, lo_eq, hi_eq = bounds
+            w = 2.0 * math.sqrt(speed_std * speed_std + contact_std * contact_std)
+            if steady and V - w <= hi_eq and V + w >= lo_eq:
+                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std
+            reach = max(w, self._reach)
+            if smin - V > reach:
+                dV = self._reach
+            elif V - smax > reach:
+                dV = -self._reach
+            else:
+                return self.increment(V, sub, contact_std, speed_std, steady)
+            return 0.5 * dV * self.sensors.period, dV, self._friction_var
+        return self.increment(V, sub, contact_std, speed_std, steady)
 
     def _coast(self, V: float, speeds: np.ndarray) -> tuple[float, float]:
         """Exact motion over one period with the contact speeds held (no drag): ``(dx, dV)``

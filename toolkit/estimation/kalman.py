@@ -142,6 +142,8 @@ class KalmanEstimator(Estimator):
         self._count_prev: int | None = None
         self._repeats = 0
         self._awaiting_command = False
+        self._force_var, self._Q = math.nan, np.zeros((2, 2))
+        self._quick = self.model.quick_increment
         self.last_input = np.zeros(2)
         self.last_Q = np.zeros((2, 2))
         self.last_nis = np.nan
@@ -161,16 +163,18 @@ class KalmanEstimator(Estimator):
             self.last_nis = np.nan
             return
         x = kf.x
-        dx, dV, force_var = self.model.quick_increment(x.item(1), sub, math.sqrt(var_v),
-                                                       math.sqrt(kf.P.item(3)), steady, bounds)
+        dx, dV, force_var = self._quick(x.item(1), sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
+                                        steady, bounds)
         # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x + F^-1 u)
         # with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place and H is
         # passed, so filterpy skips its scalar checks and the reshape of z.
-        x[0, 0] += dx - self._h * dV
-        x[1, 0] += dV
+        x[0, 0] = x.item(0) + dx - self._h * dV
+        x[1, 0] = x.item(1) + dV
         self._z[0, 0] = z
-        Q = self._gg * (force_var * self._inv_m2)
-        kf.Q = Q
+        if force_var != self._force_var:          # Q repeats while stuck or sliding freely
+            self._force_var = force_var
+            self._Q = self._gg * (force_var * self._inv_m2)
+        Q = kf.Q = self._Q
         kf.R[0, 0] = R
         kf.predict()
         kf.update(self._z, H=self._H)

@@ -24,6 +24,7 @@ from .._validation import as_float, as_float_array, as_int, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.contacts import ContactSet
 from ..model.friction import contact_forces
+from ..model.motors import unsaturated_response
 from ..model.sensors import Sensors
 
 __all__ = ["EstimatorModel", "contact_speed_estimates"]
@@ -126,11 +127,9 @@ class EstimatorModel:
         """
         h, M = self.sensors.period, self.substeps
         target = np.where(steady[:, None], speeds, commands)
-        if self.motor_lag > 0:
-            decay = np.exp(-(np.arange(M) + 0.5) * (h / M) / self.motor_lag)
-        else:
-            decay = np.zeros(M)
-        return target[:, None, :] + (speeds - target)[:, None, :] * decay[None, :, None]
+        # The motor law solved (toolkit.model.motors), at the sub-interval midpoints.
+        s = ((np.arange(M) + 0.5) * (h / M))[None, :, None]
+        return unsaturated_response(speeds[:, None, :], target[:, None, :], s, self.motor_lag, math.inf)
 
     def increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
                   steady: bool) -> tuple[float, float, float]:
@@ -351,10 +350,9 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
         # Motor law from the settled estimate at the change towards the command.
         j = np.maximum(last_change, 0)
         before = np.where((ok[j])[:, None], speeds[j], np.where(j[:, None] > 0, (w[j] - w[np.maximum(j - 1, 0)]) * q / np.maximum(t[j] - t[np.maximum(j - 1, 0)], 1e-300)[:, None], 0.0))
-        lag = model.motor_lag
-        gap_decay = np.exp(-(t - t[j]) / lag) if lag > 0 else np.zeros(k)
-        law = u[j] + (before - u[j]) * gap_decay[:, None]
-        law_var = (0.1 * np.abs(before - u[j]) * gap_decay[:, None]).max(axis=1) ** 2 + q * q / 6.0 / model.sensors.period**2
+        # The motor law solved (toolkit.model.motors): u + (v0 - u) exp(-(t - t_change) / tau).
+        law = unsaturated_response(before, u[j], (t - t[j])[:, None], model.motor_lag, math.inf)
+        law_var = (0.1 * np.abs(law - u[j])).max(axis=1) ** 2 + q * q / 6.0 / model.sensors.period**2
         has_change = last_change >= 0
         speeds = np.where((transient & has_change)[:, None], law, speeds)
         variance = np.where(transient & has_change, law_var, variance)

@@ -30,7 +30,11 @@ speeds' uncertainty (wheel quantization and backlash, ``sigma_v``) and the speed
 estimate's (``P_VV``): across ``V +- w`` with ``w = 2 sqrt(P_VV + sigma_v^2)`` the force
 spans ``[F(V + w), F(V - w)]``, a spread counted as uniform, ``(F_hi - F_lo)^2 / 12``.
 That force error, held over the period, enters as ``Q = (sigma_F / m)^2 g g^T`` with
-``g = (h^2 / 2, h)``.
+``g = (h^2 / 2, h)``. ``epsilon`` is the plant's true spread (0 for the equal-friction
+scenario). A stuck body (``V +- w`` meets the equilibrium set) has no force error, but its
+``V+ = V`` errs by the stuck-on contact's own undetected speed change: a floor of
+``sigma_v^2 / max_window`` per period on ``V`` (a random walk the wheels' window would
+not resolve), never zero.
 
 Smoother. filterpy's ``rts_smoother`` ignores ``B u``; the input is therefore moved into
 the transition of an augmented state ``(X, V, 1)``, ``F_k = [[1, h, dx_k], [0, 1, dV_k],

@@ -2,7 +2,7 @@
 
 Every estimator maps an :class:`~toolkit.model.sensors.EncoderRecord` to body-speed estimates
 with their variances, offline (:meth:`Estimator.run`) or sample by sample in a loop
-(:meth:`Estimator.reset`, :meth:`Estimator.step`), as a 50 Hz controller calls it. Scores
+(:meth:`Estimator.reset`, :meth:`Estimator.observe`, :meth:`Estimator.commanded`), as a 50 Hz controller calls it. Scores
 against the truth (RMS and max speed error, NEES, NIS) are computed when the record carries
 the truth; estimators never read it.
 """
@@ -147,8 +147,10 @@ class Estimator(abc.ABC):
     """What every speed estimator offers.
 
     Offline: :meth:`run` over a whole record. In a loop (a 50 Hz controller):
-    :meth:`reset`, then :meth:`step` once per sample, in order. Both paths run the same
-    per-sample code, so they give the same estimates.
+    :meth:`reset`, then per sample, in order, :meth:`observe` (the estimate at the sample
+    time, from its counts) and :meth:`commanded` (the command then sent, for the next
+    prediction); :meth:`step` does both. All paths run the same per-sample code, so they
+    give the same estimates.
     """
 
     #: Short name used in results and benchmarks.
@@ -159,8 +161,21 @@ class Estimator(abc.ABC):
         """Forget the past; the body is believed at ``speed`` (m/s) with std ``speed_std``."""
 
     @abc.abstractmethod
+    def observe(self, sample: EncoderSample) -> tuple[float, float]:
+        """Take one sample's counts (in order); return the speed estimate (m/s) at its time
+        and its variance ((m/s)^2). ``sample.command`` is not read: the command sent at this
+        sample is given afterwards to :meth:`commanded`."""
+
+    @abc.abstractmethod
+    def commanded(self, command: Any) -> None:
+        """The contact speeds (m/s, shape (n,)) commanded at the last observed sample; used
+        for the prediction to the next one."""
+
     def step(self, sample: EncoderSample) -> tuple[float, float]:
-        """Take one sample; return the speed estimate (m/s) at its time and its variance."""
+        """:meth:`observe` the sample, then :meth:`commanded` with its command."""
+        out = self.observe(sample)
+        self.commanded(sample.command)
+        return out
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:

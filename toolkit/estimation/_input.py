@@ -24,6 +24,7 @@ from .._validation import as_float, as_float_array, as_int, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.contacts import ContactSet
 from ..model.friction import contact_forces
+from ..model.motors import unsaturated_response
 from ..model.sensors import Sensors
 
 __all__ = ["EstimatorModel", "contact_speed_estimates"]
@@ -46,7 +47,8 @@ class EstimatorModel:
     damping : float, N s/m
         Bearing drag ``c >= 0``.
     friction_uncertainty : float
-        Relative std of each ``f_i`` (unequal, unknown friction), ``>= 0``.
+        Relative std of each ``f_i`` (unequal, unknown friction), ``>= 0``; default 0:
+        the friction is the nominal one (pass the plant's true spread when it has one).
     max_window : int
         Longest window of the wheel-speed differences, samples (``>= 1``).
     substeps : int
@@ -58,7 +60,7 @@ class EstimatorModel:
     sensors: Sensors
     motor_lag: float = 0.0
     damping: float = 0.0
-    friction_uncertainty: float = 0.05
+    friction_uncertainty: float = 0.0
     max_window: int = 25
     substeps: int = 8
     _settle: int = field(init=False, repr=False)
@@ -66,6 +68,8 @@ class EstimatorModel:
     _rest: np.ndarray = field(init=False, repr=False)
     _friction_var: float = field(init=False, repr=False)
     _probe_offsets: np.ndarray = field(init=False, repr=False)
+    _stuck_scale: float = field(init=False, repr=False)
+    _reach: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
@@ -89,6 +93,9 @@ class EstimatorModel:
         object.__setattr__(self, "_rest", M - np.arange(M) - 0.5)
         object.__setattr__(self, "_friction_var", self.friction_uncertainty**2 * float(np.dot(forces, forces)))
         object.__setattr__(self, "_probe_offsets", np.zeros((M + 2, 1)))
+        # Largest speed change over a period: the whole friction, one way.
+        object.__setattr__(self, "_reach", float(forces.sum()) * self.sensors.period / self.mass)
+        object.__setattr__(self, "_stuck_scale", (self.mass / self.sensors.period) ** 2 / self.max_window)
 
     @property
     def n(self) -> int:
@@ -120,11 +127,9 @@ class EstimatorModel:
         """
         h, M = self.sensors.period, self.substeps
         target = np.where(steady[:, None], speeds, commands)
-        if self.motor_lag > 0:
-            decay = np.exp(-(np.arange(M) + 0.5) * (h / M) / self.motor_lag)
-        else:
-            decay = np.zeros(M)
-        return target[:, None, :] + (speeds - target)[:, None, :] * decay[None, :, None]
+        # The motor law solved (toolkit.model.motors), at the sub-interval midpoints.
+        s = ((np.arange(M) + 0.5) * (h / M))[None, :, None]
+        return unsaturated_response(speeds[:, None, :], target[:, None, :], s, self.motor_lag, math.inf)
 
     def increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
                   steady: bool) -> tuple[float, float, float]:
@@ -155,8 +160,9 @@ class EstimatorModel:
         over ``V +- w``, ``w = 2 sqrt(speed_std^2 + contact_std^2)``, spans
         ``[F(V + w), F(V - w)]`` containing the force that holds the body (``c V``, the
         drag), the body sits on its equilibrium set as far as the wheels can tell: the
-        stiction rule keeps it there, ``dV = 0``, and no force uncertainty enters (a stuck
-        body keeps its speed whatever the friction spread). Otherwise the force is averaged
+        stiction rule keeps it there, ``dV = 0``, and no friction uncertainty enters (a stuck
+        body keeps its speed whatever the friction spread); the floor is the stuck-on
+        contact's undetected speed change, variance ``contact_std^2 / max_window`` per period. Otherwise the force is averaged
         over the sub-intervals along the body's path, found by two passes (the path from
         the first pass's forces, then the forces along that path), which resolves contact
         crossings inside the period to a sub-interval (and lets the path settle onto a
@@ -173,7 +179,12 @@ class EstimatorModel:
         net = contact_forces(probe, f).sum(axis=1)
         hi, lo = net[M], net[M + 1]
         if steady and lo <= c * V <= hi:
-            return 0.0, 0.0, 0.0
+            # Stuck: V+ = V errs by the stuck-on contact's own speed change over the period
+            # (motor drift, a bias of the wheel estimate). The wheels would see a random walk
+            # that accumulates more than their window estimate's variance ``contact_std^2``
+            # over the ``max_window`` periods of the window, so the floor is
+            # ``contact_std^2 / max_window`` per period, an acceleration held over it.
+            return 0.0, 0.0, self._stuck_scale * contact_std * contact_std
         dt_m = self._ds / m
         first = net[:M] - c * V
         travel = float(np.sum(first)) * dt_m
@@ -181,6 +192,12 @@ class EstimatorModel:
         if c == 0.0 and float(np.min(gaps)) > abs(travel):
             # No contact speed within reach of the path: the force is the same all along.
             second = first
+        elif steady and c == 0.0:
+            # Contacts held over the period: the exact piecewise-constant motion, crossing
+            # by crossing (a body crosses several contacts per period while braking, which
+            # a fixed sub-interval grid times only to a sub-interval).
+            dx, dV = self._coast(V, last)
+            return dx, dV, self._friction_var + (hi - lo) ** 2 / 12.0
         else:
             path = V + (np.cumsum(first) - 0.5 * first) * dt_m
             second = contact_forces(sub - path[:, None], f).sum(axis=1) - c * path
@@ -196,6 +213,85 @@ class EstimatorModel:
         # Double integral of piecewise-constant accelerations: each acts for the rest of the period.
         dx = float(np.dot(second, self._rest)) * self._ds * dt_m
         return dx, dV, self._friction_var + (hi - lo) ** 2 / 12.0
+
+    def bounds(self, sub: np.ndarray) -> np.ndarray:
+        """Per sample, what decides the input without the contact law (vectorized).
+
+        Parameters
+        ----------
+        sub : ndarray of shape (k, substeps, n), m/s
+            :meth:`substep_speeds`.
+
+        Returns
+        -------
+        ndarray of shape (k, 4), m/s
+            Slowest and fastest contact speed over the period, and the equilibrium set
+            ``(lo, hi)`` of the speeds at its end (the weighted median, as
+            :meth:`ContactSet.equilibrium <toolkit.model.ContactSet.equilibrium>`).
+        """
+        last = sub[:, -1, :]
+        order = np.argsort(last, axis=1)
+        s = np.take_along_axis(last, order, axis=1)
+        W = np.cumsum(self.forces[order], axis=1)
+        half = 0.5 * W[:, -1:]
+        tol = 1e-12 * half
+        j1 = np.argmax(W >= half - tol, axis=1)
+        j2 = np.argmax(W > half + tol, axis=1)
+        rows = np.arange(last.shape[0])
+        return np.column_stack((sub.min(axis=(1, 2)), sub.max(axis=(1, 2)), s[rows, j1], s[rows, j2]))
+
+    def quick_increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
+                        steady: bool, bounds: Any) -> tuple[float, float, float]:
+        """:meth:`increment`, without the contact law where :meth:`bounds` decide it.
+
+        Without drag: stuck when ``V +- w`` meets the equilibrium set (the same rule as
+        :meth:`increment`: ``F(V + w) <= 0 <= F(V - w)``); the whole friction one way when
+        every contact speed of the period lies beyond ``V`` by more than both ``w`` and the
+        largest speed change of a period (no crossing, no force spread: ``dV = +-F_tot h /
+        m``, ``dx = dV h / 2``). Otherwise :meth:`increment`.
+        """
+        if self.damping == 0.0:
+            smin, smax, lo_eq, hi_eq = bounds
+            w = 2.0 * math.sqrt(speed_std * speed_std + contact_std * contact_std)
+            if steady and V - w <= hi_eq and V + w >= lo_eq:
+                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std
+            reach = max(w, self._reach)
+            if smin - V > reach:
+                dV = self._reach
+            elif V - smax > reach:
+                dV = -self._reach
+            else:
+                return self.increment(V, sub, contact_std, speed_std, steady)
+            return 0.5 * dV * self.sensors.period, dV, self._friction_var
+        return self.increment(V, sub, contact_std, speed_std, steady)
+
+    def _coast(self, V: float, speeds: np.ndarray) -> tuple[float, float]:
+        """Exact motion over one period with the contact speeds held (no drag): ``(dx, dV)``
+        from ``V``; the force is constant between contact speeds, and the body sticks where
+        it reaches the equilibrium set (:meth:`ContactSet.equilibrium`)."""
+        f, m, h = self.forces, self.mass, self.sensors.period
+        lo_eq, hi_eq = ContactSet(speeds, f).equilibrium()
+        t, v, x = 0.0, V, 0.0
+        for _ in range(2 * speeds.size + 2):
+            if lo_eq <= v <= hi_eq:
+                break                           # stuck for the rest of the period
+            d = 1.0 if v < lo_eq else -1.0      # the body moves towards the set
+            gap = speeds - v
+            F = float(np.dot(f, np.where(gap == 0.0, -d, np.sign(gap))))
+            a = F / m
+            ahead = speeds[(speeds - v) * d > 0.0]
+            s = float(ahead.min() if d > 0 else ahead.max())  # the set lies ahead: never empty
+            dt = (s - v) / a
+            if t + dt >= h:
+                rest = h - t
+                x += v * rest + 0.5 * a * rest * rest
+                v += a * rest
+                t = h
+                break
+            x += v * dt + 0.5 * a * dt * dt
+            v, t = s, t + dt
+        x += v * (h - t)
+        return x - V * h, v - V
 
     def _offsets(self, V: float, w: float, M: int) -> np.ndarray:
         out = self._probe_offsets
@@ -254,10 +350,9 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
         # Motor law from the settled estimate at the change towards the command.
         j = np.maximum(last_change, 0)
         before = np.where((ok[j])[:, None], speeds[j], np.where(j[:, None] > 0, (w[j] - w[np.maximum(j - 1, 0)]) * q / np.maximum(t[j] - t[np.maximum(j - 1, 0)], 1e-300)[:, None], 0.0))
-        lag = model.motor_lag
-        gap_decay = np.exp(-(t - t[j]) / lag) if lag > 0 else np.zeros(k)
-        law = u[j] + (before - u[j]) * gap_decay[:, None]
-        law_var = (0.1 * np.abs(before - u[j]) * gap_decay[:, None]).max(axis=1) ** 2 + q * q / 6.0 / model.sensors.period**2
+        # The motor law solved (toolkit.model.motors): u + (v0 - u) exp(-(t - t_change) / tau).
+        law = unsaturated_response(before, u[j], (t - t[j])[:, None], model.motor_lag, math.inf)
+        law_var = (0.1 * np.abs(law - u[j])).max(axis=1) ** 2 + q * q / 6.0 / model.sensors.period**2
         has_change = last_change >= 0
         speeds = np.where((transient & has_change)[:, None], law, speeds)
         variance = np.where(transient & has_change, law_var, variance)

@@ -48,13 +48,16 @@ class CentralDifference(Estimator):
         self._speed = as_float(speed, "speed", f"{type(self).__name__}.reset")
         self._last: tuple[float, int] | None = None
 
-    def step(self, sample: EncoderSample) -> tuple[float, float]:
+    def observe(self, sample: EncoderSample) -> tuple[float, float]:
         q = self.sensors.central.distance_per_count
         last, self._last = self._last, (sample.time, sample.central_count)
         if last is None:
             return self._speed, 2.0 * (q * self.sensors.rate) ** 2 / 12.0
         h = sample.time - last[0]
         return (sample.central_count - last[1]) * q / h, 2.0 * (q / h) ** 2 / 12.0
+
+    def commanded(self, command: object) -> None:
+        """Unused: finite differences do not predict."""
 
 
 class WheelDifference(Estimator):
@@ -85,15 +88,21 @@ class WheelDifference(Estimator):
         self._speed = as_float(speed, "speed", f"{type(self).__name__}.reset")
         self._last: tuple[float, np.ndarray] | None = None
         self.contact_speeds = np.zeros(self.sensors.n_wheels)
+        self._first = False
 
-    def step(self, sample: EncoderSample) -> tuple[float, float]:
+    def observe(self, sample: EncoderSample) -> tuple[float, float]:
         q = self.sensors.wheel.distance_per_count
         counts = np.asarray(sample.wheel_counts)
         last, self._last = self._last, (sample.time, counts)
+        self._first = last is None
         if last is None:
-            self.contact_speeds = np.asarray(sample.command, dtype=float)
             return self._speed, 2.0 * (q * self.sensors.rate) ** 2 / 12.0
         h = sample.time - last[0]
         self.contact_speeds = (counts - last[1]) * q / h
         lo, hi = self.contacts.with_speeds(self.contact_speeds).equilibrium()
         return 0.5 * (lo + hi), 2.0 * (q / h) ** 2 / 12.0
+
+    def commanded(self, command: object) -> None:
+        """With no wheel history yet, the commands are the contact speeds' best guess."""
+        if self._first:
+            self.contact_speeds = np.asarray(command, dtype=float)

@@ -30,7 +30,11 @@ speeds' uncertainty (wheel quantization and backlash, ``sigma_v``) and the speed
 estimate's (``P_VV``): across ``V +- w`` with ``w = 2 sqrt(P_VV + sigma_v^2)`` the force
 spans ``[F(V + w), F(V - w)]``, a spread counted as uniform, ``(F_hi - F_lo)^2 / 12``.
 That force error, held over the period, enters as ``Q = (sigma_F / m)^2 g g^T`` with
-``g = (h^2 / 2, h)``.
+``g = (h^2 / 2, h)``. ``epsilon`` is the plant's true spread (0 for the equal-friction
+scenario). A stuck body (``V +- w`` meets the equilibrium set) has no force error, but its
+``V+ = V`` errs by the stuck-on contact's own undetected speed change: a floor of
+``sigma_v^2 / max_window`` per period on ``V`` (a random walk the wheels' window would
+not resolve), never zero.
 
 Smoother. filterpy's ``rts_smoother`` ignores ``B u``; the input is therefore moved into
 the transition of an augmented state ``(X, V, 1)``, ``F_k = [[1, h, dx_k], [0, 1, dV_k],
@@ -89,10 +93,10 @@ def _make_filter(model: EstimatorModel) -> Any:
     from filterpy.kalman import KalmanFilter
 
     h = model.sensors.period
-    kf = KalmanFilter(dim_x=2, dim_z=1, dim_u=2)
+    kf = KalmanFilter(dim_x=2, dim_z=1)
     kf.F = np.array([[1.0, h], [0.0, 1.0]])
     kf.H = np.array([[1.0, 0.0]])
-    kf.B = np.eye(2)
+    kf.B = None                       # the known input enters the state before predict()
     kf.inv = _scalar_inverse          # 1-D measurement: no LAPACK call per step
     return kf
 
@@ -117,7 +121,7 @@ class KalmanEstimator(Estimator):
         self.model = model
         self.initial_covariance = (None if initial_covariance is None else check_covariance(
             initial_covariance, "initial_covariance", type(self).__name__, 2))
-        h = model.sensors.period
+        h = self._h = model.sensors.period
         self._g = np.array([[0.5 * h * h], [h]])
         self._gg = self._g @ self._g.T
         self._q = model.sensors.central.distance_per_count
@@ -137,10 +141,13 @@ class KalmanEstimator(Estimator):
         std = 0.05 if speed_std is None else as_float(speed_std, "speed_std", owner, low=0.0, low_open=True)
         self._speed0, self._std0 = speed, std
         self.kf = self._build()
-        self._pending: tuple[np.ndarray, float, float] | None = None  # (sub speeds, var_v, steady)
+        self._pending: tuple[np.ndarray, float, bool, Any] | None = None  # (sub, var_v, steady, bounds)
         self._history: list[tuple[float, int, np.ndarray, np.ndarray]] = []
         self._count_prev: int | None = None
         self._repeats = 0
+        self._awaiting_command = False
+        self._force_var, self._Q = math.nan, np.zeros((2, 2))
+        self._quick = self.model.quick_increment
         self.last_input = np.zeros(2)
         self.last_Q = np.zeros((2, 2))
         self.last_nis = np.nan
@@ -151,33 +158,47 @@ class KalmanEstimator(Estimator):
         kf.P = (self.initial_covariance.copy() if self.initial_covariance is not None
                 else np.diag([self._q * self._q / 12.0, self._std0**2]))
 
-    def _advance(self, z: float, R: float, sub: np.ndarray | None, var_v: float, steady: bool) -> None:
+    def _advance(self, z: float, R: float, sub: np.ndarray | None, var_v: float, steady: bool,
+                 bounds: Any = None) -> None:
         """Predict over the last period with the input computed from its start, then update."""
         kf = self.kf
         if sub is None:
             self._start(z)
             self.last_nis = np.nan
             return
-        V = float(kf.x[1, 0])
-        dx, dV, force_var = self.model.increment(V, sub, math.sqrt(var_v), math.sqrt(kf.P[1, 1]), steady)
-        # Hot path (>= 1000x real time): the filter's own Q, R and B u are set in place and
-        # H is passed, so filterpy skips its scalar checks and the reshape of z.
-        u, zc = self._u, self._z
-        u[0, 0], u[1, 0], zc[0, 0] = dx, dV, z
-        Q = (force_var * self._inv_m2) * self._gg
-        kf.Q = Q
+        x = kf.x
+        dx, dV, force_var = self._quick(x.item(1), sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
+                                        steady, bounds)
+        # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x + F^-1 u)
+        # with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place and H is
+        # passed, so filterpy skips its scalar checks and the reshape of z.
+        x[0, 0] = x.item(0) + dx - self._h * dV
+        x[1, 0] = x.item(1) + dV
+        self._z[0, 0] = z
+        if force_var != self._force_var:          # Q repeats while stuck or sliding freely
+            self._force_var = force_var
+            self._Q = self._gg * (force_var * self._inv_m2)
+        Q = kf.Q = self._Q
         kf.R[0, 0] = R
-        kf.predict(u=u)
-        kf.update(zc, H=self._H)
+        kf.predict()
+        kf.update(self._z, H=self._H)
         self.last_input = (dx, dV)
         self.last_Q = Q
-        self.last_nis = float(kf.y[0, 0] ** 2 * kf.SI[0, 0])
+        self.last_nis = kf.y.item() ** 2 * kf.SI.item()
 
-    def step(self, sample: EncoderSample) -> tuple[float, float]:
-        """Take one sample (in order); return ``(speed, variance)`` at its time."""
+    def observe(self, sample: EncoderSample) -> tuple[float, float]:
+        """Take one sample's counts (in order); return ``(speed, variance)`` at its time.
+
+        The prediction up to this sample uses the command given to :meth:`commanded` after
+        the previous sample (the previous command again if none was given); this sample's
+        ``command`` is not read.
+        """
+        if self._awaiting_command:
+            self.commanded(self._history[-1][3])
         model = self.model
         hist = self._history
-        hist.append((sample.time, sample.central_count, np.asarray(sample.wheel_counts), np.asarray(sample.command)))
+        command = hist[-1][3] if hist else None
+        hist.append((sample.time, sample.central_count, np.asarray(sample.wheel_counts), command))
         del hist[:-(model.max_window + model.settle + 2)]
         count = sample.central_count
         fd = 0.0
@@ -189,12 +210,26 @@ class KalmanEstimator(Estimator):
                   + (self._q * self._q / 12.0) * self._repeats)
         z = (count + 0.5) * self._q
         pending = self._pending
-        self._advance(z, R, *(pending if pending is not None else (None, 0.0, True)))
+        self._advance(z, R, *(pending if pending is not None else (None, 0.0, True, None)))
+        self._awaiting_command = True
+        return float(self.kf.x[1, 0]), float(self.kf.P[1, 1])
+
+    def commanded(self, command: Any) -> None:
+        """The contact speeds commanded at the last observed sample, m/s, shape (n,): they
+        drive the prediction to the next sample."""
+        hist = self._history
+        if not hist:
+            raise RuntimeError("commanded() follows observe(): no sample observed since reset().")
+        t, c, w, _ = hist[-1]
+        hist[-1] = (t, c, w, np.asarray(command, dtype=float))
+        if any(entry[3] is None for entry in hist):
+            hist[:] = [(a, b, d, hist[-1][3] if e is None else e) for a, b, d, e in hist]
+        model = self.model
         times, _, wheels, commands = zip(*hist)
         speeds, var, steady = contact_speed_estimates(np.array(wheels), np.array(commands), np.array(times), model)
-        sub = model.substep_speeds(speeds[-1:], np.array(commands[-1:]), steady[-1:])[0]
-        self._pending = (sub, float(var[-1]), bool(steady[-1]))
-        return float(self.kf.x[1, 0]), float(self.kf.P[1, 1])
+        sub = model.substep_speeds(speeds[-1:], np.array(commands[-1:]), steady[-1:])
+        self._pending = (sub[0], float(var[-1]), bool(steady[-1]), model.bounds(sub)[0].tolist())
+        self._awaiting_command = False
 
     # -- offline --------------------------------------------------------------------------
     def filter(self, record: EncoderRecord, *, speed: float = 0.0, speed_std: float | None = None
@@ -211,34 +246,37 @@ class KalmanEstimator(Estimator):
         counts = record.central_counts
         speeds, var_v, steady = contact_speed_estimates(record.wheel_counts, record.commands, record.times, model)
         sub = model.substep_speeds(speeds, record.commands, steady)
+        bounds = model.bounds(sub).tolist()
         q = self._q
         z = (counts + 0.5) * q
         # Jitter term: speed from the counts over the last period (known before the update).
         fd = np.zeros(K)
         fd[1:] = np.diff(counts) * q / np.diff(record.times)
         R = measurement_variance(counts, fd, model)
-        X = np.empty((K, 2))
-        P = np.empty((K, 2, 2))
-        U = np.zeros((K, 2))
-        Qs = np.zeros((K, 2, 2))
-        nis = np.full(K, np.nan)
         kf = self.kf
         steady_l = steady.tolist()
         var_l = var_v.tolist()
         z_l, R_l = z.tolist(), R.tolist()
         advance = self._advance
-        for k in range(K):
-            if k == 0:
-                advance(z_l[0], R_l[0], None, 0.0, True)
-            else:
-                advance(z_l[k], R_l[k], sub[k - 1], var_l[k - 1], steady_l[k - 1])
-                U[k] = self.last_input
-                Qs[k] = self.last_Q
-                nis[k] = self.last_nis
-            X[k] = kf.x[:, 0]
-            P[k] = kf.P
-        self._pending = (sub[-1], float(var_v[-1]), bool(steady[-1]))
-        return X, P, U, Qs, nis, time.perf_counter() - started
+        # Per sample only filterpy's predict/update and the input: results go to lists of
+        # floats and references (filterpy rebinds P at every step, never writes into it).
+        advance(z_l[0], R_l[0], None, 0.0, True)
+        xs = [(kf.x.item(0), kf.x.item(1))]
+        Ps = [kf.P]
+        inputs = [(0.0, 0.0)]
+        Qs = [np.zeros((2, 2))]
+        nis = [math.nan]
+        for k in range(1, K):
+            advance(z_l[k], R_l[k], sub[k - 1], var_l[k - 1], steady_l[k - 1], bounds[k - 1])
+            x = kf.x
+            xs.append((x.item(0), x.item(1)))
+            Ps.append(kf.P)
+            inputs.append(self.last_input)
+            Qs.append(self.last_Q)
+            nis.append(self.last_nis)
+        X, P, U, Q = np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Qs)
+        self._pending = (sub[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1])
+        return X, P, U, Q, np.array(nis), time.perf_counter() - started
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
@@ -264,7 +302,11 @@ class RTSSmoother(Estimator):
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
         self.forward.reset(speed=speed, speed_std=speed_std)
 
-    def step(self, sample: EncoderSample) -> tuple[float, float]:
+    def observe(self, sample: EncoderSample) -> tuple[float, float]:
+        """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
+        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
+
+    def commanded(self, command: Any) -> None:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
         raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
 

@@ -80,5 +80,6 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
     result = simulate(plant, t_end)
     sensors = Sensors.from_spec(scene.sensors, n, **noise)
     record = record_simulation(result, plant, sensors, rng=np.random.default_rng(seed))
-    model = EstimatorModel(forces, mass, sensors, motor_lag=lag)
+    # The plant's friction is exactly the scene's (equal forces): no friction spread to model.
+    model = EstimatorModel(forces, mass, sensors, motor_lag=lag, friction_uncertainty=0.0)
     return BrakeScenario(plant, result, record, sensors, model)

@@ -54,7 +54,8 @@ class UnscentedEstimator(KalmanEstimator):
         ukf.P = (self.initial_covariance.copy() if self.initial_covariance is not None
                  else np.diag([self._q * self._q / 12.0, self._std0**2]))
 
-    def _advance(self, z: float, R: float, sub: np.ndarray | None, var_v: float, steady: bool) -> None:
+    def _advance(self, z: float, R: float, sub: np.ndarray | None, var_v: float, steady: bool,
+                 bounds: Any = None) -> None:
         from ..simulation import simulate_batch
 
         if sub is None:

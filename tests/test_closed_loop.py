@@ -60,3 +60,32 @@ def test_bad_loops_are_refused():
         simulate_closed_loop(plant, VirtualViscosity(1.0), 1e6, rate=1e3)
     with pytest.raises(ParameterError, match="'t_end' parameter of simulate_closed_loop"):
         simulate_closed_loop(plant, VirtualViscosity(1.0), float("nan"))
+
+
+def _loop_with_sensors():
+    from toolkit import CentralDifference, Sensors
+
+    plant = Plant(ContactSet([0.0] * 10, [F] * 10), M, motors=Motors(lag=0.0075, speed_limits=(-VMAX, VMAX)))
+    sensors = Sensors.carousel(10)
+    run = simulate_closed_loop(plant, VirtualViscosity(10.0, 0.15), 4.0, sensors=sensors, seed=1)
+    ideal = simulate_closed_loop(plant, VirtualViscosity(10.0, 0.15), 4.0)
+    baseline = CentralDifference(sensors).run(run.record)
+    return run, ideal, baseline
+
+
+def test_sensors_and_filter_in_the_loop():
+    # VirtualViscosity does not read the estimate, so the true trajectory must equal the
+    # ideal loop's bit for bit (identity); the Kalman filter stepped in the loop must beat the
+    # central finite difference on the same record (the second method).
+    run, ideal, baseline = _loop_with_sensors()
+    np.testing.assert_array_equal(run.speed, ideal.speed)
+    assert np.sqrt(np.mean(run.estimation_error ** 2)) < baseline.rms_error
+    assert run.record is not None and run.record.n_samples == run.times.size
+
+
+@pytest.mark.xfail(strict=True, reason="short (issue 9): stepped in the loop from rest the "
+                   "filter's RMS is 1.4 mm/s against the finite difference's 4.8 mm/s (3.4x, "
+                   "not 10x; offline on the brake record it is 32x)")
+def test_filter_in_the_loop_is_ten_times_better_than_differencing():
+    run, _, baseline = _loop_with_sensors()
+    assert np.sqrt(np.mean(run.estimation_error ** 2)) <= baseline.rms_error / 10

@@ -207,7 +207,8 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
                                wheel_counts=wheel[keep], commands=commands[keep],
                                central_resolution=sensors.central.distance_per_count,
                                wheel_resolution=sensors.wheel.distance_per_count,
-                               true_speed=speed[keep], true_position=position[keep])
+                               wheel_backlash=sensors.backlash, truth_speed=speed[keep],
+                               truth_position=position[keep], truth_contact_speeds=contact[keep])
     return ClosedLoopResult(times[keep], speed[keep], estimate[keep], variance[keep],
                             commands[keep], force[keep], contact[keep], position[keep], record,
                             status, message or status.value, time.perf_counter() - started)

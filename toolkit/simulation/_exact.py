@@ -82,6 +82,8 @@ _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _SMALL = 64                 # contacts up to which plain Python beats NumPy calls
 _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than an Enum member)
+# The ufuncs' own reductions: np.sum / np.max add a Python layer (the same results).
+_sum, _max, _abs = np.add.reduce, np.maximum.reduce, np.abs
 
 
 # -- closed forms ---------------------------------------------------------------------------
@@ -688,9 +690,15 @@ class _EventFunctions:
     D: float = 0.0
 
     def value(self, s: Any, i: Any = slice(None)) -> np.ndarray:
-        mu = self.mu
-        return (self.alpha[i] + self.beta[i] * s + self.gamma[i] * _expm1_ratio(self.lam, s)
-                + self.delta[i] * _expm1_ratio(mu, s) + self.D * s * np.exp(-mu * s))
+        # The terms of _expm1_ratio written out for the scalar rates (the same operations);
+        # a zero D term is left out (it could only turn a -0.0 into 0.0).
+        lam, mu = self.lam, self.mu
+        total = self.alpha[i] + self.beta[i] * s
+        total = total + self.gamma[i] * (-np.expm1(-(lam * s)) / lam if lam > 0 else s)
+        total = total + self.delta[i] * (-np.expm1(-(mu * s)) / mu if mu > 0 else s)
+        if self.D != 0.0:
+            total = total + self.D * s * np.exp(-mu * s)
+        return total
 
     def take(self, index: np.ndarray) -> _EventFunctions:
         """The functions at ``index`` only."""
@@ -951,6 +959,16 @@ def _filippov(G_out: float, slopes: np.ndarray, weights: np.ndarray, mass: float
     Returns ``(a, group)`` where ``group`` is the boolean mask of the tied contacts the body
     follows (their slope is ``a``) or ``None`` when it leaves every one of them.
     """
+    if slopes.size <= 1:            # the loop below for none or one tied contact, unrolled
+        if not slopes.size:
+            return (G_out - 0.0) / mass, None
+        level, w0 = float(slopes[0]), float(weights[0])
+        if abs(G_out + 0.0 - 0.0 - mass * level) <= w0 + tol:
+            return level, slopes == level
+        a = (G_out + (w0 - 0.0) - 0.0) / mass
+        if a < level:
+            return a, None
+        return (G_out - w0) / mass, None
     order = np.argsort(slopes)
     s, w = slopes[order], weights[order]
     distinct, start = np.unique(s, return_index=True)
@@ -1014,10 +1032,10 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         t_next = b if off_next == length else a + off_next
         horizon = off_next - off
         slope_now = q + e
-        scale = max(abs(V), float(np.max(np.abs(v))))
+        scale = max(abs(V), float(_max(_abs(v))))
         tie_v = 64.0 * _EPS * scale
         tol = 4.0 * (n + 1) * _EPS * (plant.contacts.total_force + abs(E) + c * abs(V)
-                                      + m * float(np.max(np.abs(slope_now))))
+                                      + m * float(_max(_abs(slope_now))))
         rec.n_evaluations += 1
         if k > 0:
             fns, seg, kinds = _compliant_step(plant, V, v, q, e, E, mu, hint, tie_v)
@@ -1116,8 +1134,6 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
 #: engine's event functions and tie tests (a few ulp, ``64 eps``, ``4 (N + 1) eps``), so that a
 #: certified piece is one the engine would also run as one segment without an event.
 _QUIET_MARGIN = 2.0 ** -40
-# The ufuncs' own reductions: np.sum / np.max add a Python layer (same results).
-_sum, _max, _abs = np.add.reduce, np.maximum.reduce, np.abs
 
 
 class _QuietPlant:

@@ -1062,7 +1062,7 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         if anchor is not None and tied[anchor]:
             V = float(v[anchor])
         side = np.sign(v - V)
-        G_out = float(np.sum(f[~tied] * side[~tied])) + E - c * V
+        G_out = float(_sum(f[~tied] * side[~tied])) + E - c * V
         t_slopes = slope_now[tied].copy()
         if releasing != 0.0:
             t_slopes[np.flatnonzero(tied) == stuck] = -releasing * math.inf
@@ -1080,7 +1080,7 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         if stuck is None:
             signs = side.copy()
             signs[tied] = np.sign(t_slopes - acc)
-            r0 = (float(np.sum(f * signs)) + E - c * V) / m
+            r0 = (float(_sum(f * signs)) + E - c * V) / m
             lam = c / m
             alpha = np.where(tied, 0.0, V - v)
             beta = -q.copy()
@@ -1094,10 +1094,10 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         else:
             group_mask = np.zeros(n, dtype=bool)
             group_mask[tied_idx[group]] = True
-            W = float(np.sum(f[group_mask]))
+            W = float(_sum(f[group_mask]))
             signs = side.copy()
             signs[tied & ~group_mask] = np.sign(slope_now[tied & ~group_mask] - acc)
-            G_fixed = float(np.sum(f[~group_mask] * signs[~group_mask])) + E
+            G_fixed = float(_sum(f[~group_mask] * signs[~group_mask])) + E
             qc, ec, vc = float(q[stuck]), float(e[stuck]), float(v[stuck])
             h0 = G_fixed - c * vc - m * (qc + ec)
             others = ~group_mask
@@ -1159,16 +1159,22 @@ class _QuietPlant:
 _QUIET_PLANTS: weakref.WeakKeyDictionary[Plant, _QuietPlant | None] = weakref.WeakKeyDictionary()
 
 
+_QUIET_LAST: list[Any] = [None, None]    # the last plant asked for (a weak reference), its entry
+
+
 def _quiet_plant(plant: Plant) -> _QuietPlant | None:
     """The per-plant constants of :func:`_quiet_piece` (cached weakly), or None when the
     shortcut does not apply (compliant contacts, motors without a lag)."""
+    last, quiet = _QUIET_LAST
+    if last is not None and last() is plant:     # a closed loop steps one plant: no lookup
+        return quiet
     try:
-        return _QUIET_PLANTS[plant]
+        quiet = _QUIET_PLANTS[plant]
     except KeyError:
-        pass
-    quiet = (_QuietPlant(plant) if plant.compliance == 0 and plant.motors is not None
-             and plant.motors.lag > 0 else None)
-    _QUIET_PLANTS[plant] = quiet
+        quiet = (_QuietPlant(plant) if plant.compliance == 0 and plant.motors is not None
+                 and plant.motors.lag > 0 else None)
+        _QUIET_PLANTS[plant] = quiet
+    _QUIET_LAST[:] = weakref.ref(plant), quiet
     return quiet
 
 

@@ -227,8 +227,7 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
         motor = MotorPiece.build(t0, speeds, u, motors.lag, motors.rate_limit)
         t, V, (stuck, hint, releasing), _ = _dynamic_piece(
             plant, motor, external, t1, state.V, (state.stuck, *state._pending), rec)
-        offset = np.array([t - t0])
-        speeds_end = motor.speeds(offset)[0]
+        speeds_end = motor.speeds_at(t - t0)
         travelled = motor.displacement(t - t0)
         pending = (hint, releasing)
     else:

@@ -142,3 +142,97 @@ def test_bad_inputs_are_refused() -> None:
         advance(plant, state, np.zeros(plant.n), 0.0)
     with pytest.raises(ParameterError, match="'stuck' parameter of ExactState"):
         ExactState(0.0, 0.0, np.zeros(2), stuck=5)
+
+
+# -- the certified no-event shortcut --------------------------------------------------------
+def _closed_loop_plant(case: str) -> tuple[Plant, float]:
+    plant = dataclasses.replace(carousel_startup_plant(2), motors=CAROUSEL.motors())
+    if case == "lag+rate":      # gaps up to 0.08 m/s stay below r tau = 0.15 m/s: no ramp...
+        plant = dataclasses.replace(plant, motors=Motors(lag=0.0075, rate_limit=20.0,
+                                                         speed_limits=(-0.35, 0.35)))
+    elif case == "lag+slow-rate":   # ... here r tau = 0.0075 m/s: many steps ramp (fallback)
+        plant = dataclasses.replace(plant, motors=Motors(lag=0.0075, rate_limit=1.0,
+                                                         speed_limits=(-0.35, 0.35)))
+    elif case == "drag+force":
+        return dataclasses.replace(plant, damping=0.3), 0.05
+    return plant, 0.0
+
+
+@pytest.mark.parametrize("case", ["lag", "lag+rate", "lag+slow-rate", "drag+force"])
+def test_quiet_steps_equal_the_full_engine(case: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A closed loop's commands: near the body speed (so the body sticks to contacts and
+    # contacts cross it), changing a little every step, or held for many steps while the
+    # body stays stuck. From each state the step runs twice: with the certified shortcut
+    # (when it applies) and with the full engine forced. Both evaluate the same closed forms
+    # (V0 + r0 expm1_ratio(lam, S) free, v_k(S) stuck; u + (v0 - u) exp(-S/tau) per motor;
+    # their integrals), with sums possibly in another order: rtol 1e-12, atol 1e-12 of the
+    # speed scale 0.35 m/s (of 0.35 m/s * DT for displacements).
+    from toolkit.simulation import _stepper
+
+    plant, external = _closed_loop_plant(case)
+    rng = np.random.default_rng(2024)
+    state = ExactState(0.0, 0.0, np.clip(rng.uniform(-0.3, 0.3, plant.n), -0.35, 0.35))
+    command = state.contact_speeds.copy()
+    quiet = {True: 0, False: 0}           # shortcut taken, by stuck
+    for k in range(600):
+        phase = (k // 40) % 3
+        if phase == 0:                    # changing: pulled towards the body speed
+            command = np.clip(state.V + 0.6 * (command - state.V)
+                              + rng.normal(0.0, 0.02, plant.n), -0.35, 0.35)
+        elif phase == 1:                  # changing: a random walk, spread out again
+            command = np.clip(command + rng.normal(0.0, 0.03, plant.n), -0.35, 0.35)
+        # (phase 2: held)
+        t1 = (k + 1) * DT
+        monkeypatch.setattr(_stepper, "_QUIET", True)
+        fast = advance(plant, state, command, t1, external=external)
+        monkeypatch.setattr(_stepper, "_QUIET", False)
+        full = advance(plant, state, command, t1, external=external)
+        assert not full._quiet
+        if fast._quiet:
+            quiet[state.stuck is not None] += 1
+            assert full.events == ()
+            assert full.success and fast.success
+            assert fast.state.stuck == full.state.stuck
+            assert fast.state._pending == full.state._pending
+            assert fast.message == full.message
+        np.testing.assert_allclose(fast.state.V, full.state.V, rtol=RTOL, atol=ATOL)
+        np.testing.assert_allclose(fast.state.contact_speeds, full.state.contact_speeds,
+                                   rtol=RTOL, atol=ATOL)
+        np.testing.assert_allclose(fast.body_displacement, full.body_displacement,
+                                   rtol=RTOL, atol=ATOL * DT)
+        np.testing.assert_allclose(fast.contact_displacements, full.contact_displacements,
+                                   rtol=RTOL, atol=ATOL * DT)
+        assert fast.state.t == full.state.t == t1
+        assert not fast.state.contact_speeds.flags.writeable
+        assert not fast.contact_displacements.flags.writeable
+        state = full.state
+    if case == "lag+slow-rate":
+        assert 0 < quiet[True] + quiet[False] < 600, quiet
+    else:                                 # the shortcut serves both kinds of quiet step
+        assert quiet[True] >= 50 and quiet[False] >= 50, quiet
+
+
+def test_quiet_steps_chain_like_the_engine(monkeypatch: pytest.MonkeyPatch) -> None:
+    # 60 s of 50 Hz stepping with and without the shortcut: the same trajectory (rounding
+    # differences of single steps do not grow: the tolerances of the per-step comparison).
+    from toolkit.simulation import _stepper
+
+    plant = dataclasses.replace(carousel_startup_plant(4), motors=CAROUSEL.motors())
+    rng = np.random.default_rng(5)
+    commands = np.clip(np.cumsum(rng.normal(0.0, 0.01, (3000, plant.n)), axis=0)
+                       + rng.uniform(-0.2, 0.2, plant.n), -0.35, 0.35)
+    runs = {}
+    for flag in (True, False):
+        monkeypatch.setattr(_stepper, "_QUIET", flag)
+        state = ExactState(0.0, 0.0, commands[0])
+        V, travel, quiet = [], [], 0
+        for k, command in enumerate(commands):
+            step = advance(plant, state, command, (k + 1) * DT)
+            state = step.state
+            V.append(state.V)
+            travel.append(step.body_displacement)
+            quiet += step._quiet
+        runs[flag] = np.array(V), np.array(travel), quiet
+    assert runs[True][2] > 1500 and runs[False][2] == 0
+    np.testing.assert_allclose(runs[True][0], runs[False][0], rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=RTOL, atol=ATOL * DT)

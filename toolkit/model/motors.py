@@ -204,16 +204,32 @@ class MotorPiece:
             settle = np.broadcast_to(self.after, on_ramp.shape)
         return np.where(ramping, on_ramp, settle)
 
+    def speeds_at(self, s: float) -> np.ndarray:
+        """Speeds at one offset ``s`` (s) from ``a``: shape (n,), m/s, fresh; the operations
+        of :meth:`speeds` on one time (without the work of a ramp phase when none is left)."""
+        ramping = s < self.ramp_end
+        if self.tau > 0:
+            with np.errstate(over="ignore", invalid="ignore"):    # only on the ramp, masked
+                settle = self.u + (self.after - self.u) * np.exp(-(s - self.ramp_end) / self.tau)
+        else:
+            settle = self.after.copy()
+        if not ramping.any():
+            return settle
+        return np.where(ramping, self.start + self.ramp * s, settle)
+
     def coefficients(self, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """At offset ``s``: speeds ``v0``, ramp slopes ``q``, exponential rates ``e`` (so that
         ``v(s + x) = v0 + q x + e expm1_ratio(1/tau, x)``) and the offset of the next phase
         change."""
-        v0 = self.speeds(np.array([s]))[0]
+        v0 = self.speeds_at(s)
         ramping = s < self.ramp_end
+        if not ramping.any():              # (the general case below with no ramp left)
+            e = (self.u - v0) / self.tau if self.tau > 0 else np.zeros_like(v0)
+            return v0, np.zeros_like(v0), e, math.inf
         q = np.where(ramping, self.ramp, 0.0)
         e = np.where(ramping, 0.0, (self.u - v0) / self.tau) if self.tau > 0 else np.zeros_like(v0)
         pending = self.ramp_end[ramping]
-        return v0, q, e, float(pending.min()) if pending.size else math.inf
+        return v0, q, e, float(pending.min())
 
     def displacement(self, s: float) -> np.ndarray:
         """Distance each contact travels over the offsets ``[0, s]`` from ``a``: the exact

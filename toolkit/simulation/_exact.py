@@ -82,6 +82,8 @@ _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _SMALL = 64                 # contacts up to which plain Python beats NumPy calls
 _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than an Enum member)
+# The ufuncs' own reductions: np.sum / np.max add a Python layer (the same results).
+_sum, _max, _abs = np.add.reduce, np.maximum.reduce, np.abs
 
 
 # -- closed forms ---------------------------------------------------------------------------
@@ -109,6 +111,8 @@ def _expm1_ratio_integral(rate: float, s: float) -> float:
     ``rate = 0``), to a few ulp: a series where the difference would cancel (``rate s < 0.5``),
     written without overflow for rates up to the largest double."""
     x = rate * s
+    if x == 0.0:
+        return s * s * 0.5                          # (the series below at x = 0)
     if x < 0.5:
         h = 0.0
         for c in _RATIO_INTEGRAL_SERIES:            # Horner
@@ -686,9 +690,15 @@ class _EventFunctions:
     D: float = 0.0
 
     def value(self, s: Any, i: Any = slice(None)) -> np.ndarray:
-        mu = self.mu
-        return (self.alpha[i] + self.beta[i] * s + self.gamma[i] * _expm1_ratio(self.lam, s)
-                + self.delta[i] * _expm1_ratio(mu, s) + self.D * s * np.exp(-mu * s))
+        # The terms of _expm1_ratio written out for the scalar rates (the same operations);
+        # a zero D term is left out (it could only turn a -0.0 into 0.0).
+        lam, mu = self.lam, self.mu
+        total = self.alpha[i] + self.beta[i] * s
+        total = total + self.gamma[i] * (-np.expm1(-(lam * s)) / lam if lam > 0 else s)
+        total = total + self.delta[i] * (-np.expm1(-(mu * s)) / mu if mu > 0 else s)
+        if self.D != 0.0:
+            total = total + self.D * s * np.exp(-mu * s)
+        return total
 
     def take(self, index: np.ndarray) -> _EventFunctions:
         """The functions at ``index`` only."""
@@ -949,6 +959,16 @@ def _filippov(G_out: float, slopes: np.ndarray, weights: np.ndarray, mass: float
     Returns ``(a, group)`` where ``group`` is the boolean mask of the tied contacts the body
     follows (their slope is ``a``) or ``None`` when it leaves every one of them.
     """
+    if slopes.size <= 1:            # the loop below for none or one tied contact, unrolled
+        if not slopes.size:
+            return (G_out - 0.0) / mass, None
+        level, w0 = float(slopes[0]), float(weights[0])
+        if abs(G_out + 0.0 - 0.0 - mass * level) <= w0 + tol:
+            return level, slopes == level
+        a = (G_out + (w0 - 0.0) - 0.0) / mass
+        if a < level:
+            return a, None
+        return (G_out - w0) / mass, None
     order = np.argsort(slopes)
     s, w = slopes[order], weights[order]
     distinct, start = np.unique(s, return_index=True)
@@ -1012,10 +1032,10 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         t_next = b if off_next == length else a + off_next
         horizon = off_next - off
         slope_now = q + e
-        scale = max(abs(V), float(np.max(np.abs(v))))
+        scale = max(abs(V), float(_max(_abs(v))))
         tie_v = 64.0 * _EPS * scale
         tol = 4.0 * (n + 1) * _EPS * (plant.contacts.total_force + abs(E) + c * abs(V)
-                                      + m * float(np.max(np.abs(slope_now))))
+                                      + m * float(_max(_abs(slope_now))))
         rec.n_evaluations += 1
         if k > 0:
             fns, seg, kinds = _compliant_step(plant, V, v, q, e, E, mu, hint, tie_v)
@@ -1042,7 +1062,7 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         if anchor is not None and tied[anchor]:
             V = float(v[anchor])
         side = np.sign(v - V)
-        G_out = float(np.sum(f[~tied] * side[~tied])) + E - c * V
+        G_out = float(_sum(f[~tied] * side[~tied])) + E - c * V
         t_slopes = slope_now[tied].copy()
         if releasing != 0.0:
             t_slopes[np.flatnonzero(tied) == stuck] = -releasing * math.inf
@@ -1060,7 +1080,7 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         if stuck is None:
             signs = side.copy()
             signs[tied] = np.sign(t_slopes - acc)
-            r0 = (float(np.sum(f * signs)) + E - c * V) / m
+            r0 = (float(_sum(f * signs)) + E - c * V) / m
             lam = c / m
             alpha = np.where(tied, 0.0, V - v)
             beta = -q.copy()
@@ -1074,10 +1094,10 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         else:
             group_mask = np.zeros(n, dtype=bool)
             group_mask[tied_idx[group]] = True
-            W = float(np.sum(f[group_mask]))
+            W = float(_sum(f[group_mask]))
             signs = side.copy()
             signs[tied & ~group_mask] = np.sign(slope_now[tied & ~group_mask] - acc)
-            G_fixed = float(np.sum(f[~group_mask] * signs[~group_mask])) + E
+            G_fixed = float(_sum(f[~group_mask] * signs[~group_mask])) + E
             qc, ec, vc = float(q[stuck]), float(e[stuck]), float(v[stuck])
             h0 = G_fixed - c * vc - m * (qc + ec)
             others = ~group_mask
@@ -1107,6 +1127,157 @@ def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float
         if rec.stop(t):
             return t, V, (stuck, hint, releasing), True
     return b, V, (stuck, hint, releasing), False
+
+
+# -- dynamic motors: a piece without events, certified ---------------------------------------
+#: Relative margin of the no-event certificate (about 4500 ulp): far above the rounding of the
+#: engine's event functions and tie tests (a few ulp, ``64 eps``, ``4 (N + 1) eps``), so that a
+#: certified piece is one the engine would also run as one segment without an event.
+_QUIET_MARGIN = 2.0 ** -40
+
+
+class _QuietPlant:
+    """What :func:`_quiet_piece` reads of a plant, read once (the plant is frozen): Coulomb
+    contacts (no compliance) and motors with a lag; None stands for any other plant."""
+
+    __slots__ = ("forces", "total_force", "mass", "damping", "tau", "mu", "lam", "ramp_gap",
+                 "speed_bound")
+
+    def __init__(self, plant: Plant) -> None:
+        motors = plant.motors
+        self.forces = plant.contacts.forces
+        self.total_force = float(plant.contacts.total_force)
+        self.mass, self.damping, self.tau = plant.mass, plant.damping, motors.lag
+        self.mu = 1.0 / motors.lag
+        self.lam = plant.damping / plant.mass
+        # Gap |u - v| above which a motor ramps at its rate limit (MotorPiece.build).
+        self.ramp_gap = motors.rate_limit * motors.lag
+        # Bound on |u| for clipped commands (inf without finite speed limits).
+        self.speed_bound = max(abs(motors.speed_limits[0]), abs(motors.speed_limits[1]))
+
+
+_QUIET_PLANTS: weakref.WeakKeyDictionary[Plant, _QuietPlant | None] = weakref.WeakKeyDictionary()
+
+
+_QUIET_LAST: list[Any] = [None, None]    # the last plant asked for (a weak reference), its entry
+
+
+def _quiet_plant(plant: Plant) -> _QuietPlant | None:
+    """The per-plant constants of :func:`_quiet_piece` (cached weakly), or None when the
+    shortcut does not apply (compliant contacts, motors without a lag)."""
+    last, quiet = _QUIET_LAST
+    if last is not None and last() is plant:     # a closed loop steps one plant: no lookup
+        return quiet
+    try:
+        quiet = _QUIET_PLANTS[plant]
+    except KeyError:
+        quiet = (_QuietPlant(plant) if plant.compliance == 0 and plant.motors is not None
+                 and plant.motors.lag > 0 else None)
+        _QUIET_PLANTS[plant] = quiet
+    _QUIET_LAST[:] = weakref.ref(plant), quiet
+    return quiet
+
+
+def _quiet_piece(quiet: _QuietPlant, start: np.ndarray, u: np.ndarray, V: float,
+                 stuck: int | None, E: float,
+                 S: float) -> tuple[float, np.ndarray, np.ndarray, float] | None:
+    """One piece of constant command ``u`` (clipped, m/s) over ``S`` seconds from contact
+    speeds ``start`` and body speed ``V`` (m/s), stuck to ``stuck`` or free, external force
+    ``E`` (N), when a cheap certificate shows that :func:`_dynamic_piece` would run it as one
+    closed-form segment without an event; None otherwise (the caller runs the engine).
+
+    The certificate uses the engine's own closed forms on ``[0, S]``. Without a ramp phase
+    (no motor on its rate limit) contact ``i`` moves as ``v_i(s) = v_i + e_i x_mu(s)`` with
+    ``x_r(s) = expm1_ratio(r, s)``, and the body
+
+    - free (no contact tied now): ``V(s) = V + r0 x_lam(s)`` under the constant force ``m r0``
+      of the current signs. The crossing function ``g_i = V(s) - v_i(s)`` has
+      ``g_i' = r0 exp(-lam s) - e_i exp(-mu s)``, zero at most once, at
+      ``s* = log(e_i / r0) / (mu - lam)``: its range on ``[0, S]`` is spanned by ``g_i(0)``,
+      ``g_i(S)`` and ``g_i(s*)`` when ``0 < s* < S``. No crossing when these share a sign.
+    - stuck to contact ``k`` (and any contacts on its very track: the same start and
+      command, e.g. at a speed limit): ``V = v_k(s)``; the gap
+      ``v_k(s) - v_i(s) = (v_k - v_i) + (e_k - e_i) x_mu(s)`` is monotone (no crossing when
+      its ends share a sign), and so is the stiction margin
+      ``h(s) = G - c v_k - m dv_k/dt = h0 + e_k (m mu - c) x_mu(s)``: it stays stuck when
+      ``|h| <= W`` (the group's total force) at both ends.
+
+    "Share a sign" and "``<= W``" hold with a margin of ``2^-40`` relative to the speed or
+    force scale, far above the rounding of the engine's tie tests and event functions
+    (``64 eps``, ``4 (N + 1) eps``, a few ulp), so the engine finds no tie and no event either
+    and the two evaluate the same closed forms: they agree to rounding.
+
+    Returns
+    -------
+    (V_end, speeds_end, travelled, body_displacement) or None
+        Body speed (m/s) and contact speeds (fresh, shape (n,)) at ``S``; the exact
+        displacements over the piece (m): each contact's (fresh, shape (n,)), the body's.
+    """
+    tau = quiet.tau
+    d = start - u                    # MotorPiece: after - u (no ramp); v(s) = u + d e^(-s/tau)
+    spread = float(_max(_abs(d)))
+    if spread > quiet.ramp_gap:
+        return None                  # a motor ramps at its rate limit: a phase change inside
+    v0 = u + d                       # MotorPiece.coefficients(0): the speeds at offset 0
+    v1 = d * math.exp(-S / tau)
+    v1 += u                          # MotorPiece.speeds(S)
+    mu, m, c = quiet.mu, quiet.mass, quiet.damping
+    grow = _scalar_expm1_ratio(mu, S)                   # v_i(S) - v_i = e_i grow
+    reach = (quiet.speed_bound if quiet.speed_bound < math.inf
+             else float(_max(_abs(u)))) + spread        # bounds |v_i(s)|
+    if stuck is None:
+        side = np.sign(v0 - V)
+        r0 = (float(_sum(quiet.forces * side)) + E - c * V) / m
+        lam = quiet.lam
+        V_end = V + r0 * _scalar_expm1_ratio(lam, S)
+        margin = _QUIET_MARGIN * (abs(V) + abs(V_end) + reach)
+        g0 = V - v0
+        g1 = V_end - v1
+        if not (((g0 > margin) & (g1 > margin)) | ((g0 < -margin) & (g1 < -margin))).all():
+            return None
+        if r0 != 0.0 and mu != lam:
+            e = (u - v0) / tau                          # MotorPiece.coefficients: e_i
+            ratio = e / r0
+            pick = (ratio > 0.0).nonzero()[0]
+            if pick.size:
+                at = np.log(ratio[pick]) / (mu - lam)   # s*: the extremum of g_i
+                inside = (at > 0.0) & (at < S)
+                if inside.any():
+                    pick, at = pick[inside], at[inside]
+                    x_lam = -np.expm1(-lam * at) / lam if lam > 0 else at
+                    g = g0[pick] + r0 * x_lam - e[pick] * (-np.expm1(-mu * at) / mu)
+                    if not ((g * np.sign(g0[pick])) > margin).all():
+                        return None
+        body = V * S + r0 * _expm1_ratio_integral(lam, S)      # _Recorder.displacement
+    else:
+        # The group the body follows: contacts on the very track of contact k (same start
+        # and command: at the speed limits, say), k their lowest index as the engine names it.
+        group = (d == d[stuck]) & (u == u[stuck])
+        if group.argmax() != stuck:
+            return None
+        f = quiet.forces
+        W = float(_sum(f[group]))
+        if not W > 0:
+            return None
+        vc = float(v0[stuck])
+        ec = (float(u[stuck]) - vc) / tau               # MotorPiece.coefficients: e_k
+        V_end = vc + ec * grow
+        margin = _QUIET_MARGIN * (abs(vc) + abs(V_end) + reach)
+        g0 = vc - v0
+        g1 = float(v1[stuck]) - v1
+        apart = ((g0 > margin) & (g1 > margin)) | ((g0 < -margin) & (g1 < -margin)) | group
+        if not apart.all():
+            return None
+        G = float(_sum(f * np.sign(v0 - vc))) + E       # (the group's own signs are 0)
+        h0 = G - c * vc - m * ec
+        h1 = h0 + ec * (m * mu - c) * grow
+        scale = quiet.total_force + abs(E) + c * (abs(vc) + abs(V_end)) + m * abs(ec)
+        if max(abs(h0), abs(h1)) > W - _QUIET_MARGIN * scale:
+            return None
+        body = vc * S + ec * _expm1_ratio_integral(mu, S)      # _Recorder.displacement
+    travelled = u * S
+    travelled += d * (tau * -math.expm1(-S / tau))     # MotorPiece.displacement, no ramp
+    return V_end, v1, travelled, body
 
 
 def _segment_value(V0: float, seg: tuple[float, ...], mu: float, s: float) -> float:

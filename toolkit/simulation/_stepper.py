@@ -13,6 +13,13 @@ the trajectory of one ``simulate`` run of that schedule, to rounding. No restart
 state carries the engine's sliding mode, and nothing is built per call but the step's own
 closed forms (with ideal motors, the force landscape of the new command).
 
+Most steps of a closed loop hold no event: the body slides between two contact speeds, or
+stays stuck to one contact while its motor settles. A cheap certificate
+(:func:`toolkit.simulation._exact._quiet_piece`: the range of every crossing function and of
+the stiction margin over the step, bounded from the engine's closed forms) recognises them,
+and such a step evaluates the engine's one closed-form segment directly, to rounding what
+the engine computes; when the certificate is unsure, the engine runs.
+
 Displacements are exact closed forms: the integral of each stored segment of ``V``
 (:meth:`_Recorder.displacement`) and of each contact's motor track
 (:meth:`toolkit.model.motors.MotorPiece.displacement`).
@@ -29,13 +36,21 @@ import numpy as np
 from .._validation import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import MotorPiece, Plant
-from ._exact import _FREE, _build_landscape, _dynamic_piece, _ideal_piece, _Recorder
+from ._exact import (_FREE, _build_landscape, _dynamic_piece, _ideal_piece, _quiet_piece,
+                     _quiet_plant, _Recorder)
 from ._result import Budget, Event, SimulationStatus, status_message
 
 __all__ = ["ExactState", "ExactStep", "advance"]
 
 _DEFAULT_BUDGET = Budget()
 _SUCCESS = SimulationStatus.SUCCESS
+_NO_PENDING = _FREE[1:]
+_QUIET_MESSAGE = status_message(_SUCCESS, "0 events")
+#: Take the certified no-event shortcut (:func:`toolkit.simulation._exact._quiet_piece`)
+#: when it applies; False runs the full engine on every step (tests compare the two).
+_QUIET = True
+#: Wall-time budgets below this (s) always run the engine, which checks the clock.
+_QUIET_WALL_TIME = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,6 +140,7 @@ class ExactStep:
     events: tuple[Event, ...]
     status: SimulationStatus
     message: str
+    _quiet: bool = field(default=False, repr=False)   # the certified no-event shortcut ran
 
     @property
     def success(self) -> bool:
@@ -184,19 +200,34 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
         raise ParameterTypeError(parameter_message("budget", "advance", "be a Budget", budget))
     motors = plant.motors
     if motors is not None:
-        u = np.clip(u, *motors.speed_limits)
+        low, high = motors.speed_limits
+        if low > -math.inf:
+            u = np.maximum(u, low)
+        if high < math.inf:
+            u = np.minimum(u, high)
     if plant.dynamic_motors:
-        mu = 1.0 / motors.lag if motors.lag > 0 else 0.0
-        rec = _Recorder(budget, 2 * n + 2, mu)
         speeds = state.contact_speeds
         if speeds.shape != (n,):
             raise ParameterError(parameter_message(
                 "state", "advance", f"hold {n} contact speeds", speeds.shape))
+        if (_QUIET and state._pending == _NO_PENDING and budget.wall_time >= _QUIET_WALL_TIME
+                and (quiet := _quiet_plant(plant)) is not None):
+            S = t1 - t0
+            piece = _quiet_piece(quiet, speeds, u, state.V, state.stuck, external, S)
+            if piece is not None:
+                V, speeds_end, travelled, body = piece
+                speeds_end.setflags(write=False)
+                travelled.setflags(write=False)
+                if math.isfinite(V):
+                    return ExactStep(ExactState._trusted(t1, V, speeds_end, state.stuck,
+                                                         _NO_PENDING),
+                                     body, travelled, (), _SUCCESS, _QUIET_MESSAGE, True)
+        mu = 1.0 / motors.lag if motors.lag > 0 else 0.0
+        rec = _Recorder(budget, 2 * n + 2, mu)
         motor = MotorPiece.build(t0, speeds, u, motors.lag, motors.rate_limit)
         t, V, (stuck, hint, releasing), _ = _dynamic_piece(
             plant, motor, external, t1, state.V, (state.stuck, *state._pending), rec)
-        offset = np.array([t - t0])
-        speeds_end = motor.speeds(offset)[0]
+        speeds_end = motor.speeds_at(t - t0)
         travelled = motor.displacement(t - t0)
         pending = (hint, releasing)
     else:

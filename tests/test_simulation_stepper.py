@@ -225,17 +225,22 @@ def test_quiet_steps_chain_like_the_engine(monkeypatch: pytest.MonkeyPatch) -> N
     for flag in (True, False):
         monkeypatch.setattr(_stepper, "_QUIET", flag)
         state = ExactState(0.0, 0.0, commands[0])
-        V, travel, quiet = [], [], 0
+        V, travel, quiet, modes, events = [], [], 0, [], []
         for k, command in enumerate(commands):
             step = advance(plant, state, command, (k + 1) * DT)
             state = step.state
             V.append(state.V)
             travel.append(step.body_displacement)
             quiet += step._quiet
-        runs[flag] = np.array(V), np.array(travel), quiet
+            modes.append(state.stuck)
+            events.extend((e.kind, e.contact) for e in step.events)
+        runs[flag] = np.array(V), np.array(travel), quiet, modes, events
+    # (the walk clips several contacts to one speed limit: the stuck-group case is taken too)
     assert runs[True][2] > 1500 and runs[False][2] == 0
     np.testing.assert_allclose(runs[True][0], runs[False][0], rtol=RTOL, atol=ATOL)
     np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=RTOL, atol=ATOL * DT)
+    assert runs[True][3] == runs[False][3]
+    assert runs[True][4] == runs[False][4]
 
 
 def test_quiet_certificate_bounds_an_interior_approach(monkeypatch: pytest.MonkeyPatch) -> None:

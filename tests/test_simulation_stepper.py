@@ -225,14 +225,53 @@ def test_quiet_steps_chain_like_the_engine(monkeypatch: pytest.MonkeyPatch) -> N
     for flag in (True, False):
         monkeypatch.setattr(_stepper, "_QUIET", flag)
         state = ExactState(0.0, 0.0, commands[0])
-        V, travel, quiet = [], [], 0
+        V, travel, quiet, modes, events = [], [], 0, [], []
         for k, command in enumerate(commands):
             step = advance(plant, state, command, (k + 1) * DT)
             state = step.state
             V.append(state.V)
             travel.append(step.body_displacement)
             quiet += step._quiet
-        runs[flag] = np.array(V), np.array(travel), quiet
+            modes.append(state.stuck)
+            events.extend((e.kind, e.contact) for e in step.events)
+        runs[flag] = np.array(V), np.array(travel), quiet, modes, events
+    # (the walk clips several contacts to one speed limit: the stuck-group case is taken too)
     assert runs[True][2] > 1500 and runs[False][2] == 0
     np.testing.assert_allclose(runs[True][0], runs[False][0], rtol=RTOL, atol=ATOL)
     np.testing.assert_allclose(runs[True][1], runs[False][1], rtol=RTOL, atol=ATOL * DT)
+    assert runs[True][3] == runs[False][3]
+    assert runs[True][4] == runs[False][4]
+
+
+def test_quiet_certificate_bounds_an_interior_approach(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The body (V = 0.1 s under 0.5 - 0.4 N, m = 1 kg) and contact 0 lagging from -0.002 m/s
+    # towards u: the gap g(s) = 0.002 + 0.1 s - (u + 0.002)(1 - exp(-s / tau)) has its
+    # minimum inside the step (s* = tau log(e / 0.1), e = (u + 0.002) / tau), below zero
+    # for u above about 0.002 m/s, while g(DT) > 0 for u below about 0.0023 m/s: there the
+    # contact crosses the body and back inside the step with both ends of the gap positive.
+    # The certificate must see that minimum: the shortcut is never taken on a step with
+    # events, and agrees with the engine on the others (tolerances: as in
+    # test_quiet_steps_equal_the_full_engine).
+    from toolkit.simulation import _stepper
+
+    plant = Plant(ContactSet([-0.002, 0.5], [0.4, 0.5]), mass=1.0, motors=Motors(lag=0.0075))
+    state = ExactState(0.0, 0.0, np.array([-0.002, 0.5]))
+    decay = math.exp(-DT / 0.0075)
+    taken = ends_apart_with_events = 0
+    for u in np.linspace(0.0, 0.003, 301):
+        command = np.array([u, 0.5])
+        monkeypatch.setattr(_stepper, "_QUIET", True)
+        fast = advance(plant, state, command, DT)
+        monkeypatch.setattr(_stepper, "_QUIET", False)
+        full = advance(plant, state, command, DT)
+        if full.events and 0.1 * DT > u + (-0.002 - u) * decay:
+            ends_apart_with_events += 1
+        if fast._quiet:
+            taken += 1
+            assert full.events == ()
+        np.testing.assert_allclose(fast.state.V, full.state.V, rtol=RTOL, atol=ATOL)
+        np.testing.assert_allclose(fast.body_displacement, full.body_displacement,
+                                   rtol=RTOL, atol=ATOL * DT)
+        np.testing.assert_allclose(fast.contact_displacements, full.contact_displacements,
+                                   rtol=RTOL, atol=ATOL * DT)
+    assert taken > 100 and ends_apart_with_events > 5, (taken, ends_apart_with_events)

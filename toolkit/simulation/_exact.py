@@ -1237,10 +1237,9 @@ def _quiet_piece(quiet: _QuietPlant, start: np.ndarray, u: np.ndarray, V: float,
             return None
         if r0 != 0.0 and mu != lam:
             e = (u - v0) / tau                          # MotorPiece.coefficients: e_i
-            ratio = e / r0
-            pick = (ratio > 0.0).nonzero()[0]
-            if pick.size:
-                at = np.log(ratio[pick]) / (mu - lam)   # s*: the extremum of g_i
+            pick = ((e > 0.0) if r0 > 0.0 else (e < 0.0)).nonzero()[0]     # e_i / r0 > 0
+            if pick.size:                               # s*: the extremum of g_i (no overflow)
+                at = (np.log(_abs(e[pick])) - math.log(abs(r0))) / (mu - lam)
                 inside = (at > 0.0) & (at < S)
                 if inside.any():
                     pick, at = pick[inside], at[inside]

@@ -147,6 +147,17 @@ class ExactStep:
         """True when the step reached ``t1``."""
         return self.status is _SUCCESS
 
+    @classmethod
+    def _trusted(cls, state: ExactState, body_displacement: float,
+                 contact_displacements: np.ndarray, events: tuple[Event, ...],
+                 status: SimulationStatus, message: str, quiet: bool) -> ExactStep:
+        """A step the engine produced: no dataclass ``__init__`` (frozen fields set once)."""
+        step = object.__new__(cls)
+        step.__dict__.update(state=state, body_displacement=body_displacement,
+                             contact_displacements=contact_displacements, events=events,
+                             status=status, message=message, _quiet=quiet)
+        return step
+
 
 def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
             external: float = 0.0, budget: Budget | None = None) -> ExactStep:
@@ -219,9 +230,9 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
                 speeds_end.setflags(write=False)
                 travelled.setflags(write=False)
                 if math.isfinite(V):
-                    return ExactStep(ExactState._trusted(t1, V, speeds_end, state.stuck,
-                                                         _NO_PENDING),
-                                     body, travelled, (), _SUCCESS, _QUIET_MESSAGE, True)
+                    return ExactStep._trusted(
+                        ExactState._trusted(t1, V, speeds_end, state.stuck, _NO_PENDING),
+                        body, travelled, (), _SUCCESS, _QUIET_MESSAGE, True)
         mu = 1.0 / motors.lag if motors.lag > 0 else 0.0
         rec = _Recorder(budget, 2 * n + 2, mu)
         motor = MotorPiece.build(t0, speeds, u, motors.lag, motors.rate_limit)

@@ -270,14 +270,17 @@ class EstimatorModel:
         from ``V``; the force is constant between contact speeds, and the body sticks where
         it reaches the equilibrium set (:meth:`ContactSet.equilibrium`)."""
         f, m, h = self.forces, self.mass, self.sensors.period
-        lo_eq, hi_eq = ContactSet(speeds, f).equilibrium()
+        contacts = ContactSet(speeds, f)
+        lo_eq, hi_eq = contacts.equilibrium()
         t, v, x = 0.0, V, 0.0
         for _ in range(2 * speeds.size + 2):
             if lo_eq <= v <= hi_eq:
                 break                           # stuck for the rest of the period
             d = 1.0 if v < lo_eq else -1.0      # the body moves towards the set
-            gap = speeds - v
-            F = float(np.dot(f, np.where(gap == 0.0, -d, np.sign(gap))))
+            # The force just past v in the direction of motion: the end of the set-valued
+            # force at v that the contacts at v give once passed (lower moving up).
+            lower, upper = contacts.force_bounds(v)
+            F = float(lower if d > 0 else upper)
             a = F / m
             ahead = speeds[(speeds - v) * d > 0.0]
             s = float(ahead.min() if d > 0 else ahead.max())  # the set lies ahead: never empty

@@ -38,6 +38,8 @@ from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, Simu
                          SimulationStatus, advance, simulate, simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
+from .sweeps import SweepResult, sweep
+from .experiments import MedianLaw
 
 # sensors and estimation (filterpy is imported only where a filter is built)
 from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
@@ -67,6 +69,8 @@ __all__ = [
     "Encoder", "Sensors", "EncoderRecord", "EncoderSample", "measure", "record_simulation",
     "Estimator", "EstimationResult", "EstimatorModel", "CentralDifference", "WheelDifference",
     "KalmanEstimator", "RTSSmoother", "UnscentedEstimator", "chi2_band", "carousel_brake_scenario",
+    # sweeps (pandas is imported with the first sweep; dask only for a cluster)
+    "sweep", "SweepResult", "MedianLaw",
     # plots (matplotlib is imported when one is drawn)
     "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision",
     # scenes and studies

@@ -150,3 +150,36 @@ def test_bad_experiment_and_parameters():
         MedianLaw(friction_spread=-0.1)
     with pytest.raises(ParameterError, match="'contact_radius_error' parameter of MedianLaw"):
         MedianLaw(contact_radius_error=0.7)
+
+
+def test_mean_median_closed_forms():
+    # Closed form: from rest the body stops at clip(0, m - g, m + g) (equal loads), so with the
+    # median held every run gives one speed although the mean varies; with the mean held the
+    # mean is one number (to rounding of the rescaling, atol 1e-15 m/s) and the speed follows
+    # the median.
+    from toolkit.experiments import MeanMedian
+
+    held_median = sweep(MeanMedian(held="median", level=0.05, gap=0.01), 80, seed=1)
+    table = held_median.table
+    np.testing.assert_allclose(table["speed"], 0.04, rtol=0, atol=1e-15)
+    assert held_median.summary["mean_range"] > 0.03
+    held_mean = sweep(MeanMedian(held="mean", level=0.0, gap=0.01), 80, seed=1)
+    table = held_mean.table
+    np.testing.assert_allclose(table["mean"], 0.0, rtol=0, atol=1e-15)
+    expected = np.clip(0.0, table["median"] - 0.01, table["median"] + 0.01)
+    np.testing.assert_allclose(table["speed"], expected, rtol=0, atol=1e-15)
+
+
+def test_outliers_move_the_body_exactly_when_the_stiction_rule_fails():
+    # The rule 0 in [F(V*+), F(V*-)] at every instant decides whether the body moves: runs
+    # that hold it keep V = V* exactly (deviation 0), the others move (> 1e-12 m/s).
+    from toolkit.experiments import Outliers
+
+    result = sweep(Outliers(amplitude=0.3), 24, seed=3)
+    table = result.table
+    moved = table["deviation"].to_numpy() > 1e-12
+    assert np.array_equal(moved, ~table["held"].to_numpy())
+    assert 0 < moved.sum() < len(table)                  # both kinds of run occur at this seed
+    above = table["lowest_outlier"].to_numpy() > 0
+    assert np.all(table["deviation"].to_numpy()[above] == 0.0)   # outliers above V*: untouched
+    assert result.summary["rule_agreement"] == 1.0

@@ -183,3 +183,31 @@ def test_outliers_move_the_body_exactly_when_the_stiction_rule_fails():
     above = table["lowest_outlier"].to_numpy() > 0
     assert np.all(table["deviation"].to_numpy()[above] == 0.0)   # outliers above V*: untouched
     assert result.summary["rule_agreement"] == 1.0
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5])
+def test_residual_friction_ideal_split_is_n_over_5(n):
+    # Closed forms: equal wheels give mu/mu0 = n/5 exactly and dT = m 2 v_max / (F_tot n/5)
+    # (the exact event time; rtol 1e-12 for rounding).
+    from toolkit.experiments import ResidualFriction
+
+    result = sweep(ResidualFriction(n=n), 3, seed=0)
+    np.testing.assert_allclose(result.table["mu_ratio"], n / 5, rtol=1e-12)
+    np.testing.assert_allclose(result.table["dT"], 1.0 * 2 * 0.35 / (2.0 * n / 5), rtol=1e-12)
+
+
+def test_residual_friction_from_unequal_wheels_and_the_bearing():
+    from toolkit.experiments import ResidualFriction
+
+    # Unequal wheels at n = 0: the band force sum_+ f_i - sum_- f_i has mean 0 and variance
+    # s^2 * 10 f^2 (independent lognormal loads with mean f, relative std s). Over 4000 runs
+    # the sample variance has a relative standard error of about sqrt(2/4000) ~ 2.2 % (a bit
+    # more for the lognormal's tails): tolerance 12 %.
+    s, f = 0.3, 0.2
+    result = sweep(ResidualFriction(n=0, friction_spread=s), 4000, seed=5)
+    band = result.table["band_force"].to_numpy()
+    assert np.var(band, ddof=1) == pytest.approx(s * s * 10 * f * f, rel=0.12)
+    assert abs(band.mean()) < 4 * np.sqrt(s * s * 10 * f * f / 4000)
+    # A Coulomb bearing is a contact at speed 0: the rig reads F_b everywhere in the band.
+    bearing = sweep(ResidualFriction(n=0, bearing_friction=0.18), 2, seed=0)
+    np.testing.assert_allclose(bearing.table["mu_ratio"], 0.18 / 2.0, rtol=1e-12)

@@ -40,7 +40,7 @@ from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, Simu
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
 from .sweeps import SweepResult, sweep
-from .experiments import MeanMedian, MedianLaw, Outliers
+from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
 
 # sensors and estimation (filterpy is imported only where a filter is built)
 from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
@@ -71,7 +71,7 @@ __all__ = [
     "Estimator", "EstimationResult", "EstimatorModel", "CentralDifference", "WheelDifference",
     "KalmanEstimator", "RTSSmoother", "UnscentedEstimator", "chi2_band", "carousel_brake_scenario",
     # sweeps (pandas is imported with the first sweep; dask only for a cluster)
-    "sweep", "SweepResult", "MedianLaw", "MeanMedian", "Outliers",
+    "sweep", "SweepResult", "MedianLaw", "MeanMedian", "Outliers", "ResidualFriction",
     # plots (matplotlib is imported when one is drawn)
     "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_median_law",
     "plot_ratio_histogram", "plot_mean_median", "plot_outliers", "plot_summary_comparison",

@@ -8,8 +8,9 @@ summary statistics); its parameters include the non-idealities of the real carou
 from .mean_median import MeanMedian
 from .median_law import MedianLaw, median_law_slope
 from .outliers import Outliers
+from .residual_friction import ResidualFriction
 
-__all__ = ["MedianLaw", "MeanMedian", "Outliers", "median_law_slope", "EXPERIMENTS"]
+__all__ = ["MedianLaw", "MeanMedian", "Outliers", "ResidualFriction", "median_law_slope", "EXPERIMENTS"]
 
 #: Experiments by name (the ``experiment`` key of a scene's ``[sweep]`` section).
-EXPERIMENTS = {cls.name: cls for cls in (MedianLaw, MeanMedian, Outliers)}
+EXPERIMENTS = {cls.name: cls for cls in (MedianLaw, MeanMedian, Outliers, ResidualFriction)}

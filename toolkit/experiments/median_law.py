@@ -12,8 +12,11 @@ midpoint that ``numpy.median`` returns (PHYSICS.md section 4); with odd ``n`` th
 
 Non-idealities (each a physical parameter, 0 = ideal)
 -----------------------------------------------------
-friction_spread : relative std of each contact's friction magnitude (lognormal, mean kept),
-    drawn per run: unequal wheels. Moves the equilibrium to the weighted median.
+friction_spread : relative std of each contact's friction magnitude (lognormal, mean kept):
+    unequal wheels. Moves the equilibrium to the weighted median. With ``wheel_seed`` the
+    loads are drawn once from that seed (one carousel, its wheels in every run, as in the
+    paper's 660 runs); without, they are drawn anew in every run (a Monte Carlo over
+    carousels).
 damping : bearing drag ``c``, N s/m: the body settles where ``F(V) = c V``.
 wheel_radius_bias, wheel_radius_std : relative error of the wheels' radius, common to all
     wheels (calibration, tyre compression) and per wheel (manufacturing): a wheel commanded
@@ -89,6 +92,9 @@ class MedianLaw:
     friction_spread, damping, wheel_radius_bias, wheel_radius_std, contact_radius_error,
     compliance : float
         Non-idealities (module docstring), default 0.
+    wheel_seed : int, optional
+        Draw the wheels' loads (``friction_spread``) and radius errors (``wheel_radius_std``)
+        once from this seed: one carousel for every run.
     settle_time : float, s, optional
         Observation time of each run from rest (default 20 s, a hundred times the ideal
         carousel's longest startup ``2 v_max / (F_tot/m)``). Unequal loads can leave a tiny
@@ -107,6 +113,7 @@ class MedianLaw:
     contact_radius_error: float = 0.0
     compliance: float = 0.0
     settle_time: float | None = None
+    wheel_seed: int | None = None
     name: str = "median_law"
 
     def __post_init__(self) -> None:
@@ -121,26 +128,40 @@ class MedianLaw:
             if not -0.5 < value < 0.5:
                 raise ParameterError(parameter_message(key, _OWNER, "lie in (-0.5, 0.5)", value))
             set_(key, value)
+        if self.wheel_seed is not None:
+            set_("wheel_seed", as_int(self.wheel_seed, "wheel_seed", _OWNER, low=0))
         if self.settle_time is not None:
             set_("settle_time", as_float(self.settle_time, "settle_time", _OWNER, low=0.0, low_open=True))
 
     # -- one chunk ------------------------------------------------------------------------
     def draw(self, seeds: list[np.random.SeedSequence]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded speeds (k, n), actual contact speeds (k, n) and friction magnitudes
-        (k, n) of each run, from its own generator (in this order: speeds, wheel errors,
-        frictions)."""
+        (k, n) of each run, from its own generator (in this order: speeds, wheel radius
+        errors, loads; the last two from ``wheel_seed`` instead when it is given)."""
         n, k = self.n, len(seeds)
         commanded, actual, forces = np.empty((k, n)), np.empty((k, n)), np.empty((k, n))
-        f = self.acceleration * self.mass / n
-        s = self.friction_spread
-        sigma = math.sqrt(math.log1p(s * s))      # lognormal with mean f and relative std s
+        if self.wheel_seed is not None:
+            wheels = np.random.default_rng(self.wheel_seed)
+            scale, load = self._wheels(wheels)
         for j, seq in enumerate(seeds):
             rng = np.random.default_rng(seq)
             commanded[j] = rng.uniform(-self.speed_limit, self.speed_limit, n)
-            scale = 1.0 + self.wheel_radius_bias + self.wheel_radius_std * rng.standard_normal(n)
+            if self.wheel_seed is None:
+                scale, load = self._wheels(rng)
             actual[j] = commanded[j] * scale
-            forces[j] = f * np.exp(sigma * rng.standard_normal(n) - 0.5 * sigma * sigma) if s > 0 else f
+            forces[j] = load
         return commanded, actual, forces
+
+    def _wheels(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Radius scale and friction load of each wheel (in this order from ``rng``)."""
+        n = self.n
+        scale = 1.0 + self.wheel_radius_bias + self.wheel_radius_std * rng.standard_normal(n)
+        f = self.acceleration * self.mass / n
+        s = self.friction_spread
+        if s == 0:
+            return scale, np.full(n, f)
+        sigma = math.sqrt(math.log1p(s * s))      # lognormal with mean f and relative std s
+        return scale, f * np.exp(sigma * rng.standard_normal(n) - 0.5 * sigma * sigma)
 
     def horizon(self) -> float:
         """Observation time of each run, s (``settle_time``, default 20 s)."""

@@ -39,6 +39,7 @@ from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, Simu
                          SimulationStatus, advance, simulate, simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
+from . import sweeps
 from .sweeps import SweepResult, sweep
 from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
 

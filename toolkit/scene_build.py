@@ -470,8 +470,12 @@ def _estimation(scene: Scene, plant: Plant | None) -> EstimationObjects | None:
         n = plant.n
         offsets = np.linspace(-spec.spread, spec.spread, n)
         cruise, brake = spec.cruise + offsets, spec.brake + offsets
-        for key, speeds in (("estimation.cruise", cruise), ("estimation.brake", brake)):
-            _within_limits(key, speeds, replace(scene.motors, clip=False) if scene.motors else None)
+        low, high = scene.motors.speed_limits if scene.motors is not None else (-math.inf, math.inf)
+        for key, centre in (("estimation.cruise", spec.cruise), ("estimation.brake", spec.brake)):
+            if centre - spec.spread < low or centre + spec.spread > high:
+                raise SceneError(f"The {key!r} value in the scene must keep {key.split('.')[1]} +- "
+                                 f"estimation.spread ({spec.spread:g} m/s) within the motors' speed limits "
+                                 f"[{low:g}, {high:g}] m/s. Got {centre:g} m/s instead.")
         rng = np.random.default_rng([spec.seed, 1])      # the sensors draw from default_rng(seed)
         forces = plant.contacts.forces * np.maximum(1.0 + spec.friction_spread * rng.standard_normal(n), 0.0)
         commands = PiecewiseConstant([spec.brake_time], [cruise, brake])

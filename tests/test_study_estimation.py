@@ -52,11 +52,13 @@ def test_estimation_stage_is_the_carousel_brake_scenario():
     rows = {row["name"]: row for row in study.rows()}
     for name, estimator in (("central_difference", CentralDifference(reference.sensors)),
                             ("kalman", KalmanEstimator(reference.model)), ("rts", RTSSmoother(reference.model))):
-        expected = estimator.run(reference.record)
+        expected = estimator.run(reference.record, speed_std=1e-4)   # the section's default prior
         assert rows[name]["rms"] == pytest.approx(expected.rms_error, rel=1e-15, abs=0)
         assert rows[name]["max_error"] == pytest.approx(expected.max_error, rel=1e-15, abs=0)
     # The smoother sees the future: never worse than the filter on the same record.
     assert rows["rts"]["rms"] <= rows["kalman"]["rms"]
+    # The first criterion on this record: the filter at most 1/10 of differencing.
+    assert rows["kalman"]["rms"] <= rows["central_difference"]["rms"] / 10
 
 
 def test_friction_spread_draws_the_true_forces_and_tells_the_model():
@@ -168,6 +170,7 @@ BAD = [
     (_with(ESTIMATE, "cruise = 0.2 ", "cruise = nan "), "'estimation.cruise'", "must be finite"),
     (_with(LOOP, "slope = 40.0 ", "slope = inf "), "'control.slope'", "must be finite"),
     (_with(LOOP, "v0 = 0.0 ", "v0 = -inf "), "'control.v0'", "must be finite"),
+    (_with(ESTIMATE, "speed_std = 1e-4 ", "speed_std = 0.0 "), "'estimation.speed_std'", "must be > 0"),
     (_with(ESTIMATE, "seed = 0", "seed = 0\ninitial_covariance = [[nan, 0.0], [0.0, 1.0]]"),
      "'estimation.initial_covariance[0][0]'", "must be finite"),
     (_with(LOOP, "cross_check = true", "cross_check = true\nbudget = {wall_time = nan}"),

@@ -16,7 +16,31 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
                      its parameters, method, strict, dt, fixed, failed, liftable, time_limit
     [schedule]       kind = braking | track, its parameters, v0, period, epsilon, horizon
     [simulation]     t_end; v0; method; options (budget); commands
+    [estimation]     methods; scenario = brake | simulation; duration; brake_time; cruise;
+                     brake; spread; friction_spread; seed; missed_count_prob; count_noise;
+                     jitter; speed_std; initial_covariance
+    [control]        controller = viscosity | speed_hold | friction_brake | open_loop, its
+                     parameters; duration; v0; sensors; estimator; rate; seed; noise; budget;
+                     cross_check
     [report]         plots; curve_points
+
+``[estimation]`` (needs ``[body]`` and both encoders in ``[sensors]``), units:
+``methods`` names from :data:`ESTIMATION_METHODS` (default all but ``"ukf"``);
+``duration``, ``brake_time`` (s); ``cruise``, ``brake``, ``spread`` (m/s: the contacts at
+``cruise + linspace(-spread, spread, n)`` from rest, at ``brake + ...`` from
+``brake_time``); ``friction_spread`` (relative std of the true ``f_i``); ``seed``
+(integer); ``missed_count_prob`` (probability); ``count_noise`` (counts); ``jitter`` (s);
+``speed_std`` (m/s, prior std of the start speed, default 1e-4); ``initial_covariance``
+(2 x 2: m^2, m^2/s, (m/s)^2). ``[control]`` (needs ``[body]``):
+``slope`` (N s/m), ``reference`` (m/s), ``band`` (m/s), ``kp`` (1), ``ki`` (1/s),
+``fraction`` (mu/mu0), ``start`` (s), ``hold`` (m/s), ``duration`` (s), ``v0`` (m/s),
+``sensors`` (true/false; default: whether ``[sensors]`` exists), ``estimator`` (one of
+:data:`LOOP_ESTIMATORS`), ``rate`` (Hz, ideal loop), ``seed``, the noise keys as above,
+``budget = {wall_time (s), max_steps, max_event_rate (1/s)}`` per plant step,
+``cross_check`` (true/false: also simulate the loop with python-control). See
+:class:`EstimationSpec` and :class:`ControlSpec`. An estimator or a closed loop reading
+encoders on a scene without them is refused, and so is a rate that would take more than
+10^7 samples.
 
 Signals given as tables (``body.external_force``, ``simulation.commands``) are piecewise
 constant: ``{times = [t_1, ..., t_k], values = [x_0, x_1, ..., x_k]}`` holds ``x_0`` before
@@ -561,8 +585,10 @@ class EstimationSpec:
     friction draws); ``friction_spread`` (relative std of each true ``f_i`` around the
     declared one, drawn once; the model-based estimators are told the spread, not the
     draw); ``missed_count_prob``, ``count_noise`` (counts), ``jitter`` (s) of the encoders;
-    ``initial_covariance`` (2 x 2, symmetric positive definite: m^2, m^2/s, (m/s)^2; the
-    filters' prior on (position, speed)).
+    ``speed_std`` (m/s, > 0, default 1e-4: the std of the filters' prior on the start speed,
+    which the scenario knows, rest or ``simulation.v0``); ``initial_covariance`` (2 x 2,
+    symmetric positive definite: m^2, m^2/s, (m/s)^2; the filters' whole prior on (position,
+    speed), replacing ``speed_std``).
     """
 
     methods: tuple[str, ...] = ("central_difference", "wheel_difference", "kalman", "rts")
@@ -577,10 +603,11 @@ class EstimationSpec:
     missed_count_prob: float = 0.0
     count_noise: float = 0.0
     jitter: float = 0.0
+    speed_std: float = 1e-4
     initial_covariance: tuple[tuple[float, ...], ...] | None = None
 
     KEYS = ("methods", "scenario", "duration", "brake_time", "cruise", "brake", "spread", "seed",
-            "friction_spread", *_NOISE_KEYS, "initial_covariance")
+            "friction_spread", *_NOISE_KEYS, "speed_std", "initial_covariance")
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> EstimationSpec:
@@ -605,6 +632,7 @@ class EstimationSpec:
             seed=_integer("estimation.seed", get("seed", 0)),
             friction_spread=_number("estimation.friction_spread", get("friction_spread", 0.0), low=0.0),
             **{key: _number(f"estimation.{key}", get(key, 0.0)) for key in _NOISE_KEYS},
+            speed_std=_number("estimation.speed_std", get("speed_std", 1e-4), low=0.0, low_open=True),
             initial_covariance=(_matrix("estimation.initial_covariance", table["initial_covariance"])
                                 if "initial_covariance" in table else None),
         )

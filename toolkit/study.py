@@ -473,7 +473,8 @@ def estimate_scene(scene: Scene, simulation: SimulationResult | None = None) -> 
         plant, v0 = scene.objects.plant_on(None), scene.simulation.v0
         run = simulation if simulation is not None else _simulation(scene, scene.objects.contacts)
     record = record_simulation(run, plant, objects.sensors, rng=np.random.default_rng(spec.seed))
-    results = tuple(estimator.run(record, speed=v0) for estimator in objects.estimators.values())
+    results = tuple(estimator.run(record, speed=v0, speed_std=spec.speed_std)
+                    for estimator in objects.estimators.values())
     return EstimationStudy(record, results, run, plant)
 
 

@@ -88,7 +88,7 @@ from .scene_build import SceneObjects, build_scene
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
     "SimulationSpec", "EstimationSpec", "ControlSpec", "ReportSpec", "ESTIMATION_METHODS",
-    "LOOP_ESTIMATORS", "CONTROLLERS", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
+    "LOOP_ESTIMATORS", "CONTROLLERS", "with_section", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
 ]
 
 #: Section names of earlier plans, refused with a pointer to the sections that replaced them.

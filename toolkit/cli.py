@@ -177,6 +177,34 @@ def _cmd_precision(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# -- estimate (issue 9): every estimator of the scene over one simulated encoder record -------
+
+def _cmd_estimate(args: argparse.Namespace) -> int:
+    from ._io import write_tree
+    from .report import estimation_files, estimation_lines, estimation_to_dict
+    from .scene import EstimationSpec, with_section
+    from .study import estimate_scene, estimation_shortfalls
+
+    scene = _scene(args, "sensors", "(the encoders to estimate from)")
+    if scene.estimation is None:           # the defaults: the brake scenario, four estimators
+        scene = with_section(scene, "estimation", EstimationSpec())
+    out = _out_dir(args, scene)
+    study = estimate_scene(scene)
+    shortfalls = estimation_shortfalls(scene, study)
+    plots_too = scene.report is None or scene.report.plots
+    written = write_tree(out, estimation_files(study, scene.name, plots_too=plots_too))
+    if args.json:
+        data = estimation_to_dict(study)
+        data.pop("series")
+        _print_json({"scene": scene.name, **data, "shortfalls": shortfall_dicts(shortfalls),
+                     "written": [str(p) for p in written]})
+    else:
+        for line in estimation_lines(study):
+            print(line)
+        print(f"wrote {', '.join(str(p) for p in written)}")
+    return _finish(shortfalls)
+
+
 def _flags(row: Any) -> str:
     names = [name for name in ("chattering", "step_collapse", "creep", "stalled") if getattr(row, name)]
     return f" [{', '.join(names)}]" if names else ""
@@ -249,6 +277,10 @@ def _parser() -> argparse.ArgumentParser:
     precision.add_argument("--repeats", type=_at_least(1), default=3, help="timing repeats (default 3)")
     precision.add_argument("--out", metavar="DIR", help="also write precision.json and precision.png into "
                            "this folder, replaced as a whole")
+    estimate = command("estimate", _cmd_estimate,
+                       "simulate the scene's [estimation] record (default: startup then brake) and "
+                       "score every estimator against the truth; writes estimate.json and estimate.png")
+    estimate.add_argument("--out", metavar="DIR", help=out_help)
     stability = command("stability", _cmd_stability,
                         "stability suite over stiff and extreme cases (exit 1 if a case fails)", scene=False)
     stability.add_argument("--quick", action="store_true", help="the smaller, faster set of cases")

@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "figure_png",
+__all__ = ["plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_estimation",
+           "plot_closed_loop", "figure_png",
            "plot_median_law", "plot_ratio_histogram", "plot_mean_median", "plot_outliers",
            "plot_summary_comparison",
            "MAX_LINES", "ERROR_LEVEL"]
@@ -411,6 +412,97 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
     _title(ax, title, "work-precision (error vs. run time)")
     ax.legend(fontsize="x-small", loc="best")
     return ax
+
+
+# -- estimation and the closed loop -------------------------------------------------------------
+#: Line styles of the estimators (truth black; finite differences thin and pale).
+_ESTIMATOR_STYLE = {"central_difference": dict(color="C7", lw=0.7, label="central finite difference"),
+                    "wheel_difference": dict(color="C8", lw=0.7, label="wheel finite difference"),
+                    "kalman": dict(color="C0", lw=1.2, label="Kalman filter"),
+                    "rts": dict(color="C3", lw=1.0, ls="--", label="RTS smoother"),
+                    "unscented": dict(color="C2", lw=1.0, label="unscented filter")}
+
+
+def plot_estimation(study: Any, axes: Any = None, *, title: str | None = None):
+    """Truth, finite differences, filter and smoother over time (top) and their errors (bottom).
+
+    Parameters
+    ----------
+    study : EstimationStudy
+        From :func:`toolkit.study.estimate_scene`.
+    axes : pair of matplotlib Axes, optional
+    title : str, optional
+        The scene name.
+
+    Returns
+    -------
+    pair of matplotlib Axes
+    """
+    top, bottom = axes if axes is not None else _figure(2, (7.0, 6.0))
+    record = study.record
+    t, truth = record.times, record.truth_speed
+    top.plot(t, truth, color="k", lw=1.6, label="truth V", zorder=_Z_EXACT)
+    for result in study.results:
+        style = dict(_ESTIMATOR_STYLE.get(result.method, dict(lw=1.0, label=result.method)))
+        rms = f" (RMS {result.rms_error * 1e3:.3g} mm/s)" if result.rms_error is not None else ""
+        style["label"] = style["label"] + rms
+        top.plot(t, result.speed, **style)
+        bottom.plot(t, (result.speed - truth) * 1e3, **{k: v for k, v in style.items() if k != "label"})
+    top.set_ylabel("body speed (m/s)")
+    bottom.set_ylabel("error (mm/s)")
+    bottom.set_xlabel("time t (s)")
+    scale = [abs(r.speed - truth).max() for r in study.results if r.method in ("kalman", "rts", "unscented")]
+    if scale:
+        limit = 1e3 * 4.0 * max(scale)
+        bottom.set_ylim(-limit, limit)
+        _note(bottom, "errors of the finite differences clipped to the filters' scale", corner="upper left")
+    bottom.axhline(0.0, color="0.5", lw=0.5)
+    _title(top, title, f"speed from encoder counts at {1.0 / record.period:g} Hz")
+    top.legend(loc="best", fontsize="x-small")
+    return top, bottom
+
+
+def plot_closed_loop(loop: Any, axes: Any = None, *, title: str | None = None,
+                     what: str = "closed loop"):
+    """Closed-loop body speed and the estimate the controller saw (top), commands (bottom).
+
+    Parameters
+    ----------
+    loop : ClosedLoopResult
+    axes : pair of matplotlib Axes, optional
+    title : str, optional
+        The scene name.
+    what : str
+        The loop's description in the title (e.g. the controller).
+
+    Returns
+    -------
+    pair of matplotlib Axes
+    """
+    top, bottom = axes if axes is not None else _figure(2, (7.0, 6.0))
+    t = loop.times
+    top.plot(t, loop.speed, color="k", lw=1.6, label="body speed V", zorder=_Z_EXACT)
+    if loop.record is not None:
+        top.step(t, loop.estimate, where="post", color="C0", lw=1.0, label="estimate (controller input)")
+    commands = np.asarray(loop.commands)
+    n = commands.shape[1]
+    shown = _thinned(n, np.argsort(commands[0], kind="stable"))
+    bottom.step(t, commands[:, shown], where="post", color="0.5", lw=0.8)
+    bottom.plot([], [], color="0.5", lw=0.8, label="commanded contact speeds")
+    _thinning_note(bottom, shown.size, n)
+    if np.any(loop.force != 0):
+        twin = bottom.twinx()
+        twin.step(t, loop.force, where="post", color="C1", lw=1.0)
+        twin.set_ylabel("rig force (N)", color="C1")
+    top.set_ylabel("speed (m/s)")
+    bottom.set_ylabel("command (m/s)")
+    bottom.set_xlabel("time t (s)")
+    _title(top, title, what)
+    if loop.status.name != "SUCCESS":
+        _note(top, f"{loop.message} at t = {t[-1]:.4g} s", corner="upper right", color="C3")
+    top.legend(loc="best", fontsize="small")
+    bottom.legend(loc="best", fontsize="small")
+    return top, bottom
 
 
 def figure_png(ax: Any) -> bytes:

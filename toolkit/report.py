@@ -23,7 +23,7 @@ from .study import Shortfall, StudyResult
 
 __all__ = ["study_summary", "study_to_dict", "study_files", "write_study", "to_json", "schedule_csv",
            "schedule_check", "schedule_lines", "shortfall_dicts", "shortfall_line", "write_precision",
-           "write_schedule"]
+           "write_schedule", "estimation_to_dict", "estimation_lines", "estimation_files", "control_lines"]
 
 
 def _clean(value: Any) -> Any:
@@ -104,6 +104,52 @@ def shortfall_line(shortfalls: list[Shortfall] | tuple[Shortfall, ...]) -> str:
     return "shortfall: " + "; ".join(map(str, shortfalls))
 
 
+def estimation_to_dict(study: Any) -> dict[str, Any]:
+    """``estimators`` (a list of ``{name, rms, max_error, nees_mean, nees_band, wall_time,
+    real_time_ratio}``: m/s, s) and ``duration`` (the record's length, s), with the sample
+    times, the truth and each estimator's speeds under ``series``."""
+    return {"estimators": study.rows(), "duration": study.duration, "samples": study.record.n_samples,
+            "simulation_status": study.simulation.status,
+            "series": {"times": study.record.times, "truth": study.record.truth_speed,
+                       **{r.method: r.speed for r in study.results}}}
+
+
+def estimation_lines(study: Any) -> list[str]:
+    """A table of the estimators' scores, one line each."""
+    lines = [f"estimation over {study.duration:g} s ({study.record.n_samples} samples):",
+             f"  {'estimator':20} {'rms (mm/s)':>10} {'max (mm/s)':>10} {'NEES mean':>10} "
+             f"{'95% band':>14} {'wall (ms)':>9} {'x real time':>11}"]
+    for row in study.rows():
+        nees = "" if row["nees_mean"] is None else f"{row['nees_mean']:.3g}"
+        band = "" if row["nees_band"] is None else f"[{row['nees_band'][0]:.3g}, {row['nees_band'][1]:.3g}]"
+        lines.append(f"  {row['name']:20} {row['rms'] * 1e3:10.3g} {row['max_error'] * 1e3:10.3g} "
+                     f"{nees:>10} {band:>14} {row['wall_time'] * 1e3:9.3g} {row['real_time_ratio']:11.4g}")
+    return lines
+
+
+def control_lines(study: Any) -> list[str]:
+    """Human lines on a closed loop."""
+    d = study.to_dict()
+    seen = f"{d['estimator']} estimate" if d["estimator"] else "the true speed (ideal loop)"
+    line = (f"closed loop ({d['controller']} on {seen}): V({d['times'][-1]:g} s) = {d['final_speed']:.6g} m/s, "
+            f"{d['samples']} samples in {d['wall_time'] * 1e3:.1f} ms; {d['message']}")
+    lines = [line]
+    if d["estimator"]:
+        lines.append(f"estimate error: RMS {d['estimate_rms_error'] * 1e3:.3g} mm/s, max "
+                     f"{d['estimate_max_error'] * 1e3:.3g} mm/s")
+    if d["cross_check_max_difference"] is not None:
+        lines.append(f"python-control interconnection: largest difference {d['cross_check_max_difference']:.3g} m/s")
+    return lines
+
+
+def estimation_files(study: Any, name: str, *, plots_too: bool = True) -> dict[str, bytes]:
+    """``estimate.json`` and (``plots_too``) ``estimate.png``, rendered in memory."""
+    payload = {"estimate.json": to_json({"scene": name, **estimation_to_dict(study)}).encode()}
+    if plots_too:
+        payload["estimate.png"] = plots.figure_png(plots.plot_estimation(study, title=name))
+    return payload
+
+
 def study_to_dict(result: StudyResult) -> dict[str, Any]:
     """Everything the study computed, JSON-able."""
     out: dict[str, Any] = {"scene": result.scene.name, "stages": list(result.stages),
@@ -119,6 +165,10 @@ def study_to_dict(result: StudyResult) -> dict[str, Any]:
                            "exact_check": schedule_check(result.schedule, result.schedule_check)}
     if result.simulation is not None:
         out["simulation"] = _simulation_dict(result.simulation)
+    if result.estimation is not None:
+        out["estimation"] = estimation_to_dict(result.estimation)
+    if result.control is not None:
+        out["control"] = result.control.to_dict()
     return out
 
 
@@ -144,6 +194,10 @@ def study_summary(result: StudyResult) -> list[str]:
         s = result.simulation
         lines.append(f"simulation ({s.method}): V({s.t[-1]:g} s) = {s.V[-1]:.6g} m/s after "
                      f"{s.n_events} events in {s.wall_time * 1e3:.1f} ms; {s.status.value}")
+    if result.estimation is not None:
+        lines.extend(estimation_lines(result.estimation))
+    if result.control is not None:
+        lines.extend(control_lines(result.control))
     lines.extend(f"shortfall: {shortfall}" for shortfall in result.shortfalls)
     return lines
 
@@ -163,6 +217,12 @@ def study_files(result: StudyResult) -> dict[str, bytes]:
         if result.schedule is not None:
             payload["schedule.png"] = plots.figure_png(
                 plots.plot_schedule(result.schedule, result.schedule_check, plant=plant, title=name))
+        if result.estimation is not None:
+            payload["estimation.png"] = plots.figure_png(plots.plot_estimation(result.estimation, title=name))
+        if result.control is not None:
+            c = result.control
+            what = f"closed loop, {c.controller}" + (f" on the {c.estimator} estimate" if c.estimator else "")
+            payload["closed_loop.png"] = plots.figure_png(plots.plot_closed_loop(c.loop, title=name, what=what))
     if result.schedule is not None:
         payload["schedule.csv"] = schedule_csv(result.schedule).encode()
         payload["schedule.json"] = to_json(result.schedule.to_dict()).encode()

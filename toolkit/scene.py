@@ -16,7 +16,31 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
                      its parameters, method, strict, dt, fixed, failed, liftable, time_limit
     [schedule]       kind = braking | track, its parameters, v0, period, epsilon, horizon
     [simulation]     t_end; v0; method; options (budget); commands
+    [estimation]     methods; scenario = brake | simulation; duration; brake_time; cruise;
+                     brake; spread; friction_spread; seed; missed_count_prob; count_noise;
+                     jitter; speed_std; initial_covariance
+    [control]        controller = viscosity | speed_hold | friction_brake | open_loop, its
+                     parameters; duration; v0; sensors; estimator; rate; seed; noise; budget;
+                     cross_check
     [report]         plots; curve_points
+
+``[estimation]`` (needs ``[body]`` and both encoders in ``[sensors]``), units:
+``methods`` names from :data:`ESTIMATION_METHODS` (default all but ``"ukf"``);
+``duration``, ``brake_time`` (s); ``cruise``, ``brake``, ``spread`` (m/s: the contacts at
+``cruise + linspace(-spread, spread, n)`` from rest, at ``brake + ...`` from
+``brake_time``); ``friction_spread`` (relative std of the true ``f_i``); ``seed``
+(integer); ``missed_count_prob`` (probability); ``count_noise`` (counts); ``jitter`` (s);
+``speed_std`` (m/s, prior std of the start speed, default 1e-4); ``initial_covariance``
+(2 x 2: m^2, m^2/s, (m/s)^2). ``[control]`` (needs ``[body]``):
+``slope`` (N s/m), ``reference`` (m/s), ``band`` (m/s), ``kp`` (1), ``ki`` (1/s),
+``fraction`` (mu/mu0), ``start`` (s), ``hold`` (m/s), ``duration`` (s), ``v0`` (m/s),
+``sensors`` (true/false; default: whether ``[sensors]`` exists), ``estimator`` (one of
+:data:`LOOP_ESTIMATORS`), ``rate`` (Hz, ideal loop), ``seed``, the noise keys as above,
+``budget = {wall_time (s), max_steps, max_event_rate (1/s)}`` per plant step,
+``cross_check`` (true/false: also simulate the loop with python-control). See
+:class:`EstimationSpec` and :class:`ControlSpec`. An estimator or a closed loop reading
+encoders on a scene without them is refused, and so is a rate that would take more than
+10^7 samples.
 
 Signals given as tables (``body.external_force``, ``simulation.commands``) are piecewise
 constant: ``{times = [t_1, ..., t_k], values = [x_0, x_1, ..., x_k]}`` holds ``x_0`` before
@@ -63,10 +87,12 @@ from .scene_build import SceneObjects, build_scene
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
-    "SimulationSpec", "ReportSpec", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
+    "SimulationSpec", "EstimationSpec", "ControlSpec", "ReportSpec", "ESTIMATION_METHODS",
+    "LOOP_ESTIMATORS", "CONTROLLERS", "with_section", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
 ]
 
-PLANNED_SECTIONS = ("estimator", "controller")
+#: Section names of earlier plans, refused with a pointer to the sections that replaced them.
+PLANNED_SECTIONS = {"estimator": "estimation", "controller": "control"}
 #: Largest scene file :func:`load_scene` reads, bytes (1 MiB): a scene is a short text.
 MAX_SCENE_BYTES = 1 << 20
 #: Largest generated array a scene may ask for (random contacts, curve samples): 1e7.
@@ -497,6 +523,193 @@ class SimulationSpec:
         )
 
 
+#: Estimators an ``[estimation]`` section may name (``methods``), in report order.
+ESTIMATION_METHODS = ("central_difference", "wheel_difference", "kalman", "rts", "ukf")
+#: Estimators a ``[control]`` loop may read (the smoother needs the future: offline only).
+LOOP_ESTIMATORS = ("kalman", "central_difference", "wheel_difference", "ukf")
+#: Controllers a ``[control]`` section may name, with the keys each takes.
+CONTROLLERS = {"viscosity": ("slope", "reference", "band"),
+               "speed_hold": ("reference", "slope", "kp", "ki"),
+               "friction_brake": ("fraction", "start", "hold"),
+               "open_loop": ()}
+_CONTROLLER_REQUIRED = {"viscosity": ("slope",), "speed_hold": ("reference", "slope"),
+                        "friction_brake": ("fraction",), "open_loop": ()}
+#: ``[estimation] scenario`` values and the keys only each takes.
+SCENARIOS = {"brake": ("duration", "brake_time", "cruise", "brake", "spread", "friction_spread"),
+             "simulation": ()}
+_NOISE_KEYS = ("missed_count_prob", "count_noise", "jitter")
+
+
+def _names(where: str, value: Any, choices: tuple[str, ...]) -> tuple[str, ...]:
+    """A non-empty list of distinct names from ``choices`` (unknown ones with a suggestion)."""
+    if not isinstance(value, list) or not value:
+        raise _fail(where, f"be a non-empty list of names from {list(choices)}", value)
+    names = tuple(_text(f"{where}[{i}]", item) for i, item in enumerate(value))
+    for i, item in enumerate(names):
+        if item not in choices:
+            raise SceneError(f"The '{where}[{i}]' value in the scene must be one of {list(choices)}. "
+                             f"Got {item!r} instead.{suggestion(item, choices)}")
+    if len(set(names)) != len(names):
+        raise _fail(where, "name each method once", list(names))
+    return names
+
+
+def _choice(where: str, value: Any, choices: Any) -> str:
+    text = _text(where, value)
+    if text not in choices:
+        raise SceneError(f"The {where!r} value in the scene must be one of {list(choices)}. "
+                         f"Got {text!r} instead.{suggestion(text, choices)}")
+    return text
+
+
+def _matrix(where: str, value: Any) -> tuple[tuple[float, ...], ...]:
+    """A non-empty list of equally long rows of finite numbers (its rules: the constructor's)."""
+    if not isinstance(value, list) or not value or not all(isinstance(row, list) for row in value):
+        raise _fail(where, "be a matrix (a list of rows of numbers)", value)
+    rows = tuple(_numbers(f"{where}[{i}]", row) for i, row in enumerate(value))
+    if len({len(row) for row in rows}) != 1:
+        raise _fail(where, "have rows of one length", [list(r) for r in rows])
+    return rows
+
+
+@dataclass(frozen=True)
+class EstimationSpec:
+    """``[estimation]``: estimate the body speed from simulated encoder counts (needs
+    ``[sensors]`` with both encoders and ``[body]``).
+
+    ``methods`` (names from :data:`ESTIMATION_METHODS`; default the first four, ``"ukf"`` is
+    slower); ``scenario``: ``"brake"`` (default: the contacts at ``cruise + linspace(-spread,
+    spread, n)`` m/s from rest, then at ``brake + ...`` from ``brake_time`` s, over
+    ``duration`` s; defaults 0.2, 0.05, -0.1, 5, 10) or ``"simulation"`` (the scene's own
+    ``[simulation]``, exact, recorded over its ``t_end``); ``seed`` (integer, the sensors' and
+    friction draws); ``friction_spread`` (relative std of each true ``f_i`` around the
+    declared one, drawn once; the model-based estimators are told the spread, not the
+    draw); ``missed_count_prob``, ``count_noise`` (counts), ``jitter`` (s) of the encoders;
+    ``speed_std`` (m/s, > 0, default 1e-4: the std of the filters' prior on the start speed,
+    which the scenario knows, rest or ``simulation.v0``); ``initial_covariance`` (2 x 2,
+    symmetric positive definite: m^2, m^2/s, (m/s)^2; the filters' whole prior on (position,
+    speed), replacing ``speed_std``).
+    """
+
+    methods: tuple[str, ...] = ("central_difference", "wheel_difference", "kalman", "rts")
+    scenario: str = "brake"
+    duration: float | None = None
+    brake_time: float = 5.0
+    cruise: float = 0.2
+    brake: float = -0.1
+    spread: float = 0.05
+    seed: int = 0
+    friction_spread: float = 0.0
+    missed_count_prob: float = 0.0
+    count_noise: float = 0.0
+    jitter: float = 0.0
+    speed_std: float = 1e-4
+    initial_covariance: tuple[tuple[float, ...], ...] | None = None
+
+    KEYS = ("methods", "scenario", "duration", "brake_time", "cruise", "brake", "spread", "seed",
+            "friction_spread", *_NOISE_KEYS, "speed_std", "initial_covariance")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> EstimationSpec:
+        _check_keys("estimation", table, cls.KEYS)
+        scenario = _choice("estimation.scenario", table.get("scenario", "brake"), SCENARIOS)
+        for other, keys in SCENARIOS.items():
+            for key in keys:
+                if key in table and key not in SCENARIOS[scenario]:
+                    raise SceneError(f"The [estimation] key {key!r} belongs to scenario = {other!r}; "
+                                     f"scenario = {scenario!r} does not take it.")
+        get = table.get
+        return cls(
+            methods=(_names("estimation.methods", table["methods"], ESTIMATION_METHODS)
+                     if "methods" in table else cls.methods),
+            scenario=scenario,
+            duration=(_number("estimation.duration", table["duration"], low=0.0, low_open=True)
+                      if "duration" in table else None),
+            brake_time=_number("estimation.brake_time", get("brake_time", 5.0), low=0.0),
+            cruise=_number("estimation.cruise", get("cruise", 0.2)),
+            brake=_number("estimation.brake", get("brake", -0.1)),
+            spread=_number("estimation.spread", get("spread", 0.05), low=0.0),
+            seed=_integer("estimation.seed", get("seed", 0)),
+            friction_spread=_number("estimation.friction_spread", get("friction_spread", 0.0), low=0.0),
+            **{key: _number(f"estimation.{key}", get(key, 0.0)) for key in _NOISE_KEYS},
+            speed_std=_number("estimation.speed_std", get("speed_std", 1e-4), low=0.0, low_open=True),
+            initial_covariance=(_matrix("estimation.initial_covariance", table["initial_covariance"])
+                                if "initial_covariance" in table else None),
+        )
+
+    @property
+    def record_duration(self) -> float:
+        """Length of the brake scenario's record, s (default 10)."""
+        return 10.0 if self.duration is None else self.duration
+
+
+@dataclass(frozen=True)
+class ControlSpec:
+    """``[control]``: a closed loop at the sample rate (needs ``[body]``).
+
+    ``controller`` (one of :data:`CONTROLLERS`) and its parameters: ``"viscosity"``:
+    ``slope`` (N s/m), ``reference`` (m/s, default 0), ``band`` (m/s, optional);
+    ``"speed_hold"``: ``reference`` (m/s), ``slope`` (N s/m), ``kp`` (default 0.5), ``ki``
+    (1/s, default 5); ``"friction_brake"``: ``fraction`` (mu/mu0 in [0, 1]), ``start`` (s,
+    default 0), ``hold`` (m/s, optional); ``"open_loop"``: replays the scene's designed
+    ``[schedule]``. Common: ``duration`` (s, default 10), ``v0`` (m/s, default 0),
+    ``sensors`` (true: read the ``[sensors]`` encoders through ``estimator``; false: the
+    ideal loop on the true speed; default: true when the scene has ``[sensors]``),
+    ``estimator`` (one of :data:`LOOP_ESTIMATORS`, default ``"kalman"``), ``rate`` (Hz, the
+    ideal loop's; with sensors theirs), ``seed`` (integer), ``missed_count_prob``,
+    ``count_noise`` (counts), ``jitter`` (s), ``budget`` (``{wall_time, max_steps,
+    max_event_rate}`` of each plant step: s, count, 1/s), ``cross_check`` (true: also
+    simulate the loop as a python-control interconnection, :mod:`toolkit.interop`, and
+    report the largest difference).
+    """
+
+    controller: str
+    params: dict[str, Any] = field(default_factory=dict)
+    duration: float = 10.0
+    v0: float = 0.0
+    sensors: bool | None = None
+    estimator: str | None = None
+    rate: float | None = None
+    seed: int = 0
+    missed_count_prob: float = 0.0
+    count_noise: float = 0.0
+    jitter: float = 0.0
+    budget: dict[str, Any] | None = None
+    cross_check: bool = False
+
+    COMMON = ("controller", "duration", "v0", "sensors", "estimator", "rate", "seed", *_NOISE_KEYS,
+              "budget", "cross_check")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> ControlSpec:
+        kind = _text("control.controller", _require("control", table, "controller"))
+        if kind not in CONTROLLERS:
+            raise SceneError(f"The 'control.controller' value in the scene must be one of "
+                             f"{list(CONTROLLERS)}. Got {kind!r} instead.{suggestion(kind, CONTROLLERS)}")
+        _check_keys("control", table, (*cls.COMMON, *CONTROLLERS[kind]))
+        for key in _CONTROLLER_REQUIRED[kind]:
+            _require("control", table, key)
+        params = {key: _number(f"control.{key}", table[key]) for key in CONTROLLERS[kind] if key in table}
+        get = table.get
+        budget = None
+        if "budget" in table:
+            budget = dict(_table("control.budget", table["budget"]))
+            _check_keys("control.budget", budget, ("wall_time", "max_steps", "max_event_rate"))
+        return cls(
+            controller=kind, params=params,
+            duration=_number("control.duration", get("duration", 10.0), low=0.0, low_open=True),
+            v0=_number("control.v0", get("v0", 0.0)),
+            sensors=_flag("control.sensors", table["sensors"]) if "sensors" in table else None,
+            estimator=(_choice("control.estimator", table["estimator"], LOOP_ESTIMATORS)
+                       if "estimator" in table else None),
+            rate=_number("control.rate", table["rate"]) if "rate" in table else None,
+            seed=_integer("control.seed", get("seed", 0)),
+            **{key: _number(f"control.{key}", get(key, 0.0)) for key in _NOISE_KEYS},
+            budget=budget,
+            cross_check=_flag("control.cross_check", get("cross_check", False)),
+        )
+
+
 @dataclass(frozen=True)
 class ReportSpec:
     """``[report]``: ``plots`` (write PNG figures; needs matplotlib), ``curve_points`` (samples of
@@ -518,7 +731,8 @@ class ReportSpec:
 _SECTIONS: dict[str, Callable[[dict[str, Any]], Any]] = {
     "contacts": ContactsSpec.parse, "body": BodySpec.parse, "motors": MotorsSpec.parse,
     "sensors": SensorsSpec.parse, "target": TargetSpec.parse, "schedule": ScheduleSpec.parse,
-    "simulation": SimulationSpec.parse, "report": ReportSpec.parse,
+    "simulation": SimulationSpec.parse, "estimation": EstimationSpec.parse,
+    "control": ControlSpec.parse, "report": ReportSpec.parse,
 }
 
 
@@ -530,7 +744,7 @@ class Scene:
     ----------
     name, description : str
     contacts : ContactsSpec
-    body, motors, sensors, target, simulation, report : section spec or None
+    body, motors, sensors, target, schedule, simulation, estimation, control, report : section spec or None
     """
 
     name: str
@@ -542,12 +756,14 @@ class Scene:
     target: TargetSpec | None = None
     schedule: ScheduleSpec | None = None
     simulation: SimulationSpec | None = None
+    estimation: EstimationSpec | None = None
+    control: ControlSpec | None = None
     report: ReportSpec | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
         """The stages this scene declares, in the order ``run`` executes them."""
-        order = ("sensors", "target", "schedule", "simulation", "report")
+        order = ("sensors", "target", "schedule", "simulation", "estimation", "control", "report")
         return ("curve",) + tuple(s for s in order if getattr(self, s) is not None)
 
     @functools.cached_property
@@ -575,11 +791,82 @@ def _check_across(sections: dict[str, Any]) -> None:
         if target.dt is not None and (motors is None or not math.isfinite(motors.rate_limit)):
             raise SceneError("'target.dt' limits each contact's change to rate_limit * dt: "
                              "it needs [motors] rate_limit (m/s^2).")
+    _check_sensing(sections)
     simulation = sections.get("simulation")
     if simulation is not None and simulation.commands is not None:
         for i, row in enumerate(simulation.commands["values"]):
             if len(row) != n:
                 raise _fail(f"simulation.commands.values[{i}]", f"hold one speed per contact ({n})", list(row))
+
+
+def _missing_encoders(sensors: Any) -> list[str]:
+    """The ``[sensors]`` keys an estimator needs that the section does not declare."""
+    if sensors is None:
+        return ["[sensors]"]
+    return [key for key in ("central_counts_per_rev", "wheel_counts_per_rev")
+            if getattr(sensors, key) is None]
+
+
+def _check_sensing(sections: dict[str, Any]) -> None:
+    """An estimator or a controller on the sensors it needs; options that need sensors."""
+    sensors = sections.get("sensors")
+    estimation = sections.get("estimation")
+    if estimation is not None:
+        missing = _missing_encoders(sensors)
+        if missing:
+            raise SceneError(f"The [estimation] section reads both encoders (central and wheels): it "
+                             f"needs {' and '.join(missing if missing == ['[sensors]'] else [f'sensors.{m}' for m in missing])}.")
+        if estimation.scenario == "simulation":
+            simulation = sections.get("simulation")
+            if simulation is None or simulation.method != "exact":
+                raise SceneError("'estimation.scenario' = 'simulation' records the scene's [simulation] "
+                                 "run: it needs a [simulation] section with method = 'exact' (the "
+                                 "encoders count the exact dense output).")
+            if estimation.duration is not None:
+                raise SceneError("'estimation.duration' belongs to scenario = 'brake'; scenario = "
+                                 "'simulation' records [simulation] t_end.")
+    control = sections.get("control")
+    if control is None:
+        return
+    if control.controller == "open_loop" and "schedule" not in sections:
+        raise SceneError("'control.controller' = 'open_loop' replays the scene's designed schedule: it "
+                         "needs a [schedule] section.")
+    if control.cross_check and control.jitter != 0.0:
+        raise _fail("control.cross_check", "be false when the encoders jitter (python-control's "
+                    "discrete-time systems read at k dt)", control.cross_check)
+    reads = control.sensors if control.sensors is not None else sensors is not None
+    if reads:
+        missing = _missing_encoders(sensors)
+        if missing:
+            shown = missing if missing == ["[sensors]"] else [f"sensors.{m}" for m in missing]
+            raise SceneError(f"The [control] loop reads the encoders through an estimator "
+                             f"(control.sensors = true): it needs {' and '.join(shown)} (or set "
+                             f"control.sensors = false for the ideal loop on the true speed).")
+        if control.rate is not None and control.rate != sensors.rate:
+            raise _fail("control.rate", f"equal sensors.rate ({sensors.rate:g} Hz) when the loop reads "
+                        "the sensors, or be left out", control.rate)
+    else:
+        if control.estimator is not None:
+            raise _fail("control.estimator", "be left out of an ideal loop (control.sensors = false "
+                        "or no [sensors]): the controller sees the true speed", control.estimator)
+        for key in _NOISE_KEYS:
+            if getattr(control, key) != 0.0:
+                raise _fail(f"control.{key}", "be left out of an ideal loop (no sensors read)",
+                            getattr(control, key))
+
+
+def with_section(scene: Scene, section: str, spec: Any) -> Scene:
+    """``scene`` with one more (or another) section, checked against the others like a loaded
+    scene (e.g. the default ``[estimation]`` that ``active-contacts estimate`` assumes)."""
+    sections = {key: getattr(scene, key) for key in _SECTIONS if getattr(scene, key) is not None}
+    sections[section] = spec
+    for stage in ("simulation", "schedule", "estimation", "control"):
+        if stage in sections and "body" not in sections:
+            raise SceneError(f"A [{stage}] section needs a [body] section (the moving inertia).")
+    _check_across(sections)
+    new = Scene(name=scene.name, description=scene.description, **sections)
+    new.objects
+    return new
 
 
 def loads_scene(text: str, *, name: str = "scene") -> Scene:
@@ -591,8 +878,8 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     allowed = ("scene", *_SECTIONS)
     for key, value in data.items():
         if key in PLANNED_SECTIONS:
-            raise SceneError(f"The [{key}] section is not supported by this version of the toolkit; "
-                             f"remove it. Supported sections: {', '.join(allowed)}.")
+            raise SceneError(f"Unknown section [{key}] in scene {name!r}. Did you mean "
+                             f"[{PLANNED_SECTIONS[key]}]?")
         if key not in allowed:
             hint = suggestion(key, allowed) or f" Valid sections: {', '.join(allowed)}."
             raise SceneError(f"Unknown section [{key}] in scene {name!r}.{hint}")
@@ -603,7 +890,7 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     if "contacts" not in data:
         raise SceneError(f"The scene {name!r} needs a [contacts] section.")
     sections = {key: _SECTIONS[key](value) for key, value in data.items() if key in _SECTIONS}
-    for stage in ("simulation", "schedule"):
+    for stage in ("simulation", "schedule", "estimation", "control"):
         if stage in sections and "body" not in sections:
             raise SceneError(f"A [{stage}] section needs a [body] section (the moving inertia).")
     _check_across(sections)
@@ -691,7 +978,8 @@ def _plain(value: Any) -> Any:
 
 def _section_table(spec: Any) -> dict[str, Any]:
     table: dict[str, Any] = {}
-    defaults = type(spec)() if type(spec) in (MotorsSpec, SensorsSpec, ReportSpec) else None
+    defaults = (type(spec)() if type(spec) in (MotorsSpec, SensorsSpec, ReportSpec, EstimationSpec)
+                else ControlSpec(spec.controller) if type(spec) is ControlSpec else None)
     for item in fields(spec):
         if not item.init:
             continue
@@ -726,6 +1014,10 @@ def dumps_scene(scene: Scene) -> str:
             for name in ("fixed", "failed", "liftable"):
                 if getattr(spec, name):
                     table[name] = list(getattr(spec, name))
+        elif key == "control":
+            table = _section_table(spec)
+            table = {"controller": spec.controller, **_plain(spec.params),
+                     **{k: v for k, v in table.items() if k not in ("controller", "params")}}
         elif key == "motors":
             table = _section_table(spec)
             limits = table.pop("speed_limits", None)

@@ -17,7 +17,16 @@ keys no constructor takes, such as ``motors.speed_limit`` or ``contacts.random``
                             :class:`~toolkit.SpeedTrajectory`)
 ``simulation.options``      the options of :func:`toolkit.simulate`; a ``budget`` table
                             becomes a :class:`~toolkit.simulation.Budget`
+``[estimation]``            :class:`EstimationObjects`: the noisy :class:`~toolkit.model.
+                            sensors.Sensors`, the estimator's :class:`~toolkit.estimation.
+                            EstimatorModel`, the estimators, the brake scenario's plant
+``[control]``               :class:`ControlObjects`: the controller (bound once here to
+                            check it), the sensors and estimator it reads, the step budget
 ==========================  ===============================================================
+
+A rate is refused (under ``sensors.rate`` or ``control.rate``) when it is not > 0, when the
+run it samples would take more than :data:`MAX_RUN_SAMPLES` samples, or when its period is
+below what the simulation clock resolves at the end of the run.
 
 Contact speeds and ``simulation.commands`` beyond the motors' speed limits are refused
 (a :class:`~toolkit.errors.SceneError` naming the key, the limit and the value) unless the
@@ -36,6 +45,7 @@ the scene key::
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -48,13 +58,18 @@ from ._validation import check_option
 from .allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 from .errors import ParameterError, ParameterTypeError, SceneError
 from .model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant
+from .model.sensors import Sensors
 from .schedule import Braking, SpeedTrajectory
 from .simulation import Budget
 
 if TYPE_CHECKING:                      # scene.py imports this module: types only, no cycle
     from .scene import Scene, ScheduleSpec
 
-__all__ = ["Clip", "SceneObjects", "build_scene", "scene_plant", "schedule_target"]
+__all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "scene_plant",
+           "schedule_target", "MAX_RUN_SAMPLES"]
+
+#: Most samples an estimation record or a closed loop may take (its arrays grow with them).
+MAX_RUN_SAMPLES = 10_000_000
 
 #: The parameter name in the single error template (:func:`toolkit.errors.parameter_message`).
 _PARAMETER = re.compile(r"The '(?P<name>[^']+)' parameter of ")
@@ -132,6 +147,10 @@ class SceneObjects:
         :class:`~toolkit.simulation.Budget`); empty without ``[simulation]``.
     clipped : tuple of Clip
         Speeds clipped to the motor limits (``[motors] clip = true``); empty otherwise.
+    estimation : EstimationObjects or None
+        ``[estimation]``.
+    control : ControlObjects or None
+        ``[control]``.
     """
 
     contacts: ContactSet
@@ -142,6 +161,8 @@ class SceneObjects:
     schedule_target: Braking | SpeedTrajectory | None = None
     simulation_options: dict[str, Any] = field(default_factory=dict)
     clipped: tuple[Clip, ...] = ()
+    estimation: EstimationObjects | None = None
+    control: ControlObjects | None = None
 
     def plant_on(self, contacts: ContactSet | None = None) -> Plant:
         """The scene's plant, on other contacts (e.g. allocated ones) when given.
@@ -311,7 +332,8 @@ def build_scene(scene: Scene) -> SceneObjects:
     return SceneObjects(contacts=contacts, motors=motors, plant=plant,
                         encoders=_encoders(scene), target=_target(scene),
                         schedule_target=schedule_target(scene.schedule),
-                        simulation_options=_simulation_options(scene), clipped=tuple(clips))
+                        simulation_options=_simulation_options(scene), clipped=tuple(clips),
+                        estimation=_estimation(scene, plant), control=_control(scene, plant))
 
 
 def _simulation_options(scene: Scene) -> dict[str, Any]:
@@ -334,3 +356,175 @@ def scene_plant(scene: Scene, contacts: ContactSet | None = None) -> Plant:
     """The :class:`~toolkit.model.Plant` a scene declares (needs ``[body]``), optionally on
     other contacts."""
     return scene.objects.plant_on(contacts)
+
+
+# -- estimation and control ------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class EstimationObjects:
+    """What ``[estimation]`` declares, built once.
+
+    Attributes
+    ----------
+    sensors : Sensors
+        The scene's encoders with the section's noise (missed counts, read noise, jitter).
+    model : EstimatorModel
+        What the model-based estimators know: the declared forces (N), the mass (kg), the
+        sensors, the motor lag (s), the drag (N s/m) and ``friction_spread``.
+    estimators : dict of str to Estimator
+        One per ``methods`` entry, in order (each run resets its estimator).
+    plant : Plant or None
+        The brake scenario's plant (true friction: the declared forces with the drawn
+        spread) and its commands; None for ``scenario = "simulation"``.
+    duration : float, s
+        Length of the record (brake scenario); the simulation's ``t_end`` otherwise.
+    """
+
+    sensors: Sensors
+    model: Any
+    estimators: dict[str, Any]
+    plant: Plant | None
+    duration: float
+
+
+@dataclass(frozen=True, eq=False)
+class ControlObjects:
+    """What ``[control]`` declares, built once.
+
+    Attributes
+    ----------
+    controller : Controller or None
+        None for ``"open_loop"`` (the study builds it from the designed schedule).
+    sensors : Sensors or None
+        The encoders read in the loop (None: the ideal loop on the true speed).
+    estimator : Estimator or None
+        What turns the counts into the estimate (with sensors).
+    rate : float, Hz
+    budget : Budget or None
+        Guards of each plant step.
+    """
+
+    controller: Any
+    sensors: Sensors | None
+    estimator: Any
+    rate: float
+    budget: Budget | None
+
+
+def _check_rate(rate: float, duration: float, key: str, what: str) -> None:
+    """A sample rate the run can honour: a resolvable period and at most MAX_RUN_SAMPLES samples."""
+    samples = math.floor(duration * rate + 1e-9) + 1
+    if samples > MAX_RUN_SAMPLES:
+        raise SceneError(f"The {key!r} value in the scene must give at most {MAX_RUN_SAMPLES} samples "
+                         f"over the {what} of {duration:g} s. Got {rate:g} Hz ({samples} samples) instead.")
+    if not duration + 1.0 / rate > duration:
+        raise SceneError(f"The {key!r} value in the scene must give a period the simulation clock "
+                         f"resolves at t = {duration:g} s. Got {rate:g} Hz instead.")
+
+
+def _noisy_sensors(scene: Scene, section: str, spec: Any) -> Sensors:
+    noise = {key: getattr(spec, key) for key in ("missed_count_prob", "count_noise", "jitter")}
+    with _scene_keys(section, _same_keys(section, tuple(noise))):
+        return Sensors.from_spec(scene.sensors, scene.contacts.n, **noise)
+
+
+def _model(plant: Plant, sensors: Sensors, friction_spread: float = 0.0) -> Any:
+    from .estimation import EstimatorModel
+
+    motors = plant.motors
+    with _scene_keys("estimation", {"friction_uncertainty": "estimation.friction_spread"}):
+        return EstimatorModel(plant.contacts.forces, plant.mass, sensors,
+                              motor_lag=motors.lag if motors is not None else 0.0,
+                              damping=plant.damping, friction_uncertainty=friction_spread)
+
+
+def _estimator(name: str, model: Any, section: str, covariance: Any = None) -> Any:
+    """The estimator ``name`` on ``model`` (``initial_covariance`` for the filters)."""
+    from .estimation import (CentralDifference, KalmanEstimator, RTSSmoother, UnscentedEstimator,
+                             WheelDifference)
+
+    if name == "central_difference":
+        return CentralDifference(model.sensors)
+    if name == "wheel_difference":
+        return WheelDifference(model.sensors, model.forces)
+    make = {"kalman": KalmanEstimator, "rts": RTSSmoother, "ukf": UnscentedEstimator}[name]
+    with _scene_keys(section, {"initial_covariance": f"{section}.initial_covariance"}):
+        return make(model, initial_covariance=covariance)
+
+
+def _estimation(scene: Scene, plant: Plant | None) -> EstimationObjects | None:
+    spec = scene.estimation
+    if spec is None:
+        return None
+    assert plant is not None and scene.sensors is not None      # scene.py requires [body], [sensors]
+    sensors = _noisy_sensors(scene, "estimation", spec)
+    model = _model(plant, sensors, spec.friction_spread)
+    covariance = None if spec.initial_covariance is None else np.array(spec.initial_covariance)
+    estimators = {name: _estimator(name, model, "estimation", covariance) for name in spec.methods}
+    scenario_plant = None
+    if spec.scenario == "brake":
+        duration = spec.record_duration
+        if spec.brake_time > duration:
+            raise SceneError(f"The 'estimation.brake_time' value in the scene must be <= "
+                             f"estimation.duration ({duration:g} s). Got {spec.brake_time:g} instead.")
+        n = plant.n
+        offsets = np.linspace(-spec.spread, spec.spread, n)
+        cruise, brake = spec.cruise + offsets, spec.brake + offsets
+        low, high = scene.motors.speed_limits if scene.motors is not None else (-math.inf, math.inf)
+        for key, centre in (("estimation.cruise", spec.cruise), ("estimation.brake", spec.brake)):
+            if centre - spec.spread < low or centre + spec.spread > high:
+                raise SceneError(f"The {key!r} value in the scene must keep {key.split('.')[1]} +- "
+                                 f"estimation.spread ({spec.spread:g} m/s) within the motors' speed limits "
+                                 f"[{low:g}, {high:g}] m/s. Got {centre:g} m/s instead.")
+        rng = np.random.default_rng([spec.seed, 1])      # the sensors draw from default_rng(seed)
+        forces = plant.contacts.forces * np.maximum(1.0 + spec.friction_spread * rng.standard_normal(n), 0.0)
+        commands = PiecewiseConstant([spec.brake_time], [cruise, brake])
+        scenario_plant = replace(plant, contacts=ContactSet(cruise, forces), commands=commands,
+                                 external_force=0.0)
+    else:
+        duration = scene.simulation.t_end                      # type: ignore[union-attr]
+    _check_rate(sensors.rate, duration, "sensors.rate", "estimation record")
+    return EstimationObjects(sensors, model, estimators, scenario_plant, duration)
+
+
+def _control(scene: Scene, plant: Plant | None) -> ControlObjects | None:
+    spec = scene.control
+    if spec is None:
+        return None
+    assert plant is not None                                   # scene.py requires [body]
+    from . import controllers
+
+    p = spec.params
+    with _scene_keys("control", _same_keys("control", tuple(p))):
+        if spec.controller == "viscosity":
+            controller = controllers.VirtualViscosity(p["slope"], p.get("reference", 0.0), p.get("band"))
+        elif spec.controller == "speed_hold":
+            controller = controllers.SpeedHold(p["reference"], p["slope"], p.get("kp", 0.5), p.get("ki", 5.0))
+        elif spec.controller == "friction_brake":
+            controller = controllers.FrictionBrake(p["fraction"], p.get("start", 0.0), p.get("hold"))
+        else:
+            controller = None
+    reads = spec.sensors if spec.sensors is not None else scene.sensors is not None
+    sensors = estimator = None
+    if reads:
+        sensors = _noisy_sensors(scene, "control", spec)
+        estimator = _estimator(spec.estimator or "kalman", _model(plant, sensors), "control")
+        rate, key = sensors.rate, "sensors.rate"
+    else:
+        rate, key = (50.0 if spec.rate is None else spec.rate), "control.rate"
+        if not rate > 0:
+            raise _fail_value(key, "be > 0", rate)
+    _check_rate(rate, spec.duration, key, "closed loop")
+    if controller is not None:
+        # Bind once to check the controller on this plant (e.g. finite speed limits).
+        with _scene_keys("control", {"plant": "motors.speed_limit"}):
+            controller.bind(plant, 1.0 / rate)
+    budget = None
+    if spec.budget is not None:
+        with _scene_keys("control", _same_keys("control.budget", tuple(spec.budget))):
+            budget = Budget(**spec.budget)
+    return ControlObjects(controller, sensors, estimator, rate, budget)
+
+
+def _fail_value(key: str, rule: str, value: Any) -> SceneError:
+    return SceneError(f"The {key!r} value in the scene must {rule}. Got {value!r} instead.")

@@ -24,7 +24,18 @@ schedule       a target beyond the speed limits (best achievable error)         
 schedule       an unverified schedule (exact run left the prediction bound)         m/s
 schedule       a braking target not reached (final distance to it)                  m/s
 simulation     a run stopped before ``t_end`` (budget, Zeno, failure; time left)    s
+estimation     the recorded run stopped before its end (time not recorded)          s
+control        the closed loop stopped before ``duration`` (budget; time left)     s
+control        python-control's simulation of the loop differs from the toolkit's   m/s
 =============  ===================================================================  ======
+
+``[estimation]`` simulates its scenario exactly (the brake scenario's plant, or the scene's
+``[simulation]`` run), records it through the sensor law and runs every estimator over the
+record, scored against the truth (:func:`estimate_scene`). ``[control]`` runs
+:func:`toolkit.simulate_closed_loop` on the scene's plant (declared contacts at ``t = 0``)
+with the declared controller, sensors and estimator (:func:`control_scene`); with
+``cross_check = true`` the same loop is also simulated by python-control
+(:mod:`toolkit.interop`) and compared sample by sample.
 
 The ones that can be known before any work (clipped speeds, a target that needs projection
 or lies beyond reach, a schedule target beyond the speed limits) are
@@ -48,9 +59,16 @@ from .scene import Scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
 from .simulation import SimulationResult, SimulationStatus, simulate
 
+#: Largest difference (m/s) between python-control's and the toolkit's closed loop that the
+#: cross check accepts: both run the same arithmetic (identical numbers, 0 observed); 1e-9
+#: leaves room for fused multiply-adds on other platforms.
+CROSS_CHECK_TOLERANCE = 1e-9
+
 __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve", "run_study",
            "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
-           "schedule_shortfalls", "simulation_shortfalls"]
+           "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
+           "estimate_scene", "control_scene", "estimation_shortfalls", "control_shortfalls",
+           "CROSS_CHECK_TOLERANCE"]
 
 
 @dataclass(frozen=True)
@@ -178,6 +196,8 @@ class StudyResult:
     schedule_check: SimulationResult | None = None
     simulation: SimulationResult | None = None
     shortfalls: tuple[Shortfall, ...] = ()
+    estimation: EstimationStudy | None = None
+    control: ControlStudy | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -389,6 +409,179 @@ def simulation_shortfalls(scene: Scene, result: SimulationResult) -> list[Shortf
                       f"({t_end - reached:.6g} s not simulated)", t_end - reached, "s")]
 
 
+# -- estimation and the closed loop -------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class EstimationStudy:
+    """Every estimator of ``[estimation]`` over one simulated encoder record.
+
+    Attributes
+    ----------
+    record : EncoderRecord
+        The counts, commands and truth (body speed and position, contact speeds).
+    results : tuple of EstimationResult
+        One per method, in the scene's order, scored against the truth.
+    simulation : SimulationResult
+        The exact run that was recorded.
+    plant : Plant
+        The plant simulated.
+    """
+
+    record: Any
+    results: tuple[Any, ...]
+    simulation: SimulationResult
+    plant: Any
+
+    @property
+    def duration(self) -> float:
+        """The record's length, s."""
+        return self.record.duration
+
+    def rows(self) -> list[dict[str, Any]]:
+        """Per estimator: ``name``, ``rms``, ``max_error`` (m/s), ``nees_mean`` (None for the
+        finite differences), its 95 % ``nees_band``, ``wall_time`` (s) and
+        ``real_time_ratio``."""
+        return [{"name": r.method, "rms": r.rms_error, "max_error": r.max_error,
+                 "nees_mean": r.nees_mean, "nees_band": r.nees_band, "wall_time": r.wall_time,
+                 "real_time_ratio": r.real_time_ratio} for r in self.results]
+
+
+def estimate_scene(scene: Scene, simulation: SimulationResult | None = None) -> EstimationStudy:
+    """Simulate, record and estimate as the scene's ``[estimation]`` declares.
+
+    Parameters
+    ----------
+    scene : Scene
+        Needs ``[estimation]`` (and so ``[sensors]`` and ``[body]``).
+    simulation : SimulationResult, optional
+        For ``scenario = "simulation"``: the scene's ``[simulation]`` run when already
+        computed (the study passes its own); otherwise it is run here.
+
+    Returns
+    -------
+    EstimationStudy
+    """
+    from .model.sensors import record_simulation
+
+    spec, objects = scene.estimation, scene.objects.estimation
+    if spec is None or objects is None:
+        raise SceneError(f"The scene {scene.name!r} has no [estimation] section.")
+    if objects.plant is not None:
+        plant, v0 = objects.plant, 0.0
+        run = simulate(plant, objects.duration)
+    else:
+        plant, v0 = scene.objects.plant_on(None), scene.simulation.v0
+        run = simulation if simulation is not None else _simulation(scene, scene.objects.contacts)
+    record = record_simulation(run, plant, objects.sensors, rng=np.random.default_rng(spec.seed))
+    results = tuple(estimator.run(record, speed=v0, speed_std=spec.speed_std)
+                    for estimator in objects.estimators.values())
+    return EstimationStudy(record, results, run, plant)
+
+
+def estimation_shortfalls(scene: Scene, study: EstimationStudy) -> list[Shortfall]:
+    """A recorded run that stopped before its end (the time not recorded, s)."""
+    run = study.simulation
+    if run.status is SimulationStatus.SUCCESS:
+        return []
+    duration = scene.objects.estimation.duration
+    reached = float(run.t_final)
+    return [Shortfall("estimation", f"the recorded simulation {run.status.value} at t = {reached:.6g} s "
+                      f"of {duration:g} s ({duration - reached:.6g} s not recorded)", duration - reached, "s")]
+
+
+@dataclass(frozen=True, eq=False)
+class ControlStudy:
+    """The closed loop of ``[control]``.
+
+    Attributes
+    ----------
+    loop : ClosedLoopResult
+    controller : str
+        The scene's ``control.controller``.
+    estimator : str or None
+        The estimator's name (None: the ideal loop on the true speed).
+    cross_check : float or None, m/s
+        Largest difference of speed and estimate between python-control's simulation of the
+        loop and the toolkit's (None when not asked for, or the loop stopped early).
+    """
+
+    loop: Any
+    controller: str
+    estimator: str | None
+    cross_check: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: settings, status, final speed, estimation error, wall time, the series."""
+        loop = self.loop
+        error = loop.estimate - loop.speed
+        return {"controller": self.controller, "estimator": self.estimator,
+                "status": loop.status, "message": loop.message, "samples": int(loop.times.size),
+                "final_speed": float(loop.speed[-1]), "wall_time": loop.wall_time,
+                "estimate_rms_error": float(np.sqrt(np.mean(error ** 2))),
+                "estimate_max_error": float(np.max(np.abs(error))),
+                "cross_check_max_difference": self.cross_check,
+                "times": loop.times, "speed": loop.speed, "estimate": loop.estimate,
+                "force": loop.force, "commands": loop.commands}
+
+
+def control_scene(scene: Scene, schedule: ScheduleResult | None = None) -> ControlStudy:
+    """Run the scene's ``[control]`` closed loop (and its python-control cross check).
+
+    Parameters
+    ----------
+    scene : Scene
+        Needs ``[control]``.
+    schedule : ScheduleResult, optional
+        For ``controller = "open_loop"``: the designed ``[schedule]`` (designed here when
+        not given).
+    """
+    from .closed_loop import simulate_closed_loop
+
+    spec, objects = scene.control, scene.objects.control
+    if spec is None or objects is None:
+        raise SceneError(f"The scene {scene.name!r} has no [control] section.")
+    plant = scene.objects.plant_on(None)
+    controller = objects.controller
+    if controller is None:                                     # open loop: the designed schedule
+        from .controllers import OpenLoop
+
+        if schedule is None:
+            schedule, _ = design_scene_schedule(scene)
+        controller = OpenLoop(schedule)
+    rate = None if objects.sensors is not None else objects.rate
+    arguments = dict(sensors=objects.sensors, estimator=objects.estimator, v0=spec.v0, seed=spec.seed,
+                     budget=objects.budget)
+    loop = simulate_closed_loop(plant, controller, spec.duration, rate=rate, **arguments)
+    difference = None
+    if spec.cross_check and loop.status is SimulationStatus.SUCCESS:
+        import control                 # python-control: only for a [control] cross check
+        from .interop import closed_loop_system
+
+        system = closed_loop_system(plant, controller, rate=rate, **arguments)
+        response = control.input_output_response(system.system, loop.times, 0, system.initial_state)
+        y = response.outputs
+        difference = float(max(np.max(np.abs(y[0] - loop.speed)), np.max(np.abs(y[1] - loop.estimate))))
+    name = getattr(objects.estimator, "name", None) if objects.sensors is not None else None
+    return ControlStudy(loop, spec.controller, name, difference)
+
+
+def control_shortfalls(scene: Scene, study: ControlStudy) -> list[Shortfall]:
+    """A loop stopped before ``duration`` (time left, s); a cross check beyond
+    :data:`CROSS_CHECK_TOLERANCE` (the difference, m/s)."""
+    found: list[Shortfall] = []
+    loop, duration = study.loop, scene.control.duration
+    if loop.status is not SimulationStatus.SUCCESS:
+        reached = float(loop.times[-1]) if loop.times.size else 0.0
+        found.append(Shortfall("control", f"the closed loop {loop.status.value} at t = {reached:.6g} s of "
+                               f"duration = {duration:g} s ({duration - reached:.6g} s not run): "
+                               f"{loop.message}", duration - reached, "s"))
+    if study.cross_check is not None and not study.cross_check <= CROSS_CHECK_TOLERANCE:
+        found.append(Shortfall("control", f"python-control's simulation of the loop differs from the "
+                               f"toolkit's by {study.cross_check:.3g} m/s (tolerance "
+                               f"{CROSS_CHECK_TOLERANCE:g} m/s)", study.cross_check, "m/s"))
+    return found
+
+
 def run_study(scene: Scene, *, strict: bool = False) -> StudyResult:
     """Run every stage the scene declares and return their results.
 
@@ -431,5 +624,13 @@ def run_study(scene: Scene, *, strict: bool = False) -> StudyResult:
     if scene.simulation is not None:
         simulation = _simulation(scene, contacts)
         found += simulation_shortfalls(scene, simulation)
+    estimation = None
+    if scene.estimation is not None:
+        estimation = estimate_scene(scene, simulation)
+        found += estimation_shortfalls(scene, estimation)
+    loop = None
+    if scene.control is not None:
+        loop = control_scene(scene, schedule)
+        found += control_shortfalls(scene, loop)
     return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation,
-                       schedule, check, simulation, tuple(found))
+                       schedule, check, simulation, tuple(found), estimation, loop)

@@ -16,7 +16,7 @@ import numpy as np
 __all__ = ["plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_estimation",
            "plot_closed_loop", "figure_png",
            "plot_median_law", "plot_ratio_histogram", "plot_mean_median", "plot_outliers",
-           "plot_summary_comparison",
+           "plot_summary_comparison", "plot_sweep",
            "MAX_LINES", "ERROR_LEVEL"]
 
 #: Most contact-speed lines drawn in one panel; larger sets are thinned (and the panel says so).
@@ -638,4 +638,33 @@ def plot_summary_comparison(values: dict[str, tuple[float, float]], ax: Any = No
     ax.set_yticks(y, names, fontsize="small")
     ax.set_xlabel(quantity)
     _title(ax, title, f"{quantity} by model")
+    return ax
+
+
+def plot_sweep(result: Any, ax: Any = None, *, title: str | None = None):
+    """The figure of one sweep, by experiment: median law (speed against median), outliers
+    (deviation against amplitude), mean against median (speed against the varied quantity),
+    residual friction (histogram of ``mu/mu0``)."""
+    name = result.experiment.name
+    if name == "median_law":
+        return plot_median_law([result], ax, labels=[name], title=title)
+    if name == "outliers":
+        return plot_outliers(result, ax, title=title)
+    ax = _axes(ax, (5.5, 3.8))
+    table = result.table
+    if name == "mean_median":
+        varied = "median" if result.experiment.held == "mean" else "mean"
+        ax.plot(table[varied], table["speed"], ".", ms=3)
+        ax.set_xlabel(f"{varied} of the contact speeds (m/s), {result.experiment.held} held")
+        ax.set_ylabel("steady body speed (m/s)")
+        _title(ax, title, f"{result.experiment.held} held")
+    elif name == "residual_friction":
+        ax.hist(table["mu_ratio"], bins=40)
+        ax.axvline(result.experiment.n / 5, color="k", lw=0.8, ls=":", label="ideal n/5")
+        ax.set_xlabel("mu/mu0 (quasi-static)")
+        ax.set_ylabel("runs")
+        ax.legend(fontsize="x-small")
+        _title(ax, title, f"residual friction, n = {result.experiment.n}")
+    else:
+        raise ValueError(f"No figure for experiment {name!r}.")
     return ax

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -59,6 +59,9 @@ class MeanMedian:
     acceleration: float = 2.0
     settle_time: float = 20.0
     name: str = "mean_median"
+    #: Names of :meth:`summarize`'s statistics.
+    STATISTICS: ClassVar[tuple[str, ...]] = ("mean_range", "median_range", "speed_range",
+                                             "slope_median", "corr_mean")
 
     def __post_init__(self) -> None:
         set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -115,6 +115,9 @@ class MedianLaw:
     settle_time: float | None = None
     wheel_seed: int | None = None
     name: str = "median_law"
+    #: Names of :meth:`summarize`'s statistics.
+    STATISTICS: ClassVar[tuple[str, ...]] = ("slope", "slope_stderr", "ratio_median", "ratio_iqr",
+                                             "settled_fraction")
 
     def __post_init__(self) -> None:
         set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731

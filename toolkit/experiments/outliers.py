@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -77,6 +77,9 @@ class Outliers:
     window: float = 3.0
     random_amplitude: bool = True
     name: str = "outliers"
+    #: Names of :meth:`summarize`'s statistics.
+    STATISTICS: ClassVar[tuple[str, ...]] = ("unaffected_fraction", "rule_agreement",
+                                             "largest_deviation", "threshold_amplitude")
 
     def __post_init__(self) -> None:
         set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731

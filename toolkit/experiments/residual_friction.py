@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -68,6 +68,8 @@ class ResidualFriction:
     mass: float = 1.0
     probes: int = 64
     name: str = "residual_friction"
+    #: Names of :meth:`summarize`'s statistics.
+    STATISTICS: ClassVar[tuple[str, ...]] = ("mu_ratio", "mu_ratio_std", "reduction", "dT_median")
 
     def __post_init__(self) -> None:
         set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731

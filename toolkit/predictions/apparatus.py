@@ -163,14 +163,24 @@ class CarryThen:
         object.__setattr__(self, "speed", as_float(self.speed, "speed", owner))
 
     def bind(self, plant: Plant, period: float) -> _CarryLaw:
-        return _CarryLaw(self.controller.bind(plant, period), self.start - 1e-9 * period,
-                         self.start, np.full(plant.n, self.speed))
+        return _CarryLaw(self.controller.bind(plant, period), self.start, float(period),
+                         np.full(plant.n, self.speed))
 
 
 class _CarryLaw:
-    def __init__(self, law: Any, switch: float, start: float, carry: np.ndarray) -> None:
-        self.law, self.switch, self.start, self.carry = law, switch, start, carry
+    """Sample times within 1e-9 periods of ``start`` count as reached; the inner clock
+    ``t - start`` is snapped to the sample grid when it lies that close to it, so that an
+    inner law's own switching times on the grid are not lost to rounding."""
+
+    def __init__(self, law: Any, start: float, period: float, carry: np.ndarray) -> None:
+        self.law, self.start, self.period, self.carry = law, start, period, carry
+        self.switch = start - 1e-9 * period
         self.n_states = law.n_states
+
+    def _inner(self, t: float) -> float:
+        inner = t - self.start
+        grid = round(inner / self.period) * self.period
+        return grid if abs(inner - grid) <= 1e-9 * self.period else inner
 
     def initial_state(self) -> np.ndarray:
         return self.law.initial_state()
@@ -178,9 +188,9 @@ class _CarryLaw:
     def output(self, t: float, z: np.ndarray, estimate: float) -> Action:
         if t < self.switch:
             return Action(self.carry)
-        return self.law.output(t - self.start, z, estimate)
+        return self.law.output(self._inner(t), z, estimate)
 
     def update(self, t: float, z: np.ndarray, estimate: float) -> np.ndarray:
         if t < self.switch:
             return z
-        return self.law.update(t - self.start, z, estimate)
+        return self.law.update(self._inner(t), z, estimate)

@@ -117,8 +117,8 @@ def test_in_loop_sweep_meets_the_targets_on_a_small_sweep():
     check = viscosity_check(ViscosityProblem(CAROUSEL, "loop", runs=40, seed=1))
     assert check.ok.all()
     assert check.r2 >= 0.98 and abs(check.ratio - 1) <= 0.05, check.message
-    # The correction still explains the runs better than the plain proportional law does.
-    assert check.r2_corrected >= check.r2 - 0.01
+    # The motor lag alone (the fit on the true speed of the same runs) is within the target too.
+    assert abs(check.k_fit_true / check.k_predicted - 1) <= 0.05 and check.r2_true >= 0.98
 
 
 @pytest.mark.slow

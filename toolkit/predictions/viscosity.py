@@ -163,6 +163,9 @@ class ViscosityCheck:
         Start relative to the reference in spacings, ``x0 = (V0 - c) / s``.
     tau, tau_predicted : ndarray of shape (runs,), s
         Fitted time constant and ``C m / k``.
+    tau_true : ndarray of shape (runs,), s
+        The same fit on the true speed of the same runs (equals ``tau`` in the ideal mode;
+        in the loop it separates the motor lag's share from the estimator's).
     correction : ndarray of shape (runs,)
         ``C`` on the commanded speeds (:func:`~toolkit.predictions.theory.viscosity_correction`).
     settled, settled_predicted : ndarray of shape (runs,), m/s
@@ -176,6 +179,8 @@ class ViscosityCheck:
     r2_corrected : float
         ``R^2`` of ``1 / tau`` fitted against ``1 / tau_predicted`` (through 0): how much of
         the scatter about the proportional law the per-run correction explains.
+    k_fit_true, r2_true : float
+        ``k_fit`` and ``r2`` from ``tau_true``.
     status : CheckStatus
     message : str
     wall_time : float, s
@@ -188,6 +193,7 @@ class ViscosityCheck:
     start: np.ndarray
     tau: np.ndarray
     tau_predicted: np.ndarray
+    tau_true: np.ndarray
     correction: np.ndarray
     settled: np.ndarray
     settled_predicted: np.ndarray
@@ -196,6 +202,8 @@ class ViscosityCheck:
     k_predicted: float
     r2: float
     r2_corrected: float
+    k_fit_true: float
+    r2_true: float
     status: CheckStatus
     message: str
     wall_time: float
@@ -217,12 +225,13 @@ class ViscosityCheck:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary (no per-run arrays): ``runs``, ``r2``, ``k_fit``, ``k_predicted``,
-        ``ratio``, ``r2_corrected``, ``mode``, ``status``, ``message``, ``wall_time``, ``correction_range``,
+        ``ratio``, ``r2_corrected``, ``true_speed`` (``k_fit``, ``r2`` on the true speed), ``mode``, ``status``, ``message``, ``wall_time``, ``correction_range``,
         ``tau_ratio_range`` (``tau / tau_predicted``), ``targets``."""
         good = self.ok
         ratio = self.tau[good] / self.tau_predicted[good]
         return {"runs": self.runs, "r2": self.r2, "k_fit": self.k_fit, "k_predicted": self.k_predicted,
-                "ratio": self.ratio, "r2_corrected": self.r2_corrected, "mode": self.problem.mode, "status": self.status.name,
+                "ratio": self.ratio, "r2_corrected": self.r2_corrected,
+                "true_speed": {"k_fit": self.k_fit_true, "r2": self.r2_true}, "mode": self.problem.mode, "status": self.status.name,
                 "message": self.message, "wall_time": self.wall_time,
                 "correction_range": [float(self.correction.min()), float(self.correction.max())],
                 "tau_ratio_range": [float(ratio.min()), float(ratio.max())] if ratio.size else None,
@@ -269,8 +278,8 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
     x0 = np.where(up, -(half - position), half - position)
     v0 = x0 * spacing
     loop = p.mode == "loop"
-    out = {name: np.full(p.runs, np.nan) for name in ("tau", "tau_predicted", "correction", "settled",
-                                                      "settled_predicted")}
+    out = {name: np.full(p.runs, np.nan) for name in ("tau", "tau_predicted", "tau_true", "correction",
+                                                      "settled", "settled_predicted")}
     ok = np.zeros(p.runs, dtype=bool)
     failures: list[str] = []
     bar = _progress(p.runs, progress, f"viscosity ({p.mode})")
@@ -295,6 +304,8 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
             first = int(np.searchsorted(run.times, p.pre_roll - 1e-9))
             tau, settled = startup_time_constant(run.times[first:], run.estimate[first:], p.tail_samples)
             out["tau"][r], out["settled"][r] = tau, settled
+            out["tau_true"][r] = (tau if not loop else
+                                  startup_time_constant(run.times[first:], run.speed[first:], p.tail_samples)[0])
             if math.isfinite(tau) and tau > 0:
                 ok[r] = True
             else:
@@ -306,6 +317,9 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
     k_pred = proportional_fit(x, 1.0 / out["tau_predicted"][ok])[0] if ok.sum() >= 2 else math.nan
     r2_corrected = (proportional_fit(1.0 / out["tau_predicted"][ok], 1.0 / out["tau"][ok])[1]
                     if ok.sum() >= 2 else math.nan)
+    ok_true = ok & np.isfinite(out["tau_true"])
+    k_true, r2_true = (proportional_fit(slope[ok_true] / m, 1.0 / out["tau_true"][ok_true])
+                       if ok_true.sum() >= 2 else (math.nan, math.nan))
     r2_min, rel_max = p.targets
     rel = abs(k_fit / k_pred - 1.0) if math.isfinite(k_fit) else math.inf
     if failures:
@@ -320,6 +334,7 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
         status = CheckStatus.SHORT if missed else CheckStatus.MET
         message = ("; ".join(missed) if missed else
                    f"R^2 {r2:.4f} >= {r2_min:g}, k_fit / k_predicted = {k_fit / k_pred:.4f}")
-    return ViscosityCheck(p, slope, spacing, v0, x0, out["tau"], out["tau_predicted"], out["correction"],
-                          out["settled"], out["settled_predicted"], ok, k_fit, k_pred, r2, r2_corrected, status,
+    return ViscosityCheck(p, slope, spacing, v0, x0, out["tau"], out["tau_predicted"], out["tau_true"],
+                          out["correction"], out["settled"], out["settled_predicted"], ok, k_fit, k_pred, r2,
+                          r2_corrected, k_true, r2_true, status,
                           message, time.perf_counter() - started)

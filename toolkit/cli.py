@@ -222,13 +222,17 @@ def _cmd_predict(args: argparse.Namespace) -> int:
             else:
                 print(f"{label}: {check.status.name} ({check.wall_time:.1f} s)")
                 for row in check.rows():
-                    show = (lambda v: "inf" if v is None else f"{v:.4g} s")
                     print(f"  n = {row['n']}: mu/mu0 {row['mu_ratio']:.4f} (predicted "
-                          f"{row['mu_predicted']:.4g}), dT {show(row['dT'])} (predicted "
-                          f"{show(row['dT_predicted'])})")
+                          f"{row['mu_predicted']:.4g}), dT {_seconds(row['dT'])} (predicted "
+                          f"{_seconds(row['dT_predicted'])})")
         if apparatus.sensors is None:
             print("the scene has no [sensors]: only the ideal checks ran")
     return _finish([Shortfall("prediction", line, math.nan, "") for line in result.shortfalls()])
+
+
+def _seconds(value: float | None) -> str:
+    """A time for the predict summary: ``inf`` for None (no transition)."""
+    return "inf" if value is None else f"{value:.4g} s"
 
 
 def _at_least(low: int) -> Callable[[str], int]:

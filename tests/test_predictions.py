@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from toolkit import ContactSet, ParameterError, Plant, simulate
-from toolkit.predictions.theory import (ONE_MINUS_INV_E, resting_speed, time_constant,
-                                        transition_time, travel_time, uniform_staircase,
-                                        viscosity_correction)
+from toolkit.predictions.theory import (ONE_MINUS_INV_E, resting_speed, staircase_correction,
+                                        time_constant, transition_time, travel_time,
+                                        uniform_staircase, viscosity_correction)
 
 # The exact simulator and travel_time both sum closed-form segments: they agree to rounding
 # (a few ulp per segment, <= 20 segments here): rtol 1e-12.
@@ -89,3 +89,53 @@ def test_bad_inputs_name_the_parameter():
         transition_time(1.0, 0.35, 2.0, -0.1)
     with pytest.raises(ParameterError, match="'spacing' parameter of uniform_staircase"):
         uniform_staircase(3, 0.0, 0.0, 1.0)
+
+
+# -- the closed-form correction of n equal steps --------------------------------------------
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 9, 10, 11, 30])
+def test_staircase_correction_equals_the_travel_time_route(n):
+    # Two methods: the closed form over plateaus, and the exact travel time on a ContactSet
+    # (any spacing, magnitude and mass, since C depends on n and x0 only). Sums of <= n
+    # plateau terms: rounding ~1e-15 each, rtol 1e-12.
+    starts = np.array([-30.0, -(n + 1) / 2.0, -(n - 1) / 2.0 - 0.3, -2.2, -1.7, -0.9, -0.6, -0.2,
+                       0.35, 0.8, 2.6, (n - 1) / 2.0 + 0.5, 12.0])
+    spacing, center, f, m = 0.037, -0.11, 0.3, 2.5
+    contacts = uniform_staircase(n, center, spacing, f)
+    closed = staircase_correction(n, starts)
+    for x0, C in zip(starts, closed):
+        exact = viscosity_correction(contacts, m, center + x0 * spacing, 2 * f / spacing)
+        if math.isnan(exact):
+            assert math.isnan(C)
+        else:
+            assert C == pytest.approx(exact, rel=RTOL_EXACT)
+
+
+def test_staircase_correction_where_the_motion_is_linear():
+    # One contact (odd): the force is f all the way to the stop at 0, so the 63.2 % time is
+    # (1 - 1/e)|x0| s m / f and C = 2 (1 - 1/e)|x0|. Two contacts from below both (even): force
+    # 2 f up to the near band edge -1/2: C = 2 (1 - 1/e)(|x0| - 1/2) / 2. Exact up to rounding.
+    assert staircase_correction(1, -0.3) == pytest.approx(2 * ONE_MINUS_INV_E * 0.3, rel=1e-15)
+    assert staircase_correction(1, 4.0) == pytest.approx(2 * ONE_MINUS_INV_E * 4.0, rel=1e-15)
+    assert staircase_correction(2, -2.0) == pytest.approx(ONE_MINUS_INV_E * 1.5, rel=1e-15)
+    # At rest already: no startup to measure.
+    assert math.isnan(staircase_correction(3, 0.0))
+    assert math.isnan(staircase_correction(10, 0.5))
+
+
+@pytest.mark.parametrize("n, u0", [(60, 20.5), (100, 40.0), (100, 40.5), (200, 80.5)])
+def test_even_correction_tends_to_its_closed_limit(n, u0):
+    # Even n stops at the band edge -1/2, so the linear law sampled at the plateau midpoints
+    # gives C -> integral from u* to u0 of du/u with u* = u0/e + (1 - 1/e)/2, i.e.
+    # 1 - ln(1 + (e - 1)/(2 u0)); the midpoint-rule error is bounded as for odd n (above):
+    # (e^2 - 1)/(24 u0^2) + e/u0^2.
+    limit = 1.0 - math.log(1.0 + (math.e - 1.0) / (2.0 * u0))
+    C = staircase_correction(n, -u0)
+    assert abs(C - limit) <= (math.e ** 2 - 1) / (24 * u0 ** 2) + math.e / u0 ** 2
+    assert C == pytest.approx(staircase_correction(n, u0), rel=0, abs=0)   # symmetric
+
+
+def test_staircase_correction_refuses_bad_input():
+    with pytest.raises(ParameterError, match="'n' parameter of staircase_correction"):
+        staircase_correction(0, -1.0)
+    with pytest.raises(ParameterError, match="'start' parameter of staircase_correction"):
+        staircase_correction(10, math.nan)

@@ -248,6 +248,46 @@ def _cmd_stability(args: argparse.Namespace) -> int:
     return EXIT_OK if report.all_ok else EXIT_FAILED
 
 
+# -- predict: the paper's viscosity and friction-fraction predictions checked in the loop ----
+def _cmd_predict(args: argparse.Namespace) -> int:
+    import math
+
+    from .model.sensors import Sensors
+    from .predictions import Apparatus, prediction_checks
+
+    if args.scene is None:
+        apparatus = Apparatus.carousel()
+    else:
+        scene = load_scene(args.scene)
+        plant = scene_plant(scene)
+        sensors = None if scene.sensors is None else Sensors.from_spec(scene.sensors, plant.n)
+        apparatus = Apparatus(plant, sensors)
+    progress = not args.json and sys.stderr.isatty()
+    result = prediction_checks(apparatus, runs=args.runs, seed=args.seed, progress=progress)
+    if args.json:
+        _print_json(result.to_dict())
+    else:
+        for label, check in result.checks():
+            if hasattr(check, "k_fit"):
+                print(f"{label}: {check.runs} runs, 1/tau vs dF/dV: R^2 {check.r2:.4f}, k_fit "
+                      f"{check.k_fit:.4f}, k_predicted {check.k_predicted:.4f} (ratio {check.ratio:.4f}), "
+                      f"{check.wall_time:.1f} s: {check.status.name}")
+            else:
+                print(f"{label}: {check.status.name} ({check.wall_time:.1f} s)")
+                for row in check.rows():
+                    print(f"  n = {row['n']}: mu/mu0 {row['mu_ratio']:.4f} (predicted "
+                          f"{row['mu_predicted']:.4g}), dT {_seconds(row['dT'])} (predicted "
+                          f"{_seconds(row['dT_predicted'])})")
+        if apparatus.sensors is None:
+            print("the scene has no [sensors]: only the ideal checks ran")
+    return _finish([Shortfall("prediction", line, math.nan, "") for line in result.shortfalls()])
+
+
+def _seconds(value: float | None) -> str:
+    """A time for the predict summary: ``inf`` for None (no transition)."""
+    return "inf" if value is None else f"{value:.4g} s"
+
+
 def _at_least(low: int) -> Callable[[str], int]:
     def convert(text: str) -> int:
         try:
@@ -320,6 +360,15 @@ def _parser() -> argparse.ArgumentParser:
     stability = command("stability", _cmd_stability,
                         "stability suite over stiff and extreme cases (exit 1 if a case fails)", scene=False)
     stability.add_argument("--quick", action="store_true", help="the smaller, faster set of cases")
+    predict = command("predict", _cmd_predict, "check the paper's viscosity and friction-fraction "
+                      "predictions, ideal and with sensors, filter and motor lag in the loop (exit 3 "
+                      "if a target is missed)", scene=False)
+    predict.add_argument("scene", metavar="SCENE", nargs="?", default=None,
+                         help="a scene file (TOML) with [body], [motors] and [sensors]; default: the "
+                              "paper's carousel")
+    predict.add_argument("--runs", type=_at_least(2), default=490,
+                         help="closed-loop runs of each viscosity sweep (default 490)")
+    predict.add_argument("--seed", type=_at_least(0), default=0, help="seed of the sweep (default 0)")
     return parser
 
 

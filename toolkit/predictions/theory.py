@@ -27,6 +27,29 @@ error on ``1/u``; phase effects of where ``V0`` falls inside a step add to it); 
 spread (``V0`` below every contact) the force saturates at ``F_tot`` and ``C`` falls below
 that estimate. :func:`viscosity_correction` evaluates ``C`` exactly for any contact set.
 
+Closed form for ``n`` equal steps (:func:`staircase_correction`). Measure speeds from the
+reference in spacings, ``x = (V - c) / s``; the contacts sit at ``p_j = j - (n + 1)/2``,
+``j = 1..n``. Between ``p_j`` and ``p_{j+1}`` (``j`` contacts below the body, ``p_0 =
+-inf``, ``p_{n+1} = +inf``) the force is ``f (n - 2 j)``, so ``dt = m s dx / (f (n - 2 j))``
+and, with ``k = 2 f / s``,
+
+    C(n, x0) = 2 * sum_j |[x0, x*] ∩ [p_j, p_{j+1}]| / |n - 2 j|,
+    x* = x0 + (1 - 1/e) (x_stop - x0),
+
+with ``x_stop = 0`` for odd ``n`` and ``x_stop = -sign(x0)/2`` (the near edge of the
+zero-force band) for even ``n``; ``C`` is symmetric in ``x0``. It depends on ``n`` and ``x0``
+only: neither the spacing, nor the magnitudes, nor the mass. Replacing the plateaus by the
+linear law they sample (``n - 2 j ~ -2 x``) gives the large-``|x0|`` limits
+
+    odd n:   C -> ln(x0 / x*) = 1,
+    even n:  C -> 1 - ln(1 + (e - 1) / (2 |x0|))          (< 1: the body stops half a
+             step short of the reference, so the fitted exponential ends early),
+
+e.g. ``0.842`` at ``|x0| = 5`` (a start half a spacing below the lowest of ten contacts)
+against the exact ``0.856``. A start outside the spread (``|x0| > (n - 1)/2``) first meets
+the saturated force ``n f`` and ``C`` grows past these limits without bound (``C = 1.07`` at
+four spacings outside ten contacts, ``3.0`` at 20).
+
 Friction fraction
 -----------------
 ``5 - j`` contacts at ``+v_max`` and ``5 + j`` at ``-v_max`` (ten equal contacts) give
@@ -47,7 +70,7 @@ from ..errors import ParameterError, parameter_message
 from ..model import ContactSet
 
 __all__ = ["travel_time", "resting_speed", "time_constant", "viscosity_correction",
-           "uniform_staircase", "transition_time", "ONE_MINUS_INV_E"]
+           "staircase_correction", "uniform_staircase", "transition_time", "ONE_MINUS_INV_E"]
 
 #: The fraction of the way covered after one time constant of an exponential.
 ONE_MINUS_INV_E = 1.0 - math.exp(-1.0)
@@ -132,6 +155,48 @@ def viscosity_correction(contacts: ContactSet, mass: float, v0: float, slope: fl
     """
     k = as_float(slope, "slope", "viscosity_correction", low=0.0, low_open=True)
     return time_constant(contacts, mass, v0) * k / float(mass)
+
+
+def staircase_correction(n: int, start: Any) -> Any:
+    """Closed-form viscosity correction ``C(n, x0)`` of ``n`` equal, equally spaced contacts.
+
+    See the module docstring for the derivation; equals :func:`viscosity_correction` on
+    :func:`uniform_staircase` contacts (same ``n``, any spacing, magnitude and mass).
+
+    Parameters
+    ----------
+    n : int
+        Number of contacts, ``>= 1``.
+    start : float or array_like
+        Start speed measured from the reference (the staircase's centre) in spacings,
+        ``x0 = (V0 - c) / s`` (dimensionless).
+
+    Returns
+    -------
+    float or ndarray
+        ``C``; ``nan`` where the body is already at rest (``x0 = 0`` for odd ``n``,
+        ``|x0| <= 1/2`` for even ``n``).
+    """
+    owner = "staircase_correction"
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ParameterError(parameter_message("n", owner, "be an integer >= 1", n))
+    x0 = as_float_array(start, "start", owner)
+    u0 = np.abs(x0)                                   # by symmetry: start below, move up
+    stop = 0.0 if n % 2 else 0.5
+    moving = u0 > stop
+    u_star = u0 + ONE_MINUS_INV_E * (stop - u0)       # |x*|, between stop and u0
+    # Mirror to a start below the reference: the path is [-u0, -u*]; contact p_j (j = 1..n)
+    # at j - (n + 1)/2; plateau j spans [p_j, p_{j+1}] with force n - 2 j (j = 0..n).
+    edges = np.concatenate(([-np.inf], np.arange(1, n + 1) - (n + 1) / 2.0, [np.inf]))
+    push = np.abs(n - 2.0 * np.arange(n + 1))
+    lo = np.maximum(edges[:-1][None, :], -u0[:, None])
+    hi = np.minimum(edges[1:][None, :], -u_star[:, None])
+    overlap = np.clip(hi - lo, 0.0, None)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # Plateaus of zero force are never crossed on the way to the stop (overlap 0).
+        share = np.where(overlap > 0, overlap / np.where(push > 0, push, 1.0)[None, :], 0.0)
+    out = np.where(moving, 2.0 * share.sum(axis=1), np.nan)
+    return float(out[0]) if np.ndim(start) == 0 else out
 
 
 def uniform_staircase(n: int, center: float, spacing: float, force: float) -> ContactSet:

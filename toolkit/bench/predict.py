@@ -1,0 +1,112 @@
+"""Prediction benchmark: the 490-run viscosity sweep on one core (issue 9).
+
+Run ``python -m toolkit.bench predict [--runs N] [--repeat R] [--seed K]``. Pins the process
+to one core (``os.sched_setaffinity``, where available), then times
+:func:`toolkit.predictions.viscosity_check` on the carousel ideal and in the loop (motor
+lag, encoders, Kalman filter), ``R`` times each, and the friction-fraction check once per
+mode. Baseline in the same run: one fixed-length 10 s closed loop of the same kind (the
+length a sweep would need without stopping each run once it has settled), times the number
+of runs. Prints the minimum of the repeats, the closed-loop samples simulated, the cost per
+sample and the ratio to the baseline, with the sweep's R^2 and k_fit / k_predicted.
+Exit status 0 when the issue-9 target holds: the in-loop sweep of 490 runs in under 60 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from toolkit.closed_loop import simulate_closed_loop
+from toolkit.controllers import VirtualViscosity
+from toolkit.model import ContactSet
+from toolkit.predictions import (Apparatus, FrictionFractionProblem, ViscosityCheck, ViscosityProblem,
+                                 friction_fraction_check,
+                                 viscosity_check)
+from toolkit.predictions.theory import travel_time
+
+
+def _one_core() -> tuple[str, set[int] | None]:
+    """Pin the process to one core; return a note and the previous affinity (to restore)."""
+    if hasattr(os, "sched_setaffinity"):
+        before = os.sched_getaffinity(0)
+        core = min(before)
+        os.sched_setaffinity(0, {core})
+        return f"pinned to core {core}", before
+    return "not pinned (no sched_setaffinity)", None
+
+
+def _samples(check: ViscosityProblem, result: ViscosityCheck) -> int:
+    """Closed-loop samples the sweep simulated (from each run's length)."""
+    a = check.apparatus
+    rate = a.sensors.rate if a.sensors is not None else 50.0
+    total = 0
+    for slope, v0, settled in zip(result.slope, result.v0, result.settled_predicted):
+        contacts = ContactSet(VirtualViscosity(float(slope)).speeds(a.run_plant(v0, check.mode)),
+                              a.plant.contacts.forces)
+        t_end = check.pre_roll + travel_time(contacts, a.mass, v0, settled) + check.tail
+        total += int(np.floor(t_end * rate + 1e-9)) + 1
+    return total
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m toolkit.bench predict", description=__doc__)
+    parser.add_argument("--runs", type=int, default=490)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    note, before = _one_core()
+    try:
+        print(note, f"load average {os.getloadavg()[0]:.2f}" if hasattr(os, "getloadavg") else "")
+        return _run(args)
+    finally:
+        if before is not None:
+            os.sched_setaffinity(0, before)
+
+
+def _run(args: argparse.Namespace) -> int:
+
+    apparatus = Apparatus.carousel()
+    status = 0
+    for mode in ("ideal", "loop"):
+        problem = ViscosityProblem(apparatus, mode, args.runs, seed=args.seed)
+        times, result = [], None
+        for _ in range(max(args.repeat, 1)):
+            start = time.perf_counter()
+            result = viscosity_check(problem)
+            times.append(time.perf_counter() - start)
+        best = min(times)
+        samples = _samples(problem, result)
+        # Baseline: one fixed 10 s run of the same loop (first run's staircase), x runs.
+        plant = apparatus.run_plant(result.v0[0], mode)
+        controller = VirtualViscosity(float(result.slope[0]))
+        sensors = apparatus.sensors if mode == "loop" else None
+        simulate_closed_loop(plant, controller, 1.0, v0=float(result.v0[0]), sensors=sensors)  # warm
+        base = min(_timed(lambda: simulate_closed_loop(plant, controller, 10.0, v0=float(result.v0[0]),
+                                                       sensors=sensors)) for _ in range(3))
+        print(f"viscosity sweep ({mode}): {result.runs} runs in {best:.2f} s (min of {len(times)}: "
+              f"{', '.join(f'{t:.2f}' for t in times)}), {samples} samples, "
+              f"{best / samples * 1e6:.0f} us/sample; R^2 {result.r2:.4f}, "
+              f"k_fit / k_predicted {result.ratio:.4f}")
+        print(f"  baseline: 10 s fixed-length runs, {base:.3f} s each -> {base * result.runs:.1f} s for "
+              f"{result.runs} runs; ratio {base * result.runs / best:.1f}x")
+        if mode == "loop":
+            target = best * 490 / result.runs
+            ok = target < 60.0
+            print(f"{'met  ' if ok else 'SHORT'} in-loop sweep of 490 runs under 60 s on one core "
+                  f"({target:.1f} s{'' if result.runs == 490 else ', scaled from ' + str(result.runs) + ' runs'})")
+            status |= 0 if ok else 1
+    for mode in ("ideal", "loop"):
+        start = time.perf_counter()
+        check = friction_fraction_check(FrictionFractionProblem(apparatus, mode, seed=args.seed))
+        print(f"friction fraction ({mode}): {time.perf_counter() - start:.2f} s, {check.status.name}")
+    return status
+
+
+def _timed(fn: Callable[[], object]) -> float:
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start

@@ -1,0 +1,99 @@
+"""Both prediction checks, ideal and in the loop: what ``active-contacts predict`` runs."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from .._validation import as_int
+from ..errors import ParameterTypeError, parameter_message
+from .apparatus import Apparatus
+from .friction import FrictionFractionCheck, FrictionFractionProblem, friction_fraction_check
+from .viscosity import ViscosityCheck, ViscosityProblem, viscosity_check
+
+__all__ = ["PredictionChecks", "prediction_checks"]
+
+
+@dataclass(frozen=True, eq=False)
+class PredictionChecks:
+    """The viscosity and friction-fraction checks in both modes.
+
+    Attributes
+    ----------
+    viscosity, viscosity_ideal : ViscosityCheck
+        In the loop (``None`` on an apparatus without sensors) and ideal.
+    friction, friction_ideal : FrictionFractionCheck
+        Likewise.
+    wall_time : float, s
+    """
+
+    viscosity: ViscosityCheck | None
+    viscosity_ideal: ViscosityCheck
+    friction: FrictionFractionCheck | None
+    friction_ideal: FrictionFractionCheck
+    wall_time: float
+
+    def checks(self) -> list[tuple[str, Any]]:
+        """``(label, check)`` for every check that ran."""
+        named = [("viscosity (loop)", self.viscosity), ("viscosity (ideal)", self.viscosity_ideal),
+                 ("friction fraction (loop)", self.friction), ("friction fraction (ideal)", self.friction_ideal)]
+        return [(label, check) for label, check in named if check is not None]
+
+    @property
+    def met(self) -> bool:
+        """Every check met its targets."""
+        return all(check.met for _, check in self.checks())
+
+    def shortfalls(self) -> list[str]:
+        """``"<label>: <message>"`` for every check that missed."""
+        return [f"{label}: {check.message}" for label, check in self.checks() if not check.met]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: ``viscosity`` (``runs``, ``r2``, ``k_fit``, ``k_predicted``, ..., and
+        ``ideal`` with the same keys) and ``friction_fraction`` (per ``n``: ``mu_ratio``,
+        ``dT``, ``dT_predicted``, ..., and ``ideal``). The top-level numbers are the loop's
+        when the apparatus has sensors, else the ideal ones (``mode`` says which)."""
+        vis_main = self.viscosity or self.viscosity_ideal
+        fr_main = self.friction or self.friction_ideal
+        viscosity = {**vis_main.to_dict(), "ideal": self.viscosity_ideal.to_dict()}
+        ideal_rows = self.friction_ideal.rows()
+        friction = [{**row, "mode": fr_main.problem.mode, "ideal": ideal}
+                    for row, ideal in zip(fr_main.rows(), ideal_rows)]
+        return {"viscosity": viscosity, "friction_fraction": friction,
+                "friction_fraction_status": {
+                    "status": fr_main.status.name, "message": fr_main.message,
+                    "brake_force": fr_main.brake_force, "wall_time": fr_main.wall_time,
+                    "ideal": {"status": self.friction_ideal.status.name,
+                              "message": self.friction_ideal.message,
+                              "brake_force": self.friction_ideal.brake_force}},
+                "met": self.met, "shortfalls": self.shortfalls(), "wall_time": self.wall_time}
+
+
+def prediction_checks(apparatus: Apparatus | None = None, *, runs: int = 490, seed: int = 0,
+                      progress: bool = False) -> PredictionChecks:
+    """Run both checks ideal and, when the apparatus has sensors, in the loop.
+
+    Parameters
+    ----------
+    apparatus : Apparatus, optional
+        Default: :meth:`Apparatus.carousel`.
+    runs : int
+        Runs of each viscosity sweep, ``>= 2``.
+    seed : int
+    progress : bool
+        Progress bars (tqdm) on stderr.
+    """
+    apparatus = Apparatus.carousel() if apparatus is None else apparatus
+    if not isinstance(apparatus, Apparatus):
+        raise ParameterTypeError(parameter_message("apparatus", "prediction_checks", "be an Apparatus", apparatus))
+    runs = as_int(runs, "runs", "prediction_checks", low=2)
+    started = time.perf_counter()
+    loop = apparatus.sensors is not None
+    vis_ideal = viscosity_check(ViscosityProblem(apparatus, "ideal", runs, seed=seed), progress=progress)
+    vis_loop = (viscosity_check(ViscosityProblem(apparatus, "loop", runs, seed=seed), progress=progress)
+                if loop else None)
+    fr_ideal = friction_fraction_check(FrictionFractionProblem(apparatus, "ideal", seed=seed), progress=progress)
+    fr_loop = (friction_fraction_check(FrictionFractionProblem(apparatus, "loop", seed=seed), progress=progress)
+               if loop else None)
+    return PredictionChecks(vis_loop, vis_ideal, fr_loop, fr_ideal, time.perf_counter() - started)

@@ -28,7 +28,8 @@ from .errors import (
     ToolkitError,
 )
 from .plots import (plot_force_curve, plot_mean_median, plot_median_law, plot_outliers, plot_precision,
-                    plot_ratio_histogram, plot_schedule, plot_simulation, plot_summary_comparison)
+                    plot_ratio_histogram, plot_schedule, plot_simulation, plot_summary_comparison, plot_sweep,
+                    plot_viscosity_check, plot_friction_fraction_check)
 from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import carousel_startup_plant
@@ -75,7 +76,8 @@ __all__ = [
     "sweep", "SweepResult", "MedianLaw", "MeanMedian", "Outliers", "ResidualFriction",
     # plots (matplotlib is imported when one is drawn)
     "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_median_law",
-    "plot_ratio_histogram", "plot_mean_median", "plot_outliers", "plot_summary_comparison",
+    "plot_ratio_histogram", "plot_mean_median", "plot_outliers", "plot_summary_comparison", "plot_sweep",
+    "plot_viscosity_check", "plot_friction_fraction_check",
     # scenes and studies
     "Scene", "load_scene", "dumps_scene", "StudyResult", "run_study",
     # errors

@@ -16,7 +16,7 @@ import numpy as np
 __all__ = ["plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_estimation",
            "plot_closed_loop", "figure_png",
            "plot_median_law", "plot_ratio_histogram", "plot_mean_median", "plot_outliers",
-           "plot_summary_comparison", "plot_sweep",
+           "plot_summary_comparison", "plot_sweep", "plot_viscosity_check", "plot_friction_fraction_check",
            "MAX_LINES", "ERROR_LEVEL"]
 
 #: Most contact-speed lines drawn in one panel; larger sets are thinned (and the panel says so).
@@ -668,3 +668,70 @@ def plot_sweep(result: Any, ax: Any = None, *, title: str | None = None):
     else:
         raise ValueError(f"No figure for experiment {name!r}.")
     return ax
+
+
+def plot_viscosity_check(checks: Sequence[Any], ax: Any = None, *, labels: Sequence[str] | None = None,
+                         title: str | None = None):
+    """``1/tau`` against the commanded ``dF/dV / m`` (the paper's Fig. 6), each check's runs
+    with its fit through the origin, and the derived prediction ``k_predicted``.
+
+    Parameters
+    ----------
+    checks : sequence of toolkit.predictions.ViscosityCheck
+    """
+    ax = _axes(ax, (5.5, 4.5))
+    labels = list(labels) if labels is not None else [c.problem.mode for c in checks]
+    reach = max(float(np.max(c.slope[c.ok] / c.problem.apparatus.mass)) for c in checks)
+    line = np.array([0.0, reach])
+    for check, label in zip(checks, labels):
+        ok = check.ok
+        x = check.slope[ok] / check.problem.apparatus.mass
+        points = ax.plot(x, 1.0 / check.tau[ok], ".", ms=3, alpha=0.6,
+                         label=f"{label}: fit {check.k_fit:.3f}, R^2 {check.r2:.3f}")
+        ax.plot(line, check.k_fit * line, color=points[0].get_color(), lw=1.2)
+    ax.plot(line, checks[0].k_predicted * line, "k--", lw=1,
+            label=f"derived correction: {checks[0].k_predicted:.3f}")
+    ax.plot(line, line, color="0.6", lw=0.8, ls=":", label="purely viscous: 1")
+    ax.set_xlabel("commanded dF/dV / m (1/s)")
+    ax.set_ylabel("1 / tau (1/s)")
+    ax.legend(fontsize="x-small", loc="upper left")
+    _note(ax, f"{checks[0].problem.runs} runs per check", corner="lower right")
+    _title(ax, title, "startup time constant against viscosity")
+    return ax
+
+
+def plot_friction_fraction_check(checks: Sequence[Any], axes: Any = None, *,
+                                 labels: Sequence[str] | None = None, title: str | None = None):
+    """The paper's Fig. 7: ``mu/mu0`` against the contacts reversed (left) and the transition
+    time against ``mu/mu0`` with the prediction ``dT = m 2 v_max / (F_tot mu/mu0)`` (right).
+
+    Parameters
+    ----------
+    checks : sequence of toolkit.predictions.FrictionFractionCheck
+    """
+    if axes is None:
+        import matplotlib.pyplot as plt
+
+        _, axes = plt.subplots(1, 2, figsize=(10.0, 3.8), layout="constrained")
+    left, right = axes
+    labels = list(labels) if labels is not None else [c.problem.mode for c in checks]
+    for j, (check, label) in enumerate(zip(checks, labels)):
+        marker = "os^v"[j % 4]
+        left.plot(check.n, check.mu_ratio, marker, mfc="none", label=label)
+        finite = np.isfinite(check.dT)
+        right.plot(check.mu_ratio[finite], check.dT[finite], marker, mfc="none", label=label)
+    first = checks[0]
+    left.plot(first.n, first.mu_predicted, "k--", lw=1, label="ideal n/5")
+    mu = np.linspace(0.15, 1.0, 64)
+    moving = first.mu_predicted > 0
+    scale = float(np.min(first.dT_predicted[moving] * first.mu_predicted[moving]))   # m 2 v_max / F_tot
+    right.plot(mu, scale / mu, "k--", lw=1, label=f"dT = {scale:.3g} s / (mu/mu0)")
+    left.set_xlabel("contacts reversed n")
+    left.set_ylabel("mu / mu0")
+    right.set_xlabel("mu / mu0")
+    right.set_ylabel("transition time +v_max -> -v_max (s)")
+    left.legend(fontsize="x-small")
+    right.legend(fontsize="x-small")
+    _title(left, title, "friction fraction")
+    _title(right, title, "transition time")
+    return axes

@@ -28,6 +28,13 @@ def test_run_succeeds_on_every_design(path, tmp_path, capsys):
     assert main(["run", str(path), "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "wrote" in out
+    scene = load_scene(path)
+    if scene.sweep is not None:          # a sweep scene: its one stage, the sweep
+        summary = json.loads((tmp_path / "sweep.json").read_text())
+        assert summary["shortfalls"] == [] and summary["runs"] == scene.sweep.runs
+        assert len((tmp_path / "results.csv").read_text().splitlines()) == scene.sweep.runs + 1
+        assert (tmp_path / "sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        return
     result = json.loads((tmp_path / "result.json").read_text())
     # The request was met: no shortfall (carousel's schedule is VERIFIED or OPTIMAL, a success).
     assert result["met"] is True and result["shortfalls"] == []
@@ -301,3 +308,58 @@ def test_curve_text_lists_every_step_even_narrow_ones(tmp_path):
         "         0.3           -2           -4",
     ]
 
+
+
+# -- sweep -------------------------------------------------------------------------------------
+
+def test_sweep_json_and_results_csv(tmp_path, capsys):
+    import pandas as pd
+
+    from toolkit import MedianLaw, sweep
+
+    code = main(["sweep", str(ROOT / "designs" / "median_law.toml"), "--runs", "50", "--seed", "4",
+                 "--json", "--out", str(tmp_path)])
+    assert code == 0
+    data = json.loads(capsys.readouterr().out)
+    # The scene's statistics only, computed on the same runs as the library call (identity).
+    expected = sweep(MedianLaw(), 50, seed=4)
+    assert set(data["summary"]) == {"slope", "slope_stderr", "ratio_median", "settled_fraction"}
+    assert data["summary"]["slope"] == expected.summary["slope"]
+    assert (data["runs"], data["seed"], data["scheduler"]) == (50, 4, "local")
+    table = pd.read_csv(tmp_path / "results.csv")
+    np.testing.assert_array_equal(table["speed"], expected.table["speed"])    # %.17g round trip
+
+
+def test_sweep_on_a_process_pool_matches_local(capsys):
+    assert main(["sweep", str(ROOT / "designs" / "median_law.toml"), "--runs", "40", "--json"]) == 0
+    local = json.loads(capsys.readouterr().out)
+    assert main(["sweep", str(ROOT / "designs" / "median_law.toml"), "--runs", "40", "--json",
+                 "--scheduler", "processes", "--workers", "2"]) == 0
+    pooled = json.loads(capsys.readouterr().out)
+    assert pooled["summary"] == local["summary"] and pooled["scheduler"] == "processes"
+
+
+def test_sweep_user_errors(tmp_path, monkeypatch, capsys):
+    # No [sweep], a sweep scene given to curve, --scheduler without dask installed, an
+    # unreachable scheduler: one line on stderr, exit 2, nothing written.
+    out = tmp_path / "out"
+    assert main(["sweep", str(ROOT / "designs" / "carousel.toml"), "--out", str(out)]) == 2
+    assert "has no [sweep] section" in capsys.readouterr().err
+    assert main(["curve", str(ROOT / "designs" / "median_law.toml")]) == 2
+    assert "is a sweep scene" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    assert main(["sweep", str(ROOT / "designs" / "median_law.toml"), "--runs", "5",
+                 "--scheduler", "tcp://127.0.0.1:9", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "pip install 'active-contacts[dask]'" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_sweep_unsettled_runs_are_a_shortfall(tmp_path, capsys):
+    # Observing each run for 0.01 s leaves most runs moving: exit 3 and the count on stderr.
+    scene = tmp_path / "short.toml"
+    scene.write_text('[sweep]\nexperiment = "median_law"\nruns = 20\nsettle_time = 0.01\n')
+    assert main(["sweep", str(scene), "--out", str(tmp_path / "out")]) == 3
+    err = capsys.readouterr().err
+    assert "runs had not settled" in err
+    assert (tmp_path / "out" / "results.csv").exists()

@@ -23,7 +23,10 @@ def test_every_design_loads_and_round_trips(path):
     scene = load_scene(path)
     again = loads_scene(dumps_scene(scene), name=scene.name)
     assert again == scene
-    np.testing.assert_array_equal(again.contact_set().speeds, scene.contact_set().speeds)
+    if scene.sweep is None:
+        np.testing.assert_array_equal(again.contact_set().speeds, scene.contact_set().speeds)
+    else:
+        assert again.objects.sweep == scene.objects.sweep
 
 
 def test_carousel_has_the_papers_hardware():
@@ -122,7 +125,7 @@ def test_scene_is_frozen():
         scene.name = "other"  # type: ignore[misc]
 
 
-LAZY = ("casadi", "cvxpy", "filterpy", "matplotlib")
+LAZY = ("casadi", "cvxpy", "filterpy", "matplotlib", "pandas", "tqdm", "distributed")
 
 
 def _modules_after_run(scene_text: str, tmp_path: Path) -> dict[str, bool]:
@@ -150,6 +153,43 @@ def test_declared_report_does_import_matplotlib(tmp_path):
     loaded = _modules_after_run(MINIMAL + "[report]\nplots = true\n", tmp_path)
     assert loaded["matplotlib"] is True
     assert (loaded["casadi"], loaded["cvxpy"], loaded["filterpy"]) == (False, False, False)
+
+
+def test_sweep_scene_loads_pandas_but_not_dask(tmp_path):
+    # A sweep scene's stage imports pandas (its table) and nothing of the other stages; Dask
+    # only for a cluster scheduler.
+    path = tmp_path / "sweep.toml"
+    path.write_text('[sweep]\nexperiment = "median_law"\nruns = 10\n')
+    code = ("import json, sys\n"
+            "from toolkit.cli import main\n"
+            f"main(['sweep', {str(path)!r}, '--json'])\n"
+            f"print(json.dumps({{m: m in sys.modules for m in {LAZY!r}}}), file=sys.stderr)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    loaded = json.loads(done.stderr.strip().splitlines()[-1])
+    assert loaded["pandas"] is True
+    assert not any(loaded[m] for m in ("casadi", "cvxpy", "filterpy", "matplotlib", "distributed"))
+
+
+SWEEP = '[scene]\nname = "ml"\n[sweep]\nexperiment = "median_law"\nruns = 30\nseed = 2\n'
+
+
+def test_sweep_section_round_trip_and_objects():
+    scene = loads_scene(SWEEP + 'friction_spread = 0.2\nwheel_seed = 1\nstatistics = ["slope"]\n')
+    assert scene.stages == ("sweep",) and scene.contacts is None
+    assert scene.objects.sweep.friction_spread == 0.2 and scene.objects.sweep.wheel_seed == 1
+    assert loads_scene(dumps_scene(scene)) == scene
+
+
+@pytest.mark.parametrize(("extra", "match"), [
+    ('friction_spread = -0.1\n', r"In \[sweep\]: The 'friction_spread' parameter of MedianLaw must be >= 0"),
+    ('frction_spread = 0.1\n', "Did you mean 'friction_spread'"),
+    ('statistics = ["slop"]\n', "Did you mean 'slope'"),
+    ('runs = 0\n', "'sweep.runs'"),
+    ('[body]\nmass = 1.0\n', r"remove \[body\]"),
+])
+def test_sweep_section_errors(extra, match):
+    with pytest.raises(SceneError, match=match):
+        loads_scene(SWEEP.replace("runs = 30\n", "") + extra if extra.startswith("runs") else SWEEP + extra)
 
 
 def test_target_constraints_round_trip():

@@ -27,7 +27,9 @@ from .errors import (
     SolverError,
     ToolkitError,
 )
-from .plots import plot_force_curve, plot_precision, plot_schedule, plot_simulation
+from .plots import (plot_force_curve, plot_mean_median, plot_median_law, plot_outliers, plot_precision,
+                    plot_ratio_histogram, plot_schedule, plot_simulation, plot_summary_comparison, plot_sweep,
+                    plot_viscosity_check, plot_friction_fraction_check)
 from .scene import Scene, dumps_scene, load_scene
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import carousel_startup_plant
@@ -38,6 +40,9 @@ from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, Simu
                          SimulationStatus, advance, simulate, simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
 from .study import CurveSamples, StudyResult, force_curve, run_study
+from . import sweeps
+from .sweeps import SweepResult, sweep
+from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
 
 # sensors and estimation (filterpy is imported only where a filter is built)
 from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
@@ -67,8 +72,12 @@ __all__ = [
     "Encoder", "Sensors", "EncoderRecord", "EncoderSample", "measure", "record_simulation",
     "Estimator", "EstimationResult", "EstimatorModel", "CentralDifference", "WheelDifference",
     "KalmanEstimator", "RTSSmoother", "UnscentedEstimator", "chi2_band", "carousel_brake_scenario",
+    # sweeps (pandas is imported with the first sweep; dask only for a cluster)
+    "sweep", "SweepResult", "MedianLaw", "MeanMedian", "Outliers", "ResidualFriction",
     # plots (matplotlib is imported when one is drawn)
-    "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision",
+    "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_median_law",
+    "plot_ratio_histogram", "plot_mean_median", "plot_outliers", "plot_summary_comparison", "plot_sweep",
+    "plot_viscosity_check", "plot_friction_fraction_check",
     # scenes and studies
     "Scene", "load_scene", "dumps_scene", "StudyResult", "run_study",
     # errors

@@ -31,12 +31,13 @@ from ._io import check_output_dir
 from .errors import SceneError, ToolkitError
 from .precision import exact_speedup, precision_report
 from .report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
-                     study_to_dict, to_json, write_precision, write_schedule, write_study)
+                     study_to_dict, sweep_lines, sweep_to_dict, to_json, write_precision, write_schedule,
+                     write_study, write_sweep)
 from .scene import Scene, load_scene
 from .scene_build import scene_plant
 from .stability import stability_suite
 from .study import (Shortfall, allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
-                    request_shortfalls, run_study, schedule_shortfalls)
+                    request_shortfalls, run_study, schedule_shortfalls, sweep_scene, sweep_shortfalls)
 
 __all__ = ["main", "EXIT_CODES"]
 
@@ -90,6 +91,10 @@ def _finish(shortfalls: Sequence[Shortfall]) -> int:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     scene = _scene(args)
+    if scene.sweep is not None:          # a sweep scene's one stage
+        args.runs = args.seed = args.scheduler = args.workers = None
+        args.out = args.out or str(Path("out") / scene.name)
+        return _cmd_sweep(args)
     out = _out_dir(args, scene)
     result = run_study(scene, strict=args.strict)
     written = write_study(result, out)
@@ -202,6 +207,26 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         for line in estimation_lines(study):
             print(line)
         print(f"wrote {', '.join(str(p) for p in written)}")
+    return _finish(shortfalls)
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    scene = _scene(args, "sweep", "to run")
+    out = check_output_dir(args.out) if args.out else None
+    result = sweep_scene(scene, runs=args.runs, seed=args.seed, scheduler=args.scheduler,
+                         workers=args.workers, progress=sys.stderr.isatty())
+    shortfalls = sweep_shortfalls(result)
+    statistics = scene.sweep.statistics
+    plots_too = scene.report is None or scene.report.plots
+    written = (write_sweep(result, out, statistics=statistics, shortfalls=shortfalls, plots_too=plots_too,
+                           title=scene.name) if out is not None else [])
+    if args.json:
+        _print_json({**sweep_to_dict(result, statistics, shortfalls), "written": [str(p) for p in written]})
+    else:
+        for line in sweep_lines(result, statistics, shortfalls):
+            print(line)
+        if written:
+            print(f"wrote {', '.join(str(p) for p in written)}")
     return _finish(shortfalls)
 
 
@@ -321,6 +346,17 @@ def _parser() -> argparse.ArgumentParser:
                        "simulate the scene's [estimation] record (default: startup then brake) and "
                        "score every estimator against the truth; writes estimate.json and estimate.png")
     estimate.add_argument("--out", metavar="DIR", help=out_help)
+    sweep = command("sweep", _cmd_sweep, "run the scene's [sweep]: many seeded runs of one of the paper's "
+                    "experiments, summary statistics, one table row per run")
+    sweep.add_argument("--runs", type=_at_least(1), help="number of runs (default: the scene's)")
+    sweep.add_argument("--seed", type=_at_least(0), help="root seed (default: the scene's)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS",
+                       help="'processes' for a local process pool, or the address of a Dask scheduler "
+                            "(tcp://host:port; needs pip install 'active-contacts[dask]'); default: "
+                            "this process")
+    sweep.add_argument("--workers", type=_at_least(1), help="processes of the 'processes' pool")
+    sweep.add_argument("--out", metavar="DIR", help="write results.csv (one row per run), sweep.json and "
+                       "sweep.png into this folder, replaced as a whole")
     stability = command("stability", _cmd_stability,
                         "stability suite over stiff and extreme cases (exit 1 if a case fails)", scene=False)
     stability.add_argument("--quick", action="store_true", help="the smaller, faster set of cases")

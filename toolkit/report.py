@@ -256,6 +256,38 @@ def write_schedule(schedule: Any, out_dir: str | Path) -> list[Path]:
     return write_tree(out_dir, {"schedule.csv": csv_text.encode(), "schedule.json": json_text.encode()})
 
 
+def sweep_to_dict(result: Any, statistics: tuple[str, ...] = (), shortfalls: Any = ()) -> dict[str, Any]:
+    """JSON form of a sweep: experiment, runs, seed, scheduler, wall time, the summary
+    statistics (only ``statistics`` when given) and the shortfalls."""
+    data = result.to_dict()
+    if statistics:
+        data["summary"] = {name: data["summary"][name] for name in statistics}
+    data["shortfalls"] = shortfall_dicts(shortfalls)
+    return data
+
+
+def sweep_lines(result: Any, statistics: tuple[str, ...] = (), shortfalls: Any = ()) -> list[str]:
+    """Text summary of a sweep."""
+    lines = [f"{result.experiment.name}: {result.runs} runs (seed {result.seed}, {result.scheduler}) "
+             f"in {result.wall_time:.3g} s"]
+    for name, value in result.summary.items():
+        if not statistics or name in statistics:
+            lines.append(f"  {name} = {value:.6g}")
+    lines.extend(f"shortfall: {shortfall}" for shortfall in shortfalls)
+    return lines
+
+
+def write_sweep(result: Any, out_dir: str | Path, *, statistics: tuple[str, ...] = (),
+                shortfalls: Any = (), plots_too: bool = True, title: str | None = None) -> list[Path]:
+    """Write ``results.csv`` (one row per run), ``sweep.json`` (:func:`sweep_to_dict`) and,
+    with ``plots_too``, ``sweep.png`` into ``out_dir``, replacing it as a whole."""
+    payload = {"results.csv": result.table.to_csv(index=False, float_format="%.17g").encode(),
+               "sweep.json": to_json(sweep_to_dict(result, statistics, shortfalls)).encode()}
+    if plots_too:
+        payload["sweep.png"] = plots.figure_png(plots.plot_sweep(result, title=title))
+    return write_tree(out_dir, payload)
+
+
 def write_text(path: str | Path, text: str) -> Path:
     """Write one text file atomically (CSV, JSON)."""
     return atomic_write_text(path, text)

@@ -1,7 +1,7 @@
 """Scene files: TOML documents that declare what a study needs (the only module that reads them).
 
-A scene declares only the stages it needs. ``[contacts]`` is required; every other section
-is optional and its absence leaves its stage out (and the packages only that stage needs
+A scene declares only the stages it needs. ``[contacts]`` is required (except in a sweep
+scene, below); every other section is optional and its absence leaves its stage out (and the packages only that stage needs
 unimported). All values are SI: m/s, N, kg, s, N s/m.
 
 ::
@@ -23,6 +23,14 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
                      parameters; duration; v0; sensors; estimator; rate; seed; noise; budget;
                      cross_check
     [report]         plots; curve_points
+    [sweep]          experiment = median_law | mean_median | outliers | residual_friction,
+                     runs, seed, chunk_size, statistics, and the experiment's parameters
+
+A *sweep scene* declares ``[sweep]`` (with optional ``[scene]`` and ``[report]``) and nothing
+else: each run of the experiment draws its own contacts, so the model (contact count, speed
+range, friction spread, motor compliance, drag, calibration errors) is given by the
+experiment's parameters in ``[sweep]``, in SI units, documented on its class in
+:mod:`toolkit.experiments`.
 
 ``[estimation]`` (needs ``[body]`` and both encoders in ``[sensors]``), units:
 ``methods`` names from :data:`ESTIMATION_METHODS` (default all but ``"ukf"``);
@@ -87,7 +95,7 @@ from .scene_build import SceneObjects, build_scene
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
-    "SimulationSpec", "EstimationSpec", "ControlSpec", "ReportSpec", "ESTIMATION_METHODS",
+    "SimulationSpec", "EstimationSpec", "ControlSpec", "ReportSpec", "SweepSpec", "ESTIMATION_METHODS",
     "LOOP_ESTIMATORS", "CONTROLLERS", "with_section", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
 ]
 
@@ -728,12 +736,70 @@ class ReportSpec:
                                          high=MAX_SAMPLES))
 
 
+@dataclass(frozen=True)
+class SweepSpec:
+    """``[sweep]``: many seeded runs of one of the paper's experiments (:func:`toolkit.sweep`).
+
+    ``experiment`` (one of :data:`toolkit.experiments.EXPERIMENTS`), ``runs`` (count, default
+    1000), ``seed`` (root seed, default 0), ``chunk_size`` (runs per chunk, optional; results
+    do not depend on it), ``statistics`` (the summary statistics ``--json`` prints, default
+    all), and any parameter of the experiment's class, e.g. for ``median_law``: ``n``,
+    ``speed_limit`` (m/s), ``acceleration`` (m/s^2), ``mass`` (kg), ``friction_spread``
+    (relative), ``damping`` (N s/m), ``wheel_radius_bias``, ``wheel_radius_std``,
+    ``contact_radius_error`` (relative), ``compliance`` ((m/s)/N), ``settle_time`` (s),
+    ``wheel_seed``. Each value is checked by the experiment's constructor.
+    """
+
+    experiment: str
+    params: dict[str, Any] = field(default_factory=dict)
+    runs: int = 1000
+    seed: int = 0
+    chunk_size: int | None = None
+    statistics: tuple[str, ...] = ()
+
+    COMMON = ("experiment", "runs", "seed", "chunk_size", "statistics")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> SweepSpec:
+        from .experiments import EXPERIMENTS
+
+        kind = _text("sweep.experiment", _require("sweep", table, "experiment"))
+        if kind not in EXPERIMENTS:
+            raise SceneError(f"The 'sweep.experiment' value in the scene must be one of "
+                             f"{list(EXPERIMENTS)}. Got {kind!r} instead.{suggestion(kind, EXPERIMENTS)}")
+        names = tuple(f.name for f in fields(EXPERIMENTS[kind]) if f.name != "name")
+        _check_keys("sweep", table, (*cls.COMMON, *names))
+        params: dict[str, Any] = {}
+        for key in names:
+            if key in table:
+                value = table[key]
+                if not isinstance(value, (bool, int, float, str)):
+                    raise _fail(f"sweep.{key}", "be a number, a string or true/false", value)
+                if isinstance(value, float):
+                    _number(f"sweep.{key}", value)
+                params[key] = value
+        statistics = ()
+        if "statistics" in table:
+            value = table["statistics"]
+            if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+                raise _fail("sweep.statistics", "be a non-empty list of summary names", value)
+            statistics = tuple(value)
+        return cls(experiment=kind, params=params,
+                   runs=_integer("sweep.runs", table.get("runs", 1000), low=1),
+                   seed=_integer("sweep.seed", table.get("seed", 0)),
+                   chunk_size=(_integer("sweep.chunk_size", table["chunk_size"], low=1)
+                               if "chunk_size" in table else None),
+                   statistics=statistics)
+
+
 _SECTIONS: dict[str, Callable[[dict[str, Any]], Any]] = {
     "contacts": ContactsSpec.parse, "body": BodySpec.parse, "motors": MotorsSpec.parse,
     "sensors": SensorsSpec.parse, "target": TargetSpec.parse, "schedule": ScheduleSpec.parse,
     "simulation": SimulationSpec.parse, "estimation": EstimationSpec.parse,
-    "control": ControlSpec.parse, "report": ReportSpec.parse,
+    "control": ControlSpec.parse, "report": ReportSpec.parse, "sweep": SweepSpec.parse,
 }
+#: The sections a sweep scene may hold besides [sweep].
+_SWEEP_SECTIONS = ("scene", "sweep", "report")
 
 
 @dataclass(frozen=True)
@@ -743,12 +809,14 @@ class Scene:
     Attributes
     ----------
     name, description : str
-    contacts : ContactsSpec
-    body, motors, sensors, target, schedule, simulation, estimation, control, report : section spec or None
+    contacts : ContactsSpec or None
+        ``None`` only in a sweep scene (its runs draw their own contacts).
+    body, motors, sensors, target, schedule, simulation, estimation, control, report, sweep :
+        section spec or None
     """
 
     name: str
-    contacts: ContactsSpec
+    contacts: ContactsSpec | None
     description: str = ""
     body: BodySpec | None = None
     motors: MotorsSpec | None = None
@@ -759,10 +827,13 @@ class Scene:
     estimation: EstimationSpec | None = None
     control: ControlSpec | None = None
     report: ReportSpec | None = None
+    sweep: SweepSpec | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
         """The stages this scene declares, in the order ``run`` executes them."""
+        if self.sweep is not None:
+            return ("sweep",) + (("report",) if self.report is not None else ())
         order = ("sensors", "target", "schedule", "simulation", "estimation", "control", "report")
         return ("curve",) + tuple(s for s in order if getattr(self, s) is not None)
 
@@ -774,7 +845,16 @@ class Scene:
         return build_scene(self)
 
     def contact_set(self) -> ContactSet:
-        """The declared :class:`~toolkit.ContactSet`."""
+        """The declared :class:`~toolkit.ContactSet`.
+
+        Raises
+        ------
+        SceneError
+            A sweep scene (its runs draw their own contacts).
+        """
+        if self.contacts is None:
+            raise SceneError(f"The scene {self.name!r} is a sweep scene: its runs draw their own "
+                             "contacts, it declares no [contacts]. Run it with 'active-contacts sweep'.")
         return self.objects.contacts
 
 
@@ -887,19 +967,26 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
             raise SceneError(f"[{key}] in scene {name!r} must be a table (a [section]), got {value!r}.")
     meta = data.get("scene", {})
     _check_keys("scene", meta, ("name", "description"))
-    if "contacts" not in data:
+    if "sweep" in data:
+        others = [key for key in data if key not in _SWEEP_SECTIONS]
+        if others:
+            raise SceneError(f"A sweep scene declares its model in [sweep] (each run draws its own "
+                             f"contacts); remove [{others[0]}]. A sweep scene may hold "
+                             f"{', '.join(f'[{k}]' for k in _SWEEP_SECTIONS)}.")
+    elif "contacts" not in data:
         raise SceneError(f"The scene {name!r} needs a [contacts] section.")
     sections = {key: _SECTIONS[key](value) for key, value in data.items() if key in _SECTIONS}
     for stage in ("simulation", "schedule", "estimation", "control"):
         if stage in sections and "body" not in sections:
             raise SceneError(f"A [{stage}] section needs a [body] section (the moving inertia).")
-    _check_across(sections)
+    if "contacts" in sections:
+        _check_across(sections)
     scene_name = _text("scene.name", meta.get("name", name))
     if not _NAME.fullmatch(scene_name):
         raise _fail("scene.name", "be a plain name of letters, digits, '_', '.' and '-' (it names the "
                     "output folder)", scene_name)
-    scene = Scene(name=scene_name,
-                  description=_text("scene.description", meta.get("description", "")), **sections)
+    scene = Scene(name=scene_name, description=_text("scene.description", meta.get("description", "")),
+                  **{"contacts": None, **sections})
     scene.objects  # build every declared object once: the constructors check their values
     return scene
 
@@ -1014,6 +1101,12 @@ def dumps_scene(scene: Scene) -> str:
             for name in ("fixed", "failed", "liftable"):
                 if getattr(spec, name):
                     table[name] = list(getattr(spec, name))
+        elif key == "sweep":
+            table = {"experiment": spec.experiment, **spec.params, "runs": spec.runs, "seed": spec.seed}
+            if spec.chunk_size is not None:
+                table["chunk_size"] = spec.chunk_size
+            if spec.statistics:
+                table["statistics"] = list(spec.statistics)
         elif key == "control":
             table = _section_table(spec)
             table = {"controller": spec.controller, **_plain(spec.params),

@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._validation import check_option
+from ._validation import check_option, suggestion
 from .allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 from .errors import ParameterError, ParameterTypeError, SceneError
 from .model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant
@@ -151,9 +151,12 @@ class SceneObjects:
         ``[estimation]``.
     control : ControlObjects or None
         ``[control]``.
+    sweep : experiment or None
+        ``[sweep]`` (:mod:`toolkit.experiments`); in a sweep scene the only object
+        (``contacts`` is then None).
     """
 
-    contacts: ContactSet
+    contacts: ContactSet | None
     motors: Motors | None = None
     plant: Plant | None = None
     encoders: dict[str, Encoder] = field(default_factory=dict)
@@ -163,6 +166,7 @@ class SceneObjects:
     clipped: tuple[Clip, ...] = ()
     estimation: EstimationObjects | None = None
     control: ControlObjects | None = None
+    sweep: Any = None
 
     def plant_on(self, contacts: ContactSet | None = None) -> Plant:
         """The scene's plant, on other contacts (e.g. allocated ones) when given.
@@ -325,6 +329,8 @@ def build_scene(scene: Scene) -> SceneObjects:
         A constructor refused a value; the message names the scene key, the rule and the
         value received.
     """
+    if scene.sweep is not None:
+        return SceneObjects(contacts=None, sweep=_sweep(scene))
     clips: list[Clip] = []
     contacts = _contacts(scene, clips)
     motors = _motors(scene)
@@ -334,6 +340,21 @@ def build_scene(scene: Scene) -> SceneObjects:
                         schedule_target=schedule_target(scene.schedule),
                         simulation_options=_simulation_options(scene), clipped=tuple(clips),
                         estimation=_estimation(scene, plant), control=_control(scene, plant))
+
+
+def _sweep(scene: Scene) -> Any:
+    """The ``[sweep]`` experiment, its parameters checked by its constructor."""
+    from .experiments import EXPERIMENTS
+
+    spec = scene.sweep
+    kind = EXPERIMENTS[spec.experiment]
+    for name in spec.statistics:
+        if name not in kind.STATISTICS:
+            raise SceneError(f"The 'sweep.statistics' value in the scene must list statistics of "
+                             f"{spec.experiment!r} ({', '.join(kind.STATISTICS)}). Got {name!r} instead."
+                             f"{suggestion(name, kind.STATISTICS)}")
+    with _scene_keys("sweep", _same_keys("sweep", tuple(spec.params))):
+        return kind(**spec.params)
 
 
 def _simulation_options(scene: Scene) -> dict[str, Any]:

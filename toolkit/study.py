@@ -68,7 +68,7 @@ __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve
            "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
            "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
            "estimate_scene", "control_scene", "estimation_shortfalls", "control_shortfalls",
-           "CROSS_CHECK_TOLERANCE"]
+           "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls"]
 
 
 @dataclass(frozen=True)
@@ -78,14 +78,15 @@ class Shortfall:
     Attributes
     ----------
     stage : str
-        ``"scene"``, ``"allocation"``, ``"schedule"`` or ``"simulation"``.
+        ``"scene"``, ``"allocation"``, ``"schedule"``, ``"simulation"``, ``"estimation"``,
+        ``"control"`` or ``"sweep"``.
     what : str
         What was missed and by how much, in words, e.g. ``"friction fraction 1.7 is not
         realizable: projected to 1 (distance 7 N)"``.
     amount : float
         By how much (NaN when no amount applies), in ``unit``.
     unit : str
-        ``"N"``, ``"m/s"`` or ``"s"``.
+        ``"N"``, ``"m/s"``, ``"s"`` or ``"runs"``.
     """
 
     stage: str
@@ -634,3 +635,42 @@ def run_study(scene: Scene, *, strict: bool = False) -> StudyResult:
         found += control_shortfalls(scene, loop)
     return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation,
                        schedule, check, simulation, tuple(found), estimation, loop)
+
+
+# -- sweeps -------------------------------------------------------------------------------------
+
+def sweep_scene(scene: Scene, *, runs: int | None = None, seed: int | None = None,
+                scheduler: Any = None, workers: int | None = None, progress: bool = False) -> Any:
+    """Run a sweep scene's ``[sweep]`` (:func:`toolkit.sweep`); ``runs`` and ``seed`` override
+    the scene's.
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    SceneError
+        The scene has no ``[sweep]``.
+    """
+    from .sweeps import sweep   # pandas comes with the first sweep
+
+    spec = scene.sweep
+    if spec is None:
+        raise SceneError(f"The scene {scene.name!r} has no [sweep] section to run.")
+    return sweep(scene.objects.sweep, spec.runs if runs is None else runs,
+                 seed=spec.seed if seed is None else seed, scheduler=scheduler, workers=workers,
+                 chunk_size=spec.chunk_size, progress=progress)
+
+
+def sweep_shortfalls(result: Any) -> list[Shortfall]:
+    """Runs that had not settled by the end of their observation time (median law, mean
+    against median): their speeds are not steady speeds (the count of such runs)."""
+    table = result.table
+    if "settled" not in table:
+        return []
+    unsettled = int((~table["settled"]).sum())
+    if not unsettled:
+        return []
+    return [Shortfall("sweep", f"{unsettled} of {result.runs} runs had not settled when observed "
+                      "(their speeds are not steady)", float(unsettled), "runs")]

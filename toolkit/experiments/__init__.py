@@ -1,0 +1,16 @@
+"""The paper's experiments as sweepable definitions (one module per experiment).
+
+Each experiment is a frozen dataclass that :func:`toolkit.sweep` runs many times with
+reproducible seeds (``run(seeds)`` evaluates a chunk of runs, ``summarize(table)`` gives the
+summary statistics); its parameters include the non-idealities of the real carousel.
+"""
+
+from .mean_median import MeanMedian
+from .median_law import MedianLaw, median_law_slope
+from .outliers import Outliers
+from .residual_friction import ResidualFriction
+
+__all__ = ["MedianLaw", "MeanMedian", "Outliers", "ResidualFriction", "median_law_slope", "EXPERIMENTS"]
+
+#: Experiments by name (the ``experiment`` key of a scene's ``[sweep]`` section).
+EXPERIMENTS = {cls.name: cls for cls in (MedianLaw, MeanMedian, Outliers, ResidualFriction)}

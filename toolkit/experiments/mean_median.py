@@ -1,0 +1,122 @@
+"""Mean against median (the paper's Fig. 2c): hold one, vary the other, watch the speed.
+
+Each run builds ``n = 2 h`` speeds (``h`` below and ``h`` above a middle pair ``m +- g``;
+``numpy.median`` is ``m``): ``held = "mean"`` draws the median ``m`` uniformly in
+``[-median_range, median_range]`` and rescales the outer speeds so that the mean stays at
+``level``; ``held = "median"`` keeps ``m = level`` and draws the outer speeds freely, so the
+mean varies. The body starts from rest and settles (exact batch path).
+
+Ideal model (closed form, equal loads, from rest): the body stops at ``clip(0, m - g,
+m + g)``, the near edge of the zero-force band, whatever the mean: with the median held the
+speed is one number for every run; with the mean held it follows the median.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .._validation import as_float, as_int
+from ..errors import ParameterError, SolverError, parameter_message
+from ..simulation import simulate_batch
+from .median_law import median_law_slope
+
+__all__ = ["MeanMedian"]
+
+_OWNER = "MeanMedian"
+
+
+@dataclass(frozen=True)
+class MeanMedian:
+    """Hold the mean and vary the median, or the reverse (see the module docstring).
+
+    Parameters
+    ----------
+    held : {"mean", "median"}
+    level : float, m/s
+        The held mean or median.
+    gap : float, m/s
+        Half-width ``g`` of the middle pair (the zero-force band is ``[m - g, m + g]``).
+    median_range : float, m/s
+        With ``held = "mean"``, medians uniform in ``[-median_range, median_range]``.
+    n : int
+        Even number of contacts (the paper: 10).
+    speed_limit : float, m/s
+    acceleration : float, m/s^2
+        ``F_tot / m``.
+    settle_time : float, s
+    """
+
+    held: str = "mean"
+    level: float = 0.0
+    gap: float = 0.01
+    median_range: float = 0.15
+    n: int = 10
+    speed_limit: float = 0.35
+    acceleration: float = 2.0
+    settle_time: float = 20.0
+    name: str = "mean_median"
+    #: Names of :meth:`summarize`'s statistics.
+    STATISTICS: ClassVar[tuple[str, ...]] = ("mean_range", "median_range", "speed_range",
+                                             "slope_median", "corr_mean")
+
+    def __post_init__(self) -> None:
+        set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731
+        if self.held not in ("mean", "median"):
+            raise ParameterError(parameter_message("held", _OWNER, "be 'mean' or 'median'", self.held))
+        set_("n", as_int(self.n, "n", _OWNER, low=4))
+        if self.n % 2:
+            raise ParameterError(parameter_message("n", _OWNER, "be even (a middle pair)", self.n))
+        for key in ("speed_limit", "acceleration", "settle_time", "gap"):
+            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0, low_open=True))
+        set_("median_range", as_float(self.median_range, "median_range", _OWNER, low=0.0))
+        set_("level", as_float(self.level, "level", _OWNER))
+        reach = self.gap + abs(self.level) + (self.median_range if self.held == "mean" else 0.0)
+        if reach >= 0.5 * self.speed_limit:
+            raise ParameterError(parameter_message(
+                "level", _OWNER, f"leave room for the outer speeds: |level| + gap"
+                f"{' + median_range' if self.held == 'mean' else ''} < speed_limit / 2 = "
+                f"{0.5 * self.speed_limit:g}", self.level))
+
+    def speeds(self, seed: np.random.SeedSequence) -> np.ndarray:
+        """One run's contact speeds, shape (n,), m/s (rejection-sampled within the limits;
+        the outer offsets are at most ``v_max / 2``, so with the checked room a draw is
+        accepted with a probability bounded away from 0)."""
+        rng = np.random.default_rng(seed)
+        h, g, v_max = self.n // 2 - 1, self.gap, self.speed_limit
+        for _ in range(10_000):
+            m = rng.uniform(-self.median_range, self.median_range) if self.held == "mean" else self.level
+            below = rng.uniform(0.01, v_max / 2, h)      # offsets of the outer speeds
+            above = rng.uniform(0.01, v_max / 2, h)
+            if self.held == "mean":
+                need = self.n * (self.level - m)         # sum(above) - sum(below) must equal this
+                if need >= 0:
+                    above *= (below.sum() + need) / above.sum()
+                else:
+                    below *= (above.sum() - need) / below.sum()
+            speeds = np.concatenate((m - g - below, [m - g, m + g], m + g + above))
+            if np.all(np.abs(speeds) <= v_max):
+                return speeds
+        raise SolverError(f"MeanMedian run {seed.spawn_key}: no speed set within the limits in 10000 draws.")
+
+    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
+        """Columns ``mean``, ``median`` (of the speeds) and ``speed`` (settled), m/s."""
+        speeds = np.array([self.speeds(seq) for seq in seeds])
+        forces = np.full(speeds.shape, self.acceleration / self.n)
+        final = simulate_batch(speeds, forces, 1.0, self.settle_time, v0=0.0).final_speeds
+        return {"mean": speeds.mean(axis=1), "median": np.median(speeds, axis=1),
+                "speed": np.array(final)}
+
+    def summarize(self, table: Any) -> dict[str, float]:
+        """``mean_range`` and ``median_range`` (max - min over the runs, m/s), ``speed_range``
+        (m/s), ``slope_median`` (speed against median through the origin) and
+        ``corr_mean`` (correlation of speed and mean; nan when either spans <= 1e-12 m/s)."""
+        mean, median, speed = (table[c].to_numpy() for c in ("mean", "median", "speed"))
+        spread = lambda x: float(x.max() - x.min())  # noqa: E731
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = float(np.corrcoef(speed, mean)[0, 1]) if min(spread(speed), spread(mean)) > 1e-12 else math.nan
+        return {"mean_range": spread(mean), "median_range": spread(median), "speed_range": spread(speed),
+                "slope_median": median_law_slope(median, speed)[0], "corr_mean": corr}

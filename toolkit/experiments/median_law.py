@@ -1,0 +1,211 @@
+"""The median law (the paper's Fig. 2b): steady speed against the median of random speeds.
+
+Each run draws ``n`` contact speeds uniformly in ``[-v_max, v_max]``, starts the body from
+rest and lets it settle; the row holds the numpy median of the commanded speeds, the
+speed the body settles at and their ratio. Over many runs the paper fits
+``V = slope * median`` through the origin and finds ``slope = 1.065 +- 0.01`` (660 runs).
+
+The ideal model (equal friction, ideal motors, no drag) gives a slope below 1 for even
+``n``: from rest the body stops at the edge of the zero-force band ``[v_(n/2),
+v_(n/2+1)]`` that it reaches first, ``V = clip(0, v_(n/2), v_(n/2+1))``, not at the band's
+midpoint that ``numpy.median`` returns (PHYSICS.md section 4); with odd ``n`` the slope is 1.
+
+Non-idealities (each a physical parameter, 0 = ideal)
+-----------------------------------------------------
+friction_spread : relative std of each contact's friction magnitude (lognormal, mean kept):
+    unequal wheels. Moves the equilibrium to the weighted median. With ``wheel_seed`` the
+    loads are drawn once from that seed (one carousel, its wheels in every run, as in the
+    paper's 660 runs); without, they are drawn anew in every run (a Monte Carlo over
+    carousels).
+damping : bearing drag ``c``, N s/m: the body settles where ``F(V) = c V``.
+wheel_radius_bias, wheel_radius_std : relative error of the wheels' radius, common to all
+    wheels (calibration, tyre compression) and per wheel (manufacturing): a wheel commanded
+    to ``v_i`` runs at ``v_i (1 + bias + std z_i)``.
+contact_radius_error : relative error of the contact radius ``L`` the central encoder's
+    angle is converted with: the reported speed is ``V / (1 + error)`` (``L_true = L (1 +
+    error)``).
+compliance : motor compliance ``k``, (m/s)/N: a loaded motor droops by ``k`` times its
+    contact force (the torque-speed line; the paper's 4.6 % speed rise on release is
+    ``k f_i = 0.046 |v_i|``). Needs the single-run exact engine (the batch path has no
+    compliance), about 0.2 ms per run.
+
+Everything but ``compliance`` runs on the vectorized exact batch path
+(:func:`toolkit.simulate_batch`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .._validation import as_float, as_int
+from ..errors import ParameterError, SolverError, parameter_message
+from ..model import ContactSet, Motors, Plant
+from ..simulation import SimulationStatus, simulate, simulate_batch
+
+__all__ = ["MedianLaw", "median_law_slope", "SETTLED_TOLERANCE"]
+
+_OWNER = "MedianLaw"
+#: A run is settled when its speed changed by at most this over the second half, m/s.
+SETTLED_TOLERANCE = 1e-9
+
+
+def median_law_slope(median: Any, speed: Any) -> tuple[float, float]:
+    """Least-squares slope of ``speed = slope * median`` through the origin, and its
+    standard error (the paper's fit ``y = m x``).
+
+    Parameters
+    ----------
+    median, speed : array_like of shape (k,), m/s
+
+    Returns
+    -------
+    slope, stderr : float
+        ``slope = sum(x y) / sum(x^2)``; ``stderr = sqrt(sum(r^2) / (k - 1) / sum(x^2))``.
+    """
+    x, y = np.asarray(median, dtype=float), np.asarray(speed, dtype=float)
+    sxx = float(x @ x)
+    if x.size < 2 or sxx == 0.0:
+        return math.nan, math.nan
+    slope = float(x @ y) / sxx
+    r = y - slope * x
+    return slope, math.sqrt(float(r @ r) / (x.size - 1) / sxx)
+
+
+@dataclass(frozen=True)
+class MedianLaw:
+    """The median-law experiment (see the module docstring for every parameter).
+
+    Parameters
+    ----------
+    n : int
+        Contacts per run (the paper: 10).
+    speed_limit : float, m/s
+        Speeds uniform in ``[-speed_limit, speed_limit]`` (the paper's ``v_max = 0.35``).
+    acceleration : float, m/s^2
+        ``F_tot / m`` (the carousel: 2).
+    mass : float, kg
+        Moving inertia (sets the force units and, with ``damping``, the drag time constant).
+    friction_spread, damping, wheel_radius_bias, wheel_radius_std, contact_radius_error,
+    compliance : float
+        Non-idealities (module docstring), default 0.
+    wheel_seed : int, optional
+        Draw the wheels' loads (``friction_spread``) and radius errors (``wheel_radius_std``)
+        once from this seed: one carousel for every run.
+    settle_time : float, s, optional
+        Observation time of each run from rest (default 20 s, a hundred times the ideal
+        carousel's longest startup ``2 v_max / (F_tot/m)``). Unequal loads can leave a tiny
+        net force, so a run may still move at the end: the ``settled`` column says whether
+        the speed changed by more than :data:`SETTLED_TOLERANCE` over the second half.
+    """
+
+    n: int = 10
+    speed_limit: float = 0.35
+    acceleration: float = 2.0
+    mass: float = 1.0
+    friction_spread: float = 0.0
+    damping: float = 0.0
+    wheel_radius_bias: float = 0.0
+    wheel_radius_std: float = 0.0
+    contact_radius_error: float = 0.0
+    compliance: float = 0.0
+    settle_time: float | None = None
+    wheel_seed: int | None = None
+    name: str = "median_law"
+    #: Names of :meth:`summarize`'s statistics.
+    STATISTICS: ClassVar[tuple[str, ...]] = ("slope", "slope_stderr", "ratio_median", "ratio_iqr",
+                                             "settled_fraction")
+
+    def __post_init__(self) -> None:
+        set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731
+        set_("n", as_int(self.n, "n", _OWNER, low=1))
+        for key in ("speed_limit", "acceleration", "mass"):
+            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0, low_open=True))
+        for key in ("friction_spread", "damping", "wheel_radius_std", "compliance"):
+            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0))
+        for key in ("wheel_radius_bias", "contact_radius_error"):
+            value = as_float(getattr(self, key), key, _OWNER)
+            if not -0.5 < value < 0.5:
+                raise ParameterError(parameter_message(key, _OWNER, "lie in (-0.5, 0.5)", value))
+            set_(key, value)
+        if self.wheel_seed is not None:
+            set_("wheel_seed", as_int(self.wheel_seed, "wheel_seed", _OWNER, low=0))
+        if self.settle_time is not None:
+            set_("settle_time", as_float(self.settle_time, "settle_time", _OWNER, low=0.0, low_open=True))
+
+    # -- one chunk ------------------------------------------------------------------------
+    def draw(self, seeds: list[np.random.SeedSequence]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Commanded speeds (k, n), actual contact speeds (k, n) and friction magnitudes
+        (k, n) of each run, from its own generator (in this order: speeds, wheel radius
+        errors, loads; the last two from ``wheel_seed`` instead when it is given)."""
+        n, k = self.n, len(seeds)
+        commanded, actual, forces = np.empty((k, n)), np.empty((k, n)), np.empty((k, n))
+        if self.wheel_seed is not None:
+            wheels = np.random.default_rng(self.wheel_seed)
+            scale, load = self._wheels(wheels)
+        for j, seq in enumerate(seeds):
+            rng = np.random.default_rng(seq)
+            commanded[j] = rng.uniform(-self.speed_limit, self.speed_limit, n)
+            if self.wheel_seed is None:
+                scale, load = self._wheels(rng)
+            actual[j] = commanded[j] * scale
+            forces[j] = load
+        return commanded, actual, forces
+
+    def _wheels(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Radius scale and friction load of each wheel (in this order from ``rng``)."""
+        n = self.n
+        scale = 1.0 + self.wheel_radius_bias + self.wheel_radius_std * rng.standard_normal(n)
+        f = self.acceleration * self.mass / n
+        s = self.friction_spread
+        if s == 0:
+            return scale, np.full(n, f)
+        sigma = math.sqrt(math.log1p(s * s))      # lognormal with mean f and relative std s
+        return scale, f * np.exp(sigma * rng.standard_normal(n) - 0.5 * sigma * sigma)
+
+    def horizon(self) -> float:
+        """Observation time of each run, s (``settle_time``, default 20 s)."""
+        return 20.0 if self.settle_time is None else self.settle_time
+
+    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
+        """Columns ``median`` (numpy median of the commanded speeds, m/s), ``speed`` (the
+        reported settled speed, m/s), ``true_speed`` (m/s), ``ratio`` (``speed / median``)
+        and ``settled`` (speed steady over the second half of the run)."""
+        commanded, actual, forces = self.draw(seeds)
+        t_end = self.horizon()
+        k = commanded.shape[0]
+        if self.compliance == 0.0:
+            half, final = (np.array(simulate_batch(actual, forces, self.mass, t, v0=0.0,
+                                                   damping=self.damping).final_speeds)
+                           for t in (0.5 * t_end, t_end))
+        else:
+            half, final = np.empty(k), np.empty(k)
+            motors = Motors(compliance=self.compliance)
+            for j in range(k):
+                plant = Plant(ContactSet(actual[j], forces[j]), self.mass, damping=self.damping,
+                              motors=motors)
+                result = simulate(plant, t_end, v0=0.0, t_eval=[0.5 * t_end, t_end])
+                if result.status is not SimulationStatus.SUCCESS:
+                    raise SolverError(f"MedianLaw run {seeds[j].spawn_key}: {result.message}")
+                half[j], final[j] = result.V
+        settled = np.abs(final - half) <= SETTLED_TOLERANCE
+        median = np.median(commanded, axis=1)
+        reported = final / (1.0 + self.contact_radius_error)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = reported / median
+        return {"median": median, "speed": reported, "true_speed": final, "ratio": ratio,
+                "settled": settled}
+
+    def summarize(self, table: Any) -> dict[str, float]:
+        """``slope`` and ``slope_stderr`` of speed against median through the origin (the
+        paper's fit), ``ratio_median`` and ``ratio_iqr`` of ``speed / median`` (runs with
+        ``|median| > 0.1 v_max``), ``settled_fraction``."""
+        slope, stderr = median_law_slope(table["median"], table["speed"])
+        keep = np.abs(table["median"].to_numpy()) > 0.1 * self.speed_limit
+        ratio = table["ratio"].to_numpy()[keep]
+        q1, q2, q3 = (np.percentile(ratio, [25, 50, 75]) if ratio.size else (math.nan,) * 3)
+        return {"slope": slope, "slope_stderr": stderr, "ratio_median": float(q2),
+                "ratio_iqr": float(q3 - q1), "settled_fraction": float(np.mean(table["settled"]))}

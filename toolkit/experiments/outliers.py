@@ -1,0 +1,159 @@
+"""Outliers (the paper's sinusoidal-outlier experiment): the fastest contacts oscillate while
+the median is held; does the body's speed move?
+
+Each run draws ``n`` speeds uniformly in ``[-v_max, v_max]``; the ``k`` fastest become
+outliers commanded ``c_i + A sin(2 pi f t + phi_i)`` with their own centre ``c_i`` (the drawn
+speed, moved down if needed so that the oscillation stays within the motor limits: ``c_i
+<= v_max - A``) and a random phase. Commands are sampled at the controller rate (50 Hz on
+the carousel) and reach the contacts through the motor law (first-order lag). The body
+starts from rest, settles, and the row reports how far its speed strays from where it
+settled while the outliers oscillate.
+
+Ideal model (the stiction rule): the body rests at ``V*`` (for even ``n`` from rest, the
+near edge of the zero-force band, a contact speed) and stays there exactly as long as zero
+stays in the set-valued force at ``V*``, ``0 in [F(V*+), F(V*-)]``, at every instant. While
+every outlier's contact speed stays above ``V*`` nothing changes; an outlier dipping below
+``V*`` shifts the others' force by ``2 f``, which the contact the body rests on (``+-f``)
+may still hold. The row's ``held`` evaluates that rule on the contact speeds of the run
+(at every reported instant: the command times, where the lagged contact speeds have their
+extremes, and the crossings, which are events), so ``deviation == 0`` exactly where
+``held``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .._validation import as_float, as_int
+from ..errors import ParameterError, SolverError, parameter_message
+from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+from ..simulation import SimulationStatus, simulate
+
+__all__ = ["Outliers"]
+
+_OWNER = "Outliers"
+
+
+@dataclass(frozen=True)
+class Outliers:
+    """The sinusoidal-outlier experiment (see the module docstring).
+
+    Parameters
+    ----------
+    n : int
+        Contacts (the paper: 10).
+    outliers : int
+        How many of the fastest contacts oscillate, ``1 .. n // 2 - 1`` (so the median's
+        contacts are never among them).
+    amplitude : float, m/s
+        ``A`` of every outlier, ``0 <= A <= v_max``; a sweep over amplitudes draws ``A``
+        uniformly in ``[0, amplitude]`` per run when ``random_amplitude`` is True.
+    frequency : float, Hz
+    speed_limit : float, m/s
+    acceleration : float, m/s^2
+        ``F_tot / m``.
+    lag : float, s
+        Motor time constant (the carousel: 0.0075 s).
+    rate : float, Hz
+        Command rate (the carousel: 50 Hz).
+    settle_time, window : float, s
+        Time before the outliers start (they hold ``c_i`` meanwhile) and the observed window.
+    random_amplitude : bool
+    """
+
+    n: int = 10
+    outliers: int = 2
+    amplitude: float = 0.3
+    frequency: float = 1.0
+    speed_limit: float = 0.35
+    acceleration: float = 2.0
+    lag: float = 0.0075
+    rate: float = 50.0
+    settle_time: float = 2.0
+    window: float = 3.0
+    random_amplitude: bool = True
+    name: str = "outliers"
+    #: Names of :meth:`summarize`'s statistics.
+    STATISTICS: ClassVar[tuple[str, ...]] = ("unaffected_fraction", "rule_agreement",
+                                             "largest_deviation", "threshold_amplitude")
+
+    def __post_init__(self) -> None:
+        set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731
+        set_("n", as_int(self.n, "n", _OWNER, low=4))
+        set_("outliers", as_int(self.outliers, "outliers", _OWNER, low=1))
+        if self.outliers > self.n // 2 - 1:
+            raise ParameterError(parameter_message(
+                "outliers", _OWNER, f"be <= n // 2 - 1 = {self.n // 2 - 1} (the median's contacts "
+                "must not oscillate)", self.outliers))
+        for key in ("frequency", "speed_limit", "acceleration", "rate", "settle_time", "window"):
+            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0, low_open=True))
+        set_("lag", as_float(self.lag, "lag", _OWNER, low=0.0))
+        set_("amplitude", as_float(self.amplitude, "amplitude", _OWNER, low=0.0, high=self.speed_limit))
+
+    def plant(self, seed: np.random.SeedSequence) -> tuple[Plant, np.ndarray, float]:
+        """The run's plant (commands sampled at ``rate``), the outlier indices and ``A``."""
+        rng = np.random.default_rng(seed)
+        v_max = self.speed_limit
+        speeds = rng.uniform(-v_max, v_max, self.n)
+        amplitude = rng.uniform(0.0, self.amplitude) if self.random_amplitude else self.amplitude
+        phase = rng.uniform(0.0, 2.0 * math.pi, self.outliers)
+        fastest = np.argsort(speeds)[-self.outliers:]
+        centre = np.minimum(speeds[fastest], v_max - amplitude)
+        # Keep the outliers the fastest: centres stay above every other contact.
+        others = np.delete(speeds, fastest)
+        centre = np.maximum(centre, others.max())
+        speeds[fastest] = centre
+        h = 1.0 / self.rate
+        times = self.settle_time + h * np.arange(math.ceil(self.window * self.rate))
+        rows = np.tile(speeds, (times.size + 1, 1))
+        wave = centre + amplitude * np.sin(2.0 * math.pi * self.frequency * (times[:, None] - self.settle_time)
+                                           + phase)
+        rows[1:, fastest] = np.clip(wave, -v_max, v_max)
+        f = self.acceleration / self.n
+        motors = Motors(lag=self.lag, speed_limits=(-v_max, v_max))
+        plant = Plant(ContactSet(speeds, np.full(self.n, f)), 1.0, motors=motors,
+                      commands=PiecewiseConstant(times, rows))
+        return plant, fastest, amplitude
+
+    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
+        """Columns ``amplitude`` (m/s), ``rest_speed`` (``V*`` before the outliers start,
+        m/s), ``deviation`` (largest ``|V - V*|`` over the window, m/s), ``lowest_outlier``
+        (lowest outlier contact speed minus ``V*``, m/s) and ``held`` (the stiction rule
+        held at ``V*`` throughout, bool)."""
+        k = len(seeds)
+        amplitude, rest, deviation, lowest = (np.empty(k) for _ in range(4))
+        held = np.empty(k, dtype=bool)
+        t_end = self.settle_time + self.window
+        for j, seq in enumerate(seeds):
+            plant, fastest, amplitude[j] = self.plant(seq)
+            result = simulate(plant, t_end, v0=0.0)
+            if result.status is not SimulationStatus.SUCCESS:
+                raise SolverError(f"Outliers run {seq.spawn_key}: {result.message}")
+            inside = result.t >= self.settle_time
+            rest[j] = result.speed_at(self.settle_time)
+            deviation[j] = float(np.max(np.abs(result.V[inside] - rest[j])))
+            speeds = result.contact_speeds[inside]
+            lowest[j] = float(speeds[:, fastest].min()) - rest[j]
+            forces = plant.contacts.forces
+            held[j] = all(lo <= 0.0 <= hi for lo, hi in
+                          (ContactSet(row, forces).force_bounds(rest[j]) for row in speeds))
+        return {"amplitude": amplitude, "rest_speed": rest, "deviation": deviation,
+                "lowest_outlier": lowest, "held": held}
+
+    def summarize(self, table: Any) -> dict[str, float]:
+        """``unaffected_fraction`` (runs with ``deviation <= 1e-12`` m/s), ``largest_deviation``
+        among runs whose outliers stayed above the rest speed (``lowest_outlier > 0``; 0 in
+        the ideal model), ``rule_agreement`` (fraction of runs where "moved" equals "the
+        stiction rule failed"; 1 in the ideal model) and ``threshold_amplitude`` (the
+        smallest amplitude that moved the body, m/s; nan if none did)."""
+        deviation = table["deviation"].to_numpy()
+        above = table["lowest_outlier"].to_numpy() > 0
+        moved = deviation > 1e-12
+        return {"unaffected_fraction": float(np.mean(~moved)),
+                "rule_agreement": float(np.mean(moved != table["held"].to_numpy())),
+                "largest_deviation": float(deviation[above].max()) if above.any() else math.nan,
+                "threshold_amplitude": float(table["amplitude"].to_numpy()[moved].min()) if moved.any() else math.nan}

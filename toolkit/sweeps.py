@@ -1,0 +1,225 @@
+"""Sweeps: many seeded runs of one experiment, on this machine or on a Dask cluster.
+
+An *experiment* (for example :class:`toolkit.experiments.MedianLaw`) says what one run is:
+it draws its scene from the run's own random generator, simulates it and returns one row of
+results. :func:`sweep` runs it ``runs`` times and gathers a tidy table (a pandas DataFrame,
+one row per run) and the experiment's summary statistics.
+
+Reproducibility
+---------------
+Run ``i`` draws from ``numpy.random.default_rng(SeedSequence(seed, spawn_key=(i,)))``,
+exactly the ``i``-th child of ``SeedSequence(seed).spawn(runs)``. A run's numbers depend only
+on ``seed`` and ``i``, never on how runs are grouped or where they execute.
+
+Runs are grouped into chunks of ``chunk_size`` consecutive runs (a fixed function of
+``runs`` and ``chunk_size``, not of the number of workers). An experiment evaluates a whole
+chunk at once (vectorized over runs where it can: the exact batch path). The chunks then go:
+
+- ``scheduler=None`` (default): one after another in this process;
+- ``scheduler="processes"``: to a ``concurrent.futures`` process pool (``workers``);
+- ``scheduler="tcp://host:port"`` or a ``distributed.Client``: to a Dask cluster
+  (``pip install active-contacts[dask]``).
+
+The chunks are the same in all three, so the tables are identical bit for bit.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from ._validation import as_int
+from .errors import ParameterError, ParameterTypeError, parameter_message
+
+__all__ = ["Experiment", "SweepResult", "sweep", "run_seeds", "MAX_RUNS", "DEFAULT_CHUNK_SIZE"]
+
+#: Most runs one sweep may take (its table holds one row per run).
+MAX_RUNS = 10_000_000
+#: Runs per chunk unless the call says otherwise.
+DEFAULT_CHUNK_SIZE = 4096
+_OWNER = "sweep"
+
+
+@runtime_checkable
+class Experiment(Protocol):
+    """What one sweep runs. Implementations are frozen dataclasses (picklable, so that a
+    process pool or a Dask worker can run them)."""
+
+    name: str
+
+    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
+        """Evaluate one chunk: one entry per column, each an array with one value per seed."""
+        ...
+
+    def summarize(self, table: Any) -> dict[str, float]:
+        """Summary statistics of the whole table (a pandas DataFrame)."""
+        ...
+
+
+@dataclass(frozen=True, eq=False)
+class SweepResult:
+    """The runs of one :func:`sweep`.
+
+    Attributes
+    ----------
+    experiment : Experiment
+    table : pandas.DataFrame
+        One row per run, in run order; column ``run`` is the run index ``i``.
+    summary : dict of str to float
+        The experiment's summary statistics (e.g. the median-law slope).
+    runs, seed, chunk_size : int
+    scheduler : str
+        ``"local"``, ``"processes"`` or ``"dask"``.
+    wall_time : float, s
+    """
+
+    experiment: Any
+    table: Any
+    summary: dict[str, float]
+    runs: int
+    seed: int
+    chunk_size: int
+    scheduler: str
+    wall_time: float
+    chunks: int = field(default=0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary (not the table): experiment name, runs, seed, scheduler,
+        wall time and the summary statistics."""
+        return {"experiment": self.experiment.name, "runs": self.runs, "seed": self.seed,
+                "chunk_size": self.chunk_size, "scheduler": self.scheduler,
+                "wall_time": self.wall_time, "summary": dict(self.summary)}
+
+
+def run_seeds(seed: int, start: int, stop: int) -> list[np.random.SeedSequence]:
+    """Children ``start .. stop-1`` of ``SeedSequence(seed).spawn(...)``, built directly."""
+    return [np.random.SeedSequence(seed, spawn_key=(i,)) for i in range(start, stop)]
+
+
+def _run_chunk(experiment: Any, seed: int, start: int, stop: int) -> dict[str, np.ndarray]:
+    columns = experiment.run(run_seeds(seed, start, stop))
+    for name, values in columns.items():
+        if np.shape(values) != (stop - start,):
+            raise RuntimeError(f"Experiment {experiment.name!r} returned column {name!r} of shape "
+                               f"{np.shape(values)} for {stop - start} runs.")
+    return columns
+
+
+def _client(scheduler: Any) -> Any:
+    try:
+        import distributed   # optional extra: imported only for a Dask scheduler
+    except ImportError:
+        raise ParameterError(parameter_message(
+            "scheduler", _OWNER, "name a Dask scheduler only where dask.distributed is "
+            "installed (pip install 'active-contacts[dask]')", scheduler)) from None
+    if isinstance(scheduler, distributed.Client):
+        return scheduler, False
+    try:
+        return distributed.Client(scheduler, timeout=10), True
+    except (OSError, TimeoutError, ValueError) as error:
+        raise ParameterError(parameter_message(
+            "scheduler", _OWNER, f"be the address of a reachable Dask scheduler ({error})",
+            scheduler)) from None
+
+
+def _progress(total: int, enabled: bool, name: str) -> Any:
+    if not enabled:
+        return None
+    from tqdm import tqdm   # only when a bar is shown
+    return tqdm(total=total, desc=name, unit="run", leave=False)
+
+
+def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = None,
+          workers: int | None = None, chunk_size: int | None = None,
+          progress: bool = False) -> SweepResult:
+    """Run ``experiment`` ``runs`` times with reproducible seeds; gather a tidy table.
+
+    Parameters
+    ----------
+    experiment : Experiment
+        E.g. :class:`toolkit.experiments.MedianLaw`.
+    runs : int
+        Number of runs, ``1 .. MAX_RUNS``.
+    seed : int
+        Root seed (``>= 0``); run ``i`` uses child ``i`` of ``SeedSequence(seed)``.
+    scheduler : None, "processes", str address or distributed.Client
+        Where chunks run (see the module docstring).
+    workers : int, optional
+        Processes of the ``"processes"`` pool (default: the CPU count).
+    chunk_size : int, optional
+        Runs per chunk (default :data:`DEFAULT_CHUNK_SIZE`); results do not depend on it.
+    progress : bool
+        Show a tqdm progress bar on stderr.
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    ParameterError
+        Bad counts or seeds; a Dask scheduler without dask.distributed installed, or one
+        that cannot be reached.
+    """
+    if not isinstance(experiment, Experiment):
+        raise ParameterTypeError(parameter_message(
+            "experiment", _OWNER, "be an experiment (toolkit.experiments)", experiment))
+    runs = as_int(runs, "runs", _OWNER, low=1)
+    if runs > MAX_RUNS:
+        raise ParameterError(parameter_message("runs", _OWNER, f"be <= {MAX_RUNS}", runs))
+    seed = as_int(seed, "seed", _OWNER, low=0)
+    chunk_size = DEFAULT_CHUNK_SIZE if chunk_size is None else as_int(chunk_size, "chunk_size", _OWNER, low=1)
+    bounds = [(a, min(a + chunk_size, runs)) for a in range(0, runs, chunk_size)]
+    started = time.perf_counter()
+    bar = _progress(runs, progress, experiment.name)
+    parts: list[dict[str, np.ndarray] | None] = [None] * len(bounds)
+    kind = "local"
+    try:
+        if scheduler is None:
+            for j, (a, b) in enumerate(bounds):
+                parts[j] = _run_chunk(experiment, seed, a, b)
+                if bar is not None:
+                    bar.update(b - a)
+        elif isinstance(scheduler, str) and scheduler == "processes":
+            kind = "processes"
+            workers = (os.cpu_count() or 1) if workers is None else as_int(workers, "workers", _OWNER, low=1)
+            with ProcessPoolExecutor(max_workers=min(workers, len(bounds))) as pool:
+                futures = {pool.submit(_run_chunk, experiment, seed, a, b): j
+                           for j, (a, b) in enumerate(bounds)}
+                for future in as_completed(futures):
+                    j = futures[future]
+                    parts[j] = future.result()
+                    if bar is not None:
+                        bar.update(bounds[j][1] - bounds[j][0])
+        else:
+            kind = "dask"
+            client, own = _client(scheduler)
+            try:
+                from distributed import as_completed as dask_completed
+                futures = {client.submit(_run_chunk, experiment, seed, a, b, pure=False): j
+                           for j, (a, b) in enumerate(bounds)}
+                for future in dask_completed(list(futures)):
+                    j = futures[future]
+                    parts[j] = future.result()
+                    if bar is not None:
+                        bar.update(bounds[j][1] - bounds[j][0])
+            finally:
+                if own:
+                    client.close()
+    finally:
+        if bar is not None:
+            bar.close()
+    import pandas as pd   # the table type; imported with the first sweep
+
+    columns = {"run": np.arange(runs)}
+    for name in parts[0]:
+        columns[name] = np.concatenate([part[name] for part in parts])
+    table = pd.DataFrame(columns)
+    summary = experiment.summarize(table)
+    return SweepResult(experiment, table, summary, runs, seed, chunk_size, kind,
+                       time.perf_counter() - started, len(bounds))

@@ -166,3 +166,30 @@ def test_observe_then_commanded_equals_run(scenario, make):
     # Same per-sample code on the same numbers: rounding only.
     np.testing.assert_allclose(out[:, 0], offline.speed[:K], rtol=0, atol=1e-12)
     np.testing.assert_allclose(out[:, 1], offline.variance[:K], rtol=1e-9, atol=1e-15)
+
+
+def test_contact_speed_tracker_equals_the_vectorized_estimates():
+    # The loop's row-by-row tracker and the offline vectorized function: the same formulas
+    # on the same counts, so equal to rounding (1e-12 m/s). A record whose commands change
+    # at row 0 (from initial_commands), at isolated rows and at consecutive rows.
+    from toolkit.estimation import ContactSpeedTracker, contact_speed_estimates
+
+    sc = carousel_brake_scenario(seed=3, t_end=3.0, brake_time=1.5)
+    rec = sc.record
+    model = sc.model
+    commands = np.array(rec.commands)
+    commands[40:44] += np.linspace(0.001, 0.004, 4)[:, None]      # four changes in a row
+    initial = commands[0] - 0.05                                   # a transient from row 0
+    speeds, var, steady = contact_speed_estimates(rec.wheel_counts, commands, rec.times, model,
+                                                  initial=initial)
+    sub = model.substep_speeds(speeds, commands, steady)
+    bounds = model.bounds(sub)
+    tracker = ContactSpeedTracker(model, initial)
+    for k in range(rec.n_samples):
+        s_k, v_k, st_k, sub_k = tracker.push(float(rec.times[k]), rec.wheel_counts[k], commands[k])
+        np.testing.assert_allclose(s_k, speeds[k], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(v_k, var[k], rtol=1e-12, atol=0)
+        assert st_k == steady[k]
+        np.testing.assert_allclose(sub_k, sub[k], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(model.bounds_row(sub_k), bounds[k], rtol=0, atol=1e-12)
+    assert not steady[:model.settle].any() and steady[model.settle:40].all()

@@ -170,7 +170,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     X, x = 0.0, np.zeros(n)
     if sensors is not None:
         sensor_state = sensors.initial_state(state.contact_speeds)
-        estimator.reset(speed=float(v0))
+        estimator.reset(speed=float(v0), contact_speeds=state.contact_speeds)
         jitter = sensors.jitter
     else:
         jitter = 0.0
@@ -208,7 +208,8 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
                                central_resolution=sensors.central.distance_per_count,
                                wheel_resolution=sensors.wheel.distance_per_count,
                                wheel_backlash=sensors.backlash, truth_speed=speed[keep],
-                               truth_position=position[keep], truth_contact_speeds=contact[keep])
+                               truth_position=position[keep], truth_contact_speeds=contact[keep],
+                               initial_commands=plant.initial_speeds())
     return ClosedLoopResult(times[keep], speed[keep], estimate[keep], variance[keep],
                             commands[keep], force[keep], contact[keep], position[keep], record,
                             status, message or status.value, time.perf_counter() - started)

@@ -27,7 +27,7 @@ from ..model.friction import contact_forces
 from ..model.motors import unsaturated_response
 from ..model.sensors import Sensors
 
-__all__ = ["EstimatorModel", "contact_speed_estimates"]
+__all__ = ["EstimatorModel", "contact_speed_estimates", "ContactSpeedTracker"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,6 +240,17 @@ class EstimatorModel:
         rows = np.arange(last.shape[0])
         return np.column_stack((sub.min(axis=(1, 2)), sub.max(axis=(1, 2)), s[rows, j1], s[rows, j2]))
 
+    def bounds_row(self, sub: np.ndarray) -> list[float]:
+        """:meth:`bounds` of one sample, ``sub`` of shape (substeps, n) (the same numbers)."""
+        last = sub[-1]
+        order = np.argsort(last)
+        W = np.cumsum(self.forces[order])
+        half = 0.5 * W[-1]
+        tol = 1e-12 * half
+        j1 = int(np.argmax(W >= half - tol))
+        j2 = int(np.argmax(W > half + tol))
+        return [float(sub.min()), float(sub.max()), float(last[order[j1]]), float(last[order[j2]])]
+
     def quick_increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
                         steady: bool, bounds: Any) -> tuple[float, float, float]:
         """:meth:`increment`, without the contact law where :meth:`bounds` decide it.
@@ -305,7 +316,8 @@ class EstimatorModel:
 
 
 def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model: EstimatorModel,
-                            *, first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                            *, first: int = 0, initial: Any = None
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contact speeds at the samples from wheel counts and commands (vectorized).
 
     Parameters
@@ -315,8 +327,14 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     times : array_like of shape (k,), s
     model : EstimatorModel
     first : int
-        Index of the first row in the whole stream (a loop passes its recent history; no
-        command change is assumed before row 0 of the stream).
+        Unused (kept for compatibility; a loop uses :class:`ContactSpeedTracker`, the same
+        formulas one row at a time).
+    initial : array_like of shape (n,), m/s, optional
+        The command the motors had settled at before row 0
+        (:attr:`EncoderRecord.initial_commands <toolkit.model.sensors.EncoderRecord>`). When
+        row 0's command differs, row 0 is a command change (a motor transient follows, the
+        wheel window starts ``settle`` rows later) from the speeds ``initial``; ``None``:
+        the motors already run at row 0's command.
 
     Returns
     -------
@@ -336,6 +354,9 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     idx = np.arange(k)
     changed = np.zeros(k, dtype=bool)
     changed[1:] = np.any(u[1:] != u[:-1], axis=1)
+    c0 = None if initial is None else np.asarray(initial, dtype=float)
+    if c0 is not None and k:
+        changed[0] = bool(np.any(u[0] != c0))
     # Last change strictly before row j (changes at j act after t_j), -inf-like when none.
     marks = np.where(changed, idx, -10**9 if first == 0 else -10**9)
     last_change = np.maximum.accumulate(np.concatenate(([-10**9], marks[:-1])))
@@ -352,7 +373,10 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     if transient.any():
         # Motor law from the settled estimate at the change towards the command.
         j = np.maximum(last_change, 0)
-        before = np.where((ok[j])[:, None], speeds[j], np.where(j[:, None] > 0, (w[j] - w[np.maximum(j - 1, 0)]) * q / np.maximum(t[j] - t[np.maximum(j - 1, 0)], 1e-300)[:, None], 0.0))
+        # Speeds at the change: the window estimate there, else a one-sample difference,
+        # else (a change at row 0) the settled speeds before it.
+        origin = 0.0 if c0 is None else c0
+        before = np.where((ok[j])[:, None], speeds[j], np.where(j[:, None] > 0, (w[j] - w[np.maximum(j - 1, 0)]) * q / np.maximum(t[j] - t[np.maximum(j - 1, 0)], 1e-300)[:, None], origin))
         # The motor law solved (toolkit.model.motors): u + (v0 - u) exp(-(t - t_change) / tau).
         law = unsaturated_response(before, u[j], (t - t[j])[:, None], model.motor_lag, math.inf)
         law_var = (0.1 * np.abs(law - u[j])).max(axis=1) ** 2 + q * q / 6.0 / model.sensors.period**2
@@ -361,6 +385,93 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
         variance = np.where(transient & has_change, law_var, variance)
         # Row 0 with no history: the commands are all we know.
         none = transient & ~has_change
-        speeds = np.where(none[:, None], u, speeds)
+        speeds = np.where(none[:, None], u if c0 is None else c0, speeds)
         variance = np.where(none, (q * model.sensors.rate) ** 2, variance)
     return speeds, variance, steady
+
+
+class ContactSpeedTracker:
+    """:func:`contact_speed_estimates` one row at a time, for a loop (O(n) per sample).
+
+    The same formulas on the same numbers as the vectorized function (a test checks they
+    agree to rounding), keeping only what the next rows need: the last ``max_window + 1``
+    times and wheel counts, the last command change and the speeds at it. :meth:`push` also
+    returns the sample's input ingredients (:meth:`EstimatorModel.substep_speeds` and
+    :meth:`EstimatorModel.bounds` of the row).
+
+    Parameters
+    ----------
+    model : EstimatorModel
+    initial : array_like of shape (n,), m/s, optional
+        As in :func:`contact_speed_estimates`.
+    """
+
+    def __init__(self, model: EstimatorModel, initial: Any = None) -> None:
+        self.model = model
+        self._q = model.sensors.wheel.distance_per_count
+        self._settle = model.settle
+        self._keep = model.max_window + 1
+        self._initial = None if initial is None else np.array(initial, dtype=float)
+        self._prev: np.ndarray | None = self._initial
+        self._rows: list[tuple[float, np.ndarray]] = []     # (t, w) of the last rows
+        self._j = -1
+        self._last_change = -10**9
+        self._change: tuple[float, np.ndarray, np.ndarray] | None = None  # (t, u, before)
+
+    def push(self, t: float, wheel_counts: Any, command: Any
+             ) -> tuple[np.ndarray, float, bool, np.ndarray]:
+        """Take row ``j`` (its time, wheel counts, and the command sent then).
+
+        Returns
+        -------
+        speeds : ndarray of shape (n,), m/s
+        variance : float, (m/s)^2
+        steady : bool
+        sub : ndarray of shape (substeps, n), m/s
+            :meth:`EstimatorModel.substep_speeds` of the row.
+        """
+        model, q = self.model, self._q
+        j = self._j = self._j + 1
+        w = np.asarray(wheel_counts, dtype=float)
+        u = np.asarray(command, dtype=float)
+        rows = self._rows
+        rows.append((t, w))
+        if len(rows) > self._keep:
+            del rows[0]
+        prev = self._prev
+        changed = prev is not None and bool((u != prev).any())
+        self._prev = u
+        lc = self._last_change
+        start = min(max(lc + self._settle, j - model.max_window, 0), j)
+        ok = start < j
+        if ok:
+            t_s, w_s = rows[start - j - 1]
+            span = t - t_s
+            speeds = (w - w_s) * q / span
+            variance = q * q / 6.0 / span**2
+        elif lc >= 0:
+            t_c, u_c, before = self._change  # type: ignore[misc]
+            law = unsaturated_response(before, u_c, t - t_c, model.motor_lag, math.inf)
+            speeds = law
+            variance = float(np.max(0.1 * np.abs(law - u_c))) ** 2 + q * q / 6.0 / model.sensors.period**2
+        else:
+            speeds = u if self._initial is None else self._initial
+            variance = (q * model.sensors.rate) ** 2
+        steady = (j - lc) >= self._settle and not changed
+        if changed:
+            if ok:
+                before = speeds
+            elif j > 0:
+                t_p, w_p = rows[-2]
+                before = (w - w_p) * q / max(t - t_p, 1e-300)
+            else:
+                before = self._initial if self._initial is not None else np.zeros_like(u)
+            self._last_change = j
+            self._change = (t, u, before)
+        # EstimatorModel.substep_speeds for this row: the motor law from the speeds towards
+        # the command (not steady) or the speeds held (steady).
+        if steady:
+            sub = np.broadcast_to(speeds, (model.substeps, speeds.size))
+        else:
+            sub = model.substep_speeds(speeds[None, :], u[None, :], np.zeros(1, dtype=bool))[0]
+        return speeds, float(variance), steady, sub

@@ -53,11 +53,11 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float
-from ..errors import ParameterTypeError, parameter_message
+from .._validation import as_float, as_float_array
+from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, check_covariance, score
-from ._input import EstimatorModel, contact_speed_estimates
+from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 
 __all__ = ["KalmanEstimator", "RTSSmoother", "steady_state_gain", "measurement_variance"]
 
@@ -85,6 +85,11 @@ def measurement_variance(counts: np.ndarray, speed: np.ndarray, model: Estimator
     run = np.cumsum(same)
     reset = np.maximum.accumulate(np.where(same == 0, run, 0))
     repeats = run - reset
+    return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
+
+
+def _measurement_variance_one(repeats: int, speed: float, q: float, sensors: Any) -> float:
+    """:func:`measurement_variance` of one sample (same expression), m^2."""
     return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
 
 
@@ -135,17 +140,27 @@ class KalmanEstimator(Estimator):
         return _make_filter(self.model)
 
     # -- the per-sample recursion, shared by run() and step() ------------------------------
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
+              contact_speeds: Any = None) -> None:
         owner = f"{type(self).__name__}.reset"
         speed = as_float(speed, "speed", owner)
         std = 0.05 if speed_std is None else as_float(speed_std, "speed_std", owner, low=0.0, low_open=True)
+        if contact_speeds is not None:
+            contact_speeds = as_float_array(contact_speeds, "contact_speeds", owner)
+            if contact_speeds.shape != (self.model.n,):
+                raise ParameterError(parameter_message(
+                    "contact_speeds", owner, f"have shape ({self.model.n},)",
+                    f"an array of shape {contact_speeds.shape}"))
         self._speed0, self._std0 = speed, std
+        self._initial = contact_speeds
         self.kf = self._build()
         self._pending: tuple[np.ndarray, float, bool, Any] | None = None  # (sub, var_v, steady, bounds)
-        self._history: list[tuple[float, int, np.ndarray, np.ndarray]] = []
+        self._tracker = ContactSpeedTracker(self.model, contact_speeds)
+        self._observed: tuple[float, np.ndarray] | None = None    # (t, wheels) awaiting a command
+        self._last_command: np.ndarray | None = None
+        self._t_prev = math.nan
         self._count_prev: int | None = None
         self._repeats = 0
-        self._awaiting_command = False
         self._force_var, self._Q = math.nan, np.zeros((2, 2))
         self._quick = self.model.quick_increment
         self.last_input = np.zeros(2)
@@ -193,43 +208,34 @@ class KalmanEstimator(Estimator):
         the previous sample (the previous command again if none was given); this sample's
         ``command`` is not read.
         """
-        if self._awaiting_command:
-            self.commanded(self._history[-1][3])
-        model = self.model
-        hist = self._history
-        command = hist[-1][3] if hist else None
-        hist.append((sample.time, sample.central_count, np.asarray(sample.wheel_counts), command))
-        del hist[:-(model.max_window + model.settle + 2)]
+        if self._observed is not None:
+            self.commanded(self._last_command)
         count = sample.central_count
+        t = sample.time
+        q = self._q
         fd = 0.0
         if self._count_prev is not None:
-            fd = (count - self._count_prev) * self._q / (sample.time - hist[-2][0])
-        self._repeats = self._repeats + 1 if count == self._count_prev else 0
-        self._count_prev = count
-        R = float(measurement_variance(np.array([count]), np.array([fd]), model)[0]
-                  + (self._q * self._q / 12.0) * self._repeats)
-        z = (count + 0.5) * self._q
+            fd = (count - self._count_prev) * q / (t - self._t_prev)
+            self._repeats = self._repeats + 1 if count == self._count_prev else 0
+        self._count_prev, self._t_prev = count, t
+        R = _measurement_variance_one(self._repeats, fd, q, self.model.sensors)
+        z = (count + 0.5) * q
         pending = self._pending
         self._advance(z, R, *(pending if pending is not None else (None, 0.0, True, None)))
-        self._awaiting_command = True
-        return float(self.kf.x[1, 0]), float(self.kf.P[1, 1])
+        self._observed = (t, sample.wheel_counts)
+        x, P = self.kf.x, self.kf.P
+        return x.item(1), P.item(3)
 
     def commanded(self, command: Any) -> None:
         """The contact speeds commanded at the last observed sample, m/s, shape (n,): they
         drive the prediction to the next sample."""
-        hist = self._history
-        if not hist:
-            raise RuntimeError("commanded() follows observe(): no sample observed since reset().")
-        t, c, w, _ = hist[-1]
-        hist[-1] = (t, c, w, np.asarray(command, dtype=float))
-        if any(entry[3] is None for entry in hist):
-            hist[:] = [(a, b, d, hist[-1][3] if e is None else e) for a, b, d, e in hist]
-        model = self.model
-        times, _, wheels, commands = zip(*hist)
-        speeds, var, steady = contact_speed_estimates(np.array(wheels), np.array(commands), np.array(times), model)
-        sub = model.substep_speeds(speeds[-1:], np.array(commands[-1:]), steady[-1:])
-        self._pending = (sub[0], float(var[-1]), bool(steady[-1]), model.bounds(sub)[0].tolist())
-        self._awaiting_command = False
+        if self._observed is None:
+            raise RuntimeError("commanded() follows observe(): once per observed sample.")
+        t, wheels = self._observed
+        self._observed = None
+        self._last_command = command
+        speeds, var, steady, sub = self._tracker.push(t, wheels, command)
+        self._pending = (sub, var, steady, self.model.bounds_row(sub))
 
     # -- offline --------------------------------------------------------------------------
     def filter(self, record: EncoderRecord, *, speed: float = 0.0, speed_std: float | None = None
@@ -241,10 +247,11 @@ class KalmanEstimator(Estimator):
                                                        "be an EncoderRecord", record))
         started = time.perf_counter()
         model = self.model
-        self.reset(speed=speed, speed_std=speed_std)
+        self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         K = record.n_samples
         counts = record.central_counts
-        speeds, var_v, steady = contact_speed_estimates(record.wheel_counts, record.commands, record.times, model)
+        speeds, var_v, steady = contact_speed_estimates(record.wheel_counts, record.commands, record.times,
+                                                        model, initial=record.initial_commands)
         sub = model.substep_speeds(speeds, record.commands, steady)
         bounds = model.bounds(sub).tolist()
         q = self._q
@@ -299,8 +306,9 @@ class RTSSmoother(Estimator):
         self.forward = KalmanEstimator(model, initial_covariance=initial_covariance)
         self.model = model
 
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
-        self.forward.reset(speed=speed, speed_std=speed_std)
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
+              contact_speeds: Any = None) -> None:
+        self.forward.reset(speed=speed, speed_std=speed_std, contact_speeds=contact_speeds)
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""

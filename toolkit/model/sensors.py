@@ -384,6 +384,11 @@ class EncoderRecord:
         by an estimator.
     truth_contact_speeds : array_like of shape (k, n), m/s, optional
         True contact speeds at ``times`` (scoring only).
+    initial_commands : array_like of shape (n,), m/s, optional
+        The command the motors had settled at before the first sample (the last command
+        sent before ``times[0]``); ``None``: unknown, taken as ``commands[0]`` (the motors
+        already run at the first command). Estimators use it to know whether the first
+        command starts a motor transient.
     """
 
     times: np.ndarray
@@ -396,6 +401,7 @@ class EncoderRecord:
     truth_speed: np.ndarray | None = None
     truth_position: np.ndarray | None = None
     truth_contact_speeds: np.ndarray | None = None
+    initial_commands: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         owner = "EncoderRecord"
@@ -429,6 +435,14 @@ class EncoderRecord:
                 raise ParameterError(parameter_message(
                     name, owner, f"have shape {shape}", f"an array of shape {array.shape}"))
             object.__setattr__(self, name, array)
+        if self.initial_commands is not None:
+            initial = as_float_array(self.initial_commands, "initial_commands", owner)
+            if initial.shape != (wheel.shape[1],):
+                raise ParameterError(parameter_message(
+                    "initial_commands", owner, f"have shape ({wheel.shape[1]},)",
+                    f"an array of shape {initial.shape}"))
+            initial.setflags(write=False)
+            object.__setattr__(self, "initial_commands", initial)
 
     @property
     def n_samples(self) -> int:
@@ -616,4 +630,5 @@ def record_simulation(result: Any, plant: Any, sensors: Sensors, *,
             "truth_contact_speeds": contact_speeds_at(plant, stamps)[0]}
     commands = np.asarray([plant.command(t) for t in stamps], dtype=float).reshape(stamps.size, plant.n)
     return EncoderRecord(stamps, central, wheel, commands, sensors.central.distance_per_count,
-                         sensors.wheel.distance_per_count, sensors.backlash, **truth_fields)
+                         sensors.wheel.distance_per_count, sensors.backlash,
+                         initial_commands=plant.initial_speeds(), **truth_fields)

@@ -70,12 +70,14 @@ class EstimatorModel:
     _probe_offsets: np.ndarray = field(init=False, repr=False)
     _stuck_scale: float = field(init=False, repr=False)
     _reach: float = field(init=False, repr=False)
+    _forces_list: list = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
         forces = as_float_array(self.forces, "forces", owner)
         check_nonnegative(forces, "forces", owner)
         object.__setattr__(self, "forces", forces)
+        object.__setattr__(self, "_forces_list", forces.tolist())
         object.__setattr__(self, "mass", as_float(self.mass, "mass", owner, low=0.0, low_open=True))
         if not isinstance(self.sensors, Sensors):
             raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors", self.sensors))
@@ -242,14 +244,26 @@ class EstimatorModel:
 
     def bounds_row(self, sub: np.ndarray) -> list[float]:
         """:meth:`bounds` of one sample, ``sub`` of shape (substeps, n) (the same numbers)."""
-        last = sub[-1]
-        order = np.argsort(last)
-        W = np.cumsum(self.forces[order])
-        half = 0.5 * W[-1]
+        # Plain floats: ten contacts cost less than the numpy calls. The motor law is
+        # monotone in time, so the extremes over the period lie on its first or last row.
+        first, last = sub[0].tolist(), sub[-1].tolist()
+        pairs = sorted(zip(last, self._forces_list))
+        total = 0.0
+        for _, f in pairs:
+            total += f
+        half = 0.5 * total
         tol = 1e-12 * half
-        j1 = int(np.argmax(W >= half - tol))
-        j2 = int(np.argmax(W > half + tol))
-        return [float(sub.min()), float(sub.max()), float(last[order[j1]]), float(last[order[j2]])]
+        acc, lo, hi = 0.0, None, None
+        for s, f in pairs:
+            acc += f
+            if lo is None and acc >= half - tol:
+                lo = s
+            if acc > half + tol:
+                hi = s
+                break
+        if hi is None:                  # every magnitude zero (bounds: the first speed)
+            hi = pairs[0][0]
+        return [min(min(first), min(last)), max(max(first), max(last)), lo, hi]
 
     def quick_increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
                         steady: bool, bounds: Any) -> tuple[float, float, float]:
@@ -417,6 +431,11 @@ class ContactSpeedTracker:
         self._j = -1
         self._last_change = -10**9
         self._change: tuple[float, np.ndarray, np.ndarray] | None = None  # (t, u, before)
+        # Sub-interval midpoints of a period (as EstimatorModel.substep_speeds), a column.
+        M = model.substeps
+        self._s = ((np.arange(M) + 0.5) * (model.sensors.period / M))[:, None]
+        self._lag = model.motor_lag
+        self._law_floor = self._q * self._q / 6.0 / model.sensors.period**2
 
     def push(self, t: float, wheel_counts: Any, command: Any
              ) -> tuple[np.ndarray, float, bool, np.ndarray]:
@@ -432,8 +451,9 @@ class ContactSpeedTracker:
         """
         model, q = self.model, self._q
         j = self._j = self._j + 1
-        w = np.asarray(wheel_counts, dtype=float)
-        u = np.asarray(command, dtype=float)
+        w = np.array(wheel_counts, dtype=float)
+        u = command if type(command) is np.ndarray and command.dtype == np.float64 else \
+            np.asarray(command, dtype=float)
         rows = self._rows
         rows.append((t, w))
         if len(rows) > self._keep:
@@ -451,9 +471,9 @@ class ContactSpeedTracker:
             variance = q * q / 6.0 / span**2
         elif lc >= 0:
             t_c, u_c, before = self._change  # type: ignore[misc]
-            law = unsaturated_response(before, u_c, t - t_c, model.motor_lag, math.inf)
+            law = unsaturated_response(before, u_c, t - t_c, self._lag, math.inf)
             speeds = law
-            variance = float(np.max(0.1 * np.abs(law - u_c))) ** 2 + q * q / 6.0 / model.sensors.period**2
+            variance = float(np.max(0.1 * np.abs(law - u_c))) ** 2 + self._law_floor
         else:
             speeds = u if self._initial is None else self._initial
             variance = (q * model.sensors.rate) ** 2
@@ -473,5 +493,5 @@ class ContactSpeedTracker:
         if steady:
             sub = np.broadcast_to(speeds, (model.substeps, speeds.size))
         else:
-            sub = model.substep_speeds(speeds[None, :], u[None, :], np.zeros(1, dtype=bool))[0]
+            sub = unsaturated_response(speeds, u, self._s, self._lag, math.inf)
         return speeds, float(variance), steady, sub

@@ -134,7 +134,7 @@ class EstimatorModel:
         return unsaturated_response(speeds[:, None, :], target[:, None, :], s, self.motor_lag, math.inf)
 
     def increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
-                  steady: bool) -> tuple[float, float, float]:
+                  steady: bool, bounds: Any = None) -> tuple[float, float, float, float | None]:
         """Known input over one sample period from body speed ``V`` (m/s).
 
         Parameters
@@ -147,6 +147,8 @@ class EstimatorModel:
             Std of the contact-speed estimates and of ``V``.
         steady : bool
             Contacts steady over the period.
+        bounds : sequence of 4 floats, optional
+            :meth:`bounds_row` of ``sub`` (computed when needed and not given).
 
         Returns
         -------
@@ -155,38 +157,61 @@ class EstimatorModel:
             h V + dx``, ``V+ = V + dV``).
         force_var : float, N^2
             Variance of the mean force over the period.
+        arrival_var : float or None, (m/s)^2
+            When the body reaches the equilibrium set within the period and sticks there,
+            ``V+`` is that set's edge, a contact speed: it no longer depends on ``V``
+            (the filter's transition has ``dV+/dV = 0``) and errs by the contact-speed
+            estimate, variance ``contact_std^2``. ``None`` otherwise.
 
         Notes
         -----
-        Set-valued force (PHYSICS.md section 2). With steady contacts, if the net force
-        over ``V +- w``, ``w = 2 sqrt(speed_std^2 + contact_std^2)``, spans
-        ``[F(V + w), F(V - w)]`` containing the force that holds the body (``c V``, the
-        drag), the body sits on its equilibrium set as far as the wheels can tell: the
-        stiction rule keeps it there, ``dV = 0``, and no friction uncertainty enters (a stuck
-        body keeps its speed whatever the friction spread); the floor is the stuck-on
-        contact's undetected speed change, variance ``contact_std^2 / max_window`` per period. Otherwise the force is averaged
-        over the sub-intervals along the body's path, found by two passes (the path from
-        the first pass's forces, then the forces along that path), which resolves contact
-        crossings inside the period to a sub-interval (and lets the path settle onto a
-        contact speed it reaches). Its variance: unequal friction, ``epsilon^2 sum f_i^2``,
-        plus the force range over ``V +- w`` counted as uniform, ``(F_hi - F_lo)^2 / 12``.
+        Set-valued force (PHYSICS.md section 2). Without drag and with steady contacts: a
+        body on the equilibrium set (``lo_eq <= V <= hi_eq``) stays there, ``dV = 0``, and
+        no friction uncertainty enters (a stuck or coasting body keeps its speed whatever
+        the friction spread); the floor is the stuck-on contact's undetected speed change,
+        variance ``contact_std^2 / max_window`` per period. Off the set, the motion is the
+        exact piecewise-constant one, crossing by crossing (:meth:`_coast`), ending on the
+        set's near edge when it gets there (an arrival). With drag or moving contacts the
+        force is averaged over the sub-intervals along the body's path, found by two passes
+        (the path from the first pass's forces, then the forces along that path).
+
+        Force variance: unequal friction, ``epsilon^2 sum f_i^2``, plus the contacts the
+        path crosses or passes within ``w = 2 sigma`` of, ``sigma = sqrt(speed_std^2 +
+        contact_std^2)`` the std of a slip ``v_i - V``: the crossing of contact ``i`` flips
+        its force by ``2 f_i`` at a time known to ``sigma_t = sigma / r_i``, ``r_i`` the
+        slip's rate of change over the period (body acceleration minus the contact's), at
+        most ``h / sqrt(12)`` (a crossing anywhere in the period); the impulse error
+        ``2 f_i sigma_t`` is a mean-force error ``2 f_i sigma_t / h``. Independent slips
+        add their variances (:meth:`_crossing_var`).
         """
         f, m, c = self.forces, self.mass, self.damping
         M = sub.shape[0]
-        w = 2.0 * math.sqrt(speed_std * speed_std + contact_std * contact_std)
+        sigma = math.sqrt(speed_std * speed_std + contact_std * contact_std)
+        w = 2.0 * sigma
         last = sub[-1]
+        if steady and c == 0.0:
+            lo_eq, hi_eq = (bounds if bounds is not None else self.bounds_row(sub))[2:]
+            if V - w <= hi_eq and V + w >= lo_eq:
+                # Stuck (or coasting in a zero band): V+ = V errs by the stuck-on contact's
+                # own speed change over the period (motor drift, a bias of the wheel
+                # estimate). The wheels would see a random walk that accumulates more than
+                # their window estimate's variance ``contact_std^2`` over the
+                # ``max_window`` periods of the window, so the floor is ``contact_std^2 /
+                # max_window`` per period, an acceleration held over it.
+                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None
+            # Contacts held over the period: the exact piecewise-constant motion, crossing
+            # by crossing (a body crosses several contacts per period while braking).
+            dx, dV, arrived = self._coast(V, last)
+            var = self._friction_var + self._crossing_var(V, dV, sub, sigma, arrived)
+            return dx, dV, var, (contact_std * contact_std if arrived else None)
         # One call of the contact law: the sub-interval rows at V, then the window's edges.
         probe = np.concatenate((sub, last[None], last[None]))
         probe -= self._offsets(V, w, M)
         net = contact_forces(probe, f).sum(axis=1)
         hi, lo = net[M], net[M + 1]
         if steady and lo <= c * V <= hi:
-            # Stuck: V+ = V errs by the stuck-on contact's own speed change over the period
-            # (motor drift, a bias of the wheel estimate). The wheels would see a random walk
-            # that accumulates more than their window estimate's variance ``contact_std^2``
-            # over the ``max_window`` periods of the window, so the floor is
-            # ``contact_std^2 / max_window`` per period, an acceleration held over it.
-            return 0.0, 0.0, self._stuck_scale * contact_std * contact_std
+            # Stuck with drag (the same floor as above).
+            return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None
         dt_m = self._ds / m
         first = net[:M] - c * V
         travel = float(np.sum(first)) * dt_m
@@ -194,27 +219,41 @@ class EstimatorModel:
         if c == 0.0 and float(np.min(gaps)) > abs(travel):
             # No contact speed within reach of the path: the force is the same all along.
             second = first
-        elif steady and c == 0.0:
-            # Contacts held over the period: the exact piecewise-constant motion, crossing
-            # by crossing (a body crosses several contacts per period while braking, which
-            # a fixed sub-interval grid times only to a sub-interval).
-            dx, dV = self._coast(V, last)
-            return dx, dV, self._friction_var + (hi - lo) ** 2 / 12.0
         else:
             path = V + (np.cumsum(first) - 0.5 * first) * dt_m
             second = contact_forces(sub - path[:, None], f).sum(axis=1) - c * path
-            if steady and c == 0.0 and first[0] != 0.0 and bool(np.any(second * first[0] <= 0.0)):
-                # The path reaches the equilibrium set within the period: the body sticks
-                # there (a single-valued force would chatter across it). Rare: once per
-                # approach, so the ContactSet is built only here.
-                lo_eq, hi_eq = ContactSet(last, f).equilibrium()
-                target = min(max(V, lo_eq), hi_eq)
-                dV = target - V
-                return 0.5 * dV * self.sensors.period, dV, self._friction_var + (hi - lo) ** 2 / 12.0
         dV = float(np.sum(second)) * dt_m
         # Double integral of piecewise-constant accelerations: each acts for the rest of the period.
         dx = float(np.dot(second, self._rest)) * self._ds * dt_m
-        return dx, dV, self._friction_var + (hi - lo) ** 2 / 12.0
+        return dx, dV, self._friction_var + self._crossing_var(V, dV, sub, sigma), None
+
+    def _crossing_var(self, V: float, dV: float, sub: np.ndarray, sigma: float,
+                      arrived: bool = False) -> float:
+        """Variance (N^2) of the mean force from uncertain crossing times (see :meth:`increment`).
+
+        Contact ``i`` counts when its speed range over the period (first and last rows of
+        ``sub``: the motor law is monotone) comes within ``2 sigma`` of the body's
+        ``[V, V + dV]``; its slip changes at ``r_i = |dv_i - dV| / h`` and its crossing time
+        is known to ``min(sigma / r_i, h / sqrt(12))``.
+        """
+        h = self.sensors.period
+        w = 2.0 * sigma
+        a, b = (V, V + dV) if dV >= 0.0 else (V + dV, V)
+        start, end = sub[0], sub[-1]
+        low = np.minimum(start, end)
+        high = np.maximum(start, end)
+        near = (high >= a - w) & (low <= b + w)
+        if arrived:
+            # The contacts the body sticks on are not crossed: V+ is their speed.
+            near &= end != V + dV
+        if not near.any():
+            return 0.0
+        rate = np.abs((end - start)[near] - dV) / h
+        cap = h / math.sqrt(12.0)
+        with np.errstate(divide="ignore"):
+            t_std = np.minimum(np.where(rate > 0.0, sigma / rate, cap), cap)
+        impulse = 2.0 * self.forces[near] * t_std / h
+        return float(np.dot(impulse, impulse))
 
     def bounds(self, sub: np.ndarray) -> np.ndarray:
         """Per sample, what decides the input without the contact law (vectorized).
@@ -266,40 +305,43 @@ class EstimatorModel:
         return [min(min(first), min(last)), max(max(first), max(last)), lo, hi]
 
     def quick_increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
-                        steady: bool, bounds: Any) -> tuple[float, float, float]:
+                        steady: bool, bounds: Any) -> tuple[float, float, float, float | None]:
         """:meth:`increment`, without the contact law where :meth:`bounds` decide it.
 
-        Without drag: stuck when ``V +- w`` meets the equilibrium set (the same rule as
-        :meth:`increment`: ``F(V + w) <= 0 <= F(V - w)``); the whole friction one way when
-        every contact speed of the period lies beyond ``V`` by more than both ``w`` and the
-        largest speed change of a period (no crossing, no force spread: ``dV = +-F_tot h /
-        m``, ``dx = dV h / 2``). Otherwise :meth:`increment`.
+        Without drag: stuck when ``V`` lies on the equilibrium set (the same rule as
+        :meth:`increment`); the whole friction one way when every contact speed of the
+        period lies beyond ``V`` by more than both ``w = 2 sqrt(speed_std^2 +
+        contact_std^2)`` and the largest speed change of a period (no crossing, no force
+        spread: ``dV = +-F_tot h / m``, ``dx = dV h / 2``). Otherwise :meth:`increment`.
         """
         if self.damping == 0.0:
             smin, smax, lo_eq, hi_eq = bounds
             w = 2.0 * math.sqrt(speed_std * speed_std + contact_std * contact_std)
             if steady and V - w <= hi_eq and V + w >= lo_eq:
-                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std
+                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None
             reach = max(w, self._reach)
             if smin - V > reach:
                 dV = self._reach
             elif V - smax > reach:
                 dV = -self._reach
             else:
-                return self.increment(V, sub, contact_std, speed_std, steady)
-            return 0.5 * dV * self.sensors.period, dV, self._friction_var
-        return self.increment(V, sub, contact_std, speed_std, steady)
+                return self.increment(V, sub, contact_std, speed_std, steady, bounds)
+            return 0.5 * dV * self.sensors.period, dV, self._friction_var, None
+        return self.increment(V, sub, contact_std, speed_std, steady, bounds)
 
-    def _coast(self, V: float, speeds: np.ndarray) -> tuple[float, float]:
-        """Exact motion over one period with the contact speeds held (no drag): ``(dx, dV)``
-        from ``V``; the force is constant between contact speeds, and the body sticks where
-        it reaches the equilibrium set (:meth:`ContactSet.equilibrium`)."""
+    def _coast(self, V: float, speeds: np.ndarray) -> tuple[float, float, bool]:
+        """Exact motion over one period with the contact speeds held (no drag): ``(dx, dV,
+        arrived)`` from ``V``; the force is constant between contact speeds, and the body
+        sticks where it reaches the equilibrium set (:meth:`ContactSet.equilibrium`);
+        ``arrived``: it got there from outside within the period."""
         f, m, h = self.forces, self.mass, self.sensors.period
         contacts = ContactSet(speeds, f)
         lo_eq, hi_eq = contacts.equilibrium()
         t, v, x = 0.0, V, 0.0
+        arrived = False
         for _ in range(2 * speeds.size + 2):
             if lo_eq <= v <= hi_eq:
+                arrived = v != V or not (lo_eq <= V <= hi_eq)
                 break                           # stuck for the rest of the period
             d = 1.0 if v < lo_eq else -1.0      # the body moves towards the set
             # The force just past v in the direction of motion: the end of the set-valued
@@ -319,7 +361,7 @@ class EstimatorModel:
             x += v * dt + 0.5 * a * dt * dt
             v, t = s, t + dt
         x += v * (h - t)
-        return x - V * h, v - V
+        return x - V * h, v - V, arrived
 
     def _offsets(self, V: float, w: float, M: int) -> np.ndarray:
         out = self._probe_offsets

@@ -10,7 +10,13 @@ The known input ``(dx_k, dV_k)`` is the active-contact force over the period, fr
 contact speeds the wheels measure, through the model's contact law
 (:meth:`~toolkit.estimation._input.EstimatorModel.increment`, which also handles the
 set-valued force at a contact speed by the stiction rule). Built on
-``filterpy.kalman.KalmanFilter`` (``predict(u, Q)``, ``update(z, R)``).
+``filterpy.kalman.KalmanFilter`` (``predict(u, B, F, Q)``, ``update(z, R)``).
+
+The motors' speeds before the first sample (``reset(contact_speeds=...)``, or the record's
+``initial_commands``) say whether the first command starts a motor transient: the wheel
+windows then start ``settle`` samples after it, as after any command change (a window
+that spanned a start from rest biased the contact speeds, and so the stuck body's speed,
+by the motors' lag and the gearbox play for its whole 0.5 s length).
 
 Noise from physical parameters
 ------------------------------
@@ -25,20 +31,33 @@ independent ones. Read noise adds ``(sigma_n q)^2`` and jitter ``(V sigma_t)^2``
 ``d`` seconds off its stamp is ``V d`` off in position), with ``V`` the speed estimate.
 
 Process. The force is known up to (a) unequal, unknown friction: each ``f_i`` has a
-relative std ``epsilon``, so the force varies by ``epsilon^2 sum f_i^2``; (b) the contact
-speeds' uncertainty (wheel quantization and backlash, ``sigma_v``) and the speed
-estimate's (``P_VV``): across ``V +- w`` with ``w = 2 sqrt(P_VV + sigma_v^2)`` the force
-spans ``[F(V + w), F(V - w)]``, a spread counted as uniform, ``(F_hi - F_lo)^2 / 12``.
-That force error, held over the period, enters as ``Q = (sigma_F / m)^2 g g^T`` with
-``g = (h^2 / 2, h)``. ``epsilon`` is the plant's true spread (0 for the equal-friction
-scenario). A stuck body (``V +- w`` meets the equilibrium set) has no force error, but its
-``V+ = V`` errs by the stuck-on contact's own undetected speed change: a floor of
-``sigma_v^2 / max_window`` per period on ``V`` (a random walk the wheels' window would
-not resolve), never zero.
+relative std ``epsilon``, so the force varies by ``epsilon^2 sum f_i^2``; (b) the times at
+which the body crosses contact speeds. A slip ``v_i - V`` is known to ``sigma = sqrt(P_VV +
+sigma_v^2)`` (``sigma_v``: the contact-speed estimate's std, wheel quantization and
+backlash); when it changes at ``r_i`` (m/s^2: the body's acceleration minus the
+contact's) its zero, where the force of contact ``i`` flips by ``2 f_i``, is timed to
+``sigma / r_i`` (at most ``h / sqrt(12)``, a crossing anywhere in the period): an impulse
+error ``2 f_i sigma / r_i``, a mean-force error ``2 f_i sigma / (r_i h)``, for every contact
+the path crosses or passes within ``2 sigma`` of. (Counting the whole force range over
+``V +- 2 sigma`` as uniform over the period instead overstates it by ``h r_i / sigma``,
+about 40x for a braking body: the filter then chased the quantization of its
+measurements at each crossing.) That force error, held over the period, enters as ``Q =
+(sigma_F / m)^2 g g^T`` with ``g = (h^2 / 2, h)``. ``epsilon`` is the plant's true spread
+(0 for the equal-friction scenario). A stuck body (``V +- 2 sigma`` meets the equilibrium
+set) has no force error, but its ``V+ = V`` errs by the stuck-on contact's own undetected
+speed change: a floor of ``sigma_v^2 / max_window`` per period on ``V`` (a random walk the
+wheels' window would not resolve), never zero.
+
+Arrival. A body that reaches the equilibrium set within the period sticks on its near edge:
+``V+`` is that contact's speed whatever ``V`` was. The transition of that step is then
+``F_k = [[1, h], [0, 0]]`` (``dV+/dV = 0``, the exact flow's derivative) with input ``u_k =
+(dx_k, V_edge)`` and ``sigma_v^2`` added to ``Q_VV``: the speed error after an arrival is
+the contact estimate's, and the filter forgets the speed error it had before.
 
 Smoother. filterpy's ``rts_smoother`` ignores ``B u``; the input is therefore moved into
-the transition of an augmented state ``(X, V, 1)``, ``F_k = [[1, h, dx_k], [0, 1, dV_k],
-[0, 0, 1]]``, which makes the smoother exact for the affine model (the constant state has
+the transition of an augmented state ``(X, V, 1)``, ``F_k = [[F_k, u_k], [0, 0, 1]]``
+(``F_k`` the filter's transition of step ``k``, ``[[1, h], [0, 1]]`` except at
+arrivals), which makes the smoother exact for the affine model (the constant state has
 zero variance: the smoother gain uses the pseudo-inverse).
 
 filterpy is imported inside the functions that build filters, so that importing the
@@ -134,6 +153,9 @@ class KalmanEstimator(Estimator):
         self._H = np.array([[1.0, 0.0]])
         self._u = np.zeros((2, 1))
         self._z = np.zeros((1, 1))
+        self._F = np.array([[1.0, h], [0.0, 1.0]])
+        self._F_arrival = np.array([[1.0, h], [0.0, 0.0]])
+        self._I2 = np.eye(2)
         self.reset()
 
     def _build(self) -> Any:
@@ -163,7 +185,8 @@ class KalmanEstimator(Estimator):
         self._repeats = 0
         self._force_var, self._Q = math.nan, np.zeros((2, 2))
         self._quick = self.model.quick_increment
-        self.last_input = np.zeros(2)
+        self.last_input = (0.0, 0.0)
+        self.last_F = self._F
         self.last_Q = np.zeros((2, 2))
         self.last_nis = np.nan
 
@@ -182,22 +205,34 @@ class KalmanEstimator(Estimator):
             self.last_nis = np.nan
             return
         x = kf.x
-        dx, dV, force_var = self._quick(x.item(1), sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
-                                        steady, bounds)
-        # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x + F^-1 u)
-        # with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place and H is
-        # passed, so filterpy skips its scalar checks and the reshape of z.
-        x[0, 0] = x.item(0) + dx - self._h * dV
-        x[1, 0] = x.item(1) + dV
+        V = x.item(1)
+        dx, dV, force_var, arrival = self._quick(V, sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
+                                                 steady, bounds)
         self._z[0, 0] = z
         if force_var != self._force_var:          # Q repeats while stuck or sliding freely
             self._force_var = force_var
             self._Q = self._gg * (force_var * self._inv_m2)
-        Q = kf.Q = self._Q
+        Q = self._Q
         kf.R[0, 0] = R
-        kf.predict()
+        if arrival is None:
+            # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x +
+            # F^-1 u) with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place
+            # and H is passed, so filterpy skips its scalar checks and the reshape of z.
+            x[0, 0] = x.item(0) + dx - self._h * dV
+            x[1, 0] = V + dV
+            kf.Q = Q
+            kf.predict()
+            self.last_input = (dx, dV)
+            self.last_F = self._F
+        else:
+            # Arrival on the equilibrium set: V+ is the edge's contact speed, whatever V was
+            # (dV+/dV = 0), known to the contact estimate's variance.
+            Q = Q + np.array([[0.0, 0.0], [0.0, arrival]])
+            u = np.array([[dx], [V + dV]])
+            kf.predict(u=u, B=self._I2, F=self._F_arrival, Q=Q)
+            self.last_input = (dx, V + dV)
+            self.last_F = self._F_arrival
         kf.update(self._z, H=self._H)
-        self.last_input = (dx, dV)
         self.last_Q = Q
         self.last_nis = kf.y.item() ** 2 * kf.SI.item()
 
@@ -271,6 +306,7 @@ class KalmanEstimator(Estimator):
         xs = [(kf.x.item(0), kf.x.item(1))]
         Ps = [kf.P]
         inputs = [(0.0, 0.0)]
+        Fs = [self._F]
         Qs = [np.zeros((2, 2))]
         nis = [math.nan]
         for k in range(1, K):
@@ -279,10 +315,12 @@ class KalmanEstimator(Estimator):
             xs.append((x.item(0), x.item(1)))
             Ps.append(kf.P)
             inputs.append(self.last_input)
+            Fs.append(self.last_F)
             Qs.append(self.last_Q)
             nis.append(self.last_nis)
         X, P, U, Q = np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Qs)
         self._pending = (sub[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1])
+        self.transitions = np.array(Fs)
         return X, P, U, Q, np.array(nis), time.perf_counter() - started
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
@@ -331,7 +369,7 @@ class RTSSmoother(Estimator):
         Pa = np.zeros((K, 3, 3))
         Pa[:, :2, :2] = P
         Fa = np.broadcast_to(np.eye(3), (K, 3, 3)).copy()
-        Fa[:, 0, 1] = h
+        Fa[:, :2, :2] = self.forward.transitions
         Fa[:, :2, 2] = U
         Qa = np.zeros((K, 3, 3))
         Qa[:, :2, :2] = Qs

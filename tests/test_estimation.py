@@ -249,3 +249,22 @@ def test_filter_after_an_arrival_forgets_the_old_speed_error():
     # Prior P_VV = 0 * P_VV + Q_VV = contact variance (no crossing variance): exact.
     assert kf.kf.P_prior[1, 1] == pytest.approx(4e-6, rel=1e-12)
     assert kf.last_input == pytest.approx((3.75e-4, 0.03), rel=0, abs=1e-15)
+
+
+def test_increment_carries_a_body_on_a_slowly_moving_set():
+    # Two 1 N contacts on m = 1 kg, commands moved by +1 mm/s (a motor transient: not
+    # steady): the zero band [0.1, 0.2] ends at [0.101, 0.201]. A body on its lower edge is
+    # carried along (stiction: the edge moves by 1 mm/s per period, less than the 2 f h / m
+    # = 40 mm/s one stiction step gives): V+ = 0.101, dx = dV h / 2. Inside the band it
+    # coasts. Moved by 60 mm/s (more than 40 mm/s) the rule does not apply.
+    model, _ = _three_contacts([0.1, 0.2])
+    start, end = np.array([0.1, 0.2]), np.array([0.101, 0.201])
+    sub = start + (end - start) * np.linspace(0.0, 1.0, model.substeps)[:, None]
+    dx, dV, var, arrival = model.increment(0.1, sub, 1e-4, 1e-4, False)
+    assert dV == pytest.approx(0.001, rel=0, abs=1e-15) and dx == pytest.approx(0.001 * 0.01, rel=1e-12)
+    assert arrival is None and var == pytest.approx((1.0 / 0.02) ** 2 * 1e-8 / model.max_window, rel=1e-12)
+    assert model.increment(0.15, sub, 1e-4, 1e-4, False)[:2] == (0.0, 0.0)
+    # quick_increment takes the same rule from the bounds.
+    assert model.quick_increment(0.1, sub, 1e-4, 1e-4, False, model.bounds_row(sub))[:2] == (dx, dV)
+    far = start + np.array([0.06, 0.06]) * np.linspace(0.0, 1.0, model.substeps)[:, None]
+    assert model.increment(0.1, far, 1e-4, 1e-4, False)[1] != pytest.approx(0.06, abs=1e-3)

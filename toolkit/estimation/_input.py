@@ -71,6 +71,7 @@ class EstimatorModel:
     _stuck_scale: float = field(init=False, repr=False)
     _reach: float = field(init=False, repr=False)
     _forces_list: list = field(init=False, repr=False)
+    _follow: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
@@ -98,6 +99,11 @@ class EstimatorModel:
         # Largest speed change over a period: the whole friction, one way.
         object.__setattr__(self, "_reach", float(forces.sum()) * self.sensors.period / self.mass)
         object.__setattr__(self, "_stuck_scale", (self.mass / self.sensors.period) ** 2 / self.max_window)
+        # Largest move of the equilibrium set's edges over a period that a body on it
+        # follows: the smallest step of the staircase, 2 min f_i > 0, for the period.
+        positive = forces[forces > 0]
+        object.__setattr__(self, "_follow", 2.0 * float(positive.min()) * self.sensors.period / self.mass
+                           if positive.size else 0.0)
 
     @property
     def n(self) -> int:
@@ -171,7 +177,12 @@ class EstimatorModel:
         the friction spread); the floor is the stuck-on contact's undetected speed change,
         variance ``contact_std^2 / max_window`` per period. Off the set, the motion is the
         exact piecewise-constant one, crossing by crossing (:meth:`_coast`), ending on the
-        set's near edge when it gets there (an arrival). With drag or moving contacts the
+        set's near edge when it gets there (an arrival). With moving contacts (a command
+        change) a body within ``w`` of the set at the start of the period stays on it when
+        the set's edges move by at most ``2 min f_i h / m`` over the period (the speed the
+        smallest stiction step can give it: it is carried along, the stiction rule of
+        PHYSICS.md section 2): ``V+ = clip(V, lo_eq, hi_eq)`` at the end, with the stuck
+        floor. Otherwise, with drag or moving contacts, the
         force is averaged over the sub-intervals along the body's path, found by two passes
         (the path from the first pass's forces, then the forces along that path).
 
@@ -190,7 +201,7 @@ class EstimatorModel:
         w = 2.0 * sigma
         last = sub[-1]
         if steady and c == 0.0:
-            lo_eq, hi_eq = (bounds if bounds is not None else self.bounds_row(sub))[2:]
+            lo_eq, hi_eq = (bounds if bounds is not None else self.bounds_row(sub))[2:4]
             if V - w <= hi_eq and V + w >= lo_eq:
                 # Stuck (or coasting in a zero band): V+ = V errs by the stuck-on contact's
                 # own speed change over the period (motor drift, a bias of the wheel
@@ -204,6 +215,11 @@ class EstimatorModel:
             dx, dV, arrived = self._coast(V, last)
             var = self._friction_var + self._crossing_var(V, dV, sub, sigma, arrived)
             return dx, dV, var, (contact_std * contact_std if arrived else None)
+        if c == 0.0:
+            edges = bounds if bounds is not None else self.bounds_row(sub)
+            lo_eq, hi_eq, lo0, hi0 = edges[2:]
+            if V - w <= hi0 and V + w >= lo0 and max(abs(lo_eq - lo0), abs(hi_eq - hi0)) <= self._follow:
+                return self._carried(V, lo_eq, hi_eq, contact_std)
         # One call of the contact law: the sub-interval rows at V, then the window's edges.
         probe = np.concatenate((sub, last[None], last[None]))
         probe -= self._offsets(V, w, M)
@@ -226,6 +242,12 @@ class EstimatorModel:
         # Double integral of piecewise-constant accelerations: each acts for the rest of the period.
         dx = float(np.dot(second, self._rest)) * self._ds * dt_m
         return dx, dV, self._friction_var + self._crossing_var(V, dV, sub, sigma), None
+
+    def _carried(self, V: float, lo_eq: float, hi_eq: float, contact_std: float
+                 ) -> tuple[float, float, float, None]:
+        """A body on a slowly moving equilibrium set stays on it (see :meth:`increment`)."""
+        dV = min(max(V, lo_eq), hi_eq) - V
+        return 0.5 * dV * self.sensors.period, dV, self._stuck_scale * contact_std * contact_std, None
 
     def _crossing_var(self, V: float, dV: float, sub: np.ndarray, sigma: float,
                       arrived: bool = False) -> float:
@@ -265,28 +287,38 @@ class EstimatorModel:
 
         Returns
         -------
-        ndarray of shape (k, 4), m/s
-            Slowest and fastest contact speed over the period, and the equilibrium set
-            ``(lo, hi)`` of the speeds at its end (the weighted median, as
-            :meth:`ContactSet.equilibrium <toolkit.model.ContactSet.equilibrium>`).
+        ndarray of shape (k, 6), m/s
+            Slowest and fastest contact speed over the period, the equilibrium set ``(lo,
+            hi)`` of the speeds at its end and that of the speeds at its start (the
+            weighted median, as :meth:`ContactSet.equilibrium
+            <toolkit.model.ContactSet.equilibrium>`).
         """
-        last = sub[:, -1, :]
-        order = np.argsort(last, axis=1)
-        s = np.take_along_axis(last, order, axis=1)
+        end = self._edges(sub[:, -1, :])
+        start = self._edges(sub[:, 0, :])
+        return np.column_stack((sub.min(axis=(1, 2)), sub.max(axis=(1, 2)), *end, *start))
+
+    def _edges(self, speeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        order = np.argsort(speeds, axis=1)
+        s = np.take_along_axis(speeds, order, axis=1)
         W = np.cumsum(self.forces[order], axis=1)
         half = 0.5 * W[:, -1:]
         tol = 1e-12 * half
         j1 = np.argmax(W >= half - tol, axis=1)
         j2 = np.argmax(W > half + tol, axis=1)
-        rows = np.arange(last.shape[0])
-        return np.column_stack((sub.min(axis=(1, 2)), sub.max(axis=(1, 2)), s[rows, j1], s[rows, j2]))
+        rows = np.arange(speeds.shape[0])
+        return s[rows, j1], s[rows, j2]
 
     def bounds_row(self, sub: np.ndarray) -> list[float]:
         """:meth:`bounds` of one sample, ``sub`` of shape (substeps, n) (the same numbers)."""
         # Plain floats: ten contacts cost less than the numpy calls. The motor law is
         # monotone in time, so the extremes over the period lie on its first or last row.
         first, last = sub[0].tolist(), sub[-1].tolist()
-        pairs = sorted(zip(last, self._forces_list))
+        lo, hi = self._edges_row(last)
+        lo0, hi0 = (lo, hi) if first == last else self._edges_row(first)
+        return [min(min(first), min(last)), max(max(first), max(last)), lo, hi, lo0, hi0]
+
+    def _edges_row(self, speeds: list) -> tuple[float, float]:
+        pairs = sorted(zip(speeds, self._forces_list))
         total = 0.0
         for _, f in pairs:
             total += f
@@ -302,7 +334,7 @@ class EstimatorModel:
                 break
         if hi is None:                  # every magnitude zero (bounds: the first speed)
             hi = pairs[0][0]
-        return [min(min(first), min(last)), max(max(first), max(last)), lo, hi]
+        return lo, hi
 
     def quick_increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
                         steady: bool, bounds: Any) -> tuple[float, float, float, float | None]:
@@ -315,10 +347,13 @@ class EstimatorModel:
         spread: ``dV = +-F_tot h / m``, ``dx = dV h / 2``). Otherwise :meth:`increment`.
         """
         if self.damping == 0.0:
-            smin, smax, lo_eq, hi_eq = bounds
+            smin, smax, lo_eq, hi_eq, lo0, hi0 = bounds
             w = 2.0 * math.sqrt(speed_std * speed_std + contact_std * contact_std)
             if steady and V - w <= hi_eq and V + w >= lo_eq:
                 return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None
+            if not steady and V - w <= hi0 and V + w >= lo0 and \
+                    max(abs(lo_eq - lo0), abs(hi_eq - hi0)) <= self._follow:
+                return self._carried(V, lo_eq, hi_eq, contact_std)
             reach = max(w, self._reach)
             if smin - V > reach:
                 dV = self._reach
@@ -398,7 +433,8 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     variance : ndarray of shape (k,), (m/s)^2
         Per-contact variance: quantization of the window's two readings, ``q^2 / 6`` over
         the window length squared; in a transient the motor law's own uncertainty, taken
-        as 10 % of the remaining gap, squared.
+        as 10 % of the remaining gap, squared, plus one period's quantization ``q^2 / (6
+        h^2)``.
     steady : ndarray of shape (k,), bool
         False within ``settle`` samples after a command change (the motors move).
     """
@@ -427,22 +463,26 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     steady &= ~changed
     transient = ~ok
     if transient.any():
-        # Motor law from the settled estimate at the change towards the command.
-        j = np.maximum(last_change, 0)
-        # Speeds at the change: the window estimate there, else a one-sample difference,
-        # else (a change at row 0) the settled speeds before it.
-        origin = 0.0 if c0 is None else c0
-        before = np.where((ok[j])[:, None], speeds[j], np.where(j[:, None] > 0, (w[j] - w[np.maximum(j - 1, 0)]) * q / np.maximum(t[j] - t[np.maximum(j - 1, 0)], 1e-300)[:, None], origin))
-        # The motor law solved (toolkit.model.motors): u + (v0 - u) exp(-(t - t_change) / tau).
-        law = unsaturated_response(before, u[j], (t - t[j])[:, None], model.motor_lag, math.inf)
-        law_var = (0.1 * np.abs(law - u[j])).max(axis=1) ** 2 + q * q / 6.0 / model.sensors.period**2
         has_change = last_change >= 0
-        speeds = np.where((transient & has_change)[:, None], law, speeds)
-        variance = np.where(transient & has_change, law_var, variance)
-        # Row 0 with no history: the commands are all we know.
+        # Row 0 with no history: the speeds the motors had settled at, else the commands.
         none = transient & ~has_change
         speeds = np.where(none[:, None], u if c0 is None else c0, speeds)
         variance = np.where(none, (q * model.sensors.rate) ** 2, variance)
+        # Inside the transient after a change, the motor law (toolkit.model.motors)
+        # u + (v0 - u) exp(-(t - t_change) / tau) from the speeds at the change: that row's
+        # own estimate (the window's when settled; the law continued from the change before
+        # when the commands change again inside a transient; the settled speeds at row 0).
+        # Rows of one change are contiguous (last_change does not decrease): in order.
+        floor = q * q / 6.0 / model.sensors.period**2
+        rows = np.flatnonzero(transient & has_change)
+        if rows.size:
+            owners = last_change[rows]
+            cuts = np.flatnonzero(np.diff(owners)) + 1
+            for seg in np.split(rows, cuts):
+                c = int(last_change[seg[0]])
+                law = unsaturated_response(speeds[c], u[c], (t[seg] - t[c])[:, None], model.motor_lag, math.inf)
+                speeds[seg] = law
+                variance[seg] = (0.1 * np.abs(law - u[c])).max(axis=1) ** 2 + floor
     return speeds, variance, steady
 
 
@@ -521,13 +561,8 @@ class ContactSpeedTracker:
             variance = (q * model.sensors.rate) ** 2
         steady = (j - lc) >= self._settle and not changed
         if changed:
-            if ok:
-                before = speeds
-            elif j > 0:
-                t_p, w_p = rows[-2]
-                before = (w - w_p) * q / max(t - t_p, 1e-300)
-            else:
-                before = self._initial if self._initial is not None else np.zeros_like(u)
+            # The speeds at the change: this row's own estimate (contact_speed_estimates).
+            before = speeds
             self._last_change = j
             self._change = (t, u, before)
         # EstimatorModel.substep_speeds for this row: the motor law from the speeds towards

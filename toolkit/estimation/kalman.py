@@ -208,7 +208,6 @@ class KalmanEstimator(Estimator):
         V = x.item(1)
         dx, dV, force_var, arrival = self._quick(V, sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
                                                  steady, bounds)
-        self._z[0, 0] = z
         if force_var != self._force_var:          # Q repeats while stuck or sliding freely
             self._force_var = force_var
             self._Q = self._gg * (force_var * self._inv_m2)
@@ -232,7 +231,9 @@ class KalmanEstimator(Estimator):
             kf.predict(u=u, B=self._I2, F=self._F_arrival, Q=Q)
             self.last_input = (dx, V + dV)
             self.last_F = self._F_arrival
-        kf.update(self._z, H=self._H)
+        # z as a float: filterpy's y = z - H x is the same (1, 1) array, and its deepcopy(z)
+        # of a float is free (of an array it is not).
+        kf.update(z, H=self._H)
         self.last_Q = Q
         self.last_nis = kf.y.item() ** 2 * kf.SI.item()
 

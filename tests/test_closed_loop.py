@@ -128,3 +128,20 @@ def test_filter_under_speed_hold_is_ten_times_better_than_differencing():
     late = run.times >= 1.0
     fd = np.sqrt(np.mean((baseline.speed - run.speed)[late] ** 2))
     assert np.sqrt(np.mean(run.estimation_error[late] ** 2)) <= fd / 10
+
+
+def test_loop_bench_runs_and_restores_the_loop(capsys):
+    # The benchmark times each stage by wrapping the loop's advance and SensorReader: after
+    # it the module's own functions are back (identity), and the timed stages account for
+    # at most the whole run (their sum plus bookkeeping is the total by construction).
+    import toolkit.closed_loop as closed_loop
+    from toolkit.bench import loop
+    from toolkit.model.sensors import SensorReader
+    from toolkit.simulation._stepper import advance
+
+    assert loop.main(["--seconds", "1", "--repeat", "1"]) == 0
+    assert closed_loop.advance is advance and closed_loop.SensorReader is SensorReader
+    out = capsys.readouterr().out
+    for stage in ("plant step (advance)", "sensors (SensorReader.read)", "estimator", "controller",
+                  "bookkeeping"):
+        assert out.count(stage) == 2

@@ -2,7 +2,7 @@
 
 At each sample ``t_k`` (50 Hz by default)::
 
-    counts  = measure(sensors, X(t_k), x(t_k))        # the sensor law (toolkit.model.sensors)
+    counts  = reader.read(X(t_k), x(t_k))             # the sensor law (SensorReader)
     V_hat   = estimator.observe(counts)                 # e.g. the Kalman filter
     u_k, F  = controller.output(t_k, z, V_hat)          # contact-speed commands, rig force
     estimator.commanded(u_k); z = controller.update(...)

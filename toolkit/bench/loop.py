@@ -10,8 +10,10 @@ best of ``R`` wall times of :func:`toolkit.simulate_closed_loop` over ``T`` seco
 9: under 0.5 s for 60 s) and, from one more run with every stage timed, the split per
 sample: plant step (``advance``), sensors (the sensor law, ``SensorReader.read``), estimator (``observe`` +
 ``commanded``), controller (``output`` + ``update``) and the rest (bookkeeping), the
-baseline being the whole loop measured in the same run. Also the filter's RMS error
-against the truth and the central finite difference's on the same record.
+baseline being the whole loop measured in the same run, and the plant alone on the same
+trajectory (the run's commands replayed open loop, no sensors or filter) timed in the same
+run. Also the filter's RMS error against the
+truth and the central finite difference's on the same record.
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ import numpy as np
 
 import toolkit.closed_loop as closed_loop
 from toolkit import CentralDifference, ContactSet, Plant, Sensors
-from toolkit.controllers import SpeedHold, VirtualViscosity
+from toolkit.controllers import OpenLoop, SpeedHold, VirtualViscosity
+from toolkit.model import PiecewiseConstant
 from toolkit.estimation import EstimatorModel, KalmanEstimator
 from toolkit.model.carousel import CAROUSEL
 
@@ -108,6 +111,13 @@ def main(argv: list[str] | None = None) -> int:
                 for _ in range(max(args.repeat, 1))]
         best = min(r.wall_time for r in runs)
         run = runs[0]
+        # Baseline in the same run: the plant alone on the same trajectory (the run's
+        # commands replayed open loop, no sensors, no filter).
+        replay = OpenLoop(PiecewiseConstant(run.times[1:], run.commands))
+        ideal_runs = [closed_loop.simulate_closed_loop(plant, replay, args.seconds)
+                      for _ in range(max(args.repeat, 1))]
+        ideal = min(r.wall_time for r in ideal_runs)
+        same = bool(np.array_equal(ideal_runs[0].speed, run.speed))
         kf_rms = float(np.sqrt(np.mean(run.estimation_error ** 2)))
         fd_rms = CentralDifference(sensors).run(run.record).rms_error
         ok = args.seconds != 60.0 or best < 0.5
@@ -117,6 +127,9 @@ def main(argv: list[str] | None = None) -> int:
               f"{best / samples * 1e6:.1f} us/sample, {args.seconds / best:.0f}x real time; "
               f"KF RMS {kf_rms * 1e3:.3f} mm/s vs central difference {fd_rms * 1e3:.3f} mm/s "
               f"({fd_rms / kf_rms:.1f}x)")
+        print(f"  baseline: the same commands replayed open loop without sensors or filter "
+              f"{ideal:.3f} s (same trajectory: {same}); the loop's sensing, estimation and "
+              f"control add {(best - ideal) / samples * 1e6:.1f} us/sample (ratio {best / ideal:.2f})")
         total, spent = _timed_run(plant, controller, args.seconds, sensors, estimator)
         rest = total - sum(spent.values())
         parts = [*spent.items(), ("bookkeeping (rest of the loop)", rest)]

@@ -94,9 +94,11 @@ def test_acceptance_kalman_beats_finite_differences_tenfold(scenario):
     assert kf.rms_error <= fd.rms_error / 10
 
 
-@pytest.mark.xfail(strict=True, reason="short (issue 9): measured KF/RTS RMS ratio 1.82 > 1.5 "
-                   "(0.080 vs 0.044 mm/s) and KF NEES mean 1.36 below its band [1.83, 2.18] "
-                   "(deterministic quantization sawtooth: see the report)")
+@pytest.mark.xfail(strict=True, reason="short (issue 9): measured KF/RTS RMS ratio 2.05 > 1.5 "
+                   "(0.062 vs 0.030 mm/s; half the filter's squared error is the startup's first "
+                   "0.3 s, where the wheel windows are 1-6 samples long) and KF NEES mean 0.87 "
+                   "below its band [1.83, 2.18] (the quantization sawtooth at constant speed is "
+                   "deterministic: see the report)")
 def test_acceptance_kalman_near_the_smoother_and_consistent(scenario):
     record, model = scenario.record, scenario.model
     kf = KalmanEstimator(model).run(record, speed_std=1e-4)
@@ -211,13 +213,13 @@ def test_increment_crossing_a_contact_closed_form():
     # rate r = dV / h = 2 m/s^2, so the crossing is timed to sigma / r and the mean force
     # errs by 2 f (sigma / r) / h; the contacts at 0.3 and 0.4 are far from [0, 0.04].
     model, sub = _three_contacts([0.03, 0.3, 0.4])
-    dx, dV, var, arrival = model.increment(0.0, sub, 1e-3, 1e-3, True)
+    dx, dV, var, arrival, on_set = model.increment(0.0, sub, 1e-3, 1e-3, True)
     sigma, h = np.sqrt(2) * 1e-3, 0.02
     # Exact crossing-by-crossing motion: rounding only (1e-15 of the speeds).
     assert dV == pytest.approx(0.04, rel=0, abs=1e-15)
     assert dx == pytest.approx(5e-4, rel=0, abs=1e-17)
     assert var == pytest.approx((2.0 * (sigma / 2.0) / h) ** 2, rel=1e-12)
-    assert arrival is None
+    assert arrival is None and not on_set
 
 
 def test_increment_arrival_on_the_equilibrium_set():
@@ -226,13 +228,13 @@ def test_increment_arrival_on_the_equilibrium_set():
     # The arrival contact is not crossed (no crossing variance) and V+ errs by the contact
     # estimate: arrival variance contact_std^2.
     model, sub = _three_contacts([0.03, 0.3])
-    dx, dV, var, arrival = model.increment(0.0, sub, 2e-3, 1e-3, True)
+    dx, dV, var, arrival, on_set = model.increment(0.0, sub, 2e-3, 1e-3, True)
     assert dV == pytest.approx(0.03, rel=0, abs=1e-15)
     assert dx == pytest.approx(3.75e-4, rel=0, abs=1e-17)
-    assert var == 0.0 and arrival == pytest.approx(4e-6, rel=1e-15)
+    assert var == 0.0 and arrival == pytest.approx(4e-6, rel=1e-15) and on_set
     # Already within 2 sigma of the set: stuck, no motion, only the floor.
-    dx, dV, var, arrival = model.increment(0.03 - 1e-3, sub, 2e-3, 1e-3, True)
-    assert (dx, dV, arrival) == (0.0, 0.0, None)
+    dx, dV, var, arrival, on_set = model.increment(0.03 - 1e-3, sub, 2e-3, 1e-3, True)
+    assert (dx, dV, arrival, on_set) == (0.0, 0.0, None, True)
     assert var == pytest.approx((1.0 / 0.02) ** 2 * 4e-6 / model.max_window, rel=1e-12)
 
 
@@ -260,11 +262,41 @@ def test_increment_carries_a_body_on_a_slowly_moving_set():
     model, _ = _three_contacts([0.1, 0.2])
     start, end = np.array([0.1, 0.2]), np.array([0.101, 0.201])
     sub = start + (end - start) * np.linspace(0.0, 1.0, model.substeps)[:, None]
-    dx, dV, var, arrival = model.increment(0.1, sub, 1e-4, 1e-4, False)
+    dx, dV, var, arrival, on_set = model.increment(0.1, sub, 1e-4, 1e-4, False)
     assert dV == pytest.approx(0.001, rel=0, abs=1e-15) and dx == pytest.approx(0.001 * 0.01, rel=1e-12)
-    assert arrival is None and var == pytest.approx((1.0 / 0.02) ** 2 * 1e-8 / model.max_window, rel=1e-12)
+    assert arrival is None and on_set and var == pytest.approx((1.0 / 0.02) ** 2 * 1e-8 / model.max_window, rel=1e-12)
     assert model.increment(0.15, sub, 1e-4, 1e-4, False)[:2] == (0.0, 0.0)
     # quick_increment takes the same rule from the bounds.
     assert model.quick_increment(0.1, sub, 1e-4, 1e-4, False, model.bounds_row(sub))[:2] == (dx, dV)
     far = start + np.array([0.06, 0.06]) * np.linspace(0.0, 1.0, model.substeps)[:, None]
     assert model.increment(0.1, far, 1e-4, 1e-4, False)[1] != pytest.approx(0.06, abs=1e-3)
+
+
+def test_filter_fuses_the_edge_when_a_held_body_leaves_the_set():
+    # The filter held the body on the set (a stuck step), then the estimate lies below the
+    # lower edge by more than 2 sigma: the body has not left (steady contacts), so the step
+    # keeps V with the ordinary transition and fuses the edge estimate as a measurement of
+    # V after the encoder's update. Second method: the Kalman equations written out.
+    model, sub = _three_contacts([0.03, 0.3])
+    h, var_v = 0.02, 4e-6
+    kf = KalmanEstimator(model)
+    kf.reset(speed=0.03, speed_std=1e-4)
+    kf._advance(0.0, 1e-8, None, 0.0, True)
+    bounds = model.bounds_row(sub)
+    kf._advance(0.03 * h, 1e-8, sub, var_v, True, bounds)            # stuck at the edge
+    x0, P0 = kf.kf.x.copy(), kf.kf.P.copy()
+    kf.kf.x[1, 0] = 0.03 - 0.01                                          # far below the edge
+    x0[1, 0] = 0.02
+    z, R = 2 * 0.03 * h, 1e-8
+    kf._advance(z, R, sub, var_v, True, bounds)
+    np.testing.assert_array_equal(kf.last_F, [[1.0, h], [0.0, 1.0]])
+    F = np.array([[1.0, h], [0.0, 1.0]])
+    x, P = F @ x0, F @ P0 @ F.T + kf.last_Q
+    for H, zz, RR in ((np.array([[1.0, 0.0]]), z, R), (np.array([[0.0, 1.0]]), 0.03, var_v)):
+        S = H @ P @ H.T + RR
+        K = P @ H.T / S
+        x = x + K * (zz - H @ x)
+        P = (np.eye(2) - K @ H) @ P @ (np.eye(2) - K @ H).T + K * RR @ K.T
+    # Two 2x2 updates in double precision: rounding, 1e-12 relative.
+    np.testing.assert_allclose(kf.kf.x, x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(kf.kf.P, P, rtol=1e-9, atol=1e-18)

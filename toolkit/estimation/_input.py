@@ -140,7 +140,7 @@ class EstimatorModel:
         return unsaturated_response(speeds[:, None, :], target[:, None, :], s, self.motor_lag, math.inf)
 
     def increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
-                  steady: bool, bounds: Any = None) -> tuple[float, float, float, float | None]:
+                  steady: bool, bounds: Any = None) -> tuple[float, float, float, float | None, bool]:
         """Known input over one sample period from body speed ``V`` (m/s).
 
         Parameters
@@ -168,6 +168,9 @@ class EstimatorModel:
             ``V+`` is that set's edge, a contact speed: it no longer depends on ``V``
             (the filter's transition has ``dV+/dV = 0``) and errs by the contact-speed
             estimate, variance ``contact_std^2``. ``None`` otherwise.
+        on_set : bool
+            The body ends the period on the equilibrium set (stuck, coasting in a zero
+            band, carried along, or arrived).
 
         Notes
         -----
@@ -209,12 +212,12 @@ class EstimatorModel:
                 # their window estimate's variance ``contact_std^2`` over the
                 # ``max_window`` periods of the window, so the floor is ``contact_std^2 /
                 # max_window`` per period, an acceleration held over it.
-                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None
+                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None, True
             # Contacts held over the period: the exact piecewise-constant motion, crossing
             # by crossing (a body crosses several contacts per period while braking).
             dx, dV, arrived = self._coast(V, last)
             var = self._friction_var + self._crossing_var(V, dV, sub, sigma, arrived)
-            return dx, dV, var, (contact_std * contact_std if arrived else None)
+            return dx, dV, var, (contact_std * contact_std if arrived else None), arrived
         if c == 0.0:
             edges = bounds if bounds is not None else self.bounds_row(sub)
             lo_eq, hi_eq, lo0, hi0 = edges[2:]
@@ -227,7 +230,7 @@ class EstimatorModel:
         hi, lo = net[M], net[M + 1]
         if steady and lo <= c * V <= hi:
             # Stuck with drag (the same floor as above).
-            return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None
+            return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None, True
         dt_m = self._ds / m
         first = net[:M] - c * V
         travel = float(np.sum(first)) * dt_m
@@ -241,13 +244,13 @@ class EstimatorModel:
         dV = float(np.sum(second)) * dt_m
         # Double integral of piecewise-constant accelerations: each acts for the rest of the period.
         dx = float(np.dot(second, self._rest)) * self._ds * dt_m
-        return dx, dV, self._friction_var + self._crossing_var(V, dV, sub, sigma), None
+        return dx, dV, self._friction_var + self._crossing_var(V, dV, sub, sigma), None, False
 
     def _carried(self, V: float, lo_eq: float, hi_eq: float, contact_std: float
-                 ) -> tuple[float, float, float, None]:
+                 ) -> tuple[float, float, float, None, bool]:
         """A body on a slowly moving equilibrium set stays on it (see :meth:`increment`)."""
         dV = min(max(V, lo_eq), hi_eq) - V
-        return 0.5 * dV * self.sensors.period, dV, self._stuck_scale * contact_std * contact_std, None
+        return 0.5 * dV * self.sensors.period, dV, self._stuck_scale * contact_std * contact_std, None, True
 
     def _crossing_var(self, V: float, dV: float, sub: np.ndarray, sigma: float,
                       arrived: bool = False) -> float:
@@ -337,7 +340,7 @@ class EstimatorModel:
         return lo, hi
 
     def quick_increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
-                        steady: bool, bounds: Any) -> tuple[float, float, float, float | None]:
+                        steady: bool, bounds: Any) -> tuple[float, float, float, float | None, bool]:
         """:meth:`increment`, without the contact law where :meth:`bounds` decide it.
 
         Without drag: stuck when ``V`` lies on the equilibrium set (the same rule as
@@ -350,7 +353,7 @@ class EstimatorModel:
             smin, smax, lo_eq, hi_eq, lo0, hi0 = bounds
             w = 2.0 * math.sqrt(speed_std * speed_std + contact_std * contact_std)
             if steady and V - w <= hi_eq and V + w >= lo_eq:
-                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None
+                return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None, True
             if not steady and V - w <= hi0 and V + w >= lo0 and \
                     max(abs(lo_eq - lo0), abs(hi_eq - hi0)) <= self._follow:
                 return self._carried(V, lo_eq, hi_eq, contact_std)
@@ -361,7 +364,7 @@ class EstimatorModel:
                 dV = -self._reach
             else:
                 return self.increment(V, sub, contact_std, speed_std, steady, bounds)
-            return 0.5 * dV * self.sensors.period, dV, self._friction_var, None
+            return 0.5 * dV * self.sensors.period, dV, self._friction_var, None, False
         return self.increment(V, sub, contact_std, speed_std, steady, bounds)
 
     def _coast(self, V: float, speeds: np.ndarray) -> tuple[float, float, bool]:

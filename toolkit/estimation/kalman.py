@@ -52,7 +52,12 @@ Arrival. A body that reaches the equilibrium set within the period sticks on its
 ``V+`` is that contact's speed whatever ``V`` was. The transition of that step is then
 ``F_k = [[1, h], [0, 0]]`` (``dV+/dV = 0``, the exact flow's derivative) with input ``u_k =
 (dx_k, V_edge)`` and ``sigma_v^2`` added to ``Q_VV``: the speed error after an arrival is
-the contact estimate's, and the filter forgets the speed error it had before.
+the contact estimate's, and the filter forgets the speed error it had before. A body the
+filter already held on the set (the previous step ended there) that a measurement update
+moved off it has not left it (steady contacts): the step keeps ``V`` (no reset; ``V`` is
+then a second estimate of the edge's speed) and fuses the contact estimate of the edge as
+a measurement of ``V`` (filterpy ``update`` with ``H = [0, 1]``, ``R = sigma_v^2``) after
+the encoder's update.
 
 Smoother. filterpy's ``rts_smoother`` ignores ``B u``; the input is therefore moved into
 the transition of an augmented state ``(X, V, 1)``, ``F_k = [[F_k, u_k], [0, 0, 1]]``
@@ -156,6 +161,7 @@ class KalmanEstimator(Estimator):
         self._F = np.array([[1.0, h], [0.0, 1.0]])
         self._F_arrival = np.array([[1.0, h], [0.0, 0.0]])
         self._I2 = np.eye(2)
+        self._H_speed = np.array([[0.0, 1.0]])
         self.reset()
 
     def _build(self) -> Any:
@@ -184,6 +190,7 @@ class KalmanEstimator(Estimator):
         self._count_prev: int | None = None
         self._repeats = 0
         self._force_var, self._Q = math.nan, np.zeros((2, 2))
+        self._on_set = False
         self._quick = self.model.quick_increment
         self.last_input = (0.0, 0.0)
         self.last_F = self._F
@@ -206,13 +213,21 @@ class KalmanEstimator(Estimator):
             return
         x = kf.x
         V = x.item(1)
-        dx, dV, force_var, arrival = self._quick(V, sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
-                                                 steady, bounds)
+        dx, dV, force_var, arrival, on_set = self._quick(V, sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
+                                                         steady, bounds)
         if force_var != self._force_var:          # Q repeats while stuck or sliding freely
             self._force_var = force_var
             self._Q = self._gg * (force_var * self._inv_m2)
         Q = self._Q
         kf.R[0, 0] = R
+        edge, edge_var = None, 0.0
+        if arrival is not None and self._on_set:
+            # Back to the set it was on (the update had moved the estimate off it): the
+            # body stayed on the edge, so V is a second estimate of the edge's speed. Keep
+            # it (no reset) and fuse the contact estimate of the edge as a measurement of V.
+            edge, edge_var = V + dV, arrival
+            dx, dV, arrival = 0.0, 0.0, None
+        self._on_set = on_set
         if arrival is None:
             # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x +
             # F^-1 u) with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place
@@ -236,6 +251,8 @@ class KalmanEstimator(Estimator):
         kf.update(z, H=self._H)
         self.last_Q = Q
         self.last_nis = kf.y.item() ** 2 * kf.SI.item()
+        if edge is not None:
+            kf.update(edge, R=edge_var, H=self._H_speed)
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         """Take one sample's counts (in order); return ``(speed, variance)`` at its time.

@@ -70,7 +70,12 @@ filter already held on the set (the previous step ended there) that a measuremen
 moved off it has not left it (steady contacts): the step keeps ``V`` (no reset; ``V`` is
 then a second estimate of the edge's speed) and fuses the contact estimate of the edge as
 a measurement of ``V`` (filterpy ``update`` with ``H = [0, 1]``, ``R = sigma_v^2``) after
-the encoder's update.
+the encoder's update. While the body stays on an edge (arrived there, or held within
+``2 sigma`` of it from outside) it moves at that contact's speed, whose wheel estimate
+improves as its window lengthens (``sigma_v^2 = q_w^2 / (6 T^2)`` for a window of ``T``
+seconds): each gain is fused the same way with the information increment's variance
+``1 / (1 / sigma_v,now^2 - 1 / sigma_v,fused^2)`` (the longer window holds the shorter
+one's counts, so only the increment is new).
 
 Smoother. filterpy's ``rts_smoother`` ignores ``B u``; the input is therefore moved into
 the transition of an augmented state ``(X, V, 1)``, ``F_k = [[F_k, u_k], [0, 0, 1]]``
@@ -97,6 +102,11 @@ from ._base import EstimationResult, Estimator, check_covariance, score
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 
 __all__ = ["KalmanEstimator", "RTSSmoother", "steady_state_gain", "measurement_variance"]
+
+
+def _side(speed: float, bounds: Any) -> int | None:
+    """Which edge of the equilibrium set (``bounds[2]`` or ``[3]``) ``speed`` is, if either."""
+    return 2 if speed == bounds[2] else (3 if speed == bounds[3] else None)
 
 
 def _scalar_inverse(S: np.ndarray) -> np.ndarray:
@@ -204,6 +214,7 @@ class KalmanEstimator(Estimator):
         self._repeats = 0
         self._force_var, self._Q = math.nan, np.zeros((2, 2))
         self._on_set = False
+        self._edge, self._edge_var = None, math.inf
         self._quick = self.model.quick_increment
         self.last_input = (0.0, 0.0)
         self.last_F = self._F
@@ -241,6 +252,26 @@ class KalmanEstimator(Estimator):
             edge, edge_var = V + dV, arrival
             dx, dV, arrival = 0.0, 0.0, None
         self._on_set = on_set
+        # On an edge of the set (arrived there, or held within 2 sigma of it from outside)
+        # the body moves at that edge contact's speed: as the wheels' window lengthens, its
+        # estimate gains information, fused as a measurement of V with the information
+        # increment's variance 1 / (1 / var_now - 1 / var_fused) (the longer window holds
+        # the shorter one's counts).
+        inc = None
+        if not (on_set and steady):
+            self._edge = None
+        elif arrival is not None:
+            self._edge, self._edge_var = _side(V + dV, bounds), arrival
+        elif edge is not None:
+            self._edge, self._edge_var = _side(edge, bounds), edge_var
+        elif self._edge is None:
+            if V < bounds[2] or V > bounds[3]:
+                self._edge = 2 if V < bounds[2] else 3
+                inc = (bounds[self._edge], var_v)
+                self._edge_var = var_v
+        elif var_v < self._edge_var:
+            inc = (bounds[self._edge], 1.0 / (1.0 / var_v - 1.0 / self._edge_var))
+            self._edge_var = var_v
         if arrival is None:
             # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x +
             # F^-1 u) with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place
@@ -266,6 +297,8 @@ class KalmanEstimator(Estimator):
         self.last_nis = kf.y.item() ** 2 * kf.SI.item()
         if edge is not None:
             kf.update(edge, R=edge_var, H=self._H_speed)
+        if inc is not None:
+            kf.update(inc[0], R=inc[1], H=self._H_speed)
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         """Take one sample's counts (in order); return ``(speed, variance)`` at its time.

@@ -105,8 +105,11 @@ __all__ = ["KalmanEstimator", "RTSSmoother", "steady_state_gain", "measurement_v
 
 
 def _side(speed: float, bounds: Any) -> int | None:
-    """Which edge of the equilibrium set (``bounds[2]`` or ``[3]``) ``speed`` is, if either."""
-    return 2 if speed == bounds[2] else (3 if speed == bounds[3] else None)
+    """Which edge of the equilibrium set (``bounds[2]`` or ``[3]``) ``speed`` is, if either
+    (to the rounding of ``V + (edge - V)``: 1e-12 m/s)."""
+    lo, hi = bounds[2], bounds[3]
+    near = 2 if abs(speed - lo) <= abs(speed - hi) else 3
+    return near if abs(speed - bounds[near]) <= 1e-12 else None
 
 
 def _scalar_inverse(S: np.ndarray) -> np.ndarray:

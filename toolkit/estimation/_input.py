@@ -5,11 +5,14 @@ contact speeds the wheel encoders measure, through the model's own contact law
 (:func:`toolkit.model.friction.contact_forces`), never re-derived here.
 
 Contact speeds from the wheels (:func:`contact_speed_estimates`, vectorized over a record;
-the loop calls it on its recent history, the same code): counts differenced over a window
-that starts ``settle`` samples after the last command change (the motor lag and the
-gearbox play have then been taken up: 4 lags = 30 ms, and 0.8 mm of play at 0.1 m/s is
-8 ms) and spans at most ``max_window`` samples. Inside the transient after a change the
-contact speeds are the motor law from the last settled estimate towards the command.
+a loop uses :class:`ContactSpeedTracker`, the same formulas one row at a time): counts
+differenced over a window that starts ``settle`` samples after the last command change
+(the motor lag and the gearbox play have then been taken up: 4 lags = 30 ms, and 0.8 mm
+of play at 0.1 m/s is 8 ms) and spans at most ``max_window`` samples. Inside the
+transient after a change the contact speeds are the motor law from the speeds at the
+change (that row's own estimate) towards the command. The first command is a change when
+the motors had settled elsewhere before it (``initial``, the record's
+``initial_commands``).
 """
 
 from __future__ import annotations

@@ -96,7 +96,7 @@ def test_acceptance_kalman_beats_finite_differences_tenfold(scenario):
 
 @pytest.mark.xfail(strict=True, reason="short (issue 9): measured KF/RTS RMS ratio 1.66 > 1.5 "
                    "(0.049 vs 0.030 mm/s; 55 % of the filter's squared error is the startup's "
-                   "first 0.3 s, where the wheel windows are 1-6 samples long) and KF NEES mean "
+                   "first 0.3 s, where the wheel windows are 1-15 samples long) and KF NEES mean "
                    "0.86 below its band [1.83, 2.18] (the quantization sawtooth at constant "
                    "speed is deterministic: see the report)")
 def test_acceptance_kalman_near_the_smoother_and_consistent(scenario):

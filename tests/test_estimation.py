@@ -94,8 +94,11 @@ def test_acceptance_kalman_beats_finite_differences_tenfold(scenario):
     assert kf.rms_error <= fd.rms_error / 10
 
 
-@pytest.mark.xfail(strict=True, reason="short (issue 9): measured KF/RTS RMS ratio 2.8 > 1.5 "
-                   "and KF NEES mean 2.42 above its band [1.83, 2.18] (cruise overconfident); see the report")
+@pytest.mark.xfail(strict=True, reason="short (issue 9): measured KF/RTS RMS ratio 1.66 > 1.5 "
+                   "(0.049 vs 0.030 mm/s; 55 % of the filter's squared error is the startup's "
+                   "first 0.3 s, where the wheel windows are 1-15 samples long) and KF NEES mean "
+                   "0.86 below its band [1.83, 2.18] (the quantization sawtooth at constant "
+                   "speed is deterministic: see the report)")
 def test_acceptance_kalman_near_the_smoother_and_consistent(scenario):
     record, model = scenario.record, scenario.model
     kf = KalmanEstimator(model).run(record, speed_std=1e-4)
@@ -166,3 +169,173 @@ def test_observe_then_commanded_equals_run(scenario, make):
     # Same per-sample code on the same numbers: rounding only.
     np.testing.assert_allclose(out[:, 0], offline.speed[:K], rtol=0, atol=1e-12)
     np.testing.assert_allclose(out[:, 1], offline.variance[:K], rtol=1e-9, atol=1e-15)
+
+
+def test_contact_speed_tracker_equals_the_vectorized_estimates():
+    # The loop's row-by-row tracker and the offline vectorized function: the same formulas
+    # on the same counts, so equal to rounding (1e-12 m/s). A record whose commands change
+    # at row 0 (from initial_commands), at isolated rows and at consecutive rows.
+    from toolkit.estimation import ContactSpeedTracker, contact_speed_estimates
+
+    sc = carousel_brake_scenario(seed=3, t_end=3.0, brake_time=1.5)
+    rec = sc.record
+    model = sc.model
+    commands = np.array(rec.commands)
+    commands[40:44] += np.linspace(0.001, 0.004, 4)[:, None]      # four changes in a row
+    initial = commands[0] - 0.05                                   # a transient from row 0
+    speeds, var, steady = contact_speed_estimates(rec.wheel_counts, commands, rec.times, model,
+                                                  initial=initial)
+    sub = model.substep_speeds(speeds, commands, steady)
+    bounds = model.bounds(sub)
+    tracker = ContactSpeedTracker(model, initial)
+    for k in range(rec.n_samples):
+        s_k, v_k, st_k, sub_k = tracker.push(float(rec.times[k]), rec.wheel_counts[k], commands[k])
+        np.testing.assert_allclose(s_k, speeds[k], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(v_k, var[k], rtol=1e-12, atol=0)
+        assert st_k == steady[k]
+        np.testing.assert_allclose(sub_k, sub[k], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(model.bounds_row(sub_k), bounds[k], rtol=0, atol=1e-12)
+    assert not steady[:model.settle].any() and steady[model.settle:40].all()
+
+
+def _three_contacts(speeds, std=1e-3):
+    sensors = Sensors.carousel(n_wheels=len(speeds))
+    model = EstimatorModel(np.ones(len(speeds)), 1.0, sensors)
+    sub = np.broadcast_to(np.asarray(speeds, dtype=float), (model.substeps, len(speeds)))
+    return model, sub
+
+
+def test_increment_crossing_a_contact_closed_form():
+    # m = 1 kg, f = 1 N: contacts at 0.03, 0.3, 0.4 (equilibrium at 0.3), body at 0 with
+    # steady contacts. a = 3 m/s^2 until 0.03 (t = 0.01 s), then 1 m/s^2 for the rest of
+    # the 0.02 s period: dV = 0.03 + 0.01 = 0.04, dx = 1.5e-4 + 3.5e-4 = 5e-4 m.
+    # Crossing variance: slip std sigma = sqrt(2) 1e-3 (speed and contact stds 1e-3), slip
+    # rate r = dV / h = 2 m/s^2, so the crossing is timed to sigma / r and the mean force
+    # errs by 2 f (sigma / r) / h; the contacts at 0.3 and 0.4 are far from [0, 0.04].
+    model, sub = _three_contacts([0.03, 0.3, 0.4])
+    dx, dV, var, arrival, on_set = model.increment(0.0, sub, 1e-3, 1e-3, True)
+    sigma, h = np.sqrt(2) * 1e-3, 0.02
+    # Exact crossing-by-crossing motion: rounding only (1e-15 of the speeds).
+    assert dV == pytest.approx(0.04, rel=0, abs=1e-15)
+    assert dx == pytest.approx(5e-4, rel=0, abs=1e-17)
+    assert var == pytest.approx((2.0 * (sigma / 2.0) / h) ** 2, rel=1e-12)
+    assert arrival is None and not on_set
+
+
+def test_increment_arrival_on_the_equilibrium_set():
+    # Contacts at 0.03 and 0.3 (zero band [0.03, 0.3]), body at 0: a = 2 m/s^2 until it
+    # reaches 0.03 at t = 0.015 s, then it coasts there: dV = 0.03, dx = 2.25e-4 + 1.5e-4 m.
+    # The arrival contact is not crossed (no crossing variance) and V+ errs by the contact
+    # estimate: arrival variance contact_std^2.
+    model, sub = _three_contacts([0.03, 0.3])
+    dx, dV, var, arrival, on_set = model.increment(0.0, sub, 2e-3, 1e-3, True)
+    assert dV == pytest.approx(0.03, rel=0, abs=1e-15)
+    assert dx == pytest.approx(3.75e-4, rel=0, abs=1e-17)
+    assert var == 0.0 and arrival == pytest.approx(4e-6, rel=1e-15) and on_set
+    # Already within 2 sigma of the set: stuck, no motion, only the floor.
+    dx, dV, var, arrival, on_set = model.increment(0.03 - 1e-3, sub, 2e-3, 1e-3, True)
+    assert (dx, dV, arrival, on_set) == (0.0, 0.0, None, True)
+    assert var == pytest.approx((1.0 / 0.02) ** 2 * 4e-6 / model.max_window, rel=1e-12)
+
+
+def test_filter_after_an_arrival_forgets_the_old_speed_error():
+    # An arrival step has the transition [[1, h], [0, 0]]: the prior speed variance is the
+    # contact estimate's plus the step's force variance, whatever P_VV was before.
+    model, sub = _three_contacts([0.03, 0.3])
+    kf = KalmanEstimator(model)
+    kf.reset(speed=0.0, speed_std=0.01)
+    kf._advance(0.0, 1e-8, None, 0.0, True)
+    bounds = model.bounds_row(sub)
+    kf._advance(3.75e-4, 1e-8, sub, 4e-6, True, bounds)
+    np.testing.assert_array_equal(kf.last_F, [[1.0, 0.02], [0.0, 0.0]])
+    # Prior P_VV = 0 * P_VV + Q_VV = contact variance (no crossing variance): exact.
+    assert kf.kf.P_prior[1, 1] == pytest.approx(4e-6, rel=1e-12)
+    assert kf.last_input == pytest.approx((3.75e-4, 0.03), rel=0, abs=1e-15)
+
+
+def test_increment_carries_a_body_on_a_slowly_moving_set():
+    # Two 1 N contacts on m = 1 kg, commands moved by +1 mm/s (a motor transient: not
+    # steady): the zero band [0.1, 0.2] ends at [0.101, 0.201]. A body on its lower edge is
+    # carried along (stiction: the edge moves by 1 mm/s per period, less than the 2 f h / m
+    # = 40 mm/s one stiction step gives): V+ = 0.101, dx = dV h / 2. Inside the band it
+    # coasts. Moved by 60 mm/s (more than 40 mm/s) the rule does not apply.
+    model, _ = _three_contacts([0.1, 0.2])
+    start, end = np.array([0.1, 0.2]), np.array([0.101, 0.201])
+    sub = start + (end - start) * np.linspace(0.0, 1.0, model.substeps)[:, None]
+    dx, dV, var, arrival, on_set = model.increment(0.1, sub, 1e-4, 1e-4, False)
+    assert dV == pytest.approx(0.001, rel=0, abs=1e-15) and dx == pytest.approx(0.001 * 0.01, rel=1e-12)
+    assert arrival is None and on_set and var == pytest.approx((1.0 / 0.02) ** 2 * 1e-8 / model.max_window, rel=1e-12)
+    assert model.increment(0.15, sub, 1e-4, 1e-4, False)[:2] == (0.0, 0.0)
+    # quick_increment takes the same rule from the bounds.
+    assert model.quick_increment(0.1, sub, 1e-4, 1e-4, False, model.bounds_row(sub))[:2] == (dx, dV)
+    far = start + np.array([0.06, 0.06]) * np.linspace(0.0, 1.0, model.substeps)[:, None]
+    assert model.increment(0.1, far, 1e-4, 1e-4, False)[1] != pytest.approx(0.06, abs=1e-3)
+
+
+def test_filter_fuses_the_edge_when_a_held_body_leaves_the_set():
+    # The filter held the body on the set (a stuck step), then the estimate lies below the
+    # lower edge by more than 2 sigma: the body has not left (steady contacts), so the step
+    # keeps V with the ordinary transition and fuses the edge estimate as a measurement of
+    # V after the encoder's update. Second method: the Kalman equations written out.
+    model, sub = _three_contacts([0.03, 0.3])
+    h, var_v = 0.02, 4e-6
+    kf = KalmanEstimator(model)
+    kf.reset(speed=0.03, speed_std=1e-4)
+    kf._advance(0.0, 1e-8, None, 0.0, True)
+    bounds = model.bounds_row(sub)
+    kf._advance(0.03 * h, 1e-8, sub, var_v, True, bounds)            # stuck at the edge
+    x0, P0 = kf.kf.x.copy(), kf.kf.P.copy()
+    kf.kf.x[1, 0] = 0.03 - 0.01                                          # far below the edge
+    x0[1, 0] = 0.02
+    z, R = 2 * 0.03 * h, 1e-8
+    kf._advance(z, R, sub, var_v, True, bounds)
+    np.testing.assert_array_equal(kf.last_F, [[1.0, h], [0.0, 1.0]])
+    F = np.array([[1.0, h], [0.0, 1.0]])
+    x, P = F @ x0, F @ P0 @ F.T + kf.last_Q
+    for H, zz, RR in ((np.array([[1.0, 0.0]]), z, R), (np.array([[0.0, 1.0]]), 0.03, var_v)):
+        S = H @ P @ H.T + RR
+        K = P @ H.T / S
+        x = x + K * (zz - H @ x)
+        P = (np.eye(2) - K @ H) @ P @ (np.eye(2) - K @ H).T + K * RR @ K.T
+    # Two 2x2 updates in double precision: rounding, 1e-12 relative.
+    np.testing.assert_allclose(kf.kf.x, x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(kf.kf.P, P, rtol=1e-9, atol=1e-18)
+
+
+def _kalman_by_hand(x, P, Q, updates, h=0.02):
+    F = np.array([[1.0, h], [0.0, 1.0]])
+    x, P = F @ x, F @ P @ F.T + Q
+    for H, z, R in updates:
+        H = np.array([H], dtype=float)
+        S = H @ P @ H.T + R
+        K = P @ H.T / S
+        x = x + K * (z - H @ x)
+        P = (np.eye(2) - K @ H) @ P @ (np.eye(2) - K @ H).T + K * R @ K.T
+    return x, P
+
+
+def test_filter_fuses_the_information_gained_on_an_edge():
+    # A body held within 2 sigma of the lower edge (0.03) from below is on that edge: the
+    # first stuck step fuses the edge's contact estimate (variance 4e-6) as a measurement of
+    # V; when the wheel window has grown (variance 1e-6) only the information increment is
+    # fused, variance 1 / (1 / 1e-6 - 1 / 4e-6). Second method: the Kalman equations.
+    model, sub = _three_contacts([0.03, 0.3])
+    bounds = model.bounds_row(sub)
+    kf = KalmanEstimator(model)
+    kf.reset(speed=0.0299, speed_std=1e-4)
+    kf._advance(0.0, 1e-8, None, 0.0, True)
+    h, R = 0.02, 1e-8
+    for k, (var_v, fused) in enumerate(((4e-6, 4e-6), (1e-6, 1.0 / (1.0 / 1e-6 - 1.0 / 4e-6))), start=1):
+        x0, P0 = kf.kf.x.copy(), kf.kf.P.copy()
+        z = k * 0.0299 * h
+        kf._advance(z, R, sub, var_v, True, bounds)
+        assert kf.last_input == (0.0, 0.0)                                # stuck: no input
+        x, P = _kalman_by_hand(x0, P0, kf.last_Q, [((1.0, 0.0), z, R), ((0.0, 1.0), 0.03, fused)])
+        # Two 2x2 updates in double precision: rounding, 1e-12 relative.
+        np.testing.assert_allclose(kf.kf.x, x, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(kf.kf.P, P, rtol=1e-9, atol=1e-18)
+    # No new information (the same window variance): no fusion, the encoder's update only.
+    x0, P0 = kf.kf.x.copy(), kf.kf.P.copy()
+    kf._advance(3 * 0.0299 * h, R, sub, 1e-6, True, bounds)
+    x, P = _kalman_by_hand(x0, P0, kf.last_Q, [((1.0, 0.0), 3 * 0.0299 * h, R)])
+    np.testing.assert_allclose(kf.kf.x, x, rtol=1e-12, atol=1e-15)

@@ -187,3 +187,29 @@ def test_noisy_sensors_need_a_generator():
     sensors = Sensors.carousel(n_wheels=1, count_noise=1.0)
     with pytest.raises(ParameterTypeError, match="'rng' parameter of measure"):
         measure(sensors, [0.0], [[0.0]], sensors.initial_state(), None)
+
+
+def test_sensor_reader_equals_measure_and_keeps_the_state():
+    # The loop's reader and measure() run the same per-row law with the same draws.
+    from toolkit.model.sensors import SensorReader
+
+    sensors = Sensors.carousel(n_wheels=3, missed_count_prob=0.05, count_noise=0.7)
+    k = np.arange(60)
+    X = 0.004 * k + 1e-4 * np.sin(k)
+    x = np.outer(0.003 * np.cos(k / 10), [1.0, -1.0, 0.5])
+    central, wheel, state = measure(sensors, X, x, sensors.initial_state(), np.random.default_rng(5))
+    reader = SensorReader(sensors, sensors.initial_state(), np.random.default_rng(5))
+    rows = [reader.read(float(X[j]), x[j]) for j in k]
+    np.testing.assert_array_equal(central, [r[0] for r in rows])
+    np.testing.assert_array_equal(wheel, np.array([r[1] for r in rows]))
+    np.testing.assert_array_equal(reader.state.motor, state.motor)
+    assert reader.state.central_offset == state.central_offset
+
+
+def test_record_initial_commands_are_checked():
+    with pytest.raises(ParameterError, match="'initial_commands' parameter of EncoderRecord must have shape"):
+        EncoderRecord([0.0, 0.02], [0, 1], [[0, 0], [1, 1]], [[0.1, 0.1], [0.1, 0.1]], 1e-4, 1e-4,
+                      initial_commands=[0.1])
+    with pytest.raises(ParameterError, match="'initial_commands' parameter of EncoderRecord must be finite"):
+        EncoderRecord([0.0, 0.02], [0, 1], [[0, 0], [1, 1]], [[0.1, 0.1], [0.1, 0.1]], 1e-4, 1e-4,
+                      initial_commands=[0.1, float("nan")])

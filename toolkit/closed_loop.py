@@ -2,7 +2,7 @@
 
 At each sample ``t_k`` (50 Hz by default)::
 
-    counts  = measure(sensors, X(t_k), x(t_k))        # the sensor law (toolkit.model.sensors)
+    counts  = reader.read(X(t_k), x(t_k))             # the sensor law (SensorReader)
     V_hat   = estimator.observe(counts)                 # e.g. the Kalman filter
     u_k, F  = controller.output(t_k, z, V_hat)          # contact-speed commands, rig force
     estimator.commanded(u_k); z = controller.update(...)
@@ -28,7 +28,7 @@ from ._validation import as_float
 from .controllers.base import ControlLaw, Controller
 from .errors import ParameterError, ParameterTypeError, parameter_message
 from .model import Plant
-from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure
+from .model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors, measure  # noqa: F401
 from .simulation import Budget, SimulationStatus
 from .simulation._stepper import ExactState, advance
 
@@ -162,44 +162,56 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     rng = np.random.default_rng(seed)
     n = plant.n
     times = np.arange(samples) * period
-    speed, estimate, variance = np.empty(samples), np.empty(samples), np.zeros(samples)
-    position, force = np.empty(samples), np.zeros(samples)
+    t_list = times.tolist()
+    speed, estimate, variance = [0.0] * samples, [0.0] * samples, [0.0] * samples
+    position, force = [0.0] * samples, [0.0] * samples
     commands, contact = np.empty((samples, n)), np.empty((samples, n))
-    central, wheel = np.zeros(samples, dtype=np.int64), np.zeros((samples, n), dtype=np.int64)
+    central, wheel = [0] * samples, np.zeros((samples, n), dtype=np.int64)
     state = ExactState(0.0, float(v0), plant.initial_speeds())
     X, x = 0.0, np.zeros(n)
+    reader = None
     if sensors is not None:
-        sensor_state = sensors.initial_state(state.contact_speeds)
-        estimator.reset(speed=float(v0))
+        reader = SensorReader(sensors, sensors.initial_state(state.contact_speeds), rng)
+        estimator.reset(speed=float(v0), contact_speeds=state.contact_speeds)
+        observe, commanded = estimator.observe, estimator.commanded
         jitter = sensors.jitter
     else:
         jitter = 0.0
+    output, update = law.output, law.update
     z = law.initial_state()
     status, message, last = SimulationStatus.SUCCESS, "", samples
+    previous = state.contact_speeds
     for k in range(samples):
-        speed[k], position[k], contact[k] = state.V, X, state.contact_speeds
-        if sensors is not None:
-            c, w, sensor_state = measure(sensors, [X], x[None, :], sensor_state, rng)
-            central[k], wheel[k] = c[0], w[0]
-            estimate[k], variance[k] = estimator.observe(
-                EncoderSample(times[k], int(c[0]), w[0], commands[k - 1] if k else state.contact_speeds))
+        t = t_list[k]
+        V = state.V
+        speed[k], position[k], contact[k] = V, X, state.contact_speeds
+        if reader is not None:
+            c, w = reader.read(X, x)
+            central[k] = c
+            wheel[k] = w
+            estimate[k], variance[k] = est, _ = observe(EncoderSample(t, c, w, previous))
         else:
-            estimate[k] = state.V
-        action = law.output(times[k], z, estimate[k])
-        commands[k], force[k] = action.commands, action.force
-        if sensors is not None:
-            estimator.commanded(commands[k])
-        z = law.update(times[k], z, estimate[k])
+            estimate[k] = est = V
+        action = output(t, z, est)
+        u = action.commands
+        commands[k] = u
+        force[k] = f = action.force
+        if reader is not None:
+            commanded(u)
+        previous = u
+        z = update(t, z, est)
         if k + 1 == samples:
             break
-        t_next = times[k + 1]
+        t_next = t_list[k + 1]
         if jitter > 0:
             t_next += float(np.clip(rng.normal(0.0, jitter), -0.25 * period, 0.25 * period))
-        step = advance(plant, state, commands[k], t_next, external=float(action.force), budget=budget)
+        step = advance(plant, state, u, t_next, external=float(f), budget=budget)
         if step.status is not SimulationStatus.SUCCESS:
             status, message, last = step.status, step.message, k + 1
             break
         state, X, x = step.state, X + step.body_displacement, x + step.contact_displacements
+    speed, estimate, variance = np.array(speed), np.array(estimate), np.array(variance)
+    position, force, central = np.array(position), np.array(force), np.array(central, dtype=np.int64)
     keep = slice(0, last)
     record = None
     if sensors is not None:
@@ -208,7 +220,8 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
                                central_resolution=sensors.central.distance_per_count,
                                wheel_resolution=sensors.wheel.distance_per_count,
                                wheel_backlash=sensors.backlash, truth_speed=speed[keep],
-                               truth_position=position[keep], truth_contact_speeds=contact[keep])
+                               truth_position=position[keep], truth_contact_speeds=contact[keep],
+                               initial_commands=plant.initial_speeds())
     return ClosedLoopResult(times[keep], speed[keep], estimate[keep], variance[keep],
                             commands[keep], force[keep], contact[keep], position[keep], record,
                             status, message or status.value, time.perf_counter() - started)

@@ -157,8 +157,11 @@ class Estimator(abc.ABC):
     name: str = "estimator"
 
     @abc.abstractmethod
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
-        """Forget the past; the body is believed at ``speed`` (m/s) with std ``speed_std``."""
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
+              contact_speeds: Any = None) -> None:
+        """Forget the past; the body is believed at ``speed`` (m/s) with std ``speed_std``;
+        the motors had settled at ``contact_speeds`` (m/s, shape (n,)) before the first
+        sample (``None``: at the first command)."""
 
     @abc.abstractmethod
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
@@ -184,7 +187,7 @@ class Estimator(abc.ABC):
             raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
                                                        "be an EncoderRecord", record))
         started = time.perf_counter()
-        self.reset(speed=speed, speed_std=speed_std)
+        self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         out = np.array([self.step(record.sample(k)) for k in range(record.n_samples)])
         wall = time.perf_counter() - started
         return score(record, self.name, out[:, 0], out[:, 1], wall)

@@ -44,7 +44,8 @@ class CentralDifference(Estimator):
         self.sensors = sensors
         self.reset()
 
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
+              contact_speeds: object = None) -> None:
         self._speed = as_float(speed, "speed", f"{type(self).__name__}.reset")
         self._last: tuple[float, int] | None = None
 
@@ -84,7 +85,8 @@ class WheelDifference(Estimator):
         self.contacts = ContactSet(np.zeros(sensors.n_wheels), forces)
         self.reset()
 
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
+              contact_speeds: object = None) -> None:
         self._speed = as_float(speed, "speed", f"{type(self).__name__}.reset")
         self._last: tuple[float, np.ndarray] | None = None
         self.contact_speeds = np.zeros(self.sensors.n_wheels)

@@ -10,7 +10,13 @@ The known input ``(dx_k, dV_k)`` is the active-contact force over the period, fr
 contact speeds the wheels measure, through the model's contact law
 (:meth:`~toolkit.estimation._input.EstimatorModel.increment`, which also handles the
 set-valued force at a contact speed by the stiction rule). Built on
-``filterpy.kalman.KalmanFilter`` (``predict(u, Q)``, ``update(z, R)``).
+``filterpy.kalman.KalmanFilter`` (``predict(u, B, F, Q)``, ``update(z, R)``).
+
+The motors' speeds before the first sample (``reset(contact_speeds=...)``, or the record's
+``initial_commands``) say whether the first command starts a motor transient: the wheel
+windows then start ``settle`` samples after it, as after any command change (a window
+that spanned a start from rest biased the contact speeds, and so the stuck body's speed,
+by the motors' lag and the gearbox play for its whole 0.5 s length).
 
 Noise from physical parameters
 ------------------------------
@@ -24,21 +30,57 @@ count: the ``r + 1`` readings of one count together weigh as one, never as ``r +
 independent ones. Read noise adds ``(sigma_n q)^2`` and jitter ``(V sigma_t)^2`` (a read
 ``d`` seconds off its stamp is ``V d`` off in position), with ``V`` the speed estimate.
 
+When the count changes at every sample at constant speed the errors are still a
+sawtooth, ``e_k = q (frac(X_0 / q + k phi) - 1/2)`` with ``phi = V h / q``: its lag-``m``
+correlation is ``1 - 6 d (1 - d)``, ``d = frac(m phi)``, so what ``n`` readings tell about
+the speed depends on ``phi``'s rational approximations, not on ``n`` alone. Fitting a
+slope to ``n`` such readings (random phase) errs, relative to ``n`` white ``q^2 / 12``
+readings, by a variance ratio of 1.45 / 3.7 / 0.39 / 1.08 for ``n`` = 5 / 10 / 25 / 50 at
+``frac(phi) = 0.061`` (the record's cruise at 0.194 m/s) and 0.37 / 0.34 / 0.57 / 0.16 at
+``0.258`` (after its brake, -0.094 m/s). No single white (or first-order Markov) ``R``
+matches both: the filter keeps ``q^2 / 12``, too little while the sawtooth is slow and too
+much while it is fast. On the acceptance record the NEES is 0.5-0.9 cruising (the fusion
+of the edge's contact speed, below, bounds the slow sawtooth's pull) and 0.2 after the
+brake: the mean NEES misses its chi-square band for this reason, not for a tuning.
+
 Process. The force is known up to (a) unequal, unknown friction: each ``f_i`` has a
-relative std ``epsilon``, so the force varies by ``epsilon^2 sum f_i^2``; (b) the contact
-speeds' uncertainty (wheel quantization and backlash, ``sigma_v``) and the speed
-estimate's (``P_VV``): across ``V +- w`` with ``w = 2 sqrt(P_VV + sigma_v^2)`` the force
-spans ``[F(V + w), F(V - w)]``, a spread counted as uniform, ``(F_hi - F_lo)^2 / 12``.
-That force error, held over the period, enters as ``Q = (sigma_F / m)^2 g g^T`` with
-``g = (h^2 / 2, h)``. ``epsilon`` is the plant's true spread (0 for the equal-friction
-scenario). A stuck body (``V +- w`` meets the equilibrium set) has no force error, but its
-``V+ = V`` errs by the stuck-on contact's own undetected speed change: a floor of
-``sigma_v^2 / max_window`` per period on ``V`` (a random walk the wheels' window would
-not resolve), never zero.
+relative std ``epsilon``, so the force varies by ``epsilon^2 sum f_i^2``; (b) the times at
+which the body crosses contact speeds. A slip ``v_i - V`` is known to ``sigma = sqrt(P_VV +
+sigma_v^2)`` (``sigma_v``: the contact-speed estimate's std, wheel quantization and
+backlash); when it changes at ``r_i`` (m/s^2: the body's acceleration minus the
+contact's) its zero, where the force of contact ``i`` flips by ``2 f_i``, is timed to
+``sigma / r_i`` (at most ``h / sqrt(12)``, a crossing anywhere in the period): an impulse
+error ``2 f_i sigma / r_i``, a mean-force error ``2 f_i sigma / (r_i h)``, for every contact
+the path crosses or passes within ``2 sigma`` of. (Counting the whole force range over
+``V +- 2 sigma`` as uniform over the period instead overstates it by ``h r_i / sigma``,
+about 40x for a braking body: the filter then chased the quantization of its
+measurements at each crossing.) That force error, held over the period, enters as ``Q =
+(sigma_F / m)^2 g g^T`` with ``g = (h^2 / 2, h)``. ``epsilon`` is the plant's true spread
+(0 for the equal-friction scenario). A stuck body (``V +- 2 sigma`` meets the equilibrium
+set) has no force error, but its ``V+ = V`` errs by the stuck-on contact's own undetected
+speed change: a floor of ``sigma_v^2 / max_window`` per period on ``V`` (a random walk the
+wheels' window would not resolve), never zero.
+
+Arrival. A body that reaches the equilibrium set within the period sticks on its near edge:
+``V+`` is that contact's speed whatever ``V`` was. The transition of that step is then
+``F_k = [[1, h], [0, 0]]`` (``dV+/dV = 0``, the exact flow's derivative) with input ``u_k =
+(dx_k, V_edge)`` and ``sigma_v^2`` added to ``Q_VV``: the speed error after an arrival is
+the contact estimate's, and the filter forgets the speed error it had before. A body the
+filter already held on the set (the previous step ended there) that a measurement update
+moved off it has not left it (steady contacts): the step keeps ``V`` (no reset; ``V`` is
+then a second estimate of the edge's speed) and fuses the contact estimate of the edge as
+a measurement of ``V`` (filterpy ``update`` with ``H = [0, 1]``, ``R = sigma_v^2``) after
+the encoder's update. While the body stays on an edge (arrived there, or held within
+``2 sigma`` of it from outside) it moves at that contact's speed, whose wheel estimate
+improves as its window lengthens (``sigma_v^2 = q_w^2 / (6 T^2)`` for a window of ``T``
+seconds): each gain is fused the same way with the information increment's variance
+``1 / (1 / sigma_v,now^2 - 1 / sigma_v,fused^2)`` (the longer window holds the shorter
+one's counts, so only the increment is new).
 
 Smoother. filterpy's ``rts_smoother`` ignores ``B u``; the input is therefore moved into
-the transition of an augmented state ``(X, V, 1)``, ``F_k = [[1, h, dx_k], [0, 1, dV_k],
-[0, 0, 1]]``, which makes the smoother exact for the affine model (the constant state has
+the transition of an augmented state ``(X, V, 1)``, ``F_k = [[F_k, u_k], [0, 0, 1]]``
+(``F_k`` the filter's transition of step ``k``, ``[[1, h], [0, 1]]`` except at
+arrivals), which makes the smoother exact for the affine model (the constant state has
 zero variance: the smoother gain uses the pseudo-inverse).
 
 filterpy is imported inside the functions that build filters, so that importing the
@@ -53,13 +95,21 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float
-from ..errors import ParameterTypeError, parameter_message
+from .._validation import as_float, as_float_array
+from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, check_covariance, score
-from ._input import EstimatorModel, contact_speed_estimates
+from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 
 __all__ = ["KalmanEstimator", "RTSSmoother", "steady_state_gain", "measurement_variance"]
+
+
+def _side(speed: float, bounds: Any) -> int | None:
+    """Which edge of the equilibrium set (``bounds[2]`` or ``[3]``) ``speed`` is, if either
+    (to the rounding of ``V + (edge - V)``: 1e-12 m/s)."""
+    lo, hi = bounds[2], bounds[3]
+    near = 2 if abs(speed - lo) <= abs(speed - hi) else 3
+    return near if abs(speed - bounds[near]) <= 1e-12 else None
 
 
 def _scalar_inverse(S: np.ndarray) -> np.ndarray:
@@ -85,6 +135,11 @@ def measurement_variance(counts: np.ndarray, speed: np.ndarray, model: Estimator
     run = np.cumsum(same)
     reset = np.maximum.accumulate(np.where(same == 0, run, 0))
     repeats = run - reset
+    return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
+
+
+def _measurement_variance_one(repeats: int, speed: float, q: float, sensors: Any) -> float:
+    """:func:`measurement_variance` of one sample (same expression), m^2."""
     return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
 
 
@@ -129,26 +184,43 @@ class KalmanEstimator(Estimator):
         self._H = np.array([[1.0, 0.0]])
         self._u = np.zeros((2, 1))
         self._z = np.zeros((1, 1))
+        self._F = np.array([[1.0, h], [0.0, 1.0]])
+        self._F_arrival = np.array([[1.0, h], [0.0, 0.0]])
+        self._I2 = np.eye(2)
+        self._H_speed = np.array([[0.0, 1.0]])
         self.reset()
 
     def _build(self) -> Any:
         return _make_filter(self.model)
 
     # -- the per-sample recursion, shared by run() and step() ------------------------------
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
+              contact_speeds: Any = None) -> None:
         owner = f"{type(self).__name__}.reset"
         speed = as_float(speed, "speed", owner)
         std = 0.05 if speed_std is None else as_float(speed_std, "speed_std", owner, low=0.0, low_open=True)
+        if contact_speeds is not None:
+            contact_speeds = as_float_array(contact_speeds, "contact_speeds", owner)
+            if contact_speeds.shape != (self.model.n,):
+                raise ParameterError(parameter_message(
+                    "contact_speeds", owner, f"have shape ({self.model.n},)",
+                    f"an array of shape {contact_speeds.shape}"))
         self._speed0, self._std0 = speed, std
+        self._initial = contact_speeds
         self.kf = self._build()
         self._pending: tuple[np.ndarray, float, bool, Any] | None = None  # (sub, var_v, steady, bounds)
-        self._history: list[tuple[float, int, np.ndarray, np.ndarray]] = []
+        self._tracker = ContactSpeedTracker(self.model, contact_speeds)
+        self._observed: tuple[float, np.ndarray] | None = None    # (t, wheels) awaiting a command
+        self._last_command: np.ndarray | None = None
+        self._t_prev = math.nan
         self._count_prev: int | None = None
         self._repeats = 0
-        self._awaiting_command = False
         self._force_var, self._Q = math.nan, np.zeros((2, 2))
+        self._on_set = False
+        self._edge, self._edge_var = None, math.inf
         self._quick = self.model.quick_increment
-        self.last_input = np.zeros(2)
+        self.last_input = (0.0, 0.0)
+        self.last_F = self._F
         self.last_Q = np.zeros((2, 2))
         self.last_nis = np.nan
 
@@ -167,24 +239,69 @@ class KalmanEstimator(Estimator):
             self.last_nis = np.nan
             return
         x = kf.x
-        dx, dV, force_var = self._quick(x.item(1), sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
-                                        steady, bounds)
-        # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x + F^-1 u)
-        # with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place and H is
-        # passed, so filterpy skips its scalar checks and the reshape of z.
-        x[0, 0] = x.item(0) + dx - self._h * dV
-        x[1, 0] = x.item(1) + dV
-        self._z[0, 0] = z
+        V = x.item(1)
+        dx, dV, force_var, arrival, on_set = self._quick(V, sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
+                                                         steady, bounds)
         if force_var != self._force_var:          # Q repeats while stuck or sliding freely
             self._force_var = force_var
             self._Q = self._gg * (force_var * self._inv_m2)
-        Q = kf.Q = self._Q
+        Q = self._Q
         kf.R[0, 0] = R
-        kf.predict()
-        kf.update(self._z, H=self._H)
-        self.last_input = (dx, dV)
+        edge, edge_var = None, 0.0
+        if arrival is not None and self._on_set:
+            # Back to the set it was on (the update had moved the estimate off it): the
+            # body stayed on the edge, so V is a second estimate of the edge's speed. Keep
+            # it (no reset) and fuse the contact estimate of the edge as a measurement of V.
+            edge, edge_var = V + dV, arrival
+            dx, dV, arrival = 0.0, 0.0, None
+        self._on_set = on_set
+        # On an edge of the set (arrived there, or held within 2 sigma of it from outside)
+        # the body moves at that edge contact's speed: as the wheels' window lengthens, its
+        # estimate gains information, fused as a measurement of V with the information
+        # increment's variance 1 / (1 / var_now - 1 / var_fused) (the longer window holds
+        # the shorter one's counts).
+        inc = None
+        if not (on_set and steady):
+            self._edge = None
+        elif arrival is not None:
+            self._edge, self._edge_var = _side(V + dV, bounds), arrival
+        elif edge is not None:
+            self._edge, self._edge_var = _side(edge, bounds), edge_var
+        elif self._edge is None:
+            if V < bounds[2] or V > bounds[3]:
+                self._edge = 2 if V < bounds[2] else 3
+                inc = (bounds[self._edge], var_v)
+                self._edge_var = var_v
+        elif var_v < self._edge_var:
+            inc = (bounds[self._edge], 1.0 / (1.0 / var_v - 1.0 / self._edge_var))
+            self._edge_var = var_v
+        if arrival is None:
+            # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x +
+            # F^-1 u) with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place
+            # and H is passed, so filterpy skips its scalar checks and the reshape of z.
+            x[0, 0] = x.item(0) + dx - self._h * dV
+            x[1, 0] = V + dV
+            kf.Q = Q
+            kf.predict()
+            self.last_input = (dx, dV)
+            self.last_F = self._F
+        else:
+            # Arrival on the equilibrium set: V+ is the edge's contact speed, whatever V was
+            # (dV+/dV = 0), known to the contact estimate's variance.
+            Q = Q + np.array([[0.0, 0.0], [0.0, arrival]])
+            u = np.array([[dx], [V + dV]])
+            kf.predict(u=u, B=self._I2, F=self._F_arrival, Q=Q)
+            self.last_input = (dx, V + dV)
+            self.last_F = self._F_arrival
+        # z as a float: filterpy's y = z - H x is the same (1, 1) array, and its deepcopy(z)
+        # of a float is free (of an array it is not).
+        kf.update(z, H=self._H)
         self.last_Q = Q
         self.last_nis = kf.y.item() ** 2 * kf.SI.item()
+        if edge is not None:
+            kf.update(edge, R=edge_var, H=self._H_speed)
+        if inc is not None:
+            kf.update(inc[0], R=inc[1], H=self._H_speed)
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         """Take one sample's counts (in order); return ``(speed, variance)`` at its time.
@@ -193,43 +310,34 @@ class KalmanEstimator(Estimator):
         the previous sample (the previous command again if none was given); this sample's
         ``command`` is not read.
         """
-        if self._awaiting_command:
-            self.commanded(self._history[-1][3])
-        model = self.model
-        hist = self._history
-        command = hist[-1][3] if hist else None
-        hist.append((sample.time, sample.central_count, np.asarray(sample.wheel_counts), command))
-        del hist[:-(model.max_window + model.settle + 2)]
+        if self._observed is not None:
+            self.commanded(self._last_command)
         count = sample.central_count
+        t = sample.time
+        q = self._q
         fd = 0.0
         if self._count_prev is not None:
-            fd = (count - self._count_prev) * self._q / (sample.time - hist[-2][0])
-        self._repeats = self._repeats + 1 if count == self._count_prev else 0
-        self._count_prev = count
-        R = float(measurement_variance(np.array([count]), np.array([fd]), model)[0]
-                  + (self._q * self._q / 12.0) * self._repeats)
-        z = (count + 0.5) * self._q
+            fd = (count - self._count_prev) * q / (t - self._t_prev)
+            self._repeats = self._repeats + 1 if count == self._count_prev else 0
+        self._count_prev, self._t_prev = count, t
+        R = _measurement_variance_one(self._repeats, fd, q, self.model.sensors)
+        z = (count + 0.5) * q
         pending = self._pending
         self._advance(z, R, *(pending if pending is not None else (None, 0.0, True, None)))
-        self._awaiting_command = True
-        return float(self.kf.x[1, 0]), float(self.kf.P[1, 1])
+        self._observed = (t, sample.wheel_counts)
+        x, P = self.kf.x, self.kf.P
+        return x.item(1), P.item(3)
 
     def commanded(self, command: Any) -> None:
         """The contact speeds commanded at the last observed sample, m/s, shape (n,): they
         drive the prediction to the next sample."""
-        hist = self._history
-        if not hist:
-            raise RuntimeError("commanded() follows observe(): no sample observed since reset().")
-        t, c, w, _ = hist[-1]
-        hist[-1] = (t, c, w, np.asarray(command, dtype=float))
-        if any(entry[3] is None for entry in hist):
-            hist[:] = [(a, b, d, hist[-1][3] if e is None else e) for a, b, d, e in hist]
-        model = self.model
-        times, _, wheels, commands = zip(*hist)
-        speeds, var, steady = contact_speed_estimates(np.array(wheels), np.array(commands), np.array(times), model)
-        sub = model.substep_speeds(speeds[-1:], np.array(commands[-1:]), steady[-1:])
-        self._pending = (sub[0], float(var[-1]), bool(steady[-1]), model.bounds(sub)[0].tolist())
-        self._awaiting_command = False
+        if self._observed is None:
+            raise RuntimeError("commanded() follows observe(): once per observed sample.")
+        t, wheels = self._observed
+        self._observed = None
+        self._last_command = command
+        speeds, var, steady, sub = self._tracker.push(t, wheels, command)
+        self._pending = (sub, var, steady, self.model.bounds_row(sub))
 
     # -- offline --------------------------------------------------------------------------
     def filter(self, record: EncoderRecord, *, speed: float = 0.0, speed_std: float | None = None
@@ -241,10 +349,11 @@ class KalmanEstimator(Estimator):
                                                        "be an EncoderRecord", record))
         started = time.perf_counter()
         model = self.model
-        self.reset(speed=speed, speed_std=speed_std)
+        self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         K = record.n_samples
         counts = record.central_counts
-        speeds, var_v, steady = contact_speed_estimates(record.wheel_counts, record.commands, record.times, model)
+        speeds, var_v, steady = contact_speed_estimates(record.wheel_counts, record.commands, record.times,
+                                                        model, initial=record.initial_commands)
         sub = model.substep_speeds(speeds, record.commands, steady)
         bounds = model.bounds(sub).tolist()
         q = self._q
@@ -264,6 +373,7 @@ class KalmanEstimator(Estimator):
         xs = [(kf.x.item(0), kf.x.item(1))]
         Ps = [kf.P]
         inputs = [(0.0, 0.0)]
+        Fs = [self._F]
         Qs = [np.zeros((2, 2))]
         nis = [math.nan]
         for k in range(1, K):
@@ -272,10 +382,12 @@ class KalmanEstimator(Estimator):
             xs.append((x.item(0), x.item(1)))
             Ps.append(kf.P)
             inputs.append(self.last_input)
+            Fs.append(self.last_F)
             Qs.append(self.last_Q)
             nis.append(self.last_nis)
         X, P, U, Q = np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Qs)
         self._pending = (sub[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1])
+        self.transitions = np.array(Fs)
         return X, P, U, Q, np.array(nis), time.perf_counter() - started
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
@@ -299,8 +411,9 @@ class RTSSmoother(Estimator):
         self.forward = KalmanEstimator(model, initial_covariance=initial_covariance)
         self.model = model
 
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None) -> None:
-        self.forward.reset(speed=speed, speed_std=speed_std)
+    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
+              contact_speeds: Any = None) -> None:
+        self.forward.reset(speed=speed, speed_std=speed_std, contact_speeds=contact_speeds)
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
@@ -323,7 +436,7 @@ class RTSSmoother(Estimator):
         Pa = np.zeros((K, 3, 3))
         Pa[:, :2, :2] = P
         Fa = np.broadcast_to(np.eye(3), (K, 3, 3)).copy()
-        Fa[:, 0, 1] = h
+        Fa[:, :2, :2] = self.forward.transitions
         Fa[:, :2, 2] = U
         Qa = np.zeros((K, 3, 3))
         Qa[:, :2, :2] = Qs

@@ -66,7 +66,7 @@ class UnscentedEstimator(KalmanEstimator):
         model = self.model
         h = model.sensors.period
         V = float(ukf.x[1])
-        dx, dV, force_var = model.increment(V, sub, math.sqrt(var_v), math.sqrt(ukf.P[1, 1]), steady)
+        dx, dV, force_var, _, _ = model.increment(V, sub, math.sqrt(var_v), math.sqrt(ukf.P[1, 1]), steady)
         sigmas = ukf.points_fn.sigma_points(ukf.x, ukf.P)
         S = sigmas.shape[0]
         speeds = np.broadcast_to(sub.mean(axis=0), (S, model.n))

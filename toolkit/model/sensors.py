@@ -33,7 +33,7 @@ import numpy as np
 from .._validation import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
-__all__ = ["Encoder", "Sensors", "SensorState", "play", "measure", "EncoderRecord", "EncoderSample",
+__all__ = ["Encoder", "Sensors", "SensorState", "SensorReader", "play", "measure", "EncoderRecord", "EncoderSample",
            "record_simulation", "contact_speeds_at", "GAUSS_NODES"]
 
 
@@ -253,9 +253,13 @@ def play(positions: Any, width: float, start: Any) -> np.ndarray:
     y = np.asarray(start, dtype=float)
     half = 0.5 * width
     for j in range(x.shape[0]):
-        y = np.minimum(np.maximum(y, x[j] - half), x[j] + half)
-        out[j] = y
+        y = out[j] = _play_step(y, x[j], half)
     return out
+
+
+def _play_step(y: np.ndarray, x: np.ndarray, half: float) -> np.ndarray:
+    """One sample of the play operator: ``clip(y, x - half, x + half)``."""
+    return np.minimum(np.maximum(y, x - half), x + half)
 
 
 def measure(sensors: Sensors, central_positions: Any, contact_positions: Any, state: SensorState,
@@ -302,33 +306,82 @@ def measure(sensors: Sensors, central_positions: Any, contact_positions: Any, st
         raise ParameterError(parameter_message(
             "contact_positions", owner, f"have shape ({X.size}, {sensors.n_wheels})",
             f"an array of shape {x.shape}"))
-    p, noise = sensors.missed_count_prob, sensors.count_noise
-    if (p > 0 or noise > 0) and not isinstance(rng, np.random.Generator):
-        raise ParameterTypeError(parameter_message(
-            "rng", owner, "be a numpy.random.Generator when counts can be missed or noisy", rng))
-    motor = play(x, sensors.backlash, state.motor)
-    true_c = sensors.central.counts(X)
-    true_w = sensors.wheel.counts(motor)
-    central = np.empty_like(true_c)
-    wheel = np.empty_like(true_w)
-    last_c, last_w = state.central_count, state.wheel_count
-    off_c, off_w = state.central_offset, state.wheel_offset.copy()
-    n = sensors.n_wheels
+    reader = SensorReader(sensors, state, rng)
+    read = reader.read
+    central = np.empty(X.size, dtype=np.int64)
+    wheel = np.empty((X.size, sensors.n_wheels), dtype=np.int64)
     for j in range(X.size):
-        c, w = int(true_c[j]), true_w[j]
-        if p > 0:
-            dc, dw = c - last_c, w - last_w
-            off_c -= int(np.sign(dc)) * int(rng.binomial(abs(dc), p))
-            off_w -= np.sign(dw) * rng.binomial(np.abs(dw), p)
-        central[j], wheel[j] = c + off_c, w + off_w
-        if noise > 0:
-            central[j] += int(np.rint(rng.normal(0.0, noise)))
-            wheel[j] += np.rint(rng.normal(0.0, noise, n)).astype(np.int64)
-        last_c, last_w = c, w
-    new = SensorState(motor=motor[-1].copy() if X.size else state.motor, central_count=last_c,
-                      wheel_count=np.array(last_w, dtype=np.int64), central_offset=off_c,
-                      wheel_offset=off_w)
-    return central, wheel, new
+        central[j], wheel[j] = read(float(X[j]), x[j])
+    return central, wheel, reader.state
+
+
+class SensorReader:
+    """The sensor law one sample at a time (what :func:`measure` runs on each row).
+
+    A closed loop keeps one reader and calls :meth:`read` at each sample: no validation or
+    state object per sample. :func:`measure` builds one from its ``state`` and reads its
+    rows through the same :meth:`read`, so the two agree sample for sample (the same
+    random draws in the same order).
+
+    Parameters
+    ----------
+    sensors : Sensors
+    state : SensorState
+        From :meth:`Sensors.initial_state` or :attr:`state`.
+    rng : numpy.random.Generator, optional
+        Needed when counts can be missed or noisy.
+    """
+
+    def __init__(self, sensors: Sensors, state: SensorState, rng: np.random.Generator | None = None) -> None:
+        p, noise = sensors.missed_count_prob, sensors.count_noise
+        if (p > 0 or noise > 0) and not isinstance(rng, np.random.Generator):
+            raise ParameterTypeError(parameter_message(
+                "rng", "measure", "be a numpy.random.Generator when counts can be missed or noisy", rng))
+        self.sensors, self.rng = sensors, rng
+        self._p, self._noise, self._n = p, noise, sensors.n_wheels
+        self._qc = sensors.central.distance_per_count
+        self._qw = sensors.wheel.distance_per_count
+        self._half = 0.5 * sensors.backlash
+        self._motor = np.array(state.motor, dtype=float)
+        self._last_c, self._last_w = int(state.central_count), np.array(state.wheel_count, dtype=np.int64)
+        self._off_c, self._off_w = int(state.central_offset), np.array(state.wheel_offset, dtype=np.int64)
+
+    def read(self, central_position: float, contact_positions: np.ndarray) -> tuple[int, np.ndarray]:
+        """Counts at one read instant.
+
+        Parameters
+        ----------
+        central_position : float, m
+        contact_positions : ndarray of shape (n,), m
+
+        Returns
+        -------
+        central : int
+        wheels : ndarray of shape (n,), int64
+        """
+        # Play operator, then position quantized by floor (never speed).
+        motor = self._motor = _play_step(self._motor, contact_positions, self._half)
+        c = math.floor(central_position / self._qc)
+        w = np.floor(motor / self._qw).astype(np.int64)
+        rng = self.rng
+        if self._p > 0:
+            p = self._p
+            dc, dw = c - self._last_c, w - self._last_w
+            self._off_c -= int(np.sign(dc)) * int(rng.binomial(abs(dc), p))
+            self._off_w = self._off_w - np.sign(dw) * rng.binomial(np.abs(dw), p)
+        central, wheels = c + self._off_c, w + self._off_w
+        if self._noise > 0:
+            central += int(np.rint(rng.normal(0.0, self._noise)))
+            wheels = wheels + np.rint(rng.normal(0.0, self._noise, self._n)).astype(np.int64)
+        self._last_c, self._last_w = c, w
+        return central, wheels
+
+    @property
+    def state(self) -> SensorState:
+        """The state after the last read (a new value)."""
+        return SensorState(motor=self._motor.copy(), central_count=self._last_c,
+                           wheel_count=np.array(self._last_w, dtype=np.int64),
+                           central_offset=self._off_c, wheel_offset=self._off_w.copy())
 
 
 # -- records ---------------------------------------------------------------------------------
@@ -384,6 +437,11 @@ class EncoderRecord:
         by an estimator.
     truth_contact_speeds : array_like of shape (k, n), m/s, optional
         True contact speeds at ``times`` (scoring only).
+    initial_commands : array_like of shape (n,), m/s, optional
+        The command the motors had settled at before the first sample (the last command
+        sent before ``times[0]``); ``None``: unknown, taken as ``commands[0]`` (the motors
+        already run at the first command). Estimators use it to know whether the first
+        command starts a motor transient.
     """
 
     times: np.ndarray
@@ -396,6 +454,7 @@ class EncoderRecord:
     truth_speed: np.ndarray | None = None
     truth_position: np.ndarray | None = None
     truth_contact_speeds: np.ndarray | None = None
+    initial_commands: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         owner = "EncoderRecord"
@@ -429,6 +488,14 @@ class EncoderRecord:
                 raise ParameterError(parameter_message(
                     name, owner, f"have shape {shape}", f"an array of shape {array.shape}"))
             object.__setattr__(self, name, array)
+        if self.initial_commands is not None:
+            initial = as_float_array(self.initial_commands, "initial_commands", owner)
+            if initial.shape != (wheel.shape[1],):
+                raise ParameterError(parameter_message(
+                    "initial_commands", owner, f"have shape ({wheel.shape[1]},)",
+                    f"an array of shape {initial.shape}"))
+            initial.setflags(write=False)
+            object.__setattr__(self, "initial_commands", initial)
 
     @property
     def n_samples(self) -> int:
@@ -616,4 +683,5 @@ def record_simulation(result: Any, plant: Any, sensors: Sensors, *,
             "truth_contact_speeds": contact_speeds_at(plant, stamps)[0]}
     commands = np.asarray([plant.command(t) for t in stamps], dtype=float).reshape(stamps.size, plant.n)
     return EncoderRecord(stamps, central, wheel, commands, sensors.central.distance_per_count,
-                         sensors.wheel.distance_per_count, sensors.backlash, **truth_fields)
+                         sensors.wheel.distance_per_count, sensors.backlash,
+                         initial_commands=plant.initial_speeds(), **truth_fields)

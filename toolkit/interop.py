@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import as_float
+from ._validation import as_float, as_float_array
 from .errors import ParameterError, ParameterTypeError, SolverError, parameter_message
 from .estimation import Estimator
 from .model import Plant
@@ -281,8 +281,10 @@ def plant_system(plant: Plant, *, sensors: Sensors | None = None, rate: float | 
 class _SteppedEstimator:
     """An estimator stepped by python-control: observe on a copy, commit in the update."""
 
-    def __init__(self, estimator: Estimator, n: int, v0: float, period: float) -> None:
+    def __init__(self, estimator: Estimator, n: int, v0: float, period: float,
+                 contact_speeds: np.ndarray | None) -> None:
         self.estimator, self.n, self.v0, self.period = estimator, n, v0, period
+        self.contact_speeds = contact_speeds
         self.k = -1                                   # samples committed; -1: never run
         self.committed: Estimator | None = None
         self.seen: dict[bytes, tuple[Estimator, tuple[float, float]]] = {}
@@ -291,7 +293,7 @@ class _SteppedEstimator:
         k = int(x[0])
         if k == 0 and self.k != 0:                    # a new run from the initial state
             fresh = copy.deepcopy(self.estimator)
-            fresh.reset(speed=self.v0)
+            fresh.reset(speed=self.v0, contact_speeds=self.contact_speeds)
             self.k, self.committed, self.seen = 0, fresh, {}
         if k != self.k or self.committed is None:
             raise SolverError(
@@ -322,7 +324,7 @@ class _SteppedEstimator:
 
 
 def estimator_system(estimator: Estimator, sensors: Sensors, *, v0: float = 0.0,
-                     name: str = "estimator") -> IOBlock:
+                     contact_speeds: Any = None, name: str = "estimator") -> IOBlock:
     """A steppable estimator (e.g. :class:`~toolkit.estimation.KalmanEstimator`) as a
     discrete-time ``control.NonlinearIOSystem``.
 
@@ -335,6 +337,10 @@ def estimator_system(estimator: Estimator, sensors: Sensors, *, v0: float = 0.0,
         The encoders it reads (their rate is the block's).
     v0 : float, m/s
         The speed the estimator is reset to (as :func:`toolkit.simulate_closed_loop` does).
+    contact_speeds : array_like of shape (n,), m/s, optional
+        The speeds the motors had settled at before the first sample (the plant's
+        ``initial_speeds()``, as :func:`toolkit.simulate_closed_loop` tells its estimator);
+        ``None``: the first command's.
     name : str
 
     Returns
@@ -353,7 +359,12 @@ def estimator_system(estimator: Estimator, sensors: Sensors, *, v0: float = 0.0,
     if not isinstance(sensors, Sensors):
         raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors", sensors))
     n, period = sensors.n_wheels, sensors.period
-    stepped = _SteppedEstimator(estimator, n, as_float(v0, "v0", owner), period)
+    if contact_speeds is not None:
+        contact_speeds = as_float_array(contact_speeds, "contact_speeds", owner)
+        if contact_speeds.shape != (n,):
+            raise ParameterError(parameter_message(
+                "contact_speeds", owner, f"hold one speed per wheel encoder ({n})", contact_speeds.tolist()))
+    stepped = _SteppedEstimator(estimator, n, as_float(v0, "v0", owner), period, contact_speeds)
 
     def update(t: float, x: np.ndarray, u: np.ndarray, params: dict) -> np.ndarray:
         return stepped.update(t, x, u)
@@ -458,7 +469,8 @@ def closed_loop_system(plant: Plant, controller: Any, *, sensors: Sensors | None
     connections.append(["plant.force", "controller.force"])
     estimate = "plant.speed"
     if sensors is not None:
-        est_block = estimator_system(estimator, sensors, v0=v0)   # type: ignore[arg-type]
+        est_block = estimator_system(estimator, sensors, v0=v0,    # type: ignore[arg-type]
+                                     contact_speeds=plant.initial_speeds())
         blocks.append(est_block)
         connections += [[f"estimator.{c}", f"plant.{c}"]
                         for c in ["central_count"] + [f"wheel_count[{i}]" for i in range(n)]]

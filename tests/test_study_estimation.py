@@ -65,9 +65,11 @@ def test_friction_spread_draws_the_true_forces_and_tells_the_model():
     scene = loads_scene(_with(ESTIMATE, "seed = 0", "seed = 3\nfriction_spread = 0.2"))
     objects = scene.objects.estimation
     forces = objects.plant.contacts.forces
-    # f_i (1 + 0.2 z_i) with z from default_rng([seed, 1]): the closed form of the draw.
+    # Lognormal loads with mean f_i = 1 and relative std 0.2 (toolkit.model.unequal_loads),
+    # z from default_rng([seed, 1]): the closed form of the draw (rtol 1e-15, rounding).
     z = np.random.default_rng([3, 1]).standard_normal(10)
-    np.testing.assert_allclose(forces, np.maximum(1.0 + 0.2 * z, 0.0), rtol=1e-15, atol=0)
+    sigma2 = np.log1p(0.2**2)
+    np.testing.assert_allclose(forces, np.exp(np.sqrt(sigma2) * z - 0.5 * sigma2), rtol=1e-15, atol=0)
     assert objects.model.friction_uncertainty == 0.2
     np.testing.assert_array_equal(objects.model.forces, np.ones(10))   # nominal, not the draw
 

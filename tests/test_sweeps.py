@@ -211,3 +211,45 @@ def test_residual_friction_from_unequal_wheels_and_the_bearing():
     # A Coulomb bearing is a contact at speed 0: the rig reads F_b everywhere in the band.
     bearing = sweep(ResidualFriction(n=0, bearing_friction=0.18), 2, seed=0)
     np.testing.assert_allclose(bearing.table["mu_ratio"], 0.18 / 2.0, rtol=1e-12)
+
+
+def test_unequal_loads_lognormal_moments():
+    # spread 0: the mean exactly, nothing drawn; otherwise mean and relative std of the
+    # lognormal (200000 draws: standard errors ~0.1 % and ~0.2 %, tolerances 1 %).
+    from toolkit.model import unequal_loads
+
+    rng = np.random.default_rng(0)
+    np.testing.assert_array_equal(unequal_loads(0.2, 0.0, 5, rng), np.full(5, 0.2))
+    assert rng.bit_generator.state == np.random.default_rng(0).bit_generator.state
+    draws = unequal_loads(0.2, 0.3, 200_000, rng)
+    assert draws.min() > 0
+    assert draws.mean() == pytest.approx(0.2, rel=0.01)
+    assert draws.std() / draws.mean() == pytest.approx(0.3, rel=0.01)
+
+
+def test_mean_median_with_unequal_wheels_stops_at_the_weighted_equilibrium():
+    # Closed form: from rest the body stops at clip(0, lo, hi) of the weighted equilibrium
+    # set of the run's contacts (atol 1e-15 m/s); with the median pair held every run gives
+    # one speed, whatever the mean (one carousel: the same loads in every run).
+    from toolkit.experiments import MeanMedian
+
+    experiment = MeanMedian(held="median", level=0.05, gap=0.01, friction_spread=0.36, wheel_seed=0)
+    result = sweep(experiment, 40, seed=2)
+    seeds = run_seeds(2, 0, 40)
+    loads = experiment.loads(seeds)
+    expected = [np.clip(0.0, *ContactSet(experiment.speeds(s), loads[j]).equilibrium())
+                for j, s in enumerate(seeds)]
+    np.testing.assert_allclose(result.table["speed"], expected, rtol=0, atol=1e-15)
+    assert result.summary["speed_range"] == 0.0 and result.summary["mean_range"] > 0.03
+
+
+def test_outliers_rule_with_unequal_wheels_on_settled_runs():
+    # Unequal loads, ideal motors: on runs that had settled when the outliers started, the
+    # weighted stiction rule still decides exactly whether the body moves.
+    from toolkit.experiments import Outliers
+
+    table = sweep(Outliers(friction_spread=0.36, wheel_seed=0), 30, seed=3).table
+    settled = table["settled"].to_numpy()
+    assert settled.sum() >= 15
+    moved = table["deviation"].to_numpy() > 1e-12
+    np.testing.assert_array_equal(moved[settled], ~table["held"].to_numpy()[settled])

@@ -57,7 +57,7 @@ import numpy as np
 from ._validation import check_option, suggestion
 from .allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 from .errors import ParameterError, ParameterTypeError, SceneError
-from .model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant
+from .model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant, unequal_loads
 from .model.sensors import Sensors
 from .schedule import Braking, SpeedTrajectory
 from .simulation import Budget
@@ -498,7 +498,7 @@ def _estimation(scene: Scene, plant: Plant | None) -> EstimationObjects | None:
                                  f"estimation.spread ({spec.spread:g} m/s) within the motors' speed limits "
                                  f"[{low:g}, {high:g}] m/s. Got {centre:g} m/s instead.")
         rng = np.random.default_rng([spec.seed, 1])      # the sensors draw from default_rng(seed)
-        forces = plant.contacts.forces * np.maximum(1.0 + spec.friction_spread * rng.standard_normal(n), 0.0)
+        forces = unequal_loads(plant.contacts.forces, spec.friction_spread, n, rng)
         commands = PiecewiseConstant([spec.brake_time], [cruise, brake])
         scenario_plant = replace(plant, contacts=ContactSet(cruise, forces), commands=commands,
                                  external_force=0.0)

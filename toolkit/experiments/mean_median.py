@@ -9,6 +9,11 @@ mean varies. The body starts from rest and settles (exact batch path).
 Ideal model (closed form, equal loads, from rest): the body stops at ``clip(0, m - g,
 m + g)``, the near edge of the zero-force band, whatever the mean: with the median held the
 speed is one number for every run; with the mean held it follows the median.
+
+Non-ideality: ``friction_spread`` (relative std of each wheel's load,
+:func:`toolkit.model.unequal_loads`; one carousel for every run with ``wheel_seed``, as in
+the paper). The equilibrium is then the weighted median, and the body stops at
+``clip(0, lo, hi)`` of the weighted equilibrium set.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import numpy as np
 
 from .._validation import as_float, as_int
 from ..errors import ParameterError, SolverError, parameter_message
+from ..model import unequal_loads
 from ..simulation import simulate_batch
 from .median_law import median_law_slope
 
@@ -48,6 +54,10 @@ class MeanMedian:
     acceleration : float, m/s^2
         ``F_tot / m``.
     settle_time : float, s
+    friction_spread : float
+        Relative std of each wheel's load (0: equal wheels).
+    wheel_seed : int, optional
+        Draw the loads once from this seed (one carousel); otherwise anew in every run.
     """
 
     held: str = "mean"
@@ -58,6 +68,8 @@ class MeanMedian:
     speed_limit: float = 0.35
     acceleration: float = 2.0
     settle_time: float = 20.0
+    friction_spread: float = 0.0
+    wheel_seed: int | None = None
     name: str = "mean_median"
     #: Names of :meth:`summarize`'s statistics.
     STATISTICS: ClassVar[tuple[str, ...]] = ("mean_range", "median_range", "speed_range",
@@ -73,6 +85,9 @@ class MeanMedian:
         for key in ("speed_limit", "acceleration", "settle_time", "gap"):
             set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0, low_open=True))
         set_("median_range", as_float(self.median_range, "median_range", _OWNER, low=0.0))
+        set_("friction_spread", as_float(self.friction_spread, "friction_spread", _OWNER, low=0.0))
+        if self.wheel_seed is not None:
+            set_("wheel_seed", as_int(self.wheel_seed, "wheel_seed", _OWNER, low=0))
         set_("level", as_float(self.level, "level", _OWNER))
         reach = self.gap + abs(self.level) + (self.median_range if self.held == "mean" else 0.0)
         if reach >= 0.5 * self.speed_limit:
@@ -102,10 +117,21 @@ class MeanMedian:
                 return speeds
         raise SolverError(f"MeanMedian run {seed.spawn_key}: no speed set within the limits in 10000 draws.")
 
+    def loads(self, seeds: list[np.random.SeedSequence]) -> np.ndarray:
+        """Each run's friction magnitudes, shape (runs, n), N (from ``wheel_seed``, or from
+        the run's own generator after its speeds)."""
+        f = self.acceleration / self.n
+        if self.wheel_seed is not None:
+            return np.tile(unequal_loads(f, self.friction_spread, self.n,
+                                         np.random.default_rng(self.wheel_seed)), (len(seeds), 1))
+        # the run's first child sequence, built directly (spawn() would change ``seq``)
+        return np.array([unequal_loads(f, self.friction_spread, self.n, np.random.default_rng(
+            np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, 0)))) for seq in seeds])
+
     def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
         """Columns ``mean``, ``median`` (of the speeds) and ``speed`` (settled), m/s."""
         speeds = np.array([self.speeds(seq) for seq in seeds])
-        forces = np.full(speeds.shape, self.acceleration / self.n)
+        forces = self.loads(seeds)
         final = simulate_batch(speeds, forces, 1.0, self.settle_time, v0=0.0).final_speeds
         return {"mean": speeds.mean(axis=1), "median": np.median(speeds, axis=1),
                 "speed": np.array(final)}

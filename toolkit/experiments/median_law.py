@@ -43,7 +43,7 @@ import numpy as np
 
 from .._validation import as_float, as_int
 from ..errors import ParameterError, SolverError, parameter_message
-from ..model import ContactSet, Motors, Plant
+from ..model import ContactSet, Motors, Plant, unequal_loads
 from ..simulation import SimulationStatus, simulate, simulate_batch
 
 __all__ = ["MedianLaw", "median_law_slope", "SETTLED_TOLERANCE"]
@@ -159,12 +159,7 @@ class MedianLaw:
         """Radius scale and friction load of each wheel (in this order from ``rng``)."""
         n = self.n
         scale = 1.0 + self.wheel_radius_bias + self.wheel_radius_std * rng.standard_normal(n)
-        f = self.acceleration * self.mass / n
-        s = self.friction_spread
-        if s == 0:
-            return scale, np.full(n, f)
-        sigma = math.sqrt(math.log1p(s * s))      # lognormal with mean f and relative std s
-        return scale, f * np.exp(sigma * rng.standard_normal(n) - 0.5 * sigma * sigma)
+        return scale, unequal_loads(self.acceleration * self.mass / n, self.friction_spread, n, rng)
 
     def horizon(self) -> float:
         """Observation time of each run, s (``settle_time``, default 20 s)."""

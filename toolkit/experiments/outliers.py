@@ -9,6 +9,10 @@ the carousel) and reach the contacts through the motor law (first-order lag). Th
 starts from rest, settles, and the row reports how far its speed strays from where it
 settled while the outliers oscillate.
 
+Non-idealities: unequal wheels (``friction_spread``, ``wheel_seed``) and compliant motors
+(``compliance``); the stiction rule below then reads the weighted force (with compliance the
+force near a contact is saturated-linear, so the rule is the ideal model's only).
+
 Ideal model (the stiction rule): the body rests at ``V*`` (for even ``n`` from rest, the
 near edge of the zero-force band, a contact speed) and stays there exactly as long as zero
 stays in the set-valued force at ``V*``, ``0 in [F(V*+), F(V*-)]``, at every instant. While
@@ -30,12 +34,15 @@ import numpy as np
 
 from .._validation import as_float, as_int
 from ..errors import ParameterError, SolverError, parameter_message
-from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+from ..model import ContactSet, Motors, PiecewiseConstant, Plant, unequal_loads
 from ..simulation import SimulationStatus, simulate
 
 __all__ = ["Outliers"]
 
 _OWNER = "Outliers"
+#: The body counts as settled when its speed changed by at most this over the last half
+#: second before the outliers start, m/s.
+SETTLED_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -63,6 +70,12 @@ class Outliers:
     settle_time, window : float, s
         Time before the outliers start (they hold ``c_i`` meanwhile) and the observed window.
     random_amplitude : bool
+    friction_spread : float
+        Relative std of each wheel's load (:func:`toolkit.model.unequal_loads`).
+    wheel_seed : int, optional
+        Draw the loads once from this seed (one carousel); otherwise anew in every run.
+    compliance : float, (m/s)/N
+        Motor compliance (a loaded motor droops by ``k`` times its contact force).
     """
 
     n: int = 10
@@ -76,9 +89,12 @@ class Outliers:
     settle_time: float = 2.0
     window: float = 3.0
     random_amplitude: bool = True
+    friction_spread: float = 0.0
+    wheel_seed: int | None = None
+    compliance: float = 0.0
     name: str = "outliers"
     #: Names of :meth:`summarize`'s statistics.
-    STATISTICS: ClassVar[tuple[str, ...]] = ("unaffected_fraction", "rule_agreement",
+    STATISTICS: ClassVar[tuple[str, ...]] = ("unaffected_fraction", "unsettled_fraction", "rule_agreement",
                                              "largest_deviation", "threshold_amplitude")
 
     def __post_init__(self) -> None:
@@ -92,6 +108,10 @@ class Outliers:
         for key in ("frequency", "speed_limit", "acceleration", "rate", "settle_time", "window"):
             set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0, low_open=True))
         set_("lag", as_float(self.lag, "lag", _OWNER, low=0.0))
+        for key in ("friction_spread", "compliance"):
+            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0))
+        if self.wheel_seed is not None:
+            set_("wheel_seed", as_int(self.wheel_seed, "wheel_seed", _OWNER, low=0))
         set_("amplitude", as_float(self.amplitude, "amplitude", _OWNER, low=0.0, high=self.speed_limit))
 
     def plant(self, seed: np.random.SeedSequence) -> tuple[Plant, np.ndarray, float]:
@@ -113,20 +133,23 @@ class Outliers:
         wave = centre + amplitude * np.sin(2.0 * math.pi * self.frequency * (times[:, None] - self.settle_time)
                                            + phase)
         rows[1:, fastest] = np.clip(wave, -v_max, v_max)
-        f = self.acceleration / self.n
-        motors = Motors(lag=self.lag, speed_limits=(-v_max, v_max))
-        plant = Plant(ContactSet(speeds, np.full(self.n, f)), 1.0, motors=motors,
+        loads = np.random.default_rng(self.wheel_seed) if self.wheel_seed is not None else rng
+        forces = unequal_loads(self.acceleration / self.n, self.friction_spread, self.n, loads)
+        motors = Motors(lag=self.lag, speed_limits=(-v_max, v_max), compliance=self.compliance)
+        plant = Plant(ContactSet(speeds, forces), 1.0, motors=motors,
                       commands=PiecewiseConstant(times, rows))
         return plant, fastest, amplitude
 
     def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
         """Columns ``amplitude`` (m/s), ``rest_speed`` (``V*`` before the outliers start,
         m/s), ``deviation`` (largest ``|V - V*|`` over the window, m/s), ``lowest_outlier``
-        (lowest outlier contact speed minus ``V*``, m/s) and ``held`` (the stiction rule
-        held at ``V*`` throughout, bool)."""
+        (lowest outlier contact speed minus ``V*``, m/s), ``held`` (the stiction rule
+        held at ``V*`` throughout, bool) and ``settled`` (the speed was steady, within
+        :data:`SETTLED_TOLERANCE`, over the last half second before the outliers started:
+        unequal loads can leave the body creeping, which is not the outliers' doing)."""
         k = len(seeds)
         amplitude, rest, deviation, lowest = (np.empty(k) for _ in range(4))
-        held = np.empty(k, dtype=bool)
+        held, settled = np.empty(k, dtype=bool), np.empty(k, dtype=bool)
         t_end = self.settle_time + self.window
         for j, seq in enumerate(seeds):
             plant, fastest, amplitude[j] = self.plant(seq)
@@ -135,6 +158,8 @@ class Outliers:
                 raise SolverError(f"Outliers run {seq.spawn_key}: {result.message}")
             inside = result.t >= self.settle_time
             rest[j] = result.speed_at(self.settle_time)
+            earlier = result.speed_at(max(self.settle_time - 0.5, 0.0))
+            settled[j] = abs(rest[j] - earlier) <= SETTLED_TOLERANCE
             deviation[j] = float(np.max(np.abs(result.V[inside] - rest[j])))
             speeds = result.contact_speeds[inside]
             lowest[j] = float(speeds[:, fastest].min()) - rest[j]
@@ -142,18 +167,20 @@ class Outliers:
             held[j] = all(lo <= 0.0 <= hi for lo, hi in
                           (ContactSet(row, forces).force_bounds(rest[j]) for row in speeds))
         return {"amplitude": amplitude, "rest_speed": rest, "deviation": deviation,
-                "lowest_outlier": lowest, "held": held}
+                "lowest_outlier": lowest, "held": held, "settled": settled}
 
     def summarize(self, table: Any) -> dict[str, float]:
         """``unaffected_fraction`` (runs with ``deviation <= 1e-12`` m/s), ``largest_deviation``
         among runs whose outliers stayed above the rest speed (``lowest_outlier > 0``; 0 in
-        the ideal model), ``rule_agreement`` (fraction of runs where "moved" equals "the
+        the ideal model), ``unsettled_fraction`` (runs still creeping when the outliers
+        started), ``rule_agreement`` (fraction of runs where "moved" equals "the
         stiction rule failed"; 1 in the ideal model) and ``threshold_amplitude`` (the
         smallest amplitude that moved the body, m/s; nan if none did)."""
         deviation = table["deviation"].to_numpy()
         above = table["lowest_outlier"].to_numpy() > 0
         moved = deviation > 1e-12
         return {"unaffected_fraction": float(np.mean(~moved)),
+                "unsettled_fraction": float(np.mean(~table["settled"].to_numpy())),
                 "rule_agreement": float(np.mean(moved != table["held"].to_numpy())),
                 "largest_deviation": float(deviation[above].max()) if above.any() else math.nan,
                 "threshold_amplitude": float(table["amplitude"].to_numpy()[moved].min()) if moved.any() else math.nan}

@@ -30,7 +30,7 @@ import numpy as np
 
 from .._validation import as_float, as_int
 from ..errors import ParameterError, SolverError, parameter_message
-from ..model import ContactSet, Plant
+from ..model import ContactSet, Plant, unequal_loads
 from ..simulation import SimulationStatus, simulate
 
 __all__ = ["ResidualFriction"]
@@ -90,10 +90,7 @@ class ResidualFriction:
     def contacts(self, seed: np.random.SeedSequence) -> ContactSet:
         """The run's wheels (and the bearing as a contact at speed 0 when it has friction)."""
         rng = np.random.default_rng(seed)
-        f = self.nominal_force / 10.0
-        s = self.friction_spread
-        sigma = math.sqrt(math.log1p(s * s))
-        forces = f * np.exp(sigma * rng.standard_normal(10) - 0.5 * sigma * sigma) if s > 0 else np.full(10, f)
+        forces = unequal_loads(self.nominal_force / 10.0, self.friction_spread, 10, rng)
         v = self.speed_limit
         speeds = np.array([v] * (5 - self.n) + [-v] * (5 + self.n))
         if self.bearing_friction > 0:

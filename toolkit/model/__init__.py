@@ -19,7 +19,7 @@ Every solver, estimator and controller calls these; none re-derives them.
 
 from __future__ import annotations
 
-from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase
+from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase, unequal_loads
 from .friction import (FRICTION_LAWS, STRIBECK_PEAK, STRIBECK_SPEED, compliant_breakpoints,
                        compliant_zero_set, contact_forces)
 from .motors import MotorPiece, Motors, implicit_step, motor_rate, reach, unsaturated_response
@@ -28,7 +28,7 @@ from .sensors import Encoder, EncoderRecord, EncoderSample, Sensors, SensorState
 from .signals import PiecewiseConstant
 
 __all__ = [
-    "ContactModel", "ContactSet", "ContactDistribution", "Staircase",
+    "ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads",
     "FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",
     "compliant_breakpoints", "compliant_zero_set",
     "Motors", "motor_rate", "MotorPiece", "unsaturated_response", "implicit_step", "reach",

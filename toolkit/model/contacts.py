@@ -34,7 +34,7 @@ import numpy as np
 from .._validation import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
-__all__ = ["ContactModel", "ContactSet", "ContactDistribution", "Staircase"]
+__all__ = ["ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads"]
 
 _EPS = np.finfo(float).eps
 
@@ -407,3 +407,32 @@ class ContactDistribution:
         share = (0.5 - cum[j]) / (cum[j + 1] - cum[j])
         point = float(edges[j] + share * (edges[j + 1] - edges[j]))
         return point, point
+
+
+def unequal_loads(mean: Any, spread: float, size: int, rng: np.random.Generator) -> np.ndarray:
+    """Friction magnitudes of contacts that differ at random (unequal wheels), N.
+
+    Each ``f_i`` is lognormal with mean ``mean`` and relative standard deviation ``spread``:
+    ``f_i = mean exp(sigma z_i - sigma^2 / 2)``, ``sigma^2 = ln(1 + spread^2)``, ``z_i``
+    standard normal from ``rng`` (always positive, unlike a clipped normal). ``spread = 0``
+    gives ``mean`` exactly and draws nothing.
+
+    Parameters
+    ----------
+    mean : float or ndarray of shape (size,), N
+        Mean load of each contact.
+    spread : float
+        Relative standard deviation, ``>= 0``.
+    size : int
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray of shape (size,), N
+    """
+    spread = as_float(spread, "spread", "unequal_loads", low=0.0)
+    mean = np.broadcast_to(np.asarray(mean, dtype=float), (size,))
+    if spread == 0.0:
+        return mean.copy()
+    sigma = float(np.sqrt(np.log1p(spread * spread)))
+    return mean * np.exp(sigma * rng.standard_normal(size) - 0.5 * sigma * sigma)

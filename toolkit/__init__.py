@@ -20,6 +20,7 @@ from .allocation import (
 )
 from .model import ContactDistribution, ContactModel, ContactSet, Encoder, Motors, PiecewiseConstant, Plant, Staircase
 from .errors import (
+    OutputError,
     ParameterError,
     ParameterTypeError,
     SceneError,
@@ -28,7 +29,8 @@ from .errors import (
     ToolkitError,
 )
 from .plots import plot_force_curve, plot_precision, plot_schedule, plot_simulation
-from .scene import Scene, dumps_scene, load_scene
+from .scene import MAX_SCENE_BYTES, Scene, dumps_scene, load_scene
+from .scene_build import Clip
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import carousel_startup_plant
 from .precision import PrecisionReport, PrecisionRow, precision_report
@@ -37,7 +39,7 @@ from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, Virtual
 from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, SimulationResult,
                          SimulationStatus, advance, simulate, simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
-from .study import CurveSamples, StudyResult, force_curve, run_study
+from .study import CurveSamples, CurveStep, Shortfall, StudyResult, force_curve, run_study
 
 # sensors and estimation (filterpy is imported only where a filter is built)
 from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
@@ -48,7 +50,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     # contact model
-    "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "force_curve",
+    "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "CurveStep",
+    "force_curve",
     # plant and simulation
     "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "SimulationStatus", "Budget", "Event",
     "simulate_batch", "BatchResult", "advance", "ExactState", "ExactStep",
@@ -70,9 +73,10 @@ __all__ = [
     # plots (matplotlib is imported when one is drawn)
     "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision",
     # scenes and studies
-    "Scene", "load_scene", "dumps_scene", "StudyResult", "run_study",
+    "Scene", "load_scene", "dumps_scene", "MAX_SCENE_BYTES", "StudyResult", "run_study", "Shortfall",
+    "Clip",
     # errors
     "ParameterError", "ParameterTypeError", "SceneError", "SceneFileNotFoundError", "SolverError",
-    "ToolkitError",
+    "OutputError", "ToolkitError",
     "__version__",
 ]

@@ -195,14 +195,35 @@ def test_moreau_budget_stop_in_a_huge_segment_is_prompt() -> None:
 
 
 def test_casadi_stopped_run_returns_its_completed_blocks() -> None:
-    plant = _pushed_plant()
-    times = np.linspace(0.0, 2.0, 501)
-    full = simulate(plant, 2.0, v0=0.1, method="casadi", t_eval=times, epsilon=1e-3)
-    assert full.success
-    cut = simulate(plant, 2.0, v0=0.1, method="casadi", t_eval=times, epsilon=1e-3,
-                   budget=Budget(max_steps=max(1, full.n_steps // 2)))
-    assert cut.status is SimulationStatus.MAX_STEPS
-    assert 0.0 < cut.t_final < 2.0 and cut.t.size > 1
-    # The completed blocks are the same integrator calls as in the full run: equal values.
-    np.testing.assert_array_equal(cut.t, times[:cut.t.size])
-    np.testing.assert_array_equal(cut.V, full.V[:cut.t.size])
+    # 10 000 output intervals; the force switches at times[2000] and times[5500] (on the
+    # grid, so the grid is exactly times[1:]): the first block ends at the first switch.
+    times = np.linspace(0.0, 2.0, 10_001)
+    plant = Plant(ContactSet([-0.3, -0.1, 0.05, 0.2, 0.3], [0.3, 0.5, 0.2, 0.4, 0.6]), mass=0.7,
+                  damping=0.05, external_force=PiecewiseConstant([times[2000], times[5500]],
+                                                                 [0.0, 0.6, -0.3]))
+    options = {"method": "casadi", "v0": 0.1, "epsilon": 1e-3}
+    first = simulate(plant, float(times[2000]), t_eval=times[:2001], **options)
+    full = simulate(plant, 2.0, t_eval=times, **options)
+    assert first.success and full.success
+    # A step budget that the first block fits and the second cannot: the run stops with
+    # MAX_STEPS and returns the first block, the same integrator call as `first` (equal
+    # values, bit for bit) and the start of the full run.
+    cut = simulate(plant, 2.0, t_eval=times, budget=Budget(max_steps=first.n_steps + 1), **options)
+    assert cut.status is SimulationStatus.MAX_STEPS, cut.message
+    np.testing.assert_array_equal(cut.t, times[:2001])
+    np.testing.assert_array_equal(cut.V, first.V)
+    np.testing.assert_array_equal(cut.V, full.V[:2001])
+
+
+def test_casadi_grid_of_many_switches_is_decimated_to_max_samples() -> None:
+    times = np.arange(1, 3000) * 1e-3                  # 2999 switches of the external force
+    values = np.where(np.arange(3000) % 2 == 0, 0.1, -0.1)
+    plant = Plant(ContactSet([-0.2, 0.0, 0.2], [1.0, 1.0, 1.0]), mass=1.0,
+                  external_force=PiecewiseConstant(times, values))
+    full = simulate(plant, 3.0, method="casadi")
+    small = simulate(plant, 3.0, method="casadi", budget=Budget(max_samples=500))
+    assert full.success and small.success and full.t.size > 3000   # 201 uniform + 2999 switches, some equal
+    assert small.t.size <= 501 and "output decimated to every 8th" in small.message
+    index = np.searchsorted(full.t, small.t)        # the same integration, thinned
+    np.testing.assert_array_equal(full.t[index], small.t)
+    np.testing.assert_array_equal(full.V[index], small.V)

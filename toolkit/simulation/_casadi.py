@@ -10,21 +10,27 @@ right-hand side. The state is ``[V]`` or, with dynamic motors, ``[V, v_1, ..., v
 
 The output grid is the requested times, or 201 uniform times when ``t_eval`` is None, plus
 every switching time of the commands and of the external force; it is the whole output
-(memory in proportion to it, never to the integrator's steps). Commands and ``F_ext`` enter
+(memory in proportion to it and to the inputs, never to the integrator's steps). Without
+``t_eval``, a grid of more than ``budget.max_samples`` times (many switches) is reported
+decimated (every 2nd, 4th, ... time and the last, said in the message). Commands and ``F_ext`` enter
 as the integrator's controls ``u``, which casadi holds constant on each grid interval, so the
 integrator restarts exactly at every switch.
 
 The grid is integrated in blocks of consecutive output times, one ``casadi.integrator`` call
-per block (64 times first, then up to twice as many per call, fewer when the wall-clock
-budget left would not cover them at the pace so far), each continuing from the last state of
-the one before. Between calls the budget is checked, so that, as far as casadi allows:
+per block, each continuing from the last state of the one before. A block aims at 64 output
+intervals first, then up to twice as many per call (fewer when the wall-clock budget left
+would not cover them at the pace so far), and ends at a switching time when one is near
+(the controls jump there), else after at least 4096 intervals: each call restarts SUNDIALS
+(a few small steps), so a grid without switches of up to 4096 times (the default 201, the
+precision report's ~1000) is one call, exactly as without blocks. Between calls the budget
+is checked, so that, as far as casadi allows:
 
 - ``budget.max_steps`` counts SUNDIALS steps over the run: each call gets the steps left as
   its ``max_num_steps`` (which SUNDIALS applies per output interval) and the total is checked
   after each call (status ``MAX_STEPS``, also when SUNDIALS gave up with too much work).
 - The wall clock cannot interrupt a running casadi call: it is checked after each call
   (status ``WALL_TIME``); block sizes follow the pace so far, so an overrun is at most about
-  one call.
+  one call (up to 4096 output intervals when no switching time is near).
 - A stopped run returns the trajectory of the calls that completed (a failed call returns
   no partial trajectory of its own block).
 
@@ -33,6 +39,7 @@ the one before. Between calls the budget is checked, so that, as far as casadi a
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import casadi as ca   # this module is loaded by casadi runs only (simulate imports it lazily)
@@ -51,8 +58,13 @@ CASADI_INTEGRATORS = ("cvodes", "idas")
 
 #: Output times used when ``t_eval`` is None.
 _DEFAULT_SAMPLES = 201
-#: Output times of the first integrator call; each later call takes up to twice as many.
+#: Output intervals of the first integrator call at most; each later call takes up to twice
+#: as many (fewer when the wall-clock budget left would not cover them at the pace so far).
 _FIRST_BLOCK = 64
+#: Every call starts the integrator afresh (a few small steps): between switching times, a
+#: call covers at least this many output intervals, so a grid without switches of up to this
+#: many times (the 201 default ones, the precision report's ~1000) is one call, as unblocked.
+_SMOOTH_BLOCK = 4096
 
 
 def casadi_right_hand_side(plant: Plant, friction: str, epsilon: float) -> tuple[Any, Any, Any]:
@@ -86,6 +98,20 @@ def _output_grid(plant: Plant, t_end: float, t_eval: np.ndarray | None) -> np.nd
     switches = plant.switching_times()
     grid = np.unique(np.concatenate((base, switches[(switches > 0) & (switches < t_end)], [t_end])))
     return grid[grid > 0.0]
+
+
+def _block_end(ends: np.ndarray, done: int, size: int, total: int) -> int:
+    """The exclusive end (a grid index) of the block that starts after ``done`` output times.
+
+    At the last switching time within ``size`` output intervals if there is one, else at the
+    first one within ``_SMOOTH_BLOCK``, else ``max(size, _SMOOTH_BLOCK)`` intervals on.
+    """
+    k = int(np.searchsorted(ends, done + size, side="right")) - 1
+    if k >= 0 and ends[k] > done:
+        return int(ends[k])
+    if k + 1 < ends.size and ends[k + 1] <= done + _SMOOTH_BLOCK:
+        return int(ends[k + 1])
+    return min(total, done + max(size, _SMOOTH_BLOCK))
 
 
 def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray | None,
@@ -126,6 +152,10 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     controls = np.vstack((ideal_speeds(plant, starts).T, external_forces(plant, starts)))
     x0 = np.concatenate(([v0], plant.initial_speeds() if dynamic else []))
     states = np.empty((grid.size, x0.size))              # the grid is the whole output
+    switches = plant.switching_times()
+    # a block may end right after these grid indices: the switching times, where the
+    # controls jump and a restart of the integrator costs nothing it would not cost anyway
+    ends = np.flatnonzero(np.isin(grid, switches)) + 1
     status, detail = SimulationStatus.SUCCESS, ""
     done, size, state = 0, _FIRST_BLOCK, x0
     while done < grid.size:
@@ -134,7 +164,7 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
             status, detail = SimulationStatus.MAX_STEPS, (
                 f"{meter.steps} steps used of max_steps = {budget.max_steps}")
             break
-        block = slice(done, min(grid.size, done + size))
+        block = slice(done, _block_end(ends, done, size, grid.size))
         options = {"abstol": atol, "reltol": rtol, "max_num_steps": int(min(remaining, 2**31 - 1))}
         function = ca.integrator("contacts", integrator, {"x": x, "u": u, "ode": ode},
                                  float(starts[done]), grid[block].tolist(), options)
@@ -173,6 +203,15 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     if t_eval is not None:                               # every t_eval is on the grid
         keep = t_eval <= t_out[-1]
         t_out, y_out = t_eval[keep], y_out[np.searchsorted(t_out, t_eval[keep])]
+    elif t_out.size > budget.max_samples + 1:            # a grid of many switching times
+        stride = 1 << math.ceil(math.log2((t_out.size - 1) / budget.max_samples))
+        index = np.arange(0, t_out.size, stride)
+        if index[-1] != t_out.size - 1:
+            index = np.append(index, t_out.size - 1)
+        note = (f"output decimated to every {stride}th of {t_out.size} grid times "
+                f"(max_samples = {budget.max_samples})")
+        detail = f"{detail}; {note}" if detail else note
+        t_out, y_out = t_out[index], y_out[index]
     return build_result(
         plant, method="casadi",
         setting=format_setting(integrator=integrator, friction=friction, eps=epsilon,

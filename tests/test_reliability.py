@@ -191,3 +191,21 @@ def test_issue_10_rows_have_tests() -> None:
             path, name = node.split("::")
             text = (ROOT / path).read_text(encoding="utf-8")
             assert f"def {name}(" in text, node
+
+
+def test_precision_reads_step_collapse_from_every_step_whatever_max_samples() -> None:
+    # The untimed own-steps run keeps every step even when the setting's budget has a small
+    # memory cap: min_step equals that of a run keeping every step (second computation,
+    # exact equality: the same deterministic steps).
+    plant = tk.carousel_startup_plant(0)
+    tight = Budget(wall_time=10.0, max_steps=20_000, max_samples=100)   # the step budget decides
+    options = {"friction": "sign", "rtol": 1e-6, "atol": 1e-9}
+    report = precision_report(plant, 5.0, repeats=1, settings=[
+        MethodSetting("exact"), MethodSetting("rk45", options, tight)])
+    row = report.row("rk45")
+    every = tk.simulate(plant, 5.0, method="rk45", budget=Budget(wall_time=10.0, max_steps=20_000,
+                                                                 max_samples=20_001), **options)
+    assert "decimated" not in every.message and every.t.size > 100
+    steps = np.diff(every.t)
+    assert row.step_collapse is not None
+    assert row.min_step == float(np.min(steps[steps > 0]))

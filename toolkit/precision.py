@@ -17,6 +17,7 @@ Pure numerics: no files, no matplotlib.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -66,6 +67,8 @@ EVALUATION_POINTS = 1001
 #: fastest reference method reaching ``max_error <= ERROR_LEVEL``.
 ERROR_LEVEL = 1e-6
 _BUDGET_STALLING = Budget(wall_time=1.0, max_steps=300_000)
+#: Most steps kept by the untimed own-steps run of an adaptive solver (``step_collapse``).
+_OWN_STEPS = 2**22
 _BUDGET_SMOOTH = Budget(wall_time=3.0, max_steps=2_000_000)
 
 
@@ -263,8 +266,9 @@ class PrecisionRow:
         are each shorter than ``STEP_COLLAPSE_RATIO * t_end`` (1e-6 of the horizon). Short
         steps that resolve a smoothing layer and then grow again do not count; a solver
         stuck in a chattering loop does. Read from one extra, untimed run that reports the
-        solver's own steps (``t_eval=None``). ``None`` for methods without adaptive steps
-        (exact, moreau) or whose steps casadi does not expose.
+        solver's own steps (``t_eval=None``, every step kept up to 2**22). ``None`` for
+        methods without adaptive steps (exact, moreau), whose steps casadi does not expose, or
+        when more steps than that had to be decimated.
     creep : bool
         Only for plants whose final contacts have a zero-force band and no drag, external
         force, command schedule or compliance: the exact solution starts strictly inside the
@@ -521,9 +525,15 @@ def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: P
         final_error = float(errors[-1]) if done else math.inf
     collapse, min_step = None, None
     if result.method in _ADAPTIVE:                         # the solver's own steps, untimed
-        own = simulate(plant, t_end, v0=v0, method=setting.method, budget=setting.budget,
-                       **setting.kwargs)
-        collapse, min_step = _step_collapse(own, t_end)
+        # Every step is needed (a decimated record would hide short steps): room for as many
+        # steps as the budget allows, up to 2**22 (64 MB of samples); a record decimated
+        # beyond that leaves step_collapse and min_step unknown (None).
+        budget = setting.budget
+        room = max(budget.max_samples, min(budget.max_steps + 1, _OWN_STEPS))
+        own = simulate(plant, t_end, v0=v0, method=setting.method,
+                       budget=dataclasses.replace(budget, max_samples=room), **setting.kwargs)
+        if "record decimated" not in own.message:
+            collapse, min_step = _step_collapse(own, t_end)
         reversals = _reversals(own.V)
         chattering = reversals > _reversals(exact_at(own.t)) + CHATTER_MARGIN
     else:

@@ -50,7 +50,7 @@ class Budget:
         record (every 2nd step, then every 4th, ..., always the first and the last). Requested
         ``t_eval`` times are all reported (their number is the caller's choice) and nothing
         else is stored per step. The default, 2**18, bounds a record to a few MB of arrays
-        (the exact method's segments to about 150 MB).
+        (the exact method's segments, Python objects, to about 170 MB).
     """
 
     wall_time: float = 60.0

@@ -20,6 +20,7 @@ from .allocation import (
 )
 from .model import ContactDistribution, ContactModel, ContactSet, Encoder, Motors, PiecewiseConstant, Plant, Staircase
 from .errors import (
+    OutputError,
     ParameterError,
     ParameterTypeError,
     SceneError,
@@ -30,7 +31,8 @@ from .errors import (
 from .plots import (plot_force_curve, plot_mean_median, plot_median_law, plot_outliers, plot_precision,
                     plot_ratio_histogram, plot_schedule, plot_simulation, plot_summary_comparison, plot_sweep,
                     plot_viscosity_check, plot_friction_fraction_check)
-from .scene import Scene, dumps_scene, load_scene
+from .scene import MAX_SCENE_BYTES, Scene, dumps_scene, load_scene
+from .scene_build import Clip
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import carousel_startup_plant
 from .precision import PrecisionReport, PrecisionRow, precision_report
@@ -39,7 +41,7 @@ from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, Virtual
 from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, SimulationResult,
                          SimulationStatus, advance, simulate, simulate_batch)
 from .stability import StabilityCase, StabilityReport, stability_suite
-from .study import CurveSamples, StudyResult, force_curve, run_study
+from .study import CurveSamples, CurveStep, Shortfall, StudyResult, force_curve, run_study
 from . import sweeps
 from .sweeps import SweepResult, sweep
 from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
@@ -53,7 +55,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     # contact model
-    "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "force_curve",
+    "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "CurveStep",
+    "force_curve",
     # plant and simulation
     "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "SimulationStatus", "Budget", "Event",
     "simulate_batch", "BatchResult", "advance", "ExactState", "ExactStep",
@@ -79,9 +82,10 @@ __all__ = [
     "plot_ratio_histogram", "plot_mean_median", "plot_outliers", "plot_summary_comparison", "plot_sweep",
     "plot_viscosity_check", "plot_friction_fraction_check",
     # scenes and studies
-    "Scene", "load_scene", "dumps_scene", "StudyResult", "run_study",
+    "Scene", "load_scene", "dumps_scene", "MAX_SCENE_BYTES", "StudyResult", "run_study", "Shortfall",
+    "Clip",
     # errors
     "ParameterError", "ParameterTypeError", "SceneError", "SceneFileNotFoundError", "SolverError",
-    "ToolkitError",
+    "OutputError", "ToolkitError",
     "__version__",
 ]

@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
-from .errors import ToolkitError
+from .errors import OutputError
 
 __all__ = ["OUTPUT_NAMES", "OutputError", "atomic_write_bytes", "atomic_write_text", "check_output_dir",
            "write_tree"]
@@ -29,10 +29,6 @@ __all__ = ["OUTPUT_NAMES", "OutputError", "atomic_write_bytes", "atomic_write_te
 #: else is not the toolkit's and is never replaced.
 OUTPUT_NAMES = frozenset({"result.json", "force_curve.png", "simulation.png", "schedule.png",
                           "schedule.csv", "schedule.json", "precision.json", "precision.png"})
-
-
-class OutputError(ToolkitError, OSError):
-    """An output folder that cannot be written (found before any work)."""
 
 
 def _umask() -> int:

@@ -18,6 +18,7 @@ __all__ = [
     "SceneError",
     "SceneFileNotFoundError",
     "SolverError",
+    "OutputError",
     "parameter_message",
 ]
 
@@ -44,6 +45,10 @@ class SceneFileNotFoundError(ToolkitError, FileNotFoundError):
 
 class SolverError(ToolkitError, RuntimeError):
     """A numerical back end failed in a way no status can express."""
+
+
+class OutputError(ToolkitError, OSError):
+    """An output folder that cannot be written (found before any work)."""
 
 
 def _show(value: Any) -> str:

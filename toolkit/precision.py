@@ -17,6 +17,7 @@ Pure numerics: no files, no matplotlib.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -37,7 +38,7 @@ from .simulation._exact import clear_cache
 __all__ = [
     "MethodSetting", "PrecisionRow", "PrecisionReport", "Speedup", "WorkPrecisionCurve",
     "precision_report", "default_settings", "work_precision_curves", "exact_speedup",
-    "rational_trajectory",
+    "precision_shortfalls", "rational_trajectory", "ERROR_LEVEL",
     "CHATTER_MARGIN", "STEP_COLLAPSE_RATIO", "STEP_COLLAPSE_RUN", "CREEP_TOLERANCE",
     "MOTION_FLOOR", "EVALUATION_POINTS", "evaluation_times",
 ]
@@ -62,7 +63,12 @@ _MIN_REPEAT_TIME = 0.02
 _WARM_RUN = 0.2
 #: Uniform times on [0, t_end] of the common evaluation grid (with the exact event times).
 EVALUATION_POINTS = 1001
+#: The accuracy the report is asked for (m/s): the speedup compares the exact method with the
+#: fastest reference method reaching ``max_error <= ERROR_LEVEL``.
+ERROR_LEVEL = 1e-6
 _BUDGET_STALLING = Budget(wall_time=1.0, max_steps=300_000)
+#: Most steps kept by the untimed own-steps run of an adaptive solver (``step_collapse``).
+_OWN_STEPS = 2**22
 _BUDGET_SMOOTH = Budget(wall_time=3.0, max_steps=2_000_000)
 
 
@@ -260,8 +266,9 @@ class PrecisionRow:
         are each shorter than ``STEP_COLLAPSE_RATIO * t_end`` (1e-6 of the horizon). Short
         steps that resolve a smoothing layer and then grow again do not count; a solver
         stuck in a chattering loop does. Read from one extra, untimed run that reports the
-        solver's own steps (``t_eval=None``). ``None`` for methods without adaptive steps
-        (exact, moreau) or whose steps casadi does not expose.
+        solver's own steps (``t_eval=None``, every step kept up to 2**22). ``None`` for
+        methods without adaptive steps (exact, moreau), whose steps casadi does not expose, or
+        when more steps than that had to be decimated.
     creep : bool
         Only for plants whose final contacts have a zero-force band and no drag, external
         force, command schedule or compliance: the exact solution starts strictly inside the
@@ -382,6 +389,7 @@ class PrecisionReport:
                "rows": [row.to_dict() for row in self.rows]}
         if any(row.method == "exact" for row in self.rows):
             out["speedup"] = exact_speedup(self).to_dict()
+            out["shortfalls"] = [shortfall.to_dict() for shortfall in precision_shortfalls(self)]
         return out
 
     def row(self, method: str, setting: str | None = None) -> PrecisionRow:
@@ -517,9 +525,15 @@ def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: P
         final_error = float(errors[-1]) if done else math.inf
     collapse, min_step = None, None
     if result.method in _ADAPTIVE:                         # the solver's own steps, untimed
-        own = simulate(plant, t_end, v0=v0, method=setting.method, budget=setting.budget,
-                       **setting.kwargs)
-        collapse, min_step = _step_collapse(own, t_end)
+        # Every step is needed (a decimated record would hide short steps): room for as many
+        # steps as the budget allows, up to 2**22 (64 MB of samples); a record decimated
+        # beyond that leaves step_collapse and min_step unknown (None).
+        budget = setting.budget
+        room = max(budget.max_samples, min(budget.max_steps + 1, _OWN_STEPS))
+        own = simulate(plant, t_end, v0=v0, method=setting.method,
+                       budget=dataclasses.replace(budget, max_samples=room), **setting.kwargs)
+        if "record decimated" not in own.message:
+            collapse, min_step = _step_collapse(own, t_end)
         reversals = _reversals(own.V)
         chattering = reversals > _reversals(exact_at(own.t)) + CHATTER_MARGIN
     else:
@@ -591,7 +605,7 @@ def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: in
 
 
 # -- derived data (pure) ----------------------------------------------------------------------
-def exact_speedup(report: PrecisionReport, error: float = 1e-6) -> Speedup:
+def exact_speedup(report: PrecisionReport, error: float = ERROR_LEVEL) -> Speedup:
     """Run time of the fastest reference method reaching ``max_error <= error`` over the exact one.
 
     Parameters
@@ -613,6 +627,64 @@ def exact_speedup(report: PrecisionReport, error: float = 1e-6) -> Speedup:
         return Speedup(math.nan, error, exact, None)
     fastest = min(accurate, key=lambda row: row.wall_time)
     return Speedup(fastest.wall_time / exact.wall_time, error, exact, fastest)
+
+
+def precision_shortfalls(report: PrecisionReport, error: float = ERROR_LEVEL) -> list[Any]:
+    """How a work-precision report missed its request (the ``precision`` command exits 3).
+
+    The request of a report with an exact row is its headline: the exact method's speedup
+    over the fastest reference method at the accuracy ``error`` (:func:`exact_speedup`),
+    which needs two things, each a :class:`toolkit.study.Shortfall` (stage ``"precision"``,
+    amount in m/s) when missed:
+
+    - the exact method, measured against the independent rational solution, is itself within
+      ``error`` (amount: its error minus ``error``); a plant outside what
+      :func:`rational_trajectory` supports has no independent reference (``max_error`` NaN),
+      which the report states and which is not a shortfall;
+    - at least one reference method finishes with ``max_error <= error``, otherwise there is
+      no ratio (amount: the closest finished reference's error minus ``error``, NaN when
+      none finished).
+
+    Not shortfalls: reference runs stopped by their budgets (showing those stalls is what the
+    report is for; they are flagged in its rows) and issue 3's 100x speedup target (a
+    benchmark target: ``python -m toolkit.bench precision`` exits 1 while it is missed).
+
+    Parameters
+    ----------
+    report : PrecisionReport
+    error : float, m/s
+
+    Returns
+    -------
+    list of toolkit.study.Shortfall
+        Empty when the request was met or the report has no exact row (no speedup asked).
+    """
+    from .study import Shortfall                      # (study imports the whole pipeline)
+
+    error = as_float(error, "error", "precision_shortfalls", low=0.0, low_open=True)
+    if not any(row.method == "exact" for row in report.rows):
+        return []
+    shortfalls = []
+    exact = report.row("exact")
+    if math.isfinite(exact.max_error) and exact.max_error > error:
+        shortfalls.append(Shortfall(
+            "precision", f"the exact method's error {exact.max_error:.3g} m/s against the rational "
+            f"solution is above the {error:g} m/s level", exact.max_error - error, "m/s"))
+    speedup = exact_speedup(report, error)
+    if speedup.reference is None:
+        finished = [row for row in report.rows if row.method != "exact"
+                    and row.status is SimulationStatus.SUCCESS and math.isfinite(row.max_error)]
+        if finished:
+            closest = min(finished, key=lambda row: row.max_error)
+            what = (f"no reference method reached max_error <= {error:g} m/s, so no speedup "
+                    f"(closest: {closest.label}, {closest.max_error:.3g} m/s)")
+            amount = closest.max_error - error
+        else:
+            what = (f"no reference method reached max_error <= {error:g} m/s, so no speedup "
+                    f"(none finished)")
+            amount = math.nan
+        shortfalls.append(Shortfall("precision", what, amount, "m/s"))
+    return shortfalls
 
 
 def work_precision_curves(report: PrecisionReport) -> tuple[WorkPrecisionCurve, ...]:

@@ -7,6 +7,14 @@ speed, mirrored sign conventions), each under its own budget, and reports for ea
 finished, whether every value is finite, how many events it produced against a stated bound,
 and whether its final state is right (:class:`StabilityCase` says what "right" means).
 
+The ``"horizon 1e9 s"`` cases (full suite only, not ``quick``) run every method (exact, moreau, rk45, lsoda, radau, bdf,
+casadi with CVODES and IDAS) to ``t_end = 1e9`` s under a 0.5 s wall-clock budget and a
+``max_samples`` memory cap: a method that can finish must end in the equilibrium set, one
+that cannot (a fixed step of 1 ms needs 1e12 steps; ``sign`` friction makes explicit solvers
+chatter) must return a budget status with a finite partial result, and either way the record
+must respect the memory cap (the subprocess test ``tests/test_memory_bounds.py`` runs the
+same horizon under a 1 GiB address-space limit).
+
 Pure numerics: no files, no matplotlib.
 """
 
@@ -19,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from .model import ContactSet, Motors, PiecewiseConstant, Plant
-from .simulation import Budget, SimulationResult, simulate
+from .simulation import Budget, SimulationResult, SimulationStatus, simulate
 
 __all__ = ["StabilityCase", "StabilityReport", "stability_suite", "EXACT_TOLERANCE",
            "SMOOTH_TOLERANCE_FACTOR"]
@@ -71,6 +79,13 @@ class StabilityCase:
         Name of the run's :class:`~toolkit.simulation.SimulationStatus` (``"SUCCESS"`` when it finished;
         ``"WALL_TIME"``, ``"MAX_STEPS"`` or ``"ZENO"`` when its budget stopped it). For a
         mirror check, that of the first run that did not succeed.
+    samples : int
+        Samples the run returned (``t.size``).
+    max_samples : int
+        The case's ``Budget.max_samples``. A ``"horizon"`` check (the 1e9 s cases) is ok when
+        the run is finite, keeps at most ``max_samples + 1`` samples, and either finished in
+        the equilibrium set or was stopped by its wall-clock or step budget
+        (``finished`` is then False: the budget stop is the expected outcome).
     """
 
     name: str
@@ -90,6 +105,8 @@ class StabilityCase:
     deviation: float
     message: str
     status: str
+    samples: int = 0
+    max_samples: int = Budget().max_samples
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dictionary (``name``, ``method``, ``finished``, ``finite``, ``events``,
@@ -102,7 +119,8 @@ class StabilityCase:
                 "final_speed": self.final_speed if np.isfinite(self.final_speed) else None,
                 "expected": list(self.expected),
                 "deviation": self.deviation if np.isfinite(self.deviation) else None,
-                "message": self.message, "status": self.status}
+                "message": self.message, "status": self.status, "samples": self.samples,
+                "max_samples": self.max_samples}
 
 
 @dataclass(frozen=True)
@@ -133,6 +151,7 @@ class _Spec:
     check: str = "equilibrium"
     tolerance: float = EXACT_TOLERANCE
     switches: int = 0
+    max_samples: int = Budget().max_samples
 
 
 def _equal(speeds: Any, mass: float = 1.0, total: float = 2.0, **kwargs: Any) -> Plant:
@@ -224,6 +243,8 @@ def _specs(quick: bool) -> list[_Spec]:
                        switches=times.size))
     specs.append(_Spec("contact speed oscillating around V", oscillating, 3.0, "moreau",
                        options={"step": 1e-4}, switches=times.size))
+    if not quick:                    # (about 2 s: the full suite only)
+        specs += _horizon_specs(_equal(eleven))
     pushed = _equal(eleven, external_force=PiecewiseConstant([1.0, 2.0], [0.0, 1.5, -0.7]))
     specs.append(_Spec("mirrored sign conventions", pushed, 5.0, v0=0.3, check="mirror",
                        switches=2))
@@ -232,10 +253,31 @@ def _specs(quick: bool) -> list[_Spec]:
     return specs
 
 
+#: Wall-clock budget (s) and memory cap (samples) of the 1e9 s horizon cases.
+_HORIZON_WALL, _HORIZON_SAMPLES = 0.5, 10_000
+
+
+def _horizon_specs(plant: Plant) -> list[_Spec]:
+    """One case per method at ``t_end = 1e9`` s (see the module docstring)."""
+    smooth = SMOOTH_TOLERANCE_FACTOR * 1e-6 + 1e-12
+    runs = [("exact", {}, EXACT_TOLERANCE),
+            ("moreau", {"step": 1e-3}, EXACT_TOLERANCE),
+            ("rk45", {"friction": "sign"}, smooth),
+            ("lsoda", {"friction": "sign"}, smooth),
+            ("radau", {"friction": "tanh", "epsilon": 1e-6, "rtol": 1e-8, "atol": 1e-13}, smooth),
+            ("bdf", {"friction": "stribeck", "epsilon": 1e-6, "rtol": 1e-8, "atol": 1e-13}, smooth),
+            ("casadi", {"integrator": "cvodes", "friction": "tanh", "epsilon": 1e-6}, smooth),
+            ("casadi", {"integrator": "idas", "friction": "stribeck", "epsilon": 1e-6}, smooth)]
+    return [_Spec("horizon 1e9 s", plant, 1e9, method, options=options, tolerance=tolerance,
+                  wall_time=_HORIZON_WALL, check="horizon", max_samples=_HORIZON_SAMPLES)
+            for method, options, tolerance in runs]
+
+
 def _run(spec: _Spec, plant: Plant, v0: float, t_eval: Any = None) -> tuple[SimulationResult, float]:
     start = time.perf_counter()
     result = simulate(plant, spec.t_end, v0=v0, method=spec.method, t_eval=t_eval,
-                      budget=Budget(wall_time=spec.wall_time), **spec.options)
+                      budget=Budget(wall_time=spec.wall_time, max_samples=spec.max_samples),
+                      **spec.options)
     return result, time.perf_counter() - start
 
 
@@ -266,14 +308,22 @@ def _case(spec: _Spec) -> StabilityCase:
     levels = np.unique(plant.final_command()).size if plant.commands is None else np.unique(
         plant.commands.values).size
     max_events = (levels + 2) * (spec.switches + 1) + spec.switches
-    ok = finished and finite and events <= max_events and deviation <= spec.tolerance
+    if spec.check == "horizon":
+        stopped = status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS)
+        bounded = result.t.size <= spec.max_samples + 1
+        ok = finite and bounded and events <= max_events and (
+            stopped or (finished and deviation <= spec.tolerance))
+        if stopped:                  # a partial run: its final speed is not judged
+            deviation = 0.0
+    else:
+        ok = finished and finite and events <= max_events and deviation <= spec.tolerance
     return StabilityCase(
         name=spec.name, method=spec.method, setting=result.setting, finished=finished,
         finite=finite, events=int(events), max_events=int(max_events), wall_time=wall,
         budget=spec.wall_time * (2 if spec.check == "mirror" else 1), ok=bool(ok),
         check=spec.check, tolerance=spec.tolerance, final_speed=final,
         expected=(float(lo), float(hi)), deviation=float(deviation), message=result.message,
-        status=status.name)
+        status=status.name, samples=int(result.t.size), max_samples=spec.max_samples)
 
 
 def stability_suite(*, quick: bool = False) -> StabilityReport:
@@ -282,7 +332,8 @@ def stability_suite(*, quick: bool = False) -> StabilityReport:
     Parameters
     ----------
     quick : bool
-        Smaller extremes (N = 1e4 instead of 1e5, epsilon down to 1e-6 instead of 1e-9).
+        Smaller extremes (N = 1e4 instead of 1e5, epsilon down to 1e-6 instead of 1e-9), and
+        without the 1e9 s horizon cases.
 
     Returns
     -------

@@ -89,9 +89,11 @@ def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exac
         One of :data:`METHODS`; see the module docstring.
     t_eval : array_like of shape (T,), s, optional
         Non-decreasing times in ``[0, t_end]`` at which to report ``V``. ``None``: the exact
-        method reports its event times (plus 0 and ``t_end``), the others their own steps.
+        method reports its event times (plus 0 and ``t_end``), the others their own steps
+        (at most ``budget.max_samples`` of them, a decimated record beyond; casadi its grid).
     budget : Budget, optional
-        Wall-clock, step and event-rate limits (default ``Budget()``).
+        Wall-clock, step, event-rate and memory (``max_samples``) limits (default
+        ``Budget()``): no method stores more than its budget allows, whatever ``t_end``.
     **options
         Method options (see the module docstring); unknown names are refused.
 

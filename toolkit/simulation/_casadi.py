@@ -8,25 +8,38 @@ compliant motor's saturated linear law when the plant has compliance; the motor 
 :mod:`toolkit.model.motors`). ``"sign"`` is refused: SUNDIALS' error control assumes a smooth
 right-hand side. The state is ``[V]`` or, with dynamic motors, ``[V, v_1, ..., v_n]``.
 
-One ``casadi.integrator`` is built over the whole output grid (the requested times, or 201
-uniform times when ``t_eval`` is None, plus every switching time of the commands and of the
-external force). Commands and ``F_ext`` enter as the integrator's controls ``u``, which casadi
-holds constant on each grid interval, so the integrator restarts exactly at every switch.
+The output grid is the requested times, or 201 uniform times when ``t_eval`` is None, plus
+every switching time of the commands and of the external force; it is the whole output
+(memory in proportion to it and to the inputs, never to the integrator's steps). Without
+``t_eval``, a grid of more than ``budget.max_samples`` times (many switches) is reported
+decimated (every 2nd, 4th, ... time and the last, said in the message). Commands and ``F_ext`` enter
+as the integrator's controls ``u``, which casadi holds constant on each grid interval, so the
+integrator restarts exactly at every switch.
 
-Budget, as far as casadi allows:
+The grid is integrated in blocks of consecutive output times, one ``casadi.integrator`` call
+per block, each continuing from the last state of the one before. A block aims at 64 output
+intervals first, then up to twice as many per call (fewer when the wall-clock budget left
+would not cover them at the pace so far), and ends at a switching time when one is near
+(the controls jump there), else after at least 4096 intervals: each call restarts SUNDIALS
+(a few small steps), so a grid without switches of up to 4096 times (the default 201, the
+precision report's ~1000) is one call, exactly as without blocks. Between calls the budget
+is checked, so that, as far as casadi allows:
 
-- ``budget.max_steps`` is passed as SUNDIALS' ``max_num_steps``, which bounds the steps **per
-  output interval**, not per run; the total is checked after the call (status ``MAX_STEPS``
-  if it is over budget or if SUNDIALS gave up with too much work).
-- The wall clock cannot interrupt a running casadi call: it is checked after the call
-  (status ``WALL_TIME`` if it overran; the trajectory is still returned).
-- When SUNDIALS fails, casadi returns no partial trajectory: the result holds ``t = 0`` only.
+- ``budget.max_steps`` counts SUNDIALS steps over the run: each call gets the steps left as
+  its ``max_num_steps`` (which SUNDIALS applies per output interval) and the total is checked
+  after each call (status ``MAX_STEPS``, also when SUNDIALS gave up with too much work).
+- The wall clock cannot interrupt a running casadi call: it is checked after each call
+  (status ``WALL_TIME``); block sizes follow the pace so far, so an overrun is at most about
+  one call (up to 4096 output intervals when no switching time is near).
+- A stopped run returns the trajectory of the calls that completed (a failed call returns
+  no partial trajectory of its own block).
 
 ``wall_time`` includes building the symbolic model and the integrator (as every call does).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import casadi as ca   # this module is loaded by casadi runs only (simulate imports it lazily)
@@ -45,6 +58,13 @@ CASADI_INTEGRATORS = ("cvodes", "idas")
 
 #: Output times used when ``t_eval`` is None.
 _DEFAULT_SAMPLES = 201
+#: Output intervals of the first integrator call at most; each later call takes up to twice
+#: as many (fewer when the wall-clock budget left would not cover them at the pace so far).
+_FIRST_BLOCK = 64
+#: Every call starts the integrator afresh (a few small steps): between switching times, a
+#: call covers at least this many output intervals, so a grid without switches of up to this
+#: many times (the 201 default ones, the precision report's ~1000) is one call, as unblocked.
+_SMOOTH_BLOCK = 4096
 
 
 def casadi_right_hand_side(plant: Plant, friction: str, epsilon: float) -> tuple[Any, Any, Any]:
@@ -78,6 +98,20 @@ def _output_grid(plant: Plant, t_end: float, t_eval: np.ndarray | None) -> np.nd
     switches = plant.switching_times()
     grid = np.unique(np.concatenate((base, switches[(switches > 0) & (switches < t_end)], [t_end])))
     return grid[grid > 0.0]
+
+
+def _block_end(ends: np.ndarray, done: int, size: int, total: int) -> int:
+    """The exclusive end (a grid index) of the block that starts after ``done`` output times.
+
+    At the last switching time within ``size`` output intervals if there is one, else at the
+    first one within ``_SMOOTH_BLOCK``, else ``max(size, _SMOOTH_BLOCK)`` intervals on.
+    """
+    k = int(np.searchsorted(ends, done + size, side="right")) - 1
+    if k >= 0 and ends[k] > done:
+        return int(ends[k])
+    if k + 1 < ends.size and ends[k + 1] <= done + _SMOOTH_BLOCK:
+        return int(ends[k + 1])
+    return min(total, done + max(size, _SMOOTH_BLOCK))
 
 
 def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray | None,
@@ -116,34 +150,68 @@ def simulate_casadi(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     grid = _output_grid(plant, t_end, t_eval)
     starts = np.concatenate(([0.0], grid[:-1]))          # u is held on (starts[k], grid[k]]
     controls = np.vstack((ideal_speeds(plant, starts).T, external_forces(plant, starts)))
-    options = {"abstol": atol, "reltol": rtol, "max_num_steps": int(min(budget.max_steps, 2**31 - 1))}
-    function = ca.integrator("contacts", integrator, {"x": x, "u": u, "ode": ode}, 0.0,
-                             grid.tolist(), options)
     x0 = np.concatenate(([v0], plant.initial_speeds() if dynamic else []))
+    states = np.empty((grid.size, x0.size))              # the grid is the whole output
+    switches = plant.switching_times()
+    # a block may end right after these grid indices: the switching times, where the
+    # controls jump and a restart of the integrator costs nothing it would not cost anyway
+    ends = np.flatnonzero(np.isin(grid, switches)) + 1
     status, detail = SimulationStatus.SUCCESS, ""
-    try:
-        solution = function(x0=x0, u=controls)
-        states = np.array(solution["xf"]).reshape(x0.size, grid.size).T
-        t_out = np.concatenate(([0.0], grid))
-        y_out = np.vstack((x0, states))
-    except RuntimeError as error:
-        too_much = "TOO_MUCH_WORK" in str(error) or "too_much_work" in str(error).lower()
-        status = SimulationStatus.MAX_STEPS if too_much else SimulationStatus.FAILED
-        detail = f"{integrator}: {str(error).strip().splitlines()[-1][:200]}"
-        t_out, y_out = np.zeros(1), x0[None, :]
-    stats = function.stats()
-    meter.steps = int(stats.get("nsteps", 0))
-    meter.evaluations = int(stats.get("nfevals", 0))
-    if status is SimulationStatus.SUCCESS:
+    done, size, state = 0, _FIRST_BLOCK, x0
+    while done < grid.size:
+        remaining = budget.max_steps - meter.steps
+        if remaining <= 0:
+            status, detail = SimulationStatus.MAX_STEPS, (
+                f"{meter.steps} steps used of max_steps = {budget.max_steps}")
+            break
+        block = slice(done, _block_end(ends, done, size, grid.size))
+        options = {"abstol": atol, "reltol": rtol, "max_num_steps": int(min(remaining, 2**31 - 1))}
+        function = ca.integrator("contacts", integrator, {"x": x, "u": u, "ode": ode},
+                                 float(starts[done]), grid[block].tolist(), options)
+        try:
+            solution = function(x0=state, u=controls[:, block])
+        except RuntimeError as error:
+            too_much = "TOO_MUCH_WORK" in str(error) or "too_much_work" in str(error).lower()
+            status = SimulationStatus.MAX_STEPS if too_much else SimulationStatus.FAILED
+            detail = (f"{integrator}: {str(error).strip().splitlines()[-1][:200]} in "
+                      f"({starts[done]:.6g}, {grid[block.stop - 1]:.6g}] s")
+        stats = function.stats()
+        meter.steps += int(stats.get("nsteps", 0))
+        meter.evaluations += int(stats.get("nfevals", 0))
+        if status is not SimulationStatus.SUCCESS:
+            break
+        states[block] = np.array(solution["xf"]).reshape(x0.size, block.stop - done).T
+        state = states[block.stop - 1]
+        done = block.stop
         if meter.steps > budget.max_steps:
-            status, detail = SimulationStatus.MAX_STEPS, (f"{meter.steps} steps used of max_steps = "
-                                                f"{budget.max_steps} (checked after the call)")
-        elif meter.elapsed() > budget.wall_time:
-            status, detail = SimulationStatus.WALL_TIME, (f"{meter.elapsed():.3g} s used of wall_time = "
-                                                f"{budget.wall_time:g} s (checked after the call)")
-    if t_eval is not None and t_out.size > 1:            # a trajectory, complete or over budget
-        keep = np.searchsorted(t_out, t_eval)            # every t_eval is on the grid
-        t_out, y_out = t_out[keep], y_out[keep]
+            status, detail = SimulationStatus.MAX_STEPS, (
+                f"{meter.steps} steps used of max_steps = {budget.max_steps} (checked after "
+                f"the block ending at t = {grid[done - 1]:.6g} s)")
+            break
+        if meter.elapsed() > budget.wall_time:
+            status, detail = SimulationStatus.WALL_TIME, (
+                f"{meter.elapsed():.3g} s used of wall_time = {budget.wall_time:g} s (checked "
+                f"after the block ending at t = {grid[done - 1]:.6g} s)")
+            break
+        # Next block: twice as many output times, but no more than the rest of the wall
+        # budget allows at the time per output interval seen so far.
+        per_interval = meter.elapsed() / done
+        room = (budget.wall_time - meter.elapsed()) / max(per_interval, 1e-12)
+        size = int(max(1, min(2 * size, room)))
+    t_out = np.concatenate(([0.0], grid[:done]))
+    y_out = np.vstack((x0, states[:done]))
+    if t_eval is not None:                               # every t_eval is on the grid
+        keep = t_eval <= t_out[-1]
+        t_out, y_out = t_eval[keep], y_out[np.searchsorted(t_out, t_eval[keep])]
+    elif t_out.size > budget.max_samples + 1:            # a grid of many switching times
+        stride = 1 << math.ceil(math.log2((t_out.size - 1) / budget.max_samples))
+        index = np.arange(0, t_out.size, stride)
+        if index[-1] != t_out.size - 1:
+            index = np.append(index, t_out.size - 1)
+        note = (f"output decimated to every {stride}th of {t_out.size} grid times "
+                f"(max_samples = {budget.max_samples})")
+        detail = f"{detail}; {note}" if detail else note
+        t_out, y_out = t_out[index], y_out[index]
     return build_result(
         plant, method="casadi",
         setting=format_setting(integrator=integrator, friction=friction, eps=epsilon,

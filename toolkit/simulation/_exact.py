@@ -44,7 +44,8 @@ With constant commands the body passes each breakpoint at most once, so a burst 
 than ``2 K + 1000`` events (``K = 2 N + 2`` bounds the breakpoints) can only come from fast
 switching or chatter;
 such a burst inside ``(2 K + 1000) / Budget.max_event_rate`` seconds stops the run with
-``SimulationStatus.ZENO``.
+``SimulationStatus.ZENO``. Memory: one closed-form segment is stored per event; a run that
+would store ``Budget.max_samples`` of them stops with ``SimulationStatus.MAX_STEPS``.
 
 Tie convention
 --------------
@@ -172,6 +173,10 @@ class _Recorder:
         if self.rounds > budget.max_steps:
             self.status = SimulationStatus.MAX_STEPS
             self.detail = f"{budget.max_steps} rounds at t = {t:.6g} s"
+        elif len(self.rows) >= budget.max_samples:       # memory cap: segments stored
+            self.status = SimulationStatus.MAX_STEPS
+            self.detail = (f"{len(self.rows)} segments stored, max_samples = "
+                           f"{budget.max_samples}, at t = {t:.6g} s")
         elif time.perf_counter() > self.deadline:
             self.status = SimulationStatus.WALL_TIME
             self.detail = f"{budget.wall_time:g} s at t = {t:.6g} s"

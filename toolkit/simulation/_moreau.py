@@ -31,7 +31,9 @@ Dynamic motors are advanced first, by the model's implicit Euler step of the mot
 contact); their speeds then enter the body's step.
 
 Steps land exactly on every command or external-force switch; the step before a switch (and
-before ``t_end``) is shortened. ``budget.max_steps`` counts steps.
+before ``t_end``) is shortened. ``budget.max_steps`` counts steps. The steps are generated
+one at a time and only the requested ``t_eval`` times (or a record of at most
+``budget.max_samples`` steps) are kept, so memory does not grow with the number of steps.
 """
 
 from __future__ import annotations
@@ -43,8 +45,7 @@ import numpy as np
 
 from .._validation import as_float
 from ..model import Plant, implicit_step
-from ._reference import (BudgetExceeded, Meter, build_result, format_setting,
-                         samples_from_steps, segment_edges)
+from ._reference import BudgetExceeded, Meter, StepRecord, build_result, format_setting, segment_edges
 from ._result import Budget, SimulationResult, SimulationStatus
 
 __all__ = ["simulate_moreau", "moreau_step_staircase"]
@@ -159,8 +160,10 @@ def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
         As in :func:`toolkit.simulation.simulate` (checked there); ``budget.max_steps``
         counts steps.
     t_eval : ndarray of shape (T,) or None, s
-        Report times (linear interpolation between steps, the net force of the step that
-        ends at or after each time); ``None``: every step.
+        Report times (linear interpolation between the two steps around each time, the net
+        force of the step that ends at or after it), sampled while stepping: nothing else is
+        stored. ``None``: every step, up to ``budget.max_samples``; beyond that a decimated
+        record (:class:`~toolkit.simulation._reference.StepRecord`), said in the message.
     step : float, s
         Step length ``h > 0`` (shortened to land on switches and ``t_end``).
 
@@ -168,50 +171,113 @@ def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     -------
     SimulationResult
         ``force`` is ``m (W - V) / h`` of each step (the net force actually applied, the
-        stiction force included); no events are reported.
+        stiction force included); no events are reported. Memory does not grow with the
+        number of steps: a run over ``1e12`` steps is stopped by its budget with the steps
+        so far.
     """
     h = as_float(step, "step", "simulate_moreau", low=0.0, low_open=True)
     meter = Meter(budget, counts="steps")
     dynamic = plant.dynamic_motors
     speeds = plant.initial_speeds()
-    times, values, forces, rows = [0.0], [v0], [plant.net_force(0.0, v0, speeds)], [speeds]
+    out = _Output(t_eval, v0, plant.net_force(0.0, v0, speeds), speeds if dynamic else None,
+                  budget.max_samples)
     status, detail = SimulationStatus.SUCCESS, ""
     edges = segment_edges(plant, t_end)
     try:
         with np.errstate(over="ignore", invalid="ignore"):   # non-finite W: caught per step
-            _segments(plant, edges, h, v0, speeds, meter, times, values, forces, rows)
+            _segments(plant, edges, h, v0, speeds, meter, out)
     except BudgetExceeded as stop:
         status, detail = stop.status, stop.detail
-    step_t = np.array(times)
-    state = np.column_stack((values, forces))
-    if dynamic:
-        state = np.column_stack((state, np.array(rows[:len(times)])))
-    t_out, y_out = samples_from_steps(step_t, state, t_eval)
-    if t_eval is not None:                       # force of the step containing each time
-        index = np.minimum(np.searchsorted(step_t, t_out, side="left"), step_t.size - 1)
-        y_out[:, 1] = state[index, 1]
+    t_out, V_out, force_out, speeds_out = out.arrays()
+    note = out.note()
+    detail = "; ".join(part for part in (detail, note) if part)
     return build_result(
-        plant, method="moreau", setting=format_setting(h=h), t=t_out, V=y_out[:, 0],
-        contact_speeds=y_out[:, 2:] if dynamic else None, force=y_out[:, 1], meter=meter,
-        status=status, detail=detail)
+        plant, method="moreau", setting=format_setting(h=h), t=t_out, V=V_out,
+        contact_speeds=speeds_out, force=force_out, meter=meter, status=status, detail=detail)
+
+
+class _Output:
+    """What a Moreau run keeps: the requested times, sampled as the steps pass them, or its
+    steps in a :class:`StepRecord` (memory bounded by ``max_samples`` either way)."""
+
+    def __init__(self, t_eval: np.ndarray | None, v0: float, force0: float,
+                 speeds0: np.ndarray | None, max_samples: int) -> None:
+        self.t_eval = t_eval
+        self.dynamic = speeds0 is not None
+        row = [v0, force0] + ([] if speeds0 is None else speeds0.tolist())
+        if t_eval is None:
+            self.record: StepRecord | None = StepRecord(0.0, row, max_samples)
+            self.next_t = math.inf
+            return
+        self.record = None
+        T = t_eval.size
+        self.times = t_eval.tolist()
+        self.V = np.empty(T)
+        self.force = np.empty(T)
+        self.speeds = np.empty((T, speeds0.size)) if speeds0 is not None else None
+        k = 0
+        while k < T and self.times[k] <= 0.0:     # requests at t = 0: the initial state
+            self.V[k], self.force[k] = v0, force0
+            if self.speeds is not None:
+                self.speeds[k] = speeds0
+            k += 1
+        self.k = k
+        self.next_t = self.times[k] if k < T else math.inf
+
+    def add(self, t0: float, V: float, t1: float, W: float, force: float,
+            speeds0: np.ndarray | None = None, speeds1: np.ndarray | None = None) -> None:
+        """One step from ``(t0, V)`` to ``(t1, W)`` with net force ``force`` (and contact
+        speeds ``speeds0`` -> ``speeds1`` with dynamic motors)."""
+        record = self.record
+        if record is not None:
+            if speeds1 is None:
+                record.add(t1, (W, force))
+            else:
+                record.add(t1, [W, force, *speeds1.tolist()])
+            return
+        if self.next_t > t1:
+            return
+        times, k, T = self.times, self.k, len(self.times)
+        slope = (W - V) / (t1 - t0)
+        while k < T and times[k] <= t1:           # np.interp's formula; W itself at t1
+            x = times[k]
+            self.V[k] = W if x == t1 else V + slope * (x - t0)
+            self.force[k] = force
+            if speeds1 is not None:
+                self.speeds[k] = speeds1 if x == t1 else (
+                    speeds0 + (speeds1 - speeds0) / (t1 - t0) * (x - t0))
+            k += 1
+        self.k = k
+        self.next_t = times[k] if k < T else math.inf
+
+    def note(self) -> str:
+        return "" if self.record is None else self.record.note()
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(t, V, force, contact speeds or None)`` of what was reached."""
+        if self.record is not None:
+            t, y = self.record.arrays()
+            return t, y[:, 0], y[:, 1], (y[:, 2:] if self.dynamic else None)
+        k = self.k
+        speeds = None if self.speeds is None else self.speeds[:k]
+        return self.t_eval[:k], self.V[:k], self.force[:k], speeds
 
 
 def _segments(plant: Plant, edges: np.ndarray, h: float, V: float, speeds: np.ndarray,
-              meter: Meter, times: list[float], values: list[float], forces: list[float],
-              rows: list[np.ndarray]) -> None:
-    """Step over every segment between switches, appending to the output lists."""
+              meter: Meter, out: _Output) -> None:
+    """Step over every segment between switches, handing each step to ``out``.
+
+    The steps of a segment are generated one at a time (nominal ``h``, the last one
+    shortened to land on the segment's end), never listed: their number may be huge.
+    """
     dynamic = plant.dynamic_motors
     for t0, t1 in zip(edges[:-1], edges[1:]):
         t0, t1 = float(t0), float(t1)
         count = max(1, math.ceil((t1 - t0) / h * (1.0 - 1e-12)))
-        # (time at the end of the step, step length): nominal h, the last one shortened
-        grid = [(t0 + j * h, h) for j in range(1, count)]
-        grid.append((t1, t1 - (t0 + (count - 1) * h)))
         if dynamic or plant.compliance > 0:
-            V, speeds = _general_segment(plant, t0, grid, V, speeds, meter,
-                                         times, values, forces, rows)
+            V, speeds = _general_segment(plant, t0, t1, h, count, V, speeds, meter, out)
         else:
-            V = _staircase_segment(plant, t0, grid, V, meter, times, values, forces)
+            V = _staircase_segment(plant, t0, t1, h, count, V, meter, out)
 
 
 def _finite_step(t: float, W: float, force: float) -> float:
@@ -222,43 +288,47 @@ def _finite_step(t: float, W: float, force: float) -> float:
     return force
 
 
-def _staircase_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V: float,
-                       meter: Meter,
-                       times: list[float], values: list[float], forces: list[float]) -> float:
+def _staircase_segment(plant: Plant, t0: float, t1: float, h: float, count: int, V: float,
+                       meter: Meter, out: _Output) -> float:
     """Steps over a segment with constant contact speeds: one staircase, binary searches."""
     cs = plant.contacts.with_speeds(plant.command(t0))
     stair = cs.staircase()
     levels, plateaus = stair.levels, stair.plateaus
     ext, m, c = plant.external(t0), plant.mass, plant.damping
     cache: dict[float, tuple[float, list[float]]] = {}
-    for t_next, h in grid:
-        if h not in cache:
-            a = m / h + c
-            cache[h] = (a, (a * levels - plateaus[1:]).tolist())
-        a, upper = cache[h]
-        b = m * V / h + ext
+    t_prev = t0
+    last = t1 - (t0 + (count - 1) * h)
+    for j in range(1, count + 1):
+        t_next, hj = (t0 + j * h, h) if j < count else (t1, last)
+        if hj not in cache:
+            a = m / hj + c
+            cache[hj] = (a, (a * levels - plateaus[1:]).tolist())
+        a, upper = cache[hj]
+        b = m * V / hj + ext
         W, _ = _resolve(levels, plateaus, a, b, bisect.bisect_left(upper, b))
         meter.evaluations += 1
         meter.step()
-        forces.append(_finite_step(t_next, W, m * (W - V) / h))
-        times.append(t_next)
-        values.append(W)
-        V = W
+        out.add(t_prev, V, t_next, W, _finite_step(t_next, W, m * (W - V) / hj))
+        t_prev, V = t_next, W
     return V
 
 
-def _general_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V: float,
-                     speeds: np.ndarray, meter: Meter, times: list[float], values: list[float],
-                     forces: list[float], rows: list[np.ndarray]) -> tuple[float, np.ndarray]:
+def _general_segment(plant: Plant, t0: float, t1: float, h: float, count: int, V: float,
+                     speeds: np.ndarray, meter: Meter, out: _Output) -> tuple[float, np.ndarray]:
     """Steps with dynamic motors and/or compliance: staircase or kinks rebuilt every step."""
     command = plant.command(t0)
     ext, m, c = plant.external(t0), plant.mass, plant.damping
-    for t_next, h in grid:
-        if plant.dynamic_motors:
-            speeds = implicit_step(plant.motors, speeds, command, h)
+    t_prev = t0
+    last = t1 - (t0 + (count - 1) * h)
+    dynamic = plant.dynamic_motors
+    for j in range(1, count + 1):
+        t_next, hj = (t0 + j * h, h) if j < count else (t1, last)
+        before = speeds
+        if dynamic:
+            speeds = implicit_step(plant.motors, speeds, command, hj)
         else:
             speeds = command
-        a, b = m / h + c, m * V / h + ext
+        a, b = m / hj + c, m * V / hj + ext
         if plant.compliance > 0:
             W = _compliant_step(plant, speeds, a, b, meter)
         else:
@@ -266,9 +336,10 @@ def _general_segment(plant: Plant, t0: float, grid: list[tuple[float, float]], V
             W, _ = moreau_step_staircase(levels, plateaus, a, b)
             meter.evaluation()
         meter.step()
-        forces.append(_finite_step(t_next, W, m * (W - V) / h))
-        times.append(t_next)
-        values.append(W)
-        rows.append(speeds)
-        V = W
+        force = _finite_step(t_next, W, m * (W - V) / hj)
+        if dynamic:
+            out.add(t_prev, V, t_next, W, force, before, speeds)
+        else:
+            out.add(t_prev, V, t_next, W, force)
+        t_prev, V = t_next, W
     return V, speeds

@@ -42,11 +42,21 @@ class Budget:
     max_event_rate : float, 1/s
         Zeno guard of the exact method: more events than ``max_event_rate`` per simulated
         second, counted over the run so far (and at least 1000 events), stops the run.
+    max_samples : int
+        Memory cap: the most samples a run keeps (``>= 2``). The exact method stores one
+        closed-form segment per event (its dense output needs them all): a run that would
+        store more stops with ``MAX_STEPS``. The stepping methods (scipy, moreau) asked for
+        their own steps (``t_eval=None``) keep every step up to this many, then a decimated
+        record (every 2nd step, then every 4th, ..., always the first and the last). Requested
+        ``t_eval`` times are all reported (their number is the caller's choice) and nothing
+        else is stored per step. The default, 2**18, bounds a record to a few MB of arrays
+        (the exact method's segments, Python objects, to about 170 MB).
     """
 
     wall_time: float = 60.0
     max_steps: int = 10**7
     max_event_rate: float = 1e6
+    max_samples: int = 2**18
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "wall_time", as_float(
@@ -54,6 +64,7 @@ class Budget:
         object.__setattr__(self, "max_steps", as_int(self.max_steps, "max_steps", "Budget", low=1))
         object.__setattr__(self, "max_event_rate", as_float(
             self.max_event_rate, "max_event_rate", "Budget", low=0.0, low_open=True, finite=False))
+        object.__setattr__(self, "max_samples", as_int(self.max_samples, "max_samples", "Budget", low=2))
 
 
 @dataclass(frozen=True)

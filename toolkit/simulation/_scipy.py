@@ -29,7 +29,9 @@ external-force switches at a time (a fresh solver per segment, as a careful user
 the run: every right-hand-side evaluation is counted and checked against
 ``budget.max_steps`` and, every few calls, the wall clock; when a budget is spent a private
 exception aborts the solver and the accepted steps so far are returned with status
-``MAX_STEPS`` or ``WALL_TIME``.
+``MAX_STEPS`` or ``WALL_TIME``. Memory does not grow with the number of steps: only the
+requested ``t_eval`` times are stored, or (``t_eval=None``) a record of at most
+``budget.max_samples`` steps, decimated when full (:class:`StepRecord`).
 """
 
 from __future__ import annotations
@@ -41,8 +43,8 @@ import scipy.integrate
 
 from .._validation import as_float, check_option
 from ..model import Plant
-from ._reference import (BudgetExceeded, Meter, build_result, check_smoothing, format_setting,
-                         samples_from_steps, segment_edges)
+from ._reference import (BudgetExceeded, Meter, StepRecord, build_result, check_smoothing,
+                         format_setting, segment_edges)
 from ._result import Budget, SimulationResult, SimulationStatus
 
 __all__ = ["simulate_scipy", "SCIPY_SOLVERS"]
@@ -87,8 +89,9 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         counts right-hand-side evaluations (finite-difference Jacobian evaluations included).
     t_eval : ndarray of shape (T,) or None, s
         Report times, evaluated with the solver's own dense output on the step that
-        contains each time; ``None``: every accepted step. A run stopped by a budget
-        reports only the times it reached.
+        contains each time (nothing else is stored per step); ``None``: every accepted step,
+        up to ``budget.max_samples``, then a decimated record (said in the message). A run
+        stopped by a budget reports only the times it reached.
     solver : {"rk45", "lsoda", "radau", "bdf"}
     friction : {"sign", "tanh", "stribeck"}
     epsilon : float, m/s
@@ -112,9 +115,10 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     dynamic = plant.dynamic_motors
     meter = Meter(budget, counts="evaluations")
     y = np.concatenate(([v0], plant.initial_speeds() if dynamic else []))
-    times, states = [0.0], [y.copy()]
-    dense_t: list[float] = []
-    dense_y: list[np.ndarray] = []
+    # Memory bounded whatever the number of steps: the requested times only (filled as the
+    # steps pass them), or a record of at most budget.max_samples steps.
+    record = StepRecord(0.0, y, budget.max_samples) if t_eval is None else None
+    samples = None if t_eval is None else _Samples(t_eval, y)
     status, detail = SimulationStatus.SUCCESS, ""
     edges = segment_edges(plant, t_end)
     try:
@@ -130,23 +134,50 @@ def simulate_scipy(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
                     raise BudgetExceeded(SimulationStatus.FAILED, f"{SCIPY_SOLVERS[solver]}: the state is not "
                                          f"finite at t = {stepper.t:g} s")
                 meter.step()
-                if t_eval is not None:
-                    _sample_step(stepper, t_eval, dense_t, dense_y)
-                times.append(stepper.t)
-                states.append(stepper.y.copy())
+                if samples is not None:
+                    samples.take(stepper)
+                else:
+                    record.add(stepper.t, stepper.y.copy())
                 meter.check_clock()
             y = stepper.y.copy()
     except BudgetExceeded as stop:
         status, detail = stop.status, stop.detail
-    step_t, step_y = np.array(times), np.array(states)
-    if t_eval is None:
-        t_out, y_out = step_t, step_y
+    if record is not None:
+        t_out, y_out = record.arrays()
+        detail = "; ".join(part for part in (detail, record.note()) if part)
     else:
-        t_out, y_out = _dense_samples(t_eval, step_t, step_y, dense_t, dense_y)
+        t_out, y_out = samples.arrays()
     return build_result(
         plant, method=solver, setting=setting, t=t_out, V=y_out[:, 0],
         contact_speeds=y_out[:, 1:] if dynamic else None, force=None, meter=meter,
         status=status, detail=detail, friction=friction, epsilon=epsilon)
+
+
+class _Samples:
+    """The requested times of a run, filled from each step's dense output as the steps pass
+    them (preallocated: memory is that of the request, not of the steps)."""
+
+    def __init__(self, t_eval: np.ndarray, y0: np.ndarray) -> None:
+        self.t_eval = t_eval
+        self.y = np.empty((t_eval.size, y0.size))
+        k = int(np.searchsorted(t_eval, 0.0, side="right"))   # requests at t = 0: y0 exactly
+        self.y[:k] = y0
+        self.k = k
+        self.next_t = float(t_eval[k]) if k < t_eval.size else np.inf
+
+    def take(self, stepper: Any) -> None:
+        """Evaluate the solver's dense output on its last step at the requested times inside it."""
+        if self.next_t > stepper.t:
+            return
+        j = int(np.searchsorted(self.t_eval, stepper.t, side="right"))
+        values = stepper.dense_output()(self.t_eval[self.k:j])
+        self.y[self.k:j] = np.atleast_2d(values.T).reshape(j - self.k, -1)
+        self.k = j
+        self.next_t = float(self.t_eval[j]) if j < self.t_eval.size else np.inf
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, y)`` at the requested times reached so far."""
+        return self.t_eval[:self.k], self.y[:self.k]
 
 
 def _solver_call(solver: str, function: Any, *args: Any, **kwargs: Any) -> Any:
@@ -162,25 +193,3 @@ def _solver_call(solver: str, function: Any, *args: Any, **kwargs: Any) -> Any:
             return function(*args, **kwargs)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
         raise BudgetExceeded(SimulationStatus.FAILED, f"{SCIPY_SOLVERS[solver]}: {error}") from error
-
-
-def _sample_step(stepper: Any, t_eval: np.ndarray, out_t: list[float],
-                 out_y: list[np.ndarray]) -> None:
-    """Evaluate the solver's dense output on its last step at the requested times inside it."""
-    lo, hi = stepper.t_old, stepper.t
-    inside = t_eval[(t_eval > lo) & (t_eval <= hi)]
-    if inside.size:
-        values = stepper.dense_output()(inside)
-        out_t.extend(inside.tolist())
-        out_y.extend(np.atleast_2d(values.T))
-
-
-def _dense_samples(t_eval: np.ndarray, step_t: np.ndarray, step_y: np.ndarray,
-                   dense_t: list[float], dense_y: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Merge the dense-output samples with the exact initial state (at t = 0 requests)."""
-    t_at0, y_at0 = samples_from_steps(step_t[:1], step_y[:1], t_eval[t_eval <= 0.0])
-    if not dense_t:
-        return t_at0, y_at0
-    t_all = np.concatenate((t_at0, np.array(dense_t)))
-    y_all = np.concatenate((y_at0, np.array(dense_y)), axis=0)
-    return t_all, y_all

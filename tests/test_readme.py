@@ -1,0 +1,140 @@
+"""The README is true on a fresh clone (issue 10, row 6).
+
+- every link resolves to a file inside the repository (no link outside it, such as the
+  team's ``../shared/PHYSICS.md``, and no mention of that file);
+- every notebook it names exists and contains what the README says it shows, and the numbers
+  it quotes from a notebook come out of the same computation here;
+- every scene key that :mod:`toolkit.scene` accepts is in the README's table, in the row of
+  its section, with the units and meanings issue 10 found missing;
+- the exit codes it documents are those of :data:`toolkit.cli.EXIT_CODES`.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import nbformat
+import numpy as np
+import pytest
+
+import toolkit as tk
+from toolkit.cli import EXIT_CODES
+from toolkit.scene import (BodySpec, ContactsSpec, MotorsSpec, ReportSpec, ScheduleSpec, SensorsSpec,
+                           SimulationSpec, TargetSpec)
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+def _notebook_source(name: str) -> str:
+    notebook = nbformat.read(ROOT / "notebooks" / name, as_version=4)
+    return "\n".join(cell.source for cell in notebook.cells)
+
+
+def test_every_link_stays_inside_the_repository() -> None:
+    targets = LINK.findall(README) + LINK.findall((ROOT / "docs" / "physics.md").read_text())
+    assert targets, "the README links its physics page"
+    for target in targets:
+        assert not re.match(r"[a-z]+:", target), f"link outside the repository: {target}"
+        path = (ROOT / target.split("#")[0]).resolve()
+        assert path.is_relative_to(ROOT) and path.exists(), target
+    # the team's brief is not part of a clone: the README may not send readers there
+    assert "PHYSICS.md" not in README and "../shared" not in README
+
+
+def test_named_files_exist() -> None:
+    for name in set(re.findall(r"`((?:notebooks|designs|docs|tests)/[\w./-]+\.\w+)`", README)):
+        assert (ROOT / name).exists(), name
+
+
+def test_force_speed_curves_notebook_shows_the_allocator_and_dt_to_1e_12() -> None:
+    # The README cites this notebook for "the allocator finds that split from
+    # FrictionFraction(n/5) and the exact simulation gives dT = ... to 1e-12": the notebook
+    # must do both (tests/test_notebooks.py runs it, so its asserts hold).
+    assert "notebooks/force_speed_curves.ipynb" in README and "to 1e-12" in README
+    source = _notebook_source("force_speed_curves.ipynb")
+    assert "tk.allocate(tk.FrictionFraction(n / 5" in source
+    assert "tk.simulate(plant" in source and "1e-12 * closed" in source
+    assert "mass * 2 * v_max / (plant.contacts.total_force * n / 5)" in source
+
+
+def test_paper_table_numbers_come_from_the_designs_it_names() -> None:
+    # The README's table of the paper's results quotes the median-law slopes "0.762 +- 0.009"
+    # (designs/median_law.toml) and "0.990 +- 0.018" (designs/median_law_nonideal.toml) and a
+    # 90.9 % reduction (designs/residual_friction.toml): the same sweeps give them to the
+    # digits quoted (atol: half a unit of the last digit printed).
+    from toolkit.scene import load_scene
+    from toolkit.study import sweep_scene
+
+    row = next(line for line in README.splitlines() if line.startswith("| median law:"))
+    assert "designs/median_law.toml" in row and "designs/median_law_nonideal.toml" in row
+    (ideal, ideal_se), (other, other_se) = [tuple(map(float, m)) for m in
+                                            re.findall(r"([0-9.]+) \+- ([0-9.]+) \(", row)]
+    for design, quoted in (("median_law", (ideal, ideal_se)), ("median_law_nonideal", (other, other_se))):
+        summary = sweep_scene(load_scene(ROOT / "designs" / f"{design}.toml")).summary
+        np.testing.assert_allclose([summary["slope"], summary["slope_stderr"]], quoted, rtol=0, atol=5e-4)
+    row = next(line for line in README.splitlines() if line.startswith("| friction reduction at"))
+    quoted = float(re.search(r"\| ([0-9.]+) % \(wheels", row).group(1))
+    summary = sweep_scene(load_scene(ROOT / "designs" / "residual_friction.toml")).summary
+    assert 100 * summary["reduction"] == pytest.approx(quoted, abs=0.05)
+
+
+def _table_row(section: str) -> str:
+    rows = [line for line in README.splitlines() if line.startswith(f"| `[{section}]` |")]
+    assert len(rows) == 1, section
+    return rows[0]
+
+
+@pytest.mark.parametrize("section, keys", [
+    ("scene", ("name", "description")),
+    ("contacts", ContactsSpec.KEYS),
+    ("body", BodySpec.KEYS),
+    ("motors", MotorsSpec.KEYS),
+    ("sensors", SensorsSpec.KEYS),
+    ("target", TargetSpec.COMMON + tuple(k for keys in TargetSpec._KIND_KEYS.values() for k in keys)
+     + tuple(TargetSpec._KIND_KEYS)),
+    ("schedule", ("kind", "v0", "period", "epsilon", "horizon", "time_limit")
+     + tuple(k for keys in ScheduleSpec._KIND_KEYS.values() for k in keys) + tuple(ScheduleSpec._KIND_KEYS)),
+    ("simulation", SimulationSpec.KEYS),
+    ("report", ReportSpec.KEYS),
+])
+def test_every_scene_key_is_in_the_readme_table(section: str, keys: tuple[str, ...]) -> None:
+    row = _table_row(section)
+    for key in keys:
+        assert re.search(rf"`{key}(`| =)", row), (section, key)
+
+
+def test_scene_keys_issue_10_found_undocumented_have_their_meaning_and_units() -> None:
+    target = _table_row("target")
+    assert re.search(r"`margin`: a count of contacts, not a speed", target)
+    body = _table_row("body")
+    assert "`{times, values}`" in body and "one entry more than `times`" in body
+    motors = _table_row("motors")
+    assert "`clip` (bool" in motors
+    simulation = _table_row("simulation")
+    for key in ("wall_time", "max_steps", "max_event_rate"):
+        assert f"`{key}`" in simulation
+    # every unit-bearing key of [body] and [motors] states its unit beside it
+    for row, pairs in ((body, ("`mass` (kg)", "`damping` (N s/m)", "`contact_radius` (m)")),
+                       (motors, ("`lag` (s)", "`rate_limit` (m/s^2)", "`compliance` ((m/s)/N)"))):
+        for pair in pairs:
+            assert pair in row, pair
+
+
+def test_exit_codes_in_the_readme_are_the_clis() -> None:
+    documented = {int(code) for code in re.findall(r"^\| (\d+) \| ", README, flags=re.M)}
+    assert documented == set(EXIT_CODES)
+    assert "--strict" in README
+
+
+def test_performance_numbers_name_their_command() -> None:
+    # Every row of the measured-performance table names the benchmark that measures it.
+    table = README.split("## Measured performance", 1)[1].split("\n\n## ", 1)[0]
+    rows = [line for line in table.splitlines() if line.startswith("| `")]
+    assert rows
+    benches = {path.stem for path in (ROOT / "toolkit" / "bench").glob("*.py")} - {"__init__", "__main__"}
+    for row in rows:
+        name = re.match(r"\| `([a-z]+)", row).group(1)
+        assert name in benches, row

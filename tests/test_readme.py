@@ -20,8 +20,8 @@ import pytest
 
 import toolkit as tk
 from toolkit.cli import EXIT_CODES
-from toolkit.scene import (BodySpec, ContactsSpec, MotorsSpec, ReportSpec, ScheduleSpec, SensorsSpec,
-                           SimulationSpec, TargetSpec)
+from toolkit.scene import (BodySpec, ContactsSpec, ControlSpec, EstimationSpec, MotorsSpec, ReportSpec,
+                           ScheduleSpec, SensorsSpec, SimulationSpec, SweepSpec, TargetSpec)
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -82,9 +82,11 @@ def test_paper_table_numbers_come_from_the_designs_it_names() -> None:
 
 
 def _table_row(section: str) -> str:
+    # the section's row of the scene-file table (and, for [estimation] and [control], the rows
+    # of their own key table)
     rows = [line for line in README.splitlines() if line.startswith(f"| `[{section}]` |")]
-    assert len(rows) == 1, section
-    return rows[0]
+    assert rows, section
+    return "\n".join(rows)
 
 
 @pytest.mark.parametrize("section, keys", [
@@ -99,6 +101,9 @@ def _table_row(section: str) -> str:
      + tuple(k for keys in ScheduleSpec._KIND_KEYS.values() for k in keys) + tuple(ScheduleSpec._KIND_KEYS)),
     ("simulation", SimulationSpec.KEYS),
     ("report", ReportSpec.KEYS),
+    ("estimation", EstimationSpec.KEYS),
+    ("control", ControlSpec.COMMON),
+    ("sweep", SweepSpec.COMMON),
 ])
 def test_every_scene_key_is_in_the_readme_table(section: str, keys: tuple[str, ...]) -> None:
     row = _table_row(section)

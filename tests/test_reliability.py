@@ -122,9 +122,6 @@ def test_real_report_shortfall_is_its_closest_rows_error() -> None:
     assert precision_shortfalls(report) == []
 
 
-@pytest.mark.xfail(strict=True, reason="needs toolkit/cli.py's _cmd_precision to end with "
-                   "`return _finish(precision_shortfalls(report))` (cli.py belongs to another "
-                   "engineer's branch); strict: passes, and so fails here, once that line is merged")
 def test_precision_command_exits_3_on_a_shortfall(monkeypatch: pytest.MonkeyPatch,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     from toolkit import cli

@@ -29,7 +29,7 @@ from typing import Any
 from . import __version__
 from ._io import check_output_dir
 from .errors import SceneError, ToolkitError
-from .precision import exact_speedup, precision_report
+from .precision import exact_speedup, precision_report, precision_shortfalls
 from .report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
                      study_to_dict, sweep_lines, sweep_to_dict, to_json, write_precision, write_schedule,
                      write_study, write_sweep)
@@ -179,7 +179,7 @@ def _cmd_precision(args: argparse.Namespace) -> int:
                       f"ratio {speedup.ratio:.1f}x" if speedup.reference is not None else "none"))
         if written:
             print(f"wrote {', '.join(str(p) for p in written)}")
-    return EXIT_OK
+    return _finish(precision_shortfalls(report))
 
 
 # -- estimate (issue 9): every estimator of the scene over one simulated encoder record -------

@@ -44,7 +44,7 @@ experiment's parameters in ``[sweep]``, in SI units, documented on its class in
 ``fraction`` (mu/mu0), ``start`` (s), ``hold`` (m/s), ``duration`` (s), ``v0`` (m/s),
 ``sensors`` (true/false; default: whether ``[sensors]`` exists), ``estimator`` (one of
 :data:`LOOP_ESTIMATORS`), ``rate`` (Hz, ideal loop), ``seed``, the noise keys as above,
-``budget = {wall_time (s), max_steps, max_event_rate (1/s)}`` per plant step,
+``budget = {wall_time (s), max_steps, max_event_rate (1/s), max_samples}`` per plant step,
 ``cross_check`` (true/false: also simulate the loop with python-control). See
 :class:`EstimationSpec` and :class:`ControlSpec`. An estimator or a closed loop reading
 encoders on a scene without them is refused, and so is a rate that would take more than
@@ -91,6 +91,7 @@ import tomli_w
 from ._validation import suggestion
 from .errors import SceneError, SceneFileNotFoundError
 from .model import ContactSet
+from .simulation import Budget
 from .scene_build import SceneObjects, build_scene
 
 __all__ = [
@@ -502,7 +503,7 @@ class ScheduleSpec:
 class SimulationSpec:
     """``[simulation]``: ``t_end`` (s), ``v0`` (m/s), ``method`` (default ``"exact"``),
     ``options`` (a table passed to :func:`toolkit.simulate`; its ``budget`` table, with keys
-    ``wall_time`` (s), ``max_steps`` and ``max_event_rate`` (1/s), becomes a
+    ``wall_time`` (s), ``max_steps``, ``max_event_rate`` (1/s) and ``max_samples``, becomes a
     :class:`toolkit.simulation.Budget`), ``commands`` (piecewise-constant contact-speed
     commands ``{times, values}``: ``values`` has one entry more than ``times``, each a list of
     n speeds in m/s within the motors' speed limits)."""
@@ -666,7 +667,7 @@ class ControlSpec:
     ``estimator`` (one of :data:`LOOP_ESTIMATORS`, default ``"kalman"``), ``rate`` (Hz, the
     ideal loop's; with sensors theirs), ``seed`` (integer), ``missed_count_prob``,
     ``count_noise`` (counts), ``jitter`` (s), ``budget`` (``{wall_time, max_steps,
-    max_event_rate}`` of each plant step: s, count, 1/s), ``cross_check`` (true: also
+    max_event_rate, max_samples}`` of each plant step: s, count, 1/s, count), ``cross_check`` (true: also
     simulate the loop as a python-control interconnection, :mod:`toolkit.interop`, and
     report the largest difference).
     """
@@ -702,7 +703,7 @@ class ControlSpec:
         budget = None
         if "budget" in table:
             budget = dict(_table("control.budget", table["budget"]))
-            _check_keys("control.budget", budget, ("wall_time", "max_steps", "max_event_rate"))
+            _check_keys("control.budget", budget, tuple(item.name for item in fields(Budget)))
         return cls(
             controller=kind, params=params,
             duration=_number("control.duration", get("duration", 10.0), low=0.0, low_open=True),

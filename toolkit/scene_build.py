@@ -49,7 +49,7 @@ import math
 import re
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -364,10 +364,11 @@ def _simulation_options(scene: Scene) -> dict[str, Any]:
     options = dict(scene.simulation.options)
     if isinstance(options.get("budget"), Mapping):
         table = options["budget"]
-        unknown = [key for key in table if key not in ("wall_time", "max_steps", "max_event_rate")]
+        keys = tuple(item.name for item in fields(Budget))
+        unknown = [key for key in table if key not in keys]
         if unknown:
             raise SceneError(f"Unknown key {unknown[0]!r} in [simulation.options.budget]. "
-                             "Valid keys: wall_time, max_steps, max_event_rate.")
+                             f"Valid keys: {', '.join(keys)}.")
         with _scene_keys("simulation", _same_keys("simulation.options.budget", tuple(table))):
             options["budget"] = Budget(**table)
     return options

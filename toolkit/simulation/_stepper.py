@@ -254,7 +254,8 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
     if status is _SUCCESS and not (math.isfinite(t) and math.isfinite(V)):
         status = SimulationStatus.FAILED
         rec.detail = f"the body speed left the floating-point range (V = {V:g} m/s)"
-    detail = rec.detail if status is not _SUCCESS else f"{len(rec.events)} events"
+    events = rec.events()
+    detail = rec.detail if status is not _SUCCESS else f"{len(events)} events"
     return ExactStep(ExactState._trusted(float(t), float(V), speeds_end, stuck, pending),
-                     rec.displacement(t), travelled, tuple(rec.events), status,
+                     rec.displacement(t), travelled, events, status,
                      status_message(status, detail))

@@ -25,11 +25,42 @@ writable at all the kernels are compiled without a cache (each process pays the 
 from __future__ import annotations
 
 import importlib
+import os
 from types import ModuleType
 
-__all__ = ["load", "loaded"]
+__all__ = ["COMPILE_AFTER", "charge", "kernels", "load", "loaded", "warm_up"]
 
 _LOADED: dict[str, ModuleType] = {}
+
+#: Work (in units of about one interpreted microsecond: a query time, a contact, an event
+#: round) that a process runs through the kernels as Python before it compiles them. Loading
+#: compiled kernels costs about 0.25 s even from a warm cache (numba and its compiler runtime),
+#: more than a short run of the CLI spends in them interpreted; a process that keeps calling
+#: them compiles once it has spent about that much interpreting (the ski-rental rule: never
+#: more than twice the better choice in hindsight). The two run the same source with the same
+#: IEEE operations and libm calls, so results do not depend on the switch (tested).
+#: ``ACTIVE_CONTACTS_COMPILE=eager`` compiles at the first kernel call instead.
+COMPILE_AFTER = 250_000
+_WORK = [0]
+_EAGER = os.environ.get("ACTIVE_CONTACTS_COMPILE", "").strip().lower() == "eager"
+
+
+def kernels(name: str, work: int = 0) -> ModuleType:
+    """The kernel module ``toolkit._compiled.<name>`` to call now: compiled once this process
+    has compiled it; before that the Python source, until the work charged (plus this call's
+    ``work``) reaches :data:`COMPILE_AFTER`, when it is compiled (:func:`load`)."""
+    module = _LOADED.get(name)
+    if module is not None:
+        return module
+    _WORK[0] += work
+    if _EAGER or _WORK[0] >= COMPILE_AFTER:
+        return load(name)
+    return importlib.import_module(f"{__name__}.{name}")
+
+
+def charge(work: int) -> None:
+    """Count ``work`` units run interpreted toward :data:`COMPILE_AFTER`."""
+    _WORK[0] += work
 
 
 def load(name: str) -> ModuleType:
@@ -60,3 +91,36 @@ def _compile(module: ModuleType) -> None:
         except RuntimeError:        # no writable cache directory anywhere: compile per process
             compiled = numba.njit(cache=False, **options)(function)
         setattr(module, fname, compiled)
+
+
+def warm_up() -> float:
+    """Compile (or load from the cache) the kernels the exact method, the batch path and
+    :meth:`ContactSet.force` run, on tiny inputs of the usual array kinds; returns the time
+    it took (s). Benchmarks and the tests call it before timing anything."""
+    import time
+
+    import numpy as np
+
+    from ..model import ContactSet, Motors, Plant
+    from ..simulation import ExactState, advance, simulate, simulate_batch
+
+    started = time.perf_counter()
+    load("core")
+    contacts = ContactSet([-0.2, 0.1, 0.3], [1.0, 2.0, 1.0])
+    contacts.force(np.linspace(-1.0, 1.0, 64))
+    contacts.force(0.0)
+    for plant in (Plant(contacts, 1.0), Plant(contacts, 1.0, damping=0.5, external_force=0.5),
+                  Plant(contacts, 1.0, motors=Motors(compliance=0.01))):
+        result = simulate(plant, 1.0)
+        simulate(plant, 1.0, t_eval=np.linspace(0.0, 1.0, 5))
+        result.speed_at(np.array([0.5, 0.25]))
+    lagged = Plant(contacts, 1.0, motors=Motors(lag=0.01))
+    state = ExactState.initial(lagged)
+    for k in range(4):
+        command = np.array([-0.2, 0.1, 0.3 - 0.01 * k])
+        command.setflags(write=k % 2 == 0)      # the caller's command, writable or not
+        state = advance(lagged, state, command, 0.02 * (k + 1)).state
+    simulate_batch(np.array([[0.1, -0.1, 0.2]]), None, 1.0, 1.0)
+    simulate_batch(np.array([[0.1, -0.1, 0.2]]), np.ones((1, 3)), np.ones(1), 1.0,
+                   damping=np.zeros(1), external=np.zeros(1), v0=np.zeros(1))
+    return time.perf_counter() - started

@@ -14,6 +14,11 @@ Two models share one interface (:class:`ContactModel`):
 - :class:`ContactDistribution`: a continuous density of contact speed over a contact patch,
   from a ``scipy.stats`` distribution or a tabulated histogram.
 
+Evaluation. :meth:`ContactSet.force` on many speeds is the kernel
+:func:`toolkit._compiled.core.coulomb_force` over these prefix sums (one source, compiled by
+numba once a process has run enough through it); the same prefix sums, snapped by
+:func:`toolkit._compiled.core.net_force`, are the force landscape of the exact simulator.
+
 Ties. Exactly at a contact speed the force is set-valued. :meth:`ContactSet.force` returns
 the midpoint of the interval there (``sign(0) = 0``); :meth:`ContactSet.force_bounds`
 returns the interval itself. Net forces are computed from prefix sums of the sorted
@@ -31,6 +36,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from .._compiled import kernels
 from .._validation import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
@@ -113,9 +119,10 @@ class ContactSet:
 
     Notes
     -----
-    Construction sorts once, ``O(n log n)``; :meth:`force`, :meth:`force_bounds` and
-    :meth:`cdf` on ``m`` speeds then cost ``O(m log n)`` time and ``O(n + m)`` memory
-    (binary search into prefix sums), never an ``n x m`` matrix.
+    Construction sorts once, ``O(n log n)``; :meth:`force_bounds` and :meth:`cdf` on ``m``
+    speeds then cost ``O(m log n)`` time and ``O(n + m)`` memory (binary search into prefix
+    sums), :meth:`force` ``O(n + m)`` expected (a bucket index over the sorted speeds), never
+    an ``n x m`` matrix.
 
     Examples
     --------
@@ -257,8 +264,15 @@ class ContactSet:
             ``V`` contribute 0, i.e. ``sign(0) = 0``). Values below :attr:`tie_tolerance`
             in magnitude are exactly 0.
         """
-        below, above, _ = self._parts(V, "ContactSet.force")
-        return self._snap(above - below)
+        query = _as_query(V, "ContactSet.force")
+        flat = np.ascontiguousarray(query.ravel()).view()
+        flat.setflags(write=False)                 # one kind of array: one compiled kernel
+        out = np.empty(flat.size)
+        # The kernel (toolkit._compiled.core.coulomb_force, compiled once a process has run
+        # enough through it): a bucket index over the levels, O(1) per speed expected.
+        kernels("core", 2 * flat.size).coulomb_force(self._levels, self._below, self._above,
+                                                     self.tie_tolerance, flat, out)
+        return out.reshape(query.shape)
 
     def force_bounds(self, V: Any) -> tuple[np.ndarray, np.ndarray]:
         """The set-valued net force at ``V`` as ``(lower, upper)``, N.

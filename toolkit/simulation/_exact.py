@@ -72,8 +72,8 @@ from typing import Any
 
 import numpy as np
 
-from .._compiled import core as _core     # the kernels' source, as Python (imports no numba)
-from .._compiled import load as _load
+from .. import _compiled
+from .._compiled import core as _core     # the kernels' source module (imports no numba)
 from ..model import ContactSet, MotorPiece, PiecewiseConstant, Plant, compliant_breakpoints
 from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
 
@@ -87,14 +87,20 @@ _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than
 _sum, _max, _abs = np.add.reduce, np.maximum.reduce, np.abs
 _EMPTY = np.empty(0)
 _EMPTY.setflags(write=False)
-_KERNELS: list[ModuleType] = []
+_COMPILED: list[ModuleType] = []     # the kernel module, once compiled in this process
 
 
-def _kernels() -> ModuleType:
-    """The compiled kernel module (:mod:`toolkit._compiled.core`), loaded on first use."""
-    if not _KERNELS:
-        _KERNELS.append(_load("core"))
-    return _KERNELS[0]
+def _kernels(work: int = 0) -> ModuleType:
+    """The kernel module :mod:`toolkit._compiled.core` to call: compiled, or its source run as
+    Python while the process has not done enough work to pay for compiling
+    (:func:`toolkit._compiled.kernels`; ``work``: this call's, about one unit per
+    interpreted microsecond)."""
+    if _COMPILED:
+        return _COMPILED[0]
+    module = _compiled.kernels("core", work)
+    if "core" in _compiled.loaded():
+        _COMPILED.append(module)
+    return module
 
 
 # -- closed forms (the kernels' own source, run as Python by the dynamic-motor engine) --------
@@ -235,7 +241,8 @@ class _Recorder:
     def displacement(self, t_stop: float) -> float:
         """The exact integral of ``V`` (m) from the first segment's start to ``t_stop`` (s)
         (:func:`toolkit._compiled.core.displacement`)."""
-        return _kernels().displacement(self.seg, self.istate[_core.I_NSEG], self.mu, t_stop)
+        n = self.istate[_core.I_NSEG]
+        return _kernels(2 * int(n)).displacement(self.seg, n, self.mu, t_stop)
 
     def dense(self, t_stop: float, success: bool, t_end: float, linear: bool) -> _Dense:
         table = self.seg[:self.n_segments].copy()
@@ -246,7 +253,8 @@ class _Recorder:
                 mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Segment starts and the final time: ``t`` (s), ``V`` (m/s) and the force ``m dV/dt``
         (N) from the right, exact, as fresh read-only arrays of shape (T,)."""
-        table = _kernels().samples(self.seg, self.istate[_core.I_NSEG], self.mu, t_stop,
+        n = self.istate[_core.I_NSEG]
+        table = _kernels(2 * int(n)).samples(self.seg, n, self.mu, t_stop,
                                    V_stop, mass)
         table.setflags(write=False)
         return table[0], table[1], table[2]
@@ -272,10 +280,12 @@ class _Dense:
     def values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(V, dV/dt)`` at ``query`` times (s, 1-d float64, any order and values): fresh
         arrays, m/s and m/s^2 (the right derivative)."""
-        if not query.flags.c_contiguous:
-            query = np.ascontiguousarray(query)
+        if query.flags.writeable or not query.flags.c_contiguous:
+            query = np.ascontiguousarray(query).view()    # read-only: one kernel specialization
+            query.setflags(write=False)
         V, dV = np.empty(query.size), np.empty(query.size)
-        _kernels().dense_values(self.table, self.mu, query, self.success, self.t_stop, V, dV)
+        _kernels(2 * query.size).dense_values(self.table, self.mu, query, self.success,
+                                              self.t_stop, V, dV)
         return V, dV
 
     def linear_values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -336,7 +346,7 @@ class _CoulombLandscape:
         # The private prefix sums of ContactSet (levels, below, above) are exactly the
         # staircase; reading them spares an O(N log N) sort per new plant.
         self.levels, self.below, self.above = contacts._levels, contacts._below, contacts._above
-        self.total = contacts._total
+        self.total = float(self.below[-1])         # F_tot as the prefix sums add it up
         self.first = np.full(self.levels.size, -1, dtype=np.int64)   # filled by the kernel
         self._contacts = contacts
         self.args = (True, self.levels, self.below, self.above, contacts.speeds,
@@ -385,6 +395,8 @@ class _CompliantLandscape:
         self.base_x = np.concatenate(([x[0]], x))
         self.base_F = np.concatenate(([total], at_x))
         self.base_F[-1] = -total
+        for array in (x, at_x, slope, self.base_x, self.base_F):
+            array.setflags(write=False)       # (read-only like the Coulomb arrays: one kernel)
         self.args = (False, x, _EMPTY, _EMPTY, _EMPTY, _EMPTY, first.astype(np.int64),
                      self.base_x, self.base_F, slope, at_x, total)
 
@@ -484,7 +496,8 @@ def _ideal_piece(plant: Plant, land: _Landscape, E: float, a: float, b: float, V
         The time and speed reached (``b`` unless the budget stopped the run, then
         ``stopped``), and the contact the body is stuck to there.
     """
-    kernel = _kernels().ideal_piece
+    core = _kernels(20)
+    kernel = core.ideal_piece
     fstate, istate = rec.fstate, rec.istate
     fstate[0] = a                                   # (core.F_T, F_V, I_STUCK, I_STARTED)
     fstate[1] = V
@@ -502,6 +515,8 @@ def _ideal_piece(plant: Plant, land: _Landscape, E: float, a: float, b: float, V
         elif code == _core.DONE and time.perf_counter() > rec.deadline:
             code = -1
         break
+    if not _COMPILED:
+        _compiled.charge(10 * int(istate[5]))         # (core.I_ROUNDS) interpreted rounds
     t, V, k = float(fstate[0]), float(fstate[1]), int(istate[2])
     stuck = None if k < 0 else k
     if code != _core.DONE:
@@ -1074,7 +1089,7 @@ def _quiet_piece(quiet: _QuietPlant, start: np.ndarray, u: np.ndarray, V: float,
         displacements over the piece (m): each contact's (fresh, shape (n,)), the body's.
     """
     out = np.empty((2, start.size))
-    certified, V_end, body = _kernels().quiet_piece(
+    certified, V_end, body = _kernels(10 * start.size).quiet_piece(
         *quiet.args, start, u, V, -1 if stuck is None else stuck, E, S, out)
     if not certified:
         return None

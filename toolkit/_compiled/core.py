@@ -63,12 +63,13 @@ RATIO_INTEGRAL_SERIES = tuple((-1.0) ** k / math.factorial(k + 2) for k in range
 SMALL = 64
 
 # Kernels and their numba options (toolkit._compiled.load compiles these names).
+_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 KERNELS = {
-    "expm1_ratio": {}, "expm1_ratio_integral": {}, "reach_time": {}, "net_force": {},
-    "coulomb_force": {}, "lowest_contact": {}, "push_segment": {}, "push_event": {},
-    "budget_code": {}, "ideal_piece": {}, "dense_values": {}, "displacement": {},
-    "samples": {}, "quiet_piece": {}, "sorted_landscape": {}, "batch_scene": {},
-    "batch": {"parallel": True},
+    "expm1_ratio": _INLINE, "expm1_ratio_integral": {}, "reach_time": _INLINE,
+    "net_force": _INLINE, "coulomb_force": {}, "lowest_contact": {}, "push_segment": _INLINE,
+    "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "dense_values": {},
+    "displacement": {}, "samples": {}, "quiet_piece": {}, "sorted_landscape": {},
+    "batch_scene": {}, "batch": {"parallel": True},
 }
 
 
@@ -168,16 +169,16 @@ def coulomb_force(levels: np.ndarray, below: np.ndarray, above: np.ndarray, tol:
         out[m] = net_force(above[right], below[left], tol)
 
 
-def lowest_contact(levels: np.ndarray, speeds: np.ndarray, forces: np.ndarray,
+def lowest_contact(land: np.ndarray, speeds: np.ndarray, forces: np.ndarray,
                    first: np.ndarray, k: int) -> int:
-    """The lowest index of the touching contacts (``f > 0``) at ``levels[k]``, kept in
+    """The lowest index of the touching contacts (``f > 0``) at level ``land[0, k]``, kept in
     ``first`` (``-1``: not known yet). Few contacts: a scan; many: one stable sort fills every
     level's entry, so a run of many events stays ``O(N log N)``."""
     if first[k] >= 0:
         return first[k]
     n = speeds.size
     if n <= SMALL:
-        x = levels[k]
+        x = land[0, k]
         for i in range(n):
             if speeds[i] == x and forces[i] > 0:
                 first[k] = i
@@ -187,7 +188,7 @@ def lowest_contact(levels: np.ndarray, speeds: np.ndarray, forces: np.ndarray,
     for p in range(n):
         i = order[p]
         if forces[i] > 0:
-            while levels[kk] < speeds[i]:
+            while land[0, kk] < speeds[i]:
                 kk += 1
             if first[kk] < 0:
                 first[kk] = i
@@ -233,22 +234,24 @@ def budget_code(rounds: int, max_steps: int, ev: np.ndarray, nev: int, window: i
 
 
 # -- the ideal-motor engine --------------------------------------------------------------------
-def ideal_piece(coulomb: bool, xs: np.ndarray, below: np.ndarray, above: np.ndarray,
-                speeds: np.ndarray, forces: np.ndarray, first: np.ndarray,
-                base_x: np.ndarray, base_F: np.ndarray, slope: np.ndarray, G_at: np.ndarray,
-                total: float, m: float, c: float, E: float, b: float,
-                fstate: np.ndarray, istate: np.ndarray, seg: np.ndarray, ev: np.ndarray) -> int:
+def ideal_piece(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
+                speeds: np.ndarray, forces: np.ndarray, total: float, m: float, c: float,
+                E: float, b: float, fstate: np.ndarray, istate: np.ndarray, seg: np.ndarray,
+                ev: np.ndarray) -> int:
     """Integrate up to time ``b`` (s) with constant contact speeds, from the state in
     ``fstate`` / ``istate`` (time ``t``, speed ``V``, the contact the body is stuck to or -1;
     ``I_STARTED = 0``: a new piece starting at ``fstate[F_T]``), under external force ``E``
     (N), mass ``m`` (kg) and drag ``c`` (N s/m); the one engine of ``simulate`` and
     ``advance`` for ideal motors.
 
-    The landscape: Coulomb (``coulomb``): the sorted distinct speeds ``xs`` and the prefix
-    sums ``below``, ``above`` of a :class:`ContactSet`, its ``speeds`` and ``forces`` and
-    ``first`` (lowest contact per level, -1 unknown; see :func:`lowest_contact`). Compliant:
-    the saturation limits ``xs``, the force ``base_F[j] + slope[j] (V - base_x[j])`` inside
-    interval ``j`` and ``G_at[k]`` at limit ``k``, ``first[k]`` its lowest contact.
+    The landscape: ``K`` breakpoints, one table ``land`` of rows (few array arguments keep
+    the call cheap: each costs reference counting). Coulomb (``coulomb``): the sorted
+    distinct speeds ``xs = land[0]`` and the prefix sums ``below = land[1]``,
+    ``above = land[2]`` (``ContactSet._table``), its ``speeds`` and ``forces`` and ``first``
+    (lowest contact per level, -1 unknown; see :func:`lowest_contact`). Compliant: the
+    saturation limits ``xs = land[0]``, the force ``base_F[j] + slope[j] (V - base_x[j])``
+    inside interval ``j`` (``base_F = land[1]``, ``slope = land[2]``, ``base_x = land[3]``)
+    and ``G_at[k] = land[4, k]`` at limit ``k``, ``first[k]`` its lowest contact.
     ``total``: ``F_tot``.
 
     Returns ``DONE`` (reached ``b``), ``MAX_STEPS`` or ``ZENO`` (stopped at ``fstate[F_T]``),
@@ -270,7 +273,6 @@ def ideal_piece(coulomb: bool, xs: np.ndarray, below: np.ndarray, above: np.ndar
     max_steps = istate[I_MAXSTEPS]
     window = istate[I_WINDOW]
     chunk = istate[I_CHUNK]
-    K = xs.size
     kind = CROSS if coulomb else SATURATION
     tol = 4.0 * (K + 1) * EPS * total              # the prefix sums' rounding (tie_tolerance)
     push_scale = total + abs(E)
@@ -282,14 +284,14 @@ def ideal_piece(coulomb: bool, xs: np.ndarray, below: np.ndarray, above: np.ndar
         lo_, hi_ = 0, K
         while lo_ < hi_:
             mid = (lo_ + hi_) >> 1
-            if xs[mid] < V:
+            if land[0, mid] < V:
                 lo_ = mid + 1
             else:
                 hi_ = mid
         j = lo_
-        at = j < K and xs[j] == V
+        at = j < K and land[0, j] == V
         if stuck >= 0:
-            holds = at and coulomb and below[j + 1] - below[j] > 0
+            holds = at and coulomb and land[1, j + 1] - land[1, j] > 0
             if not holds:
                 nev = push_event(ev, nev, t, RELEASE, stuck, V)
                 stuck = -1
@@ -299,20 +301,20 @@ def ideal_piece(coulomb: bool, xs: np.ndarray, below: np.ndarray, above: np.ndar
         if at:
             # (W, G): the stiction magnitude at breakpoint j and the others' push.
             if coulomb:
-                W = below[j + 1] - below[j]
-                lower = net_force(above[j], below[j], tol)
-                upper = net_force(above[j + 1], below[j + 1], tol)
+                W = land[1, j + 1] - land[1, j]
+                lower = net_force(land[2, j], land[1, j], tol)
+                upper = net_force(land[2, j + 1], land[1, j + 1], tol)
                 G = 0.5 * (lower + upper)
                 G = G if abs(G) > tol else 0.0
             else:
                 W = 0.0
-                G = G_at[j]
+                G = land[4, j]
             G += E - c * V
             tol_G = 4.0 * (K + 1) * EPS * (push_scale + c * abs(V))
             n_eval += 1
             if abs(G) <= W + tol_G:                 # stick (or rest at a balance)
                 if coulomb:
-                    contact = lowest_contact(xs, speeds, forces, first, j)
+                    contact = lowest_contact(land, speeds, forces, first, j)
                 else:
                     contact = first[j]
                 if W > 0 and stuck != contact:
@@ -327,17 +329,17 @@ def ideal_piece(coulomb: bool, xs: np.ndarray, below: np.ndarray, above: np.ndar
                 nev = push_event(ev, nev, t, RELEASE, stuck, V)
                 stuck = -1
             else:
-                contact = lowest_contact(xs, speeds, forces, first, j) if coulomb else first[j]
+                contact = lowest_contact(land, speeds, forces, first, j) if coulomb else first[j]
                 nev = push_event(ev, nev, t, kind, contact, V)
             if G > 0:
                 j += 1
         # Free motion inside interval j.
         if coulomb:
-            force = net_force(above[j], below[j], tol)
+            force = net_force(land[2, j], land[1, j], tol)
             dF = 0.0
         else:
-            dF = slope[j]
-            force = base_F[j] if dF == 0 else base_F[j] + dF * (V - base_x[j])
+            dF = land[2, j]
+            force = land[1, j] if dF == 0 else land[1, j] + dF * (V - land[3, j])
         r0 = (force + E - c * V) / m
         lam = (c - dF) / m
         n_eval += 1
@@ -347,14 +349,14 @@ def ideal_piece(coulomb: bool, xs: np.ndarray, below: np.ndarray, above: np.ndar
             break
         up = r0 > 0
         if up:
-            target = xs[j] if j < K else INF
+            target = land[0, j] if j < K else INF
         else:
-            target = xs[j - 1] if j > 0 else -INF
+            target = land[0, j - 1] if j > 0 else -INF
         s = reach_time(V, r0, lam, target)          # inf for an infinite target
         if t + s >= b:
             V = V + r0 * expm1_ratio(lam, b - t)
-            lo = xs[j - 1] if j > 0 else -INF
-            hi = xs[j] if j < K else INF
+            lo = land[0, j - 1] if j > 0 else -INF
+            hi = land[0, j] if j < K else INF
             if V < lo:
                 V = lo
             if V > hi:
@@ -587,32 +589,38 @@ def quiet_piece(forces: np.ndarray, total_force: float, m: float, c: float, tau:
 
 
 # -- many constant-speed scenes -------------------------------------------------------------------
-def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, order: np.ndarray,
-                     xs: np.ndarray, below: np.ndarray, above: np.ndarray) -> int:
-    """The staircase of one scene into ``xs`` (K,), ``below``, ``above`` (K + 1,), as
-    :class:`ContactSet` builds it (distinct speeds of the touching contacts, the magnitude at
-    each summed in index order, prefix sums from below and from above); ``order`` (n,) is
-    scratch. Returns ``K``."""
-    n = speeds.size
+def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.ndarray,
+                     land: np.ndarray, first: np.ndarray) -> int:
+    """The staircase of scene ``s`` (row ``s`` of ``speeds``, ``forces``) into the rows
+    ``xs``, ``below``, ``above`` of ``land`` as :class:`ContactSet` builds them (the distinct
+    speeds of the touching contacts ascending, the magnitude at each summed in index order,
+    prefix sums from below and from above), and ``first``: the lowest contact index at each
+    level; ``order`` (n,) is scratch. Returns ``K``."""
+    xs, below, above = land[0], land[1], land[2]
+    n = speeds.shape[1]
     m = 0
     for i in range(n):                     # insertion sort of the touching contacts (stable)
-        if forces[i] > 0:
-            v = speeds[i]
+        if forces[s, i] > 0:
+            v = speeds[s, i]
             p = m
-            while p > 0 and speeds[order[p - 1]] > v:
+            while p > 0 and xs[p - 1] > v:
+                xs[p] = xs[p - 1]
                 order[p] = order[p - 1]
                 p -= 1
+            xs[p] = v
             order[p] = i
             m += 1
     K = 0
     for p in range(m):
         i = order[p]
-        if K == 0 or speeds[i] != xs[K - 1]:
-            xs[K] = speeds[i]
-            above[K] = forces[i]           # (the step at level K, summed below)
+        v = xs[p]
+        if K == 0 or v != xs[K - 1]:
+            xs[K] = v
+            first[K] = i
+            above[K] = forces[s, i]        # (the step at level K, summed below)
             K += 1
         else:
-            above[K - 1] += forces[i]
+            above[K - 1] += forces[s, i]
     below[0] = 0.0
     for k in range(K):                     # np.cumsum of the steps
         below[k + 1] = below[k] + above[k]
@@ -624,15 +632,14 @@ def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, order: np.ndarray,
     return K
 
 
-def batch_scene(speeds: np.ndarray, forces: np.ndarray, m: float, c: float, E: float,
-                v0: float, t_end: float, order: np.ndarray, xs: np.ndarray, below: np.ndarray,
-                above: np.ndarray, first: np.ndarray, fstate: np.ndarray, istate: np.ndarray,
+def batch_scene(speeds: np.ndarray, forces: np.ndarray, s: int, m: float, c: float, E: float,
+                v0: float, t_end: float, order: np.ndarray, land: np.ndarray,
+                first: np.ndarray, fstate: np.ndarray, istate: np.ndarray,
                 seg: np.ndarray, ev: np.ndarray) -> tuple[float, int, bool, int]:
-    """One scene of :func:`batch` through :func:`ideal_piece` (scratch arrays given):
+    """Scene ``s`` of :func:`batch` through :func:`ideal_piece` (scratch arrays given):
     ``(final speed, events, stuck at the end, code)``."""
-    K = sorted_landscape(speeds, forces, order, xs, below, above)
-    for k in range(K):
-        first[k] = -1
+    K = sorted_landscape(speeds, forces, s, order, land, first)
+    n = speeds.shape[1]
     fstate[F_T] = 0.0
     fstate[F_V] = v0
     fstate[F_RATE] = INF
@@ -642,11 +649,11 @@ def batch_scene(speeds: np.ndarray, forces: np.ndarray, m: float, c: float, E: f
     istate[I_ROUNDS] = 0
     istate[I_NEVAL] = 0
     istate[I_STARTED] = 0
-    istate[I_MAXSTEPS] = 4 * speeds.size + 8
-    istate[I_WINDOW] = 4 * speeds.size + 8
-    istate[I_CHUNK] = 4 * speeds.size + 8
-    code = ideal_piece(True, xs[:K], below[:K + 1], above[:K + 1], speeds, forces, first[:K],
-                       xs[:0], xs[:0], xs[:0], xs[:0], below[K], m, c, E, t_end,
+    istate[I_MAXSTEPS] = 4 * n + 8           # rounds: at most 2 n + 2 (one pass per level)
+    istate[I_WINDOW] = 4 * n + 8             # (so Zeno never triggers)
+    istate[I_CHUNK] = 4 * n + 8
+    # ``first`` is complete, so the engine never reads the speeds and forces it is given.
+    code = ideal_piece(True, K, land, first, fstate, fstate, land[1, K], m, c, E, t_end,
                        fstate, istate, seg, ev)
     return fstate[F_V], istate[I_NEV], istate[I_STUCK] >= 0, code
 
@@ -663,9 +670,7 @@ def batch(speeds: np.ndarray, forces: np.ndarray, mass: np.ndarray, damping: np.
     blocks = (S + block - 1) // block
     for blk in prange(blocks):
         order = np.empty(n, dtype=np.int64)
-        xs = np.empty(n)
-        below = np.empty(n + 1)
-        above = np.empty(n + 1)
+        land = np.empty((3, n + 1))
         first = np.empty(n, dtype=np.int64)
         fstate = np.zeros(N_FSTATE)
         istate = np.zeros(N_ISTATE, dtype=np.int64)
@@ -673,5 +678,5 @@ def batch(speeds: np.ndarray, forces: np.ndarray, mass: np.ndarray, damping: np.
         ev = np.empty((rows, 4))
         for s in range(blk * block, min(S, (blk + 1) * block)):
             V[s], events[s], stuck[s], codes[s] = batch_scene(
-                speeds[s], forces[s], mass[s], damping[s], external[s], v0[s], t_end,
-                order, xs, below, above, first, fstate, istate, seg, ev)
+                speeds, forces, s, mass[s], damping[s], external[s], v0[s], t_end,
+                order, land, first, fstate, istate, seg, ev)

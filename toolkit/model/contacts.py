@@ -135,6 +135,7 @@ class ContactSet:
 
     speeds: np.ndarray
     forces: np.ndarray
+    _table: np.ndarray = field(init=False, repr=False)
     _levels: np.ndarray = field(init=False, repr=False)
     _below: np.ndarray = field(init=False, repr=False)
     _above: np.ndarray = field(init=False, repr=False)
@@ -167,14 +168,22 @@ class ContactSet:
         levels, inverse = np.unique(speeds[active], return_inverse=True)
         steps = np.bincount(inverse, weights=forces[active], minlength=levels.size)
         # below[k] = magnitude strictly below levels[k]; above[k] = magnitude at or above it.
-        below = np.concatenate(([0.0], np.cumsum(steps)))
-        above = np.concatenate((np.cumsum(steps[::-1])[::-1], [0.0]))
-        object.__setattr__(self, "_levels", levels)
-        object.__setattr__(self, "_below", below)
-        object.__setattr__(self, "_above", above)
+        # One table, rows (levels + an inf pad, below, above): the exact simulator's kernel
+        # takes the staircase as this one array (toolkit._compiled.core.ideal_piece).
+        K = levels.size
+        table = np.empty((3, K + 1))
+        table[0, :K] = levels
+        table[0, K] = np.inf
+        table[1, 0] = 0.0
+        np.cumsum(steps, out=table[1, 1:])
+        table[2, :K] = np.cumsum(steps[::-1])[::-1]
+        table[2, K] = 0.0
+        table.setflags(write=False)
+        object.__setattr__(self, "_table", table)
+        object.__setattr__(self, "_levels", table[0, :K])
+        object.__setattr__(self, "_below", table[1])
+        object.__setattr__(self, "_above", table[2])
         object.__setattr__(self, "_total", float(np.sum(steps)))
-        for array in (levels, below, above):
-            array.setflags(write=False)
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod

@@ -349,8 +349,8 @@ class _CoulombLandscape:
         self.total = float(self.below[-1])         # F_tot as the prefix sums add it up
         self.first = np.full(self.levels.size, -1, dtype=np.int64)   # filled by the kernel
         self._contacts = contacts
-        self.args = (True, self.levels, self.below, self.above, contacts.speeds,
-                     contacts.forces, self.first, _EMPTY, _EMPTY, _EMPTY, _EMPTY, self.total)
+        self.args = (True, self.levels.size, contacts._table, self.first, contacts.speeds,
+                     contacts.forces, self.total)
 
     @property
     def xs(self) -> list[float]:
@@ -376,7 +376,7 @@ class _CoulombLandscape:
     def contact(self, k: int) -> int:
         """The lowest index of the touching contacts at breakpoint ``k``."""
         contacts = self._contacts
-        return int(_core.lowest_contact(self.levels, contacts.speeds, contacts.forces,
+        return int(_core.lowest_contact(contacts._table, contacts.speeds, contacts.forces,
                                         self.first, k))
 
 
@@ -395,10 +395,12 @@ class _CompliantLandscape:
         self.base_x = np.concatenate(([x[0]], x))
         self.base_F = np.concatenate(([total], at_x))
         self.base_F[-1] = -total
-        for array in (x, at_x, slope, self.base_x, self.base_F):
-            array.setflags(write=False)       # (read-only like the Coulomb arrays: one kernel)
-        self.args = (False, x, _EMPTY, _EMPTY, _EMPTY, _EMPTY, first.astype(np.int64),
-                     self.base_x, self.base_F, slope, at_x, total)
+        K = x.size
+        land = np.zeros((5, K + 1))            # the kernel's table (toolkit._compiled.core)
+        land[0, :K], land[1], land[2], land[3], land[4, :K] = x, self.base_F, slope, \
+            self.base_x, at_x
+        land.setflags(write=False)             # (read-only like ContactSet._table: one kernel)
+        self.args = (False, K, land, first.astype(np.int64), _EMPTY, _EMPTY, total)
 
     @property
     def xs(self) -> list[float]:

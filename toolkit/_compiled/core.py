@@ -256,7 +256,7 @@ def ideal_piece(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
 
     Returns ``DONE`` (reached ``b``), ``MAX_STEPS`` or ``ZENO`` (stopped at ``fstate[F_T]``),
     or ``PAUSE`` (``istate[I_CHUNK]`` rounds done, or the buffers may not hold another
-    round: the caller checks the wall clock, makes room and calls again).
+    round: the caller checks the wall clock, grows the buffers and calls again).
     """
     t = fstate[F_T]
     V = fstate[F_V]
@@ -272,7 +272,12 @@ def ideal_piece(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
     n_eval = istate[I_NEVAL]
     max_steps = istate[I_MAXSTEPS]
     window = istate[I_WINDOW]
-    chunk = istate[I_CHUNK]
+    # Rounds before pausing: the configured chunk, or fewer when the buffers would fill up
+    # (a round stores at most two segment rows and two event rows).
+    free = min(seg.shape[0] - nseg, ev.shape[0] - nev)
+    if free < 8:
+        return PAUSE                               # no room even to start: grow and resume
+    chunk = min((free - 4) // 2, istate[I_CHUNK])
     kind = CROSS if coulomb else SATURATION
     tol = 4.0 * (K + 1) * EPS * total              # the prefix sums' rounding (tie_tolerance)
     push_scale = total + abs(E)
@@ -403,11 +408,12 @@ def ideal_piece(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
 
 # -- segments: evaluate, integrate, sample ---------------------------------------------------------
 def dense_values(table: np.ndarray, mu: float, query: np.ndarray, success: bool,
-                 t_stop: float, V: np.ndarray, dV: np.ndarray) -> None:
-    """``V`` (m/s) and its right derivative ``dV`` (m/s^2) at ``query`` times (s, any order,
-    any values) from the segment rows ``table`` (S, 7), ``t0`` increasing; times before the
-    first row use it; NaN in ``V`` past ``t_stop`` unless ``success``. Zero terms are left out
-    (the same value: a dropped ``+ 0.0`` only turns ``-0.0`` into ``0.0``)."""
+                 t_stop: float, scale: float, out: np.ndarray) -> None:
+    """``out[0]``: ``V`` (m/s) and ``out[1]``: ``scale`` times its right derivative (``scale``
+    1: m/s^2; the mass: the force ``m dV/dt``, N) at ``query`` times (s, any order, any
+    values) from the segment rows ``table`` (S, 7), ``t0`` increasing; times before the first
+    row use it; NaN in ``V`` past ``t_stop`` unless ``success``. Zero terms are left out (the
+    same value: a dropped ``+ 0.0`` only turns ``-0.0`` into ``0.0``)."""
     S = table.shape[0]
     k = 0
     for i in range(query.size):
@@ -449,8 +455,8 @@ def dense_values(table: np.ndarray, mu: float, query: np.ndarray, success: bool,
                 rate = rate + D * (1.0 - mu * s) * decay
         if not success and not q <= t_stop:
             value = math.nan
-        V[i] = value
-        dV[i] = rate
+        out[0, i] = value
+        out[1, i] = rate if scale == 1.0 else scale * rate
 
 
 def displacement(seg: np.ndarray, n: int, mu: float, t_stop: float) -> float:

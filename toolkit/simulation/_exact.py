@@ -143,6 +143,7 @@ class _Recorder:
         istate[_core.I_STUCK] = -1
         istate[_core.I_MAXSTEPS] = min(budget.max_steps, _STEP_CAP)
         istate[_core.I_WINDOW] = self.window
+        istate[_core.I_CHUNK] = _MAX_CHUNK
         self.fstate[_core.F_RATE] = budget.max_event_rate
         self.deadline = time.perf_counter() + budget.wall_time
         self.status = _SUCCESS
@@ -165,7 +166,8 @@ class _Recorder:
         self.istate[_core.I_NEVAL] = value
 
     def room(self) -> None:
-        """Make the buffers hold at least one more chunk of kernel rounds and set the chunk."""
+        """Make sure the buffers have room for a few more rows (the kernel pauses when they
+        could fill up within its next round; it sizes its chunks of rounds to fit)."""
         istate = self.istate
         free = min(self.seg.shape[0] - istate[_core.I_NSEG], self.ev.shape[0] - istate[_core.I_NEV])
         if free < 16:
@@ -174,9 +176,6 @@ class _Recorder:
                 new = np.empty((2 * old.shape[0] + 16, width))
                 new[:old.shape[0]] = old
                 setattr(self, name, new)
-            free = min(self.seg.shape[0] - istate[_core.I_NSEG],
-                       self.ev.shape[0] - istate[_core.I_NEV])
-        istate[_core.I_CHUNK] = min((int(free) - 4) // 2, _MAX_CHUNK)
 
     def segment(self, t0: float, V0: float, B: float = 0.0, lam: float = 0.0, c1: float = 0.0,
                 C: float = 0.0, D: float = 0.0) -> None:
@@ -225,9 +224,12 @@ class _Recorder:
     # -- output -----------------------------------------------------------------------------
     def events(self) -> tuple[Event, ...]:
         """The recorded events as :class:`Event` objects."""
+        n = int(self.istate[_core.I_NEV])
+        if not n:
+            return ()
         names, trusted = _KIND_NAMES, Event._trusted
-        return tuple(trusted(t, names[int(kind)], None if contact < 0 else int(contact), V)
-                     for t, kind, contact, V in self.ev[:self.n_events].tolist())
+        return tuple([trusted(t, names[int(kind)], None if contact < 0 else int(contact), V)
+                      for t, kind, contact, V in self.ev[:n].tolist()])
 
     def drop_non_finite(self) -> tuple[float, float]:
         """Forget the trailing segments whose start is not finite (an overflowed run) and
@@ -245,9 +247,12 @@ class _Recorder:
         return _kernels(2 * int(n)).displacement(self.seg, n, self.mu, t_stop)
 
     def dense(self, t_stop: float, success: bool, t_end: float, linear: bool) -> _Dense:
-        table = self.seg[:self.n_segments].copy()
-        table.setflags(write=False)
-        return _Dense(table, self.mu, t_stop, success, t_end, linear)
+        """The dense output: a read-only view of the segment rows (the run is over: nothing
+        writes to this buffer again)."""
+        seg = self.seg
+        seg.setflags(write=False)
+        return _Dense(seg[:int(self.istate[_core.I_NSEG])], self.mu, t_stop, success, t_end,
+                      linear)
 
     def samples(self, t_stop: float, V_stop: float,
                 mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -280,13 +285,19 @@ class _Dense:
     def values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(V, dV/dt)`` at ``query`` times (s, 1-d float64, any order and values): fresh
         arrays, m/s and m/s^2 (the right derivative)."""
+        out = self.scaled(query, 1.0)
+        return out[0], out[1]
+
+    def scaled(self, query: np.ndarray, scale: float) -> np.ndarray:
+        """Rows ``V`` (m/s) and ``scale dV/dt`` at ``query`` times (s, 1-d float64): one
+        fresh array of shape (2, T)."""
         if query.flags.writeable or not query.flags.c_contiguous:
             query = np.ascontiguousarray(query).view()    # read-only: one kernel specialization
             query.setflags(write=False)
-        V, dV = np.empty(query.size), np.empty(query.size)
+        out = np.empty((2, query.size))
         _kernels(2 * query.size).dense_values(self.table, self.mu, query, self.success,
-                                              self.t_stop, V, dV)
-        return V, dV
+                                              self.t_stop, scale, out)
+        return out
 
     def linear_values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """:meth:`values` when every segment is a straight line ``V0 + B s`` (``linear``),
@@ -507,12 +518,12 @@ def _ideal_piece(plant: Plant, land: _Landscape, E: float, a: float, b: float, V
     istate[7] = 0
     m, c, args = plant.mass, plant.damping, land.args
     while True:
-        rec.room()
         code = kernel(*args, m, c, E, b, fstate, istate, rec.seg, rec.ev)
         if code == _core.PAUSE:
             if time.perf_counter() > rec.deadline:
                 code = -1
             else:
+                rec.room()
                 continue
         elif code == _core.DONE and time.perf_counter() > rec.deadline:
             code = -1
@@ -1205,13 +1216,16 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         # Segment starts (events, switches, motor phase changes) and the end: exact values.
         times, V, force = rec.samples(t_stop, V_stop, m)
     else:
-        times = t_eval.copy() if t_eval.flags.writeable else t_eval
-        V, slope = dense.values(times)                 # simulate() checked: non-decreasing
-        force = m * slope
+        if t_eval.flags.writeable:
+            times = t_eval.copy()
+            times.setflags(write=False)
+        else:
+            times = t_eval
+        table = dense.scaled(times, m)                 # rows V and the force m dV/dt
         if not success:
-            force[np.isnan(V)] = np.nan
-        for array in (times, V, force):
-            array.setflags(write=False)
+            table[1, np.isnan(table[0])] = np.nan
+        table.setflags(write=False)
+        V, force = table
     speeds = _contact_speeds(plant, times)
     events = rec.events()
     n_events = len(events)

@@ -67,7 +67,7 @@ _INLINE = {"inline": "always"}      # small helpers: inlined into their callers 
 KERNELS = {
     "expm1_ratio": _INLINE, "expm1_ratio_integral": {}, "reach_time": _INLINE,
     "net_force": _INLINE, "coulomb_force": {}, "lowest_contact": {}, "push_segment": _INLINE,
-    "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "dense_values": {},
+    "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {}, "dense_values": {},
     "displacement": {}, "samples": {}, "quiet_piece": {}, "sorted_landscape": {},
     "batch_scene": {}, "batch": {"parallel": True},
 }
@@ -172,16 +172,18 @@ def coulomb_force(levels: np.ndarray, below: np.ndarray, above: np.ndarray, tol:
 def lowest_contact(land: np.ndarray, speeds: np.ndarray, forces: np.ndarray,
                    first: np.ndarray, k: int) -> int:
     """The lowest index of the touching contacts (``f > 0``) at level ``land[0, k]``, kept in
-    ``first`` (``-1``: not known yet). Few contacts: a scan; many: one stable sort fills every
-    level's entry, so a run of many events stays ``O(N log N)``."""
-    if first[k] >= 0:
+    ``first`` (``-1``: not known yet; an empty ``first`` keeps nothing). Few contacts: a
+    scan; many: one stable sort fills every level's entry, so a run of many events stays
+    ``O(N log N)``."""
+    if k < first.size and first[k] >= 0:
         return first[k]
     n = speeds.size
     if n <= SMALL:
         x = land[0, k]
         for i in range(n):
             if speeds[i] == x and forces[i] > 0:
-                first[k] = i
+                if k < first.size:
+                    first[k] = i
                 return i
     order = np.argsort(speeds, kind="mergesort")          # stable: lower indices first
     kk = 0
@@ -403,6 +405,21 @@ def ideal_piece(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
     istate[I_NEV] = nev
     istate[I_ROUNDS] = rounds
     istate[I_NEVAL] = n_eval
+    return code
+
+
+def ideal_run(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
+              speeds: np.ndarray, forces: np.ndarray, total: float, m: float, c: float,
+              E: float, b: float, fstate: np.ndarray, istate: np.ndarray, seg: np.ndarray,
+              ev: np.ndarray, query: np.ndarray, out: np.ndarray) -> int:
+    """A whole run of one piece (constant speeds) in one call: :func:`ideal_piece` from the
+    state given, then, when it reached ``b`` (``DONE``), the dense output at ``query`` into
+    ``out`` (rows ``V`` and the force ``m dV/dt``, :func:`dense_values`). Returns the code of
+    :func:`ideal_piece` (``out`` is not written unless ``DONE``)."""
+    code = ideal_piece(coulomb, K, land, first, speeds, forces, total, m, c, E, b, fstate,
+                       istate, seg, ev)
+    if code == DONE:
+        dense_values(seg[:istate[I_NSEG]], 0.0, query, True, b, m, out)
     return code
 
 

@@ -140,6 +140,7 @@ class ContactSet:
     _below: np.ndarray = field(init=False, repr=False)
     _above: np.ndarray = field(init=False, repr=False)
     _total: float = field(init=False, repr=False)
+    _prefix_total: float = field(init=False, repr=False)
 
     def __init__(self, speeds: Any, forces: Any = None) -> None:
         speeds = as_float_array(speeds, "speeds", "ContactSet")
@@ -184,6 +185,7 @@ class ContactSet:
         object.__setattr__(self, "_below", table[1])
         object.__setattr__(self, "_above", table[2])
         object.__setattr__(self, "_total", float(np.sum(steps)))
+        object.__setattr__(self, "_prefix_total", float(table[1, K]))   # (the same, as summed)
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod

@@ -87,6 +87,7 @@ _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than
 _sum, _max, _abs = np.add.reduce, np.maximum.reduce, np.abs
 _EMPTY = np.empty(0)
 _EMPTY.setflags(write=False)
+_NO_FIRST = np.empty(0, dtype=np.int64)      # (never written: the kernel caches nothing in it)
 _COMPILED: list[ModuleType] = []     # the kernel module, once compiled in this process
 
 
@@ -118,6 +119,9 @@ _MAX_CHUNK = 1 << 14        # kernel rounds between two looks at the wall clock
 _STEP_CAP = (1 << 62)       # max_steps beyond this is unlimited in practice (an int64 count)
 
 
+_INITIAL_STATES: dict[tuple[int, float, int], tuple[np.ndarray, np.ndarray]] = {}
+
+
 class _Recorder:
     """Segments and events in growing buffers, and the budget (private, mutable while running).
 
@@ -138,13 +142,20 @@ class _Recorder:
         self.window = 2 * cascade + _ZENO_FLOOR
         self.seg = np.empty((_ROWS, 7))
         self.ev = np.empty((_ROWS, 4))
-        self.fstate = np.zeros(_core.N_FSTATE)
-        self.istate = istate = np.zeros(_core.N_ISTATE, dtype=np.int64)
-        istate[_core.I_STUCK] = -1
-        istate[_core.I_MAXSTEPS] = min(budget.max_steps, _STEP_CAP)
-        istate[_core.I_WINDOW] = self.window
-        istate[_core.I_CHUNK] = _MAX_CHUNK
-        self.fstate[_core.F_RATE] = budget.max_event_rate
+        key = (budget.max_steps, budget.max_event_rate, self.window)
+        initial = _INITIAL_STATES.get(key)
+        if initial is None:                       # the initial loop state of this budget
+            fstate = np.zeros(_core.N_FSTATE)
+            istate = np.zeros(_core.N_ISTATE, dtype=np.int64)
+            istate[_core.I_STUCK] = -1
+            istate[_core.I_MAXSTEPS] = min(budget.max_steps, _STEP_CAP)
+            istate[_core.I_WINDOW] = self.window
+            istate[_core.I_CHUNK] = _MAX_CHUNK
+            fstate[_core.F_RATE] = budget.max_event_rate
+            if len(_INITIAL_STATES) > 64:
+                _INITIAL_STATES.clear()
+            initial = _INITIAL_STATES[key] = (fstate, istate)
+        self.fstate, self.istate = initial[0].copy(), initial[1].copy()
         self.deadline = time.perf_counter() + budget.wall_time
         self.status = _SUCCESS
         self.detail = ""
@@ -227,9 +238,13 @@ class _Recorder:
         n = int(self.istate[_core.I_NEV])
         if not n:
             return ()
-        names, trusted = _KIND_NAMES, Event._trusted
-        return tuple([trusted(t, names[int(kind)], None if contact < 0 else int(contact), V)
-                      for t, kind, contact, V in self.ev[:n].tolist()])
+        names, new, events = _KIND_NAMES, object.__new__, []
+        for t, kind, contact, V in self.ev[:n].tolist():     # (Event._trusted, inlined)
+            event = new(Event)
+            event.__dict__.update(time=t, kind=names[int(kind)],
+                                  contact=None if contact < 0 else int(contact), speed=V)
+            events.append(event)
+        return tuple(events)
 
     def drop_non_finite(self) -> tuple[float, float]:
         """Forget the trailing segments whose start is not finite (an overflowed run) and
@@ -350,18 +365,32 @@ class _CoulombLandscape:
     ``G``, the mean of the two plateaus beside it.
     """
 
-    __slots__ = ("levels", "below", "above", "total", "first", "args", "_contacts")
+    __slots__ = ("total", "first", "args", "_contacts")
     kind = "cross"
 
     def __init__(self, contacts: ContactSet) -> None:
-        # The private prefix sums of ContactSet (levels, below, above) are exactly the
-        # staircase; reading them spares an O(N log N) sort per new plant.
-        self.levels, self.below, self.above = contacts._levels, contacts._below, contacts._above
-        self.total = float(self.below[-1])         # F_tot as the prefix sums add it up
-        self.first = np.full(self.levels.size, -1, dtype=np.int64)   # filled by the kernel
+        # The private prefix sums of ContactSet (levels, below, above: its _table) are exactly
+        # the staircase; reading them spares an O(N log N) sort per new plant.
+        table = contacts._table
+        K = table.shape[1] - 1
+        self.total = contacts._prefix_total        # F_tot as the prefix sums add it up
+        # The lowest contact per level, filled by the kernel as events need it; few contacts
+        # are scanned instead (toolkit._compiled.core.lowest_contact): no array needed.
+        self.first = np.full(K, -1, dtype=np.int64) if contacts.n > _core.SMALL else _NO_FIRST
         self._contacts = contacts
-        self.args = (True, self.levels.size, contacts._table, self.first, contacts.speeds,
-                     contacts.forces, self.total)
+        self.args = (True, K, table, self.first, contacts.speeds, contacts.forces, self.total)
+
+    @property
+    def levels(self) -> np.ndarray:
+        return self._contacts._levels
+
+    @property
+    def below(self) -> np.ndarray:
+        return self._contacts._below
+
+    @property
+    def above(self) -> np.ndarray:
+        return self._contacts._above
 
     @property
     def xs(self) -> list[float]:
@@ -509,21 +538,32 @@ def _ideal_piece(plant: Plant, land: _Landscape, E: float, a: float, b: float, V
         The time and speed reached (``b`` unless the budget stopped the run, then
         ``stopped``), and the contact the body is stuck to there.
     """
-    core = _kernels(20)
-    kernel = core.ideal_piece
     fstate, istate = rec.fstate, rec.istate
     fstate[0] = a                                   # (core.F_T, F_V, I_STUCK, I_STARTED)
     fstate[1] = V
     istate[2] = -1 if stuck is None else stuck
     istate[7] = 0
-    m, c, args = plant.mass, plant.damping, land.args
+    code = _kernels(20).ideal_piece(*land.args, plant.mass, plant.damping, E, b, fstate,
+                                    istate, rec.seg, rec.ev)
+    return _finish_piece(plant, land, E, b, rec, code)
+
+
+def _finish_piece(plant: Plant, land: _Landscape, E: float, b: float, rec: _Recorder,
+                  code: int) -> tuple[float, float, int | None, bool]:
+    """Resume the kernel's piece (state in ``rec``) while it pauses, looking at the wall clock
+    and growing the buffers; then :func:`_ideal_piece`'s ``(t, V, stuck, stopped)``."""
+    fstate, istate = rec.fstate, rec.istate
+    if code == _core.DONE and _COMPILED and time.perf_counter() <= rec.deadline:
+        k = int(istate[2])                          # (the common case, written out)
+        return b, float(fstate[1]), (None if k < 0 else k), False
     while True:
-        code = kernel(*args, m, c, E, b, fstate, istate, rec.seg, rec.ev)
         if code == _core.PAUSE:
             if time.perf_counter() > rec.deadline:
                 code = -1
             else:
                 rec.room()
+                code = _kernels().ideal_piece(*land.args, plant.mass, plant.damping, E, b,
+                                              fstate, istate, rec.seg, rec.ev)
                 continue
         elif code == _core.DONE and time.perf_counter() > rec.deadline:
             code = -1
@@ -1196,8 +1236,30 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     mu = 1.0 / plant.motors.lag if dynamic and plant.motors.lag > 0 else 0.0
     cascade = 2 * plant.n + 2
     rec = _Recorder(budget, cascade, mu)
+    m = plant.mass
+    table = times = None
+    if t_eval is not None:
+        if t_eval.flags.writeable:
+            times = t_eval.copy()
+            times.setflags(write=False)
+        else:
+            times = t_eval
     if dynamic:
         t_stop, V_stop = _run_dynamic(plant, t_end, v0, rec)
+    elif (times is not None and plant.commands is None
+          and not isinstance(plant.external_force, PiecewiseConstant)):
+        # One piece and sample times: one kernel call runs it and evaluates the dense output
+        # (toolkit._compiled.core.ideal_run); Python only assembles the result.
+        land = _landscape(plant, 0.0)
+        E = plant.external(0.0)
+        rec.fstate[1] = v0                        # (core.F_V; t = 0, free, a new piece)
+        table = np.empty((2, times.size))
+        code = _kernels(20 + 2 * times.size).ideal_run(
+            *land.args, m, plant.damping, E, t_end, rec.fstate, rec.istate, rec.seg, rec.ev,
+            times, table)
+        if code != _core.DONE:
+            table = None                          # paused or stopped: evaluated below
+        t_stop, V_stop, _, _ = _finish_piece(plant, land, E, t_end, rec, code)
     else:
         t_stop, V_stop = _run_ideal(plant, t_end, v0, rec)
     if rec.status is _SUCCESS and not (math.isfinite(t_stop) and math.isfinite(V_stop)):
@@ -1211,19 +1273,14 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     # The ideal engine's segments are lines unless drag or compliance gives them a slope.
     linear = not dynamic and plant.damping == 0 and plant.compliance == 0
     dense = rec.dense(t_stop, success, t_end, linear)
-    m = plant.mass
-    if t_eval is None:
+    if times is None:
         # Segment starts (events, switches, motor phase changes) and the end: exact values.
         times, V, force = rec.samples(t_stop, V_stop, m)
     else:
-        if t_eval.flags.writeable:
-            times = t_eval.copy()
-            times.setflags(write=False)
-        else:
-            times = t_eval
-        table = dense.scaled(times, m)                 # rows V and the force m dV/dt
-        if not success:
-            table[1, np.isnan(table[0])] = np.nan
+        if table is None or not success:
+            table = dense.scaled(times, m)             # rows V and the force m dV/dt
+            if not success:
+                table[1, np.isnan(table[0])] = np.nan
         table.setflags(write=False)
         V, force = table
     speeds = _contact_speeds(plant, times)

@@ -67,7 +67,7 @@ _INLINE = {"inline": "always"}      # small helpers: inlined into their callers 
 KERNELS = {
     "expm1_ratio": _INLINE, "expm1_ratio_integral": {}, "reach_time": _INLINE,
     "net_force": _INLINE, "coulomb_force": {}, "lowest_contact": {}, "push_segment": _INLINE,
-    "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {}, "dense_values": {},
+    "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {}, "dense_values": {}, "segment_value": _INLINE,
     "displacement": {}, "samples": {}, "quiet_piece": {}, "sorted_landscape": {},
     "batch_scene": {}, "batch": {"parallel": True},
 }
@@ -430,10 +430,16 @@ def dense_values(table: np.ndarray, mu: float, query: np.ndarray, success: bool,
     1: m/s^2; the mass: the force ``m dV/dt``, N) at ``query`` times (s, any order, any
     values) from the segment rows ``table`` (S, 7), ``t0`` increasing; times before the first
     row use it; NaN in ``V`` past ``t_stop`` unless ``success``. Zero terms are left out (the
-    same value: a dropped ``+ 0.0`` only turns ``-0.0`` into ``0.0``)."""
+    same value: a dropped ``+ 0.0`` only turns ``-0.0`` into ``0.0``).
+
+    Consecutive times on one segment (all of them, for sorted times) are evaluated as one run
+    with that segment's coefficients; a line (``V0 + B s``, the ideal engine without drag or
+    compliance) takes a loop of its own."""
     S = table.shape[0]
+    T = query.size
+    i = 0
     k = 0
-    for i in range(query.size):
+    while i < T:
         q = query[i]
         if not (table[k, 0] <= q and (k + 1 == S or q < table[k + 1, 0])):
             a, z = 0, S                          # the last row with t0 <= q (or row 0)
@@ -444,36 +450,59 @@ def dense_values(table: np.ndarray, mu: float, query: np.ndarray, success: bool,
                 else:
                     z = mid
             k = a - 1 if a > 0 else 0
-        s = q - table[k, 0]
-        V0 = table[k, 1]
-        c1 = table[k, 2]
-        B = table[k, 3]
-        lam = table[k, 4]
-        C = table[k, 5]
-        D = table[k, 6]
-        value = V0
-        rate = c1
-        if c1 != 0:
-            value = V0 + c1 * s
-        if B != 0:
-            if lam > 0:
-                value = value + B * (-math.expm1(-(lam * s)) / lam)
-                rate = rate + B * math.exp(-lam * s)
+        t0 = table[k, 0]
+        low = t0 if k > 0 else -INF              # row 0 also serves times before it
+        high = table[k + 1, 0] if k + 1 < S else INF
+        if not success and t_stop < high:
+            high = t_stop                        # (later times: NaN, evaluated one by one)
+        j = i + 1                                # the run: query[i:j] on this row
+        while j < T and query[j] >= low and query[j] < high:
+            j += 1
+        V0, c1, B, lam, C, D = table[k, 1], table[k, 2], table[k, 3], table[k, 4], table[k, 5], table[k, 6]
+        if c1 == 0 and C == 0 and D == 0 and (lam == 0 or B == 0) and (success or q <= t_stop):
+            rate = 0.0 + B                       # (the general form's c1 + B)
+            rate = rate if scale == 1.0 else scale * rate
+            if B != 0:
+                for p in range(i, j):
+                    out[0, p] = V0 + B * (query[p] - t0)
+                    out[1, p] = rate
             else:
-                value = value + B * s
-                rate = rate + B
-        if C != 0 or D != 0:
-            decay = math.exp(-mu * s)
-            if C != 0:
-                value = value + (C * (-math.expm1(-(mu * s)) / mu) if mu > 0 else C * s)
-                rate = rate + C * decay
-            if D != 0:
-                value = value + D * s * decay
-                rate = rate + D * (1.0 - mu * s) * decay
-        if not success and not q <= t_stop:
-            value = math.nan
-        out[0, i] = value
-        out[1, i] = rate if scale == 1.0 else scale * rate
+                for p in range(i, j):
+                    out[0, p] = V0
+                    out[1, p] = rate
+        else:
+            for p in range(i, j):
+                value, rate = segment_value(V0, c1, B, lam, C, D, mu, query[p] - t0)
+                if not success and not query[p] <= t_stop:
+                    value = math.nan
+                out[0, p] = value
+                out[1, p] = rate if scale == 1.0 else scale * rate
+        i = j
+
+
+def segment_value(V0: float, c1: float, B: float, lam: float, C: float, D: float, mu: float,
+                  s: float) -> tuple[float, float]:
+    """``(V, dV/dt)`` of one segment row at offset ``s`` (s), zero terms left out."""
+    value = V0
+    rate = c1
+    if c1 != 0:
+        value = V0 + c1 * s
+    if B != 0:
+        if lam > 0:
+            value = value + B * (-math.expm1(-(lam * s)) / lam)
+            rate = rate + B * math.exp(-lam * s)
+        else:
+            value = value + B * s
+            rate = rate + B
+    if C != 0 or D != 0:
+        decay = math.exp(-mu * s)
+        if C != 0:
+            value = value + (C * (-math.expm1(-(mu * s)) / mu) if mu > 0 else C * s)
+            rate = rate + C * decay
+        if D != 0:
+            value = value + D * s * decay
+            rate = rate + D * (1.0 - mu * s) * decay
+    return value, rate
 
 
 def displacement(seg: np.ndarray, n: int, mu: float, t_stop: float) -> float:

@@ -1250,16 +1250,23 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
           and not isinstance(plant.external_force, PiecewiseConstant)):
         # One piece and sample times: one kernel call runs it and evaluates the dense output
         # (toolkit._compiled.core.ideal_run); Python only assembles the result.
-        land = _landscape(plant, 0.0)
+        if plant.motors is None and plant.n <= _core.SMALL:
+            # Nothing to build or keep: the landscape is the ContactSet's own staircase.
+            land: _Landscape = _CoulombLandscape(plant.contacts)
+        else:
+            land = _landscape(plant, 0.0)
         E = plant.external(0.0)
         rec.fstate[1] = v0                        # (core.F_V; t = 0, free, a new piece)
         table = np.empty((2, times.size))
         code = _kernels(20 + 2 * times.size).ideal_run(
             *land.args, m, plant.damping, E, t_end, rec.fstate, rec.istate, rec.seg, rec.ev,
             times, table)
-        if code != _core.DONE:
-            table = None                          # paused or stopped: evaluated below
-        t_stop, V_stop, _, _ = _finish_piece(plant, land, E, t_end, rec, code)
+        if code == _core.DONE and _COMPILED and time.perf_counter() <= rec.deadline:
+            t_stop, V_stop = t_end, float(rec.fstate[1])          # (the common case)
+        else:
+            if code != _core.DONE:
+                table = None                      # paused or stopped: evaluated below
+            t_stop, V_stop, _, _ = _finish_piece(plant, land, E, t_end, rec, code)
     else:
         t_stop, V_stop = _run_ideal(plant, t_end, v0, rec)
     if rec.status is _SUCCESS and not (math.isfinite(t_stop) and math.isfinite(V_stop)):

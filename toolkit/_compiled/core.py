@@ -67,9 +67,9 @@ _INLINE = {"inline": "always"}      # small helpers: inlined into their callers 
 KERNELS = {
     "expm1_ratio": _INLINE, "expm1_ratio_integral": {}, "reach_time": _INLINE,
     "net_force": _INLINE, "coulomb_force": {}, "lowest_contact": {}, "push_segment": _INLINE,
-    "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {}, "dense_values": {}, "segment_value": _INLINE,
-    "displacement": {}, "samples": {}, "quiet_piece": {}, "sorted_landscape": {},
-    "batch_scene": {}, "batch": {"parallel": True},
+    "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {},
+    "dense_values": {}, "segment_value": _INLINE, "displacement": {}, "samples": {},
+    "quiet_piece": {}, "sorted_landscape": {}, "batch_scene": {}, "batch": {"parallel": True},
 }
 
 
@@ -197,7 +197,7 @@ def lowest_contact(land: np.ndarray, speeds: np.ndarray, forces: np.ndarray,
     return first[k]
 
 
-# -- the recorder's buffers ----------------------------------------------------------------------
+# -- the recorder's buffers -------------------------------------------------------------------
 def push_segment(seg: np.ndarray, n: int, t0: float, V0: float, c1: float, B: float,
                  lam: float, C: float, D: float) -> int:
     """Store a segment row at ``n`` (a zero-length segment, same ``t0`` as the last row, is
@@ -235,7 +235,7 @@ def budget_code(rounds: int, max_steps: int, ev: np.ndarray, nev: int, window: i
     return DONE
 
 
-# -- the ideal-motor engine --------------------------------------------------------------------
+# -- the ideal-motor engine -------------------------------------------------------------------
 def ideal_piece(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
                 speeds: np.ndarray, forces: np.ndarray, total: float, m: float, c: float,
                 E: float, b: float, fstate: np.ndarray, istate: np.ndarray, seg: np.ndarray,
@@ -423,7 +423,7 @@ def ideal_run(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
     return code
 
 
-# -- segments: evaluate, integrate, sample ---------------------------------------------------------
+# -- segments: evaluate, integrate, sample ---------------------------------------------------
 def dense_values(table: np.ndarray, mu: float, query: np.ndarray, success: bool,
                  t_stop: float, scale: float, out: np.ndarray) -> None:
     """``out[0]``: ``V`` (m/s) and ``out[1]``: ``scale`` times its right derivative (``scale``
@@ -458,7 +458,8 @@ def dense_values(table: np.ndarray, mu: float, query: np.ndarray, success: bool,
         j = i + 1                                # the run: query[i:j] on this row
         while j < T and query[j] >= low and query[j] < high:
             j += 1
-        V0, c1, B, lam, C, D = table[k, 1], table[k, 2], table[k, 3], table[k, 4], table[k, 5], table[k, 6]
+        V0, c1, B, lam = table[k, 1], table[k, 2], table[k, 3], table[k, 4]
+        C, D = table[k, 5], table[k, 6]
         if c1 == 0 and C == 0 and D == 0 and (lam == 0 or B == 0) and (success or q <= t_stop):
             rate = 0.0 + B                       # (the general form's c1 + B)
             rate = rate if scale == 1.0 else scale * rate
@@ -539,7 +540,8 @@ def samples(seg: np.ndarray, n: int, mu: float, t_stop: float, V_stop: float,
         out[2, k] = mass * (seg[k, 2] + seg[k, 3] + seg[k, 5] + seg[k, 6])
     if T > n:                        # the last segment at its end
         s = t_stop - last
-        c1, B, lam, C, D = seg[n - 1, 2], seg[n - 1, 3], seg[n - 1, 4], seg[n - 1, 5], seg[n - 1, 6]
+        c1, B, lam = seg[n - 1, 2], seg[n - 1, 3], seg[n - 1, 4]
+        C, D = seg[n - 1, 5], seg[n - 1, 6]
         decay = math.exp(-mu * s)
         out[0, n] = t_stop
         out[1, n] = V_stop
@@ -640,7 +642,7 @@ def quiet_piece(forces: np.ndarray, total_force: float, m: float, c: float, tau:
     return True, V_end, body
 
 
-# -- many constant-speed scenes -------------------------------------------------------------------
+# -- many constant-speed scenes ----------------------------------------------------------------
 def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.ndarray,
                      land: np.ndarray, first: np.ndarray) -> int:
     """The staircase of scene ``s`` (row ``s`` of ``speeds``, ``forces``) into the rows

@@ -165,6 +165,7 @@ def simulate_batch(speeds: Any, forces: Any, mass: Any, t_end: float, *, v0: Any
     status = SimulationStatus.SUCCESS if not failed.any() else SimulationStatus.MAX_STEPS
     detail = f"{S} scenes, {int(events.sum())} events"
     if failed.any():
-        detail += f"; {int(failed.sum())} scenes stopped early (first: scene {int(np.argmax(failed))})"
+        detail += (f"; {int(failed.sum())} scenes stopped early "
+                   f"(first: scene {int(np.argmax(failed))})")
     return BatchResult(V, events, stuck, status, status_message(status, detail),
                        time.perf_counter() - started)

@@ -28,6 +28,18 @@ Two engines share that form:
   method. With many contacts a bound on ``|g'|`` first discards the functions that cannot
   change sign soon, so an event costs a few ``O(N)`` array operations.
 
+Compiled core
+-------------
+The ideal-motor engine's event loop, the dense evaluator, the segment integrals and samples,
+and the no-event certificate of :func:`~toolkit.simulation.advance` are the kernels of
+:mod:`toolkit._compiled.core`: plain Python over arrays that numba compiles (one source:
+under ``NUMBA_DISABLE_JIT=1`` the same functions run as Python). This module validates,
+keeps the per-plant landscape cache, grows the kernels' buffers and assembles the result; a
+one-piece run with sample times is a single kernel call (:func:`toolkit._compiled.core.ideal_run`).
+The dynamic-motor engine (lag, rate limit with a command schedule) is still NumPy code here.
+A process runs the kernels as Python until it has done enough work to pay for loading the
+compiled ones (:func:`toolkit._compiled.kernels`): the results are the same either way.
+
 Limits of exactness
 -------------------
 Event times are roots located to a few ulp at any time scale, down to the smallest motor lag
@@ -180,7 +192,8 @@ class _Recorder:
         """Make sure the buffers have room for a few more rows (the kernel pauses when they
         could fill up within its next round; it sizes its chunks of rounds to fit)."""
         istate = self.istate
-        free = min(self.seg.shape[0] - istate[_core.I_NSEG], self.ev.shape[0] - istate[_core.I_NEV])
+        free = min(self.seg.shape[0] - istate[_core.I_NSEG],
+                   self.ev.shape[0] - istate[_core.I_NEV])
         if free < 16:
             for name, width in (("seg", 7), ("ev", 4)):
                 old = getattr(self, name)

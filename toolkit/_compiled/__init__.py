@@ -13,7 +13,9 @@ a kernel calls only kernels of its own module.
 
 There is no second implementation to keep in step: with ``NUMBA_DISABLE_JIT=1`` (numba's own
 switch) :func:`load` returns the same functions uncompiled and the same source runs as
-Python. The tests run the kernel tests both ways (``make test``).
+Python (as it does before a process compiles, see :func:`kernels`), each call inside
+``np.errstate(all="ignore")`` as compiled code does not warn either. The tests run the
+kernel tests both ways (``make test``).
 
 Caching. ``cache=True`` stores the machine code beside the source (``__pycache__``), keyed on
 the source file, so a fresh process loads it instead of compiling. Where that directory is
@@ -27,6 +29,9 @@ from __future__ import annotations
 import importlib
 import os
 from types import ModuleType
+from typing import Any
+
+import numpy as np
 
 __all__ = ["COMPILE_AFTER", "charge", "kernels", "load", "loaded", "warm_up"]
 
@@ -45,17 +50,51 @@ _WORK = [0]
 _EAGER = os.environ.get("ACTIVE_CONTACTS_COMPILE", "").strip().lower() == "eager"
 
 
-def kernels(name: str, work: int = 0) -> ModuleType:
+class _Interpreted:
+    """A kernel module's kernels run as Python: each call from outside runs inside
+    ``np.errstate(all="ignore")``, since compiled kernels overflow to inf and NaN silently and
+    NumPy scalars would warn instead (the kernels' own results say what happened)."""
+
+    def __init__(self, module: ModuleType) -> None:
+        self._module = module
+
+    def __getattr__(self, name: str) -> Any:
+        value = getattr(self._module, name)
+        if name not in self._module.KERNELS:
+            return value
+
+        def call(*args: Any) -> Any:
+            with np.errstate(all="ignore"):
+                return value(*args)
+
+        call.__name__ = call.__qualname__ = name
+        call.__doc__ = value.__doc__
+        setattr(self, name, call)               # (looked up once)
+        return call
+
+
+_INTERPRETED: dict[str, _Interpreted] = {}
+
+
+def _interpreted(name: str) -> _Interpreted:
+    module = _INTERPRETED.get(name)
+    if module is None:
+        module = _INTERPRETED[name] = _Interpreted(
+            importlib.import_module(f"{__name__}.{name}"))
+    return module
+
+
+def kernels(name: str, work: int = 0) -> ModuleType | _Interpreted:
     """The kernel module ``toolkit._compiled.<name>`` to call now: compiled once this process
-    has compiled it; before that the Python source, until the work charged (plus this call's
-    ``work``) reaches :data:`COMPILE_AFTER`, when it is compiled (:func:`load`)."""
+    has compiled it; before that its source run as Python, until the work charged (plus this
+    call's ``work``) reaches :data:`COMPILE_AFTER`, when it is compiled (:func:`load`)."""
     module = _LOADED.get(name)
     if module is not None:
         return module
     _WORK[0] += work
     if _EAGER or _WORK[0] >= COMPILE_AFTER:
         return load(name)
-    return importlib.import_module(f"{__name__}.{name}")
+    return _interpreted(name)
 
 
 def charge(work: int) -> None:
@@ -63,13 +102,19 @@ def charge(work: int) -> None:
     _WORK[0] += work
 
 
-def load(name: str) -> ModuleType:
+def load(name: str) -> ModuleType | _Interpreted:
     """The kernel module ``toolkit._compiled.<name>`` with its kernels compiled (numba
-    imported, machine code loaded from the cache or compiled, on the first call only)."""
+    imported, machine code loaded from the cache or compiled, on the first call only); under
+    ``NUMBA_DISABLE_JIT=1`` its source run as Python."""
     module = _LOADED.get(name)
     if module is None:
-        module = importlib.import_module(f"{__name__}.{name}")
-        _compile(module)
+        import numba
+
+        if numba.config.DISABLE_JIT:
+            module = _interpreted(name)
+        else:
+            module = importlib.import_module(f"{__name__}.{name}")
+            _compile(module)
         _LOADED[name] = module
     return module
 

@@ -103,7 +103,7 @@ _NO_FIRST = np.empty(0, dtype=np.int64)      # (never written: the kernel caches
 _COMPILED: list[ModuleType] = []     # the kernel module, once compiled in this process
 
 
-def _kernels(work: int = 0) -> ModuleType:
+def _kernels(work: int = 0) -> Any:
     """The kernel module :mod:`toolkit._compiled.core` to call: compiled, or its source run as
     Python while the process has not done enough work to pay for compiling
     (:func:`toolkit._compiled.kernels`; ``work``: this call's, about one unit per

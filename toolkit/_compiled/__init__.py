@@ -1,27 +1,27 @@
 """Compiled kernels: one source, run by numba compiled or by Python as written.
 
-The kernel modules of this package (:mod:`.exact`: the exact method's event loop, dense
-evaluator, no-event certificate and batch; :mod:`.contacts`: the Coulomb force on many
-speeds) are plain Python functions over arrays and scalars. They import nothing heavy,
-so the rest of the toolkit may import them freely (a scene that never simulates never loads
-numba). :func:`load` returns a kernel module compiled: the first time, it replaces every
-function the module lists in ``KERNELS`` by ``numba.njit(cache=True, **options)`` of that
-very function. numba resolves a kernel's globals when it compiles it, so kernels that call
-each other call the compiled versions; callers go through the module attribute
-(``load("exact").ideal_piece(...)``), never through a name imported before :func:`load`;
-a kernel calls only kernels of its own module.
+The kernel module of this package, :mod:`.core` (the exact method's event loop, dense
+evaluator, no-event certificate and batch path, and the Coulomb force on many speeds), is
+plain Python functions over arrays and scalars. It imports nothing heavy, so the rest of the
+toolkit may import it freely (a process that never runs a kernel never loads numba).
+:func:`load` returns it compiled: the first time, it replaces every function the module lists
+in ``KERNELS`` by ``numba.njit(cache=True, **options)`` of that very function. numba resolves
+a kernel's globals when it compiles it, so kernels that call each other call the compiled
+versions; callers go through the module attribute (``load("core").ideal_piece(...)``), never
+through a name imported before :func:`load`; a kernel calls only kernels of its own module.
 
 There is no second implementation to keep in step: with ``NUMBA_DISABLE_JIT=1`` (numba's own
 switch) :func:`load` returns the same functions uncompiled and the same source runs as
 Python (as it does before a process compiles, see :func:`kernels`), each call inside
-``np.errstate(all="ignore")`` as compiled code does not warn either. The tests run the
+``np.errstate(all="ignore")`` since compiled code does not warn either. The tests run the
 kernel tests both ways (``make test``).
 
 Caching. ``cache=True`` stores the machine code beside the source (``__pycache__``), keyed on
-the source file, so a fresh process loads it instead of compiling. Where that directory is
-not writable (a read-only site-packages) numba falls back to its user-wide cache directory
-(``NUMBA_CACHE_DIR`` when set, else the user cache directory); where no cache directory is
-writable at all the kernels are compiled without a cache (each process pays the compile).
+the source file, so a fresh process loads it instead of compiling. Where that directory is not
+writable (a read-only site-packages) numba falls back to its user-wide cache directory;
+``NUMBA_CACHE_DIR`` puts every cache in a directory of one's choice; where no cache directory
+is writable at all the kernels are compiled without a cache (each process pays the compile).
+If numba cannot be imported, the kernels run as Python with a warning.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import numpy as np
 
 __all__ = ["COMPILE_AFTER", "charge", "kernels", "load", "loaded", "warm_up"]
 
-_LOADED: dict[str, ModuleType] = {}
+_LOADED: dict[str, Any] = {}          # name -> the compiled module (or its _Interpreted)
 
 #: Work (in units of about one interpreted microsecond: a query time, a contact, an event
 #: round) that a process runs through the kernels as Python before it compiles them. Loading
@@ -108,13 +108,20 @@ def load(name: str) -> ModuleType | _Interpreted:
     ``NUMBA_DISABLE_JIT=1`` its source run as Python."""
     module = _LOADED.get(name)
     if module is None:
-        import numba
+        try:
+            import numba
+        except ImportError:          # a broken install: the same source, run as Python
+            import warnings
 
-        if numba.config.DISABLE_JIT:
+            warnings.warn("numba cannot be imported: the toolkit's kernels run as Python "
+                          "(correct, but slower); reinstall numba >= 0.60", stacklevel=2)
             module = _interpreted(name)
         else:
-            module = importlib.import_module(f"{__name__}.{name}")
-            _compile(module)
+            if numba.config.DISABLE_JIT:
+                module = _interpreted(name)
+            else:
+                module = importlib.import_module(f"{__name__}.{name}")
+                _compile(module)
         _LOADED[name] = module
     return module
 

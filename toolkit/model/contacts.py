@@ -185,7 +185,8 @@ class ContactSet:
         object.__setattr__(self, "_below", table[1])
         object.__setattr__(self, "_above", table[2])
         object.__setattr__(self, "_total", float(np.sum(steps)))
-        object.__setattr__(self, "_prefix_total", float(table[1, K]))   # (the same, as summed)
+        # F_tot as the prefix sums add it up (may differ from _total in the last bit).
+        object.__setattr__(self, "_prefix_total", float(table[1, K]))
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod

@@ -24,8 +24,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/active-contacts run designs/carousel.toml --out out/carousel
 
+# The kernel tests run twice: compiled (as every test), and as plain Python under numba's
+# own switch (the same source must give the same numbers).
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q tests/test_compiled.py
 
 $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 	test -x $(MIN_BIN)/python || $(PYTHON) -m venv $(MIN_VENV)
@@ -35,6 +38,7 @@ $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 
 test-min: $(MIN_STAMP)
 	$(MIN_BIN)/python -m pytest -q
+	NUMBA_DISABLE_JIT=1 $(MIN_BIN)/python -m pytest -q tests/test_compiled.py
 
 bench: $(STAMP)
 	$(BIN)/python -m toolkit.bench all

@@ -6,16 +6,23 @@ prints the work-precision table and the ratio of the run time of the fastest ref
 that reaches max |V error| <= 1e-6 m/s to the run time of the exact method, both measured in
 this run. Every method, the exact one included, is asked for the same output times (the
 exact event times and 1001 uniform times) and timed on those calls
-(:func:`toolkit.precision.precision_report`). Exit status 0 when the issue-3 criterion holds (exact error <= 1e-12 and ratio >= 100).
+(:func:`toolkit.precision.precision_report`). The exact method's compiled kernels are loaded
+(or compiled) first, outside the timings, and that time is printed. Exit status 0 when the
+issue-11 criterion holds (exact error <= 1e-12 and ratio >= 200; issue 3 asked for 100).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
+from toolkit._compiled import warm_up
 from toolkit.model.carousel import carousel_startup_plant
 from toolkit.precision import default_settings, exact_speedup, precision_report
+
+
+TARGET = 200.0          # issue 11: reference / exact
 
 
 def _format(value: float) -> str:
@@ -30,6 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="a few settings only")
     args = parser.parse_args(argv)
 
+    print(f"exact kernels compiled or loaded from the cache in {warm_up():.2f} s (not timed)")
     plant = carousel_startup_plant(args.seed)
     start = time.perf_counter()
     report = precision_report(plant, args.t_end, repeats=args.repeats,
@@ -53,5 +61,6 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     print(f"fastest reference with max error <= 1e-6 m/s: {speedup.reference.label} "
           f"({speedup.reference.wall_time * 1e3:.2f} ms, error {speedup.reference.max_error:.1e})")
-    print(f"ratio reference / exact: {speedup.ratio:.1f}x")
-    return 0 if exact.max_error <= 1e-12 and speedup.ratio >= 100 else 1
+    print(f"ratio reference / exact: {speedup.ratio:.1f}x (target 200x; load average "
+          f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores)")
+    return 0 if exact.max_error <= 1e-12 and speedup.ratio >= TARGET else 1

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from toolkit._compiled import warm_up
 from toolkit.model import PiecewiseConstant
 from toolkit.model.carousel import CAROUSEL, carousel_startup_plant
 from toolkit.simulation import ExactState, _stepper, advance, simulate
@@ -38,6 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
 
+    print(f"kernels compiled or loaded from the cache in {warm_up():.2f} s (not timed)")
     plant = dataclasses.replace(carousel_startup_plant(args.seed), motors=CAROUSEL.motors())
     commands = _commands(args.seed, args.steps, plant.n)
     state = initial = ExactState(0.0, 0.0, np.clip(commands[0], -0.35, 0.35))

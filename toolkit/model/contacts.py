@@ -14,6 +14,11 @@ Two models share one interface (:class:`ContactModel`):
 - :class:`ContactDistribution`: a continuous density of contact speed over a contact patch,
   from a ``scipy.stats`` distribution or a tabulated histogram.
 
+Evaluation. :meth:`ContactSet.force` on many speeds is the kernel
+:func:`toolkit._compiled.core.coulomb_force` over these prefix sums (one source, compiled by
+numba once a process has run enough through it); the same prefix sums, snapped by
+:func:`toolkit._compiled.core.net_force`, are the force landscape of the exact simulator.
+
 Ties. Exactly at a contact speed the force is set-valued. :meth:`ContactSet.force` returns
 the midpoint of the interval there (``sign(0) = 0``); :meth:`ContactSet.force_bounds`
 returns the interval itself. Net forces are computed from prefix sums of the sorted
@@ -31,6 +36,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from .._compiled import kernels
 from .._validation import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
@@ -113,9 +119,10 @@ class ContactSet:
 
     Notes
     -----
-    Construction sorts once, ``O(n log n)``; :meth:`force`, :meth:`force_bounds` and
-    :meth:`cdf` on ``m`` speeds then cost ``O(m log n)`` time and ``O(n + m)`` memory
-    (binary search into prefix sums), never an ``n x m`` matrix.
+    Construction sorts once, ``O(n log n)``; :meth:`force_bounds` and :meth:`cdf` on ``m``
+    speeds then cost ``O(m log n)`` time and ``O(n + m)`` memory (binary search into prefix
+    sums), :meth:`force` ``O(n + m)`` expected (a bucket index over the sorted speeds), never
+    an ``n x m`` matrix.
 
     Examples
     --------
@@ -128,10 +135,12 @@ class ContactSet:
 
     speeds: np.ndarray
     forces: np.ndarray
+    _table: np.ndarray = field(init=False, repr=False)
     _levels: np.ndarray = field(init=False, repr=False)
     _below: np.ndarray = field(init=False, repr=False)
     _above: np.ndarray = field(init=False, repr=False)
     _total: float = field(init=False, repr=False)
+    _prefix_total: float = field(init=False, repr=False)
 
     def __init__(self, speeds: Any, forces: Any = None) -> None:
         speeds = as_float_array(speeds, "speeds", "ContactSet")
@@ -160,14 +169,24 @@ class ContactSet:
         levels, inverse = np.unique(speeds[active], return_inverse=True)
         steps = np.bincount(inverse, weights=forces[active], minlength=levels.size)
         # below[k] = magnitude strictly below levels[k]; above[k] = magnitude at or above it.
-        below = np.concatenate(([0.0], np.cumsum(steps)))
-        above = np.concatenate((np.cumsum(steps[::-1])[::-1], [0.0]))
-        object.__setattr__(self, "_levels", levels)
-        object.__setattr__(self, "_below", below)
-        object.__setattr__(self, "_above", above)
+        # One table, rows (levels + an inf pad, below, above): the exact simulator's kernel
+        # takes the staircase as this one array (toolkit._compiled.core.ideal_piece).
+        K = levels.size
+        table = np.empty((3, K + 1))
+        table[0, :K] = levels
+        table[0, K] = np.inf
+        table[1, 0] = 0.0
+        np.cumsum(steps, out=table[1, 1:])
+        table[2, :K] = np.cumsum(steps[::-1])[::-1]
+        table[2, K] = 0.0
+        table.setflags(write=False)
+        object.__setattr__(self, "_table", table)
+        object.__setattr__(self, "_levels", table[0, :K])
+        object.__setattr__(self, "_below", table[1])
+        object.__setattr__(self, "_above", table[2])
         object.__setattr__(self, "_total", float(np.sum(steps)))
-        for array in (levels, below, above):
-            array.setflags(write=False)
+        # F_tot as the prefix sums add it up (may differ from _total in the last bit).
+        object.__setattr__(self, "_prefix_total", float(table[1, K]))
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod
@@ -257,8 +276,15 @@ class ContactSet:
             ``V`` contribute 0, i.e. ``sign(0) = 0``). Values below :attr:`tie_tolerance`
             in magnitude are exactly 0.
         """
-        below, above, _ = self._parts(V, "ContactSet.force")
-        return self._snap(above - below)
+        query = _as_query(V, "ContactSet.force")
+        flat = np.ascontiguousarray(query.ravel()).view()
+        flat.setflags(write=False)                 # one kind of array: one compiled kernel
+        out = np.empty(flat.size)
+        # The kernel (toolkit._compiled.core.coulomb_force, compiled once a process has run
+        # enough through it): a bucket index over the levels, O(1) per speed expected.
+        kernels("core", 2 * flat.size).coulomb_force(self._levels, self._below, self._above,
+                                                     self.tie_tolerance, flat, out)
+        return out.reshape(query.shape)
 
     def force_bounds(self, V: Any) -> tuple[np.ndarray, np.ndarray]:
         """The set-valued net force at ``V`` as ``(lower, upper)``, N.

@@ -1,10 +1,11 @@
-"""Many constant-speed scenes at once: the exact method vectorized over scenes with NumPy.
+"""Many constant-speed scenes at once: the exact method's own kernel, in parallel over scenes.
 
-Each scene is a body from ``V(0) = v0`` on its own contacts (constant speeds, ideal motors,
-no external force, optional drag). The exact method visits at most ``N`` contact speeds per
-scene and does ``O(1)`` work at each, so the batch loop runs at most ``2 N + 2`` vectorized
-rounds: in each, every unfinished scene either decides at a contact speed (stick or pass,
-the rule of :mod:`toolkit.simulation._exact`) or moves in closed form to the next one.
+Each scene is a body from ``V(0) = v0`` on its own contacts (constant speeds, ideal motors)
+with its own mass, drag and constant external force. Each runs through the very event loop of
+single runs (:func:`toolkit._compiled.core.ideal_piece`, on the staircase built as
+:class:`~toolkit.model.ContactSet` builds it), so each final speed and event count is the
+single run's; :func:`toolkit._compiled.core.batch` spreads the scenes over the cores
+(``numba.prange``). Python only validates the inputs and assembles the result.
 """
 
 from __future__ import annotations
@@ -15,13 +16,13 @@ from typing import Any
 
 import numpy as np
 
+from .._compiled import kernels
 from .._validation import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, parameter_message
 from ._result import SimulationStatus, status_message
 
 __all__ = ["BatchResult", "simulate_batch"]
 
-_EPS = float(np.finfo(float).eps)
 _OWNER = "simulate_batch"
 
 
@@ -89,8 +90,16 @@ def _per_scene(value: Any, name: str, scenes: int, low: float | None,
     return array
 
 
+def _frozen(array: np.ndarray) -> np.ndarray:
+    """A read-only C-contiguous view: the kernel sees one kind of array whatever the caller
+    passed (one compiled specialization)."""
+    view = np.ascontiguousarray(array, dtype=float).view()
+    view.setflags(write=False)
+    return view
+
+
 def simulate_batch(speeds: Any, forces: Any, mass: Any, t_end: float, *, v0: Any = 0.0,
-                   damping: Any = 0.0) -> BatchResult:
+                   damping: Any = 0.0, external: Any = 0.0) -> BatchResult:
     """Simulate many scenes of constant contact speeds exactly, vectorized over scenes.
 
     Parameters
@@ -107,12 +116,15 @@ def simulate_batch(speeds: Any, forces: Any, mass: Any, t_end: float, *, v0: Any
         Initial body speeds.
     damping : float or array_like of shape (scenes,), N s/m
         Bearing drag ``c >= 0``.
+    external : float or array_like of shape (scenes,), N
+        Constant external force on the body.
 
     Returns
     -------
     BatchResult
-        Final speeds equal the single-run exact method (``simulate(..., method="exact")``)
-        to rounding; event counts equal its event counts.
+        Final speeds and event counts are those of the single-run exact method
+        (``simulate(..., method="exact")`` of a :class:`~toolkit.model.Plant` with that
+        scene's contacts, mass, damping and external force): the same kernel runs each.
 
     Examples
     --------
@@ -133,88 +145,27 @@ def simulate_batch(speeds: Any, forces: Any, mass: Any, t_end: float, *, v0: Any
                 "forces", _OWNER, f"have the shape of 'speeds' {v.shape}", f"shape {f.shape}"))
     m = _per_scene(mass, "mass", S, 0.0, low_open=True)
     c = _per_scene(damping, "damping", S, 0.0)
-    V = _per_scene(v0, "v0", S, None).copy()
+    E = _per_scene(external, "external", S, None)
+    V0 = _per_scene(v0, "v0", S, None)
     t_end = as_float(t_end, "t_end", _OWNER, low=0.0, low_open=True)
 
-    # Sort each scene; lifted contacts (f = 0) go to +inf where nothing reaches them.
-    v = np.where(f > 0, v, np.inf)
-    order = np.argsort(v, axis=1, kind="stable")
-    v = np.take_along_axis(v, order, axis=1)
-    f = np.take_along_axis(f, order, axis=1)
-    csum = np.concatenate((np.zeros((S, 1)), np.cumsum(f, axis=1)), axis=1)
-    total = csum[:, -1]
+    v, f, m, c, E, V0 = (_frozen(x) for x in (v, f, m, c, E, V0))
+    total = np.sum(f, axis=1)
     if np.any(total <= 0):
         bad = int(np.flatnonzero(total <= 0)[0])
         raise ParameterError(parameter_message(
             "forces", _OWNER, "have a positive sum in every scene", f"scene {bad} with sum 0"))
-    tol = 4.0 * (N + 1) * _EPS * total
-    positions = np.arange(N)
-    new = np.ones((S, N), dtype=bool)
-    new[:, 1:] = v[:, 1:] != v[:, :-1]
-    start = np.maximum.accumulate(np.where(new, positions, 0), axis=1)          # group start
-    last = np.where(np.append(new[:, 1:], np.ones((S, 1), dtype=bool), axis=1), positions, N)
-    end = np.minimum.accumulate(last[:, ::-1], axis=1)[:, ::-1] + 1             # group end
-    rows = np.arange(S)
-    plateau = total[:, None] - 2.0 * csum                                       # (S, N + 1)
-    plateau = np.where(np.abs(plateau) <= tol[:, None], 0.0, plateau)
-    lam = c / m
-
-    t = np.zeros(S)
-    j = np.sum(v < V[:, None], axis=1)                  # interval index, or level position
-    at = (j < N) & (v[rows, np.minimum(j, N - 1)] == V)
-    active = np.ones(S, dtype=bool)
-    stuck = np.zeros(S, dtype=bool)
-    events = np.zeros(S, dtype=np.int64)
-    for _ in range(2 * N + 2):
-        idx = np.flatnonzero(active & at)
-        if idx.size:                                    # decide at a contact speed
-            p = j[idx]
-            lo, hi = start[idx, p], end[idx, p]
-            W = csum[idx, hi] - csum[idx, lo]
-            G = (total[idx] - csum[idx, hi]) - csum[idx, lo]
-            G = np.where(np.abs(G) <= tol[idx], 0.0, G) - c[idx] * V[idx]
-            bound = W + 4.0 * (N + 1) * _EPS * (total[idx] + c[idx] * np.abs(V[idx]))
-            events[idx] += 1
-            stays = np.abs(G) <= bound
-            stuck[idx[stays]] = True
-            active[idx[stays]] = False
-            at[idx] = False
-            j[idx] = np.where(G > 0, hi, lo)
-        idx = np.flatnonzero(active & ~at)
-        if not idx.size:
-            break
-        jj, Vi, ci, mi = j[idx], V[idx], c[idx], m[idx]
-        r0 = (plateau[idx, jj] - ci * Vi) / mi
-        li = lam[idx]
-        up = r0 > 0
-        target = np.where(up, v[idx, np.minimum(jj, N - 1)], v[idx, np.maximum(jj - 1, 0)])
-        target = np.where(up & (jj == N), np.inf, np.where(~up & (jj == 0), -np.inf, target))
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            y = (target - Vi) / r0
-            x = li * y
-            reach = np.where(li > 0, np.where(x < 1.0, -np.log1p(-np.minimum(x, 1.0)) / np.where(
-                li > 0, li, 1.0), np.inf), y)
-        reach = np.where(np.isfinite(target) & (r0 != 0), reach, np.inf)
-        finish = t[idx] + reach >= t_end
-        # Scenes that end inside their interval (or coast with r0 = 0).
-        fin = idx[finish]
-        rest = (t_end - t[fin])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lf = lam[fin]
-            em = np.where(lf > 0, -np.expm1(-lf * rest) / np.where(lf > 0, lf, 1.0), rest)
-        moved = V[fin] + r0[finish] * em
-        low = np.where(j[fin] > 0, v[fin, np.maximum(j[fin] - 1, 0)], -np.inf)
-        high = np.where(j[fin] < N, v[fin, np.minimum(j[fin], N - 1)], np.inf)
-        V[fin] = np.minimum(np.maximum(moved, low), high)
-        active[fin] = False
-        # Scenes that reach the next contact speed.
-        go = idx[~finish]
-        t[go] += reach[~finish]
-        V[go] = target[~finish]
-        at[go] = True
-        down = go[~up[~finish]]
-        j[down] = start[down, j[down] - 1]
-    status = SimulationStatus.SUCCESS if not active.any() else SimulationStatus.MAX_STEPS
-    return BatchResult(V, events, stuck, status,
-                       status_message(status, f"{S} scenes, {int(events.sum())} events"),
+    V = np.empty(S)
+    events = np.empty(S, dtype=np.int64)
+    stuck = np.empty(S, dtype=bool)
+    codes = np.empty(S, dtype=np.int64)
+    # One scene is about 20 interpreted rounds of work per contact (toolkit._compiled).
+    kernels("core", 20 * S * N).batch(v, f, m, c, E, V0, t_end, V, events, stuck, codes)
+    failed = codes != 0
+    status = SimulationStatus.SUCCESS if not failed.any() else SimulationStatus.MAX_STEPS
+    detail = f"{S} scenes, {int(events.sum())} events"
+    if failed.any():
+        detail += (f"; {int(failed.sum())} scenes stopped early "
+                   f"(first: scene {int(np.argmax(failed))})")
+    return BatchResult(V, events, stuck, status, status_message(status, detail),
                        time.perf_counter() - started)

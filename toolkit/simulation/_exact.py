@@ -28,6 +28,18 @@ Two engines share that form:
   method. With many contacts a bound on ``|g'|`` first discards the functions that cannot
   change sign soon, so an event costs a few ``O(N)`` array operations.
 
+Compiled core
+-------------
+The ideal-motor engine's event loop, the dense evaluator, the segment integrals and samples,
+and the no-event certificate of :func:`~toolkit.simulation.advance` are the kernels of
+:mod:`toolkit._compiled.core`: plain Python over arrays that numba compiles (one source:
+under ``NUMBA_DISABLE_JIT=1`` the same functions run as Python). This module validates,
+keeps the per-plant landscape cache, grows the kernels' buffers and assembles the result; a
+one-piece run with sample times is a single kernel call (:func:`toolkit._compiled.core.ideal_run`).
+The dynamic-motor engine (lag, rate limit with a command schedule) is still NumPy code here.
+A process runs the kernels as Python until it has done enough work to pay for loading the
+compiled ones (:func:`toolkit._compiled.kernels`): the results are the same either way.
+
 Limits of exactness
 -------------------
 Event times are roots located to a few ulp at any time scale, down to the smallest motor lag
@@ -63,17 +75,18 @@ among coincident contacts.
 
 from __future__ import annotations
 
-import bisect
 import math
-import struct
 import time
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 
+from .. import _compiled
+from .._compiled import core as _core     # the kernels' source module (imports no numba)
 from ..model import ContactSet, MotorPiece, PiecewiseConstant, Plant, compliant_breakpoints
 from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
 
@@ -81,160 +94,209 @@ __all__ = ["simulate_exact"]
 
 _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
-_SMALL = 64                 # contacts up to which plain Python beats NumPy calls
+_SMALL = 64                 # functions up to which the first-root search takes them all
 _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than an Enum member)
 # The ufuncs' own reductions: np.sum / np.max add a Python layer (the same results).
 _sum, _max, _abs = np.add.reduce, np.maximum.reduce, np.abs
+_EMPTY = np.empty(0)
+_EMPTY.setflags(write=False)
+_NO_FIRST = np.empty(0, dtype=np.int64)      # (never written: the kernel caches nothing in it)
+_COMPILED: list[ModuleType] = []     # the kernel module, once compiled in this process
 
 
-# -- closed forms ---------------------------------------------------------------------------
-def _expm1_ratio(rate: Any, s: Any) -> Any:
-    """``(1 - exp(-rate s)) / rate``, continuous at ``rate = 0`` (``= s``); vectorized."""
-    rate = np.asarray(rate, dtype=float)
-    s = np.asarray(s, dtype=float)
-    x = rate * s
-    safe = np.where(rate > 0, rate, 1.0)
-    return np.where(rate > 0, -np.expm1(-x) / safe, s)
+def _kernels(work: int = 0) -> Any:
+    """The kernel module :mod:`toolkit._compiled.core` to call: compiled, or its source run as
+    Python while the process has not done enough work to pay for compiling
+    (:func:`toolkit._compiled.kernels`; ``work``: this call's, about one unit per
+    interpreted microsecond)."""
+    if _COMPILED:
+        return _COMPILED[0]
+    module = _compiled.kernels("core", work)
+    if "core" in _compiled.loaded():
+        _COMPILED.append(module)
+    return module
 
 
-def _scalar_expm1_ratio(rate: float, s: float) -> float:
-    """Scalar :func:`_expm1_ratio`."""
-    return -math.expm1(-rate * s) / rate if rate > 0 else s
-
-
-#: ``(-1)^k / (k + 2)!`` for k = 0..14, highest first: the series of
-#: ``(x + expm1(-x)) / x^2``, truncated below ``1e-17`` relative for ``0 <= x < 0.5``.
-_RATIO_INTEGRAL_SERIES = tuple((-1.0) ** k / math.factorial(k + 2) for k in range(14, -1, -1))
-
-
-def _expm1_ratio_integral(rate: float, s: float) -> float:
-    """``int_0^s expm1_ratio(rate, x) dx = (s - expm1_ratio(rate, s)) / rate`` (``s^2 / 2`` at
-    ``rate = 0``), to a few ulp: a series where the difference would cancel (``rate s < 0.5``),
-    written without overflow for rates up to the largest double."""
-    x = rate * s
-    if x == 0.0:
-        return s * s * 0.5                          # (the series below at x = 0)
-    if x < 0.5:
-        h = 0.0
-        for c in _RATIO_INTEGRAL_SERIES:            # Horner
-            h = h * x + c
-        return s * s * h
-    return s * ((x + math.expm1(-x)) / x) / rate
-
-
-def _reach_time(V: float, r0: float, lam: float, target: float) -> float:
-    """Time for ``V + r0 expm1_ratio(lam, s)`` to reach ``target`` (``inf`` if it never does, or
-    when ``target`` or ``r0`` is not finite)."""
-    if not (math.isfinite(target) and math.isfinite(r0)):
-        return math.inf
-    y = (target - V) / r0
-    if not y >= 0:                                  # negative, or NaN from an infinite V
-        return math.inf
-    if lam == 0:
-        return y
-    x = lam * y
-    if x >= 1.0:
-        return math.inf
-    return -math.log1p(-x) / lam
+# -- closed forms (the kernels' own source, run as Python by the dynamic-motor engine) --------
+_scalar_expm1_ratio = _core.expm1_ratio
+_expm1_ratio_integral = _core.expm1_ratio_integral
+_reach_time = _core.reach_time
 
 
 # -- segment store, events and guards ---------------------------------------------------------
+#: Event kind names by kernel code (toolkit._compiled.core: CROSS, STICK, RELEASE, ...).
+_KIND_NAMES = ("cross", "stick", "release", "saturation", "command")
+_KIND_CODES = {name: code for code, name in enumerate(_KIND_NAMES)}
+_ROWS = 32                  # initial rows of the segment and event buffers (doubled on demand)
+_MAX_CHUNK = 1 << 14        # kernel rounds between two looks at the wall clock
+_STEP_CAP = (1 << 62)       # max_steps beyond this is unlimited in practice (an int64 count)
+
+
+_INITIAL_STATES: dict[tuple[int, float, int], tuple[np.ndarray, np.ndarray]] = {}
+
+
 class _Recorder:
-    """Collects segments and events and enforces the budget (private, mutable while running)."""
+    """Segments and events in growing buffers, and the budget (private, mutable while running).
+
+    The kernels write rows into ``seg`` (segments ``(t0, V0, c1, B, lam, C, D)``) and ``ev``
+    (events ``(t, kind code, contact or -1, V)``) and keep their counts and the loop state in
+    ``istate`` / ``fstate`` (layout: :mod:`toolkit._compiled.core`). The buffers start small
+    and double when a kernel pauses for room, so they hold what the run produced: at most
+    two segment and two event rows per round, and a run has at most ``Budget.max_steps``
+    rounds, and at most ``Budget.max_samples // 2`` (the memory cap: at most
+    ``max_samples`` segments stored).
+    """
+
+    __slots__ = ("budget", "mu", "window", "seg", "ev", "fstate", "istate", "deadline",
+                 "status", "detail")
 
     def __init__(self, budget: Budget, cascade: int, mu: float) -> None:
         self.budget = budget
         self.mu = mu
         self.window = 2 * cascade + _ZENO_FLOOR
-        self.rows: list[tuple[float, ...]] = []       # segments (t0, V0, c1, B, lam, C, D)
-        self.events: list[Event] = []
-        self.n_evaluations = 0
-        self.rounds = 0
+        self.seg = np.empty((_ROWS, 7))
+        self.ev = np.empty((_ROWS, 4))
+        key = (budget.max_steps, budget.max_samples, budget.max_event_rate, self.window)
+        initial = _INITIAL_STATES.get(key)
+        if initial is None:                       # the initial loop state of this budget
+            fstate = np.zeros(_core.N_FSTATE)
+            istate = np.zeros(_core.N_ISTATE, dtype=np.int64)
+            istate[_core.I_STUCK] = -1
+            istate[_core.I_MAXSTEPS] = min(budget.max_steps, _STEP_CAP, max(budget.max_samples // 2, 1))
+            istate[_core.I_WINDOW] = self.window
+            istate[_core.I_CHUNK] = _MAX_CHUNK
+            fstate[_core.F_RATE] = budget.max_event_rate
+            if len(_INITIAL_STATES) > 64:
+                _INITIAL_STATES.clear()
+            initial = _INITIAL_STATES[key] = (fstate, istate)
+        self.fstate, self.istate = initial[0].copy(), initial[1].copy()
         self.deadline = time.perf_counter() + budget.wall_time
         self.status = _SUCCESS
         self.detail = ""
 
+    @property
+    def n_segments(self) -> int:
+        return int(self.istate[_core.I_NSEG])
+
+    @property
+    def n_events(self) -> int:
+        return int(self.istate[_core.I_NEV])
+
+    @property
+    def n_evaluations(self) -> int:
+        return int(self.istate[_core.I_NEVAL])
+
+    @n_evaluations.setter
+    def n_evaluations(self, value: int) -> None:
+        self.istate[_core.I_NEVAL] = value
+
+    def room(self) -> None:
+        """Make sure the buffers have room for a few more rows (the kernel pauses when they
+        could fill up within its next round; it sizes its chunks of rounds to fit)."""
+        istate = self.istate
+        free = min(self.seg.shape[0] - istate[_core.I_NSEG],
+                   self.ev.shape[0] - istate[_core.I_NEV])
+        if free < 16:
+            for name, width in (("seg", 7), ("ev", 4)):
+                old = getattr(self, name)
+                new = np.empty((2 * old.shape[0] + 16, width))
+                new[:old.shape[0]] = old
+                setattr(self, name, new)
+
     def segment(self, t0: float, V0: float, B: float = 0.0, lam: float = 0.0, c1: float = 0.0,
                 C: float = 0.0, D: float = 0.0) -> None:
-        rows = self.rows
-        if rows and rows[-1][0] == t0:           # a zero-length segment is superseded
-            rows.pop()
-        rows.append((t0, V0, c1, B, lam, C, D))
+        self.room()
+        istate = self.istate
+        istate[_core.I_NSEG] = _core.push_segment(self.seg, int(istate[_core.I_NSEG]), t0, V0,
+                                                  c1, B, lam, C, D)
 
     def event(self, t: float, kind: str, contact: int | None, V: float) -> None:
-        # The engines pass known kinds and plain ints; floats are made sure of here.
-        self.events.append(Event._trusted(float(t), kind, contact, float(V)))
+        self.room()
+        istate = self.istate
+        istate[_core.I_NEV] = _core.push_event(self.ev, int(istate[_core.I_NEV]), t,
+                                               _KIND_CODES[kind],
+                                               -1 if contact is None else contact, V)
 
     def stop(self, t: float) -> bool:
         """Check the budget at simulated time ``t``; True when the run must stop."""
+        istate = self.istate
+        istate[_core.I_ROUNDS] += 1
+        rounds = int(istate[_core.I_ROUNDS])
+        if rounds > istate[_core.I_MAXSTEPS]:
+            return self.stopped(_core.MAX_STEPS, t)
+        if time.perf_counter() > self.deadline:
+            return self.stopped(-1, t)
+        code = _core.budget_code(rounds, int(istate[_core.I_MAXSTEPS]), self.ev,
+                                 int(istate[_core.I_NEV]), self.window,
+                                 float(self.fstate[_core.F_RATE]))
+        return code != _core.DONE and self.stopped(code, t)
+
+    def stopped(self, code: int, t: float) -> bool:
+        """Record why the run stopped at ``t`` (a kernel code, -1 for the wall clock): True."""
         budget = self.budget
-        self.rounds += 1
-        events, w = self.events, self.window
-        if self.rounds > budget.max_steps:
+        if code == _core.MAX_STEPS:
             self.status = SimulationStatus.MAX_STEPS
-            self.detail = f"{budget.max_steps} rounds at t = {t:.6g} s"
-        elif len(self.rows) >= budget.max_samples:       # memory cap: segments stored
-            self.status = SimulationStatus.MAX_STEPS
-            self.detail = (f"{len(self.rows)} segments stored, max_samples = "
-                           f"{budget.max_samples}, at t = {t:.6g} s")
-        elif time.perf_counter() > self.deadline:
-            self.status = SimulationStatus.WALL_TIME
-            self.detail = f"{budget.wall_time:g} s at t = {t:.6g} s"
-        elif len(events) > w and ((span := events[-1].time - events[-1 - w].time)
-                                  * budget.max_event_rate < w):
+            if budget.max_samples // 2 < budget.max_steps:     # the memory cap came first
+                self.detail = (f"{int(self.istate[_core.I_NSEG])} segments stored, max_samples = "
+                               f"{budget.max_samples}, at t = {t:.6g} s")
+            else:
+                self.detail = f"{budget.max_steps} rounds at t = {t:.6g} s"
+        elif code == _core.ZENO:
+            nev, w = self.n_events, self.window
+            span = float(self.ev[nev - 1, 0] - self.ev[nev - 1 - w, 0])
             self.status = SimulationStatus.ZENO
             self.detail = f"{w} events within {span:.3g} s before t = {t:.6g} s"
         else:
-            return False
+            self.status = SimulationStatus.WALL_TIME
+            self.detail = f"{budget.wall_time:g} s at t = {t:.6g} s"
         return True
 
     # -- output -----------------------------------------------------------------------------
+    def events(self) -> tuple[Event, ...]:
+        """The recorded events as :class:`Event` objects."""
+        n = int(self.istate[_core.I_NEV])
+        if not n:
+            return ()
+        names, new, events = _KIND_NAMES, object.__new__, []
+        for t, kind, contact, V in self.ev[:n].tolist():     # (Event._trusted, inlined)
+            event = new(Event)
+            event.__dict__.update(time=t, kind=names[int(kind)],
+                                  contact=None if contact < 0 else int(contact), speed=V)
+            events.append(event)
+        return tuple(events)
+
+    def drop_non_finite(self) -> tuple[float, float]:
+        """Forget the trailing segments whose start is not finite (an overflowed run) and
+        return the last finite ``(t0, V0)``."""
+        seg, n = self.seg, self.n_segments
+        while n > 1 and not (math.isfinite(seg[n - 1, 0]) and math.isfinite(seg[n - 1, 1])):
+            n -= 1
+        self.istate[_core.I_NSEG] = n
+        return float(seg[n - 1, 0]), float(seg[n - 1, 1])
+
     def displacement(self, t_stop: float) -> float:
-        """The exact integral of ``V`` (m) from the first segment's start to ``t_stop`` (s):
-        each closed-form segment integrated in closed form, ``V0 S + c1 S^2 / 2
-        + B I(lam, S) + C I(mu, S) + D (S expm1_ratio(mu, S) - I(mu, S))`` with ``S`` its
-        length and ``I`` :func:`_expm1_ratio_integral`."""
-        rows, mu = self.rows, self.mu
-        total = 0.0
-        for k, (t0, V0, c1, B, lam, C, D) in enumerate(rows):
-            S = (rows[k + 1][0] if k + 1 < len(rows) else t_stop) - t0
-            if S <= 0.0:
-                continue
-            part = V0 * S + 0.5 * c1 * S * S
-            if B != 0.0:
-                part += B * _expm1_ratio_integral(lam, S)
-            if C != 0.0 or D != 0.0:
-                settle = _expm1_ratio_integral(mu, S)
-                part += C * settle + D * (S * _scalar_expm1_ratio(mu, S) - settle)
-            total += part
-        return total
+        """The exact integral of ``V`` (m) from the first segment's start to ``t_stop`` (s)
+        (:func:`toolkit._compiled.core.displacement`)."""
+        n = self.istate[_core.I_NSEG]
+        return _kernels(2 * int(n)).displacement(self.seg, n, self.mu, t_stop)
 
     def dense(self, t_stop: float, success: bool, t_end: float, linear: bool) -> _Dense:
-        return _Dense(self.rows, self.mu, t_stop, success, t_end, linear)
+        """The dense output: a read-only view of the segment rows (the run is over: nothing
+        writes to this buffer again)."""
+        seg = self.seg
+        seg.setflags(write=False)
+        return _Dense(seg[:int(self.istate[_core.I_NSEG])], self.mu, t_stop, success, t_end,
+                      linear)
 
     def samples(self, t_stop: float, V_stop: float,
                 mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Segment starts and the final time: ``t`` (s), ``V`` (m/s) and the force ``m dV/dt``
         (N) from the right, exact, as fresh read-only arrays of shape (T,)."""
-        times: list[float] = []
-        speeds: list[float] = []
-        forces: list[float] = []
-        for t0, V0, c1, B, lam, C, D in self.rows:                # each segment at s = 0
-            times.append(t0)
-            speeds.append(V0)
-            forces.append(mass * (c1 + B + C + D))
-        if t_stop > t0:                  # the last segment (the loop's last row) at its end
-            s, mu = t_stop - t0, self.mu
-            decay = math.exp(-mu * s)
-            times.append(t_stop)
-            speeds.append(V_stop)
-            forces.append(mass * (c1 + B * math.exp(-lam * s) + C * decay
-                                  + D * (1.0 - mu * s) * decay))
-        # One immutable bytes buffer: its views are read-only without a copy or a flag to set
-        # (and this beats np.array on a few values).
-        T = len(times)
-        table = np.frombuffer(struct.pack(f"{3 * T}d", *times, *speeds, *forces))
-        return table[:T], table[T:2 * T], table[2 * T:]
+        n = self.istate[_core.I_NSEG]
+        table = _kernels(2 * int(n)).samples(self.seg, n, self.mu, t_stop,
+                                   V_stop, mass)
+        table.setflags(write=False)
+        return table[0], table[1], table[2]
 
 
 class _Dense:
@@ -243,140 +305,48 @@ class _Dense:
     ``table`` holds one row ``(t0, V0, c1, B, lam, C, D)`` per segment; ``mu`` is the motor
     rate shared by all segments; ``linear`` says every row is a line ``V0 + B s`` (the
     engine that produced them knows it). Defined on ``[0, t_end]`` (the requested horizon);
-    :meth:`SimulationResult.speed_at` refuses times outside it.
+    :meth:`SimulationResult.speed_at` refuses times outside it. Every evaluation is the one
+    kernel :func:`toolkit._compiled.core.dense_values` (any order of times, any values).
     """
 
-    __slots__ = ("rows", "_table", "linear", "_lines", "mu", "t_stop", "success", "t_end")
+    __slots__ = ("table", "linear", "mu", "t_stop", "success", "t_end")
 
-    def __init__(self, rows: list[tuple[float, ...]], mu: float, t_stop: float,
-                 success: bool, t_end: float, linear: bool) -> None:
-        self.rows, self.mu, self.t_stop, self.success = rows, mu, t_stop, success
+    def __init__(self, table: np.ndarray, mu: float, t_stop: float, success: bool,
+                 t_end: float, linear: bool) -> None:
+        self.table, self.mu, self.t_stop, self.success = table, mu, t_stop, success
         self.t_end, self.linear = t_end, linear
-        self._table: np.ndarray | None = None
-        self._lines: tuple[np.ndarray, ...] | None = None
-
-    @property
-    def table(self) -> np.ndarray:
-        """The segments as an array of shape (segments, 7), built on first use."""
-        if self._table is None:
-            self._table = np.array(self.rows, dtype=float)
-            self._table.setflags(write=False)
-        return self._table
-
-    def linear_values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """``(V, dV/dt)`` at ``query`` times (s, 1-d, any order) when every segment is a
-        straight line ``V0 + B s`` (``linear``: the ideal engine without drag or compliance),
-        else None.
-
-        One gathered row per time, the operations of :meth:`gathered_values` without its zero
-        terms: the same values (a dropped zero term may only turn ``-0.0`` into ``0.0``).
-        """
-        if not self.linear:
-            return None
-        lines = self._lines
-        if lines is None:       # t0, then t0, V0 and B each with its first row prepended
-            rows = self.rows
-            S = len(rows)
-            t0, V0, _, B = list(zip(*rows))[:4]
-            packed = struct.pack(f"{4 * S + 3}d", *t0, t0[0], *t0, V0[0], *V0, B[0], *B)
-            table = np.frombuffer(packed)
-            lines = self._lines = (table[:S], table[S:2 * S + 1], table[2 * S + 1:3 * S + 2],
-                                   table[3 * S + 2:])
-        starts, t0, V0, B = lines
-        # Row k - 1 for t0[k-1] <= t < t0[k]; the prepended row serves times before t0[0].
-        index = starts.searchsorted(query, side="right")
-        dV = B[index]
-        if self.success:                         # finite lines over finite times: no overflow
-            V = dV * (query - t0[index])
-            V += V0[index]
-            return V, dV
-        with np.errstate(over="ignore", invalid="ignore"):
-            V = dV * (query - t0[index])
-            V += V0[index]
-        V[query > self.t_stop] = np.nan
-        return V, dV
-
-    def _parts(self, times: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        query = np.asarray(times, dtype=float)
-        t0 = self.table[:, 0]
-        index = np.clip(np.searchsorted(t0, query, side="right") - 1, 0, t0.size - 1)
-        rows = self.table[index]
-        return query, query - rows[..., 0], np.moveaxis(rows, -1, 0)
-
-    def sorted_values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(V, dV/dt)`` at non-decreasing ``query`` times (s): each closed-form segment on
-        its contiguous slice of the times, with scalar coefficients and without its zero
-        terms. The same operations in the same order as :meth:`__call__` and
-        :meth:`derivative`, so the same values (a dropped zero term only turns a ``-0.0``
-        into ``0.0``), without gathering a row per time.
-
-        Parameters
-        ----------
-        query : ndarray of shape (T,), s
-            Sorted (non-decreasing), not NaN.
-
-        Returns
-        -------
-        V : ndarray of shape (T,), m/s
-            NaN past the end of a stopped run.
-        dV : ndarray of shape (T,), m/s^2
-            Right derivative.
-        """
-        rows, mu = self.rows, self.mu
-        T = query.size
-        V, dV = np.empty(T), np.empty(T)
-        starts = np.searchsorted(query, [row[0] for row in rows], side="left").tolist()
-        starts[0] = 0                                   # times before t0[0] use the first row
-        starts.append(T)
-        with np.errstate(over="ignore", invalid="ignore"):     # only past a stopped run
-            for (t0, V0, c1, B, lam, C, D), a, b in zip(rows, starts, starts[1:]):
-                if a >= b:
-                    continue
-                s = query[a:b] - t0
-                value = V0 + c1 * s if c1 != 0 else None
-                slope: Any = c1
-                if B != 0:
-                    term = B * (-np.expm1(-(lam * s)) / lam) if lam > 0 else B * s
-                    # exp(-0 s) = 1 exactly: the term is B
-                    slope = slope + (B if lam == 0 else B * np.exp(-lam * s))
-                    value = V0 + term if value is None else value + term
-                if C != 0 or D != 0:
-                    decay = np.exp(-mu * s)
-                    if C != 0:
-                        term = C * (-np.expm1(-(mu * s)) / mu) if mu > 0 else C * s
-                        value = V0 + term if value is None else value + term
-                        slope = slope + C * decay
-                    if D != 0:
-                        term = D * s * decay
-                        value = V0 + term if value is None else value + term
-                        slope = slope + D * (1.0 - mu * s) * decay
-                V[a:b] = V0 if value is None else value
-                dV[a:b] = slope
-        if not self.success:
-            V[np.searchsorted(query, self.t_stop, side="right"):] = np.nan
-        return V, dV
 
     def values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(V, dV/dt)`` at ``query`` times (s, 1-d, within ``[0, t_end]``), by the cheapest
-        exact path: :meth:`linear_values` when every segment is a line, else
-        :meth:`sorted_values` for non-decreasing times, else the per-time gather."""
-        fast = self.linear_values(query)
-        if fast is not None:
-            return fast
-        if _is_sorted(query):
-            return self.sorted_values(query)
-        return self.gathered_values(query), self.gathered_derivative(query)
+        """``(V, dV/dt)`` at ``query`` times (s, 1-d float64, any order and values): fresh
+        arrays, m/s and m/s^2 (the right derivative)."""
+        out = self.scaled(query, 1.0)
+        return out[0], out[1]
+
+    def scaled(self, query: np.ndarray, scale: float) -> np.ndarray:
+        """Rows ``V`` (m/s) and ``scale dV/dt`` at ``query`` times (s, 1-d float64): one
+        fresh array of shape (2, T)."""
+        if query.flags.writeable or not query.flags.c_contiguous:
+            query = np.ascontiguousarray(query).view()    # read-only: one kernel specialization
+            query.setflags(write=False)
+        out = np.empty((2, query.size))
+        _kernels(2 * query.size).dense_values(self.table, self.mu, query, self.success,
+                                              self.t_stop, scale, out)
+        return out
+
+    def linear_values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """:meth:`values` when every segment is a straight line ``V0 + B s`` (``linear``),
+        else None."""
+        return self.values(query) if self.linear else None
+
+    def sorted_values(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`values` (kept for callers that know their times are sorted)."""
+        return self.values(query)
 
     def _anywhere(self, times: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`values` at any times (any shape, also non-finite or outside ``[0, t_end]``,
         where the closed forms may overflow quietly): ``(query, V, dV/dt)``."""
         query = np.asarray(times, dtype=float)
-        flat = query.ravel()
-        with np.errstate(over="ignore", invalid="ignore"):
-            if np.isfinite(flat).all():
-                V, dV = self.values(flat)
-            else:       # NaN or inf times: the general closed form propagates them
-                V, dV = self.gathered_values(flat), self.gathered_derivative(flat)
+        V, dV = self.values(query.ravel())
         return query, V, dV
 
     def __call__(self, times: Any) -> np.ndarray:
@@ -390,32 +360,20 @@ class _Dense:
         return dV.reshape(query.shape)
 
     def gathered_values(self, query: np.ndarray) -> np.ndarray:
-        """:meth:`__call__` at times in any order: one segment row gathered per time."""
-        query, s, (_, V0, c1, B, lam, C, D) = self._parts(query)
-        mu = self.mu
-        with np.errstate(over="ignore", invalid="ignore"):     # masked past a stopped run
-            value = (V0 + c1 * s + B * _expm1_ratio(lam, s) + C * _expm1_ratio(mu, s)
-                     + D * s * np.exp(-mu * s))
-        return np.where((query <= self.t_stop) | self.success, value, np.nan)
+        """:meth:`__call__` at 1-d times in any order."""
+        return self.values(np.asarray(query, dtype=float))[0]
 
     def gathered_derivative(self, query: np.ndarray) -> np.ndarray:
-        """:meth:`derivative` at times in any order: one segment row gathered per time."""
-        _, s, (_, _, c1, B, lam, C, D) = self._parts(query)
-        with np.errstate(over="ignore", invalid="ignore"):
-            decay = np.exp(-self.mu * s)
-            return c1 + B * np.exp(-lam * s) + C * decay + D * (1.0 - self.mu * s) * decay
-
-
-def _is_sorted(query: np.ndarray) -> bool:
-    """True for a 1-d array of at least two non-decreasing times (NaN-free)."""
-    return query.ndim == 1 and query.size > 1 and bool(np.all(query[1:] >= query[:-1]))
+        """:meth:`derivative` at 1-d times in any order."""
+        return self.values(np.asarray(query, dtype=float))[1]
 
 
 # -- the force landscape of constant contact speeds ----------------------------------------
-# Both landscapes answer the ideal engine's three questions: where is ``V`` (:meth:`locate`),
-# what is the force and its slope inside an interval (:meth:`force`), and what holds at a
-# breakpoint (:meth:`stiction`, :meth:`contact`). Interval ``j`` is ``(xs[j-1], xs[j])``
-# (``xs[-1] = -inf``, ``xs[K] = +inf``).
+# Both landscapes answer the ideal engine's three questions: where is ``V``, what is the force
+# and its slope inside an interval (:meth:`force`), and what holds at a breakpoint
+# (:meth:`stiction`, :meth:`contact`); the kernel (toolkit._compiled.core.ideal_piece) asks
+# them of the arrays in ``args``. Interval ``j`` is ``(xs[j-1], xs[j])`` (``xs[-1] = -inf``,
+# ``xs[K] = +inf``).
 class _CoulombLandscape:
     """The staircase of Coulomb contacts, read from the prefix sums a :class:`ContactSet`
     already holds (its sorted distinct speeds and the magnitudes below / above each).
@@ -426,100 +384,103 @@ class _CoulombLandscape:
     ``G``, the mean of the two plateaus beside it.
     """
 
-    __slots__ = ("xs", "total", "_below", "_above", "_tol", "_contacts", "_speeds", "_forces",
-                 "_first")
+    __slots__ = ("total", "first", "args", "_contacts")
     kind = "cross"
 
     def __init__(self, contacts: ContactSet) -> None:
-        # The private prefix sums of ContactSet (levels, below, above) are exactly the
-        # staircase; reading them spares an O(N log N) sort per new plant.
-        self.xs: list[float] = contacts._levels.tolist()
-        self._below: list[float] = contacts._below.tolist()
-        self._above: list[float] = contacts._above.tolist()
-        self.total = self._below[-1]
-        self._tol = 4.0 * (len(self.xs) + 1) * _EPS * self.total
+        # The private prefix sums of ContactSet (levels, below, above: its _table) are exactly
+        # the staircase; reading them spares an O(N log N) sort per new plant.
+        table = contacts._table
+        K = table.shape[1] - 1
+        self.total = contacts._prefix_total        # F_tot as the prefix sums add it up
+        # The lowest contact per level, filled by the kernel as events need it; few contacts
+        # are scanned instead (toolkit._compiled.core.lowest_contact): no array needed.
+        self.first = np.full(K, -1, dtype=np.int64) if contacts.n > _core.SMALL else _NO_FIRST
         self._contacts = contacts
-        small = contacts.n <= _SMALL                 # few contacts: find indices by a scan
-        self._speeds = contacts.speeds.tolist() if small else None
-        self._forces = contacts.forces.tolist() if small else None
-        self._first: list[int] | None = None       # many: lowest index per level, on demand
+        self.args = (True, K, table, self.first, contacts.speeds, contacts.forces, self.total)
 
-    def locate(self, V: float) -> tuple[int, bool]:
-        """``(k, True)`` when ``V`` is breakpoint ``k``, else ``(j, False)`` for interval ``j``."""
-        j = bisect.bisect_left(self.xs, V)
-        return (j, True) if j < len(self.xs) and self.xs[j] == V else (j, False)
+    @property
+    def levels(self) -> np.ndarray:
+        return self._contacts._levels
+
+    @property
+    def below(self) -> np.ndarray:
+        return self._contacts._below
+
+    @property
+    def above(self) -> np.ndarray:
+        return self._contacts._above
+
+    @property
+    def xs(self) -> list[float]:
+        """The breakpoints: the distinct speeds of the touching contacts, ascending, m/s."""
+        return self.levels.tolist()
+
+    @property
+    def _tol(self) -> float:
+        return 4.0 * (self.levels.size + 1) * _EPS * self.total
 
     def force(self, j: int, V: float) -> tuple[float, float]:
         """Force (N) at ``V`` inside interval ``j`` (the plateau), and its slope: 0."""
-        plateau = self._above[j] - self._below[j]
-        return (plateau if abs(plateau) > self._tol else 0.0), 0.0
+        return _core.net_force(float(self.above[j]), float(self.below[j]), self._tol), 0.0
 
     def stiction(self, k: int) -> tuple[float, float]:
         """``(W, G)`` at breakpoint ``k``: stiction magnitude there and the others' push, N."""
-        above, below, tol = self._above, self._below, self._tol
-        lower, upper = above[k] - below[k], above[k + 1] - below[k + 1]     # the plateaus
-        push = 0.5 * ((lower if abs(lower) > tol else 0.0) + (upper if abs(upper) > tol else 0.0))
-        return below[k + 1] - below[k], (push if abs(push) > tol else 0.0)
+        above, below, tol = self.above, self.below, self._tol
+        lower = _core.net_force(float(above[k]), float(below[k]), tol)
+        upper = _core.net_force(float(above[k + 1]), float(below[k + 1]), tol)
+        push = 0.5 * (lower + upper)
+        return float(below[k + 1] - below[k]), (push if abs(push) > tol else 0.0)
 
     def contact(self, k: int) -> int:
         """The lowest index of the touching contacts at breakpoint ``k``."""
-        speeds = self._speeds
-        if speeds is not None:                       # a C-level scan beats sorting
-            i = speeds.index(self.xs[k])
-            while self._forces[i] <= 0:              # a lifted contact at the same speed
-                i = speeds.index(self.xs[k], i + 1)
-            return i
-        if self._first is None:                      # one sort, on the first event
-            contacts = self._contacts
-            active = np.flatnonzero(contacts.forces > 0)
-            _, first = np.unique(contacts.speeds[active], return_index=True)
-            self._first = active[first].tolist()
-        return self._first[k]
+        contacts = self._contacts
+        return int(_core.lowest_contact(contacts._table, contacts.speeds, contacts.forces,
+                                        self.first, k))
 
 
-@dataclass(frozen=True, eq=False)
 class _CompliantLandscape:
     """Force-speed map of compliant contacts: saturation limits ``v_i +- k f_i`` as
     breakpoints, the force linear between them (``base_F[j] + slope[j] (V - base_x[j])``
     in interval ``j``). Breakpoints hold no stiction; ``G[k]`` is the force there."""
 
-    xs: list[float]
-    G: list[float]
-    first: list[int]
-    base_x: list[float]
-    base_F: list[float]
-    slope: list[float]
-    total: float
+    __slots__ = ("x", "G", "first", "base_x", "base_F", "slope", "total", "args")
     kind = "saturation"
 
-    locate = _CoulombLandscape.locate
+    def __init__(self, plant: Plant, speeds: np.ndarray) -> None:
+        x, at_x, first, slope, total = compliant_breakpoints(speeds, plant.contacts.forces,
+                                                             plant.compliance)
+        self.x, self.G, self.first, self.slope, self.total = x, at_x, first, slope, total
+        self.base_x = np.concatenate(([x[0]], x))
+        self.base_F = np.concatenate(([total], at_x))
+        self.base_F[-1] = -total
+        K = x.size
+        land = np.zeros((5, K + 1))            # the kernel's table (toolkit._compiled.core)
+        land[0, :K], land[1], land[2], land[3], land[4, :K] = x, self.base_F, slope, \
+            self.base_x, at_x
+        land.setflags(write=False)             # (read-only like ContactSet._table: one kernel)
+        self.args = (False, K, land, first.astype(np.int64), _EMPTY, _EMPTY, total)
+
+    @property
+    def xs(self) -> list[float]:
+        return self.x.tolist()
 
     def force(self, j: int, V: float) -> tuple[float, float]:
         """Force (N) at ``V`` inside interval ``j``, and its slope ``dF/dV`` (N s/m)."""
-        slope = self.slope[j]
-        return (self.base_F[j] if slope == 0 else self.base_F[j] + slope * (V - self.base_x[j]),
-                slope)
+        slope = float(self.slope[j])
+        base = float(self.base_F[j])
+        return (base if slope == 0 else base + slope * (V - float(self.base_x[j])), slope)
 
     def stiction(self, k: int) -> tuple[float, float]:
         """``(0, G)``: no stiction at a saturation limit, the force there, N."""
-        return 0.0, self.G[k]
+        return 0.0, float(self.G[k])
 
     def contact(self, k: int) -> int:
         """The lowest index of the contacts saturating at breakpoint ``k``."""
-        return self.first[k]
+        return int(self.first[k])
 
 
 _Landscape = _CoulombLandscape | _CompliantLandscape
-
-
-def _compliant_landscape(plant: Plant, speeds: np.ndarray) -> _CompliantLandscape:
-    x, at_x, first, slope, total = compliant_breakpoints(speeds, plant.contacts.forces,
-                                                         plant.compliance)
-    base_x = np.concatenate(([x[0]], x))
-    base_F = np.concatenate(([total], at_x))
-    base_F[-1] = -total
-    return _CompliantLandscape(x.tolist(), at_x.tolist(), first.tolist(), base_x.tolist(),
-                               base_F.tolist(), slope.tolist(), total)
 
 
 # The exact method's own cache (a Plant holds no solver state): per plant, the landscape of
@@ -539,7 +500,7 @@ def _build_landscape(plant: Plant, speeds: np.ndarray | None) -> _Landscape:
     """The landscape of contact speeds ``speeds`` (m/s; ``None``: the plant's own constant
     contact speeds)."""
     if plant.compliance > 0:
-        return _compliant_landscape(plant, speeds)
+        return _CompliantLandscape(plant, plant.contacts.speeds if speeds is None else speeds)
     contacts = plant.contacts
     return _CoulombLandscape(contacts if speeds is None else contacts.with_speeds(speeds))
 
@@ -586,7 +547,9 @@ def _ideal_piece(plant: Plant, land: _Landscape, E: float, a: float, b: float, V
                  stuck: int | None, rec: _Recorder) -> tuple[float, float, int | None, bool]:
     """Integrate over ``[a, b]`` (s) with constant contact speeds (landscape ``land``) and
     external force ``E`` (N) from speed ``V`` (m/s), the body stuck to contact ``stuck`` (or
-    None); the one engine of :func:`simulate_exact` and :func:`advance`.
+    None); the one engine of :func:`simulate_exact` and :func:`advance`: the compiled
+    :func:`toolkit._compiled.core.ideal_piece`, resumed while it pauses (to grow the buffers
+    and look at the wall clock).
 
     Returns
     -------
@@ -594,66 +557,43 @@ def _ideal_piece(plant: Plant, land: _Landscape, E: float, a: float, b: float, V
         The time and speed reached (``b`` unless the budget stopped the run, then
         ``stopped``), and the contact the body is stuck to there.
     """
-    m, c = plant.mass, plant.damping
-    event, segment, stop = rec.event, rec.segment, rec.stop      # (bound once: hot loop)
-    stiction, force_at, contact_at, kind = land.stiction, land.force, land.contact, land.kind
-    xs = land.xs
-    K = len(xs)
-    tol_scale = 4.0 * (K + 1) * _EPS                # tie tolerance per N of force scale
-    push_scale = land.total + abs(E)
-    t = t_sum = a
-    t_err = 0.0                     # compensated sum of the segment times
-    j, at = land.locate(V)
-    if stuck is not None and not (at and stiction(j)[0] > 0):
-        event(a, "release", stuck, V)
-        stuck = None
+    fstate, istate = rec.fstate, rec.istate
+    fstate[0] = a                                   # (core.F_T, F_V, I_STUCK, I_STARTED)
+    fstate[1] = V
+    istate[2] = -1 if stuck is None else stuck
+    istate[7] = 0
+    code = _kernels(20).ideal_piece(*land.args, plant.mass, plant.damping, E, b, fstate,
+                                    istate, rec.seg, rec.ev)
+    return _finish_piece(plant, land, E, b, rec, code)
+
+
+def _finish_piece(plant: Plant, land: _Landscape, E: float, b: float, rec: _Recorder,
+                  code: int) -> tuple[float, float, int | None, bool]:
+    """Resume the kernel's piece (state in ``rec``) while it pauses, looking at the wall clock
+    and growing the buffers; then :func:`_ideal_piece`'s ``(t, V, stuck, stopped)``."""
+    fstate, istate = rec.fstate, rec.istate
+    if code == _core.DONE and _COMPILED and time.perf_counter() <= rec.deadline:
+        k = int(istate[2])                          # (the common case, written out)
+        return b, float(fstate[1]), (None if k < 0 else k), False
     while True:
-        if at:
-            W, G = stiction(j)
-            G += E - c * V
-            tol = tol_scale * (push_scale + c * abs(V))
-            rec.n_evaluations += 1
-            if abs(G) <= W + tol:                       # stick (or rest at a balance)
-                contact = contact_at(j)
-                if W > 0 and stuck != contact:
-                    if stuck is not None:
-                        event(t, "release", stuck, V)
-                    event(t, "stick", contact, V)
-                    stuck = contact
-                segment(t, V)
-                break
-            if stuck is not None:
-                event(t, "release", stuck, V)
-                stuck = None
+        if code == _core.PAUSE:
+            if time.perf_counter() > rec.deadline:
+                code = -1
             else:
-                event(t, kind, contact_at(j), V)
-            j = j + 1 if G > 0 else j
-        # Free motion inside interval j.
-        force, slope = force_at(j, V)
-        r0 = (force + E - c * V) / m
-        lam = (c - slope) / m
-        rec.n_evaluations += 1
-        segment(t, V, r0, lam)
-        if r0 == 0.0:
-            break
-        up = r0 > 0
-        target = (xs[j] if j < K else math.inf) if up else (xs[j - 1] if j > 0 else -math.inf)
-        s = _reach_time(V, r0, lam, target)                # inf for an infinite target
-        if t + s >= b:
-            V = V + r0 * _scalar_expm1_ratio(lam, b - t)
-            lo = xs[j - 1] if j > 0 else -math.inf
-            hi = xs[j] if j < K else math.inf
-            V = min(max(V, lo), hi)
-            break
-        # Compensated (Neumaier) sum of the segment times: exact over 1e5 segments.
-        t_new = t_sum + s
-        t_err += (t_sum - t_new) + s if abs(t_sum) >= abs(s) else (s - t_new) + t_sum
-        t_sum = t_new
-        t, V, at = t_sum + t_err, target, True
-        j = j if up else j - 1
-        if stop(t):
-            return t, V, stuck, True
-    return b, V, stuck, stop(b)
+                rec.room()
+                code = _kernels().ideal_piece(*land.args, plant.mass, plant.damping, E, b,
+                                              fstate, istate, rec.seg, rec.ev)
+                continue
+        elif code == _core.DONE and time.perf_counter() > rec.deadline:
+            code = -1
+        break
+    if not _COMPILED:
+        _compiled.charge(10 * int(istate[5]))         # (core.I_ROUNDS) interpreted rounds
+    t, V, k = float(fstate[0]), float(fstate[1]), int(istate[2])
+    stuck = None if k < 0 else k
+    if code != _core.DONE:
+        return t, V, stuck, rec.stopped(code, t)
+    return b, V, stuck, False
 
 
 # -- dynamic motors: closed-form motor tracks -------------------------------------------------
@@ -1146,7 +1086,7 @@ class _QuietPlant:
     contacts (no compliance) and motors with a lag; None stands for any other plant."""
 
     __slots__ = ("forces", "total_force", "mass", "damping", "tau", "mu", "lam", "ramp_gap",
-                 "speed_bound")
+                 "speed_bound", "args")
 
     def __init__(self, plant: Plant) -> None:
         motors = plant.motors
@@ -1159,6 +1099,8 @@ class _QuietPlant:
         self.ramp_gap = motors.rate_limit * motors.lag
         # Bound on |u| for clipped commands (inf without finite speed limits).
         self.speed_bound = max(abs(motors.speed_limits[0]), abs(motors.speed_limits[1]))
+        self.args = (self.forces, self.total_force, self.mass, self.damping, self.tau,
+                     self.ramp_gap, self.speed_bound, _QUIET_MARGIN)
 
 
 _QUIET_PLANTS: weakref.WeakKeyDictionary[Plant, _QuietPlant | None] = weakref.WeakKeyDictionary()
@@ -1218,70 +1160,12 @@ def _quiet_piece(quiet: _QuietPlant, start: np.ndarray, u: np.ndarray, V: float,
         Body speed (m/s) and contact speeds (fresh, shape (n,)) at ``S``; the exact
         displacements over the piece (m): each contact's (fresh, shape (n,)), the body's.
     """
-    tau = quiet.tau
-    d = start - u                    # MotorPiece: after - u (no ramp); v(s) = u + d e^(-s/tau)
-    spread = float(_max(_abs(d)))
-    if spread > quiet.ramp_gap:
-        return None                  # a motor ramps at its rate limit: a phase change inside
-    v0 = u + d                       # MotorPiece.coefficients(0): the speeds at offset 0
-    v1 = d * math.exp(-S / tau)
-    v1 += u                          # MotorPiece.speeds(S)
-    mu, m, c = quiet.mu, quiet.mass, quiet.damping
-    grow = _scalar_expm1_ratio(mu, S)                   # v_i(S) - v_i = e_i grow
-    reach = (quiet.speed_bound if quiet.speed_bound < math.inf
-             else float(_max(_abs(u)))) + spread        # bounds |v_i(s)|
-    if stuck is None:
-        side = np.sign(v0 - V)
-        r0 = (float(_sum(quiet.forces * side)) + E - c * V) / m
-        lam = quiet.lam
-        V_end = V + r0 * _scalar_expm1_ratio(lam, S)
-        margin = _QUIET_MARGIN * (abs(V) + abs(V_end) + reach)
-        g0 = V - v0
-        g1 = V_end - v1
-        if not (((g0 > margin) & (g1 > margin)) | ((g0 < -margin) & (g1 < -margin))).all():
-            return None
-        if r0 != 0.0 and mu != lam:
-            e = (u - v0) / tau                          # MotorPiece.coefficients: e_i
-            pick = ((e > 0.0) if r0 > 0.0 else (e < 0.0)).nonzero()[0]     # e_i / r0 > 0
-            if pick.size:                               # s*: the extremum of g_i (no overflow)
-                at = (np.log(_abs(e[pick])) - math.log(abs(r0))) / (mu - lam)
-                inside = (at > 0.0) & (at < S)
-                if inside.any():
-                    pick, at = pick[inside], at[inside]
-                    x_lam = -np.expm1(-lam * at) / lam if lam > 0 else at
-                    g = g0[pick] + r0 * x_lam - e[pick] * (-np.expm1(-mu * at) / mu)
-                    if not ((g * np.sign(g0[pick])) > margin).all():
-                        return None
-        body = V * S + r0 * _expm1_ratio_integral(lam, S)      # _Recorder.displacement
-    else:
-        # The group the body follows: contacts on the very track of contact k (same start
-        # and command: at the speed limits, say), k their lowest index as the engine names it.
-        group = (d == d[stuck]) & (u == u[stuck])
-        if group.argmax() != stuck:
-            return None
-        f = quiet.forces
-        W = float(_sum(f[group]))
-        if not W > 0:
-            return None
-        vc = float(v0[stuck])
-        ec = (float(u[stuck]) - vc) / tau               # MotorPiece.coefficients: e_k
-        V_end = vc + ec * grow
-        margin = _QUIET_MARGIN * (abs(vc) + abs(V_end) + reach)
-        g0 = vc - v0
-        g1 = float(v1[stuck]) - v1
-        apart = ((g0 > margin) & (g1 > margin)) | ((g0 < -margin) & (g1 < -margin)) | group
-        if not apart.all():
-            return None
-        G = float(_sum(f * np.sign(v0 - vc))) + E       # (the group's own signs are 0)
-        h0 = G - c * vc - m * ec
-        h1 = h0 + ec * (m * mu - c) * grow
-        scale = quiet.total_force + abs(E) + c * (abs(vc) + abs(V_end)) + m * abs(ec)
-        if max(abs(h0), abs(h1)) > W - _QUIET_MARGIN * scale:
-            return None
-        body = vc * S + ec * _expm1_ratio_integral(mu, S)      # _Recorder.displacement
-    travelled = u * S
-    travelled += d * (tau * -math.expm1(-S / tau))     # MotorPiece.displacement, no ramp
-    return V_end, v1, travelled, body
+    out = np.empty((2, start.size))
+    certified, V_end, body = _kernels(10 * start.size).quiet_piece(
+        *quiet.args, start, u, V, -1 if stuck is None else stuck, E, S, out)
+    if not certified:
+        return None
+    return V_end, out[0], out[1], body
 
 
 def _segment_value(V0: float, seg: tuple[float, ...], mu: float, s: float) -> float:
@@ -1371,8 +1255,37 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     mu = 1.0 / plant.motors.lag if dynamic and plant.motors.lag > 0 else 0.0
     cascade = 2 * plant.n + 2
     rec = _Recorder(budget, cascade, mu)
+    m = plant.mass
+    table = times = None
+    if t_eval is not None:
+        if t_eval.flags.writeable:
+            times = t_eval.copy()
+            times.setflags(write=False)
+        else:
+            times = t_eval
     if dynamic:
         t_stop, V_stop = _run_dynamic(plant, t_end, v0, rec)
+    elif (times is not None and plant.commands is None
+          and not isinstance(plant.external_force, PiecewiseConstant)):
+        # One piece and sample times: one kernel call runs it and evaluates the dense output
+        # (toolkit._compiled.core.ideal_run); Python only assembles the result.
+        if plant.motors is None and plant.n <= _core.SMALL:
+            # Nothing to build or keep: the landscape is the ContactSet's own staircase.
+            land: _Landscape = _CoulombLandscape(plant.contacts)
+        else:
+            land = _landscape(plant, 0.0)
+        E = plant.external(0.0)
+        rec.fstate[1] = v0                        # (core.F_V; t = 0, free, a new piece)
+        table = np.empty((2, times.size))
+        code = _kernels(20 + 2 * times.size).ideal_run(
+            *land.args, m, plant.damping, E, t_end, rec.fstate, rec.istate, rec.seg, rec.ev,
+            times, table)
+        if code == _core.DONE and _COMPILED and time.perf_counter() <= rec.deadline:
+            t_stop, V_stop = t_end, float(rec.fstate[1])          # (the common case)
+        else:
+            if code != _core.DONE:
+                table = None                      # paused or stopped: evaluated below
+            t_stop, V_stop, _, _ = _finish_piece(plant, land, E, t_end, rec, code)
     else:
         t_stop, V_stop = _run_ideal(plant, t_end, v0, rec)
     if rec.status is _SUCCESS and not (math.isfinite(t_stop) and math.isfinite(V_stop)):
@@ -1381,35 +1294,31 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         rec.status = SimulationStatus.FAILED
         rec.detail = (f"the body speed left the floating-point range (V = {V_stop:g} m/s "
                       f"at t = {t_stop:g} s); shorten t_end or rescale the forces")
-        rows = rec.rows                  # keep the finite part: up to the last finite segment
-        while len(rows) > 1 and not (math.isfinite(rows[-1][0]) and math.isfinite(rows[-1][1])):
-            rows.pop()
-        t_stop, V_stop = rows[-1][0], rows[-1][1]
+        t_stop, V_stop = rec.drop_non_finite()   # keep the finite part (up to its last segment)
     success = rec.status is _SUCCESS
     # The ideal engine's segments are lines unless drag or compliance gives them a slope.
     linear = not dynamic and plant.damping == 0 and plant.compliance == 0
     dense = rec.dense(t_stop, success, t_end, linear)
-    m = plant.mass
-    if t_eval is None:
+    if times is None:
         # Segment starts (events, switches, motor phase changes) and the end: exact values.
         times, V, force = rec.samples(t_stop, V_stop, m)
     else:
-        times = t_eval.copy() if t_eval.flags.writeable else t_eval
-        V, slope = dense.values(times)                 # simulate() checked: non-decreasing
-        force = m * slope
-        if not success:
-            force[np.isnan(V)] = np.nan
-        for array in (times, V, force):
-            array.setflags(write=False)
+        if table is None or not success:
+            table = dense.scaled(times, m)             # rows V and the force m dV/dt
+            if not success:
+                table[1, np.isnan(table[0])] = np.nan
+        table.setflags(write=False)
+        V, force = table
     speeds = _contact_speeds(plant, times)
-    n_events = len(rec.events)
+    events = rec.events()
+    n_events = len(events)
     detail = rec.detail if not success else f"{n_events} events"
     # Every array above is fresh and read-only, every count an int: no re-validation.
     return SimulationResult._trusted({
         "method": "exact", "setting": "event-driven closed form", "t": times, "V": V,
-        "contact_speeds": speeds, "force": force, "events": tuple(rec.events),
+        "contact_speeds": speeds, "force": force, "events": events,
         "status": rec.status, "message": status_message(rec.status, detail),
-        "n_events": n_events, "n_evaluations": rec.n_evaluations, "n_steps": len(rec.rows),
+        "n_events": n_events, "n_evaluations": rec.n_evaluations, "n_steps": rec.n_segments,
         "wall_time": time.perf_counter() - started, "dense": dense})
 
 

@@ -18,7 +18,9 @@ stays stuck to one contact while its motor settles. A cheap certificate
 (:func:`toolkit.simulation._exact._quiet_piece`: the range of every crossing function and of
 the stiction margin over the step, bounded from the engine's closed forms) recognises them,
 and such a step evaluates the engine's one closed-form segment directly, to rounding what
-the engine computes; when the certificate is unsure, the engine runs.
+the engine computes; when the certificate is unsure, the engine runs. The certificate and the
+ideal-motor engine are compiled kernels (:mod:`toolkit._compiled.core`); the dynamic-motor
+engine that runs the other steps is NumPy code.
 
 Displacements are exact closed forms: the integral of each stored segment of ``V``
 (:meth:`_Recorder.displacement`) and of each contact's motor track
@@ -254,7 +256,8 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
     if status is _SUCCESS and not (math.isfinite(t) and math.isfinite(V)):
         status = SimulationStatus.FAILED
         rec.detail = f"the body speed left the floating-point range (V = {V:g} m/s)"
-    detail = rec.detail if status is not _SUCCESS else f"{len(rec.events)} events"
+    events = rec.events()
+    detail = rec.detail if status is not _SUCCESS else f"{len(events)} events"
     return ExactStep(ExactState._trusted(float(t), float(V), speeds_end, stuck, pending),
-                     rec.displacement(t), travelled, tuple(rec.events), status,
+                     rec.displacement(t), travelled, events, status,
                      status_message(status, detail))

@@ -16,7 +16,8 @@ Runs are grouped into chunks of ``chunk_size`` consecutive runs (a fixed functio
 chunk at once (vectorized over runs where it can: the exact batch path). The chunks then go:
 
 - ``scheduler=None`` (default): one after another in this process;
-- ``scheduler="processes"``: to a ``concurrent.futures`` process pool (``workers``);
+- ``scheduler="processes"``: to a ``concurrent.futures`` process pool (``workers``; fresh
+  interpreters, the "spawn" start method);
 - ``scheduler="tcp://host:port"`` or a ``distributed.Client``: to a Dask cluster
   (``pip install active-contacts[dask]``).
 
@@ -25,6 +26,7 @@ The chunks are the same in all three, so the tables are identical bit for bit.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -188,7 +190,10 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
         elif isinstance(scheduler, str) and scheduler == "processes":
             kind = "processes"
             workers = (os.cpu_count() or 1) if workers is None else as_int(workers, "workers", _OWNER, low=1)
-            with ProcessPoolExecutor(max_workers=min(workers, len(bounds))) as pool:
+            # "spawn": a forked child of a process whose compiled kernels started OpenMP
+            # threads (numba's parallel batch) would be killed; fresh interpreters are safe.
+            context = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=min(workers, len(bounds)), mp_context=context) as pool:
                 futures = {pool.submit(_run_chunk, experiment, seed, a, b): j
                            for j, (a, b) in enumerate(bounds)}
                 for future in as_completed(futures):

@@ -666,7 +666,13 @@ def plot_sweep(result: Any, ax: Any = None, *, title: str | None = None):
         ax.legend(fontsize="x-small")
         _title(ax, title, f"residual friction, n = {result.experiment.n}")
     else:
-        raise ValueError(f"No figure for experiment {name!r}.")
+        from ._validation import suggestion
+        from .errors import ParameterError, parameter_message
+
+        raise ParameterError(parameter_message(
+            "result", "plot_sweep", "be a sweep of median_law, mean_median, outliers or residual_friction",
+            f"a sweep of {name!r}") + suggestion(name, ("median_law", "mean_median", "outliers",
+                                                         "residual_friction")))
     return ax
 
 

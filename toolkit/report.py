@@ -258,10 +258,14 @@ def write_schedule(schedule: Any, out_dir: str | Path) -> list[Path]:
 
 def sweep_to_dict(result: Any, statistics: tuple[str, ...] = (), shortfalls: Any = ()) -> dict[str, Any]:
     """JSON form of a sweep: experiment, runs, seed, scheduler, wall time, the summary
-    statistics (only ``statistics`` when given) and the shortfalls."""
+    statistics (only ``statistics`` when given) and the shortfalls. A statistic that is
+    undefined (NaN, e.g. ``threshold_amplitude`` when no run moved) is ``null``; an infinite
+    one (``dT_median`` when the body never arrives) is the string ``"inf"`` as elsewhere."""
     data = result.to_dict()
     if statistics:
         data["summary"] = {name: data["summary"][name] for name in statistics}
+    data["summary"] = {name: (None if isinstance(value, float) and math.isnan(value) else value)
+                       for name, value in data["summary"].items()}
     data["shortfalls"] = shortfall_dicts(shortfalls)
     return data
 

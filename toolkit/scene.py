@@ -84,6 +84,7 @@ import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import tomli_w
@@ -742,33 +743,51 @@ class SweepSpec:
     """``[sweep]``: many seeded runs of one of the paper's experiments (:func:`toolkit.sweep`).
 
     ``experiment`` (one of :data:`toolkit.experiments.EXPERIMENTS`), ``runs`` (count, default
-    1000), ``seed`` (root seed, default 0), ``chunk_size`` (runs per chunk, optional; results
-    do not depend on it), ``statistics`` (the summary statistics ``--json`` prints, default
-    all), and any parameter of the experiment's class, e.g. for ``median_law``: ``n``,
-    ``speed_limit`` (m/s), ``acceleration`` (m/s^2), ``mass`` (kg), ``friction_spread``
-    (relative), ``damping`` (N s/m), ``wheel_radius_bias``, ``wheel_radius_std``,
-    ``contact_radius_error`` (relative), ``compliance`` ((m/s)/N), ``settle_time`` (s),
-    ``wheel_seed``. Each value is checked by the experiment's constructor.
+    1000, at most :data:`toolkit.sweeps.MAX_RUNS`), ``seed`` (root seed, default 0),
+    ``chunk_size`` (runs per chunk, optional; results do not depend on it), ``statistics``
+    (the summary statistics ``--json`` prints, default all), and any parameter of the
+    experiment's class, each checked by its constructor:
+
+    - ``median_law`` (:class:`~toolkit.experiments.MedianLaw`): ``n``, ``speed_limit`` (m/s),
+      ``acceleration`` (m/s^2), ``mass`` (kg), ``friction_spread`` (relative), ``damping`` (N
+      s/m), ``wheel_radius_bias``, ``wheel_radius_std``, ``contact_radius_error`` (relative),
+      ``compliance`` ((m/s)/N), ``settle_time`` (s), ``wheel_seed``;
+    - ``mean_median`` (:class:`~toolkit.experiments.MeanMedian`): ``held``, ``level``, ``gap``,
+      ``median_range`` (m/s), ``n``, ``speed_limit`` (m/s), ``acceleration`` (m/s^2),
+      ``settle_time`` (s), ``friction_spread``, ``wheel_seed``;
+    - ``outliers`` (:class:`~toolkit.experiments.Outliers`): ``n``, ``outliers``, ``amplitude``
+      (m/s), ``frequency`` (Hz), ``speed_limit`` (m/s), ``acceleration`` (m/s^2), ``lag`` (s),
+      ``rate`` (Hz), ``settle_time``, ``window`` (s), ``random_amplitude``,
+      ``friction_spread``, ``wheel_seed``, ``compliance`` ((m/s)/N);
+    - ``residual_friction`` (:class:`~toolkit.experiments.ResidualFriction`): ``n``,
+      ``friction_spread``, ``bearing_friction`` (N), ``bearing_drag`` (N s/m), ``speed_limit``
+      (m/s), ``acceleration`` (m/s^2), ``mass`` (kg), ``probes``, ``wheel_seed``.
+
+    ``params`` is a read-only mapping (the spec is frozen).
     """
 
     experiment: str
-    params: dict[str, Any] = field(default_factory=dict)
+    params: Mapping[str, Any] = field(default_factory=dict)
     runs: int = 1000
     seed: int = 0
     chunk_size: int | None = None
     statistics: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
 
     COMMON = ("experiment", "runs", "seed", "chunk_size", "statistics")
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> SweepSpec:
         from .experiments import EXPERIMENTS
+        from .sweeps import MAX_RUNS
 
         kind = _text("sweep.experiment", _require("sweep", table, "experiment"))
         if kind not in EXPERIMENTS:
             raise SceneError(f"The 'sweep.experiment' value in the scene must be one of "
                              f"{list(EXPERIMENTS)}. Got {kind!r} instead.{suggestion(kind, EXPERIMENTS)}")
-        names = tuple(f.name for f in fields(EXPERIMENTS[kind]) if f.name != "name")
+        names = tuple(f.name for f in fields(EXPERIMENTS[kind]))
         _check_keys("sweep", table, (*cls.COMMON, *names))
         params: dict[str, Any] = {}
         for key in names:
@@ -786,7 +805,7 @@ class SweepSpec:
                 raise _fail("sweep.statistics", "be a non-empty list of summary names", value)
             statistics = tuple(value)
         return cls(experiment=kind, params=params,
-                   runs=_integer("sweep.runs", table.get("runs", 1000), low=1),
+                   runs=_integer("sweep.runs", table.get("runs", 1000), low=1, high=MAX_RUNS),
                    seed=_integer("sweep.seed", table.get("seed", 0)),
                    chunk_size=(_integer("sweep.chunk_size", table["chunk_size"], low=1)
                                if "chunk_size" in table else None),
@@ -1103,7 +1122,7 @@ def dumps_scene(scene: Scene) -> str:
                 if getattr(spec, name):
                     table[name] = list(getattr(spec, name))
         elif key == "sweep":
-            table = {"experiment": spec.experiment, **spec.params, "runs": spec.runs, "seed": spec.seed}
+            table = {"experiment": spec.experiment, **dict(spec.params), "runs": spec.runs, "seed": spec.seed}
             if spec.chunk_size is not None:
                 table["chunk_size"] = spec.chunk_size
             if spec.statistics:

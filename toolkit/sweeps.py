@@ -15,7 +15,9 @@ Runs are grouped into chunks of ``chunk_size`` consecutive runs (a fixed functio
 ``runs`` and ``chunk_size``, not of the number of workers). An experiment evaluates a whole
 chunk at once (vectorized over runs where it can: the exact batch path). The chunks then go:
 
-- ``scheduler=None`` (default): one after another in this process;
+- ``scheduler=None`` (default): one after another in this process (the vectorized exact
+  batch path; no process pool unless asked for: on a shared 2-core machine a pool's start-up
+  of fresh interpreters costs more than it saves on the sweeps of the paper's sizes);
 - ``scheduler="processes"``: to a ``concurrent.futures`` process pool (``workers``; fresh
   interpreters, the "spawn" start method);
 - ``scheduler="tcp://host:port"`` or a ``distributed.Client``: to a Dask cluster
@@ -31,12 +33,15 @@ import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from ._validation import as_int
+from ._validation import as_int, suggestion
 from .errors import ParameterError, ParameterTypeError, parameter_message
+
+if TYPE_CHECKING:       # the table type, imported only with the first sweep at run time
+    import pandas as pd
 
 __all__ = ["Experiment", "SweepResult", "sweep", "run_seeds", "MAX_RUNS", "DEFAULT_CHUNK_SIZE"]
 
@@ -78,10 +83,12 @@ class SweepResult:
     scheduler : str
         ``"local"``, ``"processes"`` or ``"dask"``.
     wall_time : float, s
+    chunks : int
+        Number of chunks the runs were split into.
     """
 
-    experiment: Any
-    table: Any
+    experiment: Experiment
+    table: pd.DataFrame
     summary: dict[str, float]
     runs: int
     seed: int
@@ -112,6 +119,31 @@ def _run_chunk(experiment: Any, seed: int, start: int, stop: int) -> dict[str, n
     return columns
 
 
+#: The named schedulers (besides a Dask address ``tcp://host:port`` or a Client).
+SCHEDULERS = ("processes",)
+
+
+def _check_scheduler(scheduler: Any) -> str:
+    """``"local"``, ``"processes"`` or ``"dask"`` for a valid ``scheduler``; a clear error
+    otherwise (a string must be ``"processes"`` or an address with ``://``)."""
+    if scheduler is None:
+        return "local"
+    if isinstance(scheduler, str):
+        if scheduler == "processes":
+            return "processes"
+        if "://" in scheduler:
+            return "dask"
+        raise ParameterError(parameter_message(
+            "scheduler", _OWNER, "be None, 'processes' or a Dask scheduler address tcp://host:port",
+            scheduler) + suggestion(scheduler, SCHEDULERS))
+    distributed = __import__("sys").modules.get("distributed")
+    if distributed is not None and isinstance(scheduler, distributed.Client):
+        return "dask"
+    raise ParameterTypeError(parameter_message(
+        "scheduler", _OWNER, "be None, 'processes', a Dask address tcp://host:port or a "
+        "distributed.Client", scheduler))
+
+
 def _client(scheduler: Any) -> Any:
     try:
         import distributed   # optional extra: imported only for a Dask scheduler
@@ -123,7 +155,7 @@ def _client(scheduler: Any) -> Any:
         return scheduler, False
     try:
         return distributed.Client(scheduler, timeout=10), True
-    except (OSError, TimeoutError, ValueError) as error:
+    except (OSError, TimeoutError, ValueError, TypeError, AssertionError) as error:
         raise ParameterError(parameter_message(
             "scheduler", _OWNER, f"be the address of a reachable Dask scheduler ({error})",
             scheduler)) from None
@@ -152,7 +184,8 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     scheduler : None, "processes", str address or distributed.Client
         Where chunks run (see the module docstring).
     workers : int, optional
-        Processes of the ``"processes"`` pool (default: the CPU count).
+        Processes of the ``"processes"`` pool (default: the CPU count); refused with any other
+        scheduler (a Dask cluster has its own workers).
     chunk_size : int, optional
         Runs per chunk (default :data:`DEFAULT_CHUNK_SIZE`); results do not depend on it.
     progress : bool
@@ -175,21 +208,30 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     if runs > MAX_RUNS:
         raise ParameterError(parameter_message("runs", _OWNER, f"be <= {MAX_RUNS}", runs))
     seed = as_int(seed, "seed", _OWNER, low=0)
+    if seed >= 2**128:
+        raise ParameterError(parameter_message("seed", _OWNER, "be < 2**128", seed))
     chunk_size = DEFAULT_CHUNK_SIZE if chunk_size is None else as_int(chunk_size, "chunk_size", _OWNER, low=1)
+    kind = _check_scheduler(scheduler)
+    if workers is not None:
+        workers = as_int(workers, "workers", _OWNER, low=1)
+        if kind != "processes":
+            raise ParameterError(parameter_message(
+                "workers", _OWNER, "be given only with scheduler='processes' (the local path runs "
+                "in this process; a Dask cluster has its own workers)", workers))
+    if not isinstance(progress, (bool, np.bool_)):
+        raise ParameterTypeError(parameter_message("progress", _OWNER, "be True or False", progress))
     bounds = [(a, min(a + chunk_size, runs)) for a in range(0, runs, chunk_size)]
     started = time.perf_counter()
     bar = _progress(runs, progress, experiment.name)
     parts: list[dict[str, np.ndarray] | None] = [None] * len(bounds)
-    kind = "local"
     try:
-        if scheduler is None:
+        if kind == "local":
             for j, (a, b) in enumerate(bounds):
                 parts[j] = _run_chunk(experiment, seed, a, b)
                 if bar is not None:
                     bar.update(b - a)
-        elif isinstance(scheduler, str) and scheduler == "processes":
-            kind = "processes"
-            workers = (os.cpu_count() or 1) if workers is None else as_int(workers, "workers", _OWNER, low=1)
+        elif kind == "processes":
+            workers = (os.cpu_count() or 1) if workers is None else workers
             # "spawn": a forked child of a process whose compiled kernels started OpenMP
             # threads (numba's parallel batch) would be killed; fresh interpreters are safe.
             context = multiprocessing.get_context("spawn")
@@ -202,7 +244,6 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
                     if bar is not None:
                         bar.update(bounds[j][1] - bounds[j][0])
         else:
-            kind = "dask"
             client, own = _client(scheduler)
             try:
                 from distributed import as_completed as dask_completed
@@ -219,7 +260,7 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     finally:
         if bar is not None:
             bar.close()
-    import pandas as pd   # the table type; imported with the first sweep
+    import pandas as pd   # noqa: F811 (the table type; imported with the first sweep)
 
     columns = {"run": np.arange(runs)}
     for name in parts[0]:

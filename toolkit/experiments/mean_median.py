@@ -24,10 +24,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validation import as_float, as_int
+from .._validation import as_float
 from ..errors import ParameterError, SolverError, parameter_message
-from ..model import unequal_loads
 from ..simulation import simulate_batch
+from ._common import MAX_CONTACTS, SETTLED_TOLERANCE, as_count, check_common, setter, wheels_for_runs
 from .median_law import median_law_slope
 
 __all__ = ["MeanMedian"]
@@ -70,24 +70,22 @@ class MeanMedian:
     settle_time: float = 20.0
     friction_spread: float = 0.0
     wheel_seed: int | None = None
-    name: str = "mean_median"
+    #: The ``experiment`` key of a scene's ``[sweep]``.
+    name: ClassVar[str] = "mean_median"
     #: Names of :meth:`summarize`'s statistics.
     STATISTICS: ClassVar[tuple[str, ...]] = ("mean_range", "median_range", "speed_range",
-                                             "slope_median", "corr_mean")
+                                             "slope_median", "corr_mean", "settled_fraction")
 
     def __post_init__(self) -> None:
-        set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731
-        if self.held not in ("mean", "median"):
+        set_ = setter(self)
+        if not isinstance(self.held, str) or self.held not in ("mean", "median"):
             raise ParameterError(parameter_message("held", _OWNER, "be 'mean' or 'median'", self.held))
-        set_("n", as_int(self.n, "n", _OWNER, low=4))
+        set_("n", as_count(self.n, "n", _OWNER, low=4, high=MAX_CONTACTS))
         if self.n % 2:
             raise ParameterError(parameter_message("n", _OWNER, "be even (a middle pair)", self.n))
-        for key in ("speed_limit", "acceleration", "settle_time", "gap"):
-            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0, low_open=True))
+        check_common(self, _OWNER, positive=("speed_limit", "acceleration", "settle_time", "gap"),
+                     nonneg=("friction_spread",))
         set_("median_range", as_float(self.median_range, "median_range", _OWNER, low=0.0))
-        set_("friction_spread", as_float(self.friction_spread, "friction_spread", _OWNER, low=0.0))
-        if self.wheel_seed is not None:
-            set_("wheel_seed", as_int(self.wheel_seed, "wheel_seed", _OWNER, low=0))
         set_("level", as_float(self.level, "level", _OWNER))
         reach = self.gap + abs(self.level) + (self.median_range if self.held == "mean" else 0.0)
         if reach >= 0.5 * self.speed_limit:
@@ -118,31 +116,33 @@ class MeanMedian:
         raise SolverError(f"MeanMedian run {seed.spawn_key}: no speed set within the limits in 10000 draws.")
 
     def loads(self, seeds: list[np.random.SeedSequence]) -> np.ndarray:
-        """Each run's friction magnitudes, shape (runs, n), N (from ``wheel_seed``, or from
-        the run's own generator after its speeds)."""
-        f = self.acceleration / self.n
-        if self.wheel_seed is not None:
-            return np.tile(unequal_loads(f, self.friction_spread, self.n,
-                                         np.random.default_rng(self.wheel_seed)), (len(seeds), 1))
-        # the run's first child sequence, built directly (spawn() would change ``seq``)
-        return np.array([unequal_loads(f, self.friction_spread, self.n, np.random.default_rng(
-            np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, 0)))) for seq in seeds])
+        """Each run's friction magnitudes, shape (runs, n), N: the carousel of ``wheel_seed``
+        (:func:`toolkit.experiments.carousel_wheels`, the same wheels as every experiment
+        with that seed) or each run's own carousel."""
+        return wheels_for_runs(seeds, self.wheel_seed, self.n, self.acceleration / self.n,
+                               self.friction_spread)[1]
 
     def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
-        """Columns ``mean``, ``median`` (of the speeds) and ``speed`` (settled), m/s."""
+        """Columns ``mean``, ``median`` (of the speeds) and ``speed`` (at ``settle_time``),
+        m/s, and ``settled`` (the speed changed by at most
+        :data:`~toolkit.experiments._common.SETTLED_TOLERANCE` over the second half: unequal
+        loads can leave a small net force, and a run still moving is not at its steady speed)."""
         speeds = np.array([self.speeds(seq) for seq in seeds])
         forces = self.loads(seeds)
-        final = simulate_batch(speeds, forces, 1.0, self.settle_time, v0=0.0).final_speeds
+        half, final = (np.array(simulate_batch(speeds, forces, 1.0, t, v0=0.0).final_speeds)
+                       for t in (0.5 * self.settle_time, self.settle_time))
         return {"mean": speeds.mean(axis=1), "median": np.median(speeds, axis=1),
-                "speed": np.array(final)}
+                "speed": final, "settled": np.abs(final - half) <= SETTLED_TOLERANCE}
 
     def summarize(self, table: Any) -> dict[str, float]:
         """``mean_range`` and ``median_range`` (max - min over the runs, m/s), ``speed_range``
         (m/s), ``slope_median`` (speed against median through the origin) and
-        ``corr_mean`` (correlation of speed and mean; nan when either spans <= 1e-12 m/s)."""
+        ``corr_mean`` (correlation of speed and mean; nan when either spans <= 1e-12 m/s) and
+        ``settled_fraction``."""
         mean, median, speed = (table[c].to_numpy() for c in ("mean", "median", "speed"))
         spread = lambda x: float(x.max() - x.min())  # noqa: E731
         with np.errstate(invalid="ignore", divide="ignore"):
             corr = float(np.corrcoef(speed, mean)[0, 1]) if min(spread(speed), spread(mean)) > 1e-12 else math.nan
         return {"mean_range": spread(mean), "median_range": spread(median), "speed_range": spread(speed),
-                "slope_median": median_law_slope(median, speed)[0], "corr_mean": corr}
+                "slope_median": median_law_slope(median, speed)[0], "corr_mean": corr,
+                "settled_fraction": float(np.mean(table["settled"]))}

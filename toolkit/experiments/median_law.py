@@ -41,16 +41,16 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validation import as_float, as_int
-from ..errors import ParameterError, SolverError, parameter_message
-from ..model import ContactSet, Motors, Plant, unequal_loads
-from ..simulation import SimulationStatus, simulate, simulate_batch
+from .._validation import as_float
+from ..errors import ParameterError, parameter_message
+from ..model import ContactSet, Motors, Plant
+from ..simulation import simulate_batch
+from ._common import (MAX_CONTACTS, MAX_TIME, SETTLED_TOLERANCE, as_count, check_common, check_compliance,
+                      setter, simulate_or_raise, wheels_for_runs)
 
-__all__ = ["MedianLaw", "median_law_slope", "SETTLED_TOLERANCE"]
+__all__ = ["MedianLaw", "median_law_slope", "ideal_median_law_slope", "SETTLED_TOLERANCE"]
 
 _OWNER = "MedianLaw"
-#: A run is settled when its speed changed by at most this over the second half, m/s.
-SETTLED_TOLERANCE = 1e-9
 
 
 def median_law_slope(median: Any, speed: Any) -> tuple[float, float]:
@@ -73,6 +73,46 @@ def median_law_slope(median: Any, speed: Any) -> tuple[float, float]:
     slope = float(x @ y) / sxx
     r = y - slope * x
     return slope, math.sqrt(float(r @ r) / (x.size - 1) / sxx)
+
+
+def ideal_median_law_slope(n: int = 10) -> float:
+    """Population value of the ideal model's median-law slope: the limit of
+    :func:`median_law_slope` over infinitely many runs of :class:`MedianLaw` with equal
+    loads, ideal motors and no drag (any ``speed_limit``: the slope does not depend on it).
+
+    For even ``n`` the body from rest stops at ``y = clip(0, a, b)`` with ``a = v_(n/2)``,
+    ``b = v_(n/2+1)`` the middle order statistics of ``n`` uniform speeds, and
+    ``numpy.median`` is ``x = (a + b) / 2``; the least-squares slope through the origin tends
+    to ``E[x y] / E[x^2]``, computed here by two-dimensional quadrature of the joint density
+    of ``(a, b)`` on ``[-1, 1]``: ``n! / ((k-1)! (n-k-1)!) F(a)^(k-1) (1 - F(b))^(n-k-1) / 4``
+    with ``k = n/2`` and ``F(u) = (1 + u) / 2`` (relative error about 1e-10). For odd ``n`` the
+    body stops at the median contact: 1.
+
+    Parameters
+    ----------
+    n : int
+        Contacts per run, ``>= 1``.
+
+    Returns
+    -------
+    float
+    """
+    n = as_count(n, "n", "ideal_median_law_slope", low=1, high=MAX_CONTACTS)
+    if n % 2:
+        return 1.0
+    from scipy.integrate import dblquad   # only for this number
+
+    k = n // 2
+    log_c = math.lgamma(n + 1) - math.lgamma(k) - math.lgamma(n - k)
+
+    def density(b: float, a: float) -> float:
+        return math.exp(log_c) * ((1 + a) / 2) ** (k - 1) * ((1 - b) / 2) ** (n - k - 1) / 4
+
+    opts = {"epsabs": 1e-14, "epsrel": 1e-12}
+    exx = dblquad(lambda b, a: ((a + b) / 2) ** 2 * density(b, a), -1, 1, lambda a: a, 1, **opts)[0]
+    # y = a where a > 0, y = b where b < 0 (the mirror image, same contribution), 0 otherwise
+    exy = 2 * dblquad(lambda b, a: (a + b) / 2 * a * density(b, a), 0, 1, lambda a: a, 1, **opts)[0]
+    return exy / exx
 
 
 @dataclass(frozen=True)
@@ -114,52 +154,46 @@ class MedianLaw:
     compliance: float = 0.0
     settle_time: float | None = None
     wheel_seed: int | None = None
-    name: str = "median_law"
+    #: The ``experiment`` key of a scene's ``[sweep]``.
+    name: ClassVar[str] = "median_law"
     #: Names of :meth:`summarize`'s statistics.
     STATISTICS: ClassVar[tuple[str, ...]] = ("slope", "slope_stderr", "ratio_median", "ratio_iqr",
                                              "settled_fraction")
 
     def __post_init__(self) -> None:
-        set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731
-        set_("n", as_int(self.n, "n", _OWNER, low=1))
-        for key in ("speed_limit", "acceleration", "mass"):
-            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0, low_open=True))
-        for key in ("friction_spread", "damping", "wheel_radius_std", "compliance"):
-            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0))
+        set_ = setter(self)
+        set_("n", as_count(self.n, "n", _OWNER, low=1, high=MAX_CONTACTS))
+        check_common(self, _OWNER, positive=("speed_limit", "acceleration", "mass"),
+                     nonneg=("friction_spread", "damping"))
+        set_("wheel_radius_std", as_float(self.wheel_radius_std, "wheel_radius_std", _OWNER, low=0.0))
+        if not self.wheel_radius_std < 0.5:
+            raise ParameterError(parameter_message(
+                "wheel_radius_std", _OWNER, "be < 0.5 (a wheel two of its spreads short must still "
+                "run forwards)", self.wheel_radius_std))
         for key in ("wheel_radius_bias", "contact_radius_error"):
             value = as_float(getattr(self, key), key, _OWNER)
             if not -0.5 < value < 0.5:
                 raise ParameterError(parameter_message(key, _OWNER, "lie in (-0.5, 0.5)", value))
             set_(key, value)
-        if self.wheel_seed is not None:
-            set_("wheel_seed", as_int(self.wheel_seed, "wheel_seed", _OWNER, low=0))
+        check_compliance(self, _OWNER, self.acceleration * self.mass / self.n)
         if self.settle_time is not None:
-            set_("settle_time", as_float(self.settle_time, "settle_time", _OWNER, low=0.0, low_open=True))
+            set_("settle_time", as_float(self.settle_time, "settle_time", _OWNER, low=0.0, low_open=True,
+                                         high=MAX_TIME))
 
     # -- one chunk ------------------------------------------------------------------------
     def draw(self, seeds: list[np.random.SeedSequence]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded speeds (k, n), actual contact speeds (k, n) and friction magnitudes
-        (k, n) of each run, from its own generator (in this order: speeds, wheel radius
-        errors, loads; the last two from ``wheel_seed`` instead when it is given)."""
-        n, k = self.n, len(seeds)
-        commanded, actual, forces = np.empty((k, n)), np.empty((k, n)), np.empty((k, n))
-        if self.wheel_seed is not None:
-            wheels = np.random.default_rng(self.wheel_seed)
-            scale, load = self._wheels(wheels)
-        for j, seq in enumerate(seeds):
-            rng = np.random.default_rng(seq)
-            commanded[j] = rng.uniform(-self.speed_limit, self.speed_limit, n)
-            if self.wheel_seed is None:
-                scale, load = self._wheels(rng)
-            actual[j] = commanded[j] * scale
-            forces[j] = load
-        return commanded, actual, forces
-
-    def _wheels(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Radius scale and friction load of each wheel (in this order from ``rng``)."""
+        (k, n) of each run. The speeds come from the run's own generator; the wheels (radius
+        errors, then loads: :func:`toolkit.experiments.carousel_wheels`) from ``wheel_seed``
+        (one carousel, the same in every experiment) or from the run's own carousel
+        generator."""
         n = self.n
-        scale = 1.0 + self.wheel_radius_bias + self.wheel_radius_std * rng.standard_normal(n)
-        return scale, unequal_loads(self.acceleration * self.mass / n, self.friction_spread, n, rng)
+        commanded = np.array([np.random.default_rng(seq).uniform(-self.speed_limit, self.speed_limit, n)
+                              for seq in seeds]).reshape(len(seeds), n)
+        radius, forces = wheels_for_runs(seeds, self.wheel_seed, n, self.acceleration * self.mass / n,
+                                         self.friction_spread, self.wheel_radius_std)
+        actual = commanded * (1.0 + self.wheel_radius_bias + radius)
+        return commanded, actual, forces
 
     def horizon(self) -> float:
         """Observation time of each run, s (``settle_time``, default 20 s)."""
@@ -182,9 +216,8 @@ class MedianLaw:
             for j in range(k):
                 plant = Plant(ContactSet(actual[j], forces[j]), self.mass, damping=self.damping,
                               motors=motors)
-                result = simulate(plant, t_end, v0=0.0, t_eval=[0.5 * t_end, t_end])
-                if result.status is not SimulationStatus.SUCCESS:
-                    raise SolverError(f"MedianLaw run {seeds[j].spawn_key}: {result.message}")
+                result = simulate_or_raise(plant, t_end, f"MedianLaw run {seeds[j].spawn_key}", v0=0.0,
+                                           t_eval=[0.5 * t_end, t_end])
                 half[j], final[j] = result.V
         settled = np.abs(final - half) <= SETTLED_TOLERANCE
         median = np.median(commanded, axis=1)

@@ -32,17 +32,15 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validation import as_float, as_int
-from ..errors import ParameterError, SolverError, parameter_message
-from ..model import ContactSet, Motors, PiecewiseConstant, Plant, unequal_loads
-from ..simulation import SimulationStatus, simulate
+from .._validation import as_float
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+from ._common import (MAX_CONTACTS, MAX_SAMPLES, SETTLED_TOLERANCE, as_count, check_common, check_compliance,
+                      setter, simulate_or_raise, wheels_for_runs)
 
 __all__ = ["Outliers"]
 
 _OWNER = "Outliers"
-#: The body counts as settled when its speed changed by at most this over the last half
-#: second before the outliers start, m/s.
-SETTLED_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -92,26 +90,36 @@ class Outliers:
     friction_spread: float = 0.0
     wheel_seed: int | None = None
     compliance: float = 0.0
-    name: str = "outliers"
+    #: The ``experiment`` key of a scene's ``[sweep]``.
+    name: ClassVar[str] = "outliers"
     #: Names of :meth:`summarize`'s statistics.
     STATISTICS: ClassVar[tuple[str, ...]] = ("unaffected_fraction", "unsettled_fraction", "rule_agreement",
                                              "largest_deviation", "threshold_amplitude")
 
     def __post_init__(self) -> None:
-        set_ = lambda key, value: object.__setattr__(self, key, value)  # noqa: E731
-        set_("n", as_int(self.n, "n", _OWNER, low=4))
-        set_("outliers", as_int(self.outliers, "outliers", _OWNER, low=1))
+        set_ = setter(self)
+        set_("n", as_count(self.n, "n", _OWNER, low=4, high=MAX_CONTACTS))
+        set_("outliers", as_count(self.outliers, "outliers", _OWNER, low=1, high=MAX_CONTACTS))
         if self.outliers > self.n // 2 - 1:
             raise ParameterError(parameter_message(
                 "outliers", _OWNER, f"be <= n // 2 - 1 = {self.n // 2 - 1} (the median's contacts "
                 "must not oscillate)", self.outliers))
-        for key in ("frequency", "speed_limit", "acceleration", "rate", "settle_time", "window"):
-            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0, low_open=True))
-        set_("lag", as_float(self.lag, "lag", _OWNER, low=0.0))
-        for key in ("friction_spread", "compliance"):
-            set_(key, as_float(getattr(self, key), key, _OWNER, low=0.0))
-        if self.wheel_seed is not None:
-            set_("wheel_seed", as_int(self.wheel_seed, "wheel_seed", _OWNER, low=0))
+        check_common(self, _OWNER, positive=("frequency", "speed_limit", "acceleration", "rate", "settle_time",
+                                             "window"), nonneg=("lag", "friction_spread"))
+        if not isinstance(self.random_amplitude, (bool, np.bool_)):
+            raise ParameterTypeError(parameter_message("random_amplitude", _OWNER, "be True or False",
+                                                       self.random_amplitude))
+        set_("random_amplitude", bool(self.random_amplitude))
+        samples = math.ceil(self.window * self.rate)
+        if samples > MAX_SAMPLES:
+            raise ParameterError(parameter_message(
+                "window", _OWNER, f"give at most {MAX_SAMPLES} commands at rate = {self.rate:g} Hz "
+                f"(window * rate <= {MAX_SAMPLES})", self.window))
+        if self.frequency > 0.5 * self.rate:
+            raise ParameterError(parameter_message(
+                "frequency", _OWNER, f"be <= rate / 2 = {0.5 * self.rate:g} Hz (Nyquist: the 'rate' Hz "
+                "commands cannot carry a faster sine)", self.frequency))
+        check_compliance(self, _OWNER, self.acceleration / self.n)
         set_("amplitude", as_float(self.amplitude, "amplitude", _OWNER, low=0.0, high=self.speed_limit))
 
     def plant(self, seed: np.random.SeedSequence) -> tuple[Plant, np.ndarray, float]:
@@ -133,8 +141,9 @@ class Outliers:
         wave = centre + amplitude * np.sin(2.0 * math.pi * self.frequency * (times[:, None] - self.settle_time)
                                            + phase)
         rows[1:, fastest] = np.clip(wave, -v_max, v_max)
-        loads = np.random.default_rng(self.wheel_seed) if self.wheel_seed is not None else rng
-        forces = unequal_loads(self.acceleration / self.n, self.friction_spread, self.n, loads)
+        # the carousel of ``wheel_seed`` (the same wheels in every experiment) or the run's own
+        forces = wheels_for_runs([seed], self.wheel_seed, self.n, self.acceleration / self.n,
+                                 self.friction_spread)[1][0]
         motors = Motors(lag=self.lag, speed_limits=(-v_max, v_max), compliance=self.compliance)
         plant = Plant(ContactSet(speeds, forces), 1.0, motors=motors,
                       commands=PiecewiseConstant(times, rows))
@@ -153,9 +162,7 @@ class Outliers:
         t_end = self.settle_time + self.window
         for j, seq in enumerate(seeds):
             plant, fastest, amplitude[j] = self.plant(seq)
-            result = simulate(plant, t_end, v0=0.0)
-            if result.status is not SimulationStatus.SUCCESS:
-                raise SolverError(f"Outliers run {seq.spawn_key}: {result.message}")
+            result = simulate_or_raise(plant, t_end, f"Outliers run {seq.spawn_key}", v0=0.0)
             inside = result.t >= self.settle_time
             rest[j] = result.speed_at(self.settle_time)
             earlier = result.speed_at(max(self.settle_time - 0.5, 0.0))

@@ -5,12 +5,14 @@ reproducible seeds (``run(seeds)`` evaluates a chunk of runs, ``summarize(table)
 summary statistics); its parameters include the non-idealities of the real carousel.
 """
 
+from ._common import SETTLED_TOLERANCE, carousel_wheels
 from .mean_median import MeanMedian
-from .median_law import MedianLaw, median_law_slope
+from .median_law import MedianLaw, ideal_median_law_slope, median_law_slope
 from .outliers import Outliers
 from .residual_friction import ResidualFriction
 
-__all__ = ["MedianLaw", "MeanMedian", "Outliers", "ResidualFriction", "median_law_slope", "EXPERIMENTS"]
+__all__ = ["MedianLaw", "MeanMedian", "Outliers", "ResidualFriction", "median_law_slope",
+           "ideal_median_law_slope", "carousel_wheels", "SETTLED_TOLERANCE", "EXPERIMENTS"]
 
 #: Experiments by name (the ``experiment`` key of a scene's ``[sweep]`` section).
 EXPERIMENTS = {cls.name: cls for cls in (MedianLaw, MeanMedian, Outliers, ResidualFriction)}

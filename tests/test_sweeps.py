@@ -9,8 +9,20 @@ import numpy as np
 import pytest
 
 from toolkit import ContactSet, ParameterError, ParameterTypeError
-from toolkit.experiments import MedianLaw, median_law_slope
+from toolkit.experiments import (MeanMedian, MedianLaw, Outliers, ResidualFriction, carousel_wheels,
+                                 ideal_median_law_slope, median_law_slope)
 from toolkit.sweeps import run_seeds, sweep
+
+#: Every experiment with its non-idealities switched on, and a run count small enough to
+#: sweep it several times (chunking, schedulers).
+NONIDEAL = [
+    (MedianLaw(friction_spread=0.2, wheel_radius_bias=0.01, wheel_radius_std=0.02, contact_radius_error=0.01,
+               damping=0.1, compliance=0.02), 24),
+    (MedianLaw(friction_spread=0.36, wheel_seed=0, wheel_radius_std=0.02), 24),
+    (MeanMedian(friction_spread=0.3), 24),
+    (Outliers(friction_spread=0.3, compliance=0.02, window=1.0), 6),
+    (ResidualFriction(n=1, friction_spread=0.3, bearing_friction=0.05, bearing_drag=0.1, probes=16), 12),
+]
 
 
 def test_run_seeds_are_the_spawned_children():
@@ -29,6 +41,47 @@ def test_tables_do_not_depend_on_chunking():
     assert list(a["run"]) == list(range(300))
 
 
+@pytest.mark.parametrize(("experiment", "runs"), NONIDEAL, ids=lambda x: getattr(x, "name", str(x)))
+def test_every_experiment_with_nonidealities_does_not_depend_on_chunking(experiment, runs):
+    # Identity: run i's numbers depend on (seed, i) only (its own carousel from its own child
+    # sequence, or the one carousel of wheel_seed), so chunks of 1, 5 and all give the same
+    # table bit for bit.
+    tables = [sweep(experiment, runs, seed=4, chunk_size=c).table for c in (1, 5, runs)]
+    assert tables[0].equals(tables[1]) and tables[0].equals(tables[2])
+
+
+def test_process_pool_and_dask_give_identical_tables_for_every_experiment():
+    # The chunks are the same wherever they run: local, a process pool (fresh interpreters) and
+    # a Dask LocalCluster give identical tables, bit for bit, for every experiment with its
+    # non-idealities.
+    local = [sweep(e, runs, seed=6, chunk_size=4).table for e, runs in NONIDEAL]
+    for (experiment, runs), table in zip(NONIDEAL, local):
+        pooled = sweep(experiment, runs, seed=6, chunk_size=4, scheduler="processes", workers=2)
+        assert pooled.table.equals(table), experiment.name
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        for (experiment, runs), table in zip(NONIDEAL, local):
+            remote = sweep(experiment, runs, seed=6, chunk_size=4, scheduler=cluster.scheduler_address)
+            assert remote.scheduler == "dask" and remote.table.equals(table), experiment.name
+
+
+def test_one_wheel_seed_is_one_carousel_in_every_experiment():
+    # The wheels of wheel_seed come from carousel_wheels in one fixed draw order (radius
+    # normals first, always): the same loads in all four experiments, whether or not the
+    # wheel radii are spread (identity, bit for bit).
+    _, loads = carousel_wheels(np.random.default_rng(0), 10, 0.2, 0.36)
+    seeds = run_seeds(1, 0, 3)
+    for experiment in (MedianLaw(friction_spread=0.36, wheel_seed=0),
+                       MedianLaw(friction_spread=0.36, wheel_seed=0, wheel_radius_std=0.05)):
+        np.testing.assert_array_equal(experiment.draw(seeds)[2], np.tile(loads, (3, 1)))
+    np.testing.assert_array_equal(MeanMedian(friction_spread=0.36, wheel_seed=0).loads(seeds), np.tile(loads, (3, 1)))
+    np.testing.assert_array_equal(Outliers(friction_spread=0.36, wheel_seed=0).plant(seeds[0])[0].contacts.forces,
+                                  loads)
+    np.testing.assert_array_equal(ResidualFriction(friction_spread=0.36, wheel_seed=0).contacts(seeds[0]).forces,
+                                  loads)
+
+
 def test_even_n_from_rest_stops_at_the_near_band_edge():
     # Closed form (PHYSICS.md section 4): ideal plant, equal loads, from rest the body stops at
     # clip(0, lo, hi) with [lo, hi] the zero-force band. The exact batch lands on the contact
@@ -40,7 +93,25 @@ def test_even_n_from_rest_stops_at_the_near_band_edge():
     np.testing.assert_allclose(result.table["speed"], expected, rtol=0, atol=1e-15)
     np.testing.assert_array_equal(result.table["median"], np.median(commanded, axis=1))
     assert result.table["settled"].all()
-    assert result.summary["slope"] < 0.85          # far below 1: the edge, not the midpoint
+
+
+def test_ideal_population_slope_two_ways():
+    # The quadrature of ideal_median_law_slope against (a) a direct Monte Carlo of the closed
+    # form y = clip(0, v_(5), v_(6)), x = (v_(5) + v_(6)) / 2 over 400000 sets (its slope's
+    # standard error is about 0.009 sqrt(660 / 4e5) = 3.7e-4: tolerance 4 of them, 1.5e-3) and
+    # (b) the exact simulator's sweep of 20000 runs, within 3 of the fit's own standard errors.
+    population = ideal_median_law_slope(10)
+    v = np.sort(np.random.default_rng(12).uniform(-1.0, 1.0, (400_000, 10)), axis=1)
+    x, y = 0.5 * (v[:, 4] + v[:, 5]), np.clip(0.0, v[:, 4], v[:, 5])
+    assert population == pytest.approx(float(x @ y) / float(x @ x), rel=0, abs=1.5e-3)
+    summary = sweep(MedianLaw(), 20_000, seed=21).summary
+    assert abs(summary["slope"] - population) < 3 * summary["slope_stderr"]
+    # n = 2: y = clip(0, a, b) is 0 unless both speeds share a sign; E[xy] / E[x^2] by hand:
+    # E[x^2] = E[(a+b)^2]/4 = (2/3 + 0)/4 = 1/6 (uniform on [-1, 1], independent), and
+    # E[xy] = 2 P(both > 0) E[(a+b)/2 min(a, b) | both in (0, 1)] = 2 (1/4) (5/24) = 5/48
+    # (min of two uniforms on (0,1): E[min^2] = 1/6, E[max min] = E[a b] = 1/4), so 5/8.
+    assert ideal_median_law_slope(2) == pytest.approx(5 / 8, rel=1e-9)
+    assert ideal_median_law_slope(9) == 1.0
 
 
 def test_odd_n_follows_the_median_exactly():
@@ -52,11 +123,22 @@ def test_odd_n_follows_the_median_exactly():
 
 
 def test_slope_fit_closed_form():
-    # y = 2 x exactly -> slope 2, stderr 0; y = x + r with r orthogonal to x -> slope 1.
+    # y = 2 x exactly -> slope 2, stderr 0; y = x + r with r orthogonal to x -> slope 1 and,
+    # by hand, stderr = sqrt(|r|^2 / (k - 1) / |x|^2) = sqrt(10 / 2 / 14).
     x = np.array([1.0, -2.0, 3.0])
     assert median_law_slope(x, 2 * x) == (2.0, 0.0)
-    slope, _ = median_law_slope(x, x + np.array([3.0, 0.0, -1.0]))   # r . x = 0
+    slope, stderr = median_law_slope(x, x + np.array([3.0, 0.0, -1.0]))   # r . x = 0
     assert slope == pytest.approx(1.0, rel=1e-15)
+    assert stderr == pytest.approx(np.sqrt(10 / 2 / 14), rel=1e-15)
+    # second method: numpy's least squares for the slope and the textbook standard error of a
+    # regression through the origin, s^2 (X^T X)^-1 with s^2 = RSS / (k - 1) (rtol 1e-12)
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=50)
+    y = 0.7 * x + rng.normal(scale=0.1, size=50)
+    coef, rss, _, _ = np.linalg.lstsq(x[:, None], y, rcond=None)
+    slope, stderr = median_law_slope(x, y)
+    assert slope == pytest.approx(coef[0], rel=1e-12)
+    assert stderr == pytest.approx(np.sqrt(rss[0] / 49 * np.linalg.inv(x[:, None].T @ x[:, None])[0, 0]), rel=1e-12)
 
 
 def test_calibration_errors_scale_the_slope_exactly():
@@ -157,8 +239,6 @@ def test_mean_median_closed_forms():
     # median held every run gives one speed although the mean varies; with the mean held the
     # mean is one number (to rounding of the rescaling, atol 1e-15 m/s) and the speed follows
     # the median.
-    from toolkit.experiments import MeanMedian
-
     held_median = sweep(MeanMedian(held="median", level=0.05, gap=0.01), 80, seed=1)
     table = held_median.table
     np.testing.assert_allclose(table["speed"], 0.04, rtol=0, atol=1e-15)
@@ -173,13 +253,13 @@ def test_mean_median_closed_forms():
 def test_outliers_move_the_body_exactly_when_the_stiction_rule_fails():
     # The rule 0 in [F(V*+), F(V*-)] at every instant decides whether the body moves: runs
     # that hold it keep V = V* exactly (deviation 0), the others move (> 1e-12 m/s).
-    from toolkit.experiments import Outliers
-
-    result = sweep(Outliers(amplitude=0.3), 24, seed=3)
+    result = sweep(Outliers(amplitude=0.3), 60, seed=3)
     table = result.table
     moved = table["deviation"].to_numpy() > 1e-12
     assert np.array_equal(moved, ~table["held"].to_numpy())
-    assert 0 < moved.sum() < len(table)                  # both kinds of run occur at this seed
+    # Both kinds of run occur: about 15 % of runs move, so all 60 held with probability
+    # 0.85^60 ~ 6e-5 and all moved with less: not a property of this seed.
+    assert 0 < moved.sum() < len(table)
     above = table["lowest_outlier"].to_numpy() > 0
     assert np.all(table["deviation"].to_numpy()[above] == 0.0)   # outliers above V*: untouched
     assert result.summary["rule_agreement"] == 1.0
@@ -189,16 +269,12 @@ def test_outliers_move_the_body_exactly_when_the_stiction_rule_fails():
 def test_residual_friction_ideal_split_is_n_over_5(n):
     # Closed forms: equal wheels give mu/mu0 = n/5 exactly and dT = m 2 v_max / (F_tot n/5)
     # (the exact event time; rtol 1e-12 for rounding).
-    from toolkit.experiments import ResidualFriction
-
     result = sweep(ResidualFriction(n=n), 3, seed=0)
     np.testing.assert_allclose(result.table["mu_ratio"], n / 5, rtol=1e-12)
     np.testing.assert_allclose(result.table["dT"], 1.0 * 2 * 0.35 / (2.0 * n / 5), rtol=1e-12)
 
 
 def test_residual_friction_from_unequal_wheels_and_the_bearing():
-    from toolkit.experiments import ResidualFriction
-
     # Unequal wheels at n = 0: the band force sum_+ f_i - sum_- f_i has mean 0 and variance
     # s^2 * 10 f^2 (independent lognormal loads with mean f, relative std s). Over 4000 runs
     # the sample variance has a relative standard error of about sqrt(2/4000) ~ 2.2 % (a bit
@@ -231,8 +307,6 @@ def test_mean_median_with_unequal_wheels_stops_at_the_weighted_equilibrium():
     # Closed form: from rest the body stops at clip(0, lo, hi) of the weighted equilibrium
     # set of the run's contacts (atol 1e-15 m/s); with the median pair held every run gives
     # one speed, whatever the mean (one carousel: the same loads in every run).
-    from toolkit.experiments import MeanMedian
-
     experiment = MeanMedian(held="median", level=0.05, gap=0.01, friction_spread=0.36, wheel_seed=0)
     result = sweep(experiment, 40, seed=2)
     seeds = run_seeds(2, 0, 40)
@@ -246,10 +320,133 @@ def test_mean_median_with_unequal_wheels_stops_at_the_weighted_equilibrium():
 def test_outliers_rule_with_unequal_wheels_on_settled_runs():
     # Unequal loads, ideal motors: on runs that had settled when the outliers started, the
     # weighted stiction rule still decides exactly whether the body moves.
-    from toolkit.experiments import Outliers
-
     table = sweep(Outliers(friction_spread=0.36, wheel_seed=0), 30, seed=3).table
     settled = table["settled"].to_numpy()
     assert settled.sum() >= 15
     moved = table["deviation"].to_numpy() > 1e-12
     np.testing.assert_array_equal(moved[settled], ~table["held"].to_numpy()[settled])
+
+
+@pytest.mark.parametrize("bearing", [0.0, 0.1, 0.35, 0.39])
+def test_transition_time_with_a_bearing(bearing):
+    # Closed form (n = 1, equal wheels, F_n = 0.4 N, m = 1 kg, v = 0.35 m/s): the bearing
+    # brakes above 0 and helps below, dT = m v / (F_n - F_b) + m v / (F_n + F_b) (the exact
+    # event time; rtol 1e-12 for rounding). At F_b = 0.39 N that is 35.4 s, twenty times the
+    # ideal 1.75 s: the horizon must come from the weakest force on the way, not from F(0).
+    table = sweep(ResidualFriction(n=1, bearing_friction=bearing), 1, seed=0).table
+    expected = 0.35 / (0.4 - bearing) + 0.35 / (0.4 + bearing)
+    assert table["dT"][0] == pytest.approx(expected, rel=1e-12)
+
+
+def test_bearing_drag_adds_to_the_residual_friction():
+    # Closed form: at n = 0 with equal wheels the rig reads |c V|, whose mean over an even
+    # number of midpoint probes is exactly c v_max / 2; mu0 (all wheels one way) reads
+    # sum f_i = 2 N because -c V cancels over the symmetric probes: mu/mu0 = c v / (2 F_tot)
+    # (rtol 1e-12, rounding of the 64-term mean).
+    for c in (0.5, 1.0):
+        table = sweep(ResidualFriction(n=0, bearing_drag=c), 2, seed=0).table
+        np.testing.assert_allclose(table["mu0"], 2.0, rtol=1e-12)
+        np.testing.assert_allclose(table["mu_ratio"], c * 0.35 / 2 / 2.0, rtol=1e-12)
+
+
+def test_residual_friction_divides_by_each_carousels_own_total():
+    # mu0 = sum f_i of the run's own wheels (a Coulomb bearing and drag cancel over the
+    # symmetric probes), so mu_ratio = |band force| / sum f_i (identities, rtol 1e-12).
+    experiment = ResidualFriction(n=0, friction_spread=0.36, bearing_drag=0.0)
+    seeds = run_seeds(3, 0, 20)
+    table = sweep(experiment, 20, seed=3).table
+    totals = np.array([experiment.contacts(s).forces.sum() for s in seeds])
+    np.testing.assert_allclose(table["mu0"], totals, rtol=1e-12)
+    np.testing.assert_allclose(table["mu_ratio"], np.abs(table["band_force"]) / totals, rtol=1e-12)
+
+
+def test_mean_median_reports_runs_that_have_not_settled():
+    # From rest the body needs at least |V*| / (F_tot / m) to reach V* (F_tot / m = 2 m/s^2),
+    # so with settle_time 1 ms no run whose stop is farther than 2 mm/s from 0 has settled;
+    # the sweep's shortfalls then name the count (a CLI exit 3).
+    from toolkit.study import sweep_shortfalls
+
+    result = sweep(MeanMedian(held="median", level=0.05, gap=0.01, settle_time=0.001), 10, seed=1)
+    assert not result.table["settled"].any()
+    assert result.summary["settled_fraction"] == 0.0
+    (shortfall,) = sweep_shortfalls(result)
+    assert "10 of 10 runs had not settled" in str(shortfall)
+    settled = sweep(MeanMedian(held="median", level=0.05, gap=0.01), 10, seed=1)
+    assert settled.table["settled"].all() and sweep_shortfalls(settled) == []
+
+
+def test_release_rise_closed_form():
+    # Hold-then-release with compliant motors: a motor whose slip keeps its direction and stays
+    # beyond k f of the settled speed keeps its load, rise exactly 0; one whose slip reverses
+    # rises by 2 k f / (|u| - k f) (closed forms, rtol 1e-12).
+    k = 0.05
+    experiment = MedianLaw(compliance=k)
+    seeds = run_seeds(5, 0, 30)
+    rise = experiment.release_rise(seeds)
+    _, actual, forces = experiment.draw(seeds)
+    final = sweep(experiment, 30, seed=5).table["true_speed"].to_numpy()
+    kf = k * forces
+    checked = 0
+    for j in range(30):
+        for i in range(experiment.n):
+            u, away = actual[j, i], abs(actual[j, i] - final[j])
+            if abs(u) <= kf[j, i] or away < kf[j, i]:
+                continue
+            expected = 0.0 if np.sign(u - final[j]) == np.sign(u) else 2 * kf[j, i] / (abs(u) - kf[j, i])
+            assert rise[j, i] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+            checked += 1
+    assert checked > 200
+
+
+@pytest.mark.parametrize(("build", "error", "match"), [
+    (lambda: MedianLaw(n=10**5), ParameterError, "'n' parameter of MedianLaw must be <= 10000"),
+    (lambda: MedianLaw(n=1e20), ParameterError, "'n' parameter of MedianLaw must be <= 10000"),
+    (lambda: MedianLaw(wheel_radius_std=0.5), ParameterError, "'wheel_radius_std' parameter of MedianLaw must be < 0.5"),
+    (lambda: MedianLaw(friction_spread=1e300), ParameterError, "'friction_spread' parameter of MedianLaw must be <= 10"),
+    (lambda: MedianLaw(speed_limit=1e300), ParameterError, "'speed_limit' parameter of MedianLaw must be <= 1000"),
+    (lambda: MedianLaw(compliance=1e300), ParameterError, "'compliance' parameter of MedianLaw must droop"),
+    (lambda: MedianLaw(settle_time=1e300), ParameterError, "'settle_time' parameter of MedianLaw must be <="),
+    (lambda: MedianLaw(damping=1e300), ParameterError, "'damping' parameter of MedianLaw must be <="),
+    (lambda: MedianLaw(name="x"), TypeError, "name"),
+    (lambda: MeanMedian(n=10**7), ParameterError, "'n' parameter of MeanMedian must be <= 10000"),
+    (lambda: MeanMedian(held=["mean"]), ParameterError, "'held' parameter of MeanMedian"),
+    (lambda: MeanMedian(friction_spread=1e300), ParameterError, "'friction_spread' parameter of MeanMedian"),
+    (lambda: Outliers(rate=1e9, window=1e9), ParameterError, "'window' parameter of Outliers must be <= 1e"),
+    (lambda: Outliers(rate=1e9), ParameterError, "'window' parameter of Outliers must give at most"),
+    (lambda: Outliers(frequency=30.0), ParameterError, "'frequency' parameter of Outliers must be <= rate / 2 = 25"),
+    (lambda: Outliers(random_amplitude="no"), ParameterTypeError, "'random_amplitude' parameter of Outliers"),
+    (lambda: Outliers(random_amplitude=0), ParameterTypeError, "'random_amplitude' parameter of Outliers"),
+    (lambda: Outliers(compliance=1e300), ParameterError, "'compliance' parameter of Outliers"),
+    (lambda: ResidualFriction(probes=10**10), ParameterError, "'probes' parameter of ResidualFriction must be <="),
+    (lambda: ResidualFriction(n=6), ParameterError, "'n' parameter of ResidualFriction must be <= 5"),
+    (lambda: ResidualFriction(bearing_drag=1e300), ParameterError, "'bearing_drag' parameter of ResidualFriction"),
+    (lambda: ResidualFriction(wheel_seed=-1), ParameterError, "'wheel_seed' parameter of ResidualFriction"),
+])
+def test_bad_experiment_parameters_name_themselves(build, error, match):
+    with pytest.raises(error, match=match):
+        build()
+
+
+@pytest.mark.parametrize(("kwargs", "error", "match"), [
+    ({"scheduler": 5}, ParameterTypeError, "'scheduler' parameter of sweep must be None, 'processes'"),
+    ({"scheduler": "Processes"}, ParameterError, "Did you mean 'processes'"),
+    ({"scheduler": "threads"}, ParameterError, r"must be None, 'processes' or a Dask scheduler address tcp://host:port"),
+    ({"scheduler": ""}, ParameterError, "'scheduler' parameter of sweep"),
+    ({"workers": 3}, ParameterError, "'workers' parameter of sweep must be given only with scheduler='processes'"),
+    ({"workers": 0, "scheduler": "processes"}, ParameterError, "'workers' parameter of sweep must be >= 1"),
+    ({"workers": "x"}, ParameterTypeError, "'workers' parameter of sweep"),
+    ({"progress": "x"}, ParameterTypeError, "'progress' parameter of sweep"),
+    ({"seed": 2**200}, ParameterError, "'seed' parameter of sweep must be < 2\\*\\*128"),
+])
+def test_bad_scheduler_and_workers(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        sweep(MedianLaw(), 4, **kwargs)
+
+
+def test_name_is_a_class_constant():
+    # name is the experiment's key, not a field: fields() leaves it out and instances share it.
+    from dataclasses import fields
+
+    for cls in (MedianLaw, MeanMedian, Outliers, ResidualFriction):
+        assert "name" not in {f.name for f in fields(cls)}
+        assert cls().name == cls.name

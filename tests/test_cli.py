@@ -353,6 +353,31 @@ def test_sweep_user_errors(tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert "pip install 'active-contacts[dask]'" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+    # a scheduler that is neither 'processes' nor an address, and --workers without the pool
+    for extra, message in ((["--scheduler", "Processes"], "Did you mean 'processes'"),
+                           (["--scheduler", "threads"], "or a Dask scheduler address tcp://host:port"),
+                           (["--workers", "3"], "'workers' parameter of sweep must be given only with")):
+        assert main(["sweep", str(ROOT / "designs" / "median_law.toml"), "--runs", "5", *extra,
+                     "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()
+    # an experiment size beyond the bounds: one line naming the parameter, no traceback
+    big = tmp_path / "big.toml"
+    big.write_text('[sweep]\nexperiment = "outliers"\nruns = 1\nrate = 1e9\nwindow = 1e9\n')
+    assert main(["sweep", str(big)]) == 2
+    err = capsys.readouterr().err
+    assert "'window' parameter of Outliers" in err and len(err.strip().splitlines()) == 1
+
+
+def test_sweep_json_writes_undefined_statistics_as_null(tmp_path, capsys):
+    # No outlier amplitude (A = 0) moves the body: threshold_amplitude is undefined (NaN in
+    # the summary) and null in JSON; defined statistics stay numbers.
+    scene = tmp_path / "still.toml"
+    scene.write_text('[sweep]\nexperiment = "outliers"\nruns = 2\namplitude = 0.0\nwindow = 0.5\n')
+    assert main(["sweep", str(scene), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)["summary"]
+    assert summary["threshold_amplitude"] is None and summary["unaffected_fraction"] == 1.0
 
 
 def test_sweep_unsettled_runs_are_a_shortfall(tmp_path, capsys):

@@ -51,3 +51,81 @@ def test_summary_comparison_marks_the_paper_band():
     ax = tk.plot_summary_comparison({"a": (0.8, 0.01), "b": (1.0, 0.02)}, paper=(1.065, 0.01))
     (points,) = [line for line in ax.get_lines() if line.get_marker() == "o"]
     np.testing.assert_array_equal(points.get_xdata(), [0.8, 1.0])
+
+
+def test_mean_median_plot_draws_both_panels():
+    # Identity: the left panel's points are (median, speed) of the mean-held sweep, the right
+    # panel's (mean, speed) of the median-held one; the note quotes its speed range.
+    held_mean = tk.sweep(tk.MeanMedian(held="mean"), 12, seed=1)
+    held_median = tk.sweep(tk.MeanMedian(held="median", level=0.05), 12, seed=2)
+    left, right = tk.plot_mean_median(held_mean, held_median)
+    (a,), (b,) = left.get_lines(), right.get_lines()
+    np.testing.assert_array_equal(a.get_xdata(), held_mean.table["median"])
+    np.testing.assert_array_equal(a.get_ydata(), held_mean.table["speed"])
+    np.testing.assert_array_equal(b.get_xdata(), held_median.table["mean"])
+    np.testing.assert_array_equal(b.get_ydata(), held_median.table["speed"])
+    assert any("speed range 0 m/s" in t.get_text() for t in right.texts)
+
+
+def test_outliers_plot_splits_the_runs_by_the_rule():
+    # Runs where the rule held are circles, the others crosses, at (amplitude, max(deviation,
+    # 1e-9)) (identity: the zero deviations are drawn on the 1e-9 m/s floor line).
+    result = tk.sweep(tk.Outliers(window=1.0), 16, seed=3)
+    ax = tk.plot_outliers(result)
+    held_line, failed_line, floor = ax.get_lines()[:3]
+    table = result.table
+    held = table["held"].to_numpy()
+    deviation = np.maximum(table["deviation"].to_numpy(), 1e-9)
+    np.testing.assert_array_equal(held_line.get_xdata(), table["amplitude"][held])
+    np.testing.assert_array_equal(held_line.get_ydata(), deviation[held])
+    np.testing.assert_array_equal(failed_line.get_xdata(), table["amplitude"][~held])
+    np.testing.assert_array_equal(failed_line.get_ydata(), deviation[~held])
+    assert list(floor.get_ydata()) == [1e-9, 1e-9]
+
+
+def test_viscosity_check_plot_draws_the_runs_and_the_three_lines():
+    # Identity: the runs at (dF/dV / m, 1/tau); the fit line's slope is k_fit, the derived
+    # prediction's k_predicted, the purely viscous line's 1 (rtol 1e-12 for the division).
+    from toolkit.predictions import ViscosityProblem, viscosity_check
+
+    check = viscosity_check(ViscosityProblem(mode="ideal", runs=12, seed=0))
+    ax = tk.plot_viscosity_check([check], labels=["ideal"])
+    points, fit, predicted, viscous = ax.get_lines()
+    ok = check.ok
+    np.testing.assert_array_equal(points.get_xdata(), check.slope[ok] / check.problem.apparatus.mass)
+    np.testing.assert_array_equal(points.get_ydata(), 1.0 / check.tau[ok])
+    for line, slope in ((fit, check.k_fit), (predicted, check.k_predicted), (viscous, 1.0)):
+        x, y = line.get_data()
+        assert y[1] / x[1] == pytest.approx(slope, rel=1e-12)
+
+
+def test_friction_fraction_check_plot_draws_mu_and_dT_against_the_closed_forms():
+    # Identity: left (n, mu/mu0) and the ideal n/5; right (mu/mu0, dT) where dT is finite and
+    # the prediction dT = (m 2 v_max / F_tot) / (mu/mu0), 0.35 s / (mu/mu0) on the carousel
+    # (closed form; rtol 1e-12).
+    from toolkit.predictions import FrictionFractionProblem, friction_fraction_check
+
+    check = friction_fraction_check(FrictionFractionProblem(mode="ideal"))
+    left, right = tk.plot_friction_fraction_check([check], labels=["ideal"])
+    points, ideal = left.get_lines()
+    np.testing.assert_array_equal(points.get_xdata(), check.n)
+    np.testing.assert_array_equal(points.get_ydata(), check.mu_ratio)
+    np.testing.assert_allclose(ideal.get_ydata(), check.n / 5, rtol=1e-12)
+    measured, predicted = right.get_lines()
+    finite = np.isfinite(check.dT)
+    np.testing.assert_array_equal(measured.get_xdata(), check.mu_ratio[finite])
+    np.testing.assert_array_equal(measured.get_ydata(), check.dT[finite])
+    x, y = predicted.get_data()
+    np.testing.assert_allclose(x * y, 0.35, rtol=1e-12)
+
+
+def test_plot_sweep_refuses_an_unknown_experiment():
+    import dataclasses
+
+    result = tk.sweep(tk.MedianLaw(), 3, seed=0)
+
+    class Other:
+        name = "mediann_law"
+
+    with pytest.raises(tk.ParameterError, match="Did you mean 'median_law'"):
+        tk.plot_sweep(dataclasses.replace(result, experiment=Other()))

@@ -71,7 +71,7 @@ def test_paper_table_numbers_come_from_the_designs_it_names() -> None:
     row = next(line for line in README.splitlines() if line.startswith("| median law:"))
     assert "designs/median_law.toml" in row and "designs/median_law_nonideal.toml" in row
     (ideal, ideal_se), (other, other_se) = [tuple(map(float, m)) for m in
-                                            re.findall(r"([0-9.]+) \+- ([0-9.]+) \(", row)]
+                                            re.findall(r"([0-9.]+) \+- ([0-9.]+) (?:\(|for the)", row)]
     for design, quoted in (("median_law", (ideal, ideal_se)), ("median_law_nonideal", (other, other_se))):
         summary = sweep_scene(load_scene(ROOT / "designs" / f"{design}.toml")).summary
         np.testing.assert_allclose([summary["slope"], summary["slope_stderr"]], quoted, rtol=0, atol=5e-4)
@@ -79,6 +79,91 @@ def test_paper_table_numbers_come_from_the_designs_it_names() -> None:
     quoted = float(re.search(r"\| ([0-9.]+) % \(wheels", row).group(1))
     summary = sweep_scene(load_scene(ROOT / "designs" / "residual_friction.toml")).summary
     assert 100 * summary["reduction"] == pytest.approx(quoted, abs=0.05)
+
+
+def _paper_section() -> str:
+    return README.split("## The paper's experiments", 1)[1].split("\n## ", 1)[0]
+
+
+def _quoted(text: str, pattern: str) -> tuple[str, ...]:
+    match = re.search(pattern, " ".join(text.split()))
+    assert match, pattern
+    return match.groups()
+
+
+def test_paper_table_rows_of_the_ideal_model_come_from_their_designs() -> None:
+    # Each number the table quotes from a design's sweep, recomputed here and printed to the
+    # digits quoted (identity of the formatted strings: the README shows what the code gives).
+    from toolkit.scene import load_scene
+    from toolkit.study import sweep_scene
+
+    section = _paper_section()
+    run = lambda name: sweep_scene(load_scene(ROOT / "designs" / f"{name}.toml")).summary  # noqa: E731
+    mean = run("mean_median")
+    assert _quoted(section, r"slope ([0-9.]+) against the median over a ([0-9.]+) m/s median range") == (
+        f"{mean['slope_median']:.3f}", f"{mean['median_range']:.3f}")
+    assert abs(mean["mean_range"]) < 1e-15
+    held = run("median_held")
+    assert _quoted(section, r"speed range 0 over a ([0-9.]+) m/s mean range") == (f"{held['mean_range']:.3f}",)
+    assert held["speed_range"] == 0.0
+    out = run("outliers")
+    assert _quoted(section, r"unaffected in ([0-9]+) % of runs") == (f"{100 * out['unaffected_fraction']:.0f}",)
+    assert _quoted(section, r"smallest amplitude that moved the body ([0-9.]+) m/s") == (
+        f"{out['threshold_amplitude']:.3f}",)
+    assert out["rule_agreement"] == 1.0 and "rule predicts 100 % of runs" in section
+    residual = run("residual_friction")
+    assert _quoted(section, r"sd of `mu/mu0` ([0-9.]+)\)") == (f"{residual['mu_ratio_std']:.3f}",)
+    # the population value of the ideal slope (quadrature) beside the 660-run sample
+    assert _quoted(section, r"population value ([0-9.]+)") == (f"{tk.experiments.ideal_median_law_slope(10):.4f}",)
+
+
+def test_gap_numbers_come_from_the_models_they_name() -> None:
+    # The paragraph under the table (notebooks/gaps.ipynb at the paper's sizes): the same
+    # computations here, formatted to the digits quoted.
+    from itertools import combinations
+
+    from toolkit.experiments import ResidualFriction, carousel_wheels
+    from toolkit.sweeps import run_seeds
+
+    section = _paper_section()
+    f = 0.2
+    low, high = (tk.sweep(tk.MedianLaw(compliance=r * 0.2 / f), 660, seed=660).summary["slope"] for r in (0.026, 0.066))
+    assert _quoted(section, r"lifts the median-law slope from 0.76 to ([0-9.]+)-([0-9.]+)\.") == (
+        f"{low:.2f}", f"{high:.2f}")
+    # over 40 carousels: wheels 36 % unequal with and without compliance (the notebook's models)
+    means, sds = [], []
+    for model in (dict(friction_spread=0.36), dict(friction_spread=0.36, compliance=0.066 * 0.2 / f),
+                  dict(friction_spread=0.1)):
+        s = [tk.sweep(tk.MedianLaw(wheel_seed=w, **model), 660, seed=660).summary["slope"] for w in range(40)]
+        means.append(np.mean(s))
+        sds.append(np.std(s, ddof=1))
+    assert _quoted(section, r"over carousels ([0-9.]+)-([0-9.]+) \+- ([0-9.]+)-([0-9.]+)\)") == (
+        f"{min(means):.2f}", f"{max(means):.2f}", f"{min(sds):.3f}", f"{max(sds):.3f}")
+    # the calibration that would close the gap on the non-ideal carousel
+    from toolkit.scene import load_scene
+    from toolkit.study import sweep_scene
+
+    base = sweep_scene(load_scene(ROOT / "designs" / "median_law_nonideal.toml")).summary["slope"]
+    bias, radius = 1.065 / base - 1, base / 1.065 - 1
+    assert _quoted(section, r"wheel-radius bias of \+([0-9.]+) % \(the 45 mm wheels rolling as if ([0-9.]+) mm") == (
+        f"{100 * bias:.1f}", f"{45 * bias:.1f}")
+    assert _quoted(section, r"every reported speed ([0-9.]+) % high \(a contact radius ([0-9]+) mm shorter") == (
+        f"{-100 * radius:.1f}", f"{-266 * radius:.0f}")
+    # hold-then-release: how many motors change speed
+    experiment = tk.MedianLaw(compliance=0.046 * 0.2 / f, friction_spread=0.36, wheel_seed=0)
+    seeds = run_seeds(660, 0, 660)
+    rise = experiment.release_rise(seeds)
+    r = rise[np.abs(experiment.draw(seeds)[1]) >= 0.1]
+    assert _quoted(section, r"([0-9]+) % of the motors at `\|u\| >= 0.1 m/s` do not change speed, ([0-9.]+) % rise") == (
+        f"{100 * np.mean(np.abs(r) < 1e-12):.0f}", f"{100 * np.mean((r >= 0.026) & (r <= 0.066)):.1f}")
+    # one carousel's residual by split
+    _, loads = carousel_wheels(np.random.default_rng(0), 10, f, 0.36)
+    splits = [abs(2 * loads[list(c)].sum() - loads.sum()) / loads.sum() for c in combinations(range(10), 5)]
+    one = tk.sweep(ResidualFriction(n=0, friction_spread=0.36, wheel_seed=0), 1, seed=0).summary["mu_ratio"]
+    assert _quoted(section, r"gives ([0-9.]+) to ([0-9.]+) over its 252 splits \(([0-9.]+) with wheels 0-4") == (
+        f"{min(splits):.3f}", f"{max(splits):.3f}", f"{one:.3f}")
+    # the drag that gives 9 %: c v_max / (2 F_tot) = 0.09
+    assert _quoted(section, r"a bearing drag of ([0-9.]+) N s/m \(the rig") == (f"{0.09 * 2 * 2.0 / 0.35:.2f}",)
 
 
 def _table_row(section: str) -> str:

@@ -178,6 +178,8 @@ def test_sweep_section_round_trip_and_objects():
     assert scene.stages == ("sweep",) and scene.contacts is None
     assert scene.objects.sweep.friction_spread == 0.2 and scene.objects.sweep.wheel_seed == 1
     assert loads_scene(dumps_scene(scene)) == scene
+    with pytest.raises(TypeError):           # the spec is frozen, its parameters too
+        scene.sweep.params["friction_spread"] = 0.5
 
 
 @pytest.mark.parametrize(("extra", "match"), [
@@ -185,6 +187,9 @@ def test_sweep_section_round_trip_and_objects():
     ('frction_spread = 0.1\n', "Did you mean 'friction_spread'"),
     ('statistics = ["slop"]\n', "Did you mean 'slope'"),
     ('runs = 0\n', "'sweep.runs'"),
+    ('runs = 100000000\n', r"The 'sweep.runs' value in the scene must be an integer <= 10000000"),
+    ('n = 100000000000\n', r"In \[sweep\]: The 'n' parameter of MedianLaw must be <= 10000"),
+    ('name = "x"\n', "Unknown key 'name'"),
     ('[body]\nmass = 1.0\n', r"remove \[body\]"),
 ])
 def test_sweep_section_errors(extra, match):

@@ -354,7 +354,8 @@ def _parser() -> argparse.ArgumentParser:
                        help="'processes' for a local process pool, or the address of a Dask scheduler "
                             "(tcp://host:port; needs pip install 'active-contacts[dask]'); default: "
                             "this process")
-    sweep.add_argument("--workers", type=_at_least(1), help="processes of the 'processes' pool")
+    sweep.add_argument("--workers", type=_at_least(1),
+                       help="processes of the 'processes' pool (only with --scheduler processes)")
     sweep.add_argument("--out", metavar="DIR", help="write results.csv (one row per run), sweep.json and "
                        "sweep.png into this folder, replaced as a whole")
     stability = command("stability", _cmd_stability,

@@ -20,14 +20,18 @@ friction_spread : relative std of each contact's friction magnitude (lognormal, 
 damping : bearing drag ``c``, N s/m: the body settles where ``F(V) = c V``.
 wheel_radius_bias, wheel_radius_std : relative error of the wheels' radius, common to all
     wheels (calibration, tyre compression) and per wheel (manufacturing): a wheel commanded
-    to ``v_i`` runs at ``v_i (1 + bias + std z_i)``.
+    to ``v_i`` runs at ``v_i (1 + bias + std z_i)``; ``std < 0.5`` (a wheel two spreads short
+    still runs forwards).
 contact_radius_error : relative error of the contact radius ``L`` the central encoder's
     angle is converted with: the reported speed is ``V / (1 + error)`` (``L_true = L (1 +
     error)``).
 compliance : motor compliance ``k``, (m/s)/N: a loaded motor droops by ``k`` times its
-    contact force (the torque-speed line; the paper's 4.6 % speed rise on release is
-    ``k f_i = 0.046 |v_i|``). Needs the single-run exact engine (the batch path has no
-    compliance), about 0.2 ms per run.
+    contact force (the torque-speed line). The paper's 4.6 % speed rise on release does not
+    determine ``k`` in this model: a sliding wheel carries ``f_i`` whether the body is held
+    or not, so on release only motors whose slip reverses change speed
+    (:meth:`MedianLaw.release_rise`); ``k f = 0.046 * 0.2 m/s`` is an assumed value of that
+    order. Needs the single-run exact engine (the batch path has no compliance), about
+    0.2 ms per run.
 
 Everything but ``compliance`` runs on the vectorized exact batch path
 (:func:`toolkit.simulate_batch`).

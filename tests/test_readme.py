@@ -154,7 +154,8 @@ def test_gap_numbers_come_from_the_models_they_name() -> None:
     seeds = run_seeds(660, 0, 660)
     rise = experiment.release_rise(seeds)
     r = rise[np.abs(experiment.draw(seeds)[1]) >= 0.1]
-    assert _quoted(section, r"([0-9]+) % of the motors at `\|u\| >= 0.1 m/s` do not change speed, ([0-9.]+) % rise") == (
+    pattern = r"([0-9]+) % of the motors at `\|u\| >= 0.1 m/s` do not change speed, ([0-9.]+) % rise"
+    assert _quoted(section, pattern) == (
         f"{100 * np.mean(np.abs(r) < 1e-12):.0f}", f"{100 * np.mean((r >= 0.026) & (r <= 0.066)):.1f}")
     # one carousel's residual by split
     _, loads = carousel_wheels(np.random.default_rng(0), 10, f, 0.36)

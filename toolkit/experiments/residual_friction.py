@@ -44,7 +44,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..errors import ParameterError, parameter_message
 from ..model import ContactSet, Plant
 from ._common import MAX_SAMPLES, as_count, check_common, setter, simulate_or_raise, wheels_for_runs
 

@@ -1265,8 +1265,8 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     # ideal-motor engine (O(log N) per event) is exact for them too.
     dynamic = plant.dynamic_motors and plant.commands is not None
     mu = 1.0 / plant.motors.lag if dynamic and plant.motors.lag > 0 else 0.0
-    cascade = 2 * plant.n + 2
-    rec = _Recorder(budget, cascade, mu)
+    n = plant.n
+    rec = _Recorder(budget, 2 * n + 2, mu)
     m = plant.mass
     table = times = None
     if t_eval is not None:
@@ -1281,7 +1281,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
           and not isinstance(plant.external_force, PiecewiseConstant)):
         # One piece and sample times: one kernel call runs it and evaluates the dense output
         # (toolkit._compiled.core.ideal_run); Python only assembles the result.
-        if plant.motors is None and plant.n <= _core.SMALL:
+        if plant.motors is None and n <= _core.SMALL:
             # Nothing to build or keep: the landscape is the ContactSet's own staircase.
             land: _Landscape = _CoulombLandscape(plant.contacts)
         else:
@@ -1320,7 +1320,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
             if not success:
                 table[1, np.isnan(table[0])] = np.nan
         table.setflags(write=False)
-        V, force = table
+        V, force = table[0], table[1]                  # (indexing: faster than unpacking)
     istate = rec.istate
     n_events = int(istate[4])                          # (core.I_NEV, I_NEVAL, I_NSEG)
     rec.output = (plant, times, t_stop, success, t_end, linear)

@@ -36,6 +36,9 @@ and the no-event certificate of :func:`~toolkit.simulation.advance` are the kern
 under ``NUMBA_DISABLE_JIT=1`` the same functions run as Python). This module validates,
 keeps the per-plant landscape cache, grows the kernels' buffers and assembles the result; a
 one-piece run with sample times is a single kernel call (:func:`toolkit._compiled.core.ideal_run`).
+The result's events, contact-speed table and dense output are built from the run's record on
+first access (``SimulationResult._trusted``): a caller that reads only ``t``, ``V`` and
+``force`` (a sweep, a benchmark, a loop) does not pay for them.
 The dynamic-motor engine (lag, rate limit with a command schedule) is still NumPy code here.
 A process runs the kernels as Python until it has done enough work to pay for loading the
 compiled ones (:func:`toolkit._compiled.kernels`): the results are the same either way.

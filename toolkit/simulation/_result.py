@@ -147,6 +147,12 @@ class SimulationResult:
     wall_time : float, s
     dense : callable or None
         ``dense(times) -> V`` at any times in ``[0, t_end]`` (exact for the exact method).
+
+    Notes
+    -----
+    The exact method builds ``events``, ``contact_speeds`` and ``dense`` on their first
+    access (from its record of the run, the same values as if built at once) and keeps
+    them; ``vars(result)`` lists them only once accessed. Pickling and copying compute them.
     """
 
     method: str

@@ -52,6 +52,54 @@ def test_kernels_are_compiled_unless_disabled():
     assert hasattr(core.ideal_piece, "py_func") == JIT
 
 
+# -- the check of requested times -------------------------------------------------------------
+def _numpy_ordered_within(times: np.ndarray, t_end: float) -> bool:
+    """The NumPy rule simulate() applies before the kernels are compiled."""
+    return bool(bool((times[1:] >= times[:-1]).all()) and times[0] >= 0 and times[-1] <= t_end)
+
+
+def test_ordered_within_is_the_numpy_rule(rng):
+    # Second method: the NumPy expression, on sorted grids, ties, one time, and every kind of
+    # defect (a step back, NaN, +-inf, out of [0, t_end]) at the start, middle and end.
+    grid = np.sort(rng.uniform(0.0, 5.0, 1003))
+    cases = [grid, np.array([0.0]), np.array([5.0]), np.array([-0.0, 0.0, 5.0]),
+             np.repeat(grid[::100], 3), np.linspace(0.0, 5.0, 1004)]
+    for position in (0, 1, 500, 1002):
+        for bad in (np.nan, np.inf, -np.inf, -1e-300, 5.0 + 1e-12, grid[position] - 1e-9):
+            times = grid.copy()
+            times[position] = bad
+            cases.append(times)
+    cases.append(grid[::-1].copy())
+    for times in cases:
+        for writeable in (True, False):            # two numba specializations
+            times = times.copy()
+            times.setflags(write=writeable)
+            assert bool(core.ordered_within(times, 5.0)) == _numpy_ordered_within(times, 5.0)
+    assert core.ordered_within(grid, 5.0) and not core.ordered_within(grid, 4.0)
+
+
+def test_simulate_refuses_the_same_times_with_and_without_the_kernel(monkeypatch):
+    # simulate() checks t_eval with the compiled kernel once the process has it, with NumPy
+    # before: the same refusals and the same message either way.
+    import toolkit.simulation as simulation
+
+    plant = Plant(ContactSet([-0.2, 0.1, 0.3]), 1.0)
+    bad = [[0.5, 0.2], [0.5, 2.0], [-0.1, 0.5], [0.0, np.nan, 0.5], [0.0, np.inf]]
+    messages = []
+    for kernel in (True, False):
+        if not kernel:
+            monkeypatch.setattr(simulation, "compiled", lambda name: None)
+        found = []
+        for times in bad:
+            with pytest.raises(toolkit.errors.ParameterError) as info:
+                simulate(plant, 1.0, t_eval=np.array(times))
+            found.append(str(info.value))
+        good = simulate(plant, 1.0, t_eval=np.array([0.0, 0.0, 0.5, 1.0]))
+        np.testing.assert_array_equal(good.t, [0.0, 0.0, 0.5, 1.0])
+        messages.append(found)
+    assert messages[0] == messages[1]
+
+
 # -- the Coulomb force ---------------------------------------------------------------------------
 @pytest.mark.parametrize("n, m", [(1, 5), (7, 1), (40, 3000), (2000, 50_000)])
 def test_coulomb_force_is_the_definition(rng, n, m):

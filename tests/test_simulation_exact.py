@@ -572,6 +572,59 @@ def test_result_built_by_the_fast_path_passes_validation_unchanged(case):
         assert Event(event.time, event.kind, event.contact, event.speed) == event
 
 
+@pytest.mark.parametrize("case", ["t_eval", "none", "commands", "dynamic", "stopped"])
+def test_lazy_fields_are_computed_on_first_access_and_survive_copies(case):
+    # The fast path leaves events, contact speeds and the dense output to be built on first
+    # access. Closed forms: with speeds [-1, 0.5, 2] (f = 1 N each), m = 1 kg, from rest, the
+    # body feels +1 N up to 0.5 m/s and sticks there at t = 0.5 s; contact speeds are the
+    # commands. Pickle and deepcopy carry every field (identities).
+    import copy
+    import pickle
+
+    speeds = [-1.0, 0.5, 2.0]
+    kwargs: dict = {}
+    if case == "commands":
+        kwargs["commands"] = PiecewiseConstant([1.0], [speeds, [-1.0, 0.25, 2.0]])
+    if case == "dynamic":
+        kwargs.update(motors=Motors(lag=0.05),
+                      commands=PiecewiseConstant([1.0], [speeds, [-1.0, 0.25, 2.0]]))
+    plant = Plant(ContactSet(speeds), 1.0, **kwargs)
+    times = np.linspace(0.0, 0.8, 9) if case in ("t_eval", "stopped") else None
+    budget = Budget(max_steps=1) if case == "stopped" else None
+    result = simulate(plant, 0.8 if case in ("t_eval", "stopped") else 2.0, t_eval=times,
+                      budget=budget)
+    assert {"events", "contact_speeds", "dense"}.isdisjoint(vars(result))
+    if case != "stopped":
+        assert (result.events[0].kind, result.events[0].contact) == ("stick", 1)
+        assert result.events[0].time == pytest.approx(0.5, rel=RTOL, abs=0)
+        assert result.events[0].speed == pytest.approx(0.5, rel=RTOL, abs=0)
+    assert len(result.events) == result.n_events
+    if case == "dynamic":        # the motor lag's closed form after the switch at 1 s
+        expected = np.tile(speeds, (result.t.size, 1))
+        late = result.t > 1.0
+        expected[late, 1] = 0.25 + 0.25 * np.exp(-(result.t[late] - 1.0) / 0.05)
+        # rtol: a few roundings of exp and of the closed form (~1e-15)
+        np.testing.assert_allclose(result.contact_speeds, expected, rtol=RTOL, atol=0)
+    else:
+        expected = np.array([plant.command(t) for t in result.t])
+        np.testing.assert_array_equal(result.contact_speeds, expected)
+    np.testing.assert_array_equal(result.speed_at(result.t), result.V)
+    assert "_source" not in vars(result)       # every lazy field built: the record let go
+    fresh = simulate(plant, result.dense.t_end, t_eval=times, budget=budget)
+    for twin in (pickle.loads(pickle.dumps(fresh)), copy.deepcopy(fresh)):
+        for f in dataclasses.fields(SimulationResult):
+            if f.name in ("dense", "wall_time"):
+                continue
+            mine, other = getattr(result, f.name), getattr(twin, f.name)
+            if isinstance(mine, np.ndarray):
+                np.testing.assert_array_equal(mine, other)
+            else:
+                assert mine == other, f.name
+        np.testing.assert_array_equal(twin.speed_at(result.t), result.V)
+    with pytest.raises(AttributeError, match="no_such_field"):
+        result.no_such_field
+
+
 def test_caller_t_eval_array_is_not_frozen_by_the_result():
     times = np.linspace(0.0, 1.0, 5)
     result = simulate(Plant(ContactSet([-0.2, 0.1, 0.3]), 1.0), 1.0, t_eval=times)

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["COMPILE_AFTER", "charge", "kernels", "load", "loaded", "warm_up"]
+__all__ = ["COMPILE_AFTER", "charge", "compiled", "kernels", "load", "loaded", "warm_up"]
 
 _LOADED: dict[str, Any] = {}          # name -> the compiled module (or its _Interpreted)
 
@@ -126,6 +126,14 @@ def load(name: str) -> ModuleType | _Interpreted:
     return module
 
 
+def compiled(name: str) -> ModuleType | None:
+    """The kernel module ``toolkit._compiled.<name>`` if this process has compiled it (not
+    run as Python under ``NUMBA_DISABLE_JIT`` or without numba), else None: for callers with
+    a NumPy way of their own that only pays to switch to a kernel once it is machine code."""
+    module = _LOADED.get(name)
+    return module if isinstance(module, ModuleType) else None
+
+
 def loaded() -> tuple[str, ...]:
     """Names of the kernel modules compiled in this process (tests check laziness)."""
     return tuple(_LOADED)
@@ -165,6 +173,9 @@ def warm_up() -> float:
                   Plant(contacts, 1.0, motors=Motors(compliance=0.01))):
         result = simulate(plant, 1.0)
         simulate(plant, 1.0, t_eval=np.linspace(0.0, 1.0, 5))
+        fixed = np.linspace(0.0, 1.0, 5)
+        fixed.setflags(write=False)                # read-only times (no copy): their own kernel
+        simulate(plant, 1.0, t_eval=fixed)
         result.speed_at(np.array([0.5, 0.25]))
     lagged = Plant(contacts, 1.0, motors=Motors(lag=0.01))
     state = ExactState.initial(lagged)

@@ -70,6 +70,7 @@ KERNELS = {
     "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {},
     "dense_values": {}, "segment_value": _INLINE, "displacement": {}, "samples": {},
     "quiet_piece": {}, "sorted_landscape": {}, "batch_scene": {}, "batch": {"parallel": True},
+    "ordered_within": {},
 }
 
 
@@ -421,6 +422,19 @@ def ideal_run(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
     if code == DONE:
         dense_values(seg[:istate[I_NSEG]], 0.0, query, True, b, m, out)
     return code
+
+
+def ordered_within(times: np.ndarray, t_end: float) -> bool:
+    """True when ``times`` (s, 1-d, at least one) are non-decreasing and within
+    ``[0, t_end]``: the check of ``simulate(..., t_eval=...)``. NaN-safe as written (every
+    comparison with NaN is False) and without early exit, so that it compiles to one
+    vectorized pass (the same answer as
+    ``(times[1:] >= times[:-1]).all() and times[0] >= 0 and times[-1] <= t_end``)."""
+    n = times.size
+    ok = times[0] >= 0.0 and times[n - 1] <= t_end
+    for i in range(1, n):
+        ok &= times[i] >= times[i - 1]
+    return ok
 
 
 # -- segments: evaluate, integrate, sample ---------------------------------------------------

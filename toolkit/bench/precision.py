@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     exact = speedup.exact
     print(f"report: {len(report.rows)} rows in {total:.1f} s")
     print(f"exact: max error {exact.max_error:.2e} m/s (rational-arithmetic reference), "
-          f"{exact.wall_time * 1e6:.0f} us per run")
+          f"{exact.wall_time * 1e6:.1f} us per run")
     if speedup.reference is None:
         print("no reference method reached max error <= 1e-6 m/s")
         return 1

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from .._compiled import compiled
 from .._validation import as_float, as_float_array, check_option, suggestion
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant
@@ -65,9 +66,14 @@ def _check_t_eval(t_eval: Any, t_end: float) -> np.ndarray | None:
         times = t_eval   # the common case: no conversion (copied below only if writeable)
     else:
         times = as_float_array(t_eval, "t_eval", "simulate")
-    # One pass, NaN-safe: every comparison with NaN is False, and the two bounds exclude +-inf.
-    ordered = bool((times[1:] >= times[:-1]).all())
-    if not (ordered and times[0] >= 0 and times[-1] <= t_end):
+    # One pass, NaN-safe: every comparison with NaN is False, and the two bounds exclude +-inf
+    # (the compiled kernel once this process has it: the same test without temporaries).
+    core = compiled("core")
+    if core is not None:
+        ok = core.ordered_within(times, t_end)
+    else:
+        ok = bool((times[1:] >= times[:-1]).all()) and times[0] >= 0 and times[-1] <= t_end
+    if not ok:
         raise ParameterError(parameter_message(
             "t_eval", "simulate", f"be non-decreasing times within [0, t_end = {t_end:g}]",
             times.tolist() if times.size <= 8 else f"[{times.min():g} .. {times.max():g}]"))

@@ -36,6 +36,9 @@ and the no-event certificate of :func:`~toolkit.simulation.advance` are the kern
 under ``NUMBA_DISABLE_JIT=1`` the same functions run as Python). This module validates,
 keeps the per-plant landscape cache, grows the kernels' buffers and assembles the result; a
 one-piece run with sample times is a single kernel call (:func:`toolkit._compiled.core.ideal_run`).
+The result's events, contact-speed table and dense output are built from the run's record on
+first access (``SimulationResult._trusted``): a caller that reads only ``t``, ``V`` and
+``force`` (a sweep, a benchmark, a loop) does not pay for them.
 The dynamic-motor engine (lag, rate limit with a command schedule) is still NumPy code here.
 A process runs the kernels as Python until it has done enough work to pay for loading the
 compiled ones (:func:`toolkit._compiled.kernels`): the results are the same either way.
@@ -148,7 +151,7 @@ class _Recorder:
     """
 
     __slots__ = ("budget", "mu", "window", "seg", "ev", "fstate", "istate", "deadline",
-                 "status", "detail")
+                 "status", "detail", "output")
 
     def __init__(self, budget: Budget, cascade: int, mu: float) -> None:
         self.budget = budget
@@ -252,6 +255,18 @@ class _Recorder:
         return True
 
     # -- output -----------------------------------------------------------------------------
+    def field(self, name: str) -> Any:
+        """A lazy field of the finished run's :class:`SimulationResult` (``events``,
+        ``contact_speeds`` or ``dense``; ``SimulationResult._trusted``), from this record and
+        ``output = (plant, times, t_stop, success, t_end, linear)``, set when the run ended
+        (nothing writes to the buffers after that)."""
+        plant, times, t_stop, success, t_end, linear = self.output
+        if name == "events":
+            return self.events()
+        if name == "contact_speeds":
+            return _contact_speeds(plant, times)
+        return self.dense(t_stop, success, t_end, linear)
+
     def events(self) -> tuple[Event, ...]:
         """The recorded events as :class:`Event` objects."""
         n = int(self.istate[_core.I_NEV])
@@ -1253,8 +1268,8 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
     # ideal-motor engine (O(log N) per event) is exact for them too.
     dynamic = plant.dynamic_motors and plant.commands is not None
     mu = 1.0 / plant.motors.lag if dynamic and plant.motors.lag > 0 else 0.0
-    cascade = 2 * plant.n + 2
-    rec = _Recorder(budget, cascade, mu)
+    n = plant.n
+    rec = _Recorder(budget, 2 * n + 2, mu)
     m = plant.mass
     table = times = None
     if t_eval is not None:
@@ -1269,7 +1284,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
           and not isinstance(plant.external_force, PiecewiseConstant)):
         # One piece and sample times: one kernel call runs it and evaluates the dense output
         # (toolkit._compiled.core.ideal_run); Python only assembles the result.
-        if plant.motors is None and plant.n <= _core.SMALL:
+        if plant.motors is None and n <= _core.SMALL:
             # Nothing to build or keep: the landscape is the ContactSet's own staircase.
             land: _Landscape = _CoulombLandscape(plant.contacts)
         else:
@@ -1295,31 +1310,32 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         rec.detail = (f"the body speed left the floating-point range (V = {V_stop:g} m/s "
                       f"at t = {t_stop:g} s); shorten t_end or rescale the forces")
         t_stop, V_stop = rec.drop_non_finite()   # keep the finite part (up to its last segment)
-    success = rec.status is _SUCCESS
+    status = rec.status
+    success = status is _SUCCESS
     # The ideal engine's segments are lines unless drag or compliance gives them a slope.
     linear = not dynamic and plant.damping == 0 and plant.compliance == 0
-    dense = rec.dense(t_stop, success, t_end, linear)
     if times is None:
         # Segment starts (events, switches, motor phase changes) and the end: exact values.
         times, V, force = rec.samples(t_stop, V_stop, m)
     else:
         if table is None or not success:
-            table = dense.scaled(times, m)             # rows V and the force m dV/dt
+            table = rec.dense(t_stop, success, t_end, linear).scaled(times, m)  # V, m dV/dt
             if not success:
                 table[1, np.isnan(table[0])] = np.nan
         table.setflags(write=False)
-        V, force = table
-    speeds = _contact_speeds(plant, times)
-    events = rec.events()
-    n_events = len(events)
-    detail = rec.detail if not success else f"{n_events} events"
-    # Every array above is fresh and read-only, every count an int: no re-validation.
+        V, force = table[0], table[1]                  # (indexing: faster than unpacking)
+    istate = rec.istate
+    n_events = int(istate[4])                          # (core.I_NEV, I_NEVAL, I_NSEG)
+    rec.output = (plant, times, t_stop, success, t_end, linear)
+    # Every array above is fresh and read-only, every count an int: no re-validation. The
+    # events, the contact-speed table and the dense output are built from ``rec`` on first
+    # access (SimulationResult._trusted): a caller that reads only t, V and force never pays.
     return SimulationResult._trusted({
         "method": "exact", "setting": "event-driven closed form", "t": times, "V": V,
-        "contact_speeds": speeds, "force": force, "events": events,
-        "status": rec.status, "message": status_message(rec.status, detail),
-        "n_events": n_events, "n_evaluations": rec.n_evaluations, "n_steps": rec.n_segments,
-        "wall_time": time.perf_counter() - started, "dense": dense})
+        "force": force, "status": status,
+        "message": status_message(status, rec.detail if not success else f"{n_events} events"),
+        "n_events": n_events, "n_evaluations": int(istate[6]), "n_steps": int(istate[3]),
+        "wall_time": time.perf_counter() - started, "_source": rec})
 
 
 def _contact_speeds(plant: Plant, times: np.ndarray) -> np.ndarray:

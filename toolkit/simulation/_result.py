@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -147,6 +147,12 @@ class SimulationResult:
     wall_time : float, s
     dense : callable or None
         ``dense(times) -> V`` at any times in ``[0, t_end]`` (exact for the exact method).
+
+    Notes
+    -----
+    The exact method builds ``events``, ``contact_speeds`` and ``dense`` on their first
+    access (from its record of the run, the same values as if built at once) and keeps
+    them; ``vars(result)`` lists them only once accessed. Pickling and copying compute them.
     """
 
     method: str
@@ -188,10 +194,31 @@ class SimulationResult:
         """A result from fields a simulator produced itself (``values``: field name -> value,
         every field given; the arrays fresh, read-only and of matching shapes, the counts
         ints, ``events`` a tuple of :class:`Event`). The dict becomes the instance's own,
-        without re-validation or copies (private fast path)."""
+        without re-validation or copies (private fast path).
+
+        Fields in :data:`_LAZY_FIELDS` may be left out of ``values`` if ``values["_source"]``
+        is an object whose method ``field(name)`` returns them (the simulator's own record
+        of the run, which nothing writes to any more): each is then computed on its first
+        access, from the same data as it would have been at once, and kept."""
         result = object.__new__(cls)
         object.__setattr__(result, "__dict__", values)
         return result
+
+    def __getattr__(self, name: str) -> Any:
+        # Called only for names the instance dict lacks: a lazy field's first access.
+        if name in _LAZY_FIELDS:
+            values = self.__dict__
+            source = values.get("_source")
+            if source is not None:
+                value = values[name] = source.field(name)
+                if len(values) == _FULL:          # every lazy field computed: let go of it
+                    values.pop("_source", None)
+                return value
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Every field computed (pickle, copy): the state holds no simulator internals."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @property
     def success(self) -> bool:
@@ -258,6 +285,14 @@ class SimulationResult:
                 f"status={self.status.name}, t_final={self.t_final:.6g} s, V_final={final}, "
                 f"events={self.n_events}, steps={self.n_steps}, wall_time={self.wall_time:.3g} s)")
 
+
+#: Fields a simulator may leave to be computed on first access (see ``SimulationResult._trusted``).
+_LAZY_FIELDS = frozenset({"events", "contact_speeds", "dense"})
+# A field with a default is also a class attribute, which would answer for a lazy field before
+# ``__getattr__`` is asked: drop it (``__init__`` keeps its own default; every instance holds
+# ``dense`` in its dict, or computes it lazily).
+del SimulationResult.dense
+_FULL = len(fields(SimulationResult)) + 1          # every field and the source
 
 _MESSAGES = {status: status.value for status in SimulationStatus}     # Enum .value is a slow property
 

@@ -27,6 +27,6 @@ os.environ.setdefault("ACTIVE_CONTACTS_COMPILE", "eager")
 @pytest.fixture(scope="session", autouse=True)
 def _compiled_kernels():
     """Compile (or load from numba's cache) the kernels once, before any test times a call."""
-    from toolkit._compiled import warm_up
+    from toolkit.simulation._warmup import warm_up
 
     warm_up()

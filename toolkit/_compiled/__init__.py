@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["COMPILE_AFTER", "charge", "compiled", "kernels", "load", "loaded", "warm_up"]
+__all__ = ["COMPILE_AFTER", "charge", "compiled", "kernels", "load", "loaded"]
 
 _LOADED: dict[str, Any] = {}          # name -> the compiled module (or its _Interpreted)
 
@@ -151,39 +151,3 @@ def _compile(module: ModuleType) -> None:
         except RuntimeError:        # no writable cache directory anywhere: compile per process
             compiled = numba.njit(cache=False, **options)(function)
         setattr(module, fname, compiled)
-
-
-def warm_up() -> float:
-    """Compile (or load from the cache) the kernels the exact method, the batch path and
-    :meth:`ContactSet.force` run, on tiny inputs of the usual array kinds; returns the time
-    it took (s). Benchmarks and the tests call it before timing anything."""
-    import time
-
-    import numpy as np
-
-    from ..model import ContactSet, Motors, Plant
-    from ..simulation import ExactState, advance, simulate, simulate_batch
-
-    started = time.perf_counter()
-    load("core")
-    contacts = ContactSet([-0.2, 0.1, 0.3], [1.0, 2.0, 1.0])
-    contacts.force(np.linspace(-1.0, 1.0, 64))
-    contacts.force(0.0)
-    for plant in (Plant(contacts, 1.0), Plant(contacts, 1.0, damping=0.5, external_force=0.5),
-                  Plant(contacts, 1.0, motors=Motors(compliance=0.01))):
-        result = simulate(plant, 1.0)
-        simulate(plant, 1.0, t_eval=np.linspace(0.0, 1.0, 5))
-        fixed = np.linspace(0.0, 1.0, 5)
-        fixed.setflags(write=False)                # read-only times (no copy): their own kernel
-        simulate(plant, 1.0, t_eval=fixed)
-        result.speed_at(np.array([0.5, 0.25]))
-    lagged = Plant(contacts, 1.0, motors=Motors(lag=0.01))
-    state = ExactState.initial(lagged)
-    for k in range(4):
-        command = np.array([-0.2, 0.1, 0.3 - 0.01 * k])
-        command.setflags(write=k % 2 == 0)      # the caller's command, writable or not
-        state = advance(lagged, state, command, 0.02 * (k + 1)).state
-    simulate_batch(np.array([[0.1, -0.1, 0.2]]), None, 1.0, 1.0)
-    simulate_batch(np.array([[0.1, -0.1, 0.2]]), np.ones((1, 3)), np.ones(1), 1.0,
-                   damping=np.zeros(1), external=np.zeros(1), v0=np.zeros(1))
-    return time.perf_counter() - started

@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from toolkit._compiled import warm_up
+from toolkit.simulation._warmup import warm_up
 from toolkit.model import PiecewiseConstant
 from toolkit.model.carousel import CAROUSEL, carousel_startup_plant
 from toolkit.simulation import ExactState, _stepper, advance, simulate

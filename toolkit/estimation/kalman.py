@@ -278,7 +278,7 @@ class KalmanEstimator(Estimator):
                 self._edge = 2 if V < bounds[2] else 3
                 inc = (bounds[self._edge], var_v)
                 self._edge_var = var_v
-        elif var_v < self._edge_var:
+        elif var_v < self._edge_var * (1.0 - 1e-9):
             inc = (bounds[self._edge], 1.0 / (1.0 / var_v - 1.0 / self._edge_var))
             self._edge_var = var_v
         if arrival is None:

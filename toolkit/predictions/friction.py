@@ -263,7 +263,7 @@ def friction_fraction_check(problem: FrictionFractionProblem | None = None, *,
         status = CheckStatus.MET
         finite = np.isfinite(dT_pred)
         rel = np.abs(dT[finite] / dT_pred[finite] - 1.0)
-        message = (f"|mu/mu0 - 2j/N| <= {np.max(np.abs(mu - fractions)):.4f}, "
+        message = (f"|mu/mu0 - 2j/N| <= {np.max(np.abs(mu - fractions)):.2g}, "
                    f"|dT / dT_predicted - 1| <= {np.max(rel):.2%}")
     else:
         status = CheckStatus.SHORT

@@ -19,10 +19,19 @@ m``, ``dx = dV h / 2``. It is known exactly (the controller's own output): it ad
 process noise.
 
 Contact speeds from the wheels (:func:`contact_speed_estimates`, vectorized over a record;
-a loop uses :class:`ContactSpeedTracker`, the same formulas one row at a time): counts
-differenced over a window that starts ``settle`` samples after the last command change
+a loop uses :class:`ContactSpeedTracker`, the same formulas one row at a time): a straight
+line fitted by least squares to the counts of a window that starts ``settle`` samples after
+the last command change
 (the motor lag and the gearbox play have then been taken up: 4 lags = 30 ms, and 0.8 mm
-of play at 0.1 m/s is 8 ms) and spans at most ``max_window`` samples. Inside the
+of play at 0.1 m/s is 8 ms) and spans at most ``max_window`` samples. Within the window
+the contact runs at one speed ``v`` and reading ``i`` is ``x_0 + v t_i`` plus its
+quantization error, ``q^2 / 12`` each (the sensor model's white approximation, as for the
+central encoder): the least-squares slope ``sum (t_i - tbar) c_i q / S``, ``S = sum (t_i -
+tbar)^2``, is the minimum-variance linear unbiased estimate of ``v`` from all ``m``
+readings, with variance ``(q^2 / 12) / S``. Two readings (``m = 2``) give the plain
+difference and its ``q^2 / (6 T^2)``; ``m`` equally spaced readings ``(q^2 / 12) 12 / (h^2
+m (m^2 - 1))``, ``m (m + 1) / 12`` times less (a 26-sample window: 56x; the two end
+readings alone left the 24 readings between them unused). Inside the
 transient after a change the contact speeds are the motor law from the speeds at the
 change (that row's own estimate) towards the command. The first command is a change when
 the motors had settled elsewhere before it (``initial``, the record's
@@ -486,8 +495,8 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     -------
     speeds : ndarray of shape (k, n), m/s
     variance : ndarray of shape (k,), (m/s)^2
-        Per-contact variance: quantization of the window's two readings, ``q^2 / 6`` over
-        the window length squared; in a transient the motor law's own uncertainty, taken
+        Per-contact variance: the least-squares slope's ``(q^2 / 12) / S`` with ``S = sum
+        (t_i - tbar)^2`` over the window's readings (see the module docstring); in a transient the motor law's own uncertainty, taken
         as 10 % of the remaining gap, squared, plus one period's quantization ``q^2 / (6
         h^2)``.
     steady : ndarray of shape (k,), bool
@@ -511,9 +520,35 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     start = np.maximum(last_change + settle, idx - model.max_window)
     start = np.clip(start, 0, idx)
     ok = start < idx
-    span = np.where(ok, t - t[start], 1.0)
-    speeds = np.where(ok[:, None], (w - w[start]) * q / span[:, None], 0.0)
-    variance = np.where(ok, q * q / 6.0 / span**2, 0.0)
+    speeds = np.zeros_like(w)
+    variance = np.zeros(k)
+    # The least-squares line of each window: readings start..j padded with zeros to
+    # max_window + 1 columns and summed column by column (zeros add nothing exactly), the
+    # same sequential sums as ContactSpeedTracker's one row: the same numbers.
+    rows = np.flatnonzero(ok)
+    L = model.max_window + 1
+    ar = np.arange(L)
+    for chunk in np.array_split(rows, rows.size // 8192 + 1):
+        if not chunk.size:
+            continue
+        s0, last = start[chunk], chunk - start[chunk]
+        inside = ar <= last[:, None]
+        J = np.minimum(s0[:, None] + ar, k - 1)
+        t_rel = np.where(inside, t[J] - t[s0][:, None], 0.0)
+        total = np.zeros(chunk.size)
+        for i in range(L):
+            total += t_rel[:, i]
+        tt = np.where(inside, t_rel - (total / (last + 1))[:, None], 0.0)
+        tt2 = tt * tt
+        S = np.zeros(chunk.size)
+        for i in range(L):
+            S += tt2[:, i]
+        w_s = w[s0]
+        cov = np.zeros((chunk.size, w.shape[1]))
+        for i in range(L):
+            cov += (w[J[:, i]] - w_s) * tt[:, i, None]
+        speeds[chunk] = cov * q / S[:, None]
+        variance[chunk] = (q * q / 12.0) / S
     steady = (idx - last_change) >= settle
     steady &= ~changed
     transient = ~ok
@@ -564,7 +599,11 @@ class ContactSpeedTracker:
         self._keep = model.max_window + 1
         self._initial = None if initial is None else np.array(initial, dtype=float)
         self._prev: np.ndarray | None = self._initial
-        self._rows: list[tuple[float, np.ndarray]] = []     # (t, w) of the last rows
+        # Times and counts of the last rows (row j at column j - _base), compacted when full.
+        self._cap = 4 * self._keep
+        self._tb = np.empty(self._cap)
+        self._wb = np.empty((self._cap, model.n))
+        self._base = 0
         self._j = -1
         self._last_change = -10**9
         self._change: tuple[float, np.ndarray, np.ndarray] | None = None  # (t, u, before)
@@ -591,10 +630,15 @@ class ContactSpeedTracker:
         w = np.array(wheel_counts, dtype=float)
         u = command if type(command) is np.ndarray and command.dtype == np.float64 else \
             np.asarray(command, dtype=float)
-        rows = self._rows
-        rows.append((t, w))
-        if len(rows) > self._keep:
-            del rows[0]
+        col = j - self._base
+        if col == self._cap:                 # keep the last keep - 1 rows, then append
+            kept = self._keep - 1
+            self._tb[:kept] = self._tb[col - kept:col]
+            self._wb[:kept] = self._wb[col - kept:col]
+            self._base += col - kept
+            col = kept
+        self._tb[col] = t
+        self._wb[col] = w
         prev = self._prev
         changed = prev is not None and bool((u != prev).any())
         self._prev = u
@@ -602,10 +646,15 @@ class ContactSpeedTracker:
         start = min(max(lc + self._settle, j - model.max_window, 0), j)
         ok = start < j
         if ok:
-            t_s, w_s = rows[start - j - 1]
-            span = t - t_s
-            speeds = (w - w_s) * q / span
-            variance = q * q / 6.0 / span**2
+            # The least-squares line through the window's readings, with the sequential
+            # (prefix) sums of contact_speed_estimates: the same numbers.
+            a = start - self._base
+            tb, wb = self._tb[a:col + 1], self._wb[a:col + 1]
+            t_rel = tb - tb[0]
+            tt = t_rel - np.cumsum(t_rel)[-1] / (j - start + 1)
+            S = float(np.cumsum(tt * tt)[-1])
+            speeds = np.cumsum((wb - wb[0]) * tt[:, None], axis=0)[-1] * q / S
+            variance = (q * q / 12.0) / S
         elif lc >= 0:
             t_c, u_c, before = self._change  # type: ignore[misc]
             law = unsaturated_response(before, u_c, t - t_c, self._lag, math.inf)

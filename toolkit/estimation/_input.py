@@ -523,8 +523,8 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     speeds = np.zeros_like(w)
     variance = np.zeros(k)
     # The least-squares line of each window: readings start..j padded with zeros to
-    # max_window + 1 columns and summed column by column (zeros add nothing exactly), the
-    # same sequential sums as ContactSpeedTracker's one row: the same numbers.
+    # max_window + 1 columns and summed column by column (zeros add nothing exactly);
+    # ContactSpeedTracker's row is the same formula (equal to rounding).
     rows = np.flatnonzero(ok)
     L = model.max_window + 1
     ar = np.arange(L)
@@ -547,7 +547,7 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
         cov = np.zeros((chunk.size, w.shape[1]))
         for i in range(L):
             cov += (w[J[:, i]] - w_s) * tt[:, i, None]
-        speeds[chunk] = cov * q / S[:, None]
+        speeds[chunk] = cov * (q / S)[:, None]
         variance[chunk] = (q * q / 12.0) / S
     steady = (idx - last_change) >= settle
     steady &= ~changed
@@ -577,7 +577,7 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
 
 
 class ContactSpeedTracker:
-    """:func:`contact_speed_estimates` one row at a time, for a loop (O(n) per sample).
+    """:func:`contact_speed_estimates` one row at a time, for a loop (O(n max_window) per sample).
 
     The same formulas on the same numbers as the vectorized function (a test checks they
     agree to rounding), keeping only what the next rows need: the last ``max_window + 1``
@@ -646,14 +646,16 @@ class ContactSpeedTracker:
         start = min(max(lc + self._settle, j - model.max_window, 0), j)
         ok = start < j
         if ok:
-            # The least-squares line through the window's readings, with the sequential
-            # (prefix) sums of contact_speed_estimates: the same numbers.
+            # The least-squares line through the window's readings (contact_speed_estimates'
+            # formula; its sums in another order: equal to rounding).
+            # Times and counts relative to the window's first reading: no cancellation of
+            # large stamps or counts however long the run.
             a = start - self._base
             tb, wb = self._tb[a:col + 1], self._wb[a:col + 1]
             t_rel = tb - tb[0]
-            tt = t_rel - np.cumsum(t_rel)[-1] / (j - start + 1)
-            S = float(np.cumsum(tt * tt)[-1])
-            speeds = np.cumsum((wb - wb[0]) * tt[:, None], axis=0)[-1] * q / S
+            tt = t_rel - t_rel.sum() / (j - start + 1)
+            S = float(tt @ tt)
+            speeds = (tt @ (wb - wb[0])) * (q / S)
             variance = (q * q / 12.0) / S
         elif lc >= 0:
             t_c, u_c, before = self._change  # type: ignore[misc]

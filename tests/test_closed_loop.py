@@ -87,7 +87,7 @@ def test_filter_in_the_loop_is_ten_times_better_than_differencing():
     # Issue 9: in the loop from rest (the motors start at 0 and the first command starts a
     # transient, recorded as the record's initial_commands) the stepped filter's RMS error
     # is at most a tenth of the central finite difference's on the same record (measured
-    # 0.37 vs 4.8 mm/s, 12.8x).
+    # 0.375 vs 4.77 mm/s, 12.7x).
     run, _, baseline = _loop_with_sensors()
     assert np.sqrt(np.mean(run.estimation_error ** 2)) <= baseline.rms_error / 10
 

@@ -213,3 +213,18 @@ def test_record_initial_commands_are_checked():
     with pytest.raises(ParameterError, match="'initial_commands' parameter of EncoderRecord must be finite"):
         EncoderRecord([0.0, 0.02], [0, 1], [[0, 0], [1, 1]], [[0.1, 0.1], [0.1, 0.1]], 1e-4, 1e-4,
                       initial_commands=[0.1, float("nan")])
+
+
+def test_record_force_is_checked_and_filled_from_the_plant():
+    with pytest.raises(ParameterError, match="'force' parameter of EncoderRecord must have shape"):
+        EncoderRecord([0.0, 0.02], [0, 1], [[0, 0], [1, 1]], [[0.1, 0.1], [0.1, 0.1]], 1e-4, 1e-4,
+                      force=[0.1])
+    with pytest.raises(ParameterError, match="'force' parameter of EncoderRecord must be finite"):
+        EncoderRecord([0.0, 0.02], [0, 1], [[0, 0], [1, 1]], [[0.1, 0.1], [0.1, 0.1]], 1e-4, 1e-4,
+                      force=[0.1, float("inf")])
+    # record_simulation stamps the plant's outside force at each sample (held like the
+    # commands): a switch at 0.5 s from 0.3 N to -0.1 N, exact values.
+    plant = Plant(ContactSet([0.0, 0.1]), 1.0, external_force=PiecewiseConstant([0.5], [0.3, -0.1]))
+    record = record_simulation(simulate(plant, 1.0), plant, Sensors.carousel(2))
+    np.testing.assert_array_equal(record.force, np.where(record.times < 0.5, 0.3, -0.1))
+    assert record.sample(30).force == -0.1

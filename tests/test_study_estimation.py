@@ -55,8 +55,8 @@ def test_estimation_stage_is_the_carousel_brake_scenario():
         expected = estimator.run(reference.record, speed_std=1e-4)   # the section's default prior
         assert rows[name]["rms"] == pytest.approx(expected.rms_error, rel=1e-15, abs=0)
         assert rows[name]["max_error"] == pytest.approx(expected.max_error, rel=1e-15, abs=0)
-    # The smoother sees the future: never worse than the filter on the same record.
-    assert rows["rts"]["rms"] <= rows["kalman"]["rms"]
+    # How the smoother compares with the filter on this record (better except in the brake
+    # window, where both share an input error) is tested in test_estimation.py.
     # The first criterion on this record: the filter at most 1/10 of differencing.
     assert rows["kalman"]["rms"] <= rows["central_difference"]["rms"] / 10
 

@@ -5,7 +5,7 @@ At each sample ``t_k`` (50 Hz by default)::
     counts  = reader.read(X(t_k), x(t_k))             # the sensor law (SensorReader)
     V_hat   = estimator.observe(counts)                 # e.g. the Kalman filter
     u_k, F  = controller.output(t_k, z, V_hat)          # contact-speed commands, rig force
-    estimator.commanded(u_k); z = controller.update(...)
+    estimator.commanded(u_k, F); z = controller.update(...)
     plant   : advance(plant, state, u_k, t_{k+1}, external=F)   # exact, one held command
 
 The plant continues from its state sample to sample (:func:`toolkit.simulation.advance`:
@@ -180,7 +180,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     output, update = law.output, law.update
     z = law.initial_state()
     status, message, last = SimulationStatus.SUCCESS, "", samples
-    previous = state.contact_speeds
+    previous, previous_force = state.contact_speeds, 0.0
     for k in range(samples):
         t = t_list[k]
         V = state.V
@@ -189,16 +189,16 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
             c, w = reader.read(X, x)
             central[k] = c
             wheel[k] = w
-            estimate[k], variance[k] = est, _ = observe(EncoderSample(t, c, w, previous))
+            estimate[k], variance[k] = est, _ = observe(EncoderSample(t, c, w, previous, previous_force))
         else:
             estimate[k] = est = V
         action = output(t, z, est)
         u = action.commands
         commands[k] = u
-        force[k] = f = action.force
+        force[k] = f = float(action.force)
         if reader is not None:
-            commanded(u)
-        previous = u
+            commanded(u, f)
+        previous, previous_force = u, f
         z = update(t, z, est)
         if k + 1 == samples:
             break
@@ -221,7 +221,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
                                wheel_resolution=sensors.wheel.distance_per_count,
                                wheel_backlash=sensors.backlash, truth_speed=speed[keep],
                                truth_position=position[keep], truth_contact_speeds=contact[keep],
-                               initial_commands=plant.initial_speeds())
+                               initial_commands=plant.initial_speeds(), force=force[keep])
     return ClosedLoopResult(times[keep], speed[keep], estimate[keep], variance[keep],
                             commands[keep], force[keep], contact[keep], position[keep], record,
                             status, message or status.value, time.perf_counter() - started)

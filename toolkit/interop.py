@@ -17,6 +17,7 @@ plant       body speed, contact speeds, body and    update: :func:`toolkit.simul
 estimator   samples observed, last estimate and     output: ``estimator.observe`` of the
             its variance                            counts at ``t_k`` (feedthrough); update:
                                                     ``estimator.commanded`` with the command
+                                                    and the controller's force
 controller  the law's own state ``z``               output: ``law.output(t_k, z, estimate)``;
                                                     update: ``law.update(t_k, z, estimate)``
 ==========  ======================================  ==========================================
@@ -309,7 +310,8 @@ class _SteppedEstimator:
             trial = copy.deepcopy(base)
             result = trial.observe(EncoderSample(k * self.period, int(counts[0]),
                                                  counts[1:].astype(np.int64),
-                                                 np.asarray(u[self.n + 1:], dtype=float)))
+                                                 np.asarray(u[self.n + 1:2 * self.n + 1], dtype=float),
+                                                 float(u[2 * self.n + 1])))
             self.seen[key] = (trial, result)
         return self.seen[key]
 
@@ -318,7 +320,7 @@ class _SteppedEstimator:
 
     def update(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         trial, (V, P) = self._observed(x, u)
-        trial.commanded(np.array(u[self.n + 1:], dtype=float))
+        trial.commanded(np.array(u[self.n + 1:2 * self.n + 1], dtype=float), float(u[2 * self.n + 1]))
         self.committed, self.seen, self.k = trial, {}, self.k + 1
         return np.array([float(self.k), V, P])
 
@@ -346,8 +348,9 @@ def estimator_system(estimator: Estimator, sensors: Sensors, *, v0: float = 0.0,
     Returns
     -------
     IOBlock
-        Inputs ``central_count``, ``wheel_count[0..n-1]`` (the counts read at ``t_k``) and
-        ``command[0..n-1]`` (m/s, the command sent at ``t_k``); outputs ``estimate`` (m/s)
+        Inputs ``central_count``, ``wheel_count[0..n-1]`` (the counts read at ``t_k``),
+        ``command[0..n-1]`` (m/s, the command sent at ``t_k``) and ``force`` (N, the
+        outside force applied from ``t_k``, a known input like the command); outputs ``estimate`` (m/s)
         and ``variance`` ((m/s)^2) at ``t_k``; states: samples observed, the last estimate
         and its variance.
     """
@@ -374,7 +377,7 @@ def estimator_system(estimator: Estimator, sensors: Sensors, *, v0: float = 0.0,
 
     counts = ["central_count"] + [f"wheel_count[{i}]" for i in range(n)]
     system = control.NonlinearIOSystem(
-        update, output, inputs=counts + [f"command[{i}]" for i in range(n)],
+        update, output, inputs=counts + [f"command[{i}]" for i in range(n)] + ["force"],
         outputs=["estimate", "variance"], states=["samples", "last_estimate", "last_variance"],
         dt=period, name=name)
     return IOBlock(system, np.array([0.0, float(v0), 0.0]), period)
@@ -474,7 +477,7 @@ def closed_loop_system(plant: Plant, controller: Any, *, sensors: Sensors | None
         blocks.append(est_block)
         connections += [[f"estimator.{c}", f"plant.{c}"]
                         for c in ["central_count"] + [f"wheel_count[{i}]" for i in range(n)]]
-        connections += [[f"estimator.{c}", f"controller.{c}"] for c in commands]
+        connections += [[f"estimator.{c}", f"controller.{c}"] for c in commands + ["force"]]
         estimate = "estimator.estimate"
     connections.append(["controller.estimate", estimate])
     blocks.append(law_block)

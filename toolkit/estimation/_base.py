@@ -2,7 +2,10 @@
 
 Every estimator maps an :class:`~toolkit.model.sensors.EncoderRecord` to body-speed estimates
 with their variances, offline (:meth:`Estimator.run`) or sample by sample in a loop
-(:meth:`Estimator.reset`, :meth:`Estimator.observe`, :meth:`Estimator.commanded`), as a 50 Hz controller calls it. Scores
+(:meth:`Estimator.reset`, :meth:`Estimator.observe`, :meth:`Estimator.commanded`), as a 50 Hz controller calls it.
+The known inputs of a sample period are the commanded contact speeds and the outside force
+a controller applies (``commanded(command, force)``; offline the record's ``commands`` and
+``force``). Scores
 against the truth (RMS and max speed error, NEES, NIS) are computed when the record carries
 the truth; estimators never read it.
 """
@@ -148,8 +151,8 @@ class Estimator(abc.ABC):
 
     Offline: :meth:`run` over a whole record. In a loop (a 50 Hz controller):
     :meth:`reset`, then per sample, in order, :meth:`observe` (the estimate at the sample
-    time, from its counts) and :meth:`commanded` (the command then sent, for the next
-    prediction); :meth:`step` does both. All paths run the same per-sample code, so they
+    time, from its counts) and :meth:`commanded` (the command and outside force then sent,
+    for the next prediction); :meth:`step` does both. All paths run the same per-sample code, so they
     give the same estimates.
     """
 
@@ -170,14 +173,15 @@ class Estimator(abc.ABC):
         sample is given afterwards to :meth:`commanded`."""
 
     @abc.abstractmethod
-    def commanded(self, command: Any) -> None:
-        """The contact speeds (m/s, shape (n,)) commanded at the last observed sample; used
-        for the prediction to the next one."""
+    def commanded(self, command: Any, force: float = 0.0) -> None:
+        """The contact speeds (m/s, shape (n,)) commanded at the last observed sample and the
+        outside force (N) applied to the body with them (a rig's; held, like the command,
+        until the next sample); used for the prediction to the next one."""
 
     def step(self, sample: EncoderSample) -> tuple[float, float]:
-        """:meth:`observe` the sample, then :meth:`commanded` with its command."""
+        """:meth:`observe` the sample, then :meth:`commanded` with its command and force."""
         out = self.observe(sample)
-        self.commanded(sample.command)
+        self.commanded(sample.command, sample.force)
         return out
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,

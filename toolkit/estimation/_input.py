@@ -4,11 +4,34 @@ The active-contact force is the known input of the Kalman filters: it is compute
 contact speeds the wheel encoders measure, through the model's own contact law
 (:func:`toolkit.model.friction.contact_forces`), never re-derived here.
 
+An outside force ``F`` (N) that a controller applies over the period (a test rig's,
+:class:`~toolkit.controllers.ForceDrive`; held like the command) is the other known input.
+For the contact law it is one more contact, of magnitude ``|F|``, at a speed the body cannot
+reach within the period (``sign(F) inf`` for the equilibrium set; in the exact coast a
+finite speed beyond every contact speed by more than the period's largest speed change
+``(F_tot + |F|) h / m``): ``|F| sign(v - V) = F`` for every ``V`` on the path. So the
+equilibrium set (``{V : -F in F_c(V)}``, the weighted quantile ``(F_tot + F) / (2 F_tot)``
+of the contact speeds; none when ``|F| > F_tot``: the body accelerates throughout), the
+stiction rule at a contact speed and the exact coast all take it through the same law
+(:class:`~toolkit.model.ContactSet`, :func:`~toolkit.model.friction.contact_forces`), and
+between crossings the closed-form increments simply gain ``F / m``: ``dV = (F_c + F) h /
+m``, ``dx = dV h / 2``. It is known exactly (the controller's own output): it adds no
+process noise.
+
 Contact speeds from the wheels (:func:`contact_speed_estimates`, vectorized over a record;
-a loop uses :class:`ContactSpeedTracker`, the same formulas one row at a time): counts
-differenced over a window that starts ``settle`` samples after the last command change
+a loop uses :class:`ContactSpeedTracker`, the same formulas one row at a time): a straight
+line fitted by least squares to the counts of a window that starts ``settle`` samples after
+the last command change
 (the motor lag and the gearbox play have then been taken up: 4 lags = 30 ms, and 0.8 mm
-of play at 0.1 m/s is 8 ms) and spans at most ``max_window`` samples. Inside the
+of play at 0.1 m/s is 8 ms) and spans at most ``max_window`` samples. Within the window
+the contact runs at one speed ``v`` and reading ``i`` is ``x_0 + v t_i`` plus its
+quantization error, ``q^2 / 12`` each (the sensor model's white approximation, as for the
+central encoder): the least-squares slope ``sum (t_i - tbar) c_i q / S``, ``S = sum (t_i -
+tbar)^2``, is the minimum-variance linear unbiased estimate of ``v`` from all ``m``
+readings, with variance ``(q^2 / 12) / S``. Two readings (``m = 2``) give the plain
+difference and its ``q^2 / (6 T^2)``; ``m`` equally spaced readings ``(q^2 / 12) 12 / (h^2
+m (m^2 - 1))``, ``m (m + 1) / 12`` times less (a 26-sample window: 56x; the two end
+readings alone left the 24 readings between them unused). Inside the
 transient after a change the contact speeds are the motor law from the speeds at the
 change (that row's own estimate) towards the command. The first command is a change when
 the motors had settled elsewhere before it (``initial``, the record's
@@ -143,7 +166,8 @@ class EstimatorModel:
         return unsaturated_response(speeds[:, None, :], target[:, None, :], s, self.motor_lag, math.inf)
 
     def increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
-                  steady: bool, bounds: Any = None) -> tuple[float, float, float, float | None, bool]:
+                  steady: bool, bounds: Any = None, force: float = 0.0
+                  ) -> tuple[float, float, float, float | None, bool]:
         """Known input over one sample period from body speed ``V`` (m/s).
 
         Parameters
@@ -156,14 +180,16 @@ class EstimatorModel:
             Std of the contact-speed estimates and of ``V``.
         steady : bool
             Contacts steady over the period.
-        bounds : sequence of 4 floats, optional
-            :meth:`bounds_row` of ``sub`` (computed when needed and not given).
+        bounds : sequence of 6 floats, optional
+            :meth:`bounds_row` of ``sub`` and ``force`` (computed when needed and not given).
+        force : float, N
+            Outside force held over the period (known exactly; see the module docstring).
 
         Returns
         -------
         dx, dV : float
-            Position (m) and speed (m/s) increments due to the contact force (``x+ = x +
-            h V + dx``, ``V+ = V + dV``).
+            Position (m) and speed (m/s) increments due to the contact force and the
+            outside force (``x+ = x + h V + dx``, ``V+ = V + dV``).
         force_var : float, N^2
             Variance of the mean force over the period.
         arrival_var : float or None, (m/s)^2
@@ -207,7 +233,7 @@ class EstimatorModel:
         w = 2.0 * sigma
         last = sub[-1]
         if steady and c == 0.0:
-            lo_eq, hi_eq = (bounds if bounds is not None else self.bounds_row(sub))[2:4]
+            lo_eq, hi_eq = (bounds if bounds is not None else self.bounds_row(sub, force))[2:4]
             if V - w <= hi_eq and V + w >= lo_eq:
                 # Stuck (or coasting in a zero band): V+ = V errs by the stuck-on contact's
                 # own speed change over the period (motor drift, a bias of the wheel
@@ -218,11 +244,11 @@ class EstimatorModel:
                 return 0.0, 0.0, self._stuck_scale * contact_std * contact_std, None, True
             # Contacts held over the period: the exact piecewise-constant motion, crossing
             # by crossing (a body crosses several contacts per period while braking).
-            dx, dV, arrived = self._coast(V, last)
+            dx, dV, arrived = self._coast(V, last, force)
             var = self._friction_var + self._crossing_var(V, dV, sub, sigma, arrived)
             return dx, dV, var, (contact_std * contact_std if arrived else None), arrived
         if c == 0.0:
-            edges = bounds if bounds is not None else self.bounds_row(sub)
+            edges = bounds if bounds is not None else self.bounds_row(sub, force)
             lo_eq, hi_eq, lo0, hi0 = edges[2:]
             if V - w <= hi0 and V + w >= lo0 and max(abs(lo_eq - lo0), abs(hi_eq - hi0)) <= self._follow:
                 return self._carried(V, lo_eq, hi_eq, contact_std)
@@ -230,6 +256,8 @@ class EstimatorModel:
         probe = np.concatenate((sub, last[None], last[None]))
         probe -= self._offsets(V, w, M)
         net = contact_forces(probe, f).sum(axis=1)
+        if force != 0.0:
+            net += force                    # the outside force: a contact out of reach
         hi, lo = net[M], net[M + 1]
         if steady and lo <= c * V <= hi:
             # Stuck with drag (the same floor as above).
@@ -243,7 +271,7 @@ class EstimatorModel:
             second = first
         else:
             path = V + (np.cumsum(first) - 0.5 * first) * dt_m
-            second = contact_forces(sub - path[:, None], f).sum(axis=1) - c * path
+            second = contact_forces(sub - path[:, None], f).sum(axis=1) + force - c * path
         dV = float(np.sum(second)) * dt_m
         # Double integral of piecewise-constant accelerations: each acts for the rest of the period.
         dx = float(np.dot(second, self._rest)) * self._ds * dt_m
@@ -283,13 +311,16 @@ class EstimatorModel:
         impulse = 2.0 * self.forces[near] * t_std / h
         return float(np.dot(impulse, impulse))
 
-    def bounds(self, sub: np.ndarray) -> np.ndarray:
+    def bounds(self, sub: np.ndarray, force: Any = None) -> np.ndarray:
         """Per sample, what decides the input without the contact law (vectorized).
 
         Parameters
         ----------
         sub : ndarray of shape (k, substeps, n), m/s
             :meth:`substep_speeds`.
+        force : array_like of shape (k,), N, optional
+            Outside force of each period (``None``: none). The equilibrium set is then
+            ``{V : -F in F_c(V)}`` (``+-inf`` edges when ``|F| > F_tot``).
 
         Returns
         -------
@@ -299,14 +330,23 @@ class EstimatorModel:
             weighted median, as :meth:`ContactSet.equilibrium
             <toolkit.model.ContactSet.equilibrium>`).
         """
-        end = self._edges(sub[:, -1, :])
-        start = self._edges(sub[:, 0, :])
+        F = None if force is None else np.asarray(force, dtype=float)
+        if F is not None and not F.any():
+            F = None
+        end = self._edges(sub[:, -1, :], F)
+        start = self._edges(sub[:, 0, :], F)
         return np.column_stack((sub.min(axis=(1, 2)), sub.max(axis=(1, 2)), *end, *start))
 
-    def _edges(self, speeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _edges(self, speeds: np.ndarray, force: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        forces = np.broadcast_to(self.forces, speeds.shape)
+        if force is not None:
+            # The outside force as a contact of magnitude |F| at sign(F) inf (out of reach;
+            # a zero force: a contact of no weight, which changes nothing).
+            speeds = np.column_stack((speeds, np.where(force >= 0.0, np.inf, -np.inf)))
+            forces = np.column_stack((forces, np.abs(force)))
         order = np.argsort(speeds, axis=1)
         s = np.take_along_axis(speeds, order, axis=1)
-        W = np.cumsum(self.forces[order], axis=1)
+        W = np.cumsum(np.take_along_axis(forces, order, axis=1), axis=1)
         half = 0.5 * W[:, -1:]
         tol = 1e-12 * half
         j1 = np.argmax(W >= half - tol, axis=1)
@@ -314,17 +354,22 @@ class EstimatorModel:
         rows = np.arange(speeds.shape[0])
         return s[rows, j1], s[rows, j2]
 
-    def bounds_row(self, sub: np.ndarray) -> list[float]:
-        """:meth:`bounds` of one sample, ``sub`` of shape (substeps, n) (the same numbers)."""
+    def bounds_row(self, sub: np.ndarray, force: float = 0.0) -> list[float]:
+        """:meth:`bounds` of one sample, ``sub`` of shape (substeps, n), with the period's
+        outside force ``force`` (N) (the same numbers)."""
         # Plain floats: ten contacts cost less than the numpy calls. The motor law is
         # monotone in time, so the extremes over the period lie on its first or last row.
         first, last = sub[0].tolist(), sub[-1].tolist()
-        lo, hi = self._edges_row(last)
-        lo0, hi0 = (lo, hi) if first == last else self._edges_row(first)
+        lo, hi = self._edges_row(last, force)
+        lo0, hi0 = (lo, hi) if first == last else self._edges_row(first, force)
         return [min(min(first), min(last)), max(max(first), max(last)), lo, hi, lo0, hi0]
 
-    def _edges_row(self, speeds: list) -> tuple[float, float]:
+    def _edges_row(self, speeds: list, force: float = 0.0) -> tuple[float, float]:
         pairs = sorted(zip(speeds, self._forces_list))
+        if force != 0.0:
+            # The outside force as a contact of magnitude |F| at sign(F) inf (see _edges).
+            pairs.append((math.copysign(math.inf, force), abs(force)))
+            pairs.sort()
         total = 0.0
         for _, f in pairs:
             total += f
@@ -343,14 +388,16 @@ class EstimatorModel:
         return lo, hi
 
     def quick_increment(self, V: float, sub: np.ndarray, contact_std: float, speed_std: float,
-                        steady: bool, bounds: Any) -> tuple[float, float, float, float | None, bool]:
+                        steady: bool, bounds: Any, force: float = 0.0
+                        ) -> tuple[float, float, float, float | None, bool]:
         """:meth:`increment`, without the contact law where :meth:`bounds` decide it.
 
         Without drag: stuck when ``V`` lies on the equilibrium set (the same rule as
         :meth:`increment`); the whole friction one way when every contact speed of the
         period lies beyond ``V`` by more than both ``w = 2 sqrt(speed_std^2 +
-        contact_std^2)`` and the largest speed change of a period (no crossing, no force
-        spread: ``dV = +-F_tot h / m``, ``dx = dV h / 2``). Otherwise :meth:`increment`.
+        contact_std^2)`` and the largest speed change of a period, ``(F_tot + |F|) h / m``
+        (no crossing, no force spread: ``dV = (+-F_tot + F) h / m``, ``dx = dV h / 2``).
+        Otherwise :meth:`increment`. ``bounds``: :meth:`bounds_row` with the same ``force``.
         """
         if self.damping == 0.0:
             smin, smax, lo_eq, hi_eq, lo0, hi0 = bounds
@@ -360,22 +407,33 @@ class EstimatorModel:
             if not steady and V - w <= hi0 and V + w >= lo0 and \
                     max(abs(lo_eq - lo0), abs(hi_eq - hi0)) <= self._follow:
                 return self._carried(V, lo_eq, hi_eq, contact_std)
-            reach = max(w, self._reach)
-            if smin - V > reach:
-                dV = self._reach
-            elif V - smax > reach:
-                dV = -self._reach
+            if force == 0.0:
+                reach, push = max(w, self._reach), 0.0
             else:
-                return self.increment(V, sub, contact_std, speed_std, steady, bounds)
+                push = force * self.sensors.period / self.mass
+                reach = max(w, self._reach + abs(push))
+            if smin - V > reach:
+                dV = self._reach + push
+            elif V - smax > reach:
+                dV = push - self._reach
+            else:
+                return self.increment(V, sub, contact_std, speed_std, steady, bounds, force)
             return 0.5 * dV * self.sensors.period, dV, self._friction_var, None, False
-        return self.increment(V, sub, contact_std, speed_std, steady, bounds)
+        return self.increment(V, sub, contact_std, speed_std, steady, bounds, force)
 
-    def _coast(self, V: float, speeds: np.ndarray) -> tuple[float, float, bool]:
+    def _coast(self, V: float, speeds: np.ndarray, force: float = 0.0) -> tuple[float, float, bool]:
         """Exact motion over one period with the contact speeds held (no drag): ``(dx, dV,
         arrived)`` from ``V``; the force is constant between contact speeds, and the body
         sticks where it reaches the equilibrium set (:meth:`ContactSet.equilibrium`);
-        ``arrived``: it got there from outside within the period."""
+        ``arrived``: it got there from outside within the period. An outside force ``force``
+        (N) is one more contact of magnitude ``|F|`` at a speed the body cannot reach within
+        the period (see the module docstring)."""
         f, m, h = self.forces, self.mass, self.sensors.period
+        if force != 0.0:
+            # Beyond every contact speed and V by more than the period's largest speed change.
+            far = float(np.max(np.abs(speeds))) + abs(V) + (float(f.sum()) + abs(force)) * h / m + 1.0
+            speeds = np.append(speeds, math.copysign(far, force))
+            f = np.append(f, abs(force))
         contacts = ContactSet(speeds, f)
         lo_eq, hi_eq = contacts.equilibrium()
         t, v, x = 0.0, V, 0.0
@@ -437,8 +495,8 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     -------
     speeds : ndarray of shape (k, n), m/s
     variance : ndarray of shape (k,), (m/s)^2
-        Per-contact variance: quantization of the window's two readings, ``q^2 / 6`` over
-        the window length squared; in a transient the motor law's own uncertainty, taken
+        Per-contact variance: the least-squares slope's ``(q^2 / 12) / S`` with ``S = sum
+        (t_i - tbar)^2`` over the window's readings (see the module docstring); in a transient the motor law's own uncertainty, taken
         as 10 % of the remaining gap, squared, plus one period's quantization ``q^2 / (6
         h^2)``.
     steady : ndarray of shape (k,), bool
@@ -462,9 +520,35 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     start = np.maximum(last_change + settle, idx - model.max_window)
     start = np.clip(start, 0, idx)
     ok = start < idx
-    span = np.where(ok, t - t[start], 1.0)
-    speeds = np.where(ok[:, None], (w - w[start]) * q / span[:, None], 0.0)
-    variance = np.where(ok, q * q / 6.0 / span**2, 0.0)
+    speeds = np.zeros_like(w)
+    variance = np.zeros(k)
+    # The least-squares line of each window: readings start..j padded with zeros to
+    # max_window + 1 columns and summed column by column (zeros add nothing exactly);
+    # ContactSpeedTracker's row is the same formula (equal to rounding).
+    rows = np.flatnonzero(ok)
+    L = model.max_window + 1
+    ar = np.arange(L)
+    for chunk in np.array_split(rows, rows.size // 8192 + 1):
+        if not chunk.size:
+            continue
+        s0, last = start[chunk], chunk - start[chunk]
+        inside = ar <= last[:, None]
+        J = np.minimum(s0[:, None] + ar, k - 1)
+        t_rel = np.where(inside, t[J] - t[s0][:, None], 0.0)
+        total = np.zeros(chunk.size)
+        for i in range(L):
+            total += t_rel[:, i]
+        tt = np.where(inside, t_rel - (total / (last + 1))[:, None], 0.0)
+        tt2 = tt * tt
+        S = np.zeros(chunk.size)
+        for i in range(L):
+            S += tt2[:, i]
+        w_s = w[s0]
+        cov = np.zeros((chunk.size, w.shape[1]))
+        for i in range(L):
+            cov += (w[J[:, i]] - w_s) * tt[:, i, None]
+        speeds[chunk] = cov * (q / S)[:, None]
+        variance[chunk] = (q * q / 12.0) / S
     steady = (idx - last_change) >= settle
     steady &= ~changed
     transient = ~ok
@@ -493,7 +577,7 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
 
 
 class ContactSpeedTracker:
-    """:func:`contact_speed_estimates` one row at a time, for a loop (O(n) per sample).
+    """:func:`contact_speed_estimates` one row at a time, for a loop (O(n max_window) per sample).
 
     The same formulas on the same numbers as the vectorized function (a test checks they
     agree to rounding), keeping only what the next rows need: the last ``max_window + 1``
@@ -515,7 +599,11 @@ class ContactSpeedTracker:
         self._keep = model.max_window + 1
         self._initial = None if initial is None else np.array(initial, dtype=float)
         self._prev: np.ndarray | None = self._initial
-        self._rows: list[tuple[float, np.ndarray]] = []     # (t, w) of the last rows
+        # Times and counts of the last rows (row j at column j - _base), compacted when full.
+        self._cap = 4 * self._keep
+        self._tb = np.empty(self._cap)
+        self._wb = np.empty((self._cap, model.n))
+        self._base = 0
         self._j = -1
         self._last_change = -10**9
         self._change: tuple[float, np.ndarray, np.ndarray] | None = None  # (t, u, before)
@@ -542,10 +630,15 @@ class ContactSpeedTracker:
         w = np.array(wheel_counts, dtype=float)
         u = command if type(command) is np.ndarray and command.dtype == np.float64 else \
             np.asarray(command, dtype=float)
-        rows = self._rows
-        rows.append((t, w))
-        if len(rows) > self._keep:
-            del rows[0]
+        col = j - self._base
+        if col == self._cap:                 # keep the last keep - 1 rows, then append
+            kept = self._keep - 1
+            self._tb[:kept] = self._tb[col - kept:col]
+            self._wb[:kept] = self._wb[col - kept:col]
+            self._base += col - kept
+            col = kept
+        self._tb[col] = t
+        self._wb[col] = w
         prev = self._prev
         changed = prev is not None and bool((u != prev).any())
         self._prev = u
@@ -553,10 +646,17 @@ class ContactSpeedTracker:
         start = min(max(lc + self._settle, j - model.max_window, 0), j)
         ok = start < j
         if ok:
-            t_s, w_s = rows[start - j - 1]
-            span = t - t_s
-            speeds = (w - w_s) * q / span
-            variance = q * q / 6.0 / span**2
+            # The least-squares line through the window's readings (contact_speed_estimates'
+            # formula; its sums in another order: equal to rounding).
+            # Times and counts relative to the window's first reading: no cancellation of
+            # large stamps or counts however long the run.
+            a = start - self._base
+            tb, wb = self._tb[a:col + 1], self._wb[a:col + 1]
+            t_rel = tb - tb[0]
+            tt = t_rel - t_rel.sum() / (j - start + 1)
+            S = float(tt @ tt)
+            speeds = (tt @ (wb - wb[0])) * (q / S)
+            variance = (q * q / 12.0) / S
         elif lc >= 0:
             t_c, u_c, before = self._change  # type: ignore[misc]
             law = unsaturated_response(before, u_c, t - t_c, self._lag, math.inf)

@@ -57,7 +57,7 @@ class CentralDifference(Estimator):
         h = sample.time - last[0]
         return (sample.central_count - last[1]) * q / h, 2.0 * (q / h) ** 2 / 12.0
 
-    def commanded(self, command: object) -> None:
+    def commanded(self, command: object, force: float = 0.0) -> None:
         """Unused: finite differences do not predict."""
 
 
@@ -104,7 +104,7 @@ class WheelDifference(Estimator):
         lo, hi = self.contacts.with_speeds(self.contact_speeds).equilibrium()
         return 0.5 * (lo + hi), 2.0 * (q / h) ** 2 / 12.0
 
-    def commanded(self, command: object) -> None:
+    def commanded(self, command: object, force: float = 0.0) -> None:
         """With no wheel history yet, the commands are the contact speeds' best guess."""
         if self._first:
             self.contact_speeds = np.asarray(command, dtype=float)

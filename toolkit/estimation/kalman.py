@@ -9,8 +9,12 @@ Per sample period ``h`` (the encoders' rate)::
 The known input ``(dx_k, dV_k)`` is the active-contact force over the period, from the
 contact speeds the wheels measure, through the model's contact law
 (:meth:`~toolkit.estimation._input.EstimatorModel.increment`, which also handles the
-set-valued force at a contact speed by the stiction rule). Built on
-``filterpy.kalman.KalmanFilter`` (``predict(u, B, F, Q)``, ``update(z, R)``).
+set-valued force at a contact speed by the stiction rule), plus the outside force ``F_k``
+a controller applied over the period (a rig's: ``commanded(command, force)``, or the
+record's ``force``), through the same law (a contact out of reach: between crossings
+the increments gain ``F_k h / m`` and ``F_k h^2 / (2 m)``; the equilibrium set becomes
+``{V : -F_k in F_c(V)}``). Built on ``filterpy.kalman.KalmanFilter`` (``predict(u, B,
+F, Q)``, ``update(z, R)``).
 
 The motors' speeds before the first sample (``reset(contact_speeds=...)``, or the record's
 ``initial_commands``) say whether the first command starts a motor transient: the wheel
@@ -39,9 +43,16 @@ readings, by a variance ratio of 1.45 / 3.7 / 0.39 / 1.08 for ``n`` = 5 / 10 / 2
 ``frac(phi) = 0.061`` (the record's cruise at 0.194 m/s) and 0.37 / 0.34 / 0.57 / 0.16 at
 ``0.258`` (after its brake, -0.094 m/s). No single white (or first-order Markov) ``R``
 matches both: the filter keeps ``q^2 / 12``, too little while the sawtooth is slow and too
-much while it is fast. On the acceptance record the NEES is 0.5-0.9 cruising (the fusion
-of the edge's contact speed, below, bounds the slow sawtooth's pull) and 0.2 after the
-brake: the mean NEES misses its chi-square band for this reason, not for a tuning.
+much while it is fast. On the acceptance record the NEES is 0.58 cruising (the fusion
+of the edge's contact speed, below, bounds the slow sawtooth's pull) and 0.14 after the
+brake: the mean NEES (1.14) misses its chi-square band for this reason, not for a tuning.
+It is not a uniform underconfidence either: 3.5 in the startup's first 0.3 s and about 23
+in the 0.3 s after the brake command, where the motors sweep contacts through the body's
+speed within one period and the input's sub-interval average places each crossing at a
+sub-interval midpoint (up to ``h / (2 M)`` off): a bias of about 0.15 mm/s over the
+deceleration that ``Q`` does not hold (counting that timing error as noise, ``(2 f_i)^2
+ds^2 / (12 h^2)`` per crossing, made the filter lean on the quantized positions and doubled
+its RMS there; the remedy is exact crossing times in the input, not more noise).
 
 Process. The force is known up to (a) unequal, unknown friction: each ``f_i`` has a
 relative std ``epsilon``, so the force varies by ``epsilon^2 sum f_i^2``; (b) the times at
@@ -208,10 +219,11 @@ class KalmanEstimator(Estimator):
         self._speed0, self._std0 = speed, std
         self._initial = contact_speeds
         self.kf = self._build()
-        self._pending: tuple[np.ndarray, float, bool, Any] | None = None  # (sub, var_v, steady, bounds)
+        self._pending: tuple[np.ndarray, float, bool, Any, float] | None = None  # (sub, var_v, steady, bounds, F)
         self._tracker = ContactSpeedTracker(self.model, contact_speeds)
         self._observed: tuple[float, np.ndarray] | None = None    # (t, wheels) awaiting a command
         self._last_command: np.ndarray | None = None
+        self._last_force = 0.0
         self._t_prev = math.nan
         self._count_prev: int | None = None
         self._repeats = 0
@@ -231,8 +243,9 @@ class KalmanEstimator(Estimator):
                 else np.diag([self._q * self._q / 12.0, self._std0**2]))
 
     def _advance(self, z: float, R: float, sub: np.ndarray | None, var_v: float, steady: bool,
-                 bounds: Any = None) -> None:
-        """Predict over the last period with the input computed from its start, then update."""
+                 bounds: Any = None, force: float = 0.0) -> None:
+        """Predict over the last period with the input computed from its start (contact
+        speeds and the outside force ``force``, N), then update."""
         kf = self.kf
         if sub is None:
             self._start(z)
@@ -241,7 +254,7 @@ class KalmanEstimator(Estimator):
         x = kf.x
         V = x.item(1)
         dx, dV, force_var, arrival, on_set = self._quick(V, sub, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
-                                                         steady, bounds)
+                                                         steady, bounds, force)
         if force_var != self._force_var:          # Q repeats while stuck or sliding freely
             self._force_var = force_var
             self._Q = self._gg * (force_var * self._inv_m2)
@@ -272,7 +285,9 @@ class KalmanEstimator(Estimator):
                 self._edge = 2 if V < bounds[2] else 3
                 inc = (bounds[self._edge], var_v)
                 self._edge_var = var_v
-        elif var_v < self._edge_var:
+        elif var_v < self._edge_var * (1.0 - 1e-9):
+            # (Smaller by more than rounding: a window sliding at full length keeps its
+            # variance and brings no new information.)
             inc = (bounds[self._edge], 1.0 / (1.0 / var_v - 1.0 / self._edge_var))
             self._edge_var = var_v
         if arrival is None:
@@ -306,12 +321,12 @@ class KalmanEstimator(Estimator):
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         """Take one sample's counts (in order); return ``(speed, variance)`` at its time.
 
-        The prediction up to this sample uses the command given to :meth:`commanded` after
-        the previous sample (the previous command again if none was given); this sample's
-        ``command`` is not read.
+        The prediction up to this sample uses the command and force given to
+        :meth:`commanded` after the previous sample (the previous ones again if none were
+        given); this sample's ``command`` and ``force`` are not read.
         """
         if self._observed is not None:
-            self.commanded(self._last_command)
+            self.commanded(self._last_command, self._last_force)
         count = sample.central_count
         t = sample.time
         q = self._q
@@ -323,21 +338,24 @@ class KalmanEstimator(Estimator):
         R = _measurement_variance_one(self._repeats, fd, q, self.model.sensors)
         z = (count + 0.5) * q
         pending = self._pending
-        self._advance(z, R, *(pending if pending is not None else (None, 0.0, True, None)))
+        self._advance(z, R, *(pending if pending is not None else (None, 0.0, True, None, 0.0)))
         self._observed = (t, sample.wheel_counts)
         x, P = self.kf.x, self.kf.P
         return x.item(1), P.item(3)
 
-    def commanded(self, command: Any) -> None:
-        """The contact speeds commanded at the last observed sample, m/s, shape (n,): they
-        drive the prediction to the next sample."""
+    def commanded(self, command: Any, force: float = 0.0) -> None:
+        """The contact speeds commanded at the last observed sample (m/s, shape (n,)) and
+        the outside force applied with them (N, held to the next sample): they drive the
+        prediction to the next sample."""
         if self._observed is None:
             raise RuntimeError("commanded() follows observe(): once per observed sample.")
+        if type(force) is not float or not math.isfinite(force):
+            force = as_float(force, "force", f"{type(self).__name__}.commanded")
         t, wheels = self._observed
         self._observed = None
-        self._last_command = command
+        self._last_command, self._last_force = command, force
         speeds, var, steady, sub = self._tracker.push(t, wheels, command)
-        self._pending = (sub, var, steady, self.model.bounds_row(sub))
+        self._pending = (sub, var, steady, self.model.bounds_row(sub, force), force)
 
     # -- offline --------------------------------------------------------------------------
     def filter(self, record: EncoderRecord, *, speed: float = 0.0, speed_std: float | None = None
@@ -355,7 +373,9 @@ class KalmanEstimator(Estimator):
         speeds, var_v, steady = contact_speed_estimates(record.wheel_counts, record.commands, record.times,
                                                         model, initial=record.initial_commands)
         sub = model.substep_speeds(speeds, record.commands, steady)
-        bounds = model.bounds(sub).tolist()
+        force = np.zeros(K) if record.force is None else record.force
+        bounds = model.bounds(sub, force).tolist()
+        force_l = force.tolist()
         q = self._q
         z = (counts + 0.5) * q
         # Jitter term: speed from the counts over the last period (known before the update).
@@ -377,7 +397,7 @@ class KalmanEstimator(Estimator):
         Qs = [np.zeros((2, 2))]
         nis = [math.nan]
         for k in range(1, K):
-            advance(z_l[k], R_l[k], sub[k - 1], var_l[k - 1], steady_l[k - 1], bounds[k - 1])
+            advance(z_l[k], R_l[k], sub[k - 1], var_l[k - 1], steady_l[k - 1], bounds[k - 1], force_l[k - 1])
             x = kf.x
             xs.append((x.item(0), x.item(1)))
             Ps.append(kf.P)
@@ -386,7 +406,7 @@ class KalmanEstimator(Estimator):
             Qs.append(self.last_Q)
             nis.append(self.last_nis)
         X, P, U, Q = np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Qs)
-        self._pending = (sub[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1])
+        self._pending = (sub[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1], force_l[-1])
         self.transitions = np.array(Fs)
         return X, P, U, Q, np.array(nis), time.perf_counter() - started
 
@@ -419,7 +439,7 @@ class RTSSmoother(Estimator):
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
         raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
 
-    def commanded(self, command: Any) -> None:
+    def commanded(self, command: Any, force: float = 0.0) -> None:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
         raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
 

@@ -1,6 +1,7 @@
 """Unscented Kalman filter whose process model is the exact simulator over one sample.
 
-Same state ``(X, V)``, measurement, noise and known inputs as
+Same state ``(X, V)``, measurement, noise and known inputs (contact speeds and the outside
+force, the latter as a contact out of reach) as
 :class:`~toolkit.estimation.kalman.KalmanEstimator` (whose per-sample loop it reuses), but
 the prediction propagates each sigma point through the exact model: all sigma points at
 once by :func:`toolkit.simulation.simulate_batch` (one scene per sigma point, the contacts
@@ -55,7 +56,7 @@ class UnscentedEstimator(KalmanEstimator):
                  else np.diag([self._q * self._q / 12.0, self._std0**2]))
 
     def _advance(self, z: float, R: float, sub: np.ndarray | None, var_v: float, steady: bool,
-                 bounds: Any = None) -> None:
+                 bounds: Any = None, force: float = 0.0) -> None:
         from ..simulation import simulate_batch
 
         if sub is None:
@@ -66,11 +67,22 @@ class UnscentedEstimator(KalmanEstimator):
         model = self.model
         h = model.sensors.period
         V = float(ukf.x[1])
-        dx, dV, force_var, _, _ = model.increment(V, sub, math.sqrt(var_v), math.sqrt(ukf.P[1, 1]), steady)
+        dx, dV, force_var, _, _ = model.increment(V, sub, math.sqrt(var_v), math.sqrt(ukf.P[1, 1]), steady,
+                                                  force=force)
         sigmas = ukf.points_fn.sigma_points(ukf.x, ukf.P)
         S = sigmas.shape[0]
-        speeds = np.broadcast_to(sub.mean(axis=0), (S, model.n))
-        forces = np.broadcast_to(model.forces, (S, model.n))
+        mean = sub.mean(axis=0)
+        f = model.forces
+        if force != 0.0:
+            # The outside force as one more contact, of magnitude |F|, beyond every contact
+            # speed and sigma point by more than the period's largest speed change (out of
+            # reach: it pushes with F all period; see toolkit.estimation._input).
+            far = (float(np.max(np.abs(mean))) + float(np.max(np.abs(sigmas[:, 1])))
+                   + (float(f.sum()) + abs(force)) * h / model.mass + 1.0)
+            mean = np.append(mean, math.copysign(far, force))
+            f = np.append(f, abs(force))
+        speeds = np.broadcast_to(mean, (S, mean.size))
+        forces = np.broadcast_to(f, (S, f.size))
         final = simulate_batch(speeds, forces, model.mass, h, v0=sigmas[:, 1]).final_speeds
         moved = np.column_stack((sigmas[:, 0] + 0.5 * h * (sigmas[:, 1] + final), final))
         rows = iter(moved)

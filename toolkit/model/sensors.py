@@ -396,12 +396,16 @@ class EncoderSample:
     wheel_counts : ndarray of shape (n,), int64
     command : ndarray of shape (n,), m/s
         The contact speeds commanded at this sample.
+    force : float, N
+        The outside force applied to the body from this sample to the next (a rig's; 0
+        when nothing but the contacts acts).
     """
 
     time: float
     central_count: int
     wheel_counts: np.ndarray
     command: np.ndarray
+    force: float = 0.0
 
 
 def _int_array(value: Any, name: str, ndim: int) -> np.ndarray:
@@ -442,6 +446,10 @@ class EncoderRecord:
         sent before ``times[0]``); ``None``: unknown, taken as ``commands[0]`` (the motors
         already run at the first command). Estimators use it to know whether the first
         command starts a motor transient.
+    force : array_like of shape (k,), N, optional
+        Outside force applied to the body from each sample to the next (a rig's, or the
+        plant's ``external_force`` at the stamps), held over the period like the commands;
+        ``None``: none (zeros). Estimators take it as a known input.
     """
 
     times: np.ndarray
@@ -455,6 +463,7 @@ class EncoderRecord:
     truth_position: np.ndarray | None = None
     truth_contact_speeds: np.ndarray | None = None
     initial_commands: np.ndarray | None = None
+    force: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         owner = "EncoderRecord"
@@ -496,6 +505,13 @@ class EncoderRecord:
                     f"an array of shape {initial.shape}"))
             initial.setflags(write=False)
             object.__setattr__(self, "initial_commands", initial)
+        if self.force is not None:
+            force = as_float_array(self.force, "force", owner, ndim=1)
+            if force.shape != (k,):
+                raise ParameterError(parameter_message(
+                    "force", owner, f"have shape ({k},)", f"an array of shape {force.shape}"))
+            force.setflags(write=False)
+            object.__setattr__(self, "force", force)
 
     @property
     def n_samples(self) -> int:
@@ -525,7 +541,8 @@ class EncoderRecord:
     def sample(self, k: int) -> EncoderSample:
         """Sample ``k`` as an :class:`EncoderSample` (what a closed loop sees)."""
         return EncoderSample(float(self.times[k]), int(self.central_counts[k]),
-                             self.wheel_counts[k], self.commands[k])
+                             self.wheel_counts[k], self.commands[k],
+                             0.0 if self.force is None else float(self.force[k]))
 
     def __len__(self) -> int:
         return self.n_samples
@@ -682,6 +699,8 @@ def record_simulation(result: Any, plant: Any, sensors: Sensors, *,
             "truth_position": body if sensors.jitter == 0 else _antiderivative(result.speed_at, stamps, breaks),
             "truth_contact_speeds": contact_speeds_at(plant, stamps)[0]}
     commands = np.asarray([plant.command(t) for t in stamps], dtype=float).reshape(stamps.size, plant.n)
+    # The plant's outside force at each stamp, held to the next as the commands are.
+    force = np.array([plant.external(t) for t in stamps], dtype=float)
     return EncoderRecord(stamps, central, wheel, commands, sensors.central.distance_per_count,
                          sensors.wheel.distance_per_count, sensors.backlash,
-                         initial_commands=plant.initial_speeds(), **truth_fields)
+                         initial_commands=plant.initial_speeds(), force=force, **truth_fields)

@@ -11,9 +11,12 @@ the contacts hold their speeds, and the contacts' force is read from the rig's f
 the body's inertia removed (:func:`~toolkit.predictions._measure.rig_friction`) over the
 part of the ramp after the rig's own transient (``window``). ``mu / mu0 = F / F0`` with
 ``F0`` the brake condition's force (every contact at 0, ramped over positive speeds), as in
-the paper. In the loop the rig's speed loop closes on the central encoder's finite
-difference: the Kalman filter of :mod:`toolkit.estimation` takes the contact force as its
-only input and knows nothing of a rig's force, so it cannot estimate a rig-driven body.
+the paper. In the loop the rig's speed loop closes on the Kalman filter of
+:mod:`toolkit.estimation`, which takes the rig's force as a known input beside the contact
+force (``commanded(command, force)``); ``rig_estimator="central_difference"`` closes it on
+the central encoder's finite difference instead, for comparison. (A filter told only the
+contact force diverges on a rig-driven body: the rig's force, about ``2 j f``, is then an
+unmodelled acceleration.)
 
 Transition time: the wheels carry the body at ``+v_max`` for ``pre_roll`` seconds, then
 :class:`~toolkit.controllers.FrictionBrake` commands the split; ``dT`` is read off the speed
@@ -33,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_int
+from .._validation import as_float, as_int, check_option
 from ..allocation import FrictionFraction, allocate
 from ..closed_loop import simulate_closed_loop
 from ..controllers import ForceDrive, FrictionBrake
@@ -44,7 +47,10 @@ from .apparatus import Apparatus
 from .theory import transition_time
 from .viscosity import CheckStatus, _progress
 
-__all__ = ["FrictionFractionProblem", "FrictionFractionCheck", "friction_fraction_check"]
+__all__ = ["FrictionFractionProblem", "FrictionFractionCheck", "friction_fraction_check", "RIG_ESTIMATORS"]
+
+#: What the rig's speed loop may close on in the loop mode.
+RIG_ESTIMATORS = ("kalman", "central_difference")
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +73,9 @@ class FrictionFractionProblem:
     margin : float
         Share of ``v_max`` left out at both ends of the transition reading, in ``(0, 0.5)``.
     seed : int
+    rig_estimator : {"kalman", "central_difference"}
+        What the rig's speed loop closes on in the loop mode: the Kalman filter (default)
+        or the central encoder's finite difference (the baseline, for comparison).
     targets : (float, float)
         ``|mu/mu0 - 2 j / N|`` at most the first; ``|dT / dT_predicted - 1|`` at most the second.
     """
@@ -80,6 +89,7 @@ class FrictionFractionProblem:
     margin: float = 0.1
     seed: int = 0
     targets: tuple[float, float] = (0.02, 0.05)
+    rig_estimator: str = "kalman"
 
     def __post_init__(self) -> None:
         owner = "FrictionFractionProblem"
@@ -105,6 +115,8 @@ class FrictionFractionProblem:
             raise ParameterError(parameter_message("margin", owner, "be < 0.5", self.margin))
         object.__setattr__(self, "margin", margin)
         object.__setattr__(self, "seed", as_int(self.seed, "seed", owner, low=0))
+        object.__setattr__(self, "rig_estimator", check_option(self.rig_estimator, "rig_estimator", owner,
+                                                               RIG_ESTIMATORS))
         object.__setattr__(self, "targets", (as_float(self.targets[0], "targets", owner, low=0.0),
                                              as_float(self.targets[1], "targets", owner, low=0.0)))
 
@@ -168,8 +180,8 @@ def _rig(a: Apparatus, speeds: np.ndarray, v_start: float, v_end: float, p: Fric
     """Mean contact force (N) over the read part of one rig ramp, and a failure message."""
     loop = p.mode == "loop"
     plant = a.run_plant(speeds, p.mode)
-    estimator = None
-    if loop:
+    estimator = None                # with sensors: simulate_closed_loop's Kalman filter
+    if loop and p.rig_estimator == "central_difference":
         from ..estimation import CentralDifference
         estimator = CentralDifference(a.sensors)
     run = simulate_closed_loop(plant, ForceDrive(speeds, v_start, v_end, p.ramp), p.ramp, v0=v_start,
@@ -251,7 +263,7 @@ def friction_fraction_check(problem: FrictionFractionProblem | None = None, *,
         status = CheckStatus.MET
         finite = np.isfinite(dT_pred)
         rel = np.abs(dT[finite] / dT_pred[finite] - 1.0)
-        message = (f"|mu/mu0 - 2j/N| <= {np.max(np.abs(mu - fractions)):.4f}, "
+        message = (f"|mu/mu0 - 2j/N| <= {np.max(np.abs(mu - fractions)):.2g}, "
                    f"|dT / dT_predicted - 1| <= {np.max(rel):.2%}")
     else:
         status = CheckStatus.SHORT

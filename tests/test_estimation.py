@@ -13,10 +13,11 @@ import pytest
 
 from toolkit import ParameterError
 from toolkit.estimation import (CentralDifference, EstimatorModel, KalmanEstimator, RTSSmoother,
-                                UnscentedEstimator, WheelDifference, carousel_brake_scenario,
+                                UnscentedEstimator, WheelDifference,
                                 chi2_band, steady_state_gain)
 from toolkit.model import ContactSet, Plant
 from toolkit.model.sensors import Sensors, record_simulation
+from toolkit.scenarios import carousel_brake_scenario
 from toolkit.simulation import simulate
 
 

@@ -41,7 +41,8 @@ def test_estimation_and_control_round_trip():
 def test_estimation_stage_is_the_carousel_brake_scenario():
     # Second method: the estimation package's own acceptance scenario (same plant, encoders
     # and seed) gives the same record and the same scores, exactly (same arithmetic).
-    from toolkit.estimation import CentralDifference, KalmanEstimator, RTSSmoother, carousel_brake_scenario
+    from toolkit.estimation import CentralDifference, KalmanEstimator, RTSSmoother
+    from toolkit.scenarios import carousel_brake_scenario
 
     study = estimate_scene(loads_scene(ESTIMATE))
     reference = carousel_brake_scenario(seed=0)

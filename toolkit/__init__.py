@@ -49,7 +49,8 @@ from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
 # sensors and estimation (filterpy is imported only where a filter is built)
 from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
 from .estimation import (CentralDifference, EstimationResult, Estimator, EstimatorModel, KalmanEstimator,
-                         RTSSmoother, UnscentedEstimator, WheelDifference, carousel_brake_scenario, chi2_band)
+                         RTSSmoother, UnscentedEstimator, WheelDifference, chi2_band)
+from .scenarios import BrakeScenario, carousel_brake_scenario
 
 __version__ = "0.1.0"
 

@@ -13,7 +13,8 @@ from __future__ import annotations
 import argparse
 
 from toolkit.estimation import (CentralDifference, KalmanEstimator, RTSSmoother, UnscentedEstimator,
-                                WheelDifference, carousel_brake_scenario)
+                                WheelDifference)
+from toolkit.scenarios import carousel_brake_scenario
 
 
 def main(argv: list[str] | None = None) -> int:

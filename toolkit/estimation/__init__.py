@@ -19,10 +19,9 @@ from ._base import EstimationResult, Estimator, chi2_band
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 from .finite_difference import CentralDifference, WheelDifference
 from .kalman import KalmanEstimator, RTSSmoother, steady_state_gain
-from .scenario import BrakeScenario, carousel_brake_scenario
 from .unscented import UnscentedEstimator
 
 __all__ = ["Estimator", "EstimationResult", "EstimatorModel", "chi2_band", "contact_speed_estimates",
            "ContactSpeedTracker",
            "CentralDifference", "WheelDifference", "KalmanEstimator", "RTSSmoother",
-           "steady_state_gain", "UnscentedEstimator", "BrakeScenario", "carousel_brake_scenario"]
+           "steady_state_gain", "UnscentedEstimator"]

@@ -1,4 +1,5 @@
-"""The acceptance scenario: the paper's carousel started from rest, then braked (public API only).
+"""Reference scenarios built from the shipped designs: the estimation acceptance run, the
+paper's carousel started from rest, then braked.
 
 Ten equal wheels with ``f_i`` from ``designs/carousel.toml`` (1 N each), the moving inertia
 ``m = I / L^2`` (5 kg) from its body section, motor lag 7.5 ms, the paper's encoders at
@@ -14,14 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model import ContactSet, Motors, PiecewiseConstant, Plant
-from ..model.sensors import EncoderRecord, Sensors, record_simulation
-from ._input import EstimatorModel
+from .model import ContactSet, Motors, PiecewiseConstant, Plant
+from .model.sensors import EncoderRecord, Sensors, record_simulation
+from .estimation import EstimatorModel
 
 __all__ = ["BrakeScenario", "carousel_brake_scenario", "CAROUSEL_SCENE"]
 
 #: The reference scene file (repository root / designs).
-CAROUSEL_SCENE = Path(__file__).resolve().parents[2] / "designs" / "carousel.toml"
+CAROUSEL_SCENE = Path(__file__).resolve().parents[1] / "designs" / "carousel.toml"
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,8 +66,8 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
     **noise
         ``missed_count_prob``, ``count_noise``, ``jitter`` of :class:`Sensors`.
     """
-    from ..scene import load_scene
-    from ..simulation import simulate
+    from .scene import load_scene
+    from .simulation import simulate
 
     scene = load_scene(CAROUSEL_SCENE)
     forces = scene.contact_set().forces

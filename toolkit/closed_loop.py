@@ -93,11 +93,7 @@ def _check(plant: Any, controller: Any, sensors: Any, estimator: Any, rate: Any,
         raise ParameterTypeError(parameter_message(
             "controller", owner, "be a controller (toolkit.controllers)", controller))
     if sensors is not None:
-        if not isinstance(sensors, Sensors):
-            raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors or None", sensors))
-        if sensors.n_wheels != plant.n:
-            raise ParameterError(parameter_message(
-                "sensors", owner, f"have one wheel encoder per contact ({plant.n})", sensors.n_wheels))
+        Sensors.checked(sensors, plant.n, owner)
         if rate is not None and as_float(rate, "rate", owner) != sensors.rate:
             raise ParameterError(parameter_message(
                 "rate", owner, f"equal the sensors' rate ({sensors.rate:g} Hz) or be None", rate))

@@ -206,11 +206,7 @@ def plant_system(plant: Plant, *, sensors: Sensors | None = None, rate: float | 
     if not isinstance(plant, Plant):
         raise ParameterTypeError(parameter_message("plant", owner, "be a Plant", plant))
     if sensors is not None:
-        if not isinstance(sensors, Sensors):
-            raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors or None", sensors))
-        if sensors.n_wheels != plant.n:
-            raise ParameterError(parameter_message(
-                "sensors", owner, f"have one wheel encoder per contact ({plant.n})", sensors.n_wheels))
+        Sensors.checked(sensors, plant.n, owner)
         if sensors.jitter != 0.0:
             raise ParameterError(parameter_message(
                 "sensors", owner, "have jitter = 0 (a discrete-time system reads at k dt; "

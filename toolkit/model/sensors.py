@@ -156,6 +156,23 @@ class Sensors:
         return cls(Encoder(8192, 0.266, 50.0), Encoder(48 * 74.83, 0.045, 50.0, backlash=0.0008),
                    n_wheels, **noise)
 
+    @staticmethod
+    def checked(sensors: Any, n_contacts: int, owner: str) -> Sensors:
+        """``sensors`` checked for a plant of ``n_contacts`` contacts: a :class:`Sensors`
+        with one wheel encoder per contact (the check every closed-loop entry point makes).
+
+        Raises
+        ------
+        ParameterTypeError, ParameterError
+            Naming ``owner``'s ``sensors`` parameter, the rule and the value.
+        """
+        if not isinstance(sensors, Sensors):
+            raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors or None", sensors))
+        if sensors.n_wheels != n_contacts:
+            raise ParameterError(parameter_message(
+                "sensors", owner, f"have one wheel encoder per contact ({n_contacts})", sensors.n_wheels))
+        return sensors
+
     @classmethod
     def from_spec(cls, spec: Any, n_wheels: int, **noise: float) -> Sensors:
         """From a scene's ``[sensors]`` section (any object with its fields: ``rate``,

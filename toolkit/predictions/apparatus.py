@@ -71,13 +71,7 @@ class Apparatus:
                 "plant", owner, "have motors with finite symmetric speed limits (-v_max, v_max)",
                 f"speed_limits ({lo}, {hi})"))
         if self.sensors is not None:
-            if not isinstance(self.sensors, Sensors):
-                raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors or None",
-                                                           self.sensors))
-            if self.sensors.n_wheels != plant.n:
-                raise ParameterError(parameter_message(
-                    "sensors", owner, f"have one wheel encoder per contact ({plant.n})",
-                    self.sensors.n_wheels))
+            Sensors.checked(self.sensors, plant.n, owner)
 
     @classmethod
     def carousel(cls, mass: float = 1.0) -> Apparatus:

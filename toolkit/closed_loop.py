@@ -30,6 +30,7 @@ from .errors import ParameterError, ParameterTypeError, parameter_message
 from .model import Plant
 from .model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors, measure  # noqa: F401
 from .simulation import Budget, SimulationStatus
+from .simulation._result import refuse_backlash
 from .simulation._stepper import ExactState, advance
 
 __all__ = ["ClosedLoopResult", "simulate_closed_loop", "MAX_SAMPLES"]
@@ -89,6 +90,7 @@ def _check(plant: Any, controller: Any, sensors: Any, estimator: Any, rate: Any,
     owner = "simulate_closed_loop"
     if not isinstance(plant, Plant):
         raise ParameterTypeError(parameter_message("plant", owner, "be a Plant", plant))
+    refuse_backlash(plant, owner)         # the plant steps are the exact engine's (advance)
     if not hasattr(controller, "bind"):
         raise ParameterTypeError(parameter_message(
             "controller", owner, "be a controller (toolkit.controllers)", controller))

@@ -9,7 +9,7 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
     [scene]          name, description
     [contacts]       speeds | random, and forces | (mu, normal_loads)        (required)
     [body]           mass | (inertia, contact_radius); damping; external_force
-    [motors]         speed_limit | speed_limits; lag; rate_limit; compliance; clip
+    [motors]         speed_limit | speed_limits; lag; rate_limit; compliance; backlash; clip
     [sensors]        rate; wheel_counts_per_rev; wheel_radius; wheel_backlash;
                      central_counts_per_rev; contact_radius
     [target]         kind = force_curve | viscosity | friction_fraction | equilibrium_speed,
@@ -316,7 +316,9 @@ class BodySpec:
 class MotorsSpec:
     """``[motors]``: ``speed_limit`` (m/s, symmetric) or ``speed_limits = [lo, hi]``; ``lag``
     (s, first-order time constant); ``rate_limit`` (m/s^2); ``compliance`` ((m/s)/N, speed
-    droop per newton of contact force); ``clip`` (default false: contact speeds and
+    droop per newton of contact force); ``backlash`` (m at the contact, the drive's gearbox
+    play; simulated by ``method = "moreau"`` only, refused by the other methods); ``clip``
+    (default false: contact speeds and
     ``simulation.commands`` beyond the speed limits are refused; true: they are clipped to
     the limits and the study reports a shortfall)."""
 
@@ -324,9 +326,10 @@ class MotorsSpec:
     lag: float = 0.0
     rate_limit: float = math.inf
     compliance: float = 0.0
+    backlash: float = 0.0
     clip: bool = False
 
-    KEYS = ("speed_limit", "speed_limits", "lag", "rate_limit", "compliance", "clip")
+    KEYS = ("speed_limit", "speed_limits", "lag", "rate_limit", "compliance", "backlash", "clip")
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> MotorsSpec:
@@ -346,6 +349,7 @@ class MotorsSpec:
             lag=_number("motors.lag", table.get("lag", 0.0)),
             rate_limit=_number("motors.rate_limit", table.get("rate_limit", math.inf), allow_inf=True),
             compliance=_number("motors.compliance", table.get("compliance", 0.0)),
+            backlash=_number("motors.backlash", table.get("backlash", 0.0)),
             clip=_flag("motors.clip", table.get("clip", False)),
         )
 

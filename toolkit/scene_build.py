@@ -241,9 +241,10 @@ def _motors(scene: Scene) -> Motors | None:
     spec = scene.motors
     if spec is None:
         return None
-    with _scene_keys("motors", _same_keys("motors", ("lag", "rate_limit", "speed_limits", "compliance"))):
+    with _scene_keys("motors", _same_keys("motors", ("lag", "rate_limit", "speed_limits", "compliance",
+                                                         "backlash"))):
         return Motors(lag=spec.lag, rate_limit=spec.rate_limit, speed_limits=spec.speed_limits,
-                      compliance=spec.compliance)
+                      compliance=spec.compliance, backlash=spec.backlash)
 
 
 def _plant(scene: Scene, contacts: ContactSet, motors: Motors | None, clips: list[Clip]) -> Plant | None:

@@ -181,7 +181,8 @@ def _mirror(plant: Plant) -> Plant:
     motors = plant.motors
     if motors is not None:
         low, high = motors.speed_limits
-        motors = Motors(motors.lag, motors.rate_limit, (-high, -low), motors.compliance)
+        motors = Motors(motors.lag, motors.rate_limit, (-high, -low), motors.compliance,
+                        motors.backlash)
     return Plant(plant.contacts.with_speeds(-plant.contacts.speeds), plant.mass, plant.damping,
                  ext_m, motors, commands)
 

@@ -54,12 +54,39 @@ class Motors:
         Slope ``k`` of the motor's torque-speed line: the contact's actual speed droops by
         ``k`` times its contact force, so the contact force becomes the saturated linear
         function ``f_i clip((v_i - V) / (k f_i), -1, 1)``; ``0`` = stiff motor (Coulomb law).
+    backlash : float, m (at the contact)
+        Width ``b >= 0`` of the gearbox play between each motor and its wheel; ``0`` = no
+        play (nothing changes). Simulated by ``simulate(..., method="moreau")`` only (the
+        other methods refuse ``b > 0``); see Notes.
+
+    Notes
+    -----
+    **Drive backlash.** Wheel ``i`` is driven by its motor through a play of width ``b``;
+    ``g_i`` (wheel position minus motor position, m) stays in ``[-b/2, b/2]``. While the
+    gearbox is engaged the contact moves at the motor's speed ``v_i`` and carries the usual
+    force ``f_i Sign(v_i - V)``, restricted to the sign the engaged edge can transmit: at
+    ``g_i = -b/2`` the motor pushes the wheel forward (contact force in ``[0, f_i]``), at
+    ``g_i = +b/2`` it pushes it back (force in ``[-f_i, 0]``). When the force the contact
+    must carry reverses, the wheel leaves its edge: it carries no force (wheel inertia
+    neglected, so it rolls with the body, contact speed ``V``) and ``dg_i/dt = V - v_i``
+    until ``g_i`` reaches the other edge, where the gear re-engages and the contact pushes
+    with the new sign. At ``t = 0`` each drive sits at the edge that pushes towards its
+    contact's speed relative to the body, ``g_i = -(b/2) sign(v_i - V(0))``, or, for a
+    contact riding with the body, towards its own speed, ``-(b/2) sign(v_i)`` (``g_i = 0``,
+    mid-play, for a contact at rest under a body at rest).
+
+    Closed form (checked in ``tests/test_backlash.py``): ``N`` contacts of total force
+    ``F_tot`` at ``+v`` carrying the body at ``V = +v``, commanded to ``-v`` (ideal motors):
+    every wheel crosses its play at relative speed ``2 v``, so the body coasts for
+    ``b / (2 v)``, then decelerates under ``-F_tot`` and reaches ``-v`` at
+    ``dT = b / (2 v) + 2 v m / F_tot``.
     """
 
     lag: float = 0.0
     rate_limit: float = float("inf")
     speed_limits: tuple[float, float] = (float("-inf"), float("inf"))
     compliance: float = 0.0
+    backlash: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "Motors"
@@ -71,6 +98,7 @@ class Motors:
             self.rate_limit, "rate_limit", owner, low=0.0, low_open=True, finite=False))
         object.__setattr__(self, "compliance", as_float(
             self.compliance, "compliance", owner, low=0.0))
+        object.__setattr__(self, "backlash", as_float(self.backlash, "backlash", owner, low=0.0))
         limits = self.speed_limits
         if isinstance(limits, (str, bytes)) or not hasattr(limits, "__len__") or len(limits) != 2:
             raise ParameterTypeError(parameter_message(

@@ -156,6 +156,11 @@ class Plant:
         return 0.0 if self.motors is None else self.motors.compliance
 
     @property
+    def backlash(self) -> float:
+        """Drive backlash ``b`` (m at the contact), 0 for ideal motors or no play."""
+        return 0.0 if self.motors is None else self.motors.backlash
+
+    @property
     def dynamic_motors(self) -> bool:
         """True when contact speeds are states (a motor lag or a finite rate limit)."""
         return self.motors is not None and self.motors.dynamic

@@ -8,7 +8,8 @@ Methods (``method=``):
   ``sign``, ``tanh`` or ``stribeck`` friction law (options ``friction``, ``epsilon``,
   ``rtol``, ``atol``).
 - ``"moreau"``: Moreau-Jean time stepping, the set-valued force resolved exactly each step
-  (option ``step``).
+  (option ``step``); the only method that models drive backlash (``Motors(backlash=b)``),
+  which every other method refuses.
 - ``"casadi"``: a casadi CVODES/IDAS integrator on the smoothed model (options
   ``integrator``, ``friction``, ``epsilon``, ``rtol``, ``atol``).
 
@@ -33,7 +34,7 @@ from .._validation import as_float, as_float_array, check_option, suggestion
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant
 from ._batch import BatchResult, simulate_batch
-from ._result import Budget, Event, SimulationResult, SimulationStatus
+from ._result import Budget, Event, SimulationResult, SimulationStatus, refuse_backlash
 from ._stepper import ExactState, ExactStep, advance
 
 __all__ = ["simulate", "simulate_batch", "BatchResult", "SimulationStatus", "Budget", "Event",
@@ -127,6 +128,8 @@ def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exac
     budget = _DEFAULT_BUDGET if budget is None else budget
     if not isinstance(budget, Budget):
         raise ParameterTypeError(parameter_message("budget", "simulate", "be a Budget", budget))
+    if method != "moreau" and plant.motors is not None and plant.motors.backlash > 0:
+        refuse_backlash(plant, f"simulate(method={method!r})")
     module, function, fixed, accepted = _DISPATCH[method]
     for name in options:
         if name not in accepted:

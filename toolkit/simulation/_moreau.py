@@ -30,6 +30,18 @@ Dynamic motors are advanced first, by the model's implicit Euler step of the mot
 (:func:`toolkit.model.motors.implicit_step`, solved exactly: a monotone scalar equation per
 contact); their speeds then enter the body's step.
 
+Drive backlash (``Motors(backlash=b)``, the physics in :class:`toolkit.model.Motors`) adds a
+play state ``g_i`` in ``[-b/2, b/2]`` per contact. A drive at its lower edge ``-b/2`` can only
+push the body forward: its contact enters the step's staircase as a half step (force ``f_i``
+below its level ``v_i``, ``[0, f_i]`` at it, ``0`` above); at its upper edge ``+b/2`` as the
+other half (``0`` below, ``[-f_i, 0]`` at ``v_i``, ``-f_i`` above); a contact inside its play
+carries zero force and is left out of the staircase. The staircase stays non-increasing, so
+the step is still the exact set-valued solve above for the engaged contacts. After the step
+every play moves with its wheel rolling at the body's new speed, ``g_i <- clip(g_i + h (W -
+v_i), -b/2, b/2)``: a drive whose force would reverse leaves its edge, and a drive that
+reaches the other edge is engaged from the next step (first-order in ``h`` like the rest).
+Backlash with motor compliance is refused (the compliant law is not split into halves).
+
 Steps land exactly on every command or external-force switch; the step before a switch (and
 before ``t_end``) is shortened. ``budget.max_steps`` counts steps. The steps are generated
 one at a time and only the requested ``t_eval`` times (or a record of at most
@@ -44,6 +56,7 @@ import math
 import numpy as np
 
 from .._validation import as_float
+from ..errors import ParameterError, parameter_message
 from ..model import Plant, implicit_step
 from ._reference import BudgetExceeded, Meter, StepRecord, build_result, format_setting, segment_edges
 from ._result import Budget, SimulationResult, SimulationStatus
@@ -179,13 +192,21 @@ def simulate_moreau(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray
     meter = Meter(budget, counts="steps")
     dynamic = plant.dynamic_motors
     speeds = plant.initial_speeds()
+    play = None
+    if plant.backlash > 0:
+        if plant.compliance > 0:
+            raise ParameterError(parameter_message(
+                "plant", "simulate(method='moreau')", "have motors.compliance = 0 when "
+                "motors.backlash > 0 (backlash is modelled with stiff motors only)",
+                f"compliance = {plant.compliance:g} (m/s)/N, backlash = {plant.backlash:g} m"))
+        play = initial_play(0.5 * plant.backlash, speeds, v0)
     out = _Output(t_eval, v0, plant.net_force(0.0, v0, speeds), speeds if dynamic else None,
                   budget.max_samples)
     status, detail = SimulationStatus.SUCCESS, ""
     edges = segment_edges(plant, t_end)
     try:
         with np.errstate(over="ignore", invalid="ignore"):   # non-finite W: caught per step
-            _segments(plant, edges, h, v0, speeds, meter, out)
+            _segments(plant, edges, h, v0, speeds, meter, out, play)
     except BudgetExceeded as stop:
         status, detail = stop.status, stop.detail
     t_out, V_out, force_out, speeds_out = out.arrays()
@@ -264,8 +285,10 @@ class _Output:
 
 
 def _segments(plant: Plant, edges: np.ndarray, h: float, V: float, speeds: np.ndarray,
-              meter: Meter, out: _Output) -> None:
+              meter: Meter, out: _Output, play: np.ndarray | None = None) -> None:
     """Step over every segment between switches, handing each step to ``out``.
+
+    ``play``: the drives' play ``g_i`` (m) with backlash, ``None`` without.
 
     The steps of a segment are generated one at a time (nominal ``h``, the last one
     shortened to land on the segment's end), never listed: their number may be huge.
@@ -274,7 +297,10 @@ def _segments(plant: Plant, edges: np.ndarray, h: float, V: float, speeds: np.nd
     for t0, t1 in zip(edges[:-1], edges[1:]):
         t0, t1 = float(t0), float(t1)
         count = max(1, math.ceil((t1 - t0) / h * (1.0 - 1e-12)))
-        if dynamic or plant.compliance > 0:
+        if play is not None:
+            V, speeds, play = _backlash_segment(plant, t0, t1, h, count, V, speeds, play,
+                                                0.5 * plant.backlash, meter, out)
+        elif dynamic or plant.compliance > 0:
             V, speeds = _general_segment(plant, t0, t1, h, count, V, speeds, meter, out)
         else:
             V = _staircase_segment(plant, t0, t1, h, count, V, meter, out)
@@ -343,3 +369,94 @@ def _general_segment(plant: Plant, t0: float, t1: float, h: float, count: int, V
             out.add(t_prev, V, t_next, W, force)
         t_prev, V = t_next, W
     return V, speeds
+
+
+def initial_play(half: float, speeds: np.ndarray, v0: float) -> np.ndarray:
+    """The drives' play at ``t = 0``, m: each at the edge that pushes towards its contact.
+
+    ``g_i = -half sign(v_i - v0)``; for a contact riding with the body (``v_i = v0``)
+    ``-half sign(v_i)``; ``0`` (mid-play) for a contact at rest under a body at rest.
+
+    Parameters
+    ----------
+    half : float, m
+        Half the backlash, ``b / 2``.
+    speeds : ndarray of shape (n,), m/s
+        Contact (motor) speeds at ``t = 0``.
+    v0 : float, m/s
+        Body speed at ``t = 0``.
+    """
+    push = np.sign(speeds - v0)
+    push = np.where(push == 0.0, np.sign(speeds), push)
+    return -half * push
+
+
+def play_staircase(speeds: np.ndarray, forces: np.ndarray, play: np.ndarray,
+                   half: float) -> tuple[np.ndarray, np.ndarray]:
+    """Levels and plateau forces of the engaged drives (a contact in its play is left out).
+
+    A drive at ``g_i = -half`` contributes ``f_i`` below its level and ``0`` above; at
+    ``g_i = +half`` ``0`` below and ``-f_i`` above; with ``half = 0`` both (the Coulomb
+    contact of :func:`_staircase`). Plateau forces below ``4 (K + 1) eps F`` (``F`` the
+    engaged contacts' total) are snapped to 0, as in :func:`_staircase`.
+
+    Parameters
+    ----------
+    speeds : ndarray of shape (n,), m/s
+        Motor speeds.
+    forces : ndarray of shape (n,), N
+    play : ndarray of shape (n,), m
+        ``g_i`` in ``[-half, half]``.
+    half : float, m
+
+    Returns
+    -------
+    levels : ndarray of shape (K,), m/s
+    plateaus : ndarray of shape (K + 1,), N
+        Non-increasing; ``[0.0]`` with no engaged drive.
+    """
+    lower, upper = play == -half, play == half
+    engaged = (lower | upper) & (forces > 0)
+    order = np.argsort(speeds[engaged], kind="stable")
+    s = speeds[engaged][order]
+    below = np.where(lower, forces, 0.0)[engaged][order]     # force below the level, N
+    above = np.where(upper, -forces, 0.0)[engaged][order]    # force above the level, N
+    if s.size == 0:
+        return s, np.zeros(1)
+    starts = np.concatenate(([0], np.flatnonzero(np.diff(s) > 0) + 1))
+    levels, drops = s[starts], np.add.reduceat(below - above, starts)
+    first = float(np.sum(below))
+    plateaus = first - np.concatenate(([0.0], np.cumsum(drops)))
+    tolerance = 4.0 * (levels.size + 1) * np.finfo(float).eps * float(np.sum(forces[engaged]))
+    plateaus[np.abs(plateaus) <= tolerance] = 0.0
+    return levels, plateaus
+
+
+def _backlash_segment(plant: Plant, t0: float, t1: float, h: float, count: int, V: float,
+                      speeds: np.ndarray, play: np.ndarray, half: float, meter: Meter,
+                      out: _Output) -> tuple[float, np.ndarray, np.ndarray]:
+    """Steps with drive backlash: the engaged drives' staircase rebuilt every step, then
+    every play advanced with its wheel rolling at the body's new speed."""
+    command = plant.command(t0)
+    ext, m, c = plant.external(t0), plant.mass, plant.damping
+    forces = plant.contacts.forces
+    t_prev = t0
+    last = t1 - (t0 + (count - 1) * h)
+    dynamic = plant.dynamic_motors
+    for j in range(1, count + 1):
+        t_next, hj = (t0 + j * h, h) if j < count else (t1, last)
+        before = speeds
+        speeds = implicit_step(plant.motors, speeds, command, hj) if dynamic else command
+        a, b = m / hj + c, m * V / hj + ext
+        levels, plateaus = play_staircase(speeds, forces, play, half)
+        W, _ = moreau_step_staircase(levels, plateaus, a, b)
+        meter.evaluation()
+        meter.step()
+        force = _finite_step(t_next, W, m * (W - V) / hj)
+        play = np.clip(play + hj * (W - speeds), -half, half)
+        if dynamic:
+            out.add(t_prev, V, t_next, W, force, before, speeds)
+        else:
+            out.add(t_prev, V, t_next, W, force)
+        t_prev, V = t_next, W
+    return V, speeds, play

@@ -302,3 +302,20 @@ def status_message(status: SimulationStatus, detail: str = "") -> str:
     message = _MESSAGES[status]
     return message if not detail else f"{message} ({detail})"
 
+
+
+def refuse_backlash(plant: Any, owner: str) -> None:
+    """Refuse a plant with drive backlash (``plant.backlash > 0``) in ``owner``.
+
+    Only the Moreau-Jean method models the gearbox play (its per-contact play state); every
+    other solver, and everything built on them, calls this first.
+
+    Raises
+    ------
+    ParameterError
+        Naming the ``plant`` parameter of ``owner``, the rule and the backlash received.
+    """
+    if plant.backlash > 0:
+        raise ParameterError(parameter_message(
+            "plant", owner, "have motors.backlash = 0 (drive backlash is modelled by "
+            "simulate(..., method='moreau') only)", f"motors.backlash = {plant.backlash:g} m"))

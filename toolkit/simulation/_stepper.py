@@ -40,7 +40,7 @@ from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import MotorPiece, Plant
 from ._exact import (_FREE, _build_landscape, _dynamic_piece, _ideal_piece, _quiet_piece,
                      _quiet_plant, _Recorder)
-from ._result import Budget, Event, SimulationStatus, status_message
+from ._result import Budget, Event, SimulationStatus, refuse_backlash, status_message
 
 __all__ = ["ExactState", "ExactStep", "advance"]
 
@@ -194,6 +194,8 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
     """
     if type(plant) is not Plant and not isinstance(plant, Plant):
         raise ParameterTypeError(parameter_message("plant", "advance", "be a Plant", plant))
+    if plant.motors is not None and plant.motors.backlash > 0:
+        refuse_backlash(plant, "advance")
     if not isinstance(state, ExactState):
         raise ParameterTypeError(parameter_message("state", "advance", "be an ExactState",
                                                    state))

@@ -73,6 +73,26 @@ def test_reversal_error_is_first_order():
     np.testing.assert_allclose(with_play - without, B / (2 * V_C), rtol=0, atol=2 * h)
 
 
+@pytest.mark.parametrize("h", [1e-3, 3e-4, 1e-4])
+def test_a_drive_whose_force_reverses_crosses_its_play(h):
+    # Contacts at v1 = 0.1 and v2 = 0.3 m/s (f each) pull a body up from rest. Without play it
+    # stops at v1 (the near edge of the zero band [v1, v2]). With play the v1 drive leaves its
+    # lower edge as soon as V > v1 (its force would turn negative), so the body accelerates
+    # under f alone, a = f / m, until that wheel has crossed b: (V - v1)^2 / (2 a) = b, hence
+    # V_end = v1 + sqrt(2 a b); then the drive re-engages at its upper edge and the band's
+    # forces cancel. The step k whose end first sees the play crossed obeys
+    # k (k + 1) >= (t* / h)^2 > (k - 1) k with t* = sqrt(2 b / a), so |k h - t*| < h and
+    # |V_h - V_end| < a h (plus 1e-12 m/s of rounding).
+    f, m, v1, v2 = 0.8, 2.0, 0.1, 0.3
+    a = f / m
+    plant = Plant(ContactSet([v1, v2], [f, f]), m, motors=Motors(backlash=B))
+    result = simulate(plant, 1.0, method="moreau", step=h)
+    expected = v1 + np.sqrt(2 * a * B)
+    np.testing.assert_allclose(result.V[-1], expected, rtol=0, atol=a * h + 1e-12)
+    without = simulate(Plant(plant.contacts, m), 1.0)
+    np.testing.assert_allclose(without.V[-1], v1, rtol=0, atol=1e-12)   # exact engine: rounding
+
+
 def test_zero_backlash_leaves_the_other_methods_alone():
     # b = 0 is the Coulomb plant: the exact engine accepts it, and its reversal time is the
     # closed form 2 v m / F_tot to rounding (1e-12 s).

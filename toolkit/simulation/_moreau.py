@@ -339,21 +339,27 @@ def _staircase_segment(plant: Plant, t0: float, t1: float, h: float, count: int,
     return V
 
 
-def _general_segment(plant: Plant, t0: float, t1: float, h: float, count: int, V: float,
-                     speeds: np.ndarray, meter: Meter, out: _Output) -> tuple[float, np.ndarray]:
-    """Steps with dynamic motors and/or compliance: staircase or kinks rebuilt every step."""
+def _motor_steps(plant: Plant, t0: float, t1: float, h: float, count: int, speeds: np.ndarray):
+    """The ``count`` steps of a segment with its command held: yields ``(t_next, h_j,
+    speeds before, speeds after)``, the contact speeds advanced by the motor law's implicit
+    step (dynamic motors) or set to the command (ideal motors); the last step ends at ``t1``."""
     command = plant.command(t0)
-    ext, m, c = plant.external(t0), plant.mass, plant.damping
-    t_prev = t0
     last = t1 - (t0 + (count - 1) * h)
     dynamic = plant.dynamic_motors
     for j in range(1, count + 1):
         t_next, hj = (t0 + j * h, h) if j < count else (t1, last)
         before = speeds
-        if dynamic:
-            speeds = implicit_step(plant.motors, speeds, command, hj)
-        else:
-            speeds = command
+        speeds = implicit_step(plant.motors, speeds, command, hj) if dynamic else command
+        yield t_next, hj, before, speeds
+
+
+def _general_segment(plant: Plant, t0: float, t1: float, h: float, count: int, V: float,
+                     speeds: np.ndarray, meter: Meter, out: _Output) -> tuple[float, np.ndarray]:
+    """Steps with dynamic motors and/or compliance: staircase or kinks rebuilt every step."""
+    ext, m, c = plant.external(t0), plant.mass, plant.damping
+    t_prev = t0
+    dynamic = plant.dynamic_motors
+    for t_next, hj, before, speeds in _motor_steps(plant, t0, t1, h, count, speeds):
         a, b = m / hj + c, m * V / hj + ext
         if plant.compliance > 0:
             W = _compliant_step(plant, speeds, a, b, meter)
@@ -437,16 +443,11 @@ def _backlash_segment(plant: Plant, t0: float, t1: float, h: float, count: int, 
                       out: _Output) -> tuple[float, np.ndarray, np.ndarray]:
     """Steps with drive backlash: the engaged drives' staircase rebuilt every step, then
     every play advanced with its wheel rolling at the body's new speed."""
-    command = plant.command(t0)
     ext, m, c = plant.external(t0), plant.mass, plant.damping
     forces = plant.contacts.forces
     t_prev = t0
-    last = t1 - (t0 + (count - 1) * h)
     dynamic = plant.dynamic_motors
-    for j in range(1, count + 1):
-        t_next, hj = (t0 + j * h, h) if j < count else (t1, last)
-        before = speeds
-        speeds = implicit_step(plant.motors, speeds, command, hj) if dynamic else command
+    for t_next, hj, before, speeds in _motor_steps(plant, t0, t1, h, count, speeds):
         a, b = m / hj + c, m * V / hj + ext
         levels, plateaus = play_staircase(speeds, forces, play, half)
         W, _ = moreau_step_staircase(levels, plateaus, a, b)

@@ -43,6 +43,10 @@ class UnscentedEstimator(KalmanEstimator):
 
     name = "unscented"
 
+    def __init__(self, model: Any, *, initial_covariance: Any = None) -> None:
+        # The sigma points are the UKF's way with the sign nonlinearity: no exact holds.
+        super().__init__(model, initial_covariance=initial_covariance, exact_holds=False)
+
     def _build(self) -> Any:
         # filterpy is imported here, not at module level: toolkit imports must not load it.
         from filterpy.kalman import JulierSigmaPoints, UnscentedKalmanFilter
@@ -59,7 +63,8 @@ class UnscentedEstimator(KalmanEstimator):
                  else np.diag([self._q * self._q / 12.0, self._std0**2]))
 
     def _advance(self, z: float, R: float, track: np.ndarray | None, var_v: float, steady: bool,
-                 bounds: Any = None, force: float = 0.0) -> None:
+                 bounds: Any = None, force: float = 0.0, count: int = 0, t: float = 0.0,
+                 wheels: Any = None) -> None:
         if track is None:
             self._start(z)
             self.last_nis = np.nan

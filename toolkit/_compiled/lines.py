@@ -1,0 +1,218 @@
+"""Kernels of quantized straight lines: the exact set of lines a run of counts allows.
+
+Compiled by :func:`toolkit._compiled.load` (``load("lines")``); as written, this module
+imports nothing but ``math`` and NumPy and runs as Python (``NUMBA_DISABLE_JIT=1``).
+
+A body (or a wheel) that moves at one constant speed ``v`` passes position ``x0 + v tau_j +
+r_j`` at the sample times ``tau_j`` (``r_j`` a known offset: what remains of a motor
+transient), and an ideal encoder of count ``q`` reads ``c_j = floor(position / q)``. Each
+reading confines ``(x0, v)`` to the strip ``c_j q - r_j <= x0 + tau_j v < (c_j + 1) q - r_j``;
+together the readings confine it to a convex polygon, exactly the lines that give these
+counts (no noise model, no white approximation of the quantization's sawtooth).
+
+- :func:`clip_strip`: a convex polygon intersected with a strip (Sutherland-Hodgman against
+  its two half-planes).
+- :func:`extend_lines`: many polygons (one per wheel) clipped by one reading each.
+- :func:`line_moments`: mean and covariance of ``(x0, v)`` uniform over a polygon and
+  weighted by the ``x``-width of a second polygon at the same ``v`` (the wheel a body rides:
+  the joint uniform law over both lines' intercepts, with the shared speed). Exact: between
+  consecutive vertex speeds every slice width is linear in ``v``, the integrands are
+  polynomials of degree at most 4, and 3-point Gauss-Legendre integrates them exactly.
+
+Polygons are arrays of shape ``(capacity, 2)`` with rows ``(x, v)`` counter-clockwise in
+their first ``n`` rows. Callers choose coordinates near the polygon (a reference intercept
+and speed subtracted) so that the strips' bounds keep their precision.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_INLINE = {"inline": "always"}
+
+KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "slice_x": _INLINE,
+           "line_moments": {}}
+
+# 3-point Gauss-Legendre on [-1, 1]: exact for polynomials of degree <= 5.
+_GL_X = np.array([-math.sqrt(0.6), 0.0, math.sqrt(0.6)])
+_GL_W = np.array([5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0])
+
+
+def clip_half(poly: np.ndarray, n: int, a0: float, a1: float, bound: float,
+              out: np.ndarray) -> int:
+    """``poly[:n]`` intersected with ``a0 x + a1 v <= bound`` into ``out``; the new count
+    (0 when empty; ``-1`` when ``out`` is too small)."""
+    m = 0
+    cap = out.shape[0]
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        fp = a0 * poly[i, 0] + a1 * poly[i, 1] - bound
+        fq = a0 * poly[j, 0] + a1 * poly[j, 1] - bound
+        if fp <= 0.0:
+            if m == cap:
+                return -1
+            out[m, 0] = poly[i, 0]
+            out[m, 1] = poly[i, 1]
+            m += 1
+        if (fp < 0.0 < fq) or (fq < 0.0 < fp):
+            if m == cap:
+                return -1
+            s = fp / (fp - fq)
+            out[m, 0] = poly[i, 0] + s * (poly[j, 0] - poly[i, 0])
+            out[m, 1] = poly[i, 1] + s * (poly[j, 1] - poly[i, 1])
+            m += 1
+    return m if m >= 3 else 0
+
+
+def clip_strip(poly: np.ndarray, n: int, a0: float, a1: float, lo: float, hi: float,
+               scratch: np.ndarray, out: np.ndarray) -> int:
+    """``poly[:n]`` intersected with the strip ``lo <= a0 x + a1 v <= hi``, written to
+    ``out`` (``scratch`` holds the intermediate polygon; neither may alias ``poly``).
+
+    Returns
+    -------
+    int
+        The result's vertex count: 0 when empty (or degenerate, fewer than 3 vertices),
+        ``-1`` when ``out`` or ``scratch`` has too few rows.
+    """
+    m = clip_half(poly, n, a0, a1, hi, scratch)
+    if m <= 0:
+        return m
+    return clip_half(scratch, m, -a0, -a1, -lo, out)
+
+
+def extend_lines(polys: np.ndarray, counts: np.ndarray, tau: float, readings: np.ndarray,
+                 first: np.ndarray, ref: np.ndarray, q: float, gap: np.ndarray, transient: float,
+                 scratch: np.ndarray, out: np.ndarray) -> None:
+    """Clip polygon ``i`` (``polys[i, :counts[i]]``, coordinates ``(x - first[i] q, v -
+    ref[i])``) by reading ``readings[i]`` at ``tau`` (s) after the first: the strip ``lo <= x
+    + tau v <= lo + q``, ``lo = (readings[i] - first[i]) q - ref[i] tau - gap[i] transient``
+    (``gap[i] transient`` the motor transient's remainder, m), in place, for every ``i`` with
+    ``counts[i] > 0``; ``counts[i]`` becomes the new vertex count (0: no line fits the
+    readings; -1: out of capacity).
+
+    ``scratch`` and ``out`` have the shape of one polygon."""
+    for i in range(polys.shape[0]):
+        n = counts[i]
+        if n <= 0:
+            continue
+        lo = (readings[i] - first[i]) * q - ref[i] * tau - gap[i] * transient
+        m = clip_strip(polys[i], n, 1.0, tau, lo, lo + q, scratch, out)
+        counts[i] = m
+        for r in range(max(m, 0)):
+            polys[i, r, 0] = out[r, 0]
+            polys[i, r, 1] = out[r, 1]
+
+
+def slice_x(poly: np.ndarray, n: int, v: float) -> tuple[float, float]:
+    """The polygon's ``x`` range at speed ``v`` (empty: ``lo > hi``)."""
+    lo = math.inf
+    hi = -math.inf
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        v0 = poly[i, 1]
+        v1 = poly[j, 1]
+        if v0 == v1:
+            if v0 == v:
+                lo = min(lo, poly[i, 0], poly[j, 0])
+                hi = max(hi, poly[i, 0], poly[j, 0])
+            continue
+        if (v0 - v) * (v1 - v) <= 0.0:
+            x = poly[i, 0] + (poly[j, 0] - poly[i, 0]) * ((v - v0) / (v1 - v0))
+            lo = min(lo, x)
+            hi = max(hi, x)
+    return lo, hi
+
+
+def line_moments(pc: np.ndarray, nc: int, pw: np.ndarray, nw: int, out: np.ndarray) -> float:
+    """Moments of ``(x, v)`` with density proportional to ``1[(x, v) in pc] w(v)``, ``w`` the
+    ``x``-width of ``pw`` at ``v`` (``nw = 0``: ``w = 1``).
+
+    Writes ``out[:5] = (mean x, mean v, var x, cov xv, var v)`` and returns the total weight
+    (``int w(v) width_pc(v) dv``; 0 when the two polygons share no speed, ``out`` then
+    untouched). Central moments are summed about the mean of a first pass (no cancellation
+    of large raw moments).
+    """
+    vlo = math.inf
+    vhi = -math.inf
+    for i in range(nc):
+        vlo = min(vlo, pc[i, 1])
+        vhi = max(vhi, pc[i, 1])
+    if nw > 0:
+        wlo = math.inf
+        whi = -math.inf
+        for i in range(nw):
+            wlo = min(wlo, pw[i, 1])
+            whi = max(whi, pw[i, 1])
+        vlo = max(vlo, wlo)
+        vhi = min(vhi, whi)
+    if not vlo < vhi:
+        return 0.0
+    # Breakpoints: every vertex speed inside (vlo, vhi), sorted.
+    br = np.empty(nc + nw + 2)
+    nb = 0
+    br[nb] = vlo
+    nb += 1
+    br[nb] = vhi
+    nb += 1
+    for i in range(nc):
+        if vlo < pc[i, 1] < vhi:
+            br[nb] = pc[i, 1]
+            nb += 1
+    for i in range(nw):
+        if vlo < pw[i, 1] < vhi:
+            br[nb] = pw[i, 1]
+            nb += 1
+    b = np.sort(br[:nb])
+    total = 0.0
+    sv = 0.0
+    sx = 0.0
+    # Pass 1: weight and means; pass 2: central second moments.
+    for sweep in range(2):
+        mv = sv / total if sweep == 1 else 0.0
+        mx = sx / total if sweep == 1 else 0.0
+        vxx = 0.0
+        vxv = 0.0
+        vvv = 0.0
+        for k in range(nb - 1):
+            a = b[k]
+            c = b[k + 1]
+            if not a < c:
+                continue
+            half = 0.5 * (c - a)
+            mid = 0.5 * (a + c)
+            for g in range(3):
+                v = mid + half * _GL_X[g]
+                lo, hi = slice_x(pc, nc, v)
+                wc = hi - lo
+                if not wc > 0.0:
+                    continue
+                ww = 1.0
+                if nw > 0:
+                    l2, h2 = slice_x(pw, nw, v)
+                    ww = h2 - l2
+                    if not ww > 0.0:
+                        continue
+                rho = half * _GL_W[g] * wc * ww
+                xm = 0.5 * (lo + hi)
+                if sweep == 0:
+                    total += rho
+                    sv += rho * v
+                    sx += rho * xm
+                else:
+                    dv = v - mv
+                    dx = xm - mx
+                    vxx += rho * (dx * dx + wc * wc / 12.0)
+                    vxv += rho * dx * dv
+                    vvv += rho * dv * dv
+        if sweep == 0 and not total > 0.0:
+            return 0.0
+        if sweep == 1:
+            out[0] = mx
+            out[1] = mv
+            out[2] = vxx / total
+            out[3] = vxv / total
+            out[4] = vvv / total
+    return total

@@ -80,7 +80,7 @@ class WheelLines:
         self._c0 = np.zeros(n)
         self.ref = np.zeros(n)               # reference speeds of the windows, m/s
         self.gap0 = np.zeros(n)              # speed minus asymptote at t0 (motor law), m/s
-        self._gap: tuple[float, np.ndarray] | None = None    # (t, gap) at a transient's end
+        self._moving: tuple[float, np.ndarray] | None = None  # (end time, track) of the last moving period
         self._last: tuple[float, np.ndarray] | None = None
 
     def gap_at(self, t: float) -> np.ndarray:
@@ -98,10 +98,7 @@ class WheelLines:
             return
         if not steady:
             self.active = False
-            if self._lag > 0.0:
-                # The motors end this period a motor-law gap away from the speeds they
-                # settle at; it decays with the lag in the windows that follow.
-                self._gap = (t, self.model.end_speeds(track) - track[1])
+            self._moving = (t, track)
             return
         if not self.active:
             t0, w0 = last
@@ -109,9 +106,15 @@ class WheelLines:
             self.t0 = t0
             self._c0 = np.asarray(w0, dtype=float)
             self.ref = np.array(track[0], dtype=float)
-            g = self._gap
-            self.gap0 = (np.zeros_like(self.ref) if g is None or self._lag <= 0.0
-                         else g[1] * math.exp(-(t0 - g[0]) / self._lag))
+            # The motors ended their last moving period a motor-law gap away from the speeds
+            # they settle at; it decays with the lag into the window.
+            moving = self._moving
+            if moving is None or self._lag <= 0.0:
+                self.gap0 = np.zeros_like(self.ref)
+            else:
+                end, track_moving = moving
+                gap = self.model.end_speeds(track_moving) - track_moving[1]
+                self.gap0 = gap * math.exp(-(t0 - end) / self._lag)
             for i in range(self.polys.shape[0]):
                 _box(self.polys[i])
             self.counts[:] = 4

@@ -3,16 +3,18 @@
 Compiled by :func:`toolkit._compiled.load` (``load("lines")``); as written, this module
 imports nothing but ``math`` and NumPy and runs as Python (``NUMBA_DISABLE_JIT=1``).
 
-A body (or a wheel) that moves at one constant speed ``v`` passes position ``x0 + v tau_j +
-r_j`` at the sample times ``tau_j`` (``r_j`` a known offset: what remains of a motor
-transient), and an ideal encoder of count ``q`` reads ``c_j = floor(position / q)``. Each
-reading confines ``(x0, v)`` to the strip ``c_j q - r_j <= x0 + tau_j v < (c_j + 1) q - r_j``;
+A body (or a wheel) that moves at one constant speed ``v`` passes position ``x0 + v tau_j``
+at the sample times ``tau_j``, and an ideal encoder of count ``q`` reads ``c_j = floor(position
+/ q)``. Each reading confines ``(x0, v)`` to the strip ``c_j q <= x0 + tau_j v < (c_j + 1) q``;
 together the readings confine it to a convex polygon, exactly the lines that give these
 counts (no noise model, no white approximation of the quantization's sawtooth).
 
 - :func:`clip_strip`: a convex polygon intersected with a strip (Sutherland-Hodgman against
-  its two half-planes).
+  its two half-planes; a vertex within ``tol`` of a boundary counts as on it, so rounding
+  adds no sliver vertices).
 - :func:`extend_lines`: many polygons (one per wheel) clipped by one reading each.
+- :func:`ride_moments`: the body's line riding an unknown wheel: the evidence-weighted
+  mixture of :func:`line_moments` over the wheels.
 - :func:`line_moments`: mean and covariance of ``(x0, v)`` uniform over a polygon and
   weighted by the ``x``-width of a second polygon at the same ``v`` (the wheel a body rides:
   the joint uniform law over both lines' intercepts, with the shared speed). Exact: between
@@ -20,8 +22,8 @@ counts (no noise model, no white approximation of the quantization's sawtooth).
   polynomials of degree at most 4, and 3-point Gauss-Legendre integrates them exactly.
 
 Polygons are arrays of shape ``(capacity, 2)`` with rows ``(x, v)`` counter-clockwise in
-their first ``n`` rows. Callers choose coordinates near the polygon (a reference intercept
-and speed subtracted) so that the strips' bounds keep their precision.
+their first ``n`` rows: ``x`` the intercept less the first reading's count edge (m), ``v``
+the speed (m/s).
 """
 
 from __future__ import annotations
@@ -33,30 +35,31 @@ import numpy as np
 _INLINE = {"inline": "always"}
 
 KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "slice_x": _INLINE,
-           "line_moments": {}}
+           "line_moments": {}, "area": _INLINE, "ride_moments": {}}
 
 # 3-point Gauss-Legendre on [-1, 1]: exact for polynomials of degree <= 5.
 _GL_X = np.array([-math.sqrt(0.6), 0.0, math.sqrt(0.6)])
 _GL_W = np.array([5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0])
 
 
-def clip_half(poly: np.ndarray, n: int, a0: float, a1: float, bound: float,
+def clip_half(poly: np.ndarray, n: int, a0: float, a1: float, bound: float, tol: float,
               out: np.ndarray) -> int:
     """``poly[:n]`` intersected with ``a0 x + a1 v <= bound`` into ``out``; the new count
-    (0 when empty; ``-1`` when ``out`` is too small)."""
+    (0 when empty or degenerate; ``-1`` when ``out`` is too small). A vertex within ``tol``
+    of the boundary counts as on it (kept, and no intersection is added next to it)."""
     m = 0
     cap = out.shape[0]
     for i in range(n):
         j = i + 1 if i + 1 < n else 0
         fp = a0 * poly[i, 0] + a1 * poly[i, 1] - bound
         fq = a0 * poly[j, 0] + a1 * poly[j, 1] - bound
-        if fp <= 0.0:
+        if fp <= tol:
             if m == cap:
                 return -1
             out[m, 0] = poly[i, 0]
             out[m, 1] = poly[i, 1]
             m += 1
-        if (fp < 0.0 < fq) or (fq < 0.0 < fp):
+        if (fp < -tol and fq > tol) or (fq < -tol and fp > tol):
             if m == cap:
                 return -1
             s = fp / (fp - fq)
@@ -67,9 +70,10 @@ def clip_half(poly: np.ndarray, n: int, a0: float, a1: float, bound: float,
 
 
 def clip_strip(poly: np.ndarray, n: int, a0: float, a1: float, lo: float, hi: float,
-               scratch: np.ndarray, out: np.ndarray) -> int:
+               tol: float, scratch: np.ndarray, out: np.ndarray) -> int:
     """``poly[:n]`` intersected with the strip ``lo <= a0 x + a1 v <= hi``, written to
-    ``out`` (``scratch`` holds the intermediate polygon; neither may alias ``poly``).
+    ``out`` (``scratch`` holds the intermediate polygon; neither may alias ``poly``);
+    vertices within ``tol`` (in units of ``a0 x + a1 v``) of a bound count as on it.
 
     Returns
     -------
@@ -77,29 +81,28 @@ def clip_strip(poly: np.ndarray, n: int, a0: float, a1: float, lo: float, hi: fl
         The result's vertex count: 0 when empty (or degenerate, fewer than 3 vertices),
         ``-1`` when ``out`` or ``scratch`` has too few rows.
     """
-    m = clip_half(poly, n, a0, a1, hi, scratch)
+    m = clip_half(poly, n, a0, a1, hi, tol, scratch)
     if m <= 0:
         return m
-    return clip_half(scratch, m, -a0, -a1, -lo, out)
+    return clip_half(scratch, m, -a0, -a1, -lo, tol, out)
 
 
-def extend_lines(polys: np.ndarray, counts: np.ndarray, tau: float, readings: np.ndarray,
-                 first: np.ndarray, ref: np.ndarray, q: float, gap: np.ndarray, transient: float,
+def extend_lines(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.ndarray,
+                 readings: np.ndarray, first: np.ndarray, q: float, tol: float,
                  scratch: np.ndarray, out: np.ndarray) -> None:
-    """Clip polygon ``i`` (``polys[i, :counts[i]]``, coordinates ``(x - first[i] q, v -
-    ref[i])``) by reading ``readings[i]`` at ``tau`` (s) after the first: the strip ``lo <= x
-    + tau v <= lo + q``, ``lo = (readings[i] - first[i]) q - ref[i] tau - gap[i] transient``
-    (``gap[i] transient`` the motor transient's remainder, m), in place, for every ``i`` with
-    ``counts[i] > 0``; ``counts[i]`` becomes the new vertex count (0: no line fits the
-    readings; -1: out of capacity).
+    """Clip polygon ``i`` (``polys[i, :counts[i]]``; its line starts at ``starts[i]`` s with
+    reading ``first[i]``) by reading ``readings[i]`` at ``t`` (s): the strip ``lo <= x + tau
+    v <= lo + q``, ``tau = t - starts[i]``, ``lo = (readings[i] - first[i]) q``, in place, for
+    every ``i`` with ``counts[i] > 0``; ``counts[i]`` becomes the new vertex count (0: no
+    line fits the readings; -1: out of capacity).
 
     ``scratch`` and ``out`` have the shape of one polygon."""
     for i in range(polys.shape[0]):
         n = counts[i]
         if n <= 0:
             continue
-        lo = (readings[i] - first[i]) * q - ref[i] * tau - gap[i] * transient
-        m = clip_strip(polys[i], n, 1.0, tau, lo, lo + q, scratch, out)
+        lo = (readings[i] - first[i]) * q
+        m = clip_strip(polys[i], n, 1.0, t - starts[i], lo, lo + q, tol, scratch, out)
         counts[i] = m
         for r in range(max(m, 0)):
             polys[i, r, 0] = out[r, 0]
@@ -215,4 +218,81 @@ def line_moments(pc: np.ndarray, nc: int, pw: np.ndarray, nw: int, out: np.ndarr
             out[2] = vxx / total
             out[3] = vxv / total
             out[4] = vvv / total
+    return total
+
+
+def area(poly: np.ndarray, n: int) -> float:
+    """Area of the counter-clockwise polygon ``poly[:n]`` (shoelace, about its first vertex)."""
+    total = 0.0
+    x0 = poly[0, 0]
+    v0 = poly[0, 1]
+    for i in range(1, n - 1):
+        total += (poly[i, 0] - x0) * (poly[i + 1, 1] - v0) - (poly[i + 1, 0] - x0) * (poly[i, 1] - v0)
+    return 0.5 * total
+
+
+def ride_moments(pc: np.ndarray, nc: int, polys: np.ndarray, counts: np.ndarray,
+                 prior: np.ndarray, moments: np.ndarray, evidence: np.ndarray,
+                 out: np.ndarray) -> float:
+    """The body's line ``pc[:nc]`` riding one of the wheels ``polys[i, :counts[i]]``, which one
+    unknown (prior odds ``prior[i]``): the mixture of :func:`line_moments` over the wheels,
+    each weighted by its prior times its evidence, the central polygon's width averaged over
+    that wheel's uniform posterior of the speed (``line_moments``' weight over the wheel
+    polygon's area: the likelihood of the central counts when the body rides that wheel).
+
+    Writes each wheel's moments to ``moments[i]`` and posterior weight (prior times evidence)
+    to ``evidence[i]`` (0 where its speeds miss the body's), the mixture's ``(mean x, mean v,
+    var x, cov xv, var v)`` to ``out``; returns the total weight (0: the body rides none of
+    them, ``out`` untouched).
+    """
+    vlo = math.inf
+    vhi = -math.inf
+    for i in range(nc):
+        vlo = min(vlo, pc[i, 1])
+        vhi = max(vhi, pc[i, 1])
+    total = 0.0
+    for i in range(polys.shape[0]):
+        evidence[i] = 0.0
+        n = counts[i]
+        if n < 3 or not prior[i] > 0.0:
+            continue
+        wlo = math.inf
+        whi = -math.inf
+        for r in range(n):
+            wlo = min(wlo, polys[i, r, 1])
+            whi = max(whi, polys[i, r, 1])
+        if not (wlo < vhi and vlo < whi):
+            continue
+        a = area(polys[i], n)
+        if not a > 0.0:
+            continue
+        w = line_moments(pc, nc, polys[i], n, moments[i])
+        if w > 0.0:
+            evidence[i] = prior[i] * (w / a)
+            total += evidence[i]
+    if not total > 0.0:
+        return 0.0
+    mx = 0.0
+    mv = 0.0
+    for i in range(polys.shape[0]):
+        if evidence[i] > 0.0:
+            p = evidence[i] / total
+            mx += p * moments[i, 0]
+            mv += p * moments[i, 1]
+    vxx = 0.0
+    vxv = 0.0
+    vvv = 0.0
+    for i in range(polys.shape[0]):
+        if evidence[i] > 0.0:
+            p = evidence[i] / total
+            dx = moments[i, 0] - mx
+            dv = moments[i, 1] - mv
+            vxx += p * (moments[i, 2] + dx * dx)
+            vxv += p * (moments[i, 3] + dx * dv)
+            vvv += p * (moments[i, 4] + dv * dv)
+    out[0] = mx
+    out[1] = mv
+    out[2] = vxx
+    out[3] = vxv
+    out[4] = vvv
     return total

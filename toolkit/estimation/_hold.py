@@ -1,15 +1,12 @@
 """A body riding a settled contact, estimated from the exact set of lines its counts allow.
 
-While the contacts hold their speeds and the body sticks to one of them (contact ``i``, an
-edge of the equilibrium set: the carousel cruising or braked), body and wheel ``i`` move at
-one speed ``V``: the body passes ``X_a + V tau + r(tau)`` (``tau`` the time since the hold's
-first sample ``a``) and the wheel ``x_0 + V tau' + r(tau')`` (``tau'`` since its window
-start), ``r`` what remains of the last motor transient
-(:func:`~toolkit.model.motors.transient_displacement` of the motor law's gap, known). An
-ideal encoder reads ``c = floor(position / q)``, so each reading confines the line's
-intercept and speed to a strip ``c q - r <= x + tau V < (c + 1) q - r``, and the readings
-together to a convex polygon: exactly the lines that give these counts
-(:mod:`toolkit._compiled.lines`).
+While the contacts hold their speeds and the body sticks to one of them (the carousel
+cruising or braked), body and that contact's wheel move at one speed ``V``: the body passes
+``X_a + V tau`` (``tau`` the time since the hold's first sample ``a``) and the wheel ``x_0 +
+V tau'`` (``tau'`` since its window start). An ideal encoder reads ``c = floor(position /
+q)``, so each reading confines the line's intercept and speed to a strip ``c q <= x + tau V <
+(c + 1) q``, and the readings together to a convex polygon: exactly the lines that give these
+counts (:mod:`toolkit._compiled.lines`).
 
 Why not the white model. The quantization error of a body at constant speed is not noise
 but a deterministic sawtooth ``q (frac(X_0 / q + k V h / q) - 1/2)`` (the Kalman filter's
@@ -19,15 +16,34 @@ and near a rational ``V h / q`` far worse (the pattern repeats and stops informi
 with white ``R`` is then overconfident or underconfident depending on the grid phase, which
 it cannot know. The polygon is the exact likelihood: with the grid phases uniform (the
 encoders' zero is wherever the parts were at power-up) and no other prior, the posterior of
-``(X_a, V)`` is uniform over the central polygon, weighted by the width of wheel ``i``'s
-polygon at the same ``V`` (the wheel's intercept integrated out). Its mean and covariance
-(:func:`~toolkit._compiled.lines.line_moments`, exact) are the filter's state while the hold
-lasts; both the central and the wheel windows start only where the model is exact (the
-contacts settled: ``steady``), and any reading outside every line the model allows (an
-empty polygon: a motor that wandered, a count the model did not expect) ends the hold.
+``(X_a, V)`` given that the body rides wheel ``i`` is uniform over the central polygon,
+weighted by the width of wheel ``i``'s polygon at the same ``V`` (the wheel's intercept
+integrated out). Which wheel the body rides is not assumed: the Gaussian filter's belief at
+the hold's start gives the prior odds (``exp(-d_i^2 / 2)``, ``d_i`` the distance of wheel
+``i``'s estimated speed from the body's in stds of their difference, floored at ``1e-300``
+of the largest: the belief may be wrong), each wheel's evidence (the likelihood of the
+central counts if the body rides it) updates them, and the filter's state is the mixture's
+mean and covariance (:func:`~toolkit._compiled.lines.ride_moments`, exact). Wheels whose
+speeds the counts exclude drop out; two wheels at nearly one speed share the weight.
 
-The hold needs ideal encoders (no read noise, no missed counts, no jitter) and motors that
-hold their speeds (``contact_drift = 0``); otherwise the filter keeps its Gaussian model.
+Where the lines are exact. A wheel's window starts once the contacts hold their speeds
+(``steady``), the motor law's remaining transient would move the contact by less than
+:data:`TRANSIENT` counts, and, after a reversal (or a start from rest), the contact has
+travelled the gearbox play since it turned (the encoder's play operator passes no motion
+before). A wheel whose readings leave every line restarts its window there. A hold starts
+only where the Gaussian filter has the body reach the equilibrium set after the wheels'
+lines became exact (a body that meets an edge contact still settling towards it may stop
+short inside a zero-force band and coast there, at a speed of its own). It ends when the
+contacts move, and fails at a reading no line allows (or when no wheel's speeds meet the
+body's, e.g. a hold begun before the body stuck): the filter's state then restarts from
+what the reading and a one-period difference know, and a new hold starts from the next
+sample.
+
+The hold needs ideal encoders (no read noise, no missed counts, no jitter), motors that
+hold their speeds (``contact_drift = 0``), no drag, and the friction the model knows
+(``friction_uncertainty = 0``: with an unknown spread the filter cannot tell that the body
+stuck, it may still creep towards the weighted median); otherwise the filter keeps its
+Gaussian model.
 """
 
 from __future__ import annotations
@@ -38,14 +54,20 @@ from typing import Any
 import numpy as np
 
 from .._compiled import kernels
-from ..model.motors import transient_displacement
 from ._input import EstimatorModel
 
-#: Vertices a polygon may hold (a run of counts of one line allows a quadrilateral; the
-#: starting box and rounding add a few).
-CAPACITY = 32
-#: Half sides of the starting box, m and m/s: any intercept and speed (the first two
-#: readings cut it to one count and ``2 q / h``).
+#: Vertices a polygon may hold (a run of counts of one line allows at most a quadrilateral;
+#: the starting box adds up to four).
+CAPACITY = 16
+#: A strip's bound within this many counts of a vertex takes it as on the bound (rounding;
+#: positions of a 10 s run are about 1e4 counts, stored to 1e-16 relative).
+TOLERANCE = 1e-8
+#: The motor transient's remainder (the distance the motor law has still to travel beyond
+#: its settled line) below which a wheel's line starts, in counts; the wheels' strips take
+#: it as their tolerance (the polygon a thousandth of a count wider: no line is lost).
+TRANSIENT = 1e-3
+#: Half sides of the starting box (m of intercept, m/s of speed): any line; the first two
+#: readings cut it to one count and ``2 q / h``.
 _BOX = (1.0e3, 1.0e3)
 
 
@@ -55,11 +77,10 @@ def _box(poly: np.ndarray) -> None:
 
 
 class WheelLines:
-    """Each wheel's polygon of lines since the contacts last settled.
+    """Each wheel's polygon of lines since its window started.
 
-    Push every sample, in order, with the period that ends there (its track and whether
-    the contacts held their speeds over it). A steady period after a moving one starts the
-    windows at its first sample; a moving period stops them.
+    Push every sample, in order, with the period that ends there (its track and whether the
+    contacts held their speeds over it).
 
     Parameters
     ----------
@@ -70,135 +91,150 @@ class WheelLines:
         self.model = model
         n = model.n
         self._q = model.sensors.wheel.distance_per_count
+        self._play = model.sensors.wheel.backlash
         self._lag = model.motor_lag
+        self._tol = TRANSIENT * self._q      # the transient's remainder counts as on a bound
         self.polys = np.empty((n, CAPACITY, 2))
         self.counts = np.zeros(n, dtype=np.int64)
+        self.starts = np.zeros(n)            # each window's first sample time, s
+        self._first = np.zeros(n)            # each window's first reading, counts
         self._scratch = np.empty((CAPACITY, 2))
         self._out = np.empty((CAPACITY, 2))
         self.active = False
-        self.t0 = math.nan
-        self._c0 = np.zeros(n)
-        self.ref = np.zeros(n)               # reference speeds of the windows, m/s
-        self.gap0 = np.zeros(n)              # speed minus asymptote at t0 (motor law), m/s
-        self._moving: tuple[float, np.ndarray] | None = None  # (end time, track) of the last moving period
+        self._change: tuple[float, np.ndarray, np.ndarray] | None = None   # (t, start, target)
+        self._ready_at = -math.inf
         self._last: tuple[float, np.ndarray] | None = None
 
-    def gap_at(self, t: float) -> np.ndarray:
-        """Each contact's speed minus its settled speed at time ``t`` (s), m/s."""
-        if self._lag <= 0.0 or not self.gap0.any():
-            return np.zeros_like(self.gap0)
-        return self.gap0 * math.exp(-(t - self.t0) / self._lag)
-
     def push(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool) -> None:
-        """Row at time ``t`` (s) with wheel counts ``wheels``; ``track`` and ``steady`` of
-        the period ending at it (``track`` None for the first row)."""
-        wheels = np.asarray(wheels)
+        """Row at time ``t`` (s) with wheel counts ``wheels`` (copied); ``track`` and
+        ``steady`` of the period ending at it (``track`` None for the first row)."""
+        wheels = np.array(wheels, dtype=float)
         last, self._last = self._last, (t, wheels)
         if track is None:
             return
         if not steady:
+            if self.active or self._change is None or not np.array_equal(track[1], self._change[2]):
+                # A command change: the motors leave the speeds they held towards a target.
+                self._change = (last[0], np.array(track[0]), np.array(track[1]))
+                self._ready_at = self._start_time()
             self.active = False
-            self._moving = (t, track)
             return
         if not self.active:
             t0, w0 = last
+            if t0 < self._ready_at:
+                return
             self.active = True
-            self.t0 = t0
-            self._c0 = np.asarray(w0, dtype=float)
-            self.ref = np.array(track[0], dtype=float)
-            # The motors ended their last moving period a motor-law gap away from the speeds
-            # they settle at; it decays with the lag into the window.
-            moving = self._moving
-            if moving is None or self._lag <= 0.0:
-                self.gap0 = np.zeros_like(self.ref)
-            else:
-                end, track_moving = moving
-                gap = self.model.end_speeds(track_moving) - track_moving[1]
-                self.gap0 = gap * math.exp(-(t0 - end) / self._lag)
-            for i in range(self.polys.shape[0]):
+            self.starts[:] = t0
+            self._first[:] = w0
+            for i in range(self.counts.size):
                 _box(self.polys[i])
             self.counts[:] = 4
-            self._extend(0.0, self._c0)
-        self._extend(t - self.t0, wheels)
+            self._extend(t0, w0)
+        self._extend(t, wheels)
+        dead = self.counts <= 0
+        if dead.any():
+            # No line (or no room) for these readings: a new window from this row.
+            for i in np.flatnonzero(dead):
+                _box(self.polys[i])
+            self.counts[dead] = 4
+            self.starts[dead] = t
+            self._first[dead] = wheels[dead]
+            self._extend(t, wheels)
 
-    def _extend(self, tau: float, wheels: Any) -> None:
-        transient = transient_displacement(1.0, tau, self._lag) if self._lag > 0.0 else 0.0
+    def _start_time(self) -> float:
+        """When every wheel's line is exact after the last change: the motor law's remainder
+        under :data:`TRANSIENT` counts, and the gearbox play taken up after a reversal."""
+        t_c, start, target = self._change
+        lag, q, play = self._lag, self._q, self._play
+        ready = t_c
+        gap = np.abs(start - target)
+        if lag > 0.0 and gap.max() * lag > TRANSIENT * q:
+            # |start - target| lag exp(-s / lag) <= TRANSIENT q
+            ready = t_c + lag * math.log(gap.max() * lag / (TRANSIENT * q))
+        if play > 0.0:
+            for v0, u in zip(start.tolist(), target.tolist()):
+                if v0 * u > 0.0 or u == 0.0:
+                    continue                   # no reversal (the play stays taken up)
+                # The motor law from v0 to u crosses zero at s_z (lag: u + (v0 - u)
+                # exp(-s / lag) = 0), then travels |u| (s - s_z - lag (1 - exp(-(s - s_z) /
+                # lag))); its play is taken up when that reaches the play. Bracket, bisect.
+                s_z = lag * math.log((u - v0) / u) if lag > 0.0 else 0.0
+
+                def travel(s: float) -> float:
+                    x = s - s_z
+                    return abs(u) * (x - (lag * -math.expm1(-x / lag) if lag > 0.0 else 0.0))
+
+                lo, hi = s_z, s_z + play / abs(u) + lag
+                while travel(hi) < play:
+                    hi += play / abs(u) + lag
+                for _ in range(60):
+                    mid = 0.5 * (lo + hi)
+                    if travel(mid) < play:
+                        lo = mid
+                    else:
+                        hi = mid
+                ready = max(ready, t_c + hi)
+        return ready
+
+    def _extend(self, t: float, wheels: np.ndarray) -> None:
         kernels("lines", 30 * self.counts.size).extend_lines(
-            self.polys, self.counts, tau, wheels, self._c0, self.ref, self._q, self.gap0, transient,
+            self.polys, self.counts, t, self.starts, wheels, self._first, self._q, self._tol,
             self._scratch, self._out)
 
 
 class Hold:
-    """The body riding contact ``i`` from sample ``a``: its polygon and the moments.
+    """The body on one line from sample ``a``, riding one of the wheels: polygon and moments.
 
     Parameters
     ----------
     q : float, m
         The central encoder's count.
-    lag : float, s
-        The motors' lag (for the transient's remainder).
+    n : int
+        Number of wheels.
     """
 
-    def __init__(self, q: float, lag: float) -> None:
+    def __init__(self, q: float, n: int) -> None:
         self._q = q
-        self._lag = lag
+        self._tol = TOLERANCE * q
         self._polys = (np.empty((CAPACITY, 2)), np.empty((CAPACITY, 2)))
         self._scratch = np.empty((CAPACITY, 2))
         self._n = 0
-        self._moments = np.zeros(5)
-        self.contact = -1
+        self._moments = np.zeros((n, 5))
+        self.evidence = np.zeros(n)          # posterior weight of each wheel
+        self._out = np.zeros(5)
 
-    def start(self, t: float, count: int, contact: int, lines: WheelLines) -> None:
-        """Begin at sample time ``t`` (s) with central ``count`` on ``contact`` (its wheel
-        window in ``lines`` already under way)."""
+    def start(self, t: float, count: int, prior: np.ndarray) -> None:
+        """Begin at sample time ``t`` (s) with central ``count``; ``prior`` the odds of each
+        wheel being the one the body rides."""
         self.t_a = t
         self.c_a = count
-        self.contact = contact
-        self.ref = float(lines.ref[contact])
-        self.gap = float(lines.gap_at(t)[contact])
+        self._prior = prior
         poly = self._polys[0]
         _box(poly)
-        # The anchor's own reading: X_a in [c_a q, (c_a + 1) q), i.e. x' in [0, q).
-        self._n = kernels("lines", 1).clip_strip(poly, 4, 1.0, 0.0, 0.0, self._q, self._scratch,
-                                                 self._polys[1])
+        # The anchor's own reading: X_a in [c_a q, (c_a + 1) q), i.e. x in [0, q).
+        self._n = kernels("lines", 1).clip_strip(poly, 4, 1.0, 0.0, 0.0, self._q, self._tol,
+                                                 self._scratch, self._polys[1])
         self._polys = (self._polys[1], self._polys[0])
-        self._tau = 0.0
-        self.step_input = (0.0, 0.0)
 
     def push(self, t: float, count: int, lines: WheelLines
              ) -> tuple[float, float, float, float, float] | None:
         """Take the central ``count`` read at ``t`` (s); the state's mean and covariance
         ``(X, V, P_XX, P_XV, P_VV)`` (m, m/s, m^2, m^2/s, (m/s)^2), or None when no line fits
-        the counts (the hold ends)."""
+        the counts or no wheel's speeds meet the body's (the hold fails)."""
         tau = t - self.t_a
         q = self._q
-        r = 0.0
-        if self.gap != 0.0:
-            r = transient_displacement(self.gap, tau, self._lag)
-        lo = (count - self.c_a) * q - self.ref * tau - r
+        lo = (count - self.c_a) * q
         K = kernels("lines", 300)
         poly, spare = self._polys
-        n = K.clip_strip(poly, self._n, 1.0, tau, lo, lo + q, self._scratch, spare)
-        i = self.contact
-        if n <= 0 or lines.counts[i] <= 0:
+        n = K.clip_strip(poly, self._n, 1.0, tau, lo, lo + q, self._tol, self._scratch, spare)
+        if n <= 0:
             return None
-        weight = K.line_moments(spare, n, lines.polys[i], lines.counts[i], self._moments)
-        if not weight > 0.0:
+        if not K.ride_moments(spare, n, lines.polys, lines.counts, self._prior, self._moments,
+                              self.evidence, self._out) > 0.0:
             return None
         self._polys = (spare, poly)
         self._n = n
-        # x+ = F x + u over the step from the previous sample (F = [[1, dt], [0, 1]]): what
-        # the transient's remainder adds beyond the straight line.
-        before, self._tau = self._tau, tau
-        if self.gap != 0.0:
-            g0 = self.gap * math.exp(-before / self._lag)
-            self.step_input = (transient_displacement(g0, tau - before, self._lag) - (tau - before) * g0,
-                               g0 * math.expm1(-(tau - before) / self._lag))
-        else:
-            self.step_input = (0.0, 0.0)
-        mx, mv, vxx, vxv, vvv = self._moments.tolist()
-        speed = self.ref + mv
-        residual_speed = self.gap * math.exp(-tau / self._lag) if self.gap != 0.0 else 0.0
-        # (X, V) = A (x', v') + offsets with A = [[1, tau], [0, 1]].
-        return (self.c_a * q + mx + speed * tau + r, speed + residual_speed,
+        mx, mv, vxx, vxv, vvv = self._out.tolist()
+        # (X, V) = A (x, v) + (c_a q + ..., 0) with A = [[1, tau], [0, 1]].
+        return (self.c_a * q + mx + mv * tau, mv,
                 vxx + 2.0 * tau * vxv + tau * tau * vvv, vxv + tau * vvv, vvv)

@@ -58,7 +58,8 @@ over the central polygon weighted by the wheel polygon's width at the same speed
 is its mean and covariance (exact), ``Q = 0`` for the step (the line is exact). A hold
 starts where the Gaussian filter has the body on an edge of the equilibrium set with
 steady contacts, lasts while they stay steady, and ends at a reading no line allows. It
-needs ideal encoders and ``contact_drift = 0`` (:attr:`KalmanEstimator.holds_exact`). On
+needs ideal encoders, ``contact_drift = 0``, no drag and no friction spread
+(:attr:`KalmanEstimator.holds_exact`). On
 the acceptance record the NEES mean is then 1.76 (1.64 in the first second, 2.44
 cruising, 1.54 around the brake, 1.21 braked); over random grid phases the filter passes
 Bar-Shalom's Monte Carlo test (the mean NEES over 30 records inside its 95 % band at 96-98 %
@@ -187,7 +188,8 @@ class KalmanEstimator(Estimator):
     exact_holds : bool
         While the body rides a settled contact, take the exact posterior of the counts
         (:mod:`toolkit.estimation._hold`) instead of the white-noise update (default; used
-        only with ideal encoders and ``contact_drift = 0``, see :attr:`holds_exact`).
+        only with ideal encoders, ``contact_drift = 0``, no drag and no friction spread, see
+        :attr:`holds_exact`).
     """
 
     name = "kalman"
@@ -203,10 +205,12 @@ class KalmanEstimator(Estimator):
         self.model = model
         sensors = model.sensors
         #: Whether holds use the exact posterior: asked for, ideal encoders (no read noise,
-        #: missed counts or jitter), motors that hold their speeds, no drag.
+        #: missed counts or jitter), motors that hold their speeds, no drag, and friction
+        #: the model knows (with an uncertain spread the filter cannot tell that the body
+        #: stuck: it may still creep towards the weighted median).
         self.holds_exact = (exact_holds and sensors.count_noise == 0.0 and sensors.jitter == 0.0
                             and sensors.missed_count_prob == 0.0 and model.contact_drift == 0.0
-                            and model.damping == 0.0)
+                            and model.damping == 0.0 and model.friction_uncertainty == 0.0)
         self.initial_covariance = (None if initial_covariance is None else check_covariance(
             initial_covariance, "initial_covariance", type(self).__name__, 2))
         h = self._h = model.sensors.period
@@ -215,6 +219,7 @@ class KalmanEstimator(Estimator):
         self._F = np.array([[1.0, h], [0.0, 1.0]])
         self._I2 = np.eye(2)
         self._Q0 = np.zeros((2, 2))
+        self._F_reset = np.zeros((2, 2))
         self._H_speed = np.array([[0.0, 1.0]])
         self.reset()
 
@@ -248,10 +253,10 @@ class KalmanEstimator(Estimator):
         self._edge, self._edge_var = None, math.inf
         self._increment = self.model.increment
         self._lines = WheelLines(self.model) if self.holds_exact else None
-        self._hold = Hold(self._q, self.model.motor_lag)
+        self._hold = Hold(self._q, self.model.n)
         self._anchor = (math.nan, 0)          # (time, central count) of the last sample
         self.holding = False                   # the last step was an exact hold
-        self._hold_force = 0.0                 # the outside force the hold started with, N
+        self._stuck_settled = False            # the body reached the set on settled contacts
         self.last_input = (0.0, 0.0)
         self.last_F = self._F
         self.last_Q = np.zeros((2, 2))
@@ -279,7 +284,7 @@ class KalmanEstimator(Estimator):
             self.last_nis = np.nan
             return
         if (lines is not None and steady and lines.active
-                and self._held(t, count, anchor, bounds, track, force, var_v)):
+                and self._held(t, count, anchor, track[0], var_v)):
             return
         self.holding = False
         x = kf.x
@@ -298,6 +303,12 @@ class KalmanEstimator(Estimator):
             dx, dV, Q, slopes, arrival, on_set = self._increment(V, track, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
                                                              steady, bounds, force)
         self._on_set = on_set
+        # Stuck on a settled contact: the body reached the set once the wheels' lines were
+        # exact (the motors' transient below the lines' resolution: it then sticks on the
+        # edge contact); one that met an edge contact still settling towards it may have
+        # stopped short, inside a zero-force band, and coast there.
+        if arrival is not None or not (on_set and steady):
+            self._stuck_settled = arrival is not None and steady and lines is not None and lines.active
         # On an edge of the set (arrived there, or held within 2 sigma of it from outside)
         # the body moves at that edge contact's speed: as the wheels' window lengthens, its
         # estimate gains information, fused as a measurement of V with the information
@@ -345,49 +356,50 @@ class KalmanEstimator(Estimator):
         if inc is not None:
             kf.update(inc[0], R=inc[1], H=self._H_speed)
 
-    def _held(self, t: float, count: int, anchor: tuple[float, int], bounds: Any,
-              track: np.ndarray, force: float, var_v: float) -> bool:
-        """The exact hold's step, if the body rides a settled contact: continue the hold (or
-        start one where the filter has the body on an edge of the set: the last step ended
-        there and the speed is within ``2 sigma`` of it, ``sigma^2 = P_VV + var_v``), set the
-        state to the posterior's moments; False when there is no hold (the Gaussian step
-        follows)."""
+    def _held(self, t: float, count: int, anchor: tuple[float, int], speeds: np.ndarray,
+              var_v: float) -> bool:
+        """The exact hold's step (:mod:`toolkit.estimation._hold`) where the body rides a
+        settled contact: continue the hold, or start one where the Gaussian filter has the
+        body on the equilibrium set (the last step ended there) since it reached the set on
+        settled contacts, and set the state to the posterior's moments. A failed hold (no line fits the counts, or no wheel's speeds
+        meet the body's) resets the state to what the reading and a one-period difference
+        know, ``P = diag(q^2 / 12, q^2 / (6 h^2))`` (the transition ``F = 0``: the smoother
+        does not carry the failed hold's information back); the next sample starts a new
+        hold, its prior odds from that wide belief. False when there is no hold (the
+        Gaussian step follows)."""
         hold, lines = self._hold, self._lines
-        if not (self.holding and force == self._hold_force):
-            if not self._on_set:
-                return False
-            edge = self._edge if self._edge is not None else (2 if bounds[2] == bounds[3] else None)
-            if edge is None:
-                return False
-            w = 2.0 * math.sqrt(self.kf.P.item(3) + var_v)
-            if abs(self.kf.x.item(1) - bounds[edge]) > w:
-                return False
-            speeds = track[0].tolist()
-            if bounds[edge] not in speeds:
-                return False
-            hold.start(anchor[0], anchor[1], speeds.index(bounds[edge]), lines)
-            self._hold_force = force
         kf = self.kf
+        if not self.holding:
+            if not (self._on_set and self._stuck_settled):
+                return False
+            # Prior odds of the wheels: the Gaussian belief in the body's speed against each
+            # contact's estimate (floored: the counts may still show the belief wrong).
+            d2 = (speeds - kf.x.item(1)) ** 2 / (kf.P.item(3) + var_v)
+            hold.start(anchor[0], anchor[1], np.maximum(np.exp(-0.5 * (d2 - d2.min())), 1e-300))
         x, P = kf.x, kf.P
+        h, q = self._h, self._q
+        z = (count + 0.5) * q
+        # The NIS of the reading against the straight line's prediction, with the count's
+        # q^2 / 12 (its variance over a uniform grid phase).
+        innovation = z - (x.item(0) + h * x.item(1))
+        self.last_nis = innovation * innovation / (P.item(0) + 2.0 * h * P.item(1) + h * h * P.item(3)
+                                                   + q * q / 12.0)
         state = hold.push(t, count, lines)
         if state is None:
             self.holding = False
-            return False
-        # The hold's step as the smoother sees it: x+ = F x + u (u the transient's remainder,
-        # Q = 0: the line is exact); the NIS of the reading against that prediction with the
-        # count's q^2 / 12 (its variance over a uniform grid phase).
+            restart = np.diag([q * q / 12.0, q * q / (6.0 * h * h)])
+            kf.x = np.array([[z], [x.item(1)]])
+            kf.P = restart
+            self.last_input = (z, x.item(1))
+            self.last_F = self._F_reset
+            self.last_Q = restart
+            return True
+        # The hold's step as the smoother sees it: x+ = F x (Q = 0: the line is exact).
         X, V, pxx, pxv, pvv = state
-        F = self._F
-        u = hold.step_input
-        q = self._q
-        innovation = (count + 0.5) * q - (x.item(0) + self._h * x.item(1) + u[0])
-        h = self._h
-        self.last_nis = innovation * innovation / (P.item(0) + 2.0 * h * P.item(1) + h * h * P.item(3)
-                                                   + q * q / 12.0)
         kf.x = np.array([[X], [V]])
         kf.P = np.array([[pxx, pxv], [pxv, pvv]])
-        self.last_input = u
-        self.last_F = F
+        self.last_input = (0.0, 0.0)
+        self.last_F = self._F
         self.last_Q = self._Q0
         self._on_set = True
         self.holding = True

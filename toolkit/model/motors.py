@@ -34,8 +34,7 @@ from .._validation import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ._xp import ops
 
-__all__ = ["Motors", "motor_rate", "MotorPiece", "unsaturated_response", "transient_displacement",
-           "implicit_step", "reach"]
+__all__ = ["Motors", "motor_rate", "MotorPiece", "unsaturated_response", "implicit_step", "reach"]
 
 
 @dataclass(frozen=True)
@@ -272,25 +271,9 @@ class MotorPiece:
         rest = s - on_ramp
         distance = self.start * on_ramp + 0.5 * self.ramp * on_ramp * on_ramp
         if self.tau > 0:
-            return distance + self.u * rest + transient_displacement(self.after - self.u, rest, self.tau)
+            return distance + (self.u * rest
+                               + (self.after - self.u) * (self.tau * -np.expm1(-rest / self.tau)))
         return distance + self.after * rest
-
-
-def transient_displacement(gap: Any, s: Any, lag: float) -> Any:
-    """Distance a lagging motor travels beyond its command over ``s`` seconds from a speed
-    ``gap`` away from it: ``int_0^s gap exp(-x / tau) dx = gap tau (1 - exp(-s / tau))``, m.
-
-    Parameters
-    ----------
-    gap : float or ndarray, m/s
-        Speed minus command at the start.
-    s : float or ndarray, s
-    lag : float, s
-        ``tau > 0`` (without a lag the motor has no transient to travel).
-    """
-    if type(s) is float:                  # (a scalar time: math, without NumPy's overhead)
-        return gap * (lag * -math.expm1(-s / lag))
-    return gap * (lag * -np.expm1(-np.asarray(s) / lag))
 
 
 def implicit_step(motors: Motors, speeds: np.ndarray, command: np.ndarray, h: float) -> np.ndarray:

@@ -257,6 +257,9 @@ def test_estimate_cli_json_has_the_documented_keys(tmp_path, capsys):
     saved = json.loads((tmp_path / "estimate.json").read_text())
     assert saved["estimators"][2]["rms"] == data["estimators"][2]["rms"]
     assert (tmp_path / "estimate.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # Run again into the same folder: the toolkit's own output is replaced, not refused.
+    assert main(["estimate", str(ROOT / "designs" / "estimate.toml"), "--json", "--out", str(tmp_path)]) == 0
+    assert json.loads(capsys.readouterr().out)["estimators"][2]["rms"] == data["estimators"][2]["rms"]
 
 
 def test_estimate_cli_defaults_to_the_brake_scenario_on_a_scene_without_estimation(tmp_path, capsys):

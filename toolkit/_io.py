@@ -28,7 +28,9 @@ __all__ = ["OUTPUT_NAMES", "OutputError", "atomic_write_bytes", "atomic_write_te
 #: Every file name the toolkit writes into an output folder. A folder that holds anything
 #: else is not the toolkit's and is never replaced.
 OUTPUT_NAMES = frozenset({"result.json", "force_curve.png", "simulation.png", "schedule.png",
-                          "schedule.csv", "schedule.json", "precision.json", "precision.png"})
+                          "schedule.csv", "schedule.json", "precision.json", "precision.png",
+                          "estimation.png", "closed_loop.png", "estimate.json", "estimate.png",
+                          "results.csv", "sweep.json", "sweep.png"})
 
 
 def _umask() -> int:

@@ -105,7 +105,7 @@ def test_filter_follows_the_brake_exactly(scenario):
 def test_smoother_is_no_worse_than_the_filter_in_each_phase(scenario):
     # The smoother conditions on every sample, the filter on the past only: on a model
     # that holds, the smoother is no worse in any phase of the run (startup, cruise, brake
-    # window, braked). Measured over the record 0.0151 vs 0.0217 mm/s.
+    # window, braked). Measured over the record 0.0151 vs 0.0220 mm/s.
     record = scenario.record
     kf = KalmanEstimator(scenario.model).run(record, speed_std=1e-4)
     rts = RTSSmoother(scenario.model).run(record, speed_std=1e-4)
@@ -126,18 +126,18 @@ def test_acceptance_kalman_beats_finite_differences_tenfold(scenario):
 
 def test_acceptance_kalman_near_the_smoother(scenario):
     # Issue 9: the filter's RMS within 1.5x of the RTS smoother's on the same record.
-    # Measured 0.0286 vs 0.0311 mm/s (0.92x) with the wheel windows' least-squares lines
-    # (before: 0.049 vs 0.030, 1.66x). Outside the brake window, where the smoother is the
-    # reference it should be, 0.0211 vs 0.0135 mm/s: 1.56x (before: 3.16x).
+    # Measured 0.0220 vs 0.0151 mm/s (1.46x) with the exact holds (0.0226 vs 0.0160, 1.41x,
+    # with the white model throughout; 0.049 vs 0.030, 1.66x, before the wheel windows'
+    # least-squares lines).
     record, model = scenario.record, scenario.model
     kf = KalmanEstimator(model).run(record, speed_std=1e-4)
     rts = RTSSmoother(model).run(record, speed_std=1e-4)
     assert kf.rms_error <= 1.5 * rts.rms_error
 
 
-@pytest.mark.xfail(strict=True, reason="short (issue 9): measured KF NEES mean 1.76 below its band "
+@pytest.mark.xfail(strict=True, reason="short (issue 9): measured KF NEES mean 1.77 below its band "
                    "[1.83, 2.18] on the acceptance record (1.64 in the first second, 2.44 cruising, "
-                   "1.54 around the brake, 1.21 braked). The band is that of 500 independent "
+                   "1.56 around the brake, 1.22 braked). The band is that of 500 independent "
                    "errors; a hold's errors are one line's, the same for hundreds of samples, so "
                    "one record's mean spreads far wider (10-90 % 1.4-2.8 over 40 grid phases) while "
                    "the filter is consistent over phases (test_kalman_is_consistent_over_grid_phases)")

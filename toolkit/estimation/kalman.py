@@ -54,16 +54,18 @@ Exact holds (default). Where the sawtooth matters most, the body rides a settled
 filter takes the exact posterior of the counts instead of a white update
 (:mod:`toolkit.estimation._hold`): each reading confines the line to a strip, the readings
 to a convex polygon, and the posterior of ``(X, V)`` with uniform grid phases is uniform
-over the central polygon weighted by the wheel polygon's width at the same speed; the state
-is its mean and covariance (exact), ``Q = 0`` for the step (the line is exact). A hold
-starts where the Gaussian filter has the body on an edge of the equilibrium set with
-steady contacts, lasts while they stay steady, and ends at a reading no line allows. It
-needs ideal encoders, ``contact_drift = 0``, no drag and no friction spread
+over the central polygon weighted by the ridden wheel polygon's width at the same speed,
+mixed over the wheels by their evidence (prior odds from the Gaussian belief); the state is
+its mean and covariance (exact), ``Q = 0`` for the step (the line is exact). A hold starts
+where the Gaussian filter has the body reach the equilibrium set after the wheels' lines
+became exact, lasts while the contacts stay steady, and fails at a reading no line allows
+(the state then restarts from the reading and a one-period difference). It needs ideal
+encoders, ``contact_drift = 0``, no drag and no friction spread
 (:attr:`KalmanEstimator.holds_exact`). On
-the acceptance record the NEES mean is then 1.76 (1.64 in the first second, 2.44
-cruising, 1.54 around the brake, 1.21 braked); over random grid phases the filter passes
+the acceptance record the NEES mean is then 1.77 (1.64 in the first second, 2.44
+cruising, 1.56 around the brake, 1.22 braked); over random grid phases the filter passes
 Bar-Shalom's Monte Carlo test (the mean NEES over 30 records inside its 95 % band at 96-98 %
-of the samples, time average 1.9-2.2) where the white model does not (39 %). One record's
+of the samples, time average 1.9-2.2) where the white model does not (10-35 %). One record's
 mean misses the single-record band of 500 independent errors in most phases because a
 hold's errors are one line's error, the same for hundreds of samples
 (``python -m toolkit.bench estimation --phases 40``).

@@ -213,10 +213,11 @@ def test_exact_holds_only_with_ideal_encoders_and_steady_motors(scenario):
 
 
 def test_a_reading_off_the_line_ends_the_hold(scenario):
-    # The body "slips" two counts at 3 s (a reading no line through the earlier ones gives):
-    # the hold's polygon is empty there, the state restarts from the reading and a
-    # one-period difference, and a new hold starts from the next sample; the estimate stays
-    # finite and within 1 mm/s.
+    # The record "slips" two counts at 3 s (a reading no line through the earlier ones
+    # gives): the hold fails there, the state restarts from the reading and the one-period
+    # difference (two counts a period off: 20 mm/s, its std 4.2 mm/s), and the Gaussian
+    # steps take over until the body next reaches the set (the brake); measured: back within
+    # 0.034 mm/s after 0.5 s, every error within 4.8 of its std, holds again from 5.22 s.
     record = scenario.record
     counts = record.central_counts.copy()
     k = int(np.searchsorted(record.times, 3.0))
@@ -224,15 +225,18 @@ def test_a_reading_off_the_line_ends_the_hold(scenario):
     slipped = dataclasses.replace(record, central_counts=counts)
     loop = KalmanEstimator(scenario.model)
     loop.reset(speed_std=1e-4, contact_speeds=record.initial_commands)
-    held, speed = [], []
+    held, speed, std = [], [], []
     for j in range(record.n_samples):
-        speed.append(loop.step(slipped.sample(j))[0])
+        v, var = loop.step(slipped.sample(j))
+        speed.append(v)
+        std.append(np.sqrt(var))
         held.append(loop.holding)
-    held = np.array(held)
-    assert held[k - 20:k].all() and not held[k]
-    assert held[k + 2:k + 100].all()
+    held, t = np.array(held), record.times
     err = np.array(speed) - record.truth_speed
-    assert np.all(np.isfinite(err)) and np.max(np.abs(err[record.times > 1.0])) < 1e-3
+    assert held[k - 20:k].all() and not held[k:250].any()
+    assert held[(t > 5.3)].all()
+    assert np.all(np.isfinite(err)) and np.max(np.abs(err[1:]) / np.array(std)[1:]) < 5.0
+    assert np.max(np.abs(err[(t > 3.5) & (t < 5.0)])) < 0.1e-3
 
 
 def test_no_hold_on_a_body_that_met_a_settling_contact():
@@ -251,6 +255,23 @@ def test_no_hold_on_a_body_that_met_a_settling_contact():
     white = KalmanEstimator(model, exact_holds=False).run(run.record, speed=0.3)
     np.testing.assert_array_equal(exact.speed, white.speed)
     assert np.nanmean(exact.nees[run.record.times > 1.5]) < 2.0
+
+
+def test_no_hold_while_an_outside_force_ramps():
+    # The ForceDrive rig ramps its force every sample over contacts inside the body's range:
+    # the body may creep between contacts, so every new force hands it to the flow, which
+    # must see it reach the set again under that force. Here none does: the filter equals the
+    # white-model filter (identity; a review found holds restarting every sample before, NEES
+    # 2.7e4 in the second second).
+    from toolkit import ForceDrive, Motors, Sensors, simulate_closed_loop
+    plant = Plant(ContactSet([0.0] * 10, [1.0] * 10), 5.0, motors=Motors(lag=0.0075, speed_limits=(-0.35, 0.35)))
+    sensors = Sensors.carousel(10)
+    run = simulate_closed_loop(plant, ForceDrive(np.linspace(-0.3, 0.3, 10), 0.0, 0.2, 2.0), 4.0,
+                               sensors=sensors, seed=1)
+    model = EstimatorModel(plant.contacts.forces, 5.0, sensors, motor_lag=0.0075, speed_limits=(-0.35, 0.35))
+    exact = KalmanEstimator(model).run(run.record)
+    white = KalmanEstimator(model, exact_holds=False).run(run.record)
+    np.testing.assert_array_equal(exact.speed, white.speed)
 
 
 def test_holds_after_a_slow_reversal_wait_for_the_gearbox_play():

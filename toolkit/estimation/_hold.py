@@ -36,8 +36,10 @@ lines became exact (a body that meets an edge contact still settling towards it 
 short inside a zero-force band and coast there, at a speed of its own). It ends when the
 contacts move, and fails at a reading no line allows (or when no wheel's speeds meet the
 body's, e.g. a hold begun before the body stuck): the filter's state then restarts from
-what the reading and a one-period difference know, and a new hold starts from the next
-sample.
+what the reading and the one-period difference of the readings know, and the Gaussian
+steps take the body until they see it reach the set again. A new outside force also ends a
+hold. Not held, conservatively: a body that reached the set before the wheels' lines became
+exact (the motors still settling) stays with the Gaussian model until it next arrives.
 
 The hold needs ideal encoders (no read noise, no missed counts, no jitter), motors that
 hold their speeds (``contact_drift = 0``), no drag, and the friction the model knows

@@ -259,6 +259,7 @@ class KalmanEstimator(Estimator):
         self._anchor = (math.nan, 0)          # (time, central count) of the last sample
         self.holding = False                   # the last step was an exact hold
         self._stuck_settled = False            # the body reached the set on settled contacts
+        self._hold_force = 0.0                 # the outside force the hold began with, N
         self.last_input = (0.0, 0.0)
         self.last_F = self._F
         self.last_Q = np.zeros((2, 2))
@@ -285,6 +286,11 @@ class KalmanEstimator(Estimator):
             self._start(z)
             self.last_nis = np.nan
             return
+        if force != self._hold_force:
+            # A new outside force: the body may creep or slide off; the flow decides until
+            # it sees the body reach the set again.
+            self._hold_force = force
+            self.holding = self._stuck_settled = False
         if (lines is not None and steady and lines.active
                 and self._held(t, count, anchor, track[0], var_v)):
             return
@@ -362,13 +368,14 @@ class KalmanEstimator(Estimator):
               var_v: float) -> bool:
         """The exact hold's step (:mod:`toolkit.estimation._hold`) where the body rides a
         settled contact: continue the hold, or start one where the Gaussian filter has the
-        body on the equilibrium set (the last step ended there) since it reached the set on
-        settled contacts, and set the state to the posterior's moments. A failed hold (no line fits the counts, or no wheel's speeds
-        meet the body's) resets the state to what the reading and a one-period difference
-        know, ``P = diag(q^2 / 12, q^2 / (6 h^2))`` (the transition ``F = 0``: the smoother
-        does not carry the failed hold's information back); the next sample starts a new
-        hold, its prior odds from that wide belief. False when there is no hold (the
-        Gaussian step follows)."""
+        body on the equilibrium set since it reached the set after the wheels' lines became
+        exact (and the outside force has not changed since), and set the state to the
+        posterior's moments. A failed hold (no line fits the counts, or no wheel's speeds
+        meet the body's) resets the state to what the reading and the one-period difference
+        of the readings know, ``(z, (c_k - c_{k-1}) q / h)`` with ``P = diag(q^2 / 12, q^2 /
+        (6 h^2))`` (the transition ``F = 0``: the smoother does not carry the failed hold's
+        information back), and hands the body back to the Gaussian steps until they see it
+        reach the set again. False when there is no hold (the Gaussian step follows)."""
         hold, lines = self._hold, self._lines
         kf = self.kf
         if not self.holding:
@@ -389,10 +396,12 @@ class KalmanEstimator(Estimator):
         state = hold.push(t, count, lines)
         if state is None:
             self.holding = False
+            self._on_set = self._stuck_settled = False
             restart = np.diag([q * q / 12.0, q * q / (6.0 * h * h)])
-            kf.x = np.array([[z], [x.item(1)]])
+            speed = (count - anchor[1]) * q / (t - anchor[0])
+            kf.x = np.array([[z], [speed]])
             kf.P = restart
-            self.last_input = (z, x.item(1))
+            self.last_input = (z, speed)
             self.last_F = self._F_reset
             self.last_Q = restart
             return True

@@ -829,3 +829,32 @@ def test_wheel_window_is_the_least_squares_line():
     assert speeds[1, 0] == pytest.approx((counts[1, 0] - counts[0, 0]) * q / h, rel=0, abs=1e-15)
     assert var[1] == pytest.approx(q * q / (6 * h * h), rel=1e-12)
 
+
+
+def test_wheel_lines_wait_for_the_play_after_a_reversal():
+    # After a command that turns a motor, its line is exact once it has travelled the
+    # gearbox play from where it turned (and the lag law's remaining travel is under
+    # TRANSIENT counts): the start time equals a brute-force scan of the motor law
+    # (MotorPiece speeds on a 1 us grid, trapezoid sums of the travel since the turn;
+    # tolerance 2 us, the grid plus the sum's error). A slow turn (-5 mm/s: the play takes
+    # ~0.16 s) makes the play decide, not the transient (75 ms).
+    from toolkit.estimation._hold import TRANSIENT, WheelLines
+    from toolkit.model.motors import MotorPiece
+    model = carousel_brake_scenario(seed=0, t_end=1.0).model
+    lag, play, q = model.motor_lag, model.sensors.wheel.backlash, model.sensors.wheel.distance_per_count
+    lines = WheelLines(model)
+    start = np.full(model.n, 0.2)
+    target = np.linspace(-0.005, 0.05, model.n)          # two turn, the others do not
+    lines._change = (1.0, start, target)
+    ready = lines._start_time() - 1.0
+    piece = MotorPiece.build(0.0, start, target, lag, np.inf)
+    s = np.arange(0.0, 0.5, 1e-6)
+    v = piece.speeds(s)
+    played = 0.0
+    for i in np.flatnonzero(target < 0):
+        turn = np.argmax(v[:, i] <= 0.0)
+        travel = np.concatenate(([0.0], np.cumsum(0.5 * (v[turn + 1:, i] + v[turn:-1, i]) * 1e-6)))
+        played = max(played, s[turn + np.argmax(np.abs(travel) >= play)])
+    settled = lag * np.log(np.abs(start - target).max() * lag / (TRANSIENT * q))
+    assert played > settled
+    assert ready == pytest.approx(played, abs=2e-6)

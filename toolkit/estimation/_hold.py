@@ -56,6 +56,7 @@ from typing import Any
 import numpy as np
 
 from .._compiled import kernels
+from ..model.motors import MotorPiece
 from ._input import EstimatorModel
 
 #: Vertices a polygon may hold (a run of counts of one line allows at most a quadrilateral;
@@ -104,7 +105,7 @@ class WheelLines:
         self._out = np.empty((CAPACITY, 2))
         self.active = False
         self._change: tuple[float, np.ndarray, np.ndarray] | None = None   # (t, start, target)
-        self._ready_at = -math.inf
+        self._ready_at: float | None = -math.inf
         self._last: tuple[float, np.ndarray] | None = None
 
     def push(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool) -> None:
@@ -116,13 +117,16 @@ class WheelLines:
             return
         if not steady:
             if self.active or self._change is None or not np.array_equal(track[1], self._change[2]):
-                # A command change: the motors leave the speeds they held towards a target.
+                # A command change: the motors leave the speeds they held towards a target
+                # (when their lines are exact again is worked out once they settle).
                 self._change = (last[0], np.array(track[0]), np.array(track[1]))
-                self._ready_at = self._start_time()
+                self._ready_at = None
             self.active = False
             return
         if not self.active:
             t0, w0 = last
+            if self._ready_at is None:
+                self._ready_at = self._start_time() if self._change is not None else -math.inf
             if t0 < self._ready_at:
                 return
             self.active = True
@@ -151,31 +155,29 @@ class WheelLines:
         ready = t_c
         gap = np.abs(start - target)
         if lag > 0.0 and gap.max() * lag > TRANSIENT * q:
-            # |start - target| lag exp(-s / lag) <= TRANSIENT q
+            # The lag law's remaining travel |start - target| lag exp(-s / lag) <= TRANSIENT q.
             ready = t_c + lag * math.log(gap.max() * lag / (TRANSIENT * q))
-        if play > 0.0:
-            for v0, u in zip(start.tolist(), target.tolist()):
-                if v0 * u > 0.0 or u == 0.0:
-                    continue                   # no reversal (the play stays taken up)
-                # The motor law from v0 to u crosses zero at s_z (lag: u + (v0 - u)
-                # exp(-s / lag) = 0), then travels |u| (s - s_z - lag (1 - exp(-(s - s_z) /
-                # lag))); its play is taken up when that reaches the play. Bracket, bisect.
-                s_z = lag * math.log((u - v0) / u) if lag > 0.0 else 0.0
+        turning = (start * target <= 0.0) & (target != 0.0)
+        if play > 0.0 and turning.any():
+            # A motor that turns (or starts from rest) passes no motion through the play until
+            # it has travelled the play from where it turned: bisect the time at which every
+            # turning motor has, on the motor law's own displacement (MotorPiece).
+            piece = MotorPiece.build(0.0, start[turning], target[turning], lag, math.inf)
+            v0, u = start[turning], target[turning]
+            turn = lag * np.log((u - v0) / u) if lag > 0.0 else np.zeros_like(u)
+            at_turn = np.array([piece.displacement(float(s_i))[i] for i, s_i in enumerate(turn)])
 
-                def travel(s: float) -> float:
-                    x = s - s_z
-                    return abs(u) * (x - (lag * -math.expm1(-x / lag) if lag > 0.0 else 0.0))
+            def taken_up(s: float) -> bool:
+                return bool(np.all((s >= turn) & (np.abs(piece.displacement(s) - at_turn) >= play)))
 
-                lo, hi = s_z, s_z + play / abs(u) + lag
-                while travel(hi) < play:
-                    hi += play / abs(u) + lag
-                for _ in range(60):
-                    mid = 0.5 * (lo + hi)
-                    if travel(mid) < play:
-                        lo = mid
-                    else:
-                        hi = mid
-                ready = max(ready, t_c + hi)
+            lo = float(turn.max())
+            hi = lo + play / float(np.abs(u).min()) + lag
+            while not taken_up(hi):
+                hi += play / float(np.abs(u).min()) + lag
+            for _ in range(50):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (lo, mid) if taken_up(mid) else (mid, hi)
+            ready = max(ready, t_c + hi)
         return ready
 
     def _extend(self, t: float, wheels: np.ndarray) -> None:

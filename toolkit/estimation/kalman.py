@@ -259,7 +259,7 @@ class KalmanEstimator(Estimator):
         self._anchor = (math.nan, 0)          # (time, central count) of the last sample
         self.holding = False                   # the last step was an exact hold
         self._stuck_settled = False            # the body reached the set on settled contacts
-        self._hold_force = 0.0                 # the outside force the hold began with, N
+        self._hold_force = 0.0                 # the last period's outside force (a change ends a hold), N
         self.last_input = (0.0, 0.0)
         self.last_F = self._F
         self.last_Q = np.zeros((2, 2))

@@ -234,6 +234,15 @@ def test_a_reading_off_the_line_ends_the_hold(scenario):
     held, t = np.array(held), record.times
     err = np.array(speed) - record.truth_speed
     assert held[k - 20:k].all() and not held[k:250].any()
+    # The restart's covariance: the reading errs by e_k, the one-period difference by
+    # (e_k - e_k-1) / h, both uniform of variance q^2 / 12 (identity).
+    replay = KalmanEstimator(scenario.model)
+    replay.reset(speed_std=1e-4, contact_speeds=record.initial_commands)
+    for j in range(k + 1):
+        replay.step(slipped.sample(j))
+    q, h = scenario.sensors.central.distance_per_count, scenario.sensors.period
+    np.testing.assert_allclose(replay.kf.P, (q * q / 12) * np.array([[1, 1 / h], [1 / h, 2 / h**2]]),
+                               rtol=1e-12)
     assert held[(t > 5.3)].all()
     assert np.all(np.isfinite(err)) and np.max(np.abs(err[1:]) / np.array(std)[1:]) < 5.0
     assert np.max(np.abs(err[(t > 3.5) & (t < 5.0)])) < 0.1e-3
@@ -858,3 +867,31 @@ def test_wheel_lines_wait_for_the_play_after_a_reversal():
     settled = lag * np.log(np.abs(start - target).max() * lag / (TRANSIENT * q))
     assert played > settled
     assert ready == pytest.approx(played, abs=2e-6)
+
+
+def test_without_a_lag_the_wheel_lines_wait_for_the_play_too():
+    # Ideal motors turn at once and run at their command: the play takes play / |u| after
+    # the change (closed form); the window's reversal is judged from the speeds held before
+    # the change (a lag-free track already starts at the target). In the brake scene braking
+    # to -10.6 mm/s the held samples stay consistent (largest NEES measured 4.6; 2348 when
+    # the window did not wait) and holds begin after the slowest turning wheel's play.
+    from toolkit.estimation._hold import WheelLines
+    model = dataclasses.replace(carousel_brake_scenario(seed=0, t_end=1.0).model, motor_lag=0.0)
+    lines = WheelLines(model)
+    start, target = np.full(model.n, 0.2), np.linspace(-0.005, 0.05, model.n)
+    lines._change = (1.0, start, target)
+    slowest = np.abs(target[target < 0]).min()
+    assert lines._start_time() == pytest.approx(1.0 + model.sensors.wheel.backlash / slowest, rel=1e-12)
+    sc = carousel_brake_scenario(seed=0, lag=0.0, brake=-0.0106)
+    loop = KalmanEstimator(sc.model)
+    loop.reset(speed_std=1e-4, contact_speeds=sc.record.initial_commands)
+    held = []
+    for k in range(sc.record.n_samples):
+        loop.step(sc.record.sample(k))
+        held.append(loop.holding)
+    held, t = np.array(held), sc.record.times
+    turning = sc.record.commands[-1][sc.record.commands[-1] < 0]
+    first = t[np.flatnonzero(held & (t > 5.0))[0]]
+    assert first >= 5.0 + sc.sensors.wheel.backlash / np.abs(turning).min()
+    nees = KalmanEstimator(sc.model).run(sc.record, speed_std=1e-4).nees
+    assert np.max(nees[held & (t > 5.0)]) < 10.0

@@ -106,6 +106,7 @@ class WheelLines:
         self.active = False
         self._change: tuple[float, np.ndarray, np.ndarray] | None = None   # (t, start, target)
         self._ready_at: float | None = -math.inf
+        self._held: np.ndarray | None = None     # the speeds of the last steady period, m/s
         self._last: tuple[float, np.ndarray] | None = None
 
     def push(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool) -> None:
@@ -117,12 +118,15 @@ class WheelLines:
             return
         if not steady:
             if self.active or self._change is None or not np.array_equal(track[1], self._change[2]):
-                # A command change: the motors leave the speeds they held towards a target
-                # (when their lines are exact again is worked out once they settle).
-                self._change = (last[0], np.array(track[0]), np.array(track[1]))
+                # A command change: the motors leave the speeds they held (without a lag the
+                # track already starts at the target) towards a target (when their lines are
+                # exact again is worked out once they settle).
+                start = self._held if self._lag <= 0.0 and self._held is not None else track[0]
+                self._change = (last[0], np.array(start), np.array(track[1]))
                 self._ready_at = None
             self.active = False
             return
+        self._held = track[0]
         if not self.active:
             t0, w0 = last
             if self._ready_at is None:
@@ -158,7 +162,11 @@ class WheelLines:
             # The lag law's remaining travel |start - target| lag exp(-s / lag) <= TRANSIENT q.
             ready = t_c + lag * math.log(gap.max() * lag / (TRANSIENT * q))
         turning = (start * target <= 0.0) & (target != 0.0)
-        if play > 0.0 and turning.any():
+        if play > 0.0 and turning.any() and lag <= 0.0:
+            # Without a lag a motor turns at once and runs at its command: the play takes
+            # play / |u|.
+            ready = max(ready, t_c + play / float(np.abs(target[turning]).min()))
+        elif play > 0.0 and turning.any():
             # A motor that turns (or starts from rest) passes no motion through the play until
             # it has travelled the play from where it turned: bisect the time at which every
             # turning motor has, on the motor law's own displacement (MotorPiece).

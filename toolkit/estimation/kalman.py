@@ -372,9 +372,9 @@ class KalmanEstimator(Estimator):
         exact (and the outside force has not changed since), and set the state to the
         posterior's moments. A failed hold (no line fits the counts, or no wheel's speeds
         meet the body's) resets the state to what the reading and the one-period difference
-        of the readings know, ``(z, (c_k - c_{k-1}) q / h)`` with ``P = diag(q^2 / 12, q^2 /
-        (6 h^2))`` (the transition ``F = 0``: the smoother does not carry the failed hold's
-        information back), and hands the body back to the Gaussian steps until they see it
+        of the readings know, ``(z, (c_k - c_{k-1}) q / h)`` with ``P = (q^2 / 12) [[1, 1 / h],
+        [1 / h, 2 / h^2]]`` (the reading's error is in both; the transition ``F = 0``: the
+        smoother does not carry the failed hold's information back), and hands the body back to the Gaussian steps until they see it
         reach the set again. False when there is no hold (the Gaussian step follows)."""
         hold, lines = self._hold, self._lines
         kf = self.kf
@@ -397,8 +397,10 @@ class KalmanEstimator(Estimator):
         if state is None:
             self.holding = False
             self._on_set = self._stuck_settled = False
-            restart = np.diag([q * q / 12.0, q * q / (6.0 * h * h)])
-            speed = (count - anchor[1]) * q / (t - anchor[0])
+            # The reading errs by e_k (variance q^2 / 12), the difference by (e_k - e_k-1) / dt.
+            dt = t - anchor[0]
+            restart = (q * q / 12.0) * np.array([[1.0, 1.0 / dt], [1.0 / dt, 2.0 / (dt * dt)]])
+            speed = (count - anchor[1]) * q / dt
             kf.x = np.array([[z], [speed]])
             kf.P = restart
             self.last_input = (z, speed)

@@ -80,7 +80,8 @@ KERNELS = {
     # The event roots of the dynamic-motor engine: IEEE division (inf, NaN) as NumPy's.
     "event_value": _IEEE, "event_slope": _IEEE, "event_inflection": _IEEE,
     "sign": _IEEE, "midpoint": _IEEE, "bisect": _IEEE, "newton_root": _IEEE,
-    "brent_root": _IEEE, "polish_root": _IEEE, "first_root_all": _IEEE, "first_root": _IEEE,
+    "brent_root": _IEEE, "polish_root": _IEEE, "all_zero": _INLINE, "first_root_all": _IEEE,
+    "first_root": _IEEE,
     "free_first_root": _IEEE, "stuck_first_root": _IEEE,
 }
 
@@ -890,6 +891,14 @@ def polish_root(alpha: float, beta: float, gamma: float, delta: float, lam: floa
     return bisect(alpha, beta, gamma, delta, lam, mu, D, lo, hi, False, bits, ibits)
 
 
+def all_zero(values: np.ndarray, rows: np.ndarray, n: int) -> bool:
+    """Whether ``values[rows[r]] == 0`` for every ``r < n``."""
+    for r in range(n):
+        if values[rows[r]] != 0.0:
+            return False
+    return True
+
+
 def first_root_all(alpha: np.ndarray, beta: np.ndarray, gamma: np.ndarray, delta: np.ndarray,
                    lam: float, mu: float, D: float, horizon: float, rows: np.ndarray,
                    bits: np.ndarray, ibits: np.ndarray) -> tuple[float, int]:
@@ -908,23 +917,10 @@ def first_root_all(alpha: np.ndarray, beta: np.ndarray, gamma: np.ndarray, delta
     # motors: mu = 0; or one of the two terms absent): g is convex or concave, g' monotone.
     single = 0
     if D == 0.0:
-        if lam == 0.0:
+        if lam == 0.0 or all_zero(gamma, rows, n):
             single = 1
-        else:
-            single = 1
-            for r in range(n):
-                if gamma[rows[r]] != 0.0:
-                    single = 0
-                    break
-        if single == 0:
-            if mu == 0.0:
-                single = 2
-            else:
-                single = 2
-                for r in range(n):
-                    if delta[rows[r]] != 0.0:
-                        single = 0
-                        break
+        elif mu == 0.0 or all_zero(delta, rows, n):
+            single = 2
     cand = np.empty(n, dtype=np.int64)          # candidates: position, bracket, sign at lo
     c_lo = np.empty(n)
     c_hi = np.empty(n)

@@ -91,7 +91,6 @@ class WheelLines:
     """
 
     def __init__(self, model: EstimatorModel) -> None:
-        self.model = model
         n = model.n
         self._q = model.sensors.wheel.distance_per_count
         self._play = model.sensors.wheel.backlash
@@ -134,22 +133,21 @@ class WheelLines:
             if t0 < self._ready_at:
                 return
             self.active = True
-            self.starts[:] = t0
-            self._first[:] = w0
-            for i in range(self.counts.size):
-                _box(self.polys[i])
-            self.counts[:] = 4
-            self._extend(t0, w0)
+            self._restart(np.ones(self.counts.size, dtype=bool), t0, w0)
         self._extend(t, wheels)
         dead = self.counts <= 0
         if dead.any():
             # No line (or no room) for these readings: a new window from this row.
-            for i in np.flatnonzero(dead):
-                _box(self.polys[i])
-            self.counts[dead] = 4
-            self.starts[dead] = t
-            self._first[dead] = wheels[dead]
-            self._extend(t, wheels)
+            self._restart(dead, t, wheels)
+
+    def _restart(self, which: np.ndarray, t: float, wheels: np.ndarray) -> None:
+        """New windows for the wheels ``which`` (bool mask) from the row at ``t`` (s)."""
+        for i in np.flatnonzero(which):
+            _box(self.polys[i])
+        self.counts[which] = 4
+        self.starts[which] = t
+        self._first[which] = wheels[which]
+        self._extend(t, wheels)
 
     def _start_time(self) -> float:
         """When every wheel's line is exact after the last change: the motor law's remainder
@@ -172,7 +170,7 @@ class WheelLines:
             # turning motor has, on the motor law's own displacement (MotorPiece).
             piece = MotorPiece.build(0.0, start[turning], target[turning], lag, math.inf)
             v0, u = start[turning], target[turning]
-            turn = lag * np.log((u - v0) / u) if lag > 0.0 else np.zeros_like(u)
+            turn = lag * np.log((u - v0) / u)
             at_turn = np.array([piece.displacement(float(s_i))[i] for i, s_i in enumerate(turn)])
 
             def taken_up(s: float) -> bool:

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from toolkit import ContactSet, Motors, ParameterError, PiecewiseConstant, Plant, SceneError, simulate
-from toolkit.closed_loop import simulate_closed_loop
+from toolkit.loop.closed_loop import simulate_closed_loop
 from toolkit.controllers import OpenLoop
-from toolkit.scene import dumps_scene, loads_scene
+from toolkit.scenes.spec import dumps_scene, loads_scene
 from toolkit.simulation import ExactState, advance
 from toolkit.simulation._moreau import _staircase, initial_play, play_staircase
-from toolkit.study import _simulation
+from toolkit.scenes.study import _simulation
 
 # Incommensurate on purpose (no step size divides the phases): N contacts of f each at +V_C
 # carry the body at +V_C; at T_SWITCH they are commanded to -V_C (ideal motors).

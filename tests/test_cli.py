@@ -12,7 +12,7 @@ import pytest
 
 from toolkit import ContactSet, __version__
 from toolkit.cli import main
-from toolkit.scene import load_scene
+from toolkit.scenes.spec import load_scene
 
 ROOT = Path(__file__).parents[1]
 DESIGNS = sorted((ROOT / "designs").glob("*.toml"))

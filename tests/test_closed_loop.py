@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from toolkit import ContactSet, Motors, ParameterError, PiecewiseConstant, Plant, simulate
-from toolkit.closed_loop import simulate_closed_loop
+from toolkit.loop.closed_loop import simulate_closed_loop
 from toolkit.controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, VirtualViscosity
 from toolkit.predictions.theory import transition_time
 
@@ -137,7 +137,7 @@ def test_loop_bench_runs_and_restores_the_loop(capsys):
     # The benchmark times each stage by wrapping the loop's advance and SensorReader: after
     # it the module's own functions are back (identity), and the timed stages account for
     # at most the whole run (their sum plus bookkeeping is the total by construction).
-    import toolkit.closed_loop as closed_loop
+    import toolkit.loop.closed_loop as closed_loop
     from toolkit.bench import loop
     from toolkit.model.sensors import SensorReader
     from toolkit.simulation._stepper import advance

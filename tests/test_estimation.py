@@ -17,7 +17,7 @@ from toolkit.estimation import (CentralDifference, EstimatorModel, KalmanEstimat
                                 chi2_band, steady_state_gain)
 from toolkit.model import ContactSet, Plant
 from toolkit.model.sensors import Sensors, record_simulation
-from toolkit.scenarios import carousel_brake_scenario
+from toolkit.analysis.scenarios import carousel_brake_scenario
 from toolkit.simulation import simulate
 
 

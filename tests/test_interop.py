@@ -18,7 +18,7 @@ from toolkit.controllers import (FrictionBrake, ForceDrive, OpenLoop, SpeedHold,
 from toolkit.errors import ParameterError, SolverError  # noqa: E402
 from toolkit.estimation import (CentralDifference, EstimatorModel, KalmanEstimator,  # noqa: E402
                                 WheelDifference)
-from toolkit.interop import (closed_loop_system, controller_system, plant_system,  # noqa: E402
+from toolkit.loop.interop import (closed_loop_system, controller_system, plant_system,  # noqa: E402
                              viscous_system)
 from toolkit.model import PiecewiseConstant  # noqa: E402
 from toolkit.model.sensors import Sensors  # noqa: E402
@@ -139,6 +139,6 @@ def test_viscous_system_step_is_the_closed_form():
 
 
 def test_importing_the_interop_does_not_load_control():
-    code = "import toolkit, toolkit.interop, sys; print('control' in sys.modules)"
+    code = "import toolkit, toolkit.loop.interop, sys; print('control' in sys.modules)"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "False"

@@ -20,7 +20,7 @@ import pytest
 
 import toolkit as tk
 from toolkit import plots
-from toolkit.precision import MethodSetting, work_precision_curves
+from toolkit.analysis.precision import MethodSetting, work_precision_curves
 
 VMAX = 0.35                      # PHYSICS.md section 3
 MOTORS = tk.Motors(lag=0.01, speed_limits=(-VMAX, VMAX))

@@ -10,8 +10,8 @@ import pytest
 pytest.importorskip("matplotlib")
 
 from toolkit import plots  # noqa: E402
-from toolkit.scene import load_scene  # noqa: E402
-from toolkit.study import control_scene, estimate_scene  # noqa: E402
+from toolkit.scenes.spec import load_scene  # noqa: E402
+from toolkit.scenes.study import control_scene, estimate_scene  # noqa: E402
 
 ROOT = Path(__file__).parents[1]
 

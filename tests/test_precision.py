@@ -13,12 +13,12 @@ import pytest
 
 from toolkit.errors import ParameterError
 from toolkit.model import ContactSet, Plant
-import toolkit.precision as precision
+import toolkit.analysis.precision as precision
 from toolkit.model.carousel import CAROUSEL_ACCELERATION, carousel_startup_plant
-from toolkit.precision import (MethodSetting, PrecisionReport, default_settings, exact_speedup,
+from toolkit.analysis.precision import (MethodSetting, PrecisionReport, default_settings, exact_speedup,
                                precision_report, rational_trajectory, work_precision_curves)
-from toolkit.scene import load_scene
-from toolkit.scene_build import scene_plant
+from toolkit.scenes.spec import load_scene
+from toolkit.scenes.build import scene_plant
 from toolkit.simulation import Budget, SimulationStatus, simulate
 from toolkit.simulation._exact import _LANDSCAPES
 

@@ -4,7 +4,7 @@
   team's ``../shared/PHYSICS.md``, and no mention of that file);
 - every notebook it names exists and contains what the README says it shows, and the numbers
   it quotes from a notebook come out of the same computation here;
-- every scene key that :mod:`toolkit.scene` accepts is in the README's table, in the row of
+- every scene key that :mod:`toolkit.scenes.spec` accepts is in the README's table, in the row of
   its section, with the units and meanings issue 10 found missing;
 - the exit codes it documents are those of :data:`toolkit.cli.EXIT_CODES`.
 """
@@ -20,7 +20,7 @@ import pytest
 
 import toolkit as tk
 from toolkit.cli import EXIT_CODES
-from toolkit.scene import (BodySpec, ContactsSpec, ControlSpec, EstimationSpec, MotorsSpec, ReportSpec,
+from toolkit.scenes.spec import (BodySpec, ContactsSpec, ControlSpec, EstimationSpec, MotorsSpec, ReportSpec,
                            ScheduleSpec, SensorsSpec, SimulationSpec, SweepSpec, TargetSpec)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,8 +65,8 @@ def test_paper_table_numbers_come_from_the_designs_it_names() -> None:
     # (designs/median_law.toml) and "0.990 +- 0.018" (designs/median_law_nonideal.toml) and a
     # 90.9 % reduction (designs/residual_friction.toml): the same sweeps give them to the
     # digits quoted (atol: half a unit of the last digit printed).
-    from toolkit.scene import load_scene
-    from toolkit.study import sweep_scene
+    from toolkit.scenes.spec import load_scene
+    from toolkit.scenes.study import sweep_scene
 
     row = next(line for line in README.splitlines() if line.startswith("| median law:"))
     assert "designs/median_law.toml" in row and "designs/median_law_nonideal.toml" in row
@@ -94,8 +94,8 @@ def _quoted(text: str, pattern: str) -> tuple[str, ...]:
 def test_paper_table_rows_of_the_ideal_model_come_from_their_designs() -> None:
     # Each number the table quotes from a design's sweep, recomputed here and printed to the
     # digits quoted (identity of the formatted strings: the README shows what the code gives).
-    from toolkit.scene import load_scene
-    from toolkit.study import sweep_scene
+    from toolkit.scenes.spec import load_scene
+    from toolkit.scenes.study import sweep_scene
 
     section = _paper_section()
     run = lambda name: sweep_scene(load_scene(ROOT / "designs" / f"{name}.toml")).summary  # noqa: E731
@@ -140,8 +140,8 @@ def test_gap_numbers_come_from_the_models_they_name() -> None:
     assert _quoted(section, r"over carousels ([0-9.]+)-([0-9.]+) \+- ([0-9.]+)-([0-9.]+)\)") == (
         f"{min(means):.2f}", f"{max(means):.2f}", f"{min(sds):.3f}", f"{max(sds):.3f}")
     # the calibration that would close the gap on the non-ideal carousel
-    from toolkit.scene import load_scene
-    from toolkit.study import sweep_scene
+    from toolkit.scenes.spec import load_scene
+    from toolkit.scenes.study import sweep_scene
 
     base = sweep_scene(load_scene(ROOT / "designs" / "median_law_nonideal.toml")).summary["slope"]
     bias, radius = 1.065 / base - 1, base / 1.065 - 1

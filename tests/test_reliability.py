@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import toolkit as tk
-from toolkit.precision import (ERROR_LEVEL, MethodSetting, PrecisionReport, PrecisionRow, exact_speedup,
+from toolkit.analysis.precision import (ERROR_LEVEL, MethodSetting, PrecisionReport, PrecisionRow, exact_speedup,
                                precision_report, precision_shortfalls)
 from toolkit.simulation import Budget, SimulationStatus
 
@@ -35,7 +35,7 @@ def test_public_api_has_no_duplicates_and_every_name_resolves() -> None:
 
 
 def test_exported_objects_are_the_ones_the_toolkit_uses(tmp_path: Path) -> None:
-    from toolkit import _io, scene, scene_build, study
+    from toolkit.scenes import _io, build as scene_build, spec as scene, study
 
     assert tk.Shortfall is study.Shortfall and tk.Clip is scene_build.Clip
     assert tk.MAX_SCENE_BYTES == scene.MAX_SCENE_BYTES == 1 << 20

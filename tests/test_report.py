@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-import toolkit._io as io
+import toolkit.scenes._io as io
 from toolkit.cli import main
-from toolkit.report import study_to_dict, to_json, write_study
-from toolkit.scene import load_scene, loads_scene
-from toolkit.study import Shortfall, run_study
+from toolkit.scenes.report import study_to_dict, to_json, write_study
+from toolkit.scenes.spec import load_scene, loads_scene
+from toolkit.scenes.study import Shortfall, run_study
 
 ROOT = Path(__file__).parents[1]
 EQUAL = ROOT / "designs" / "equal.toml"          # writes result.json, force_curve.png, simulation.png

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from toolkit import SceneError, SceneFileNotFoundError
-from toolkit.scene import dumps_scene, load_scene, loads_scene
+from toolkit.scenes.spec import dumps_scene, load_scene, loads_scene
 
 DESIGNS = sorted((Path(__file__).parents[1] / "designs").glob("*.toml"))
 MINIMAL = '[contacts]\nspeeds = [0.1, 0.2, 0.3]\n'
@@ -133,9 +133,9 @@ def _modules_after_run(scene_text: str, tmp_path: Path) -> dict[str, bool]:
     path.write_text(scene_text)
     code = (
         "import json, sys\n"
-        "from toolkit.scene import load_scene\n"
-        "from toolkit.study import run_study\n"
-        "from toolkit.report import write_study\n"
+        "from toolkit.scenes.spec import load_scene\n"
+        "from toolkit.scenes.study import run_study\n"
+        "from toolkit.scenes.report import write_study\n"
         f"write_study(run_study(load_scene({str(path)!r})), {str(tmp_path / 'out')!r})\n"
         f"print(json.dumps({{m: m in sys.modules for m in {LAZY!r}}}))\n"
     )
@@ -329,7 +329,7 @@ def test_empty_scene(tmp_path):
 
 
 def test_scene_larger_than_the_cap(tmp_path):
-    from toolkit.scene import MAX_SCENE_BYTES
+    from toolkit.scenes.spec import MAX_SCENE_BYTES
 
     path = tmp_path / "huge.toml"
     path.write_bytes(MINIMAL.encode() + b"#" * (MAX_SCENE_BYTES + 1 - len(MINIMAL)))
@@ -365,7 +365,7 @@ def test_unreadable_scene(tmp_path, monkeypatch):
         def refuse(*args, **kwargs):
             raise PermissionError(13, "Permission denied")
 
-        monkeypatch.setattr("toolkit.scene.open", refuse, raising=False)
+        monkeypatch.setattr("toolkit.scenes.spec.open", refuse, raising=False)
         with pytest.raises(SceneError) as info:
             load_scene(path)
         assert str(info.value) == f"The scene file {str(path)!r} cannot be read: Permission denied."

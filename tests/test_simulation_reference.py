@@ -12,7 +12,7 @@ from scipy.optimize import brentq
 from toolkit.model import ContactSet
 from toolkit.errors import ParameterError
 from toolkit.model import Motors, PiecewiseConstant, Plant
-from toolkit.precision import rational_trajectory
+from toolkit.analysis.precision import rational_trajectory
 from toolkit.simulation import Budget, SimulationStatus, simulate
 from toolkit.simulation._moreau import _compliant_step, _staircase, moreau_step_staircase
 from toolkit.simulation._reference import BudgetExceeded, Meter

@@ -10,7 +10,7 @@ import pytest
 from toolkit.model import ContactSet
 from toolkit.model import Motors, PiecewiseConstant, Plant
 from toolkit.simulation import SimulationStatus, simulate
-from toolkit.stability import StabilityReport, _case, _mirror, _Spec, stability_suite
+from toolkit.analysis.stability import StabilityReport, _case, _mirror, _Spec, stability_suite
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +29,7 @@ def test_suite_covers_the_issue_cases(report: StabilityReport) -> None:
 
 def test_every_method_has_a_1e9_horizon_case(report: StabilityReport) -> None:
     from toolkit.simulation import METHODS
-    from toolkit.stability import _HORIZON_SAMPLES, _HORIZON_WALL
+    from toolkit.analysis.stability import _HORIZON_SAMPLES, _HORIZON_WALL
 
     horizon = [case for case in report.cases if case.check == "horizon"]
     assert {case.method for case in horizon} == set(METHODS)

@@ -12,8 +12,8 @@ import pytest
 
 from toolkit.cli import main
 from toolkit.errors import SceneError
-from toolkit.scene import dumps_scene, load_scene, loads_scene
-from toolkit.study import control_scene, estimate_scene, run_study
+from toolkit.scenes.spec import dumps_scene, load_scene, loads_scene
+from toolkit.scenes.study import control_scene, estimate_scene, run_study
 
 ROOT = Path(__file__).parents[1]
 ESTIMATE = (ROOT / "designs" / "estimate.toml").read_text()
@@ -42,7 +42,7 @@ def test_estimation_stage_is_the_carousel_brake_scenario():
     # Second method: the estimation package's own acceptance scenario (same plant, encoders
     # and seed) gives the same record and the same scores, exactly (same arithmetic).
     from toolkit.estimation import CentralDifference, KalmanEstimator, RTSSmoother
-    from toolkit.scenarios import carousel_brake_scenario
+    from toolkit.analysis.scenarios import carousel_brake_scenario
 
     study = estimate_scene(loads_scene(ESTIMATE))
     reference = carousel_brake_scenario(seed=0)
@@ -226,9 +226,9 @@ def _modules_after_run(text: str, tmp_path: Path) -> dict[str, bool]:
     path = tmp_path / "scene.toml"
     path.write_text(text)
     code = ("import json, sys\n"
-            "from toolkit.scene import load_scene\n"
-            "from toolkit.study import run_study\n"
-            "from toolkit.report import study_to_dict\n"
+            "from toolkit.scenes.spec import load_scene\n"
+            "from toolkit.scenes.study import run_study\n"
+            "from toolkit.scenes.report import study_to_dict\n"
             f"study_to_dict(run_study(load_scene({str(path)!r})))\n"
             f"print(json.dumps({{m: m in sys.modules for m in {LAZY!r}}}))\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)

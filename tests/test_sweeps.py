@@ -364,7 +364,7 @@ def test_mean_median_reports_runs_that_have_not_settled():
     # From rest the body needs at least |V*| / (F_tot / m) to reach V* (F_tot / m = 2 m/s^2),
     # so with settle_time 1 ms no run whose stop is farther than 2 mm/s from 0 has settled;
     # the sweep's shortfalls then name the count (a CLI exit 3).
-    from toolkit.study import sweep_shortfalls
+    from toolkit.scenes.study import sweep_shortfalls
 
     result = sweep(MeanMedian(held="median", level=0.05, gap=0.01, settle_time=0.001), 10, seed=1)
     assert not result.table["settled"].any()

@@ -31,17 +31,17 @@ from .errors import (
 from .plots import (plot_force_curve, plot_mean_median, plot_median_law, plot_outliers, plot_precision,
                     plot_ratio_histogram, plot_schedule, plot_simulation, plot_summary_comparison, plot_sweep,
                     plot_viscosity_check, plot_friction_fraction_check)
-from .scene import MAX_SCENE_BYTES, Scene, dumps_scene, load_scene
-from .scene_build import Clip
+from .scenes.spec import MAX_SCENE_BYTES, Scene, dumps_scene, load_scene
+from .scenes.build import Clip
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import carousel_startup_plant
-from .precision import PrecisionReport, PrecisionRow, precision_report
-from .closed_loop import ClosedLoopResult, simulate_closed_loop
+from .analysis.precision import PrecisionReport, PrecisionRow, precision_report
+from .loop.closed_loop import ClosedLoopResult, simulate_closed_loop
 from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, VirtualViscosity
 from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, SimulationResult,
                          SimulationStatus, advance, simulate, simulate_batch)
-from .stability import StabilityCase, StabilityReport, stability_suite
-from .study import CurveSamples, CurveStep, Shortfall, StudyResult, force_curve, run_study
+from .analysis.stability import StabilityCase, StabilityReport, stability_suite
+from .scenes.study import CurveSamples, CurveStep, Shortfall, StudyResult, force_curve, run_study
 from . import sweeps
 from .sweeps import SweepResult, sweep
 from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
@@ -50,7 +50,7 @@ from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
 from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
 from .estimation import (CentralDifference, EstimationResult, Estimator, EstimatorModel, KalmanEstimator,
                          RTSSmoother, UnscentedEstimator, WheelDifference, chi2_band)
-from .scenarios import BrakeScenario, carousel_brake_scenario
+from .analysis.scenarios import BrakeScenario, carousel_brake_scenario
 
 __version__ = "0.1.0"
 

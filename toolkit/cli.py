@@ -27,16 +27,16 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
-from ._io import check_output_dir
+from .scenes._io import check_output_dir
 from .errors import SceneError, ToolkitError
-from .precision import exact_speedup, precision_report, precision_shortfalls
-from .report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
+from .analysis.precision import exact_speedup, precision_report, precision_shortfalls
+from .scenes.report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
                      study_to_dict, sweep_lines, sweep_to_dict, to_json, write_precision, write_schedule,
                      write_study, write_sweep)
-from .scene import Scene, load_scene
-from .scene_build import scene_plant
-from .stability import stability_suite
-from .study import (Shortfall, allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
+from .scenes.spec import Scene, load_scene
+from .scenes.build import scene_plant
+from .analysis.stability import stability_suite
+from .scenes.study import (Shortfall, allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
                     request_shortfalls, run_study, schedule_shortfalls, sweep_scene, sweep_shortfalls)
 
 __all__ = ["main", "EXIT_CODES"]
@@ -185,10 +185,10 @@ def _cmd_precision(args: argparse.Namespace) -> int:
 # -- estimate (issue 9): every estimator of the scene over one simulated encoder record -------
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
-    from ._io import write_tree
-    from .report import estimation_files, estimation_lines, estimation_to_dict
-    from .scene import EstimationSpec, with_section
-    from .study import estimate_scene, estimation_shortfalls
+    from .scenes._io import write_tree
+    from .scenes.report import estimation_files, estimation_lines, estimation_to_dict
+    from .scenes.spec import EstimationSpec, with_section
+    from .scenes.study import estimate_scene, estimation_shortfalls
 
     scene = _scene(args, "sensors", "(the encoders to estimate from)")
     if scene.estimation is None:           # the defaults: the brake scenario, four estimators

@@ -74,7 +74,7 @@ def _thinning_note(ax: Any, shown: int, n: int) -> None:
 # -- force curve ------------------------------------------------------------------------------
 def plot_force_curve(curve: Any, ax: Any = None, *, label: str | None = None,
                      title: str | None = None):
-    """Draw a :class:`toolkit.study.CurveSamples`: the staircase, its set-valued steps, the equilibrium.
+    """Draw a :class:`toolkit.scenes.study.CurveSamples`: the staircase, its set-valued steps, the equilibrium.
 
     Parameters
     ----------
@@ -358,7 +358,7 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
     Parameters
     ----------
     curves : sequence of WorkPrecisionCurve
-        From :func:`toolkit.precision.work_precision_curves`. Runs a budget stopped (or
+        From :func:`toolkit.analysis.precision.work_precision_curves`. Runs a budget stopped (or
         that failed) are drawn with hollow markers, explained in the legend (their error
         covers only the part they simulated).
     ax : matplotlib Axes, optional
@@ -429,7 +429,7 @@ def plot_estimation(study: Any, axes: Any = None, *, title: str | None = None):
     Parameters
     ----------
     study : EstimationStudy
-        From :func:`toolkit.study.estimate_scene`.
+        From :func:`toolkit.scenes.study.estimate_scene`.
     axes : pair of matplotlib Axes, optional
     title : str, optional
         The scene name.

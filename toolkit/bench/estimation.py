@@ -26,7 +26,7 @@ import numpy as np
 
 from toolkit.estimation import (CentralDifference, KalmanEstimator, RTSSmoother, UnscentedEstimator,
                                 WheelDifference, chi2_band)
-from toolkit.scenarios import carousel_brake_scenario
+from toolkit.analysis.scenarios import carousel_brake_scenario
 
 
 def main(argv: list[str] | None = None) -> int:

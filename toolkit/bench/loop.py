@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-import toolkit.closed_loop as closed_loop
+import toolkit.loop.closed_loop as closed_loop
 from toolkit import CentralDifference, ContactSet, Plant, Sensors
 from toolkit.controllers import OpenLoop, SpeedHold, VirtualViscosity
 from toolkit.model import PiecewiseConstant

@@ -6,7 +6,7 @@ prints the work-precision table and the ratio of the run time of the fastest ref
 that reaches max |V error| <= 1e-6 m/s to the run time of the exact method, both measured in
 this run. Every method, the exact one included, is asked for the same output times (the
 exact event times and 1001 uniform times) and timed on those calls
-(:func:`toolkit.precision.precision_report`). The exact method's compiled kernels are loaded
+(:func:`toolkit.analysis.precision.precision_report`). The exact method's compiled kernels are loaded
 (or compiled) first, outside the timings, and that time is printed. Exit status 0 when the
 issue-11 criterion holds (exact error <= 1e-12 and ratio >= 200; issue 3 asked for 100).
 """
@@ -19,7 +19,7 @@ import time
 
 from toolkit.simulation._warmup import warm_up
 from toolkit.model.carousel import carousel_startup_plant
-from toolkit.precision import default_settings, exact_speedup, precision_report
+from toolkit.analysis.precision import default_settings, exact_speedup, precision_report
 
 
 TARGET = 200.0          # issue 11: reference / exact

@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from toolkit.closed_loop import simulate_closed_loop
+from toolkit.loop.closed_loop import simulate_closed_loop
 from toolkit.controllers import VirtualViscosity
 from toolkit.model import ContactSet
 from toolkit.predictions import (Apparatus, FrictionFractionProblem, ViscosityCheck, ViscosityProblem,

@@ -18,9 +18,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ..scene import load_scene
+from ..scenes.spec import load_scene
 from ..schedule import design_schedule
-from ..scene_build import scene_plant
+from ..scenes.build import scene_plant
 
 SCENES = ("brake_schedule", "carousel")
 

@@ -1,8 +1,8 @@
 """Controllers that set contact speeds (and a test rig's force) from the speed estimate.
 
 Each is a frozen settings object with ``bind(plant, period) -> ControlLaw``; the law's pure
-``output``/``update`` functions run once per sample in :func:`toolkit.closed_loop.simulate_closed_loop`
-and in the python-control interconnection of :mod:`toolkit.interop`.
+``output``/``update`` functions run once per sample in :func:`toolkit.loop.closed_loop.simulate_closed_loop`
+and in the python-control interconnection of :mod:`toolkit.loop.interop`.
 
 - :class:`OpenLoop`: replay a schedule (from :func:`~toolkit.schedule.design_schedule`);
 - :class:`VirtualViscosity`: a staircase of contact speeds centred on a reference;

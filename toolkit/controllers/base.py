@@ -8,7 +8,7 @@ two pure functions a closed loop calls once per sample::
     z = law.update(t, z, estimate)          # the controller's own state, shape (law.n_states,)
 
 Pure functions of an explicit state make the same law usable in the toolkit's closed loop
-and as a discrete-time ``control.NonlinearIOSystem`` (:mod:`toolkit.interop`).
+and as a discrete-time ``control.NonlinearIOSystem`` (:mod:`toolkit.loop.interop`).
 """
 
 from __future__ import annotations

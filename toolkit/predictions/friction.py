@@ -38,7 +38,7 @@ import numpy as np
 
 from .._validation import as_float, as_int, check_option
 from ..allocation import FrictionFraction, allocate
-from ..closed_loop import simulate_closed_loop
+from ..loop.closed_loop import simulate_closed_loop
 from ..controllers import ForceDrive, FrictionBrake
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..simulation import SimulationStatus

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_float, as_int
-from ..closed_loop import simulate_closed_loop
+from ..loop.closed_loop import simulate_closed_loop
 from ..controllers import VirtualViscosity
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import ContactSet

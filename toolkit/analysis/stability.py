@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from .model import ContactSet, Motors, PiecewiseConstant, Plant
-from .simulation import Budget, SimulationResult, SimulationStatus, simulate
+from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+from ..simulation import Budget, SimulationResult, SimulationStatus, simulate
 
 __all__ = ["StabilityCase", "StabilityReport", "stability_suite", "EXACT_TOLERANCE",
            "SMOOTH_TOLERANCE_FACTOR"]

@@ -24,14 +24,14 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import as_float
-from .controllers.base import ControlLaw, Controller
-from .errors import ParameterError, ParameterTypeError, parameter_message
-from .model import Plant
-from .model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors, measure  # noqa: F401
-from .simulation import Budget, SimulationStatus
-from .simulation._result import refuse_backlash
-from .simulation._stepper import ExactState, advance
+from .._validation import as_float
+from ..controllers.base import ControlLaw, Controller
+from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..model import Plant
+from ..model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors, measure  # noqa: F401
+from ..simulation import Budget, SimulationStatus
+from ..simulation._result import refuse_backlash
+from ..simulation._stepper import ExactState, advance
 
 __all__ = ["ClosedLoopResult", "simulate_closed_loop", "MAX_SAMPLES"]
 
@@ -152,7 +152,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     period = 1.0 / rate
     law: ControlLaw = controller.bind(plant, period)
     if sensors is not None and estimator is None:
-        from .estimation import EstimatorModel, KalmanEstimator   # filterpy: only with sensors
+        from ..estimation import EstimatorModel, KalmanEstimator   # filterpy: only with sensors
         motors = plant.motors
         estimator = KalmanEstimator(EstimatorModel(
             plant.contacts.forces, plant.mass, sensors,

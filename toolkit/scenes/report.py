@@ -1,7 +1,7 @@
-"""Turn study results into JSON and PNG files (the I/O side of :mod:`toolkit.study`).
+"""Turn study results into JSON and PNG files (the I/O side of :mod:`toolkit.scenes.study`).
 
 Everything is rendered in memory first and then the output folder is replaced as a whole
-(:func:`toolkit._io.write_tree`), so a failure leaves either the previous outputs or none.
+(:func:`toolkit.scenes._io.write_tree`), so a failure leaves either the previous outputs or none.
 An output folder holds the files of one command; a folder holding files the toolkit did not
 write is refused.
 """
@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from . import plots
+from .. import plots
 from ._io import atomic_write_text, write_tree
-from .precision import work_precision_curves
-from .scene_build import scene_plant
+from ..analysis.precision import work_precision_curves
+from .build import scene_plant
 from .study import Shortfall, StudyResult
 
 __all__ = ["study_summary", "study_to_dict", "study_files", "write_study", "to_json", "schedule_csv",
@@ -95,7 +95,7 @@ def schedule_lines(schedule: Any, check: Any, shortfalls: Any = ()) -> list[str]
 
 
 def shortfall_dicts(shortfalls: Any) -> list[dict[str, Any]]:
-    """JSON-able list of :class:`~toolkit.study.Shortfall`."""
+    """JSON-able list of :class:`~toolkit.scenes.study.Shortfall`."""
     return [shortfall.to_dict() for shortfall in shortfalls]
 
 

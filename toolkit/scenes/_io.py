@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
-from .errors import OutputError
+from ..errors import OutputError
 
 __all__ = ["OUTPUT_NAMES", "OutputError", "atomic_write_bytes", "atomic_write_text", "check_output_dir",
            "write_tree"]

@@ -1,6 +1,6 @@
 """Build toolkit objects from a parsed scene: the one place scene specs become objects.
 
-:mod:`toolkit.scene` reads a TOML file into frozen spec dataclasses and checks the *form* of
+:mod:`toolkit.scenes.spec` reads a TOML file into frozen spec dataclasses and checks the *form* of
 every value (known keys, types, finite numbers, rules between sections, and the rules of
 keys no constructor takes, such as ``motors.speed_limit`` or ``contacts.random``).
 :func:`build_scene` then builds the objects those specs declare, once:
@@ -54,16 +54,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._validation import check_option, suggestion
-from .allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
-from .errors import ParameterError, ParameterTypeError, SceneError
-from .model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant, unequal_loads
-from .model.sensors import Sensors
-from .schedule import Braking, SpeedTrajectory
-from .simulation import Budget
+from .._validation import check_option, suggestion
+from ..allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
+from ..errors import ParameterError, ParameterTypeError, SceneError
+from ..model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant, unequal_loads
+from ..model.sensors import Sensors
+from ..schedule import Braking, SpeedTrajectory
+from ..simulation import Budget
 
 if TYPE_CHECKING:                      # scene.py imports this module: types only, no cycle
-    from .scene import Scene, ScheduleSpec
+    from .spec import Scene, ScheduleSpec
 
 __all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "scene_plant",
            "schedule_target", "MAX_RUN_SAMPLES"]
@@ -345,7 +345,7 @@ def build_scene(scene: Scene) -> SceneObjects:
 
 def _sweep(scene: Scene) -> Any:
     """The ``[sweep]`` experiment, its parameters checked by its constructor."""
-    from .experiments import EXPERIMENTS
+    from ..experiments import EXPERIMENTS
 
     spec = scene.sweep
     kind = EXPERIMENTS[spec.experiment]
@@ -452,7 +452,7 @@ def _noisy_sensors(scene: Scene, section: str, spec: Any) -> Sensors:
 
 
 def _model(plant: Plant, sensors: Sensors, friction_spread: float = 0.0) -> Any:
-    from .estimation import EstimatorModel
+    from ..estimation import EstimatorModel
 
     motors = plant.motors
     with _scene_keys("estimation", {"friction_uncertainty": "estimation.friction_spread"}):
@@ -464,7 +464,7 @@ def _model(plant: Plant, sensors: Sensors, friction_spread: float = 0.0) -> Any:
 
 def _estimator(name: str, model: Any, section: str, covariance: Any = None) -> Any:
     """The estimator ``name`` on ``model`` (``initial_covariance`` for the filters)."""
-    from .estimation import (CentralDifference, KalmanEstimator, RTSSmoother, UnscentedEstimator,
+    from ..estimation import (CentralDifference, KalmanEstimator, RTSSmoother, UnscentedEstimator,
                              WheelDifference)
 
     if name == "central_difference":
@@ -516,7 +516,7 @@ def _control(scene: Scene, plant: Plant | None) -> ControlObjects | None:
     if spec is None:
         return None
     assert plant is not None                                   # scene.py requires [body]
-    from . import controllers
+    from .. import controllers
 
     p = spec.params
     with _scene_keys("control", _same_keys("control", tuple(p))):

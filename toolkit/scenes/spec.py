@@ -70,7 +70,7 @@ sections and keys, types, finite numbers, required and exclusive keys, rules bet
 sections such as one command per contact) and the rules of keys that no constructor takes
 (``motors.speed_limit``, ``body.inertia``, ``contacts.random``, ``schedule.period``, ...).
 Every other value is checked by the constructor that takes it, when
-:mod:`toolkit.scene_build` builds the scene's objects (``Scene.objects``, once, at load).
+:mod:`toolkit.scenes.build` builds the scene's objects (``Scene.objects``, once, at load).
 """
 
 from __future__ import annotations
@@ -89,11 +89,11 @@ from typing import Any
 
 import tomli_w
 
-from ._validation import suggestion
-from .errors import SceneError, SceneFileNotFoundError
-from .model import ContactSet
-from .simulation import Budget
-from .scene_build import SceneObjects, build_scene
+from .._validation import suggestion
+from ..errors import SceneError, SceneFileNotFoundError
+from ..model import ContactSet
+from ..simulation import Budget
+from .build import SceneObjects, build_scene
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
@@ -673,7 +673,7 @@ class ControlSpec:
     ideal loop's; with sensors theirs), ``seed`` (integer), ``missed_count_prob``,
     ``count_noise`` (counts), ``jitter`` (s), ``budget`` (``{wall_time, max_steps,
     max_event_rate, max_samples}`` of each plant step: s, count, 1/s, count), ``cross_check`` (true: also
-    simulate the loop as a python-control interconnection, :mod:`toolkit.interop`, and
+    simulate the loop as a python-control interconnection, :mod:`toolkit.loop.interop`, and
     report the largest difference).
     """
 
@@ -784,8 +784,8 @@ class SweepSpec:
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> SweepSpec:
-        from .experiments import EXPERIMENTS
-        from .sweeps import MAX_RUNS
+        from ..experiments import EXPERIMENTS
+        from ..sweeps import MAX_RUNS
 
         kind = _text("sweep.experiment", _require("sweep", table, "experiment"))
         if kind not in EXPERIMENTS:
@@ -863,7 +863,7 @@ class Scene:
 
     @functools.cached_property
     def objects(self) -> SceneObjects:
-        """The toolkit objects this scene declares (:func:`toolkit.scene_build.build_scene`),
+        """The toolkit objects this scene declares (:func:`toolkit.scenes.build.build_scene`),
         built once: :func:`load_scene` builds them to validate the values, and every stage
         reuses them."""
         return build_scene(self)

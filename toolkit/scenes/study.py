@@ -8,7 +8,7 @@ the simulation runs on the allocated contact speeds: the design is checked by si
 A ``[schedule]`` is designed and then simulated exactly under its own commands.
 
 Every object a stage needs (contacts, motors, plant, encoders, targets) comes from
-``scene.objects`` (:mod:`toolkit.scene_build`), built once when the scene was loaded.
+``scene.objects`` (:mod:`toolkit.scenes.build`), built once when the scene was loaded.
 
 A study that finishes may still miss what the scene asked for. Each miss is a
 :class:`Shortfall` (``StudyResult.shortfalls``), one kind per way of missing:
@@ -35,7 +35,7 @@ record, scored against the truth (:func:`estimate_scene`). ``[control]`` runs
 :func:`toolkit.simulate_closed_loop` on the scene's plant (declared contacts at ``t = 0``)
 with the declared controller, sensors and estimator (:func:`control_scene`); with
 ``cross_check = true`` the same loop is also simulated by python-control
-(:mod:`toolkit.interop`) and compared sample by sample.
+(:mod:`toolkit.loop.interop`) and compared sample by sample.
 
 The ones that can be known before any work (clipped speeds, a target that needs projection
 or lies beyond reach, a schedule target beyond the speed limits) are
@@ -51,13 +51,13 @@ from typing import Any
 
 import numpy as np
 
-from .allocation import (AllocationResult, AllocationStatus, EquilibriumSpeed, FrictionFraction,
+from ..allocation import (AllocationResult, AllocationStatus, EquilibriumSpeed, FrictionFraction,
                          allocate, build_problem)
-from .errors import ParameterError, SceneError
-from .model import ContactSet
-from .scene import Scene
-from .schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
-from .simulation import SimulationResult, SimulationStatus, simulate
+from ..errors import ParameterError, SceneError
+from ..model import ContactSet
+from .spec import Scene
+from ..schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
+from ..simulation import SimulationResult, SimulationStatus, simulate
 
 #: Largest difference (m/s) between python-control's and the toolkit's closed loop that the
 #: cross check accepts: both run the same arithmetic (identical numbers, 0 observed); 1e-9
@@ -462,7 +462,7 @@ def estimate_scene(scene: Scene, simulation: SimulationResult | None = None) -> 
     -------
     EstimationStudy
     """
-    from .model.sensors import record_simulation
+    from ..model.sensors import record_simulation
 
     spec, objects = scene.estimation, scene.objects.estimation
     if spec is None or objects is None:
@@ -536,7 +536,7 @@ def control_scene(scene: Scene, schedule: ScheduleResult | None = None) -> Contr
         For ``controller = "open_loop"``: the designed ``[schedule]`` (designed here when
         not given).
     """
-    from .closed_loop import simulate_closed_loop
+    from ..loop.closed_loop import simulate_closed_loop
 
     spec, objects = scene.control, scene.objects.control
     if spec is None or objects is None:
@@ -544,7 +544,7 @@ def control_scene(scene: Scene, schedule: ScheduleResult | None = None) -> Contr
     plant = scene.objects.plant_on(None)
     controller = objects.controller
     if controller is None:                                     # open loop: the designed schedule
-        from .controllers import OpenLoop
+        from ..controllers import OpenLoop
 
         if schedule is None:
             schedule, _ = design_scene_schedule(scene)
@@ -556,7 +556,7 @@ def control_scene(scene: Scene, schedule: ScheduleResult | None = None) -> Contr
     difference = None
     if spec.cross_check and loop.status is SimulationStatus.SUCCESS:
         import control                 # python-control: only for a [control] cross check
-        from .interop import closed_loop_system
+        from ..loop.interop import closed_loop_system
 
         system = closed_loop_system(plant, controller, rate=rate, **arguments)
         response = control.input_output_response(system.system, loop.times, 0, system.initial_state)
@@ -653,7 +653,7 @@ def sweep_scene(scene: Scene, *, runs: int | None = None, seed: int | None = Non
     SceneError
         The scene has no ``[sweep]``.
     """
-    from .sweeps import sweep   # pandas comes with the first sweep
+    from ..sweeps import sweep   # pandas comes with the first sweep
 
     spec = scene.sweep
     if spec is None:

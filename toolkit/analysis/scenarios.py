@@ -15,15 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ._validation import as_int
-from .model import ContactSet, Motors, PiecewiseConstant, Plant
-from .model.sensors import EncoderRecord, Sensors, record_simulation
-from .estimation import EstimatorModel
+from .._validation import as_int
+from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+from ..model.sensors import EncoderRecord, Sensors, record_simulation
+from ..estimation import EstimatorModel
 
 __all__ = ["BrakeScenario", "carousel_brake_scenario", "CAROUSEL_SCENE"]
 
 #: The reference scene file (repository root / designs).
-CAROUSEL_SCENE = Path(__file__).resolve().parents[1] / "designs" / "carousel.toml"
+CAROUSEL_SCENE = Path(__file__).resolve().parents[2] / "designs" / "carousel.toml"
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,8 +72,8 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
     **noise
         ``missed_count_prob``, ``count_noise``, ``jitter`` of :class:`Sensors`.
     """
-    from .scene import load_scene
-    from .simulation import simulate
+    from ..scenes.spec import load_scene
+    from ..simulation import simulate
 
     scene = load_scene(CAROUSEL_SCENE)
     forces = scene.contact_set().forces

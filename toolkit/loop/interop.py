@@ -52,13 +52,13 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import as_float, as_float_array
-from .errors import ParameterError, ParameterTypeError, SolverError, parameter_message
-from .estimation import Estimator
-from .model import Plant
-from .model.sensors import EncoderSample, Sensors, SensorState, measure
-from .simulation import Budget, SimulationStatus
-from .simulation._stepper import ExactState, advance
+from .._validation import as_float, as_float_array
+from ..errors import ParameterError, ParameterTypeError, SolverError, parameter_message
+from ..estimation import Estimator
+from ..model import Plant
+from ..model.sensors import EncoderSample, Sensors, SensorState, measure
+from ..simulation import Budget, SimulationStatus
+from ..simulation._stepper import ExactState, advance
 
 __all__ = ["IOBlock", "LoopSystem", "plant_system", "estimator_system", "controller_system",
            "closed_loop_system", "viscous_system"]

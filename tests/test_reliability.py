@@ -35,9 +35,10 @@ def test_public_api_has_no_duplicates_and_every_name_resolves() -> None:
 
 
 def test_exported_objects_are_the_ones_the_toolkit_uses(tmp_path: Path) -> None:
+    from toolkit import shortfall
     from toolkit.scenes import _io, build as scene_build, spec as scene, study
 
-    assert tk.Shortfall is study.Shortfall and tk.Clip is scene_build.Clip
+    assert tk.Shortfall is study.Shortfall is shortfall.Shortfall and tk.Clip is scene_build.Clip
     assert tk.MAX_SCENE_BYTES == scene.MAX_SCENE_BYTES == 1 << 20
     # OutputError is one of the toolkit's errors (errors.py), an OSError, and what the output
     # check raises for an --out that is an existing file

@@ -12,7 +12,8 @@ import toolkit.scenes._io as io
 from toolkit.cli import main
 from toolkit.scenes.report import study_to_dict, to_json, write_study
 from toolkit.scenes.spec import load_scene, loads_scene
-from toolkit.scenes.study import Shortfall, run_study
+from toolkit.shortfall import Shortfall
+from toolkit.scenes.study import run_study
 
 ROOT = Path(__file__).parents[1]
 EQUAL = ROOT / "designs" / "equal.toml"          # writes result.json, force_curve.png, simulation.png

@@ -41,7 +41,8 @@ from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, Virtual
 from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, SimulationResult,
                          SimulationStatus, advance, simulate, simulate_batch)
 from .analysis.stability import StabilityCase, StabilityReport, stability_suite
-from .scenes.study import CurveSamples, CurveStep, Shortfall, StudyResult, force_curve, run_study
+from .shortfall import Shortfall
+from .scenes.study import CurveSamples, CurveStep, StudyResult, force_curve, run_study
 from . import sweeps
 from .sweeps import SweepResult, sweep
 from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction

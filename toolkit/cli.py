@@ -36,7 +36,8 @@ from .scenes.report import (schedule_check, schedule_lines, shortfall_dicts, sho
 from .scenes.spec import Scene, load_scene
 from .scenes.build import scene_plant
 from .analysis.stability import stability_suite
-from .scenes.study import (Shortfall, allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
+from .shortfall import Shortfall
+from .scenes.study import (allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
                     request_shortfalls, run_study, schedule_shortfalls, sweep_scene, sweep_shortfalls)
 
 __all__ = ["main", "EXIT_CODES"]

@@ -32,6 +32,7 @@ import numpy as np
 from .._validation import as_float, as_int
 from ..model import PiecewiseConstant, Plant
 from ..errors import ParameterError, ParameterTypeError, SolverError, parameter_message
+from ..shortfall import Shortfall
 from ..simulation import METHODS, Budget, SimulationResult, SimulationStatus, simulate
 from ..simulation._exact import clear_cache
 
@@ -634,7 +635,7 @@ def precision_shortfalls(report: PrecisionReport, error: float = ERROR_LEVEL) ->
 
     The request of a report with an exact row is its headline: the exact method's speedup
     over the fastest reference method at the accuracy ``error`` (:func:`exact_speedup`),
-    which needs two things, each a :class:`toolkit.scenes.study.Shortfall` (stage ``"precision"``,
+    which needs two things, each a :class:`toolkit.shortfall.Shortfall` (stage ``"precision"``,
     amount in m/s) when missed:
 
     - the exact method, measured against the independent rational solution, is itself within
@@ -656,10 +657,9 @@ def precision_shortfalls(report: PrecisionReport, error: float = ERROR_LEVEL) ->
 
     Returns
     -------
-    list of toolkit.scenes.study.Shortfall
+    list of toolkit.shortfall.Shortfall
         Empty when the request was met or the report has no exact row (no speedup asked).
     """
-    from ..scenes.study import Shortfall                      # (study imports the whole pipeline)
 
     error = as_float(error, "error", "precision_shortfalls", low=0.0, low_open=True)
     if not any(row.method == "exact" for row in report.rows):

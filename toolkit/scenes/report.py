@@ -19,7 +19,8 @@ from .. import plots
 from ._io import atomic_write_text, write_tree
 from ..analysis.precision import work_precision_curves
 from .build import scene_plant
-from .study import Shortfall, StudyResult
+from ..shortfall import Shortfall
+from .study import StudyResult
 
 __all__ = ["study_summary", "study_to_dict", "study_files", "write_study", "to_json", "schedule_csv",
            "schedule_check", "schedule_lines", "shortfall_dicts", "shortfall_line", "write_precision",
@@ -95,7 +96,7 @@ def schedule_lines(schedule: Any, check: Any, shortfalls: Any = ()) -> list[str]
 
 
 def shortfall_dicts(shortfalls: Any) -> list[dict[str, Any]]:
-    """JSON-able list of :class:`~toolkit.scenes.study.Shortfall`."""
+    """JSON-able list of :class:`~toolkit.shortfall.Shortfall`."""
     return [shortfall.to_dict() for shortfall in shortfalls]
 
 

@@ -57,6 +57,7 @@ from ..errors import ParameterError, SceneError
 from ..model import ContactSet
 from .spec import Scene
 from ..schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
+from ..shortfall import Shortfall
 from ..simulation import SimulationResult, SimulationStatus, simulate
 
 #: Largest difference (m/s) between python-control's and the toolkit's closed loop that the
@@ -69,39 +70,6 @@ __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve
            "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
            "estimate_scene", "control_scene", "estimation_shortfalls", "control_shortfalls",
            "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls"]
-
-
-@dataclass(frozen=True)
-class Shortfall:
-    """A way a finished study missed what the scene asked for.
-
-    Attributes
-    ----------
-    stage : str
-        ``"scene"``, ``"allocation"``, ``"schedule"``, ``"simulation"``, ``"estimation"``,
-        ``"control"`` or ``"sweep"``.
-    what : str
-        What was missed and by how much, in words, e.g. ``"friction fraction 1.7 is not
-        realizable: projected to 1 (distance 7 N)"``.
-    amount : float
-        By how much (NaN when no amount applies), in ``unit``.
-    unit : str
-        ``"N"``, ``"m/s"``, ``"s"`` or ``"runs"``.
-    """
-
-    stage: str
-    what: str
-    amount: float
-    unit: str
-
-    def __str__(self) -> str:
-        return f"{self.stage}: {self.what}"
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able form: ``stage``, ``what``, ``amount`` (None when NaN), ``unit``."""
-        amount = float(self.amount)
-        return {"stage": self.stage, "what": self.what,
-                "amount": amount if math.isfinite(amount) else None, "unit": self.unit}
 
 
 @dataclass(frozen=True)

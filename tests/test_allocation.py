@@ -23,7 +23,7 @@ from toolkit.allocation import (
 from toolkit.allocation._evaluate import evaluate_errors, failure_margin
 from toolkit.errors import ParameterError, ParameterTypeError
 
-V_MAX = 0.35          # PHYSICS.md section 3: |v_i| <= 0.35 m/s
+V_MAX = 0.35          # docs/physics.md section 5: |v_i| <= 0.35 m/s
 
 
 @pytest.fixture
@@ -83,7 +83,7 @@ def test_quantile_error_is_f_tot_over_n_on_a_full_range_target(n: int) -> None:
     result = allocate(target, ContactSet(np.zeros(n), np.full(n, 2.0)))
     assert result.method == "quantile"
     assert result.status is AllocationStatus.OPTIMAL
-    # Closed form F_tot / N (PHYSICS.md section 6); rtol: a few roundings of the quantiles.
+    # Closed form F_tot / N (docs/physics.md section 8); rtol: a few roundings of the quantiles.
     assert result.error_sup == pytest.approx(total / n, rel=1e-12, abs=0)
     assert result.bound == pytest.approx(total / n, rel=1e-15, abs=0)
     assert abs(result.gap) < 1e-12
@@ -218,7 +218,7 @@ def test_friction_fraction_braking_time_by_simulation(k: int) -> None:
     simulation = pytest.importorskip("toolkit.simulation")
     from toolkit.model import Plant
 
-    mass, f = 1.0, 0.2                        # F_tot = 2 N, F_tot / m = 2 m/s^2 (PHYSICS.md 4)
+    mass, f = 1.0, 0.2                        # F_tot = 2 N, F_tot / m = 2 m/s^2 (docs/physics.md section 6)
     result = allocate(FrictionFraction(k / 5, V_MAX), ContactSet(np.zeros(10), np.full(10, f)),
                       speed_limits=(-V_MAX, V_MAX))
     run = simulation.simulate(Plant(result.contacts, mass), 2.0, v0=V_MAX)

@@ -108,7 +108,7 @@ def test_allocate_json_reproduces_the_papers_split(capsys):
 
 
 def test_run_on_braking_checks_the_transition_time(tmp_path, capsys):
-    # dT = m 2 v_max / (F_tot mu/mu0) = 5 * 0.7 / (10 * 0.4) = 0.875 s (PHYSICS.md section 4).
+    # dT = m 2 v_max / (F_tot mu/mu0) = 5 * 0.7 / (10 * 0.4) = 0.875 s (docs/physics.md section 6).
     assert main(["run", str(ROOT / "designs" / "braking.toml"), "--out", str(tmp_path), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     t, V = np.array(data["simulation"]["t"]), np.array(data["simulation"]["V"])

@@ -123,7 +123,7 @@ def test_cdf_identity_away_from_ties():
 
 
 def test_uniform_spacing_has_average_viscosity():
-    # Average slope 2 F_tot / (N s) over the staircase (PHYSICS.md section 4).
+    # Average slope 2 F_tot / (N s) over the staircase (docs/physics.md section 6).
     n, spacing = 10, 0.07
     cs = ContactSet(np.arange(n) * spacing, np.full(n, 0.3))
     stairs = cs.staircase()

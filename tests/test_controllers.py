@@ -20,7 +20,7 @@ def plant():
 def test_virtual_viscosity_is_a_uniform_staircase_of_spacing_2f_over_k(plant):
     k = 10.0
     speeds = np.sort(VirtualViscosity(k, 0.1).bind(plant, 0.02).output(0.0, np.zeros(0), 0.0).commands)
-    # Quantiles of the linear law (PHYSICS.md section 6): spacing 2 f / k, centred on 0.1.
+    # Quantiles of the linear law (docs/physics.md section 8): spacing 2 f / k, centred on 0.1.
     np.testing.assert_allclose(np.diff(speeds), 2 * F / k, rtol=1e-12)
     assert np.mean(speeds) == pytest.approx(0.1, abs=1e-15)
 

@@ -22,7 +22,7 @@ import toolkit as tk
 from toolkit import plots
 from toolkit.analysis.precision import MethodSetting, work_precision_curves
 
-VMAX = 0.35                      # PHYSICS.md section 3
+VMAX = 0.35                      # docs/physics.md section 5
 MOTORS = tk.Motors(lag=0.01, speed_limits=(-VMAX, VMAX))
 SCENE = "plot_scene"
 

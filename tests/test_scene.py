@@ -35,7 +35,7 @@ def test_carousel_has_the_papers_hardware():
     assert contacts.n == 10
     assert np.all(np.abs(contacts.speeds) <= 0.35)
     assert scene.motors.speed_limits == (-0.35, 0.35)
-    # F_tot / m = 2 m/s^2 (PHYSICS.md section 4): I / L^2 = 0.353780 / 0.266^2 = 5.000 kg;
+    # F_tot / m = 2 m/s^2 (docs/physics.md section 6): I / L^2 = 0.353780 / 0.266^2 = 5.000 kg;
     # rtol 1e-5 because the inertia is written with 6 significant digits.
     np.testing.assert_allclose(contacts.total_force / scene.body.moving_mass, 2.0, rtol=1e-5)
 
@@ -232,7 +232,7 @@ def test_declared_objects_are_built_once_at_load():
     assert scene.objects is objects and scene.contact_set() is objects.contacts
     assert objects.plant.contacts is objects.contacts and objects.plant.motors is objects.motors
     assert set(objects.encoders) == {"wheel", "central"}
-    # F_tot / m = 2 m/s^2 (PHYSICS.md section 4), rtol 1e-5 as in the carousel test above.
+    # F_tot / m = 2 m/s^2 (docs/physics.md section 6), rtol 1e-5 as in the carousel test above.
     np.testing.assert_allclose(objects.contacts.total_force / objects.plant.mass, 2.0, rtol=1e-5)
     assert load_scene(path) == scene            # the built objects are not part of equality
 

@@ -23,7 +23,7 @@ from toolkit.schedule import (Braking, ScheduleResult, ScheduleStatus, SpeedTraj
                               braking_time, design_schedule, deviation_bound)
 from toolkit.simulation import simulate
 
-VMAX = 0.35                      # PHYSICS.md section 3
+VMAX = 0.35                      # docs/physics.md section 5
 TAU = 0.01                       # motors settle in ~30 ms = 3 tau
 PERIOD = 0.02                    # 50 Hz
 MOTORS = Motors(lag=TAU, speed_limits=(-VMAX, VMAX))
@@ -55,7 +55,7 @@ def check_limits(result: ScheduleResult, plant: Plant) -> None:
 # -- closed forms -----------------------------------------------------------------------------
 def test_braking_time_ideal_motors_is_m_dv_over_ftot():
     plant = carousel([0.3] * 10, motors=Motors(speed_limits=(-VMAX, VMAX)))
-    # dT = m (V0 - Vt) / F_tot = 1 * 0.3 / 2 (PHYSICS.md section 4).
+    # dT = m (V0 - Vt) / F_tot = 1 * 0.3 / 2 (docs/physics.md section 6).
     assert braking_time(plant, 0.3, 0.0) == pytest.approx(0.15, rel=1e-15, abs=0)
     # Mirrored: speeding up from -0.3 to 0 with contacts at +v_max takes as long.
     assert braking_time(carousel([-0.3] * 10, motors=plant.motors), -0.3, 0.0) == \
@@ -210,7 +210,7 @@ def test_fast_braking_reaches_the_closed_form_minimum_time(braking):
 
 def test_braking_within_a_duration_follows_the_constant_deceleration():
     plant = carousel([0.3] * 10)
-    # mu/mu0 = 0.5: dT = m (V0 - Vt) / (F_tot mu/mu0) = 0.3 s (PHYSICS.md section 4).
+    # mu/mu0 = 0.5: dT = m (V0 - Vt) / (F_tot mu/mu0) = 0.3 s (docs/physics.md section 6).
     result = design_schedule(plant, Braking(0.0, duration=0.3), v0=0.3)
     check_limits(result, plant)
     grid = exact_run(plant, result, 0.3, result.times)
@@ -332,7 +332,7 @@ def test_ideal_motors_stick_to_a_feasible_reference_exactly():
 
 def test_lagged_contacts_carry_the_body_while_sticking_holds(sinusoid):
     # With a lag the contacts follow exponentials; wherever every contact has the same speed
-    # p(t) and |m p'(t)| <= F_tot (PHYSICS.md section 2, c = F_ext = 0) the body sticks to
+    # p(t) and |m p'(t)| <= F_tot (docs/physics.md section 4, c = F_ext = 0) the body sticks to
     # them: the exact simulation equals the closed-form path p to rounding.
     plant, _, result = sinusoid
     checked = 0
@@ -442,7 +442,7 @@ def test_refinement_runs_bounded_and_keeps_a_verified_schedule():
 
 def test_holding_against_drag_and_a_force_step_is_exact():
     # Contacts at the held speed R carry the body there while |F_ext - c R| <= F_tot
-    # (Filippov sticking, PHYSICS.md section 2): 1.2 N - 2 N s/m x 0.1 m/s = 1 N <= 2 N.
+    # (Filippov sticking, docs/physics.md section 4): 1.2 N - 2 N s/m x 0.1 m/s = 1 N <= 2 N.
     push = PiecewiseConstant([0.13], [0.0, 1.2])                    # N, a step mid-period
     plant = Plant(ContactSet(np.full(10, 0.1), np.full(10, 0.2)), mass=1.0, damping=2.0,
                   external_force=push, motors=MOTORS)

@@ -1,4 +1,4 @@
-"""Encoder resolutions against the paper's hardware table (PHYSICS.md section 3)."""
+"""Encoder resolutions against the paper's hardware table (docs/physics.md section 5)."""
 
 from __future__ import annotations
 

@@ -193,7 +193,7 @@ def test_command_schedule_moves_the_median():
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 5])
 def test_braking_law(n):
-    # PHYSICS.md section 4: 5-n contacts at +v_max, 5+n at -v_max, from V = +v_max:
+    # docs/physics.md section 6: 5-n contacts at +v_max, 5+n at -v_max, from V = +v_max:
     # dT = m 2 v_max / (F_tot n / 5).
     v_max, mass, f = 0.35, 0.8, 0.2
     speeds = [v_max] * (5 - n) + [-v_max] * (5 + n)

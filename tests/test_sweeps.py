@@ -83,7 +83,7 @@ def test_one_wheel_seed_is_one_carousel_in_every_experiment():
 
 
 def test_even_n_from_rest_stops_at_the_near_band_edge():
-    # Closed form (PHYSICS.md section 4): ideal plant, equal loads, from rest the body stops at
+    # Closed form (docs/physics.md section 6): ideal plant, equal loads, from rest the body stops at
     # clip(0, lo, hi) with [lo, hi] the zero-force band. The exact batch lands on the contact
     # speed itself, so the match is to rounding of the motion (atol 1e-15 m/s).
     experiment = MedianLaw(n=10)

@@ -231,6 +231,26 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return _finish(shortfalls)
 
 
+def _cmd_designs(args: argparse.Namespace) -> int:
+    from .scenes.designs import copy_designs, design_names, design_text
+
+    if args.copy is not None:
+        written = copy_designs(args.copy)
+        if args.json:
+            _print_json({"written": [str(p) for p in written]})
+        else:
+            print(f"wrote {len(written)} designs into {args.copy}")
+        return EXIT_OK
+    names = design_names()
+    if args.json:
+        _print_json({"designs": list(names)})
+    else:
+        for name in names:
+            first = design_text(name).splitlines()[0] if design_text(name) else ""
+            print(f"{name:22} {first.lstrip('# ').strip()}")
+    return EXIT_OK
+
+
 def _flags(row: Any) -> str:
     names = [name for name in ("chattering", "step_collapse", "creep", "stalled") if getattr(row, name)]
     return f" [{', '.join(names)}]" if names else ""
@@ -359,6 +379,10 @@ def _parser() -> argparse.ArgumentParser:
                        help="processes of the 'processes' pool (only with --scheduler processes)")
     sweep.add_argument("--out", metavar="DIR", help="write results.csv (one row per run), sweep.json and "
                        "sweep.png into this folder, replaced as a whole")
+    designs = command("designs", _cmd_designs, "list the designs shipped with the toolkit (scene files); "
+                      "--copy DIR writes them into DIR for editing", scene=False)
+    designs.add_argument("--copy", metavar="DIR", help="write every shipped design into this folder "
+                         "(created if needed; refused if a file of the same name is there)")
     stability = command("stability", _cmd_stability,
                         "stability suite over stiff and extreme cases (exit 1 if a case fails)", scene=False)
     stability.add_argument("--quick", action="store_true", help="the smaller, faster set of cases")

@@ -5,7 +5,7 @@ One verb, :func:`allocate`, over small frozen target objects
 :class:`EquilibriumSpeed`). Methods, one module each:
 
 - ``"quantile"`` (:mod:`._quantile`): the exact construction for equal magnitudes sharing
-  one speed box (PHYSICS.md section 6), with its closed-form optimal error.
+  one speed box (docs/physics.md section 8), with its closed-form optimal error.
 - ``"milp"`` (:mod:`._milp`): a mixed-integer program (cvxpy + HiGHS) for unequal
   magnitudes, per-contact boxes, rate limits, fixed/failed and liftable contacts.
 - ``"casadi"`` (:mod:`._smooth`): compliant contacts and continuous distributions.

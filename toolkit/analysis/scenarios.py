@@ -1,7 +1,7 @@
 """Reference scenarios built from the shipped designs: the estimation acceptance run, the
 paper's carousel started from rest, then braked.
 
-Ten equal wheels with ``f_i`` from ``designs/carousel.toml`` (1 N each), the moving inertia
+Ten equal wheels with ``f_i`` from the shipped ``carousel`` design (1 N each), the moving inertia
 ``m = I / L^2`` (5 kg) from its body section, motor lag 7.5 ms, the paper's encoders at
 50 Hz. The contacts are commanded to a spread around ``cruise`` from rest, and at
 ``brake_time`` to a braking set spread around ``brake``; the run is simulated exactly and
@@ -11,7 +11,6 @@ recorded through the sensor law.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -20,10 +19,7 @@ from ..model import ContactSet, Motors, PiecewiseConstant, Plant
 from ..model.sensors import EncoderRecord, Sensors, record_simulation
 from ..estimation import EstimatorModel
 
-__all__ = ["BrakeScenario", "carousel_brake_scenario", "CAROUSEL_SCENE"]
-
-#: The reference scene file (repository root / designs).
-CAROUSEL_SCENE = Path(__file__).resolve().parents[2] / "designs" / "carousel.toml"
+__all__ = ["BrakeScenario", "carousel_brake_scenario"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,10 +68,10 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
     **noise
         ``missed_count_prob``, ``count_noise``, ``jitter`` of :class:`Sensors`.
     """
-    from ..scenes.spec import load_scene
+    from ..scenes.designs import load_design
     from ..simulation import simulate
 
-    scene = load_scene(CAROUSEL_SCENE)
+    scene = load_design("carousel")
     forces = scene.contact_set().forces
     mass = scene.body.moving_mass
     n = forces.size

@@ -16,9 +16,8 @@ and the ratio baseline / constructive.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
-from ..scenes.spec import load_scene
+from ..scenes.designs import load_design
 from ..schedule import design_schedule
 from ..scenes.build import scene_plant
 
@@ -28,11 +27,10 @@ SCENES = ("brake_schedule", "carousel")
 def main(argv: list[str]) -> int:
     quick = "--quick" in argv
     iterations = 10 if quick else 30
-    designs = Path(__file__).resolve().parents[2] / "designs"
     print(f"{'scene':>15} {'method':>22} {'wall [s]':>9} {'status':>9} {'sup error':>10}"
           f" {'objective':>10}  ipopt")
     for name in SCENES:
-        scene = load_scene(designs / f"{name}.toml")
+        scene = load_design(name)
         spec = scene.schedule
         plant, target = scene_plant(scene), scene.objects.schedule_target
         walls = {}

@@ -13,7 +13,7 @@ sub-intervals and placed every crossing at a sub-interval midpoint, up to ``h / 
 a 0.16 mm/s bias through the carousel's brake). Three cases are decided from the equilibrium
 set alone (:meth:`EstimatorModel.bounds_row`, the weighted quantile of the contact speeds,
 :class:`~toolkit.model.ContactSet`), without running the flow: a body on the set with
-settled contacts stays there (stiction, PHYSICS.md section 2); a body farther from every
+settled contacts stays there (stiction, docs/physics.md section 4); a body farther from every
 contact speed than both the period's largest speed change ``(F_tot + |F|) h / m`` and
 ``w = 2 sqrt(P_VV + sigma_v^2)`` feels the whole friction one way (``dV = (-+F_tot + F) h /
 m``, ``dx = dV h / 2``); a body on a slowly moving set (inside it, or on the contact at its
@@ -273,7 +273,7 @@ class EstimatorModel:
         2``, no crossing). With moving contacts (a command change) a body
         within ``w = 2 sqrt(speed_std^2 + contact_std^2)`` of the set at the start of the
         period whose edges move by at most ``2 min f_i h / m`` over the period (the speed the
-        smallest stiction step can give it, PHYSICS.md section 2) stays inside it, or follows
+        smallest stiction step can give it, docs/physics.md section 4) stays inside it, or follows
         the contact at its edge when it is on that contact (:meth:`_carried`). Otherwise the
         exact flow (:meth:`flow`) and its linearization.
         """

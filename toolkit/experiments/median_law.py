@@ -8,7 +8,7 @@ speed the body settles at and their ratio. Over many runs the paper fits
 The ideal model (equal friction, ideal motors, no drag) gives a slope below 1 for even
 ``n``: from rest the body stops at the edge of the zero-force band ``[v_(n/2),
 v_(n/2+1)]`` that it reaches first, ``V = clip(0, v_(n/2), v_(n/2+1))``, not at the band's
-midpoint that ``numpy.median`` returns (PHYSICS.md section 4); with odd ``n`` the slope is 1.
+midpoint that ``numpy.median`` returns (docs/physics.md section 6); with odd ``n`` the slope is 1.
 
 Non-idealities (each a physical parameter, 0 = ideal)
 -----------------------------------------------------

@@ -1,11 +1,11 @@
 """The paper's reference carousel: its hardware constants and the startup scene built on them.
 
-The values are those of PHYSICS.md section 3 and of the scene files ``designs/carousel.toml``
+The values are those of docs/physics.md section 5 and of the scene files ``designs/carousel.toml``
 and ``designs/startup11.toml`` (Shah & Gravish, arXiv 2501.09746): wheels of radius 0.045 m
 touching the ground 0.266 m from the axis, 48-count motor encoders behind a 74.83:1 gearbox
 (3591.84 counts per wheel turn), an 8192-count central encoder, 50 Hz sampling and commands,
 contact speeds within +-0.35 m/s, motors that settle in ~30 ms (lag 0.0075 s), and
-``F_tot / m = 2 m/s^2`` (the paper's transition time, PHYSICS.md section 4).
+``F_tot / m = 2 m/s^2`` (the paper's transition time, docs/physics.md section 6).
 """
 
 from __future__ import annotations
@@ -75,9 +75,9 @@ class CarouselHardware:
 
 #: The paper's carousel.
 CAROUSEL = CarouselHardware()
-#: ``F_tot / m`` of the reference carousel, m/s^2 (PHYSICS.md section 4).
+#: ``F_tot / m`` of the reference carousel, m/s^2 (docs/physics.md section 6).
 CAROUSEL_ACCELERATION = CAROUSEL.acceleration
-#: Contact speed limit ``v_max`` of the reference carousel, m/s (PHYSICS.md section 3).
+#: Contact speed limit ``v_max`` of the reference carousel, m/s (docs/physics.md section 5).
 CAROUSEL_SPEED_LIMIT = CAROUSEL.speed_limit
 
 
@@ -85,8 +85,8 @@ def carousel_startup_plant(seed: int = 0, *, n: int = 11, mass: float = 1.0) -> 
     """The carousel startup scene of issue 3: ``n`` random speeds, equal loads, from rest.
 
     Speeds are uniform in ``[-v_max, v_max]`` with ``v_max = 0.35`` m/s; the contacts carry
-    equal magnitudes with ``F_tot / m = 2`` m/s^2 (the paper's transition time, PHYSICS.md
-    section 4). Without drag or external force the motion depends on ``F_tot / m`` only, so
+    equal magnitudes with ``F_tot / m = 2`` m/s^2 (the paper's transition time, docs/physics.md
+    section 6). Without drag or external force the motion depends on ``F_tot / m`` only, so
     ``mass`` just sets the units of the forces. Ideal motors (add
     ``motors=CAROUSEL.motors()`` with :func:`dataclasses.replace` for the lag).
 

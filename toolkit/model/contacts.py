@@ -6,7 +6,7 @@ at ``V``, with ``f_i * sign(v_i - V)`` newtons. The net force
     F(V) = sum_i f_i sign(v_i - V) = F_tot * (1 - 2 CDF_w(V))
 
 is a non-increasing staircase from ``+F_tot`` to ``-F_tot`` whose zero set, the
-equilibrium, is the weighted median of the speeds (PHYSICS.md section 1).
+equilibrium, is the weighted median of the speeds (docs/physics.md section 3).
 
 Two models share one interface (:class:`ContactModel`):
 

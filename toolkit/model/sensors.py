@@ -3,7 +3,7 @@
 An encoder with ``counts_per_rev`` counts on a shaft whose contact point sits at ``radius``
 resolves ``2 pi radius / counts_per_rev`` metres; differencing counts at ``rate`` Hz gives
 speed in steps of that distance times the rate. At constant speed the quantization error
-is a deterministic sawtooth, not white noise (PHYSICS.md section 3).
+is a deterministic sawtooth, not white noise (docs/physics.md section 5).
 
 The sensor law is written once, in :func:`measure`: positions in, integer counts out, one
 sample (a closed loop) or a whole record (offline) through the same code. It quantizes
@@ -118,7 +118,7 @@ class Sensors:
     Notes
     -----
     The rates of the two encoders must agree: one rate for all encoders and the motor
-    commands (PHYSICS.md section 3: 50 Hz).
+    commands (docs/physics.md section 5: 50 Hz).
     """
 
     central: Encoder
@@ -146,7 +146,7 @@ class Sensors:
     # -- constructors ---------------------------------------------------------------------
     @classmethod
     def carousel(cls, n_wheels: int = 10, **noise: float) -> Sensors:
-        """The paper's encoders (PHYSICS.md section 3) at 50 Hz.
+        """The paper's encoders (docs/physics.md section 5) at 50 Hz.
 
         Central AMT103-V: 8192 counts/rev at ``L = 0.266 m`` (0.204 mm per count); wheels:
         48 CPR x 74.83:1 = 3591.84 counts/rev at ``R = 0.045 m`` (78.7 um per count) with

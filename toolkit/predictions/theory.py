@@ -5,8 +5,8 @@ Numerics only, on the model's own :class:`~toolkit.model.ContactSet`.
 Viscosity of a finite staircase
 -------------------------------
 ``n`` equal contacts (magnitude ``f``) spread uniformly with spacing ``s`` realize, on
-average, the viscous law ``F = -k (V - c)`` with ``k = dF/dV = 2 f / s`` (PHYSICS.md
-section 4), whose startup from ``V0`` is exponential with ``tau = m / k``. The staircase is
+average, the viscous law ``F = -k (V - c)`` with ``k = dF/dV = 2 f / s`` (docs/physics.md
+section 6), whose startup from ``V0`` is exponential with ``tau = m / k``. The staircase is
 only approximately viscous: between two contact speeds its force is constant, so ``V(t)`` is
 piecewise linear and the body reaches its resting speed ``V_stop`` (the median, or for even
 ``n`` the near edge of the zero-force band) in finite time.
@@ -202,7 +202,7 @@ def staircase_correction(n: int, start: Any) -> Any:
 def uniform_staircase(n: int, center: float, spacing: float, force: float) -> ContactSet:
     """``n`` contacts of magnitude ``force`` (N) at ``center + (j - (n + 1)/2) spacing`` (m/s),
     ``j = 1..n``: the optimal equal-magnitude staircase for a viscous target (its quantiles,
-    PHYSICS.md section 6), slope ``2 force / spacing``."""
+    docs/physics.md section 8), slope ``2 force / spacing``."""
     if not isinstance(n, (int, np.integer)) or n < 1:
         raise ParameterError(parameter_message("n", "uniform_staircase", "be an integer >= 1", n))
     s = as_float(spacing, "spacing", "uniform_staircase", low=0.0, low_open=True)

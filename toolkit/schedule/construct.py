@@ -1,6 +1,6 @@
 """Constructive contact-speed schedules and their certificates (private to :mod:`toolkit.schedule`).
 
-Physics (PHYSICS.md section 2): with every contact commanded to the same speed path
+Physics (docs/physics.md section 4): with every contact commanded to the same speed path
 ``p(t)`` the body, once on it, *sticks* to it (Filippov sliding mode) as long as
 ``|m p' + c p - F_ext| <= F_tot``; away from it the body moves at the largest force the
 contacts on its side give. So a schedule is built period by period from a few closed-form

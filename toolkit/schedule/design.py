@@ -1,7 +1,7 @@
 """Design of contact-speed schedules: :func:`design_schedule`.
 
 A schedule is a table of commanded contact speeds, constant over each controller period
-(50 Hz on the paper's hardware, PHYSICS.md section 3), that firmware can play. The design
+(50 Hz on the paper's hardware, docs/physics.md section 5), that firmware can play. The design
 works under the plant's motor model (first-order lag ``tau``, rate limit ``r``, speed
 limits; :mod:`~toolkit.schedule.commands`):
 

@@ -13,6 +13,7 @@ from toolkit.scenes.spec import dumps_scene, loads_scene
 from toolkit.simulation import ExactState, advance
 from toolkit.simulation._moreau import _staircase, initial_play, play_staircase
 from toolkit.scenes.study import _simulation
+from toolkit.scenes.build import build_scene
 
 # Incommensurate on purpose (no step size divides the phases): N contacts of f each at +V_C
 # carry the body at +V_C; at T_SWITCH they are commanded to -V_C (ideal motors).
@@ -179,13 +180,14 @@ commands = {{ times = [{T_SWITCH}], values = [[{V_C}, {V_C}, {V_C}, {V_C}, {V_C}
 
 def test_scene_key_round_trips_and_simulates_the_closed_form():
     scene = loads_scene(SCENE)
-    assert scene.motors.backlash == B and scene.objects.plant.motors.backlash == B
+    assert scene.motors.backlash == B and build_scene(scene).plant.motors.backlash == B
     again = loads_scene(dumps_scene(scene))
-    assert again == scene and again.objects.plant.backlash == B
+    assert again == scene and build_scene(again).plant.backlash == B
     # The scene's Moreau run: the closed form within 2 h (h = 2.5e-4 s), as above.
-    error = _reversal_time(_simulation(scene, scene.contact_set())) - _closed_form(B)
+    objects = build_scene(scene)
+    error = _reversal_time(_simulation(objects, objects.contacts)) - _closed_form(B)
     assert -1e-12 <= error <= 2 * 2.5e-4 + 1e-12
     with pytest.raises(SceneError) as info:
-        loads_scene(SCENE.replace(f"backlash = {B}", "backlash = -0.1"))
+        build_scene(loads_scene(SCENE.replace(f"backlash = {B}", "backlash = -0.1")))
     assert "(scene key 'motors.backlash')" in str(info.value)
     assert "The 'backlash' parameter of Motors must be >= 0. Got -0.1" in str(info.value)

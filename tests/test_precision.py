@@ -18,7 +18,7 @@ from toolkit.model.carousel import CAROUSEL_ACCELERATION, carousel_startup_plant
 from toolkit.analysis.precision import (MethodSetting, PrecisionReport, default_settings, exact_speedup,
                                precision_report, rational_trajectory, work_precision_curves)
 from toolkit.scenes.spec import load_scene
-from toolkit.scenes.build import scene_plant
+from toolkit.scenes.build import build_scene
 from toolkit.simulation import Budget, SimulationStatus, simulate
 from toolkit.simulation._exact import _LANDSCAPES
 
@@ -44,7 +44,7 @@ def test_carousel_plant_matches_the_paper_numbers(carousel: Plant) -> None:
 def test_startup11_design_is_the_benchmark_scene() -> None:
     # designs/startup11.toml lets the CLI reproduce `python -m toolkit.bench precision`.
     scene = load_scene(Path(__file__).parents[1] / "designs" / "startup11.toml")
-    plant, reference = scene_plant(scene), carousel_startup_plant(seed=0)
+    plant, reference = build_scene(scene).plant, carousel_startup_plant(seed=0)
     np.testing.assert_array_equal(plant.contacts.speeds, reference.contacts.speeds)
     np.testing.assert_array_equal(plant.contacts.forces, reference.contacts.forces)
     assert (plant.mass, plant.damping, plant.motors, plant.commands) == (1.0, 0.0, None, None)

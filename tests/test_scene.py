@@ -13,6 +13,7 @@ import pytest
 
 from toolkit import SceneError, SceneFileNotFoundError
 from toolkit.scenes.spec import dumps_scene, load_scene, loads_scene
+from toolkit.scenes.build import build_scene
 
 DESIGNS = sorted((Path(__file__).parents[1] / "designs").glob("*.toml"))
 MINIMAL = '[contacts]\nspeeds = [0.1, 0.2, 0.3]\n'
@@ -24,14 +25,14 @@ def test_every_design_loads_and_round_trips(path):
     again = loads_scene(dumps_scene(scene), name=scene.name)
     assert again == scene
     if scene.sweep is None:
-        np.testing.assert_array_equal(again.contact_set().speeds, scene.contact_set().speeds)
+        np.testing.assert_array_equal(build_scene(again).contacts.speeds, build_scene(scene).contacts.speeds)
     else:
-        assert again.objects.sweep == scene.objects.sweep
+        assert build_scene(again).sweep == build_scene(scene).sweep
 
 
 def test_carousel_has_the_papers_hardware():
     scene = load_scene(Path(__file__).parents[1] / "designs" / "carousel.toml")
-    contacts = scene.contact_set()
+    contacts = build_scene(scene).contacts
     assert contacts.n == 10
     assert np.all(np.abs(contacts.speeds) <= 0.35)
     assert scene.motors.speed_limits == (-0.35, 0.35)
@@ -42,14 +43,14 @@ def test_carousel_has_the_papers_hardware():
 
 def test_random_contacts_are_reproducible():
     text = '[contacts]\nrandom = { n = 5, low = -0.3, high = 0.3, seed = 4 }\n'
-    a, b = loads_scene(text).contact_set(), loads_scene(text).contact_set()
+    a, b = build_scene(loads_scene(text)).contacts, build_scene(loads_scene(text)).contacts
     np.testing.assert_array_equal(a.speeds, b.speeds)
     np.testing.assert_array_equal(a.speeds, np.random.default_rng(4).uniform(-0.3, 0.3, 5))
 
 
 def test_mu_and_normal_loads_give_forces():
     scene = loads_scene('[contacts]\nspeeds = [0.1, 0.2]\nmu = 0.5\nnormal_loads = [2.0, 4.0]\n')
-    np.testing.assert_array_equal(scene.contact_set().forces, [1.0, 2.0])
+    np.testing.assert_array_equal(build_scene(scene).contacts.forces, [1.0, 2.0])
 
 
 def test_missing_sections_mean_no_stage():
@@ -108,15 +109,15 @@ def test_missing_sections_mean_no_stage():
 )
 def test_bad_scenes_are_refused_with_a_clear_message(text, fragment):
     with pytest.raises(SceneError) as info:
-        loads_scene(text)
+        build_scene(loads_scene(text))
     assert fragment in str(info.value)
 
 
 def test_missing_file():
     with pytest.raises(SceneFileNotFoundError, match="does not exist"):
-        load_scene("designs/no-such-scene.toml")
+        build_scene(load_scene("designs/no-such-scene.toml"))
     with pytest.raises(FileNotFoundError):
-        load_scene("designs/no-such-scene.toml")
+        build_scene(load_scene("designs/no-such-scene.toml"))
 
 
 def test_scene_is_frozen():
@@ -176,7 +177,7 @@ SWEEP = '[scene]\nname = "ml"\n[sweep]\nexperiment = "median_law"\nruns = 30\nse
 def test_sweep_section_round_trip_and_objects():
     scene = loads_scene(SWEEP + 'friction_spread = 0.2\nwheel_seed = 1\nstatistics = ["slope"]\n')
     assert scene.stages == ("sweep",) and scene.contacts is None
-    assert scene.objects.sweep.friction_spread == 0.2 and scene.objects.sweep.wheel_seed == 1
+    assert build_scene(scene).sweep.friction_spread == 0.2 and build_scene(scene).sweep.wheel_seed == 1
     assert loads_scene(dumps_scene(scene)) == scene
     with pytest.raises(TypeError):           # the spec is frozen, its parameters too
         scene.sweep.params["friction_spread"] = 0.5
@@ -194,7 +195,7 @@ def test_sweep_section_round_trip_and_objects():
 ])
 def test_sweep_section_errors(extra, match):
     with pytest.raises(SceneError, match=match):
-        loads_scene(SWEEP.replace("runs = 30\n", "") + extra if extra.startswith("runs") else SWEEP + extra)
+        build_scene(loads_scene(SWEEP.replace("runs = 30\n", "") + extra if extra.startswith("runs") else SWEEP + extra))
 
 
 def test_target_constraints_round_trip():
@@ -220,16 +221,19 @@ def test_target_constraints_round_trip():
 def test_constructor_rules_are_refused_under_the_scene_key(text, key, rule):
     # Each value is checked once, by the constructor that takes it; the scene names the key.
     with pytest.raises(SceneError) as info:
-        loads_scene(text)
+        build_scene(loads_scene(text))
     message = str(info.value)
     assert f"(scene key {key})" in message and rule in message
 
 
-def test_declared_objects_are_built_once_at_load():
+def test_loading_builds_nothing_and_each_build_is_fresh():
     path = Path(__file__).parents[1] / "designs" / "carousel.toml"
     scene = load_scene(path)
-    objects = scene.objects
-    assert scene.objects is objects and scene.contact_set() is objects.contacts
+    assert not hasattr(scene, "objects")          # a parsed scene is specs only
+    objects = build_scene(scene)
+    again = build_scene(scene)                    # a run's own objects: never shared between runs
+    assert again is not objects and again.contacts is not objects.contacts and again.scene is scene
+    np.testing.assert_array_equal(again.contacts.speeds, objects.contacts.speeds)
     assert objects.plant.contacts is objects.contacts and objects.plant.motors is objects.motors
     assert set(objects.encoders) == {"wheel", "central"}
     # F_tot / m = 2 m/s^2 (docs/physics.md section 6), rtol 1e-5 as in the carousel test above.
@@ -260,7 +264,7 @@ LIMITED = "[motors]\nspeed_limit = 0.35\n"
 )
 def test_speeds_beyond_the_motor_limits_are_refused(text, message):
     with pytest.raises(SceneError) as info:
-        loads_scene(text)
+        build_scene(loads_scene(text))
     if message is None:                         # random speeds: the largest draw above 0.2
         speeds = np.random.default_rng(0).uniform(0.0, 1.0, 5)
         message = (f"The 'contacts.random' value in the scene must lie within the motors' speed limits "
@@ -274,9 +278,9 @@ def test_clip_true_clips_speeds_and_commands_and_round_trips():
             "[simulation]\nt_end = 1.0\ncommands = { times = [0.5], values = [[0.0, 0.1, 0.2], [0.0, 0.4, 0.6]] }\n")
     scene = loads_scene(text)
     assert scene.motors.clip is True
-    np.testing.assert_array_equal(scene.contact_set().speeds, [0.1, -0.35, 0.2])
-    np.testing.assert_array_equal(scene.objects.plant.commands.values, [[0.0, 0.1, 0.2], [0.0, 0.35, 0.35]])
-    clips = {clip.key: (clip.value, clip.limit, clip.count) for clip in scene.objects.clipped}
+    np.testing.assert_array_equal(build_scene(scene).contacts.speeds, [0.1, -0.35, 0.2])
+    np.testing.assert_array_equal(build_scene(scene).plant.commands.values, [[0.0, 0.1, 0.2], [0.0, 0.35, 0.35]])
+    clips = {clip.key: (clip.value, clip.limit, clip.count) for clip in build_scene(scene).clipped}
     assert clips == {"contacts.speeds": (-0.5, -0.35, 1), "simulation.commands": (0.6, 0.35, 2)}
     assert loads_scene(dumps_scene(scene), name=scene.name) == scene
     assert "clip = true" in dumps_scene(scene)
@@ -287,9 +291,9 @@ def test_simulation_budget_table_becomes_a_budget():
 
     scene = loads_scene(MINIMAL + "[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\n"
                                   "options = { budget = { wall_time = 2.5, max_steps = 7 } }\n")
-    assert scene.objects.simulation_options == {"budget": Budget(wall_time=2.5, max_steps=7)}
+    assert build_scene(scene).simulation_options == {"budget": Budget(wall_time=2.5, max_steps=7)}
     with pytest.raises(SceneError, match="Unknown key 'wall' in \\[simulation.options.budget\\]"):
-        loads_scene(MINIMAL + "[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\noptions = { budget = { wall = 1 } }\n")
+        build_scene(loads_scene(MINIMAL + "[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\noptions = { budget = { wall = 1 } }\n"))
 
 
 # -- scene file edge cases (issue 10): one line, exit 2, no traceback ---------------------------
@@ -371,3 +375,25 @@ def test_unreadable_scene(tmp_path, monkeypatch):
         assert str(info.value) == f"The scene file {str(path)!r} cannot be read: Permission denied."
     finally:
         path.chmod(0o644)
+
+
+HEAVY = ("filterpy", "control", "cvxpy", "casadi", "matplotlib")
+
+
+def _imported_after(code: str) -> dict[str, bool]:
+    script = code + f"\nimport json, sys\nprint(json.dumps({{m: m in sys.modules for m in {HEAVY!r}}}))\n"
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
+                          cwd=Path(__file__).parents[1])
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+def test_loading_a_scene_imports_no_heavy_package_and_building_is_a_separate_call():
+    load_all = ("from toolkit.scenes.spec import load_scene\n"
+                "from toolkit.scenes.designs import design_names, load_design\n"
+                "scenes = [load_design(name) for name in design_names()]\n")
+    assert _imported_after(load_all) == dict.fromkeys(HEAVY, False)
+    # Positive control: building the estimation scene makes its Kalman filter (filterpy),
+    # and nothing else heavy; the check sees an import when there is one.
+    built = _imported_after(load_all + "from toolkit.scenes.build import build_scene\n"
+                            "build_scene(load_design('estimate'))\n")
+    assert built == {**dict.fromkeys(HEAVY, False), "filterpy": True}

@@ -14,6 +14,7 @@ from toolkit.cli import main
 from toolkit.errors import SceneError
 from toolkit.scenes.spec import dumps_scene, load_scene, loads_scene
 from toolkit.scenes.study import control_scene, estimate_scene, run_study
+from toolkit.scenes.build import build_scene
 
 ROOT = Path(__file__).parents[1]
 ESTIMATE = (ROOT / "designs" / "estimate.toml").read_text()
@@ -64,7 +65,7 @@ def test_estimation_stage_is_the_carousel_brake_scenario():
 
 def test_friction_spread_draws_the_true_forces_and_tells_the_model():
     scene = loads_scene(_with(ESTIMATE, "seed = 0", "seed = 3\nfriction_spread = 0.2"))
-    objects = scene.objects.estimation
+    objects = build_scene(scene).estimation
     forces = objects.plant.contacts.forces
     # Lognormal loads with mean f_i = 1 and relative std 0.2 (toolkit.model.unequal_loads),
     # z from default_rng([seed, 1]): the closed form of the draw (rtol 1e-15, rounding).
@@ -98,7 +99,7 @@ def test_ideal_viscosity_loop_stops_on_the_staircase_edge():
 
     scene = loads_scene(_with(_with(LOOP, "sensors = true", "sensors = false"), 'estimator = "kalman"\n', ""))
     study = control_scene(scene)
-    speeds = VirtualViscosity(40.0, 0.1).speeds(scene.objects.plant)
+    speeds = VirtualViscosity(40.0, 0.1).speeds(build_scene(scene).plant)
     lo, hi = ContactSet(speeds, np.ones(10)).equilibrium()
     assert (lo, hi) == pytest.approx((0.075, 0.125), rel=0, abs=1e-15)
     assert study.loop.speed[-1] == pytest.approx(lo, rel=0, abs=1e-12)   # exact engine, rounding
@@ -199,7 +200,7 @@ BAD = [
 @pytest.mark.parametrize(("text", "key", "rule"), BAD, ids=[f"{i}-{b[1]}" for i, b in enumerate(BAD)])
 def test_bad_input_is_refused_naming_key_rule_and_value(text, key, rule):
     with pytest.raises(SceneError) as caught:
-        loads_scene(text)
+        build_scene(loads_scene(text))
     message = str(caught.value)
     assert key in message and rule in message, message
 
@@ -262,11 +263,22 @@ def test_estimate_cli_json_has_the_documented_keys(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["estimators"][2]["rms"] == data["estimators"][2]["rms"]
 
 
-def test_estimate_cli_defaults_to_the_brake_scenario_on_a_scene_without_estimation(tmp_path, capsys):
-    # designs/carousel.toml has [sensors] but no [estimation]: the defaults of the section.
+def test_estimate_cli_records_the_scenes_own_run_on_a_scene_without_estimation(tmp_path, capsys):
+    # designs/carousel.toml has [sensors] and [simulation] but no [estimation]: its own run
+    # (t_end = 5 s) is recorded and scored, never a scenario of other contacts.
     assert main(["estimate", str(ROOT / "designs" / "carousel.toml"), "--json", "--out", str(tmp_path)]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert data["duration"] == 10.0 and len(data["estimators"]) == 4
+    assert data["duration"] == 5.0 and len(data["estimators"]) == 4
+
+
+def test_estimate_cli_refuses_a_scene_with_no_run_to_record(tmp_path):
+    # designs/closed_loop.toml declares a loop, no [estimation] and no [simulation]: refused
+    # (it used to score a brake scenario on other contacts without saying so).
+    done = subprocess.run([sys.executable, "-m", "toolkit.cli", "estimate", "designs/closed_loop.toml",
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert done.stderr.count("\n") == 1 and "no [estimation] section and no [simulation]" in done.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def test_estimate_without_sensors_is_a_one_line_user_error(tmp_path):

@@ -27,18 +27,19 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
-from .scenes._io import check_output_dir
-from .errors import SceneError, ToolkitError
 from .analysis.precision import exact_speedup, precision_report, precision_shortfalls
-from .scenes.report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
-                     study_to_dict, sweep_lines, sweep_to_dict, to_json, write_precision, write_schedule,
-                     write_study, write_sweep)
-from .scenes.spec import Scene, load_scene
-from .scenes.build import scene_plant
 from .analysis.stability import stability_suite
-from .shortfall import Shortfall
+from .errors import SceneError, ToolkitError
+from .scenes._io import claim_output_dir
+from .scenes.build import SceneObjects, build_scene, sweep_scene_error
+from .scenes.limits import FLAGS, LIMITS
+from .scenes.report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
+                            study_to_dict, sweep_lines, sweep_to_dict, to_json, write_precision,
+                            write_schedule, write_study, write_sweep)
+from .scenes.spec import Scene, load_scene
 from .scenes.study import (allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
-                    request_shortfalls, run_study, schedule_shortfalls, sweep_scene, sweep_shortfalls)
+                           request_shortfalls, run_study, schedule_shortfalls, sweep_scene, sweep_shortfalls)
+from .shortfall import Shortfall
 
 __all__ = ["main", "EXIT_CODES"]
 
@@ -61,22 +62,31 @@ def _print_json(data: Any) -> None:
     sys.stdout.write(to_json(data))
 
 
-def _scene(args: argparse.Namespace, section: str | None = None, purpose: str = "") -> Scene:
-    """Load the SCENE argument; with ``section``, refuse a scene that does not declare it."""
+def _parsed(args: argparse.Namespace, section: str | None = None, purpose: str = "") -> Scene:
+    """Load the SCENE argument (form only); refuse a sweep scene where the command needs
+    contacts of its own, and, with ``section``, a scene that does not declare it."""
     scene = load_scene(args.scene)
+    if scene.sweep is not None and args.command not in ("run", "sweep"):
+        raise sweep_scene_error(scene, args.command)
     if section is not None and getattr(scene, section) is None:
         raise SceneError(f"The scene {scene.name!r} has no [{section}] section {purpose}.")
     return scene
 
 
+def _scene(args: argparse.Namespace, section: str | None = None, purpose: str = "") -> SceneObjects:
+    """:func:`_parsed`, then built: every value checked (exit 2 on a bad one)."""
+    return build_scene(_parsed(args, section, purpose))
+
+
 def _out_dir(args: argparse.Namespace, scene: Scene) -> Path:
-    """``--out``, or ``out/<scene name>``, checked before any work (exit 2 if unwritable)."""
-    return check_output_dir(Path(args.out) if args.out else Path("out") / scene.name)
+    """``--out``, or ``out/<scene name>``."""
+    return Path(args.out) if args.out is not None else Path("out") / scene.name
 
 
-def _known_shortfalls(scene: Scene, args: argparse.Namespace, stages: tuple[str, ...]) -> list[Shortfall]:
+def _known_shortfalls(objects: SceneObjects, args: argparse.Namespace,
+                      stages: tuple[str, ...]) -> list[Shortfall]:
     """The shortfalls of ``stages`` known before any work; with ``--strict`` a refusal (exit 2)."""
-    known = [s for s in request_shortfalls(scene) if s.stage in stages]
+    known = [s for s in request_shortfalls(objects) if s.stage in stages]
     if args.strict and known:
         raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
     return known
@@ -91,14 +101,14 @@ def _finish(shortfalls: Sequence[Shortfall]) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    scene = _scene(args)
-    if scene.sweep is not None:          # a sweep scene's one stage
+    objects = _scene(args)
+    if objects.sweep is not None:          # a sweep scene's one stage
         args.runs = args.seed = args.scheduler = args.workers = None
-        args.out = args.out or str(Path("out") / scene.name)
+        args.out = str(_out_dir(args, objects.scene))
         return _cmd_sweep(args)
-    out = _out_dir(args, scene)
-    result = run_study(scene, strict=args.strict)
-    written = write_study(result, out)
+    with claim_output_dir(_out_dir(args, objects.scene)) as out:
+        result = run_study(objects, strict=args.strict)
+        written = write_study(result, out)
     if args.json:
         _print_json({**study_to_dict(result), "written": [str(p) for p in written]})
     else:
@@ -109,7 +119,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_curve(args: argparse.Namespace) -> int:
-    curve = force_curve(_scene(args).contact_set(), args.points)
+    curve = force_curve(_scene(args).contacts, args.points)
     if args.json:
         _print_json(curve.to_dict())
     else:
@@ -123,10 +133,10 @@ def _cmd_curve(args: argparse.Namespace) -> int:
 
 
 def _cmd_allocate(args: argparse.Namespace) -> int:
-    scene = _scene(args, "target", "to allocate")
-    known = _known_shortfalls(scene, args, ("scene", "allocation"))
-    result = allocate_scene(scene, strict=args.strict)
-    shortfalls = [s for s in known if s.stage == "scene"] + allocation_shortfalls(scene, result)
+    objects = _scene(args, "target", "to allocate")
+    known = _known_shortfalls(objects, args, ("scene", "allocation"))
+    result = allocate_scene(objects, strict=args.strict)
+    shortfalls = [s for s in known if s.stage == "scene"] + allocation_shortfalls(objects, result)
     if args.json:
         _print_json({**result.to_dict(), "shortfalls": shortfall_dicts(shortfalls)})
     else:
@@ -140,12 +150,12 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
-    scene = _scene(args, "schedule", "to design")
-    known = _known_shortfalls(scene, args, ("scene", "schedule"))
-    out = _out_dir(args, scene)
-    result, check = design_scene_schedule(scene)
-    shortfalls = [s for s in known if s.stage == "scene"] + schedule_shortfalls(scene, result, check)
-    written = write_schedule(result, out)
+    objects = _scene(args, "schedule", "to design")
+    known = _known_shortfalls(objects, args, ("scene", "schedule"))
+    with claim_output_dir(_out_dir(args, objects.scene)) as out:
+        result, check = design_scene_schedule(objects)
+        shortfalls = [s for s in known if s.stage == "scene"] + schedule_shortfalls(objects, result, check)
+        written = write_schedule(result, out)
     verified = schedule_check(result, check)
     if args.json:
         _print_json({**result.to_dict(), "exact_check": verified, "shortfalls": shortfall_dicts(shortfalls),
@@ -158,12 +168,11 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
 
 
 def _cmd_precision(args: argparse.Namespace) -> int:
-    scene = _scene(args, "simulation", "(t_end, v0) to compare methods on")
-    if args.out:
-        check_output_dir(args.out)
-    report = precision_report(scene_plant(scene), scene.simulation.t_end, v0=scene.simulation.v0,
-                              repeats=args.repeats)
-    written = write_precision(report, args.out, title=scene.name) if args.out else []
+    objects = _scene(args, "simulation", "(t_end, v0) to compare methods on")
+    spec = objects.scene.simulation
+    with claim_output_dir(args.out) as out:
+        report = precision_report(objects.plant, spec.t_end, v0=spec.v0, repeats=args.repeats)
+        written = write_precision(report, out, title=objects.scene.name) if out is not None else []
     if args.json:
         _print_json(report.to_dict())
     else:
@@ -186,19 +195,29 @@ def _cmd_precision(args: argparse.Namespace) -> int:
 # -- estimate (issue 9): every estimator of the scene over one simulated encoder record -------
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     from .scenes._io import write_tree
     from .scenes.report import estimation_files, estimation_lines, estimation_to_dict
-    from .scenes.spec import EstimationSpec, with_section
+    from .scenes.spec import EstimationSpec
     from .scenes.study import estimate_scene, estimation_shortfalls
 
-    scene = _scene(args, "sensors", "(the encoders to estimate from)")
-    if scene.estimation is None:           # the defaults: the brake scenario, four estimators
-        scene = with_section(scene, "estimation", EstimationSpec())
-    out = _out_dir(args, scene)
-    study = estimate_scene(scene)
-    shortfalls = estimation_shortfalls(scene, study)
-    plots_too = scene.report is None or scene.report.plots
-    written = write_tree(out, estimation_files(study, scene.name, plots_too=plots_too))
+    scene = _parsed(args)
+    if scene.estimation is None:      # the scene's own run, recorded: never another scenario
+        if scene.sensors is None:
+            raise SceneError(f"The scene {scene.name!r} has no [sensors] section (the encoders to "
+                             "estimate from).")
+        if scene.simulation is None:
+            raise SceneError(f"The scene {scene.name!r} has no [estimation] section and no [simulation] "
+                             "run to record: add [estimation] (scenario = \"brake\", the startup-then-brake "
+                             "record on the scene's wheel forces, as in the shipped 'estimate' design).")
+        scene = replace(scene, estimation=EstimationSpec(scenario="simulation"))
+    objects = build_scene(scene)
+    with claim_output_dir(_out_dir(args, scene)) as out:
+        study = estimate_scene(objects)
+        shortfalls = estimation_shortfalls(objects, study)
+        plots_too = scene.report is None or scene.report.plots
+        written = write_tree(out, estimation_files(study, scene.name, plots_too=plots_too))
     if args.json:
         data = estimation_to_dict(study)
         data.pop("series")
@@ -212,15 +231,16 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    scene = _scene(args, "sweep", "to run")
-    out = check_output_dir(args.out) if args.out else None
-    result = sweep_scene(scene, runs=args.runs, seed=args.seed, scheduler=args.scheduler,
-                         workers=args.workers, progress=sys.stderr.isatty())
-    shortfalls = sweep_shortfalls(result)
-    statistics = scene.sweep.statistics
-    plots_too = scene.report is None or scene.report.plots
-    written = (write_sweep(result, out, statistics=statistics, shortfalls=shortfalls, plots_too=plots_too,
-                           title=scene.name) if out is not None else [])
+    objects = _scene(args, "sweep", "to run")
+    scene = objects.scene
+    with claim_output_dir(args.out) as out:
+        result = sweep_scene(objects, runs=args.runs, seed=args.seed, scheduler=args.scheduler,
+                             workers=args.workers, progress=sys.stderr.isatty())
+        shortfalls = sweep_shortfalls(result)
+        statistics = scene.sweep.statistics
+        plots_too = scene.report is None or scene.report.plots
+        written = (write_sweep(result, out, statistics=statistics, shortfalls=shortfalls, plots_too=plots_too,
+                               title=scene.name) if out is not None else [])
     if args.json:
         _print_json({**sweep_to_dict(result, statistics, shortfalls), "written": [str(p) for p in written]})
     else:
@@ -273,16 +293,13 @@ def _cmd_stability(args: argparse.Namespace) -> int:
 def _cmd_predict(args: argparse.Namespace) -> int:
     import math
 
-    from .model.sensors import Sensors
     from .predictions import Apparatus, prediction_checks
 
     if args.scene is None:
         apparatus = Apparatus.carousel()
     else:
-        scene = load_scene(args.scene)
-        plant = scene_plant(scene)
-        sensors = None if scene.sensors is None else Sensors.from_spec(scene.sensors, plant.n)
-        apparatus = Apparatus(plant, sensors)
+        objects = _scene(args)
+        apparatus = Apparatus(objects.plant_on(None), objects.sensors)
     progress = not args.json and sys.stderr.isatty()
     result = prediction_checks(apparatus, runs=args.runs, seed=args.seed, progress=progress)
     if args.json:
@@ -309,27 +326,45 @@ def _seconds(value: float | None) -> str:
     return "inf" if value is None else f"{value:.4g} s"
 
 
-def _at_least(low: int) -> Callable[[str], int]:
+def _bounded(name: str) -> Callable[[str], int]:
+    """An integer flag with the bounds of its scene key (:data:`~toolkit.scenes.limits.LIMITS`)
+    or of its own entry in :data:`~toolkit.scenes.limits.FLAGS`."""
+    limit = FLAGS.get(name) or next(lim for lim in LIMITS.values() if lim.flag == name)
+
     def convert(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+            raise argparse.ArgumentTypeError(f"must {limit.rule}, got {text!r}") from None
+        if not limit.holds(value):
+            raise argparse.ArgumentTypeError(f"must {limit.broken(value)}, got {value}")
         return value
 
     return convert
 
 
+def _folder(text: str) -> str:
+    """An output folder path: not empty (an empty one would silently mean the default)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"must name a folder, got {text!r}")
+    return text
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (exit 2), like every other user error."""
+
+    def error(self, message: str) -> None:        # type: ignore[override]
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="active-contacts",
         description="Design, simulate and analyse friction created by active contacts.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="exit codes:\n" + "\n".join(f"  {code:<4} {meaning}" for code, meaning in EXIT_CODES.items()))
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
 
     def command(name: str, handler: Callable[[argparse.Namespace], int], help_text: str,
                 scene: bool = True, strict: bool = False) -> argparse.ArgumentParser:
@@ -349,35 +384,37 @@ def _parser() -> argparse.ArgumentParser:
                 "or hold only toolkit outputs")
     run = command("run", _cmd_run, "run every stage the scene declares and write results and plots",
                   strict=True)
-    run.add_argument("--out", metavar="DIR", help=out_help)
+    run.add_argument("--out", metavar="DIR", type=_folder, help=out_help)
     curve = command("curve", _cmd_curve, "print every step of the force-speed curve of the scene's "
                     "contacts (--json: also the sampled curve)")
-    curve.add_argument("--points", type=_at_least(2), default=801, help="samples in --json (default 801)")
+    curve.add_argument("--points", type=_bounded("curve --points"), default=801,
+                       help=f"samples in --json (default 801; {LIMITS['report.curve_points'].rule[3:]})")
     command("allocate", _cmd_allocate, "allocate contact speeds that realize the scene's [target]",
             strict=True)
     schedule = command("schedule", _cmd_schedule,
                        "design the scene's [schedule] and write schedule.csv and schedule.json", strict=True)
-    schedule.add_argument("--out", metavar="DIR", help=out_help)
+    schedule.add_argument("--out", metavar="DIR", type=_folder, help=out_help)
     precision = command("precision", _cmd_precision,
                         "work-precision report: every simulation method against the exact one")
-    precision.add_argument("--repeats", type=_at_least(1), default=3, help="timing repeats (default 3)")
-    precision.add_argument("--out", metavar="DIR", help="also write precision.json and precision.png into "
+    precision.add_argument("--repeats", type=_bounded("precision --repeats"), default=3,
+                           help="timing repeats (default 3)")
+    precision.add_argument("--out", metavar="DIR", type=_folder, help="also write precision.json and precision.png into "
                            "this folder, replaced as a whole")
     estimate = command("estimate", _cmd_estimate,
                        "simulate the scene's [estimation] record (default: startup then brake) and "
                        "score every estimator against the truth; writes estimate.json and estimate.png")
-    estimate.add_argument("--out", metavar="DIR", help=out_help)
+    estimate.add_argument("--out", metavar="DIR", type=_folder, help=out_help)
     sweep = command("sweep", _cmd_sweep, "run the scene's [sweep]: many seeded runs of one of the paper's "
                     "experiments, summary statistics, one table row per run")
-    sweep.add_argument("--runs", type=_at_least(1), help="number of runs (default: the scene's)")
-    sweep.add_argument("--seed", type=_at_least(0), help="root seed (default: the scene's)")
+    sweep.add_argument("--runs", type=_bounded("sweep --runs"), help="number of runs (default: the scene's)")
+    sweep.add_argument("--seed", type=_bounded("sweep --seed"), help="root seed (default: the scene's)")
     sweep.add_argument("--scheduler", metavar="ADDRESS",
                        help="'processes' for a local process pool, or the address of a Dask scheduler "
                             "(tcp://host:port; needs pip install 'active-contacts[dask]'); default: "
                             "this process")
-    sweep.add_argument("--workers", type=_at_least(1),
+    sweep.add_argument("--workers", type=_bounded("sweep --workers"),
                        help="processes of the 'processes' pool (only with --scheduler processes)")
-    sweep.add_argument("--out", metavar="DIR", help="write results.csv (one row per run), sweep.json and "
+    sweep.add_argument("--out", metavar="DIR", type=_folder, help="write results.csv (one row per run), sweep.json and "
                        "sweep.png into this folder, replaced as a whole")
     designs = command("designs", _cmd_designs, "list the designs shipped with the toolkit (scene files); "
                       "--copy DIR writes them into DIR for editing", scene=False)
@@ -392,9 +429,9 @@ def _parser() -> argparse.ArgumentParser:
     predict.add_argument("scene", metavar="SCENE", nargs="?", default=None,
                          help="a scene file (TOML) with [body], [motors] and [sensors]; default: the "
                               "paper's carousel")
-    predict.add_argument("--runs", type=_at_least(2), default=490,
+    predict.add_argument("--runs", type=_bounded("predict --runs"), default=490,
                          help="closed-loop runs of each viscosity sweep (default 490)")
-    predict.add_argument("--seed", type=_at_least(0), default=0, help="seed of the sweep (default 0)")
+    predict.add_argument("--seed", type=_bounded("predict --seed"), default=0, help="seed of the sweep (default 0)")
     return parser
 
 

@@ -20,6 +20,7 @@ __all__ = [
     "SolverError",
     "OutputError",
     "parameter_message",
+    "ParameterMessage",
 ]
 
 
@@ -27,12 +28,33 @@ class ToolkitError(Exception):
     """Base class of every error the toolkit raises on purpose."""
 
 
-class ParameterError(ToolkitError, ValueError):
-    """A parameter has the right type but a value that breaks a rule."""
+class _ParameterNamed:
+    """Mixin: the parameter and its owner, taken from a :func:`parameter_message` message.
+
+    Attributes
+    ----------
+    parameter : str or None
+        The parameter's name (``"forces"``); None when the message names none.
+    owner : str or None
+        The function, class or scene section that takes it (``"ContactSet"``).
+    """
+
+    parameter: str | None
+    owner: str | None
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        message = args[0] if args else None
+        self.parameter = getattr(message, "parameter", None)
+        self.owner = getattr(message, "owner", None)
 
 
-class ParameterTypeError(ToolkitError, TypeError):
-    """A parameter has the wrong type."""
+class ParameterError(_ParameterNamed, ToolkitError, ValueError):
+    """A parameter has the right type but a value that breaks a rule (``.parameter`` names it)."""
+
+
+class ParameterTypeError(_ParameterNamed, ToolkitError, TypeError):
+    """A parameter has the wrong type (``.parameter`` names it)."""
 
 
 class SceneError(ParameterError):
@@ -56,7 +78,23 @@ def _show(value: Any) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def parameter_message(name: str, owner: str, rule: str, value: Any) -> str:
+class ParameterMessage(str):
+    """An error message that remembers the parameter and owner it names (see
+    :func:`parameter_message`); text added to it keeps them."""
+
+    parameter: str
+    owner: str
+
+    def __new__(cls, text: str, parameter: str, owner: str) -> ParameterMessage:
+        message = super().__new__(cls, text)
+        message.parameter, message.owner = parameter, owner
+        return message
+
+    def __add__(self, other: str) -> ParameterMessage:
+        return ParameterMessage(str(self) + other, self.parameter, self.owner)
+
+
+def parameter_message(name: str, owner: str, rule: str, value: Any) -> ParameterMessage:
     """Format the single error template used everywhere.
 
     Parameters
@@ -72,7 +110,10 @@ def parameter_message(name: str, owner: str, rule: str, value: Any) -> str:
 
     Returns
     -------
-    str
-        ``"The 'forces' parameter of ContactSet must be >= 0. Got -0.2 instead."``
+    ParameterMessage
+        ``"The 'forces' parameter of ContactSet must be >= 0. Got -0.2 instead."``, a ``str``
+        that carries ``name`` and ``owner``: an error raised with it has them as
+        ``error.parameter`` and ``error.owner``.
     """
-    return f"The {name!r} parameter of {owner} must {rule}. Got {_show(value)} instead."
+    return ParameterMessage(f"The {name!r} parameter of {owner} must {rule}. Got {_show(value)} instead.",
+                            name, owner)

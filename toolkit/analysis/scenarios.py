@@ -10,7 +10,7 @@ recorded through the sensor law.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -68,20 +68,21 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
     **noise
         ``missed_count_prob``, ``count_noise``, ``jitter`` of :class:`Sensors`.
     """
+    from ..scenes.build import build_scene
     from ..scenes.designs import load_design
     from ..simulation import simulate
 
-    scene = load_design("carousel")
-    forces = scene.contact_set().forces
-    mass = scene.body.moving_mass
+    carousel = build_scene(load_design("carousel"))
+    forces = carousel.contacts.forces
+    mass = carousel.plant.mass
     n = forces.size
     offsets = np.linspace(-spread, spread, n)
     commands = PiecewiseConstant([brake_time], [cruise + offsets, brake + offsets])
-    v_max = scene.motors.speed_limits[1]
+    v_max = carousel.motors.speed_limits[1]
     plant = Plant(ContactSet(cruise + offsets, forces), mass,
                   motors=Motors(lag=lag, speed_limits=(-v_max, v_max)), commands=commands)
     result = simulate(plant, t_end)
-    sensors = Sensors.from_spec(scene.sensors, n, **noise)
+    sensors = replace(carousel.sensors, **noise)
     positions: dict = {}
     if grid_phase is not None:
         draw = np.random.default_rng(as_int(grid_phase, "grid_phase", "carousel_brake_scenario", low=0))

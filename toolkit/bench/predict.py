@@ -22,7 +22,7 @@ import numpy as np
 
 from toolkit.loop.closed_loop import simulate_closed_loop
 from toolkit.controllers import VirtualViscosity
-from toolkit.model import ContactSet
+from toolkit.model import ContactSet, sample_count
 from toolkit.predictions import (Apparatus, FrictionFractionProblem, ViscosityCheck, ViscosityProblem,
                                  friction_fraction_check,
                                  viscosity_check)
@@ -48,7 +48,7 @@ def _samples(check: ViscosityProblem, result: ViscosityCheck) -> int:
         contacts = ContactSet(VirtualViscosity(float(slope)).speeds(a.run_plant(v0, check.mode)),
                               a.plant.contacts.forces)
         t_end = check.pre_roll + travel_time(contacts, a.mass, v0, settled) + check.tail
-        total += int(np.floor(t_end * rate + 1e-9)) + 1
+        total += sample_count(t_end, rate)
     return total
 
 

@@ -19,7 +19,7 @@ import time
 
 from ..scenes.designs import load_design
 from ..schedule import design_schedule
-from ..scenes.build import scene_plant
+from ..scenes.build import build_scene
 
 SCENES = ("brake_schedule", "carousel")
 
@@ -32,7 +32,8 @@ def main(argv: list[str]) -> int:
     for name in SCENES:
         scene = load_design(name)
         spec = scene.schedule
-        plant, target = scene_plant(scene), scene.objects.schedule_target
+        objects = build_scene(scene)
+        plant, target = objects.plant, objects.schedule_target
         walls = {}
         for refine in (False, True):
             started = time.perf_counter()

@@ -27,7 +27,7 @@ import numpy as np
 from .._validation import as_float
 from ..controllers.base import ControlLaw, Controller
 from ..errors import ParameterError, ParameterTypeError, parameter_message
-from ..model import Plant
+from ..model import Plant, sample_count, sample_times
 from ..model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors, measure  # noqa: F401
 from ..simulation import Budget, SimulationStatus
 from ..simulation._result import refuse_backlash
@@ -105,7 +105,7 @@ def _check(plant: Any, controller: Any, sensors: Any, estimator: Any, rate: Any,
             "estimator", owner, "come with the sensors it reads (sensors=Sensors(...))", estimator))
     rate = 50.0 if rate is None else as_float(rate, "rate", owner, low=0.0, low_open=True)
     t_end = as_float(t_end, "t_end", owner, low=0.0, low_open=True)
-    samples = math.floor(t_end * rate + 1e-9) + 1
+    samples = sample_count(t_end, rate)
     period = 1.0 / rate
     if samples > MAX_SAMPLES or not (period > 0 and t_end + period > t_end):
         raise ParameterError(parameter_message(
@@ -160,7 +160,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
             speed_limits=motors.speed_limits if motors is not None else (-math.inf, math.inf)))
     rng = np.random.default_rng(seed)
     n = plant.n
-    times = np.arange(samples) * period
+    times = sample_times(t_end, rate)
     t_list = times.tolist()
     speed, estimate, variance = [0.0] * samples, [0.0] * samples, [0.0] * samples
     position, force = [0.0] * samples, [0.0] * samples

@@ -55,7 +55,7 @@ import numpy as np
 from .._validation import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, SolverError, parameter_message
 from ..estimation import Estimator
-from ..model import Plant
+from ..model import Plant, sample_times
 from ..model.sensors import EncoderSample, Sensors, SensorState, measure
 from ..simulation import Budget, SimulationStatus
 from ..simulation._stepper import ExactState, advance
@@ -104,11 +104,10 @@ class LoopSystem:
     blocks: tuple[IOBlock, ...]
 
     def times(self, t_end: float) -> np.ndarray:
-        """Sample times ``k period`` for ``k = 0 .. floor(t_end / period)``, s: pass them to
+        """Sample times (:func:`toolkit.model.sample_times`), s: pass them to
         ``control.input_output_response`` (the same grid as :func:`toolkit.simulate_closed_loop`)."""
         t_end = as_float(t_end, "t_end", "LoopSystem.times", low=0.0, low_open=True)
-        rate = 1.0 / self.period
-        return np.arange(math.floor(t_end * rate + 1e-9) + 1) * self.period
+        return sample_times(t_end, 1.0 / self.period)
 
 
 def _rate(rate: Any, sensors: Sensors | None, owner: str) -> float:
@@ -120,9 +119,9 @@ def _rate(rate: Any, sensors: Sensors | None, owner: str) -> float:
     return 50.0 if rate is None else as_float(rate, "rate", owner, low=0.0, low_open=True)
 
 
-def _index(t: float, period: float) -> int:
-    """The sample index of a sample time ``t = k period``."""
-    return int(round(t / period))
+def _index(t: float, rate: float) -> int:
+    """The sample index of a sample time ``t = k / rate`` (:func:`toolkit.model.sample_times`)."""
+    return int(round(t * rate))
 
 
 # -- plant ----------------------------------------------------------------------------------
@@ -234,14 +233,14 @@ def plant_system(plant: Plant, *, sensors: Sensors | None = None, rate: float | 
         first_reading(x0)
 
     def update(t: float, x: np.ndarray, u: np.ndarray, params: dict) -> np.ndarray:
-        k = _index(t, period)
+        k = _index(t, rate)
         stuck, hint, releasing = x[at.mode]
-        state = ExactState(k * period, float(x[at.V]), x[at.v].copy(), _index_or_none(stuck),
+        state = ExactState(k / rate, float(x[at.V]), x[at.v].copy(), _index_or_none(stuck),
                            _pending=(_index_or_none(hint), float(releasing)))
-        step = advance(plant, state, np.asarray(u[:n], dtype=float), (k + 1) * period,
+        step = advance(plant, state, np.asarray(u[:n], dtype=float), (k + 1) / rate,
                        external=float(u[n]), budget=budget)
         if step.status is not SimulationStatus.SUCCESS:
-            raise SolverError(f"The plant step from t = {k * period:g} s stopped: {step.message}.")
+            raise SolverError(f"The plant step from t = {k / rate:g} s stopped: {step.message}.")
         out = np.array(x, dtype=float)
         new = step.state
         out[at.V], out[at.v] = new.V, new.contact_speeds
@@ -278,9 +277,9 @@ def plant_system(plant: Plant, *, sensors: Sensors | None = None, rate: float | 
 class _SteppedEstimator:
     """An estimator stepped by python-control: observe on a copy, commit in the update."""
 
-    def __init__(self, estimator: Estimator, n: int, v0: float, period: float,
+    def __init__(self, estimator: Estimator, n: int, v0: float, rate: float,
                  contact_speeds: np.ndarray | None) -> None:
-        self.estimator, self.n, self.v0, self.period = estimator, n, v0, period
+        self.estimator, self.n, self.v0, self.rate = estimator, n, v0, rate
         self.contact_speeds = contact_speeds
         self.k = -1                                   # samples committed; -1: never run
         self.committed: Estimator | None = None
@@ -304,7 +303,7 @@ class _SteppedEstimator:
         key = counts.tobytes()
         if key not in self.seen:
             trial = copy.deepcopy(base)
-            result = trial.observe(EncoderSample(k * self.period, int(counts[0]),
+            result = trial.observe(EncoderSample(k / self.rate, int(counts[0]),
                                                  counts[1:].astype(np.int64),
                                                  np.asarray(u[self.n + 1:2 * self.n + 1], dtype=float),
                                                  float(u[2 * self.n + 1])))
@@ -363,7 +362,7 @@ def estimator_system(estimator: Estimator, sensors: Sensors, *, v0: float = 0.0,
         if contact_speeds.shape != (n,):
             raise ParameterError(parameter_message(
                 "contact_speeds", owner, f"hold one speed per wheel encoder ({n})", contact_speeds.tolist()))
-    stepped = _SteppedEstimator(estimator, n, as_float(v0, "v0", owner), period, contact_speeds)
+    stepped = _SteppedEstimator(estimator, n, as_float(v0, "v0", owner), sensors.rate, contact_speeds)
 
     def update(t: float, x: np.ndarray, u: np.ndarray, params: dict) -> np.ndarray:
         return stepped.update(t, x, u)

@@ -8,7 +8,8 @@ Read this package alone to know the whole model:
   compliant), over numpy or casadi;
 - :mod:`~toolkit.model.motors`: the motor law (lag, rate limit, speed limits) and its
   closed-form solutions;
-- :mod:`~toolkit.model.signals`: piecewise-constant signals (external force, commands);
+- :mod:`~toolkit.model.signals`: piecewise-constant signals (external force, commands) and
+  the sample instants of a run at a rate;
 - :mod:`~toolkit.model.plant`: the body on its contacts, ``m dV/dt in F(V) + F_ext - c V``,
   and its right-hand side :meth:`Plant.rhs`;
 - :mod:`~toolkit.model.sensors`: encoders as integer counts of position (the sensor law
@@ -25,13 +26,13 @@ from .friction import (FRICTION_LAWS, STRIBECK_PEAK, STRIBECK_SPEED, compliant_b
 from .motors import MotorPiece, Motors, implicit_step, motor_rate, reach, unsaturated_response
 from .plant import Plant
 from .sensors import Encoder, EncoderRecord, EncoderSample, Sensors, SensorState, measure, play, record_simulation
-from .signals import PiecewiseConstant
+from .signals import PiecewiseConstant, sample_count, sample_times
 
 __all__ = [
     "ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads",
     "FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",
     "compliant_breakpoints", "compliant_zero_set",
     "Motors", "motor_rate", "MotorPiece", "unsaturated_response", "implicit_step", "reach",
-    "PiecewiseConstant", "Plant", "Encoder",
+    "PiecewiseConstant", "sample_count", "sample_times", "Plant", "Encoder",
     "Sensors", "SensorState", "EncoderRecord", "EncoderSample", "measure", "play", "record_simulation",
 ]

@@ -1,7 +1,9 @@
-"""Signals of time: piecewise-constant external forces and contact-speed commands."""
+"""Signals of time: piecewise-constant external forces and contact-speed commands, and the
+sample instants of a run at a rate."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -10,7 +12,20 @@ import numpy as np
 from .._validation import as_float_array
 from ..errors import ParameterError, parameter_message
 
-__all__ = ["PiecewiseConstant"]
+__all__ = ["PiecewiseConstant", "sample_count", "sample_times"]
+
+
+def sample_count(duration: float, rate: float) -> int:
+    """Samples of a run of ``duration`` s at ``rate`` Hz, both ends included: ``floor(duration
+    rate) + 1``, where a product within a relative 1e-9 below a whole number counts as it
+    (10 s at 50 Hz is 501 samples however the 10 s was rounded)."""
+    return math.floor(duration * rate * (1.0 + 1e-9)) + 1
+
+
+def sample_times(duration: float, rate: float) -> np.ndarray:
+    """The sample instants ``k / rate`` (s), ``k = 0 .. sample_count(duration, rate) - 1``:
+    the one grid of every sampled run (encoder records, closed loops, python-control)."""
+    return np.arange(sample_count(duration, rate)) / rate
 
 
 @dataclass(frozen=True, eq=False)

@@ -40,7 +40,7 @@ from .._validation import as_float, as_int
 from ..loop.closed_loop import simulate_closed_loop
 from ..controllers import VirtualViscosity
 from ..errors import ParameterError, ParameterTypeError, parameter_message
-from ..model import ContactSet
+from ..model import ContactSet, sample_count
 from ..simulation import SimulationStatus
 from ._measure import proportional_fit, startup_time_constant
 from .apparatus import Apparatus, CarryThen
@@ -143,7 +143,7 @@ class ViscosityProblem:
                 "start", owner, f"leave the start outside the equilibrium set (below {half - stop:g} "
                 "spacings from the lowest contact)", self.start))
         rate = a.sensors.rate if a.sensors is not None else 50.0
-        if self.tail_samples > math.floor(self.tail * rate + 1e-9):
+        if self.tail_samples > sample_count(self.tail, rate) - 1:
             raise ParameterError(parameter_message(
                 "tail_samples", owner, f"fit in the tail ({self.tail:g} s at {rate:g} Hz)", self.tail_samples))
 

@@ -13,17 +13,20 @@ Files and folders get the usual modes: ``0o666`` and ``0o777`` less the umask (0
 
 from __future__ import annotations
 
+import fcntl
+import hashlib
 import os
 import shutil
 import stat
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import OutputError
 
 __all__ = ["OUTPUT_NAMES", "OutputError", "atomic_write_bytes", "atomic_write_text", "check_output_dir",
-           "write_tree"]
+           "claim_output_dir", "write_tree"]
 
 #: Every file name the toolkit writes into an output folder. A folder that holds anything
 #: else is not the toolkit's and is never replaced.
@@ -68,6 +71,49 @@ def check_output_dir(path: str | os.PathLike[str]) -> Path:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write the output: the folder {str(parent)!r} is not writable")
     return target
+
+
+@contextmanager
+def claim_output_dir(path: str | os.PathLike[str] | None) -> Iterator[Path | None]:
+    """Check an output folder before any work and hold it for this run until the block ends.
+
+    Two runs into one folder would both write and both say so, though only the last one's
+    files survive: the second run to claim a folder is refused here, before any work. The
+    claim is an advisory lock (``flock``) on a file named after the folder's absolute path
+    in the system's temporary folder, so nothing is written beside the outputs; it ends
+    with the block or with the process.
+
+    Yields
+    ------
+    Path or None
+        The checked folder (``None`` in, ``None`` out: a command without ``--out``).
+
+    Raises
+    ------
+    OutputError
+        The folder cannot be written (:func:`check_output_dir`) or another run holds it.
+    """
+    if path is None:
+        yield None
+        return
+    target = check_output_dir(path)
+    key = hashlib.sha256(os.fsencode(os.path.abspath(target))).hexdigest()[:32]
+    locks = Path(tempfile.gettempdir()) / "active-contacts-outputs"
+    locks.mkdir(mode=0o1777, exist_ok=True)
+    lock = locks / f"{key}.lock"
+    handle = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(handle, 32, 0).decode(errors="replace").strip() or "unknown"
+            raise OutputError(f"cannot write the output: another run (pid {holder}) is writing into "
+                              f"{str(target)!r}; wait for it or choose another folder") from None
+        os.ftruncate(handle, 0)
+        os.pwrite(handle, str(os.getpid()).encode(), 0)
+        yield target
+    finally:
+        os.close(handle)                 # releases the lock (the file stays, empty of meaning)
 
 
 def _write_file(path: Path, data: bytes) -> None:

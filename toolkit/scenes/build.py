@@ -1,9 +1,7 @@
 """Build toolkit objects from a parsed scene: the one place scene specs become objects.
 
-:mod:`toolkit.scenes.spec` reads a TOML file into frozen spec dataclasses and checks the *form* of
-every value (known keys, types, finite numbers, rules between sections, and the rules of
-keys no constructor takes, such as ``motors.speed_limit`` or ``contacts.random``).
-:func:`build_scene` then builds the objects those specs declare, once:
+:func:`build_scene` checks every value and every rule between sections, then builds fresh
+objects (a study builds them once per run: estimators and controllers carry state):
 
 ==========================  ===============================================================
 ``[contacts]``              :class:`~toolkit.model.ContactSet` (speeds within the motor
@@ -11,33 +9,22 @@ keys no constructor takes, such as ``motors.speed_limit`` or ``contacts.random``
 ``[motors]``                :class:`~toolkit.model.Motors`
 ``[body]`` (+ motors,       :class:`~toolkit.model.Plant`, its external force and commands
 ``simulation.commands``)    as :class:`~toolkit.model.PiecewiseConstant` signals
-``[sensors]``               :class:`~toolkit.model.Encoder` per declared encoder
+``[sensors]``               :class:`~toolkit.model.Encoder` per declared encoder, and the
+                            :class:`~toolkit.model.Sensors` when both are declared
 ``[target]``                the allocation target (:class:`~toolkit.ForceCurve`, ...)
 ``[schedule]``              the schedule target (:class:`~toolkit.Braking` or
                             :class:`~toolkit.SpeedTrajectory`)
 ``simulation.options``      the options of :func:`toolkit.simulate`; a ``budget`` table
                             becomes a :class:`~toolkit.simulation.Budget`
-``[estimation]``            :class:`EstimationObjects`: the noisy :class:`~toolkit.model.
-                            sensors.Sensors`, the estimator's :class:`~toolkit.estimation.
-                            EstimatorModel`, the estimators, the brake scenario's plant
-``[control]``               :class:`ControlObjects`: the controller (bound once here to
-                            check it), the sensors and estimator it reads, the step budget
+``[estimation]``            :class:`EstimationObjects`
+``[control]``               :class:`ControlObjects`
+``[sweep]``                 the experiment (:mod:`toolkit.experiments`)
 ==========================  ===============================================================
 
-A rate is refused (under ``sensors.rate`` or ``control.rate``) when it is not > 0, when the
-run it samples would take more than :data:`MAX_RUN_SAMPLES` samples, or when its period is
-below what the simulation clock resolves at the end of the run.
-
-Contact speeds and ``simulation.commands`` beyond the motors' speed limits are refused
-(a :class:`~toolkit.errors.SceneError` naming the key, the limit and the value) unless the
-scene sets ``[motors] clip = true``; then they are clipped and every clip is recorded in
-:attr:`SceneObjects.clipped` (the study reports them as shortfalls).
-
-Each value's rules live in the constructor that takes it (the motor lag in
-:class:`~toolkit.model.Motors`, the mass in :class:`~toolkit.model.Plant`, ...). A
-constructor's :class:`~toolkit.errors.ParameterError` becomes a
-:class:`~toolkit.errors.SceneError` that keeps the constructor's rule and value and names
-the scene key::
+The bounds of values no constructor takes are :data:`toolkit.scenes.limits.LIMITS`; every
+other value is checked by the constructor that takes it, and a constructor's
+:class:`~toolkit.errors.ParameterError` (whose ``parameter`` names what it refused) becomes
+a :class:`~toolkit.errors.SceneError` that keeps the rule and value and names the scene key::
 
     In [motors]: The 'lag' parameter of Motors must be >= 0. Got -0.1 instead.
     (scene key 'motors.lag')
@@ -46,33 +33,29 @@ the scene key::
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from .._validation import check_option, suggestion
 from ..allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 from ..errors import ParameterError, ParameterTypeError, SceneError
-from ..model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant, unequal_loads
+from ..model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant, sample_count, unequal_loads
 from ..model.sensors import Sensors
 from ..schedule import Braking, SpeedTrajectory
 from ..simulation import Budget
+from .limits import BYTES_PER_NUMBER, LIMITS, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES, scene_value_error
+from .spec import Scene, ScheduleSpec
 
-if TYPE_CHECKING:                      # scene.py imports this module: types only, no cycle
-    from .spec import Scene, ScheduleSpec
+__all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "schedule_target",
+           "output_numbers", "sweep_scene_error"]
 
-__all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "scene_plant",
-           "schedule_target", "MAX_RUN_SAMPLES"]
-
-#: Most samples an estimation record or a closed loop may take (its arrays grow with them).
-MAX_RUN_SAMPLES = 10_000_000
-
-#: The parameter name in the single error template (:func:`toolkit.errors.parameter_message`).
-_PARAMETER = re.compile(r"The '(?P<name>[^']+)' parameter of ")
+_fail = scene_value_error
+#: Keys of ``[estimation]`` / ``[control]`` that set the encoders' noise.
+_NOISE_KEYS = ("missed_count_prob", "count_noise", "jitter")
 
 
 @dataclass(frozen=True)
@@ -102,6 +85,338 @@ class Clip:
         return abs(self.value - self.limit)
 
 
+@dataclass(frozen=True, eq=False)
+class EstimationObjects:
+    """What ``[estimation]`` declares.
+
+    Attributes
+    ----------
+    sensors : Sensors
+        The scene's encoders with the section's noise (missed counts, read noise, jitter).
+    model : EstimatorModel
+        What the model-based estimators know: the declared forces (N), the mass (kg), the
+        sensors, the motor lag (s), the drag (N s/m) and ``friction_spread``.
+    estimators : dict of str to Estimator
+        One per ``methods`` entry, in order.
+    plant : Plant
+        The plant the record is simulated on: the brake scenario's (true friction: the
+        declared forces with the drawn spread, and its commands), or the scene's own for
+        ``scenario = "simulation"``.
+    duration : float, s
+        Length of the record.
+    v0 : float, m/s
+        The speed the record starts from (rest, or ``simulation.v0``).
+    """
+
+    sensors: Sensors
+    model: Any
+    estimators: dict[str, Any]
+    plant: Plant
+    duration: float
+    v0: float
+
+
+@dataclass(frozen=True, eq=False)
+class ControlObjects:
+    """What ``[control]`` declares.
+
+    Attributes
+    ----------
+    controller : Controller or None
+        None for ``"open_loop"`` (the study builds it from the designed schedule).
+    sensors : Sensors or None
+        The encoders read in the loop (None: the ideal loop on the true speed).
+    estimator : Estimator or None
+        What turns the counts into the estimate (with sensors).
+    rate : float, Hz
+    budget : Budget or None
+        Guards of each plant step.
+    """
+
+    controller: Any
+    sensors: Sensors | None
+    estimator: Any
+    rate: float
+    budget: Budget | None
+
+
+@dataclass(frozen=True, eq=False)
+class SceneObjects:
+    """The toolkit objects a scene declares, built by :func:`build_scene`.
+
+    Attributes
+    ----------
+    scene : Scene
+        The parsed scene they were built from.
+    contacts : ContactSet or None
+        Declared contact speeds (m/s) and friction magnitudes (N), shape (n,); None in a
+        sweep scene.
+    motors : Motors or None
+        ``[motors]``; None for ideal motors.
+    plant : Plant or None
+        ``[body]`` on the declared contacts with the motors, the external force (N) and the
+        ``[simulation]`` commands (m/s); None without ``[body]``.
+    encoders : dict of str to Encoder
+        ``"wheel"`` and ``"central"``, those ``[sensors]`` declares (empty without it).
+    sensors : Sensors or None
+        Both encoders, noise-free (None unless ``[sensors]`` declares both).
+    target : ForceCurve, Viscosity, FrictionFraction, EquilibriumSpeed or None
+        The allocation target of ``[target]``.
+    schedule_target : Braking, SpeedTrajectory or None
+        The schedule target of ``[schedule]``.
+    simulation_options : dict
+        ``[simulation] options`` as :func:`toolkit.simulate` takes them (``budget`` a
+        :class:`~toolkit.simulation.Budget`); empty without ``[simulation]``.
+    clipped : tuple of Clip
+        Speeds clipped to the motor limits (``[motors] clip = true``); empty otherwise.
+    estimation : EstimationObjects or None
+    control : ControlObjects or None
+    sweep : experiment or None
+        ``[sweep]`` (:mod:`toolkit.experiments`).
+    """
+
+    scene: Scene
+    contacts: ContactSet | None
+    motors: Motors | None = None
+    plant: Plant | None = None
+    encoders: dict[str, Encoder] = field(default_factory=dict)
+    sensors: Sensors | None = None
+    target: Any = None
+    schedule_target: Braking | SpeedTrajectory | None = None
+    simulation_options: dict[str, Any] = field(default_factory=dict)
+    clipped: tuple[Clip, ...] = ()
+    estimation: EstimationObjects | None = None
+    control: ControlObjects | None = None
+    sweep: Any = None
+
+    def plant_on(self, contacts: ContactSet | None = None) -> Plant:
+        """The scene's plant, on other contacts (e.g. allocated ones) when given.
+
+        Raises
+        ------
+        SceneError
+            The scene has no ``[body]`` (the moving inertia).
+        """
+        if self.plant is None:
+            raise SceneError(f"The scene {self.scene.name!r} has no [body] section (the moving "
+                             "inertia) that this stage needs.")
+        if contacts is None or contacts is self.contacts:
+            return self.plant
+        return replace(self.plant, contacts=contacts)
+
+
+def sweep_scene_error(scene: Scene, command: str) -> SceneError:
+    """The one refusal of a sweep scene by a command that needs contacts of its own."""
+    return SceneError(f"The scene {scene.name!r} is a sweep scene: its runs draw their own contacts "
+                      f"and it declares no [contacts], so '{command}' has nothing to work on. Run it "
+                      "with 'active-contacts sweep'.")
+
+
+def build_scene(scene: Scene) -> SceneObjects:
+    """Check every value of ``scene`` and build the objects it declares (fresh ones each call).
+
+    Parameters
+    ----------
+    scene : Scene
+        A parsed scene (:func:`toolkit.load_scene`).
+
+    Returns
+    -------
+    SceneObjects
+
+    Raises
+    ------
+    SceneError
+        A value out of its bounds, a rule between sections broken, or a constructor that
+        refused a value; the message names the scene key, the rule and the value received.
+    """
+    if not isinstance(scene, Scene):
+        raise SceneError(f"build_scene takes a Scene (from load_scene). Got {type(scene).__name__} instead.")
+    _check_limits(scene)
+    if scene.sweep is not None:
+        return SceneObjects(scene=scene, contacts=None, sweep=_sweep(scene))
+    _check_across(scene)
+    clips: list[Clip] = []
+    contacts = _contacts(scene, clips)
+    motors = _motors(scene)
+    plant = _plant(scene, contacts, motors, clips)
+    encoders = _encoders(scene)
+    sensors = (Sensors(encoders["central"], encoders["wheel"], contacts.n)
+               if {"central", "wheel"} <= set(encoders) else None)
+    objects = SceneObjects(scene=scene, contacts=contacts, motors=motors, plant=plant, encoders=encoders,
+                           sensors=sensors, target=_target(scene), schedule_target=schedule_target(scene.schedule),
+                           simulation_options=_simulation_options(scene), clipped=tuple(clips))
+    estimation = _estimation(scene, objects)
+    control = _control(scene, objects)
+    _check_output_size(scene, estimation, control)
+    return replace(objects, estimation=estimation, control=control)
+
+
+# -- bounds and rules between sections ---------------------------------------------------------
+
+def _declared(scene: Scene, key: str) -> list[tuple[str, Any]]:
+    """The values ``scene`` declares under ``key`` (``section.name``, ``[]`` for each entry)."""
+    section, _, rest = key.partition(".")
+    node: Any = getattr(scene, section)
+    if node is None:
+        return []
+    many = rest.endswith("[]")
+    path = rest[:-2] if many else rest
+    for part in path.split("."):
+        node = node.get(part) if isinstance(node, Mapping) else getattr(node, part, None)
+        if node is None:
+            return []
+    if many:
+        return [(f"{key[:-2]}[{i}]", value) for i, value in enumerate(node)]
+    return [(key, node)]
+
+
+def _check_limits(scene: Scene) -> None:
+    for key, limit in LIMITS.items():
+        for where, value in _declared(scene, key):
+            if not limit.holds(value):
+                raise _fail(where, limit.broken(value), value)
+    contacts = scene.contacts
+    if contacts is not None and contacts.random is not None and contacts.random["high"] < contacts.random["low"]:
+        raise _fail("contacts.random.high", f"be >= low ({contacts.random['low']:g})", contacts.random["high"])
+
+
+def _check_across(scene: Scene) -> None:
+    """Rules that tie one section to another (the body a stage needs, contact counts, sensors)."""
+    for stage in ("simulation", "schedule", "estimation", "control"):
+        if getattr(scene, stage) is not None and scene.body is None:
+            raise SceneError(f"A [{stage}] section needs a [body] section (the moving inertia).")
+    n = scene.contacts.n
+    target = scene.target
+    if target is not None:
+        for key in ("fixed", "failed", "liftable"):
+            for index in getattr(target, key):
+                if index >= n:
+                    raise _fail(f"target.{key}", f"hold contact indices below n = {n}", list(getattr(target, key)))
+        motors = scene.motors
+        if target.dt is not None and (motors is None or not math.isfinite(motors.rate_limit)):
+            raise SceneError("'target.dt' limits each contact's change to rate_limit * dt: "
+                             "it needs [motors] rate_limit (m/s^2).")
+    _check_sensing(scene)
+    simulation = scene.simulation
+    if simulation is not None and simulation.commands is not None:
+        for i, row in enumerate(simulation.commands["values"]):
+            if len(row) != n:
+                raise _fail(f"simulation.commands.values[{i}]", f"hold one speed per contact ({n})", list(row))
+
+
+def _missing_encoders(sensors: Any) -> list[str]:
+    """The ``[sensors]`` keys an estimator needs that the section does not declare."""
+    if sensors is None:
+        return ["[sensors]"]
+    return [f"sensors.{key}" for key in ("central_counts_per_rev", "wheel_counts_per_rev")
+            if getattr(sensors, key) is None]
+
+
+def _check_sensing(scene: Scene) -> None:
+    """An estimator or a controller on the sensors it needs; options that need sensors."""
+    sensors, estimation = scene.sensors, scene.estimation
+    if estimation is not None:
+        missing = _missing_encoders(sensors)
+        if missing:
+            raise SceneError(f"The [estimation] section reads both encoders (central and wheels): it "
+                             f"needs {' and '.join(missing)}.")
+        if estimation.scenario == "simulation":
+            simulation = scene.simulation
+            if simulation is None or simulation.method != "exact":
+                raise SceneError("'estimation.scenario' = 'simulation' records the scene's [simulation] "
+                                 "run: it needs a [simulation] section with method = 'exact' (the "
+                                 "encoders count the exact dense output).")
+            if estimation.duration is not None:
+                raise SceneError("'estimation.duration' belongs to scenario = 'brake'; scenario = "
+                                 "'simulation' records [simulation] t_end.")
+    control = scene.control
+    if control is None:
+        return
+    if control.controller == "open_loop" and scene.schedule is None:
+        raise SceneError("'control.controller' = 'open_loop' replays the scene's designed schedule: it "
+                         "needs a [schedule] section.")
+    if control.cross_check and control.jitter != 0.0:
+        raise _fail("control.cross_check", "be false when the encoders jitter (python-control's "
+                    "discrete-time systems read at k dt)", control.cross_check)
+    reads = control.sensors if control.sensors is not None else sensors is not None
+    if reads:
+        missing = _missing_encoders(sensors)
+        if missing:
+            raise SceneError(f"The [control] loop reads the encoders through an estimator "
+                             f"(control.sensors = true): it needs {' and '.join(missing)} (or set "
+                             f"control.sensors = false for the ideal loop on the true speed).")
+        if control.rate is not None and control.rate != sensors.rate:
+            raise _fail("control.rate", f"equal sensors.rate ({sensors.rate:g} Hz) when the loop reads "
+                        "the sensors, or be left out", control.rate)
+    else:
+        if control.estimator is not None:
+            raise _fail("control.estimator", "be left out of an ideal loop (control.sensors = false "
+                        "or no [sensors]): the controller sees the true speed", control.estimator)
+        for key in _NOISE_KEYS:
+            if getattr(control, key) != 0.0:
+                raise _fail(f"control.{key}", "be left out of an ideal loop (no sensors read)",
+                            getattr(control, key))
+
+
+def output_numbers(scene: Scene, estimation: EstimationObjects | None = None,
+                   control: ControlObjects | None = None) -> int:
+    """How many numbers the series of a run's JSON output hold (the force-speed curve, the
+    estimation record's truth and estimates, the closed loop's signals), known before any
+    work: what :data:`~toolkit.scenes.limits.MAX_OUTPUT_BYTES` bounds."""
+    n = scene.contacts.n if scene.contacts is not None else 0
+    points = scene.report.curve_points if scene.report is not None else 801
+    numbers = 2 * points + 3 * n
+    if estimation is not None:
+        samples = sample_count(estimation.duration, estimation.sensors.rate)
+        numbers += samples * (2 + len(estimation.estimators))
+    if control is not None:
+        numbers += sample_count(scene.control.duration, control.rate) * (4 + n)
+    return numbers
+
+
+def _check_output_size(scene: Scene, estimation: EstimationObjects | None,
+                       control: ControlObjects | None) -> None:
+    numbers = output_numbers(scene, estimation, control)
+    size = numbers * BYTES_PER_NUMBER
+    if size > MAX_OUTPUT_BYTES:
+        key = ("control.duration" if control is not None else "estimation.duration" if estimation is not None
+               else "report.curve_points")
+        raise SceneError(
+            f"The scene {scene.name!r} asks for outputs of about {size / 2**20:.0f} MiB ({numbers} numbers "
+            f"in its series: the curve, the estimation record, the closed loop); outputs are limited "
+            f"to {MAX_OUTPUT_BYTES >> 20} MiB. Shorten the run or lower its rate ({key}).")
+
+
+# -- constructor errors named by scene key -------------------------------------------------------
+
+@contextmanager
+def _scene_keys(section: str, keys: Mapping[str, str | tuple[str, ...]]) -> Iterator[None]:
+    """Turn a constructor's parameter error into a SceneError naming the scene key.
+
+    ``keys`` maps the constructor's parameter names to the scene key (or keys) that set them;
+    the message keeps the constructor's rule and value (one template everywhere) and adds
+    the key.
+    """
+    try:
+        yield
+    except SceneError:
+        raise
+    except (ParameterError, ParameterTypeError) as error:
+        found = keys.get(error.parameter, ()) if error.parameter is not None else ()
+        names = (found,) if isinstance(found, str) else found
+        where = names[0].split(".")[0] if names else section
+        suffix = (f" (scene keys {' and '.join(map(repr, names))})" if len(names) > 1
+                  else f" (scene key {names[0]!r})" if names else "")
+        raise SceneError(f"In [{where}]: {error}{suffix}") from None
+
+
+def _same_keys(section: str, names: tuple[str, ...]) -> dict[str, str]:
+    return {name: f"{section}.{name}" for name in names}
+
+
+# -- objects -------------------------------------------------------------------------------------
+
 def _within_limits(key: str, speeds: np.ndarray, motors: Any) -> tuple[np.ndarray, Clip | None]:
     """``speeds`` checked against ``[motors]``'s limits: refused, or clipped with ``clip = true``."""
     if motors is None:
@@ -121,93 +436,6 @@ def _within_limits(key: str, speeds: np.ndarray, motors: Any) -> tuple[np.ndarra
             f"[{low:g}, {high:g}] m/s (or set [motors] clip = true to clip it). Got {value:g} m/s "
             f"(entry [{index}], beyond the limit {limit:g} m/s) instead.")
     return np.clip(speeds, low, high), Clip(key, value, limit, int(beyond.sum()))
-
-
-@dataclass(frozen=True, eq=False)
-class SceneObjects:
-    """The toolkit objects a scene declares, built and validated once by :func:`build_scene`.
-
-    Attributes
-    ----------
-    contacts : ContactSet
-        Declared contact speeds (m/s) and friction magnitudes (N), shape (n,).
-    motors : Motors or None
-        ``[motors]``; None for ideal motors.
-    plant : Plant or None
-        ``[body]`` on the declared contacts with the motors, the external force (N) and the
-        ``[simulation]`` commands (m/s); None without ``[body]``.
-    encoders : dict of str to Encoder
-        ``"wheel"`` and ``"central"``, those ``[sensors]`` declares (empty without it).
-    target : ForceCurve, Viscosity, FrictionFraction, EquilibriumSpeed or None
-        The allocation target of ``[target]``.
-    schedule_target : Braking, SpeedTrajectory or None
-        The schedule target of ``[schedule]``.
-    simulation_options : dict
-        ``[simulation] options`` as :func:`toolkit.simulate` takes them (``budget`` a
-        :class:`~toolkit.simulation.Budget`); empty without ``[simulation]``.
-    clipped : tuple of Clip
-        Speeds clipped to the motor limits (``[motors] clip = true``); empty otherwise.
-    estimation : EstimationObjects or None
-        ``[estimation]``.
-    control : ControlObjects or None
-        ``[control]``.
-    sweep : experiment or None
-        ``[sweep]`` (:mod:`toolkit.experiments`); in a sweep scene the only object
-        (``contacts`` is then None).
-    """
-
-    contacts: ContactSet | None
-    motors: Motors | None = None
-    plant: Plant | None = None
-    encoders: dict[str, Encoder] = field(default_factory=dict)
-    target: Any = None
-    schedule_target: Braking | SpeedTrajectory | None = None
-    simulation_options: dict[str, Any] = field(default_factory=dict)
-    clipped: tuple[Clip, ...] = ()
-    estimation: EstimationObjects | None = None
-    control: ControlObjects | None = None
-    sweep: Any = None
-
-    def plant_on(self, contacts: ContactSet | None = None) -> Plant:
-        """The scene's plant, on other contacts (e.g. allocated ones) when given.
-
-        Raises
-        ------
-        SceneError
-            The scene has no ``[body]`` (the moving inertia).
-        """
-        if self.plant is None:
-            raise SceneError("This stage needs a [body] section (the moving inertia).")
-        if contacts is None or contacts is self.contacts:
-            return self.plant
-        return replace(self.plant, contacts=contacts)
-
-
-@contextmanager
-def _scene_keys(section: str, keys: Mapping[str, str | tuple[str, ...]]) -> Iterator[None]:
-    """Turn a constructor's parameter error into a SceneError naming the scene key.
-
-    ``keys`` maps the constructor's parameter names to the scene key (or keys) that set
-    them; the message keeps the constructor's rule and value (one template everywhere) and
-    adds the key.
-    """
-    try:
-        yield
-    except SceneError:
-        raise
-    except (ParameterError, ParameterTypeError) as error:
-        message = str(error)
-        match = _PARAMETER.match(message)
-        found = keys.get(match["name"], ()) if match else ()
-        names = (found,) if isinstance(found, str) else found
-        where = names[0].split(".")[0] if names else section
-        suffix = (f" (scene keys {' and '.join(map(repr, names))})" if len(names) > 1
-                  else f" (scene key {names[0]!r})" if names else "")
-        raise SceneError(f"In [{where}]: {message}{suffix}") from None
-
-
-def _same_keys(section: str, names: tuple[str, ...]) -> dict[str, str]:
-    return {name: f"{section}.{name}" for name in names}
 
 
 def _signal(value: float | Mapping[str, Any], key: str) -> float | PiecewiseConstant:
@@ -312,37 +540,6 @@ def schedule_target(spec: ScheduleSpec | None) -> Braking | SpeedTrajectory | No
         return SpeedTrajectory(spec.params["times"], spec.params["speeds"])
 
 
-def build_scene(scene: Scene) -> SceneObjects:
-    """Build every object ``scene`` declares (use ``scene.objects``: built once and kept).
-
-    Parameters
-    ----------
-    scene : Scene
-        A parsed scene (:func:`toolkit.load_scene`).
-
-    Returns
-    -------
-    SceneObjects
-
-    Raises
-    ------
-    SceneError
-        A constructor refused a value; the message names the scene key, the rule and the
-        value received.
-    """
-    if scene.sweep is not None:
-        return SceneObjects(contacts=None, sweep=_sweep(scene))
-    clips: list[Clip] = []
-    contacts = _contacts(scene, clips)
-    motors = _motors(scene)
-    plant = _plant(scene, contacts, motors, clips)
-    return SceneObjects(contacts=contacts, motors=motors, plant=plant,
-                        encoders=_encoders(scene), target=_target(scene),
-                        schedule_target=schedule_target(scene.schedule),
-                        simulation_options=_simulation_options(scene), clipped=tuple(clips),
-                        estimation=_estimation(scene, plant), control=_control(scene, plant))
-
-
 def _sweep(scene: Scene) -> Any:
     """The ``[sweep]`` experiment, its parameters checked by its constructor."""
     from ..experiments import EXPERIMENTS
@@ -375,68 +572,11 @@ def _simulation_options(scene: Scene) -> dict[str, Any]:
     return options
 
 
-def scene_plant(scene: Scene, contacts: ContactSet | None = None) -> Plant:
-    """The :class:`~toolkit.model.Plant` a scene declares (needs ``[body]``), optionally on
-    other contacts."""
-    return scene.objects.plant_on(contacts)
-
-
-# -- estimation and control ------------------------------------------------------------------
-
-@dataclass(frozen=True, eq=False)
-class EstimationObjects:
-    """What ``[estimation]`` declares, built once.
-
-    Attributes
-    ----------
-    sensors : Sensors
-        The scene's encoders with the section's noise (missed counts, read noise, jitter).
-    model : EstimatorModel
-        What the model-based estimators know: the declared forces (N), the mass (kg), the
-        sensors, the motor lag (s), the drag (N s/m) and ``friction_spread``.
-    estimators : dict of str to Estimator
-        One per ``methods`` entry, in order (each run resets its estimator).
-    plant : Plant or None
-        The brake scenario's plant (true friction: the declared forces with the drawn
-        spread) and its commands; None for ``scenario = "simulation"``.
-    duration : float, s
-        Length of the record (brake scenario); the simulation's ``t_end`` otherwise.
-    """
-
-    sensors: Sensors
-    model: Any
-    estimators: dict[str, Any]
-    plant: Plant | None
-    duration: float
-
-
-@dataclass(frozen=True, eq=False)
-class ControlObjects:
-    """What ``[control]`` declares, built once.
-
-    Attributes
-    ----------
-    controller : Controller or None
-        None for ``"open_loop"`` (the study builds it from the designed schedule).
-    sensors : Sensors or None
-        The encoders read in the loop (None: the ideal loop on the true speed).
-    estimator : Estimator or None
-        What turns the counts into the estimate (with sensors).
-    rate : float, Hz
-    budget : Budget or None
-        Guards of each plant step.
-    """
-
-    controller: Any
-    sensors: Sensors | None
-    estimator: Any
-    rate: float
-    budget: Budget | None
-
+# -- estimation and control ----------------------------------------------------------------------
 
 def _check_rate(rate: float, duration: float, key: str, what: str) -> None:
     """A sample rate the run can honour: a resolvable period and at most MAX_RUN_SAMPLES samples."""
-    samples = math.floor(duration * rate + 1e-9) + 1
+    samples = sample_count(duration, rate)
     if samples > MAX_RUN_SAMPLES:
         raise SceneError(f"The {key!r} value in the scene must give at most {MAX_RUN_SAMPLES} samples "
                          f"over the {what} of {duration:g} s. Got {rate:g} Hz ({samples} samples) instead.")
@@ -445,10 +585,10 @@ def _check_rate(rate: float, duration: float, key: str, what: str) -> None:
                          f"resolves at t = {duration:g} s. Got {rate:g} Hz instead.")
 
 
-def _noisy_sensors(scene: Scene, section: str, spec: Any) -> Sensors:
-    noise = {key: getattr(spec, key) for key in ("missed_count_prob", "count_noise", "jitter")}
+def _noisy_sensors(objects: SceneObjects, section: str, spec: Any) -> Sensors:
+    noise = {key: getattr(spec, key) for key in _NOISE_KEYS}
     with _scene_keys(section, _same_keys(section, tuple(noise))):
-        return Sensors.from_spec(scene.sensors, scene.contacts.n, **noise)
+        return replace(objects.sensors, **noise)
 
 
 def _model(plant: Plant, sensors: Sensors, friction_spread: float = 0.0) -> Any:
@@ -476,48 +616,45 @@ def _estimator(name: str, model: Any, section: str, covariance: Any = None) -> A
         return make(model, initial_covariance=covariance)
 
 
-def _estimation(scene: Scene, plant: Plant | None) -> EstimationObjects | None:
+def _estimation(scene: Scene, objects: SceneObjects) -> EstimationObjects | None:
     spec = scene.estimation
     if spec is None:
         return None
-    assert plant is not None and scene.sensors is not None      # scene.py requires [body], [sensors]
-    sensors = _noisy_sensors(scene, "estimation", spec)
-    model = _model(plant, sensors, spec.friction_spread)
-    covariance = None if spec.initial_covariance is None else np.array(spec.initial_covariance)
-    estimators = {name: _estimator(name, model, "estimation", covariance) for name in spec.methods}
-    scenario_plant = None
+    plant = objects.plant
+    sensors = _noisy_sensors(objects, "estimation", spec)
     if spec.scenario == "brake":
         duration = spec.record_duration
         if spec.brake_time > duration:
-            raise SceneError(f"The 'estimation.brake_time' value in the scene must be <= "
-                             f"estimation.duration ({duration:g} s). Got {spec.brake_time:g} instead.")
+            raise _fail("estimation.brake_time", f"be <= estimation.duration ({duration:g} s)", spec.brake_time)
         n = plant.n
         offsets = np.linspace(-spec.spread, spec.spread, n)
         cruise, brake = spec.cruise + offsets, spec.brake + offsets
-        low, high = scene.motors.speed_limits if scene.motors is not None else (-math.inf, math.inf)
+        low, high = objects.motors.speed_limits if objects.motors is not None else (-math.inf, math.inf)
         for key, centre in (("estimation.cruise", spec.cruise), ("estimation.brake", spec.brake)):
             if centre - spec.spread < low or centre + spec.spread > high:
-                raise SceneError(f"The {key!r} value in the scene must keep {key.split('.')[1]} +- "
-                                 f"estimation.spread ({spec.spread:g} m/s) within the motors' speed limits "
-                                 f"[{low:g}, {high:g}] m/s. Got {centre:g} m/s instead.")
+                raise _fail(key, f"keep {key.split('.')[1]} +- estimation.spread ({spec.spread:g} m/s) within "
+                            f"the motors' speed limits [{low:g}, {high:g}] m/s", centre)
         rng = np.random.default_rng([spec.seed, 1])      # the sensors draw from default_rng(seed)
         forces = unequal_loads(plant.contacts.forces, spec.friction_spread, n, rng)
         commands = PiecewiseConstant([spec.brake_time], [cruise, brake])
-        scenario_plant = replace(plant, contacts=ContactSet(cruise, forces), commands=commands,
-                                 external_force=0.0)
+        record_plant = replace(plant, contacts=ContactSet(cruise, forces), commands=commands, external_force=0.0)
+        v0 = 0.0
     else:
-        duration = scene.simulation.t_end                      # type: ignore[union-attr]
+        duration, record_plant, v0 = scene.simulation.t_end, plant, scene.simulation.v0
     _check_rate(sensors.rate, duration, "sensors.rate", "estimation record")
-    return EstimationObjects(sensors, model, estimators, scenario_plant, duration)
+    model = _model(plant, sensors, spec.friction_spread)
+    covariance = None if spec.initial_covariance is None else np.array(spec.initial_covariance)
+    estimators = {name: _estimator(name, model, "estimation", covariance) for name in spec.methods}
+    return EstimationObjects(sensors, model, estimators, record_plant, duration, v0)
 
 
-def _control(scene: Scene, plant: Plant | None) -> ControlObjects | None:
+def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
     spec = scene.control
     if spec is None:
         return None
-    assert plant is not None                                   # scene.py requires [body]
     from .. import controllers
 
+    plant = objects.plant
     p = spec.params
     with _scene_keys("control", _same_keys("control", tuple(p))):
         if spec.controller == "viscosity":
@@ -531,13 +668,13 @@ def _control(scene: Scene, plant: Plant | None) -> ControlObjects | None:
     reads = spec.sensors if spec.sensors is not None else scene.sensors is not None
     sensors = estimator = None
     if reads:
-        sensors = _noisy_sensors(scene, "control", spec)
+        sensors = _noisy_sensors(objects, "control", spec)
         estimator = _estimator(spec.estimator or "kalman", _model(plant, sensors), "control")
         rate, key = sensors.rate, "sensors.rate"
     else:
         rate, key = (50.0 if spec.rate is None else spec.rate), "control.rate"
         if not rate > 0:
-            raise _fail_value(key, "be > 0", rate)
+            raise _fail(key, "be > 0", rate)
     _check_rate(rate, spec.duration, key, "closed loop")
     if controller is not None:
         # Bind once to check the controller on this plant (e.g. finite speed limits).
@@ -549,6 +686,3 @@ def _control(scene: Scene, plant: Plant | None) -> ControlObjects | None:
             budget = Budget(**spec.budget)
     return ControlObjects(controller, sensors, estimator, rate, budget)
 
-
-def _fail_value(key: str, rule: str, value: Any) -> SceneError:
-    return SceneError(f"The {key!r} value in the scene must {rule}. Got {value!r} instead.")

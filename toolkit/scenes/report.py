@@ -18,7 +18,6 @@ import numpy as np
 from .. import plots
 from ._io import atomic_write_text, write_tree
 from ..analysis.precision import work_precision_curves
-from .build import scene_plant
 from ..shortfall import Shortfall
 from .study import StudyResult
 
@@ -210,14 +209,12 @@ def study_files(result: StudyResult) -> dict[str, bytes]:
     if report is not None and report.plots:
         name = result.scene.name
         payload["force_curve.png"] = plots.figure_png(plots.plot_force_curve(result.curve, title=name))
-        if result.simulation is not None or result.schedule is not None:
-            plant = scene_plant(result.scene, result.contacts)     # the plant the study ran on
         if result.simulation is not None:
             payload["simulation.png"] = plots.figure_png(
-                plots.plot_simulation(result.simulation, plant=plant, title=name))
+                plots.plot_simulation(result.simulation, plant=result.plant, title=name))
         if result.schedule is not None:
             payload["schedule.png"] = plots.figure_png(
-                plots.plot_schedule(result.schedule, result.schedule_check, plant=plant, title=name))
+                plots.plot_schedule(result.schedule, result.schedule_check, plant=result.plant, title=name))
         if result.estimation is not None:
             payload["estimation.png"] = plots.figure_png(plots.plot_estimation(result.estimation, title=name))
         if result.control is not None:

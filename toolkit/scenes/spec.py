@@ -62,21 +62,18 @@ to the limits (and the study reports each clip as a shortfall).
 
 A scene file is read as UTF-8 and may be at most :data:`MAX_SCENE_BYTES` (1 MiB) long.
 
-:func:`load_scene` validates every value and refuses unknown keys with a suggestion;
-:func:`dumps_scene` writes a scene back (round trip: ``load(dump(s)) == s``).
-
-Validation happens once per value. This module checks the *form* of the document (known
-sections and keys, types, finite numbers, required and exclusive keys, rules between
-sections such as one command per contact) and the rules of keys that no constructor takes
-(``motors.speed_limit``, ``body.inertia``, ``contacts.random``, ``schedule.period``, ...).
-Every other value is checked by the constructor that takes it, when
-:mod:`toolkit.scenes.build` builds the scene's objects (``Scene.objects``, once, at load).
+This module checks the *form* of the document only: known sections and keys (unknown ones
+refused with a suggestion), types, finite numbers, required and exclusive keys. It builds no
+object and imports no solver, filter or plotting library. The bounds of values
+(:mod:`toolkit.scenes.limits`), the rules between sections and the rules of the constructors
+are checked when :func:`toolkit.scenes.build.build_scene` builds the scene's objects, the one
+place specs become objects. :func:`dumps_scene` writes a scene back (round trip:
+``loads_scene(dumps_scene(s)) == s``).
 """
 
 from __future__ import annotations
 
 import errno
-import functools
 import math
 import stat
 import re
@@ -91,50 +88,42 @@ import tomli_w
 
 from .._validation import suggestion
 from ..errors import SceneError, SceneFileNotFoundError
-from ..model import ContactSet
 from ..simulation import Budget
-from .build import SceneObjects, build_scene
+from .limits import MAX_SAMPLES, scene_value_error
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
     "SimulationSpec", "EstimationSpec", "ControlSpec", "ReportSpec", "SweepSpec", "ESTIMATION_METHODS",
-    "LOOP_ESTIMATORS", "CONTROLLERS", "with_section", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
+    "LOOP_ESTIMATORS", "CONTROLLERS", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
+    "MAX_SAMPLES",
 ]
 
 #: Section names of earlier plans, refused with a pointer to the sections that replaced them.
 PLANNED_SECTIONS = {"estimator": "estimation", "controller": "control"}
 #: Largest scene file :func:`load_scene` reads, bytes (1 MiB): a scene is a short text.
 MAX_SCENE_BYTES = 1 << 20
-#: Largest generated array a scene may ask for (random contacts, curve samples): 1e7.
-MAX_SAMPLES = 10_000_000
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 
 
-# -- value checks: each returns the cleaned value or raises SceneError ------------------------
+# -- form checks: each returns the cleaned value or raises SceneError --------------------------
+# (types, finite numbers, known, required and exclusive keys; the bounds of values and the
+# rules between sections are toolkit.scenes.build's)
 
-def _fail(where: str, rule: str, value: Any) -> SceneError:
-    return SceneError(f"The {where!r} value in the scene must {rule}. Got {value!r} instead.")
+_fail = scene_value_error
 
 
-def _number(where: str, value: Any, *, low: float | None = None, low_open: bool = False,
-            allow_inf: bool = False) -> float:
+def _number(where: str, value: Any, *, allow_inf: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise _fail(where, "be a number", value)
     value = float(value)
     if math.isnan(value) or (not allow_inf and math.isinf(value)):
         raise _fail(where, "be finite", value)
-    if low is not None and (value <= low if low_open else value < low):
-        raise _fail(where, f"be {'>' if low_open else '>='} {low:g}", value)
     return value
 
 
-def _integer(where: str, value: Any, *, low: int | None = 0, high: int | None = None) -> int:
+def _integer(where: str, value: Any) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
-        raise _fail(where, "be an integer" if low is None else f"be an integer >= {low}", value)
-    if low is not None and value < low:
-        raise _fail(where, f"be an integer >= {low}", value)
-    if high is not None and value > high:
-        raise _fail(where, f"be an integer <= {high}", value)
+        raise _fail(where, "be an integer", value)
     return value
 
 
@@ -249,13 +238,10 @@ class ContactsSpec:
         if "random" in table:
             raw = _table("contacts.random", table["random"])
             _check_keys("contacts.random", raw, ("n", "low", "high", "seed"))
-            random = {"n": _integer("contacts.random.n", _require("contacts.random", raw, "n"), low=1,
-                                    high=MAX_SAMPLES),
+            random = {"n": _integer("contacts.random.n", _require("contacts.random", raw, "n")),
                       "low": _number("contacts.random.low", _require("contacts.random", raw, "low")),
                       "high": _number("contacts.random.high", _require("contacts.random", raw, "high")),
                       "seed": _integer("contacts.random.seed", raw.get("seed", 0))}
-            if random["high"] < random["low"]:
-                raise _fail("contacts.random.high", f"be >= low ({random['low']:g})", random["high"])
         return cls(
             speeds=_numbers("contacts.speeds", table["speeds"]) if "speeds" in table else None,
             random=random,
@@ -297,8 +283,8 @@ class BodySpec:
         get = table.get
         return cls(
             mass=_number("body.mass", table["mass"]) if "mass" in table else None,
-            inertia=_number("body.inertia", table["inertia"], low=0.0, low_open=True) if "inertia" in table else None,
-            contact_radius=(_number("body.contact_radius", table["contact_radius"], low=0.0, low_open=True)
+            inertia=_number("body.inertia", table["inertia"]) if "inertia" in table else None,
+            contact_radius=(_number("body.contact_radius", table["contact_radius"])
                             if "contact_radius" in table else None),
             damping=_number("body.damping", get("damping", 0.0)),
             external_force=_signal_table("body.external_force", get("external_force", 0.0)),
@@ -306,7 +292,7 @@ class BodySpec:
 
     @property
     def moving_mass(self) -> float:
-        """Moving inertia at the contacts, kg."""
+        """Moving inertia at the contacts, kg (``inertia / contact_radius**2`` when given so)."""
         if self.mass is not None:
             return self.mass
         return self.inertia / self.contact_radius**2  # type: ignore[operator]
@@ -328,6 +314,7 @@ class MotorsSpec:
     compliance: float = 0.0
     backlash: float = 0.0
     clip: bool = False
+    speed_limit: float | None = None
 
     KEYS = ("speed_limit", "speed_limits", "lag", "rate_limit", "compliance", "backlash", "clip")
 
@@ -336,8 +323,9 @@ class MotorsSpec:
         _check_keys("motors", table, cls.KEYS)
         _exclusive("motors", table, "speed_limit", "speed_limits")
         limits: tuple[float, float] = (-math.inf, math.inf)
+        v_max = None
         if "speed_limit" in table:
-            v_max = _number("motors.speed_limit", table["speed_limit"], low=0.0, low_open=True)
+            v_max = _number("motors.speed_limit", table["speed_limit"])
             limits = (-v_max, v_max)
         elif "speed_limits" in table:
             pair = _numbers("motors.speed_limits", table["speed_limits"])
@@ -345,6 +333,7 @@ class MotorsSpec:
                 raise _fail("motors.speed_limits", "be a pair [lo, hi]", list(pair))
             limits = (pair[0], pair[1])
         return cls(
+            speed_limit=v_max,
             speed_limits=limits,
             lag=_number("motors.lag", table.get("lag", 0.0)),
             rate_limit=_number("motors.rate_limit", table.get("rate_limit", math.inf), allow_inf=True),
@@ -441,7 +430,7 @@ class TargetSpec:
             if key in ("speeds", "forces", "weights"):
                 params[key] = _numbers(where, table[key])
             elif key == "margin":
-                params[key] = _integer(where, table[key], low=None)
+                params[key] = _integer(where, table[key])
             elif key == "band":
                 params[key] = _scalar_or_numbers(where, table[key])
             else:
@@ -455,10 +444,9 @@ class TargetSpec:
         method = _text("target.method", table["method"]) if "method" in table else None
         return cls(kind=kind, params=params, method=method,
                    strict=_flag("target.strict", table.get("strict", False)),
-                   dt=_number("target.dt", table["dt"], low=0.0, low_open=True) if "dt" in table else None,
+                   dt=_number("target.dt", table["dt"]) if "dt" in table else None,
                    fixed=indices("fixed"), failed=indices("failed"), liftable=indices("liftable"),
-                   time_limit=_number("target.time_limit", table.get("time_limit", 30.0), low=0.0,
-                                      low_open=True))
+                   time_limit=_number("target.time_limit", table.get("time_limit", 30.0)))
 
 
 @dataclass(frozen=True)
@@ -495,9 +483,7 @@ class ScheduleSpec:
                                else _number(where, table[key]))
 
         def positive(key: str, default: float | None) -> float | None:
-            if key not in table:
-                return default
-            return _number(f"schedule.{key}", table[key], low=0.0, low_open=True)
+            return _number(f"schedule.{key}", table[key]) if key in table else default
 
         return cls(kind=kind, params=params, v0=_number("schedule.v0", table.get("v0", 0.0)),
                    period=positive("period", 0.02), epsilon=positive("epsilon", 1e-3),
@@ -529,7 +515,7 @@ class SimulationSpec:
             commands = _signal_table("simulation.commands", _table("simulation.commands", table["commands"]),
                                      vector=True)
         return cls(
-            t_end=_number("simulation.t_end", _require("simulation", table, "t_end"), low=0.0, low_open=True),
+            t_end=_number("simulation.t_end", _require("simulation", table, "t_end")),
             v0=_number("simulation.v0", table.get("v0", 0.0)),
             method=_text("simulation.method", table.get("method", "exact")),
             options=dict(_table("simulation.options", table.get("options", {}))),
@@ -637,16 +623,15 @@ class EstimationSpec:
             methods=(_names("estimation.methods", table["methods"], ESTIMATION_METHODS)
                      if "methods" in table else cls.methods),
             scenario=scenario,
-            duration=(_number("estimation.duration", table["duration"], low=0.0, low_open=True)
-                      if "duration" in table else None),
-            brake_time=_number("estimation.brake_time", get("brake_time", 5.0), low=0.0),
+            duration=_number("estimation.duration", table["duration"]) if "duration" in table else None,
+            brake_time=_number("estimation.brake_time", get("brake_time", 5.0)),
             cruise=_number("estimation.cruise", get("cruise", 0.2)),
             brake=_number("estimation.brake", get("brake", -0.1)),
-            spread=_number("estimation.spread", get("spread", 0.05), low=0.0),
+            spread=_number("estimation.spread", get("spread", 0.05)),
             seed=_integer("estimation.seed", get("seed", 0)),
-            friction_spread=_number("estimation.friction_spread", get("friction_spread", 0.0), low=0.0),
+            friction_spread=_number("estimation.friction_spread", get("friction_spread", 0.0)),
             **{key: _number(f"estimation.{key}", get(key, 0.0)) for key in _NOISE_KEYS},
-            speed_std=_number("estimation.speed_std", get("speed_std", 1e-4), low=0.0, low_open=True),
+            speed_std=_number("estimation.speed_std", get("speed_std", 1e-4)),
             initial_covariance=(_matrix("estimation.initial_covariance", table["initial_covariance"])
                                 if "initial_covariance" in table else None),
         )
@@ -711,7 +696,7 @@ class ControlSpec:
             _check_keys("control.budget", budget, tuple(item.name for item in fields(Budget)))
         return cls(
             controller=kind, params=params,
-            duration=_number("control.duration", get("duration", 10.0), low=0.0, low_open=True),
+            duration=_number("control.duration", get("duration", 10.0)),
             v0=_number("control.v0", get("v0", 0.0)),
             sensors=_flag("control.sensors", table["sensors"]) if "sensors" in table else None,
             estimator=(_choice("control.estimator", table["estimator"], LOOP_ESTIMATORS)
@@ -738,8 +723,7 @@ class ReportSpec:
     def parse(cls, table: dict[str, Any]) -> ReportSpec:
         _check_keys("report", table, cls.KEYS)
         return cls(plots=_flag("report.plots", table.get("plots", True)),
-                   curve_points=_integer("report.curve_points", table.get("curve_points", 801), low=2,
-                                         high=MAX_SAMPLES))
+                   curve_points=_integer("report.curve_points", table.get("curve_points", 801)))
 
 
 @dataclass(frozen=True)
@@ -785,7 +769,6 @@ class SweepSpec:
     @classmethod
     def parse(cls, table: dict[str, Any]) -> SweepSpec:
         from ..experiments import EXPERIMENTS
-        from ..sweeps import MAX_RUNS
 
         kind = _text("sweep.experiment", _require("sweep", table, "experiment"))
         if kind not in EXPERIMENTS:
@@ -809,10 +792,9 @@ class SweepSpec:
                 raise _fail("sweep.statistics", "be a non-empty list of summary names", value)
             statistics = tuple(value)
         return cls(experiment=kind, params=params,
-                   runs=_integer("sweep.runs", table.get("runs", 1000), low=1, high=MAX_RUNS),
+                   runs=_integer("sweep.runs", table.get("runs", 1000)),
                    seed=_integer("sweep.seed", table.get("seed", 0)),
-                   chunk_size=(_integer("sweep.chunk_size", table["chunk_size"], low=1)
-                               if "chunk_size" in table else None),
+                   chunk_size=_integer("sweep.chunk_size", table["chunk_size"]) if "chunk_size" in table else None,
                    statistics=statistics)
 
 
@@ -861,120 +843,10 @@ class Scene:
         order = ("sensors", "target", "schedule", "simulation", "estimation", "control", "report")
         return ("curve",) + tuple(s for s in order if getattr(self, s) is not None)
 
-    @functools.cached_property
-    def objects(self) -> SceneObjects:
-        """The toolkit objects this scene declares (:func:`toolkit.scenes.build.build_scene`),
-        built once: :func:`load_scene` builds them to validate the values, and every stage
-        reuses them."""
-        return build_scene(self)
-
-    def contact_set(self) -> ContactSet:
-        """The declared :class:`~toolkit.ContactSet`.
-
-        Raises
-        ------
-        SceneError
-            A sweep scene (its runs draw their own contacts).
-        """
-        if self.contacts is None:
-            raise SceneError(f"The scene {self.name!r} is a sweep scene: its runs draw their own "
-                             "contacts, it declares no [contacts]. Run it with 'active-contacts sweep'.")
-        return self.objects.contacts
-
-
-def _check_across(sections: dict[str, Any]) -> None:
-    """Rules that tie one section to another (contact counts, rate limits)."""
-    n = sections["contacts"].n
-    target = sections.get("target")
-    if target is not None:
-        for key in ("fixed", "failed", "liftable"):
-            for index in getattr(target, key):
-                if index >= n:
-                    raise _fail(f"target.{key}", f"hold contact indices below n = {n}", list(getattr(target, key)))
-        motors = sections.get("motors")
-        if target.dt is not None and (motors is None or not math.isfinite(motors.rate_limit)):
-            raise SceneError("'target.dt' limits each contact's change to rate_limit * dt: "
-                             "it needs [motors] rate_limit (m/s^2).")
-    _check_sensing(sections)
-    simulation = sections.get("simulation")
-    if simulation is not None and simulation.commands is not None:
-        for i, row in enumerate(simulation.commands["values"]):
-            if len(row) != n:
-                raise _fail(f"simulation.commands.values[{i}]", f"hold one speed per contact ({n})", list(row))
-
-
-def _missing_encoders(sensors: Any) -> list[str]:
-    """The ``[sensors]`` keys an estimator needs that the section does not declare."""
-    if sensors is None:
-        return ["[sensors]"]
-    return [key for key in ("central_counts_per_rev", "wheel_counts_per_rev")
-            if getattr(sensors, key) is None]
-
-
-def _check_sensing(sections: dict[str, Any]) -> None:
-    """An estimator or a controller on the sensors it needs; options that need sensors."""
-    sensors = sections.get("sensors")
-    estimation = sections.get("estimation")
-    if estimation is not None:
-        missing = _missing_encoders(sensors)
-        if missing:
-            raise SceneError(f"The [estimation] section reads both encoders (central and wheels): it "
-                             f"needs {' and '.join(missing if missing == ['[sensors]'] else [f'sensors.{m}' for m in missing])}.")
-        if estimation.scenario == "simulation":
-            simulation = sections.get("simulation")
-            if simulation is None or simulation.method != "exact":
-                raise SceneError("'estimation.scenario' = 'simulation' records the scene's [simulation] "
-                                 "run: it needs a [simulation] section with method = 'exact' (the "
-                                 "encoders count the exact dense output).")
-            if estimation.duration is not None:
-                raise SceneError("'estimation.duration' belongs to scenario = 'brake'; scenario = "
-                                 "'simulation' records [simulation] t_end.")
-    control = sections.get("control")
-    if control is None:
-        return
-    if control.controller == "open_loop" and "schedule" not in sections:
-        raise SceneError("'control.controller' = 'open_loop' replays the scene's designed schedule: it "
-                         "needs a [schedule] section.")
-    if control.cross_check and control.jitter != 0.0:
-        raise _fail("control.cross_check", "be false when the encoders jitter (python-control's "
-                    "discrete-time systems read at k dt)", control.cross_check)
-    reads = control.sensors if control.sensors is not None else sensors is not None
-    if reads:
-        missing = _missing_encoders(sensors)
-        if missing:
-            shown = missing if missing == ["[sensors]"] else [f"sensors.{m}" for m in missing]
-            raise SceneError(f"The [control] loop reads the encoders through an estimator "
-                             f"(control.sensors = true): it needs {' and '.join(shown)} (or set "
-                             f"control.sensors = false for the ideal loop on the true speed).")
-        if control.rate is not None and control.rate != sensors.rate:
-            raise _fail("control.rate", f"equal sensors.rate ({sensors.rate:g} Hz) when the loop reads "
-                        "the sensors, or be left out", control.rate)
-    else:
-        if control.estimator is not None:
-            raise _fail("control.estimator", "be left out of an ideal loop (control.sensors = false "
-                        "or no [sensors]): the controller sees the true speed", control.estimator)
-        for key in _NOISE_KEYS:
-            if getattr(control, key) != 0.0:
-                raise _fail(f"control.{key}", "be left out of an ideal loop (no sensors read)",
-                            getattr(control, key))
-
-
-def with_section(scene: Scene, section: str, spec: Any) -> Scene:
-    """``scene`` with one more (or another) section, checked against the others like a loaded
-    scene (e.g. the default ``[estimation]`` that ``active-contacts estimate`` assumes)."""
-    sections = {key: getattr(scene, key) for key in _SECTIONS if getattr(scene, key) is not None}
-    sections[section] = spec
-    for stage in ("simulation", "schedule", "estimation", "control"):
-        if stage in sections and "body" not in sections:
-            raise SceneError(f"A [{stage}] section needs a [body] section (the moving inertia).")
-    _check_across(sections)
-    new = Scene(name=scene.name, description=scene.description, **sections)
-    new.objects
-    return new
 
 
 def loads_scene(text: str, *, name: str = "scene") -> Scene:
-    """Parse and validate a scene from TOML text; see :func:`load_scene`."""
+    """Parse a scene from TOML text and check its form; see :func:`load_scene`."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
@@ -1000,23 +872,16 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     elif "contacts" not in data:
         raise SceneError(f"The scene {name!r} needs a [contacts] section.")
     sections = {key: _SECTIONS[key](value) for key, value in data.items() if key in _SECTIONS}
-    for stage in ("simulation", "schedule", "estimation", "control"):
-        if stage in sections and "body" not in sections:
-            raise SceneError(f"A [{stage}] section needs a [body] section (the moving inertia).")
-    if "contacts" in sections:
-        _check_across(sections)
     scene_name = _text("scene.name", meta.get("name", name))
     if not _NAME.fullmatch(scene_name):
         raise _fail("scene.name", "be a plain name of letters, digits, '_', '.' and '-' (it names the "
                     "output folder)", scene_name)
-    scene = Scene(name=scene_name, description=_text("scene.description", meta.get("description", "")),
-                  **{"contacts": None, **sections})
-    scene.objects  # build every declared object once: the constructors check their values
-    return scene
+    return Scene(name=scene_name, description=_text("scene.description", meta.get("description", "")),
+                 **{"contacts": None, **sections})
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read, validate and freeze a scene file.
+    """Read a scene file and check its form (no objects are built: :func:`~toolkit.scenes.build.build_scene`).
 
     Parameters
     ----------
@@ -1033,7 +898,9 @@ def load_scene(path: str | Path) -> Scene:
         The file does not exist.
     SceneError
         The path is a directory, a symbolic link loop or not a regular file; the file cannot
-        be read, is empty, larger than :data:`MAX_SCENE_BYTES` or not UTF-8; invalid TOML, an unknown section or key (with a suggestion), or a bad value.
+        be read, is empty, larger than :data:`MAX_SCENE_BYTES` or not UTF-8; invalid TOML, an
+        unknown section or key (with a suggestion), a missing or conflicting key, a value of
+        the wrong type or not finite.
     """
     file = Path(path)
     stem = file.stem if _NAME.fullmatch(file.stem) else "scene"
@@ -1138,7 +1005,7 @@ def dumps_scene(scene: Scene) -> str:
         elif key == "motors":
             table = _section_table(spec)
             limits = table.pop("speed_limits", None)
-            if limits is not None and all(math.isfinite(x) for x in limits):
+            if "speed_limit" not in table and limits is not None and all(math.isfinite(x) for x in limits):
                 table["speed_limits"] = limits
         else:
             table = _section_table(spec)

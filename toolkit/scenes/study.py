@@ -7,8 +7,10 @@ packages only it needs are not imported. When a scene has both a target and a si
 the simulation runs on the allocated contact speeds: the design is checked by simulating it.
 A ``[schedule]`` is designed and then simulated exactly under its own commands.
 
-Every object a stage needs (contacts, motors, plant, encoders, targets) comes from
-``scene.objects`` (:mod:`toolkit.scenes.build`), built once when the scene was loaded.
+Every object a stage needs (contacts, motors, plant, encoders, targets, estimators,
+controllers) comes from :func:`~toolkit.scenes.build.build_scene`, called once per run: each
+stage function takes those :class:`~toolkit.scenes.build.SceneObjects` (or a
+:class:`~toolkit.scenes.spec.Scene`, built then).
 
 A study that finishes may still miss what the scene asked for. Each miss is a
 :class:`Shortfall` (``StudyResult.shortfalls``), one kind per way of missing:
@@ -54,7 +56,8 @@ import numpy as np
 from ..allocation import (AllocationResult, AllocationStatus, EquilibriumSpeed, FrictionFraction,
                          allocate, build_problem)
 from ..errors import ParameterError, SceneError
-from ..model import ContactSet
+from ..model import ContactSet, Plant
+from .build import SceneObjects, build_scene
 from .spec import Scene
 from ..schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
 from ..shortfall import Shortfall
@@ -154,7 +157,11 @@ def force_curve(contacts: ContactSet, points: int = 801, *, margin: float | None
 
 @dataclass(frozen=True)
 class StudyResult:
-    """What :func:`run_study` computed; ``None`` for stages the scene does not declare."""
+    """What :func:`run_study` computed; ``None`` for stages the scene does not declare.
+
+    ``contacts`` are those the study ran on (the allocated ones when the scene has a
+    ``[target]``) and ``plant`` the scene's plant on them (None without ``[body]``).
+    """
 
     scene: Scene
     contacts: ContactSet
@@ -167,6 +174,7 @@ class StudyResult:
     shortfalls: tuple[Shortfall, ...] = ()
     estimation: EstimationStudy | None = None
     control: ControlStudy | None = None
+    plant: Plant | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -179,17 +187,23 @@ class StudyResult:
         return not self.shortfalls
 
 
-def _sensors(scene: Scene) -> dict[str, dict[str, float]]:
-    return {name: encoder.summary() for name, encoder in scene.objects.encoders.items()}
+def _built(scene: Scene | SceneObjects) -> SceneObjects:
+    """The objects of a scene: given, or built now."""
+    return scene if isinstance(scene, SceneObjects) else build_scene(scene)
 
 
-def allocate_scene(scene: Scene, contacts: ContactSet | None = None, *, strict: bool = False
-                   ) -> AllocationResult:
+def _spec(scene: Scene | SceneObjects) -> Scene:
+    """The parsed scene, given or behind its objects (nothing is built)."""
+    return scene.scene if isinstance(scene, SceneObjects) else scene
+
+
+def allocate_scene(scene: Scene | SceneObjects, contacts: ContactSet | None = None, *,
+                   strict: bool = False) -> AllocationResult:
     """Solve a scene's ``[target]`` under its ``[motors]`` limits and compliance; see :func:`toolkit.allocate`.
 
     Parameters
     ----------
-    scene : Scene
+    scene : Scene or SceneObjects
         Needs ``[target]``.
     contacts : ContactSet, optional
         Start from these contacts instead of the declared ones.
@@ -197,14 +211,16 @@ def allocate_scene(scene: Scene, contacts: ContactSet | None = None, *, strict: 
         Refuse a target that needs projection or lies beyond the contacts' reach
         (:class:`~toolkit.errors.ParameterError`), as ``[target] strict = true`` does.
     """
-    motors = scene.objects.motors
-    return allocate(scene.objects.target, contacts if contacts is not None else scene.objects.contacts,
-                    method=scene.target.method, compliance=motors.compliance if motors is not None else 0.0,
-                    **_allocation_arguments(scene, strict))
+    objects = _built(scene)
+    motors = objects.motors
+    return allocate(objects.target, contacts if contacts is not None else objects.contacts,
+                    method=objects.scene.target.method,
+                    compliance=motors.compliance if motors is not None else 0.0,
+                    **_allocation_arguments(objects, strict))
 
 
-def _allocation_arguments(scene: Scene, strict: bool = False) -> dict[str, Any]:
-    spec, motors = scene.target, scene.objects.motors
+def _allocation_arguments(objects: SceneObjects, strict: bool = False) -> dict[str, Any]:
+    spec, motors = objects.scene.target, objects.motors
     limits = motors.speed_limits if motors is not None else None
     rate = motors.rate_limit if motors is not None and spec.dt is not None else None
     return dict(speed_limits=limits, rate_limit=rate, dt=spec.dt, fixed=list(spec.fixed),
@@ -212,13 +228,13 @@ def _allocation_arguments(scene: Scene, strict: bool = False) -> dict[str, Any]:
                 strict=spec.strict or strict, time_limit=spec.time_limit)
 
 
-def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None
+def design_scene_schedule(scene: Scene | SceneObjects, contacts: ContactSet | None = None
                           ) -> tuple[ScheduleResult, SimulationResult]:
     """Design the scene's ``[schedule]`` and verify it with the exact simulator.
 
     Parameters
     ----------
-    scene : Scene
+    scene : Scene or SceneObjects
         Needs ``[schedule]`` and ``[body]``.
     contacts : ContactSet, optional
         Design on these contacts (e.g. allocated ones) instead of the declared ones.
@@ -228,25 +244,26 @@ def design_scene_schedule(scene: Scene, contacts: ContactSet | None = None
     (ScheduleResult, SimulationResult)
         The design, and the exact nonsmooth simulation of the plant under its commands.
     """
-    spec = scene.schedule
-    plant = scene.objects.plant_on(contacts)
-    result = design_schedule(plant, scene.objects.schedule_target, v0=spec.v0, horizon=spec.horizon,
+    objects = _built(scene)
+    spec = objects.scene.schedule
+    plant = objects.plant_on(contacts)
+    result = design_schedule(plant, objects.schedule_target, v0=spec.v0, horizon=spec.horizon,
                              period=spec.period, epsilon=spec.epsilon, time_limit=spec.time_limit)
     check = simulate(replace(plant, commands=result.as_commands()), float(result.times[-1]),
                      v0=spec.v0, t_eval=result.times)
     return result, check
 
 
-def _simulation(scene: Scene, contacts: ContactSet) -> SimulationResult:
-    spec = scene.simulation
-    return simulate(scene.objects.plant_on(contacts), spec.t_end, v0=spec.v0, method=spec.method,
-                    **scene.objects.simulation_options)
+def _simulation(objects: SceneObjects, contacts: ContactSet) -> SimulationResult:
+    spec = objects.scene.simulation
+    return simulate(objects.plant_on(contacts), spec.t_end, v0=spec.v0, method=spec.method,
+                    **objects.simulation_options)
 
 
 # -- shortfalls ----------------------------------------------------------------------------------
 
-def _limits(scene: Scene) -> tuple[float, float]:
-    motors = scene.objects.motors
+def _limits(objects: SceneObjects) -> tuple[float, float]:
+    motors = objects.motors
     return motors.speed_limits if motors is not None else (-math.inf, math.inf)
 
 
@@ -261,35 +278,36 @@ def _beyond(values: Any, limits: tuple[float, float]) -> tuple[float, float] | N
     return float(values[i]), high if values[i] > high else low
 
 
-def _allocation_refusal(scene: Scene, contacts: ContactSet) -> str | None:
+def _allocation_refusal(objects: SceneObjects, contacts: ContactSet) -> str | None:
     """Why ``allocate(..., strict=True)`` would refuse the scene's target (None if it would not).
 
     Only builds the problem (no solve): the realizability rules are checked there.
     """
     try:
-        build_problem(scene.objects.target, contacts, **_allocation_arguments(scene, strict=True))
+        build_problem(objects.target, contacts, **_allocation_arguments(objects, strict=True))
     except ParameterError as error:
         return str(error)
     return None
 
 
-def request_shortfalls(scene: Scene) -> list[Shortfall]:
+def request_shortfalls(scene: Scene | SceneObjects) -> list[Shortfall]:
     """The shortfalls a scene's request implies before any work: clipped speeds (stage
     ``"scene"``), a target that needs projection or lies beyond reach (``"allocation"``),
     a schedule target beyond the speed limits (``"schedule"``). Amounts that only a solve
     gives are NaN here."""
+    objects = _built(scene)
     found = [Shortfall("scene", f"{clip.count} speed(s) in {clip.key!r} beyond the motors' speed limit "
                        f"clipped: {clip.value:g} m/s to {clip.limit:g} m/s (excess {clip.excess:.3g} m/s)",
-                       clip.excess, "m/s") for clip in scene.objects.clipped]
-    if scene.target is not None:
-        refusal = _allocation_refusal(scene, scene.objects.contacts)
+                       clip.excess, "m/s") for clip in objects.clipped]
+    if objects.target is not None:
+        refusal = _allocation_refusal(objects, objects.contacts)
         if refusal is not None:
             found.append(Shortfall("allocation", f"the target is not realizable: {refusal}",
                                    math.nan, "N"))
-    target = scene.objects.schedule_target
+    target = objects.schedule_target
     if target is not None:
         values = target.speed if isinstance(target, Braking) else target.speeds
-        beyond = _beyond(values, _limits(scene))
+        beyond = _beyond(values, _limits(objects))
         if beyond is not None:
             found.append(Shortfall("schedule", f"unreachable: the target speed {beyond[0]:g} m/s exceeds "
                                    f"the speed limit {beyond[1]:g} m/s", abs(beyond[0] - beyond[1]),
@@ -297,7 +315,7 @@ def request_shortfalls(scene: Scene) -> list[Shortfall]:
     return found
 
 
-def allocation_shortfalls(scene: Scene, result: AllocationResult,
+def allocation_shortfalls(scene: Scene | SceneObjects, result: AllocationResult,
                           contacts: ContactSet | None = None) -> list[Shortfall]:
     """How an allocation of the scene's ``[target]`` missed it (an empty list when it did not).
 
@@ -305,8 +323,9 @@ def allocation_shortfalls(scene: Scene, result: AllocationResult,
     reach (the certified best achievable error, N), or no allocation at all (infeasible,
     time limit, solver error; the achieved error, N).
     """
+    objects = _built(scene)
     found: list[Shortfall] = []
-    target, projection = scene.objects.target, result.projection
+    target, projection = objects.target, result.projection
     if projection is not None:
         distance = float(projection.distance_sup)
         if isinstance(target, FrictionFraction):
@@ -318,11 +337,11 @@ def allocation_shortfalls(scene: Scene, result: AllocationResult,
             what = (f"equilibrium speed {target.speed:g} m/s is beyond the contacts' reach: "
                     f"projected to {float(xs[np.argmax(ys <= 0)]):g} m/s (distance {distance:.3g} N)")
         else:
-            what = (f"the {scene.target.kind} target is not realizable ({', '.join(projection.reasons)}): "
+            what = (f"the {objects.scene.target.kind} target is not realizable ({', '.join(projection.reasons)}): "
                     f"projected (distance {distance:.3g} N)")
         found.append(Shortfall("allocation", what, distance, "N"))
-    elif (refusal := _allocation_refusal(scene, contacts if contacts is not None
-                                         else scene.objects.contacts)) is not None:
+    elif (refusal := _allocation_refusal(objects, contacts if contacts is not None
+                                         else objects.contacts)) is not None:
         found.append(Shortfall("allocation", f"unreachable: best achievable error {result.bound:.3g} N "
                                f"({refusal})", float(result.bound), "N"))
     if result.status in (AllocationStatus.INFEASIBLE, AllocationStatus.TIME_LIMIT,
@@ -333,7 +352,8 @@ def allocation_shortfalls(scene: Scene, result: AllocationResult,
     return found
 
 
-def schedule_shortfalls(scene: Scene, result: ScheduleResult, check: SimulationResult) -> list[Shortfall]:
+def schedule_shortfalls(scene: Scene | SceneObjects, result: ScheduleResult,
+                        check: SimulationResult) -> list[Shortfall]:
     """How a designed schedule missed the scene's ``[schedule]`` (an empty list when it did not).
 
     A target beyond the speed limits (``"unreachable: best achievable error X m/s, because
@@ -342,10 +362,11 @@ def schedule_shortfalls(scene: Scene, result: ScheduleResult, check: SimulationR
     prediction bound) and a braking target not reached (the final distance to it).
     A VERIFIED schedule that is not proven optimal is a success.
     """
+    objects = _built(scene)
     found: list[Shortfall] = []
-    target = scene.objects.schedule_target
+    target = objects.schedule_target
     values = target.speed if isinstance(target, Braking) else target.speeds
-    beyond = _beyond(values, _limits(scene))
+    beyond = _beyond(values, _limits(objects))
     if beyond is not None:
         if isinstance(target, Braking):
             best = abs(beyond[0] - beyond[1])
@@ -369,11 +390,11 @@ def schedule_shortfalls(scene: Scene, result: ScheduleResult, check: SimulationR
     return found
 
 
-def simulation_shortfalls(scene: Scene, result: SimulationResult) -> list[Shortfall]:
+def simulation_shortfalls(scene: Scene | SceneObjects, result: SimulationResult) -> list[Shortfall]:
     """A simulation that stopped before ``t_end`` (the simulated time left, s)."""
     if result.status is SimulationStatus.SUCCESS:
         return []
-    t_end, reached = scene.simulation.t_end, float(result.t[-1]) if len(result.t) else 0.0
+    t_end, reached = _spec(scene).simulation.t_end, float(result.t[-1]) if len(result.t) else 0.0
     return [Shortfall("simulation", f"{result.status.value} at t = {reached:.6g} s of t_end = {t_end:g} s "
                       f"({t_end - reached:.6g} s not simulated)", t_end - reached, "s")]
 
@@ -415,12 +436,13 @@ class EstimationStudy:
                  "real_time_ratio": r.real_time_ratio} for r in self.results]
 
 
-def estimate_scene(scene: Scene, simulation: SimulationResult | None = None) -> EstimationStudy:
+def estimate_scene(scene: Scene | SceneObjects, simulation: SimulationResult | None = None
+                   ) -> EstimationStudy:
     """Simulate, record and estimate as the scene's ``[estimation]`` declares.
 
     Parameters
     ----------
-    scene : Scene
+    scene : Scene or SceneObjects
         Needs ``[estimation]`` (and so ``[sensors]`` and ``[body]``).
     simulation : SimulationResult, optional
         For ``scenario = "simulation"``: the scene's ``[simulation]`` run when already
@@ -432,27 +454,28 @@ def estimate_scene(scene: Scene, simulation: SimulationResult | None = None) -> 
     """
     from ..model.sensors import record_simulation
 
-    spec, objects = scene.estimation, scene.objects.estimation
+    built = _built(scene)
+    spec, objects = built.scene.estimation, built.estimation
     if spec is None or objects is None:
-        raise SceneError(f"The scene {scene.name!r} has no [estimation] section.")
-    if objects.plant is not None:
-        plant, v0 = objects.plant, 0.0
+        raise SceneError(f"The scene {built.scene.name!r} has no [estimation] section.")
+    plant = objects.plant
+    if spec.scenario == "brake":
         run = simulate(plant, objects.duration)
     else:
-        plant, v0 = scene.objects.plant_on(None), scene.simulation.v0
-        run = simulation if simulation is not None else _simulation(scene, scene.objects.contacts)
+        run = simulation if simulation is not None else _simulation(built, built.contacts)
     record = record_simulation(run, plant, objects.sensors, rng=np.random.default_rng(spec.seed))
-    results = tuple(estimator.run(record, speed=v0, speed_std=spec.speed_std)
+    results = tuple(estimator.run(record, speed=objects.v0, speed_std=spec.speed_std)
                     for estimator in objects.estimators.values())
     return EstimationStudy(record, results, run, plant)
 
 
-def estimation_shortfalls(scene: Scene, study: EstimationStudy) -> list[Shortfall]:
+def estimation_shortfalls(scene: Scene | SceneObjects, study: EstimationStudy) -> list[Shortfall]:
     """A recorded run that stopped before its end (the time not recorded, s)."""
     run = study.simulation
     if run.status is SimulationStatus.SUCCESS:
         return []
-    duration = scene.objects.estimation.duration
+    spec = _spec(scene)
+    duration = spec.estimation.record_duration if spec.estimation.scenario == "brake" else spec.simulation.t_end
     reached = float(run.t_final)
     return [Shortfall("estimation", f"the recorded simulation {run.status.value} at t = {reached:.6g} s "
                       f"of {duration:g} s ({duration - reached:.6g} s not recorded)", duration - reached, "s")]
@@ -493,12 +516,12 @@ class ControlStudy:
                 "force": loop.force, "commands": loop.commands}
 
 
-def control_scene(scene: Scene, schedule: ScheduleResult | None = None) -> ControlStudy:
+def control_scene(scene: Scene | SceneObjects, schedule: ScheduleResult | None = None) -> ControlStudy:
     """Run the scene's ``[control]`` closed loop (and its python-control cross check).
 
     Parameters
     ----------
-    scene : Scene
+    scene : Scene or SceneObjects
         Needs ``[control]``.
     schedule : ScheduleResult, optional
         For ``controller = "open_loop"``: the designed ``[schedule]`` (designed here when
@@ -506,16 +529,17 @@ def control_scene(scene: Scene, schedule: ScheduleResult | None = None) -> Contr
     """
     from ..loop.closed_loop import simulate_closed_loop
 
-    spec, objects = scene.control, scene.objects.control
+    built = _built(scene)
+    spec, objects = built.scene.control, built.control
     if spec is None or objects is None:
-        raise SceneError(f"The scene {scene.name!r} has no [control] section.")
-    plant = scene.objects.plant_on(None)
+        raise SceneError(f"The scene {built.scene.name!r} has no [control] section.")
+    plant = built.plant_on(None)
     controller = objects.controller
     if controller is None:                                     # open loop: the designed schedule
         from ..controllers import OpenLoop
 
         if schedule is None:
-            schedule, _ = design_scene_schedule(scene)
+            schedule, _ = design_scene_schedule(built)
         controller = OpenLoop(schedule)
     rate = None if objects.sensors is not None else objects.rate
     arguments = dict(sensors=objects.sensors, estimator=objects.estimator, v0=spec.v0, seed=spec.seed,
@@ -534,11 +558,11 @@ def control_scene(scene: Scene, schedule: ScheduleResult | None = None) -> Contr
     return ControlStudy(loop, spec.controller, name, difference)
 
 
-def control_shortfalls(scene: Scene, study: ControlStudy) -> list[Shortfall]:
+def control_shortfalls(scene: Scene | SceneObjects, study: ControlStudy) -> list[Shortfall]:
     """A loop stopped before ``duration`` (time left, s); a cross check beyond
     :data:`CROSS_CHECK_TOLERANCE` (the difference, m/s)."""
     found: list[Shortfall] = []
-    loop, duration = study.loop, scene.control.duration
+    loop, duration = study.loop, _spec(scene).control.duration
     if loop.status is not SimulationStatus.SUCCESS:
         reached = float(loop.times[-1]) if loop.times.size else 0.0
         found.append(Shortfall("control", f"the closed loop {loop.status.value} at t = {reached:.6g} s of "
@@ -551,13 +575,13 @@ def control_shortfalls(scene: Scene, study: ControlStudy) -> list[Shortfall]:
     return found
 
 
-def run_study(scene: Scene, *, strict: bool = False) -> StudyResult:
-    """Run every stage the scene declares and return their results.
+def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResult:
+    """Build the scene's objects once and run every stage it declares.
 
     Parameters
     ----------
-    scene : Scene
-        From :func:`toolkit.load_scene`.
+    scene : Scene or SceneObjects
+        From :func:`toolkit.load_scene` (built here), or already built.
     strict : bool
         Refuse, before any work, a request that is known to fall short
         (:func:`request_shortfalls`) instead of running it and reporting the shortfall.
@@ -572,42 +596,49 @@ def run_study(scene: Scene, *, strict: bool = False) -> StudyResult:
     SceneError
         ``strict=True`` and the request falls short before any work.
     """
-    if strict:
-        known = request_shortfalls(scene)
-        if known:
-            raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
-    contacts = scene.objects.contacts
-    found = [s for s in request_shortfalls(scene) if s.stage == "scene"]
+    objects = _built(scene)
+    scene = objects.scene
+    if scene.sweep is not None:
+        from .build import sweep_scene_error
+
+        raise sweep_scene_error(scene, "run_study")
+    known = request_shortfalls(objects)
+    if strict and known:
+        raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
+    contacts = objects.contacts
+    found = [s for s in known if s.stage == "scene"]
     points = scene.report.curve_points if scene.report is not None else 801
-    sensors = _sensors(scene) if scene.sensors is not None else None
+    sensors = ({name: encoder.summary() for name, encoder in objects.encoders.items()}
+               if scene.sensors is not None else None)
     allocation = None
     if scene.target is not None:
-        allocation = allocate_scene(scene, contacts)
-        found += allocation_shortfalls(scene, allocation, contacts)
+        allocation = allocate_scene(objects, contacts)
+        found += allocation_shortfalls(objects, allocation, contacts)
         contacts = allocation.contacts
     schedule = check = None
     if scene.schedule is not None:
-        schedule, check = design_scene_schedule(scene, contacts)
-        found += schedule_shortfalls(scene, schedule, check)
+        schedule, check = design_scene_schedule(objects, contacts)
+        found += schedule_shortfalls(objects, schedule, check)
     simulation = None
     if scene.simulation is not None:
-        simulation = _simulation(scene, contacts)
+        simulation = _simulation(objects, contacts)
         found += simulation_shortfalls(scene, simulation)
     estimation = None
     if scene.estimation is not None:
-        estimation = estimate_scene(scene, simulation)
-        found += estimation_shortfalls(scene, estimation)
+        estimation = estimate_scene(objects, simulation)
+        found += estimation_shortfalls(objects, estimation)
     loop = None
     if scene.control is not None:
-        loop = control_scene(scene, schedule)
-        found += control_shortfalls(scene, loop)
+        loop = control_scene(objects, schedule)
+        found += control_shortfalls(objects, loop)
+    plant = objects.plant_on(contacts) if objects.plant is not None else None
     return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation,
-                       schedule, check, simulation, tuple(found), estimation, loop)
+                       schedule, check, simulation, tuple(found), estimation, loop, plant)
 
 
 # -- sweeps -------------------------------------------------------------------------------------
 
-def sweep_scene(scene: Scene, *, runs: int | None = None, seed: int | None = None,
+def sweep_scene(scene: Scene | SceneObjects, *, runs: int | None = None, seed: int | None = None,
                 scheduler: Any = None, workers: int | None = None, progress: bool = False) -> Any:
     """Run a sweep scene's ``[sweep]`` (:func:`toolkit.sweep`); ``runs`` and ``seed`` override
     the scene's.
@@ -623,10 +654,11 @@ def sweep_scene(scene: Scene, *, runs: int | None = None, seed: int | None = Non
     """
     from ..sweeps import sweep   # pandas comes with the first sweep
 
-    spec = scene.sweep
+    objects = _built(scene)
+    spec = objects.scene.sweep
     if spec is None:
-        raise SceneError(f"The scene {scene.name!r} has no [sweep] section to run.")
-    return sweep(scene.objects.sweep, spec.runs if runs is None else runs,
+        raise SceneError(f"The scene {objects.scene.name!r} has no [sweep] section to run.")
+    return sweep(objects.sweep, spec.runs if runs is None else runs,
                  seed=spec.seed if seed is None else seed, scheduler=scheduler, workers=workers,
                  chunk_size=spec.chunk_size, progress=progress)
 

@@ -7,6 +7,7 @@ import pytest
 
 from toolkit import ContactSet, Motors, ParameterError, PiecewiseConstant, Plant, simulate
 from toolkit.loop.closed_loop import simulate_closed_loop
+from toolkit.model.carousel import CAROUSEL
 from toolkit.controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, VirtualViscosity
 from toolkit.predictions.theory import transition_time
 
@@ -66,7 +67,7 @@ def _loop_with_sensors():
     from toolkit import CentralDifference, Sensors
 
     plant = Plant(ContactSet([0.0] * 10, [F] * 10), M, motors=Motors(lag=0.0075, speed_limits=(-VMAX, VMAX)))
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     run = simulate_closed_loop(plant, VirtualViscosity(10.0, 0.15), 4.0, sensors=sensors, seed=1)
     ideal = simulate_closed_loop(plant, VirtualViscosity(10.0, 0.15), 4.0)
     baseline = CentralDifference(sensors).run(run.record)
@@ -107,7 +108,7 @@ def test_stepped_filter_equals_the_offline_filter_on_the_loop_record(controller)
     from toolkit.estimation import EstimatorModel
 
     plant = Plant(ContactSet([0.0] * 10, [F] * 10), M, motors=Motors(lag=0.0075, speed_limits=(-VMAX, VMAX)))
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     run = simulate_closed_loop(plant, controller, 3.0, sensors=sensors, seed=2)
     np.testing.assert_array_equal(run.record.initial_commands, np.zeros(10))
     model = EstimatorModel(plant.contacts.forces, M, sensors, motor_lag=0.0075)
@@ -125,7 +126,7 @@ def test_filter_under_speed_hold_is_ten_times_better_than_differencing():
     from toolkit import CentralDifference, Sensors
 
     plant = Plant(ContactSet([0.0] * 10, [1.0] * 10), 5.0, motors=Motors(lag=0.0075, speed_limits=(-VMAX, VMAX)))
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     run = simulate_closed_loop(plant, SpeedHold(0.2, 50.0), 6.0, sensors=sensors, seed=1)
     baseline = CentralDifference(sensors).run(run.record)
     late = run.times >= 1.0

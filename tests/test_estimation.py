@@ -16,6 +16,7 @@ from toolkit.estimation import (CentralDifference, EstimatorModel, KalmanEstimat
                                 UnscentedEstimator, WheelDifference,
                                 chi2_band, steady_state_gain)
 from toolkit.model import ContactSet, Plant
+from toolkit.model.carousel import CAROUSEL
 from toolkit.model.sensors import Sensors, record_simulation
 from toolkit.analysis.scenarios import carousel_brake_scenario
 from toolkit.simulation import simulate
@@ -30,7 +31,7 @@ def _constant_speed_record(V: float = 0.1234, t_end: float = 4.0):
     # Every contact at V and the body released at V: it stays stuck at V exactly.
     plant = Plant(ContactSet(np.full(10, V)), 5.0)
     result = simulate(plant, t_end, v0=V)
-    sensors = Sensors.carousel()
+    sensors = CAROUSEL.sensors()
     return record_simulation(result, plant, sensors), EstimatorModel(np.ones(10), 5.0, sensors)
 
 
@@ -257,7 +258,7 @@ def test_no_hold_on_a_body_that_met_a_settling_contact():
     # 375 before the arrival had to follow the lines' start).
     from toolkit import Motors, Sensors, VirtualViscosity, simulate_closed_loop
     plant = Plant(ContactSet([0.0] * 10, [1.0] * 10), 5.0, motors=Motors(lag=0.0075, speed_limits=(-0.35, 0.35)))
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     run = simulate_closed_loop(plant, VirtualViscosity(3000.0, 0.15), 4.0, sensors=sensors, v0=0.3)
     model = EstimatorModel(plant.contacts.forces, 5.0, sensors, motor_lag=0.0075, speed_limits=(-0.35, 0.35))
     exact = KalmanEstimator(model).run(run.record, speed=0.3)
@@ -274,7 +275,7 @@ def test_no_hold_while_an_outside_force_ramps():
     # 2.7e4 in the second second).
     from toolkit import ForceDrive, Motors, Sensors, simulate_closed_loop
     plant = Plant(ContactSet([0.0] * 10, [1.0] * 10), 5.0, motors=Motors(lag=0.0075, speed_limits=(-0.35, 0.35)))
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     run = simulate_closed_loop(plant, ForceDrive(np.linspace(-0.3, 0.3, 10), 0.0, 0.2, 2.0), 4.0,
                                sensors=sensors, seed=1)
     model = EstimatorModel(plant.contacts.forces, 5.0, sensors, motor_lag=0.0075, speed_limits=(-0.35, 0.35))
@@ -369,7 +370,7 @@ def test_bad_covariances_are_refused(bad):
                                           ({"forces": [1.0, -1.0]}, "forces"),
                                           ({"friction_uncertainty": -0.1}, "friction_uncertainty")])
 def test_bad_models_name_the_parameter(kwargs, name):
-    args = {"forces": [1.0, 1.0], "mass": 1.0, "sensors": Sensors.carousel(n_wheels=2), **kwargs}
+    args = {"forces": [1.0, 1.0], "mass": 1.0, "sensors": CAROUSEL.sensors(n_wheels=2), **kwargs}
     with pytest.raises(ParameterError, match=f"^The '{name}' parameter of EstimatorModel must"):
         EstimatorModel(**args)
 
@@ -433,7 +434,7 @@ def test_contact_speed_tracker_equals_the_vectorized_estimates():
 
 
 def _three_contacts(speeds, lag=0.0):
-    sensors = Sensors.carousel(n_wheels=len(speeds))
+    sensors = CAROUSEL.sensors(n_wheels=len(speeds))
     model = EstimatorModel(np.ones(len(speeds)), 1.0, sensors, motor_lag=lag)
     speeds = np.asarray(speeds, dtype=float)
     return model, np.stack((speeds, speeds))
@@ -491,7 +492,7 @@ def test_linearization_equals_finite_differences_of_the_flow():
     # entries are products of two differences.
     rng = np.random.default_rng(1)
     n = 10
-    sensors = Sensors.carousel(n_wheels=n)
+    sensors = CAROUSEL.sensors(n_wheels=n)
     checked = 0
     for trial in range(240):
         lag = (0.0, 0.0075)[trial % 2]
@@ -538,7 +539,7 @@ def test_linearization_through_sticks_and_releases_equals_finite_differences():
     # gain is approximate (7 of 3000 random periods off by up to 2x in Q, measured).
     rng = np.random.default_rng(7)
     n, d = 6, 1e-7
-    sensors = Sensors.carousel(n_wheels=n)
+    sensors = CAROUSEL.sensors(n_wheels=n)
     seen: dict[tuple, int] = {}
     for trial in range(600):
         lag = (0.0, 0.0075)[trial % 2]
@@ -776,7 +777,7 @@ def rig_run():
 
     speeds = np.array([-0.35] * 6 + [0.35] * 4)
     plant = Plant(ContactSet(speeds, [0.2] * 10), 1.0, motors=Motors(lag=0.0075, speed_limits=(-0.35, 0.35)))
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     run = simulate_closed_loop(plant, ForceDrive(speeds, 0.28, -0.28, 3.0), 3.0, v0=0.28,
                                sensors=sensors, seed=3)
     return run, EstimatorModel(plant.contacts.forces, 1.0, sensors, motor_lag=0.0075)
@@ -819,7 +820,7 @@ def test_wheel_window_is_the_least_squares_line():
     # q^2 / (6 h^2).
     from toolkit.estimation import contact_speed_estimates
 
-    sensors = Sensors.carousel(n_wheels=2)
+    sensors = CAROUSEL.sensors(n_wheels=2)
     model = EstimatorModel(np.ones(2), 1.0, sensors)
     q, h = sensors.wheel.distance_per_count, sensors.period
     times = np.arange(40) * h

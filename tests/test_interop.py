@@ -21,6 +21,7 @@ from toolkit.estimation import (CentralDifference, EstimatorModel, KalmanEstimat
 from toolkit.loop.interop import (closed_loop_system, controller_system, plant_system,  # noqa: E402
                              viscous_system)
 from toolkit.model import PiecewiseConstant  # noqa: E402
+from toolkit.model.carousel import CAROUSEL  # noqa: E402
 from toolkit.model.sensors import Sensors  # noqa: E402
 
 V_MAX = 0.35
@@ -65,7 +66,7 @@ def test_loop_with_sensors_and_kalman_filter_matches(name):
     # "drive": the rig's force reaches the filter as a known input (the estimator block's
     # force input, connected to the controller's force output).
     controller = _controllers()[name]
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     model = EstimatorModel(PLANT.contacts.forces, PLANT.mass, sensors, motor_lag=0.0075)
     reference = simulate_closed_loop(PLANT, controller, 2.0, sensors=sensors,
                                      estimator=KalmanEstimator(model), v0=0.1)
@@ -80,7 +81,7 @@ def test_loop_with_sensors_and_kalman_filter_matches(name):
                          ids=["central_difference", "wheel_difference"])
 def test_noisy_sensors_and_baselines_match(make):
     # Missed counts and read noise draw from the seeded generator in the same order.
-    sensors = Sensors.carousel(10, missed_count_prob=0.05, count_noise=0.7)
+    sensors = CAROUSEL.sensors(10, missed_count_prob=0.05, count_noise=0.7)
     estimator = make(sensors)
     reference = simulate_closed_loop(PLANT, VirtualViscosity(40.0, 0.1), 1.0, sensors=sensors,
                                      estimator=estimator, v0=0.0, seed=7)
@@ -90,7 +91,7 @@ def test_noisy_sensors_and_baselines_match(make):
 
 
 def test_blocks_have_named_signals_and_discrete_time():
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     block = plant_system(PLANT, sensors=sensors)
     assert block.system.dt == pytest.approx(0.02, rel=0, abs=0)   # 1/50 exactly
     assert block.system.input_labels[-1] == "force"
@@ -100,9 +101,9 @@ def test_blocks_have_named_signals_and_discrete_time():
 
 
 def test_bad_interop_input_is_refused():
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     with pytest.raises(ParameterError, match="'sensors' parameter of plant_system must have jitter = 0"):
-        plant_system(PLANT, sensors=Sensors.carousel(10, jitter=1e-3))
+        plant_system(PLANT, sensors=CAROUSEL.sensors(10, jitter=1e-3))
     with pytest.raises(ParameterError, match="'estimator' parameter of closed_loop_system must be given"):
         closed_loop_system(PLANT, VirtualViscosity(40.0), sensors=sensors)
     with pytest.raises(ParameterError, match="'rate' parameter of plant_system must equal the sensors'"):
@@ -114,7 +115,7 @@ def test_bad_interop_input_is_refused():
 
 
 def test_estimator_block_refuses_skipped_samples():
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     model = EstimatorModel(PLANT.contacts.forces, PLANT.mass, sensors)
     loop = closed_loop_system(PLANT, VirtualViscosity(40.0), sensors=sensors, estimator=KalmanEstimator(model))
     x0 = loop.initial_state.copy()

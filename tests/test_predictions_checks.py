@@ -15,6 +15,7 @@ from toolkit import ContactSet, ParameterError, Plant, Sensors, simulate_closed_
 from toolkit.cli import main
 from toolkit.controllers import FrictionBrake
 from toolkit.model import Motors
+from toolkit.model.carousel import CAROUSEL as HARDWARE
 from toolkit.predictions import (Apparatus, CarryThen, CheckStatus, FrictionFractionProblem, ViscosityProblem,
                                  friction_fraction_check, prediction_checks, viscosity_check)
 from toolkit.predictions._measure import (crossing_duration, crossing_time, proportional_fit, rig_friction,
@@ -211,7 +212,7 @@ def test_apparatus_refuses_what_the_experiments_do_not_cover():
     with pytest.raises(ParameterError, match="finite symmetric speed limits"):
         Apparatus(lopsided)
     with pytest.raises(ParameterError, match="'sensors' parameter of Apparatus"):
-        Apparatus(CAROUSEL.plant, Sensors.carousel(8))
+        Apparatus(CAROUSEL.plant, HARDWARE.sensors(8))
 
 
 # -- both, and the command line ------------------------------------------------------------------

@@ -41,6 +41,20 @@ def test_carousel_has_the_papers_hardware():
     np.testing.assert_allclose(contacts.total_force / scene.body.moving_mass, 2.0, rtol=1e-5)
 
 
+def test_carousel_design_states_the_models_carousel():
+    # The shipped design and toolkit.model.carousel.CAROUSEL (what the reference scenarios and
+    # predictions build on) state one carousel, to the last bit.
+    from toolkit.model.carousel import CAROUSEL
+
+    objects = build_scene(load_scene(Path(__file__).parents[1] / "designs" / "carousel.toml"))
+    sensors = objects.sensors
+    assert objects.contacts.n == CAROUSEL.n_wheels
+    np.testing.assert_array_equal(objects.contacts.forces, CAROUSEL.wheel_force)
+    assert objects.plant.mass == CAROUSEL.moving_mass         # the same arithmetic: I / L^2
+    assert objects.motors == CAROUSEL.motors()
+    assert sensors == CAROUSEL.sensors()
+
+
 def test_random_contacts_are_reproducible():
     text = '[contacts]\nrandom = { n = 5, low = -0.3, high = 0.3, seed = 4 }\n'
     a, b = build_scene(loads_scene(text)).contacts, build_scene(loads_scene(text)).contacts

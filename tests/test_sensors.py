@@ -46,6 +46,7 @@ def test_bad_encoders_are_refused(kwargs):
 
 # -- the sensor suite, the sensor law and records ---------------------------------------------
 from toolkit.model import ContactSet, Motors, PiecewiseConstant, Plant  # noqa: E402
+from toolkit.model.carousel import CAROUSEL
 from toolkit.model.sensors import (EncoderRecord, Sensors, measure, play,  # noqa: E402
                                    record_simulation)
 from toolkit.simulation import simulate  # noqa: E402
@@ -115,7 +116,7 @@ def _startup_plant(lag: float = 0.0) -> Plant:
 def test_record_positions_match_the_constant_acceleration_closed_form():
     plant = _startup_plant()
     result = simulate(plant, 1.0)
-    sensors = Sensors.carousel()
+    sensors = CAROUSEL.sensors()
     record = record_simulation(result, plant, sensors)
     t = record.times
     X = np.where(t < 0.5, t**2, 0.25 + (t - 0.5))
@@ -151,7 +152,7 @@ def test_record_contact_positions_match_the_motor_lag_closed_form():
 def _noisy_record(seed: int) -> EncoderRecord:
     plant = _startup_plant(lag=0.0075)
     result = simulate(plant, 1.0)
-    sensors = Sensors.carousel(missed_count_prob=0.01, count_noise=0.5, jitter=1e-3)
+    sensors = CAROUSEL.sensors(missed_count_prob=0.01, count_noise=0.5, jitter=1e-3)
     return record_simulation(result, plant, sensors, rng=np.random.default_rng(seed))
 
 
@@ -163,7 +164,7 @@ def test_same_seed_gives_the_same_record():
 
 
 def test_one_sample_at_a_time_equals_the_whole_record():
-    sensors = Sensors.carousel(n_wheels=3, missed_count_prob=0.05, count_noise=0.7)
+    sensors = CAROUSEL.sensors(n_wheels=3, missed_count_prob=0.05, count_noise=0.7)
     k = np.arange(100)
     X = 0.004 * k + 1e-4 * np.sin(k)
     x = np.outer(0.003 * np.cos(k / 10), [1.0, -1.0, 0.5])
@@ -177,14 +178,14 @@ def test_one_sample_at_a_time_equals_the_whole_record():
 
 
 def test_every_transition_missed_freezes_the_counts():
-    sensors = Sensors.carousel(n_wheels=2, missed_count_prob=1.0)
+    sensors = CAROUSEL.sensors(n_wheels=2, missed_count_prob=1.0)
     X = np.linspace(0, 0.1, 50)
     central, wheel, _ = measure(sensors, X, np.c_[X, -X], sensors.initial_state(), np.random.default_rng(0))
     assert np.all(central == 0) and np.all(wheel == wheel[0])
 
 
 def test_noisy_sensors_need_a_generator():
-    sensors = Sensors.carousel(n_wheels=1, count_noise=1.0)
+    sensors = CAROUSEL.sensors(n_wheels=1, count_noise=1.0)
     with pytest.raises(ParameterTypeError, match="'rng' parameter of measure"):
         measure(sensors, [0.0], [[0.0]], sensors.initial_state(), None)
 
@@ -193,7 +194,7 @@ def test_sensor_reader_equals_measure_and_keeps_the_state():
     # The loop's reader and measure() run the same per-row law with the same draws.
     from toolkit.model.sensors import SensorReader
 
-    sensors = Sensors.carousel(n_wheels=3, missed_count_prob=0.05, count_noise=0.7)
+    sensors = CAROUSEL.sensors(n_wheels=3, missed_count_prob=0.05, count_noise=0.7)
     k = np.arange(60)
     X = 0.004 * k + 1e-4 * np.sin(k)
     x = np.outer(0.003 * np.cos(k / 10), [1.0, -1.0, 0.5])
@@ -225,7 +226,7 @@ def test_record_force_is_checked_and_filled_from_the_plant():
     # record_simulation stamps the plant's outside force at each sample (held like the
     # commands): a switch at 0.5 s from 0.3 N to -0.1 N, exact values.
     plant = Plant(ContactSet([0.0, 0.1]), 1.0, external_force=PiecewiseConstant([0.5], [0.3, -0.1]))
-    record = record_simulation(simulate(plant, 1.0), plant, Sensors.carousel(2))
+    record = record_simulation(simulate(plant, 1.0), plant, CAROUSEL.sensors(2))
     np.testing.assert_array_equal(record.force, np.where(record.times < 0.5, 0.3, -0.1))
     assert record.sample(30).force == -0.1
 
@@ -237,7 +238,7 @@ def test_record_starts_anywhere_on_the_count_grids():
     # shifts every count by exactly one (an identity).
     plant = _startup_plant()
     result = simulate(plant, 1.0)
-    sensors = Sensors.carousel()
+    sensors = CAROUSEL.sensors()
     q, qw = sensors.central.distance_per_count, sensors.wheel.distance_per_count
     base = record_simulation(result, plant, sensors)
     x0, c0 = 0.37 * q, np.linspace(0.1, 0.9, 10) * qw

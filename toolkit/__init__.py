@@ -34,7 +34,7 @@ from .plots import (plot_force_curve, plot_mean_median, plot_median_law, plot_ou
 from .scenes.spec import MAX_SCENE_BYTES, Scene, dumps_scene, load_scene
 from .scenes.build import Clip
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
-from .model.carousel import carousel_startup_plant
+from .model.carousel import CAROUSEL, CarouselHardware, carousel_startup_plant
 from .analysis.precision import PrecisionReport, PrecisionRow, precision_report
 from .loop.closed_loop import ClosedLoopResult, simulate_closed_loop
 from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, VirtualViscosity
@@ -60,7 +60,8 @@ __all__ = [
     "ContactDistribution", "ContactModel", "ContactSet", "Staircase", "CurveSamples", "CurveStep",
     "force_curve",
     # plant and simulation
-    "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "SimulationStatus", "Budget", "Event",
+    "Plant", "Motors", "PiecewiseConstant", "CAROUSEL", "CarouselHardware",
+    "simulate", "SimulationResult", "SimulationStatus", "Budget", "Event",
     "simulate_batch", "BatchResult", "advance", "ExactState", "ExactStep",
     # work-precision report and stability suite
     "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant",

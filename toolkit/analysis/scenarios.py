@@ -1,21 +1,22 @@
-"""Reference scenarios built from the shipped designs: the estimation acceptance run, the
-paper's carousel started from rest, then braked.
+"""Reference scenarios: the estimation acceptance run, the paper's carousel started from rest,
+then braked.
 
-Ten equal wheels with ``f_i`` from the shipped ``carousel`` design (1 N each), the moving inertia
-``m = I / L^2`` (5 kg) from its body section, motor lag 7.5 ms, the paper's encoders at
-50 Hz. The contacts are commanded to a spread around ``cruise`` from rest, and at
+The paper's carousel (:data:`toolkit.model.carousel.CAROUSEL`, as in the shipped ``carousel``
+design): ten equal wheels of 1 N each, the moving inertia ``m`` = 5 kg (``F_tot / m = 2
+m/s^2``), motor lag 7.5 ms, the paper's encoders at 50 Hz. The contacts are commanded to a spread around ``cruise`` from rest, and at
 ``brake_time`` to a braking set spread around ``brake``; the run is simulated exactly and
 recorded through the sensor law.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from .._validation import as_int
 from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+from ..model.carousel import CAROUSEL
 from ..model.sensors import EncoderRecord, Sensors, record_simulation
 from ..estimation import EstimatorModel
 
@@ -68,21 +69,18 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
     **noise
         ``missed_count_prob``, ``count_noise``, ``jitter`` of :class:`Sensors`.
     """
-    from ..scenes.build import build_scene
-    from ..scenes.designs import load_design
     from ..simulation import simulate
 
-    carousel = build_scene(load_design("carousel"))
-    forces = carousel.contacts.forces
-    mass = carousel.plant.mass
-    n = forces.size
+    n = CAROUSEL.n_wheels
+    forces = np.full(n, CAROUSEL.wheel_force)
+    mass = CAROUSEL.moving_mass
     offsets = np.linspace(-spread, spread, n)
     commands = PiecewiseConstant([brake_time], [cruise + offsets, brake + offsets])
-    v_max = carousel.motors.speed_limits[1]
+    v_max = CAROUSEL.speed_limit
     plant = Plant(ContactSet(cruise + offsets, forces), mass,
                   motors=Motors(lag=lag, speed_limits=(-v_max, v_max)), commands=commands)
     result = simulate(plant, t_end)
-    sensors = replace(carousel.sensors, **noise)
+    sensors = CAROUSEL.sensors(n, **noise)
     positions: dict = {}
     if grid_phase is not None:
         draw = np.random.default_rng(as_int(grid_phase, "grid_phase", "carousel_brake_scenario", low=0))

@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     plant = Plant(ContactSet([0.0] * 10, [1.0] * 10), 5.0, motors=CAROUSEL.motors())
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     model = EstimatorModel(plant.contacts.forces, plant.mass, sensors, motor_lag=CAROUSEL.motor_lag,
                            speed_limits=plant.motors.speed_limits)
     samples = int(round(args.seconds * sensors.rate)) + 1

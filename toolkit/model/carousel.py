@@ -18,7 +18,7 @@ from .._validation import as_float, as_int
 from .contacts import ContactSet
 from .motors import Motors
 from .plant import Plant
-from .sensors import Encoder
+from .sensors import Encoder, Sensors
 
 __all__ = ["CarouselHardware", "CAROUSEL", "CAROUSEL_ACCELERATION", "CAROUSEL_SPEED_LIMIT",
            "carousel_startup_plant"]
@@ -47,6 +47,15 @@ class CarouselHardware:
         First-order time constant of the motors (settle, ``4 tau``, in ~30 ms).
     acceleration : float, m/s^2
         ``F_tot / m``, from ``dT = 0.35 s`` for ``2 v_max = 0.7 m/s``.
+    n_wheels : int
+        Contacts (wheels on hinged spokes, equal normal load).
+    wheel_force : float, N
+        Friction magnitude of one wheel. The paper gives neither it nor the inertia: only
+        ``F_tot / m`` matters without drag, and 1 N per wheel is the reference scenes'
+        choice of units.
+    inertia : float, kg m^2
+        Moving inertia about the axis, chosen (6 digits) so that ``m = I / L^2`` = 5 kg gives
+        ``F_tot / m`` = 2 m/s^2 with :attr:`wheel_force`.
     """
 
     contact_radius: float = 0.266
@@ -58,19 +67,26 @@ class CarouselHardware:
     speed_limit: float = 0.35
     motor_lag: float = 0.0075
     acceleration: float = 2.0
+    n_wheels: int = 10
+    wheel_force: float = 1.0
+    inertia: float = 0.353780
+
+    @property
+    def moving_mass(self) -> float:
+        """Moving inertia at the contacts, kg: ``inertia / contact_radius**2`` (5.000 kg)."""
+        return self.inertia / self.contact_radius**2
 
     def motors(self) -> Motors:
         """The motors: lag :attr:`motor_lag`, commands clipped to ``+-`` :attr:`speed_limit`."""
         return Motors(lag=self.motor_lag, speed_limits=(-self.speed_limit, self.speed_limit))
 
-    def wheel_encoder(self) -> Encoder:
-        """A wheel's encoder (counts of contact travel), sampled at :attr:`rate`."""
-        return Encoder(self.wheel_counts_per_rev, self.wheel_radius, self.rate,
-                       self.wheel_backlash)
-
-    def central_encoder(self) -> Encoder:
-        """The central encoder (counts of body travel at the contact radius), at :attr:`rate`."""
-        return Encoder(self.central_counts_per_rev, self.contact_radius, self.rate)
+    def sensors(self, n_wheels: int | None = None, **noise: float) -> Sensors:
+        """The encoders (the central one, one per wheel) sampled at :attr:`rate`; ``noise``
+        takes :class:`~toolkit.model.sensors.Sensors`' ``missed_count_prob``, ``count_noise``
+        and ``jitter``."""
+        return Sensors(Encoder(self.central_counts_per_rev, self.contact_radius, self.rate),
+                       Encoder(self.wheel_counts_per_rev, self.wheel_radius, self.rate, self.wheel_backlash),
+                       self.n_wheels if n_wheels is None else n_wheels, **noise)
 
 
 #: The paper's carousel.

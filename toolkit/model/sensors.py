@@ -156,18 +156,6 @@ class Sensors:
                 "must lie at least 4 standard deviations out)", self.jitter))
 
     # -- constructors ---------------------------------------------------------------------
-    @classmethod
-    def carousel(cls, n_wheels: int = 10, **noise: float) -> Sensors:
-        """The paper's encoders (docs/physics.md section 5) at 50 Hz.
-
-        Central AMT103-V: 8192 counts/rev at ``L = 0.266 m`` (0.204 mm per count); wheels:
-        48 CPR x 74.83:1 = 3591.84 counts/rev at ``R = 0.045 m`` (78.7 um per count) with
-        0.8 mm of gearbox backlash. ``noise`` takes ``missed_count_prob``, ``count_noise``
-        and ``jitter``.
-        """
-        return cls(Encoder(8192, 0.266, 50.0), Encoder(48 * 74.83, 0.045, 50.0, backlash=0.0008),
-                   n_wheels, **noise)
-
     @staticmethod
     def checked(sensors: Any, n_contacts: int, owner: str) -> Sensors:
         """``sensors`` checked for a plant of ``n_contacts`` contacts: a :class:`Sensors`

@@ -77,12 +77,12 @@ class Apparatus:
     def carousel(cls, mass: float = 1.0) -> Apparatus:
         """The paper's carousel (:data:`toolkit.model.carousel.CAROUSEL`): ten equal wheels
         with ``F_tot / m = 2 m/s^2``, motors of lag 7.5 ms within ``+-0.35 m/s``, the encoders
-        of :meth:`Sensors.carousel` at 50 Hz. Without drag only ``F_tot / m`` matters, so
+        of :meth:`CAROUSEL.sensors <toolkit.model.carousel.CarouselHardware.sensors>` at 50 Hz. Without drag only ``F_tot / m`` matters, so
         ``mass`` (kg) only sets the unit of the forces."""
         mass = as_float(mass, "mass", "Apparatus.carousel", low=0.0, low_open=True)
         n = 10
         contacts = ContactSet(np.zeros(n), np.full(n, CAROUSEL.acceleration * mass / n))
-        return cls(Plant(contacts, mass=mass, motors=CAROUSEL.motors()), Sensors.carousel(n))
+        return cls(Plant(contacts, mass=mass, motors=CAROUSEL.motors()), CAROUSEL.sensors(n))
 
     # -- properties -----------------------------------------------------------------------
     @property

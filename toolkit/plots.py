@@ -666,7 +666,7 @@ def plot_sweep(result: Any, ax: Any = None, *, title: str | None = None):
         ax.legend(fontsize="x-small")
         _title(ax, title, f"residual friction, n = {result.experiment.n}")
     else:
-        from ._validation import suggestion
+        from .errors import suggestion
         from .errors import ParameterError, parameter_message
 
         raise ParameterError(parameter_message(

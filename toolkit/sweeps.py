@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from ._validation import as_int, suggestion
+from .errors import as_int, suggestion
 from .errors import ParameterError, ParameterTypeError, parameter_message
 
 if TYPE_CHECKING:       # the table type, imported only with the first sweep at run time

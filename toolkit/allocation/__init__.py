@@ -22,7 +22,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from .._validation import as_float, check_option
+from ..errors import as_float, check_option
 from ..errors import ParameterError, parameter_message
 from ..model import ContactDistribution
 from ._evaluate import evaluate_errors

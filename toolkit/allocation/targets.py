@@ -26,7 +26,7 @@ from typing import Any, Protocol, Union, runtime_checkable
 
 import numpy as np
 
-from .._validation import as_float, as_float_array, as_int
+from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
 __all__ = ["ForceCurve", "Viscosity", "FrictionFraction", "EquilibriumSpeed", "Target",

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_int
+from ..errors import as_float, as_int
 from ..model import PiecewiseConstant, Plant
 from ..errors import ParameterError, ParameterTypeError, SolverError, parameter_message
 from ..shortfall import Shortfall

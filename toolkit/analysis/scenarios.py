@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_int
+from ..errors import as_int
 from ..model import ContactSet, Motors, PiecewiseConstant, Plant
 from ..model.carousel import CAROUSEL
 from ..model.sensors import EncoderRecord, Sensors, record_simulation

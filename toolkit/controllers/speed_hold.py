@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._validation import as_float
+from ..errors import as_float
 from ..model import Plant
 from .base import Action, speed_limits
 from .viscosity import VirtualViscosity

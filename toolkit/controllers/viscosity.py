@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_float
+from ..errors import as_float
 from ..allocation import Viscosity, allocate
 from ..model import Plant
 from .base import Action, StatelessLaw, speed_limits

@@ -71,7 +71,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_float_array, as_int, check_nonnegative
+from ..errors import as_float, as_float_array, as_int, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.contacts import ContactSet
 from ..model.friction import contact_forces

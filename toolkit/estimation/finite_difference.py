@@ -22,7 +22,7 @@ import numpy as np
 from ..model.contacts import ContactSet
 from ..model.sensors import EncoderSample, Sensors
 from ..errors import ParameterTypeError, parameter_message
-from .._validation import as_float
+from ..errors import as_float
 from ._base import Estimator
 
 __all__ = ["CentralDifference", "WheelDifference"]

@@ -116,7 +116,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_float_array
+from ..errors import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, check_covariance, score

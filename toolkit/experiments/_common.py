@@ -19,7 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .._validation import as_float, as_int
+from ..errors import as_float, as_int
 from ..errors import ParameterError, SolverError, parameter_message
 from ..model import unequal_loads
 

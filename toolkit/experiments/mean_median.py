@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validation import as_float
+from ..errors import as_float
 from ..errors import ParameterError, SolverError, parameter_message
 from ..simulation import simulate_batch
 from ._common import MAX_CONTACTS, SETTLED_TOLERANCE, as_count, check_common, setter, wheels_for_runs

@@ -45,7 +45,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validation import as_float
+from ..errors import as_float
 from ..errors import ParameterError, parameter_message
 from ..model import ContactSet, Motors, Plant
 from ..simulation import simulate_batch

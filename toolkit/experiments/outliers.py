@@ -32,7 +32,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validation import as_float
+from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import ContactSet, Motors, PiecewiseConstant, Plant
 from ._common import (MAX_CONTACTS, MAX_SAMPLES, SETTLED_TOLERANCE, as_count, check_common, check_compliance,

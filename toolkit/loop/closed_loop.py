@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float
+from ..errors import as_float
 from ..controllers.base import ControlLaw, Controller
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant, sample_count, sample_times

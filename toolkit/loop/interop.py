@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_float_array
+from ..errors import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, SolverError, parameter_message
 from ..estimation import Estimator
 from ..model import Plant, sample_times

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_float, as_int
+from ..errors import as_float, as_int
 from .contacts import ContactSet
 from .motors import Motors
 from .plant import Plant

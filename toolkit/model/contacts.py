@@ -37,7 +37,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from .._compiled import kernels
-from .._validation import as_float, as_float_array, check_nonnegative
+from ..errors import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
 __all__ = ["ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads"]

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, check_option
+from ..errors import as_float, check_option
 from ._xp import ops
 
 __all__ = ["FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float
+from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ._xp import ops
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float_array
+from ..errors import as_float_array
 from ..errors import ParameterError, parameter_message
 
 __all__ = ["PiecewiseConstant", "sample_count", "sample_times"]

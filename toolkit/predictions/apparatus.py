@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, check_option
+from ..errors import as_float, check_option
 from ..controllers.base import Action, Controller
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import ContactSet, Motors, Plant

@@ -6,7 +6,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from .._validation import as_int
+from ..errors import as_int
 from ..errors import ParameterTypeError, parameter_message
 from .apparatus import Apparatus
 from .friction import FrictionFractionCheck, FrictionFractionProblem, friction_fraction_check

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_int, check_option
+from ..errors import as_float, as_int, check_option
 from ..allocation import FrictionFraction, allocate
 from ..loop.closed_loop import simulate_closed_loop
 from ..controllers import ForceDrive, FrictionBrake

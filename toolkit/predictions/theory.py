@@ -65,7 +65,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_float_array
+from ..errors import as_float, as_float_array
 from ..errors import ParameterError, parameter_message
 from ..model import ContactSet
 

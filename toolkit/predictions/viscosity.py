@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_int
+from ..errors import as_float, as_int
 from ..loop.closed_loop import simulate_closed_loop
 from ..controllers import VirtualViscosity
 from ..errors import ParameterError, ParameterTypeError, parameter_message

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_option, suggestion
+from ..errors import check_option, suggestion
 from ..allocation import METHODS, EquilibriumSpeed, ForceCurve, FrictionFraction, Viscosity
 from ..errors import ParameterError, ParameterTypeError, SceneError
 from ..model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant, sample_count, unequal_loads

@@ -9,7 +9,7 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-from .._validation import suggestion
+from ..errors import suggestion
 from ..errors import OutputError, ParameterError, parameter_message
 
 __all__ = ["design_names", "design_text", "load_design", "copy_designs"]

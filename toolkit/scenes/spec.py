@@ -86,7 +86,7 @@ from typing import Any
 
 import tomli_w
 
-from .._validation import suggestion
+from ..errors import suggestion
 from ..errors import SceneError, SceneFileNotFoundError
 from ..simulation import Budget
 from .limits import MAX_SAMPLES, scene_value_error

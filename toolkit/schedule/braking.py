@@ -12,7 +12,7 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
-from .._validation import as_float
+from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import ContactSet, Motors, Plant
 

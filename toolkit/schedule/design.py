@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_float_array, as_int
+from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Motors, PiecewiseConstant, Plant
 from .braking import braking_time

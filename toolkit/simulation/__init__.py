@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from .._compiled import compiled
-from .._validation import as_float, as_float_array, check_option, suggestion
+from ..errors import as_float, as_float_array, check_option, suggestion
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant
 from ._batch import BatchResult, simulate_batch

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._compiled import kernels
-from .._validation import as_float, as_float_array, check_nonnegative
+from ..errors import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, parameter_message
 from ._result import SimulationStatus, status_message
 

@@ -45,7 +45,7 @@ from typing import Any
 import casadi as ca   # this module is loaded by casadi runs only (simulate imports it lazily)
 import numpy as np
 
-from .._validation import as_float, check_option
+from ..errors import as_float, check_option
 from ..model import Plant
 from ._reference import (Meter, build_result, check_smoothing, external_forces, format_setting,
                          ideal_speeds)

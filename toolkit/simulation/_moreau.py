@@ -55,7 +55,7 @@ import math
 
 import numpy as np
 
-from .._validation import as_float
+from ..errors import as_float
 from ..errors import ParameterError, parameter_message
 from ..model import Plant, implicit_step
 from ._reference import BudgetExceeded, Meter, StepRecord, build_result, format_setting, segment_edges

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, check_option
+from ..errors import as_float, check_option
 from ..model import FRICTION_LAWS, Plant
 from ._result import Budget, SimulationResult, SimulationStatus, status_message
 

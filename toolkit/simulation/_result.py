@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_int, check_option
+from ..errors import as_float, as_int, check_option
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
 __all__ = ["SimulationStatus", "Budget", "Event", "SimulationResult", "EVENT_KINDS", "status_message"]

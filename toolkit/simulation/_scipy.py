@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import scipy.integrate
 
-from .._validation import as_float, check_option
+from ..errors import as_float, check_option
 from ..model import Plant
 from ._reference import (BudgetExceeded, Meter, StepRecord, build_result, check_smoothing,
                          format_setting, segment_edges)

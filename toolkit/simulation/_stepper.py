@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_float_array, as_int
+from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import MotorPiece, Plant
 from ._exact import (_FREE, _build_landscape, _dynamic_piece, _ideal_piece, _quiet_piece,

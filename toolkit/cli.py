@@ -265,9 +265,12 @@ def _cmd_designs(args: argparse.Namespace) -> int:
     if args.json:
         _print_json({"designs": list(names)})
     else:
+        import tomllib
+
         for name in names:
-            first = design_text(name).splitlines()[0] if design_text(name) else ""
-            print(f"{name:22} {first.lstrip('# ').strip()}")
+            about = tomllib.loads(design_text(name)).get("scene", {}).get("description", "")
+            print(f"{name:20} {about}")
+        print("copy them for editing: active-contacts designs --copy DIR")
     return EXIT_OK
 
 

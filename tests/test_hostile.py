@@ -1,0 +1,98 @@
+"""Hostile inputs a newcomer tried (issue 19): each is refused with exit 2 and one line, no
+traceback, nothing written; none is silently clipped or replaced."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from toolkit.scenes._io import claim_output_dir
+
+ROOT = Path(__file__).resolve().parents[1]
+CAROUSEL = str(ROOT / "designs" / "carousel.toml")
+SWEEP_MESSAGE = "is a sweep scene: its runs draw their own contacts"
+
+
+def _cli(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "toolkit.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=300)
+
+
+def _refused(done: subprocess.CompletedProcess, *fragments: str) -> None:
+    assert done.returncode == 2, (done.returncode, done.stderr)
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+    for fragment in fragments:
+        assert fragment in done.stderr, done.stderr
+
+
+def _scene(tmp_path: Path, text: str) -> str:
+    path = tmp_path / "hostile.toml"
+    path.write_text(text)
+    return str(path)
+
+
+BASE = ('[contacts]\nspeeds = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]\nforces = 1.0\n'
+        '[body]\nmass = 5.0\n[motors]\nspeed_limit = 0.35\nlag = 0.0075\n'
+        '[sensors]\nrate = 50.0\nwheel_counts_per_rev = 3591.84\nwheel_radius = 0.045\n'
+        'central_counts_per_rev = 8192\ncontact_radius = 0.266\n')
+
+
+def test_curve_points_flag_is_bounded_like_its_scene_key():
+    # report.curve_points <= 1e7 in a scene; the flag has the same bound (toolkit.scenes.limits).
+    _refused(_cli("curve", CAROUSEL, "--points", "100000000", "--json"), "--points", "<= 10000000")
+
+
+@pytest.mark.parametrize("flag", [["sweep", str(ROOT / "designs" / "median_law.toml"), "--runs", "100000001"],
+                                  ["precision", str(ROOT / "designs" / "startup11.toml"), "--repeats", "0"],
+                                  ["predict", "--runs", "1"]])
+def test_every_integer_flag_is_bounded(flag):
+    _refused(_cli(*flag), "must be an integer")
+
+
+def test_jitter_beyond_what_the_sensor_law_models_is_refused_not_clipped(tmp_path):
+    # 1 s of jitter at 50 Hz used to be clipped to a quarter period without a word.
+    text = BASE + "[estimation]\njitter = 1.0\nduration = 1.0\nbrake_time = 0.5\n"
+    _refused(_cli("estimate", _scene(tmp_path, text), "--out", str(tmp_path / "o")),
+             "'jitter' parameter of Sensors", "estimation.jitter")
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_empty_out_is_refused_not_replaced_by_the_default(tmp_path):
+    _refused(_cli("run", CAROUSEL, "--out", "", cwd=tmp_path), "--out", "must name a folder")
+    assert not (tmp_path / "out").exists()
+
+
+def test_estimate_never_substitutes_another_scenario(tmp_path):
+    _refused(_cli("estimate", str(ROOT / "designs" / "closed_loop.toml"), "--out", str(tmp_path / "o")),
+             "no [estimation] section and no [simulation] run to record")
+
+
+def test_outputs_beyond_the_documented_size_are_refused_before_work(tmp_path):
+    # 2e5 Hz for 2 s: 400 001 samples of 14 signals, ~160 MiB of result.json (limit 64 MiB).
+    text = BASE.replace("[sensors]", "[x]").split("[x]")[0] + (
+        '[control]\ncontroller = "viscosity"\nslope = 40.0\nduration = 2.0\nrate = 2e5\n')
+    done = _cli("run", _scene(tmp_path, text), "--out", str(tmp_path / "o"))
+    _refused(done, "outputs are limited to 64 MiB", "control.duration")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_second_run_into_a_claimed_folder_is_refused_before_work(tmp_path):
+    out = tmp_path / "o"
+    with claim_output_dir(out):                  # another run holds the folder
+        _refused(_cli("run", CAROUSEL, "--out", str(out)), "another run", "is writing into")
+        assert not out.exists()
+    done = _cli("run", CAROUSEL, "--out", str(out))   # released: the folder is free again
+    assert done.returncode == 0 and (out / "result.json").exists(), done.stderr
+
+
+@pytest.mark.parametrize("command", [["curve"], ["allocate"], ["schedule"], ["precision"], ["estimate"],
+                                     ["predict"]])
+def test_every_command_refuses_a_sweep_scene_with_one_message(command):
+    _refused(_cli(*command, str(ROOT / "designs" / "median_law.toml")), SWEEP_MESSAGE, "'active-contacts sweep'")
+
+
+def test_sweep_refuses_a_scene_without_a_sweep():
+    _refused(_cli("sweep", CAROUSEL), "has no [sweep] section")

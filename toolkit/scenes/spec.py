@@ -177,10 +177,7 @@ def _exclusive(where: str, table: Mapping[str, Any], *keys: str) -> None:
 def _kind(section: str, table: Mapping[str, Any], kind_keys: Mapping[str, tuple[str, ...]],
           required: Mapping[str, tuple[str, ...]], common: tuple[str, ...]) -> str:
     """Read ``kind``, then refuse keys that kind does not take and require the ones it needs."""
-    kind = _text(f"{section}.kind", _require(section, table, "kind"))
-    if kind not in kind_keys:
-        raise SceneError(f"The '{section}.kind' value in the scene must be one of {list(kind_keys)}. "
-                         f"Got {kind!r} instead.{suggestion(kind, kind_keys)}")
+    kind = _choice(f"{section}.kind", _require(section, table, "kind"), kind_keys)
     _check_keys(section, table, (*common, *kind_keys[kind]))
     for key in required[kind]:
         _require(section, table, key)
@@ -681,10 +678,7 @@ class ControlSpec:
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> ControlSpec:
-        kind = _text("control.controller", _require("control", table, "controller"))
-        if kind not in CONTROLLERS:
-            raise SceneError(f"The 'control.controller' value in the scene must be one of "
-                             f"{list(CONTROLLERS)}. Got {kind!r} instead.{suggestion(kind, CONTROLLERS)}")
+        kind = _choice("control.controller", _require("control", table, "controller"), CONTROLLERS)
         _check_keys("control", table, (*cls.COMMON, *CONTROLLERS[kind]))
         for key in _CONTROLLER_REQUIRED[kind]:
             _require("control", table, key)
@@ -770,10 +764,7 @@ class SweepSpec:
     def parse(cls, table: dict[str, Any]) -> SweepSpec:
         from ..experiments import EXPERIMENTS
 
-        kind = _text("sweep.experiment", _require("sweep", table, "experiment"))
-        if kind not in EXPERIMENTS:
-            raise SceneError(f"The 'sweep.experiment' value in the scene must be one of "
-                             f"{list(EXPERIMENTS)}. Got {kind!r} instead.{suggestion(kind, EXPERIMENTS)}")
+        kind = _choice("sweep.experiment", _require("sweep", table, "experiment"), EXPERIMENTS)
         names = tuple(f.name for f in fields(EXPERIMENTS[kind]))
         _check_keys("sweep", table, (*cls.COMMON, *names))
         params: dict[str, Any] = {}

@@ -32,7 +32,8 @@ from .plots import (plot_force_curve, plot_mean_median, plot_median_law, plot_ou
                     plot_ratio_histogram, plot_schedule, plot_simulation, plot_summary_comparison, plot_sweep,
                     plot_viscosity_check, plot_friction_fraction_check)
 from .scenes.spec import MAX_SCENE_BYTES, Scene, dumps_scene, load_scene
-from .scenes.build import Clip
+from .scenes.build import Clip, SceneObjects, build_scene
+from .scenes.designs import copy_designs, design_names, load_design
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import CAROUSEL, CarouselHardware, carousel_startup_plant
 from .analysis.precision import PrecisionReport, PrecisionRow, precision_report
@@ -85,7 +86,8 @@ __all__ = [
     "plot_ratio_histogram", "plot_mean_median", "plot_outliers", "plot_summary_comparison", "plot_sweep",
     "plot_viscosity_check", "plot_friction_fraction_check",
     # scenes and studies
-    "Scene", "load_scene", "dumps_scene", "MAX_SCENE_BYTES", "StudyResult", "run_study", "Shortfall",
+    "Scene", "load_scene", "dumps_scene", "MAX_SCENE_BYTES", "build_scene", "SceneObjects", "StudyResult",
+    "run_study", "Shortfall", "design_names", "load_design", "copy_designs",
     "Clip",
     # errors
     "ParameterError", "ParameterTypeError", "SceneError", "SceneFileNotFoundError", "SolverError",

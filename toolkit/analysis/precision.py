@@ -33,8 +33,7 @@ from ..errors import as_float, as_int
 from ..model import PiecewiseConstant, Plant
 from ..errors import ParameterError, ParameterTypeError, SolverError, parameter_message
 from ..shortfall import Shortfall
-from ..simulation import METHODS, Budget, SimulationResult, SimulationStatus, simulate
-from ..simulation._exact import clear_cache
+from ..simulation import METHODS, Budget, SimulationResult, SimulationStatus, clear_cache, simulate
 
 __all__ = [
     "MethodSetting", "PrecisionRow", "PrecisionReport", "Speedup", "WorkPrecisionCurve",

@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from toolkit.simulation._warmup import warm_up
+from toolkit.simulation import warm_up
 from toolkit.model import ContactSet, Plant
 from toolkit.model.carousel import carousel_startup_plant as _carousel
 from toolkit.simulation import simulate

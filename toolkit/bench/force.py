@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from toolkit.simulation._warmup import warm_up
+from toolkit.simulation import warm_up
 from toolkit.model import ContactSet
 
 TARGET = 0.15           # s for N = 1e5, M = 1e6 (issue 11)

@@ -17,7 +17,7 @@ import argparse
 import os
 import time
 
-from toolkit.simulation._warmup import warm_up
+from toolkit.simulation import warm_up
 from toolkit.model.carousel import carousel_startup_plant
 from toolkit.analysis.precision import default_settings, exact_speedup, precision_report
 

@@ -48,7 +48,7 @@ print(imported - start, done - imported)
 _WARM_UP = """
 import time
 start = time.perf_counter()
-from toolkit.simulation._warmup import warm_up
+from toolkit.simulation import warm_up
 print(warm_up() + 0 * start)
 """
 

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from toolkit.simulation._warmup import warm_up
+from toolkit.simulation import warm_up
 from toolkit.model import ContactSet, Motors, PiecewiseConstant, Plant
 from toolkit.model.carousel import CAROUSEL, carousel_startup_plant
 from toolkit.simulation import ExactState, _stepper, advance, simulate

@@ -29,9 +29,7 @@ from ..controllers.base import ControlLaw, Controller
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant, sample_count, sample_times
 from ..model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors, measure  # noqa: F401
-from ..simulation import Budget, SimulationStatus
-from ..simulation._result import refuse_backlash
-from ..simulation._stepper import ExactState, advance
+from ..simulation import Budget, ExactState, SimulationStatus, advance, refuse_backlash
 
 __all__ = ["ClosedLoopResult", "simulate_closed_loop", "MAX_SAMPLES"]
 

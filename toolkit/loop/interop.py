@@ -57,8 +57,7 @@ from ..errors import ParameterError, ParameterTypeError, SolverError, parameter_
 from ..estimation import Estimator
 from ..model import Plant, sample_times
 from ..model.sensors import EncoderSample, Sensors, SensorState, measure
-from ..simulation import Budget, SimulationStatus
-from ..simulation._stepper import ExactState, advance
+from ..simulation import Budget, ExactState, SimulationStatus, advance
 
 __all__ = ["IOBlock", "LoopSystem", "plant_system", "estimator_system", "controller_system",
            "closed_loop_system", "viscous_system"]

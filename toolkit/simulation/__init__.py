@@ -19,6 +19,11 @@ method) and returns their final speeds.
 :func:`advance` continues an exact simulation from an :class:`ExactState` over one sample
 period under a held command (the exact engine, no restart cost), with the exact body and
 contact displacements over the step: the plant of a sampled closed loop.
+
+Also public: :func:`warm_up` (compile or load the kernels before timing anything),
+:func:`clear_cache` (forget a plant's cached landscapes: time a run from scratch) and
+:func:`refuse_backlash` (the check every method but Moreau-Jean makes). Everything else in
+this package is private: other packages use this face only.
 """
 
 from __future__ import annotations
@@ -35,10 +40,13 @@ from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant
 from ._batch import BatchResult, simulate_batch
 from ._result import Budget, Event, SimulationResult, SimulationStatus, refuse_backlash
+from ._exact import clear_cache
 from ._stepper import ExactState, ExactStep, advance
+from ._warmup import warm_up
 
 __all__ = ["simulate", "simulate_batch", "BatchResult", "SimulationStatus", "Budget", "Event",
-           "SimulationResult", "METHODS", "advance", "ExactState", "ExactStep"]
+           "SimulationResult", "METHODS", "advance", "ExactState", "ExactStep", "clear_cache", "warm_up",
+           "refuse_backlash"]
 
 _SCIPY_OPTIONS = ("friction", "epsilon", "rtol", "atol")
 

@@ -34,7 +34,8 @@ from .plots import (plot_force_curve, plot_mean_median, plot_median_law, plot_ou
 from .scenes.spec import MAX_SCENE_BYTES, Scene, dumps_scene, load_scene
 from .scenes.build import Clip
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
-from .model.carousel import carousel_startup_plant
+from .model.carousel import CAROUSEL, carousel_startup_plant
+from .model.parameters import PARAMETERS, Origin, Parameter, parameter
 from .analysis.precision import PrecisionReport, PrecisionRow, precision_report
 from .loop.closed_loop import ClosedLoopResult, simulate_closed_loop
 from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, VirtualViscosity
@@ -63,7 +64,9 @@ __all__ = [
     "Plant", "Motors", "PiecewiseConstant", "simulate", "SimulationResult", "SimulationStatus", "Budget", "Event",
     "simulate_batch", "BatchResult", "advance", "ExactState", "ExactStep",
     # work-precision report and stability suite
-    "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant",
+    "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant", "CAROUSEL",
+    # the non-ideal carousel's parameters and where each value comes from
+    "PARAMETERS", "Parameter", "Origin", "parameter",
     "stability_suite", "StabilityReport", "StabilityCase",
     # allocation (inverse design)
     "allocate", "evaluate_errors", "AllocationResult", "AllocationStatus", "Projection",

@@ -763,8 +763,9 @@ def plot_viscosity_check(checks: Sequence[Any], ax: Any = None, *, labels: Seque
 
 def plot_friction_fraction_check(checks: Sequence[Any], axes: Any = None, *,
                                  labels: Sequence[str] | None = None, title: str | None = None):
-    """The paper's friction-fraction figure (its Fig. 6): ``mu/mu0`` against the contacts reversed (left) and the transition
-    time against ``mu/mu0`` with the prediction ``dT = m 2 v_max / (F_tot mu/mu0)`` (right).
+    """The paper's friction-fraction figure (its Fig. 6b, c): ``mu/mu0`` against the contacts
+    reversed (left) and the transition time against ``mu/mu0`` with the prediction
+    ``dT = m 2 v_max / (F_tot mu/mu0)`` (right).
 
     Parameters
     ----------

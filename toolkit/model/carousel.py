@@ -48,7 +48,7 @@ class CarouselHardware:
     motor_lag : float, s
         First-order time constant of the motors (settle to 2 %, ``4 tau``, in ~30 ms).
     acceleration : float, m/s^2
-        ``F_tot / m``, from ``dT = 0.35 s`` for ``2 v_max = 0.7 m/s``.
+        ``F_tot / m``, fitted to ``dT = 0.35 s`` for ``2 v_max = 0.7 m/s``.
     """
 
     contact_radius: float = 0.266
@@ -59,7 +59,7 @@ class CarouselHardware:
     rate: float = 50.0
     speed_limit: float = 0.35
     motor_lag: float = PARAMETERS["motor_lag"].value
-    acceleration: float = 2.0
+    acceleration: float = PARAMETERS["acceleration"].value
 
     def motors(self) -> Motors:
         """The motors: lag :attr:`motor_lag`, commands clipped to ``+-`` :attr:`speed_limit`."""

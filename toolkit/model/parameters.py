@@ -9,7 +9,8 @@ the reference carousel's constants (:mod:`toolkit.model.carousel`) read theirs f
 docs/physics.md section 6 tells the story these values make together.
 
 Values in newtons refer to the reference carousel of the notebooks and checks: ten wheels,
-``F_tot / m = 2 m/s^2`` with ``m = 1 kg`` (``F_tot = 2 N``, ``f = 0.2 N`` per wheel).
+``F_tot / m = 2 m/s^2`` (``acceleration``) with ``m = 1 kg`` (``F_tot = 2 N``, ``f = 0.2 N``
+per wheel).
 """
 
 from __future__ import annotations
@@ -102,6 +103,15 @@ _RESIDUAL = 0.09      # the paper's mu/mu0 at n = 0 (a 91 +- 4 % reduction)
 _RESIDUAL_TEXT = "the 91 +- 4 % reduction of friction at n = 0 (mu/mu0 = 0.09; 'Sliding friction coefficient control')"
 
 _RECORDS = (
+    Parameter(
+        "acceleration", 2.0, "m/s^2", Origin.FITTED,
+        "F_tot / m, the wheels' total friction over the moving inertia: the paper gives neither "
+        "(nor mu, the load or the inertia), only its transition-time law dT = 0.35 s / (mu/mu0) "
+        "('Sliding friction coefficient control', Fig. 6c), which the ideal model writes "
+        "dT = m 2 v_max / (F_tot mu/mu0): F_tot / m = 2 x 0.35 m/s / 0.35 s.",
+        fitted_to="the transition time 0.35 s at mu/mu0 = 1 (Fig. 6c's curve)",
+        predicts="dT = 0.35 s / (mu/mu0) for every other split (the shape of Fig. 6c), and the time "
+                 "scale of every startup (the median law's settling, the viscosity runs' m / (dF/dV))"),
     Parameter(
         "motor_lag", 0.0075, "s", Origin.MEASURED,
         "'The active contacts reach their steady-state speeds quickly (~30 ms)' ('Equilibrium "

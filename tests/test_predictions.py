@@ -206,3 +206,26 @@ def test_least_squares_differs_from_the_crossing_rule():
         least_squares_correction(10, -4.0, 0.0)
     with pytest.raises(ParameterError, match="'definition' parameter of startup_correction"):
         startup_correction("crossing", 10, -4.0)
+
+
+def test_holding_the_final_value_is_what_makes_the_fit_window_blind():
+    # docs/physics.md section 6 and the README quote, for a start at the lowest of ten contacts
+    # (x0 = -4.5, stop after 2.083 time constants), one and three time constants of record after
+    # the stop: C = 0.782 and 0.780 with both ends held (least_squares_correction), 0.930 and
+    # 0.829 with the final value free (a second fit, scipy's curve_fit, on the trajectory built
+    # by hand). Printed to three digits: atol 5e-4.
+    from scipy.optimize import curve_fit
+
+    stop = 2.083                        # s in units of m / k: the travel time to the band edge
+    held, free = [], []
+    for extra in (1.0, 3.0):
+        window = stop + extra
+        held.append(least_squares_correction(10, -4.5, window))
+        t = np.linspace(0.0, window, 20001)
+        x = _staircase_path(10, -4.5, t)
+        (tau, _), _ = curve_fit(lambda t, tau, end: end + (-4.5 - end) * np.exp(-t / tau), t, x,
+                                p0=[0.8, x[-1]], xtol=1e-14, ftol=1e-14)
+        free.append(tau)
+    assert stop == pytest.approx(travel_time(uniform_staircase(10, 0.0, 1.0, 0.5), 1.0, -4.5, -0.5), abs=5e-4)
+    np.testing.assert_allclose(held, [0.782, 0.780], rtol=0, atol=5e-4)
+    np.testing.assert_allclose(free, [0.930, 0.829], rtol=0, atol=5e-4)

@@ -32,6 +32,7 @@ import numpy as np
 
 from .._validation import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
+from .parameters import PARAMETERS
 
 __all__ = ["Encoder", "Sensors", "SensorState", "SensorReader", "play", "measure", "EncoderRecord", "EncoderSample",
            "record_simulation", "contact_speeds_at", "GAUSS_NODES"]
@@ -150,12 +151,12 @@ class Sensors:
 
         Central AMT103-V: 8192 counts/rev at ``L = 0.266 m`` (0.204 mm per count); wheels:
         48 CPR x 74.83:1 = 3591.84 counts/rev at ``R = 0.045 m`` (78.7 um per count) with
-        0.8 mm of gearbox backlash: :data:`toolkit.model.carousel.CAROUSEL`'s encoders.
-        ``noise`` takes ``missed_count_prob``, ``count_noise`` and ``jitter``.
+        0.8 mm of gearbox backlash (:data:`toolkit.PARAMETERS` ``wheel_backlash``). ``noise``
+        takes ``missed_count_prob``, ``count_noise`` and ``jitter``.
         """
-        from .carousel import CAROUSEL      # carousel builds on this module: import at call time
-
-        return cls(CAROUSEL.central_encoder(), CAROUSEL.wheel_encoder(), n_wheels, **noise)
+        return cls(Encoder(8192, 0.266, 50.0),
+                   Encoder(48 * 74.83, 0.045, 50.0, backlash=PARAMETERS["wheel_backlash"].value),
+                   n_wheels, **noise)
 
     @staticmethod
     def checked(sensors: Any, n_contacts: int, owner: str) -> Sensors:

@@ -335,3 +335,25 @@ def test_cli_predict_exit_codes(tmp_path, capsys):
     assert main(["predict", str(unequal)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "equal friction magnitude" in err[0]
+
+
+def test_cli_predict_with_contacts(capsys):
+    # --contacts N: N equal wheels sharing the carousel's F_tot; the fits say n = N; the
+    # friction-fraction check runs j = 0..N/2 (N even) or is left out (N odd).
+    assert main(["predict", "--runs", "4", "--contacts", "20", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["viscosity"]["n"] == 20 and {f["n"] for f in data["viscosity"]["fits"]} == {20}
+    assert [row["n"] for row in data["friction_fraction"]] == list(range(11))
+    assert main(["predict", "--runs", "4", "--contacts", "11"]) == 0
+    out = capsys.readouterr().out
+    assert "on 11 contacts" in out and "least_squares (4 starts inside the spread): k_fit" in out
+    assert "friction fraction: left out (11 contacts" in out
+    assert main(["predict", "--runs", "4", "--contacts", "11", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["friction_fraction"] == [] and data["friction_fraction_status"] is None
+    with pytest.raises(SystemExit) as exit_info:
+        main(["predict", "--contacts", "0"])
+    assert exit_info.value.code == 2
+    assert "--contacts: must be an integer >= 1, got 0" in capsys.readouterr().err
+    assert main(["predict", "--contacts", "20000"]) == 2
+    assert "'n' parameter of Apparatus.with_contacts must be an integer in [1, 10000]" in capsys.readouterr().err

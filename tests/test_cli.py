@@ -389,3 +389,20 @@ def test_sweep_unsettled_runs_are_a_shortfall(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "runs had not settled" in err
     assert (tmp_path / "out" / "results.csv").exists()
+
+
+def test_report_figures_need_no_backend(tmp_path):
+    # The command line writes its PNGs offscreen (plain Figures no backend manages): pyplot is
+    # never imported, whatever MPLBACKEND says, and the files are PNGs.
+    import os
+
+    code = ("import sys\n"
+            "from toolkit.cli import main\n"
+            f"assert main(['run', 'designs/carousel.toml', '--out', {str(tmp_path / 'out')!r}]) == 0\n"
+            "print('matplotlib.pyplot' in sys.modules, 'matplotlib' in sys.modules)\n")
+    env = {**os.environ, "MPLBACKEND": "tkagg", "DISPLAY": ""}    # pyplot could not start it here
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split()[-2:] == ["False", "True"]
+    for name in ("force_curve.png", "simulation.png", "schedule.png"):
+        assert (tmp_path / "out" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -216,3 +216,27 @@ def test_pareto_front_keeps_points_nothing_beats():
 def test_force_curve_title_names_the_scene():
     ax = plots.plot_force_curve(tk.force_curve(tk.ContactSet([0.0, 0.1, 0.2, 0.3])), title=SCENE)
     assert ax.get_title() == f"{SCENE}: force-speed curve"
+
+
+def test_plots_keep_the_users_backend_and_files_need_none():
+    # In a fresh interpreter whose user chose the svg backend: writing a PNG (offscreen)
+    # never imports pyplot; drawing without ax uses the user's pyplot and backend, which no
+    # plot function switches (they used to call matplotlib.use("Agg")).
+    import os
+    import subprocess
+    import sys
+
+    code = ("import sys, matplotlib\n"
+            "matplotlib.use('svg')\n"
+            "import toolkit as tk\n"
+            "from toolkit import plots\n"
+            "curve = tk.force_curve(tk.ContactSet([0.1, 0.2, 0.3]))\n"
+            "png = plots.render_png(plots.plot_force_curve, curve)\n"
+            "assert png[:8] == b'\\x89PNG\\r\\n\\x1a\\n'\n"
+            "print('pyplot' in ' '.join(sys.modules))\n"
+            "ax = tk.plot_force_curve(curve)\n"
+            "import matplotlib.pyplot as plt\n"
+            "print(matplotlib.get_backend(), len(plt.get_fignums()))\n")
+    env = {k: v for k, v in os.environ.items() if k != "MPLBACKEND"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    assert out.stdout.split() == ["False", "svg", "1"], out.stdout + out.stderr

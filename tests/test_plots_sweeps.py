@@ -84,19 +84,26 @@ def test_outliers_plot_splits_the_runs_by_the_rule():
 
 
 def test_viscosity_check_plot_draws_the_runs_and_the_three_lines():
-    # Identity: the runs at (dF/dV / m, 1/tau); the fit line's slope is k_fit, the derived
-    # prediction's k_predicted, the purely viscous line's 1 (rtol 1e-12 for the division).
+    # Identity: the runs at (dF/dV / m, 1/tau) under the drawn definition; the fit line's
+    # slope is k_fit, the ideal model's k_predicted, the purely viscous line's 1 (rtol 1e-12
+    # for the division).
     from toolkit.predictions import ViscosityProblem, viscosity_check
 
-    check = viscosity_check(ViscosityProblem(mode="ideal", runs=12, seed=0))
-    ax = tk.plot_viscosity_check([check], labels=["ideal"])
-    points, fit, predicted, viscous = ax.get_lines()
-    ok = check.ok
-    np.testing.assert_array_equal(points.get_xdata(), check.slope[ok] / check.problem.apparatus.mass)
-    np.testing.assert_array_equal(points.get_ydata(), 1.0 / check.tau[ok])
-    for line, slope in ((fit, check.k_fit), (predicted, check.k_predicted), (viscous, 1.0)):
-        x, y = line.get_data()
-        assert y[1] / x[1] == pytest.approx(slope, rel=1e-12)
+    check = viscosity_check(ViscosityProblem(mode="ideal", runs=12, seed=0, start=(-1.0, 1.0)))
+    for definition in ("least_squares", "crossing_63"):
+        for starts in ("inside", "outside"):
+            ax = tk.plot_viscosity_check([check], labels=["ideal"], definition=definition, starts=starts)
+            points, fit, predicted, viscous = ax.get_lines()
+            use = check.ok & (check.inside if starts == "inside" else ~check.inside)
+            np.testing.assert_array_equal(points.get_xdata(), check.slope[use] / check.problem.apparatus.mass)
+            np.testing.assert_array_equal(points.get_ydata(), 1.0 / check.tau[definition][use])
+            expected = check.fit(definition, starts)
+            for line, slope in ((fit, expected.k_fit), (predicted, expected.k_predicted), (viscous, 1.0)):
+                x, y = line.get_data()
+                assert y[1] / x[1] == pytest.approx(slope, rel=1e-12)
+    only_inside = viscosity_check(ViscosityProblem(mode="ideal", runs=4, seed=0))
+    with pytest.raises(tk.ParameterError, match="'starts' parameter of plot_viscosity_check"):
+        tk.plot_viscosity_check([only_inside], starts="outside")
 
 
 def test_friction_fraction_check_plot_draws_mu_and_dT_against_the_closed_forms():

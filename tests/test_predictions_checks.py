@@ -18,8 +18,10 @@ from toolkit.model import Motors
 from toolkit.model.carousel import CAROUSEL as HARDWARE
 from toolkit.predictions import (Apparatus, CarryThen, CheckStatus, FrictionFractionProblem, ViscosityProblem,
                                  friction_fraction_check, prediction_checks, viscosity_check)
-from toolkit.predictions._measure import (crossing_duration, crossing_time, proportional_fit, rig_friction,
+from toolkit.predictions._measure import (crossing_duration, crossing_time, crossing_time_constant,
+                                          exponential_time_constant, proportional_fit, rig_friction,
                                           startup_time_constant)
+from toolkit.predictions.viscosity import EQUILIBRIUM_MARGIN, plan_runs
 from toolkit.predictions.theory import ONE_MINUS_INV_E, staircase_correction, transition_time
 
 CAROUSEL = Apparatus.carousel()
@@ -44,9 +46,27 @@ def test_startup_time_constant_of_a_sampled_exponential():
     # the crossing by 0.6e-9 / (0.5 / e) = 3.4e-9 s: abs 1e-6 s covers both.
     t = np.arange(0.0, 20.0, 1e-3)
     v = 0.2 - 0.5 * np.exp(-t / 1.0)
-    tau, settled = startup_time_constant(t, v, 5)
+    tau, settled = crossing_time_constant(t, v, 5)
     assert settled == pytest.approx(0.2, rel=0, abs=2e-9)
     assert tau == pytest.approx(1.0, rel=0, abs=1e-6)
+    assert startup_time_constant("crossing_63", t, v, 5) == (tau, settled)
+
+
+@pytest.mark.parametrize("h", [0.3, 0.05])
+def test_least_squares_time_constant_of_a_sampled_exponential(h):
+    # The fit's model is the exponential itself with both ends held: on exact samples its
+    # error is zero at the true tau (2.5 s), whatever the sampling; only the settled value's
+    # miss, 0.5 e^-16 = 5.6e-8 m/s on a 40 s record, moves it: abs 1e-5 s.
+    t = np.arange(0.0, 40.0 + h / 2, h)
+    v = -0.1 + 0.5 * np.exp(-t / 2.5)
+    tau, settled = exponential_time_constant(t, v, 1)
+    assert tau == pytest.approx(2.5, rel=0, abs=1e-5)
+    assert startup_time_constant("least_squares", t, v, 1) == (tau, settled)
+    # Shifted clock: the fit starts at the first sample.
+    assert exponential_time_constant(t + 3.0, v, 1)[0] == pytest.approx(tau, rel=1e-9)
+    assert math.isnan(exponential_time_constant(t, np.full(t.size, 0.2), 3)[0])
+    with pytest.raises(ParameterError, match="'definition' parameter of startup_time_constant"):
+        startup_time_constant("exponential", t, v, 1)
 
 
 def test_proportional_fit_of_exact_and_scattered_data():
@@ -80,22 +100,30 @@ def test_carry_then_shifts_the_inner_clock():
 
 
 # -- viscosity ---------------------------------------------------------------------------------
-def test_ideal_sweep_reads_the_derived_correction_within_one_sample():
-    # Ideal loop: V(t) is piecewise linear and concave on the way to the stop, so the chord
-    # between samples crosses the 63.2 % level no earlier than V and at most one period
-    # later: 0 <= tau - C m / k <= h (rounding: 1e-12 s); the settled speed is the resting
-    # speed exactly (the exact plant sticks on the contact speed).
+def test_ideal_sweep_reads_the_ideal_model():
+    # Ideal loop: the samples lie on the exact trajectory. Crossing rule: V(t) is piecewise
+    # linear and concave on the way to the stop, so the chord between samples crosses the
+    # 63.2 % level no earlier than V and at most one period later: 0 <= tau - C m / k <= h
+    # (rounding: 1e-12 s). Least squares: the 50 Hz samples' sum against the prediction's
+    # 1001-sample sum over the same window (the same path): measured within 0.46 %, rtol 1 %.
+    # The settled speed is the resting speed exactly (the exact plant sticks on the contact).
     check = viscosity_check(ViscosityProblem(CAROUSEL, "ideal", runs=60, seed=4))
     assert check.ok.all() and check.runs == 60
-    gap = check.tau - check.tau_predicted
+    gap = check.tau["crossing_63"] - check.tau_predicted["crossing_63"]
     assert np.all(gap >= -1e-12) and np.all(gap <= PERIOD + 1e-12)
-    np.testing.assert_allclose(check.settled, check.settled_predicted, rtol=0, atol=1e-15)
-    # The per-run correction is the closed form at the run's start (rounding of the
+    np.testing.assert_allclose(check.tau["least_squares"], check.tau_predicted["least_squares"], rtol=1e-2)
+    np.testing.assert_allclose(check.settled, check.design.settled_predicted, rtol=0, atol=1e-15)
+    # The per-run crossing correction is the closed form at the run's start (rounding of the
     # allocation's speeds: rtol 1e-9).
     n = CAROUSEL.n
-    np.testing.assert_allclose(check.correction, staircase_correction(n, check.start), rtol=1e-9)
+    np.testing.assert_allclose(check.correction["crossing_63"], staircase_correction(n, check.start), rtol=1e-9)
     # So 1/tau lies within a period of the prediction: k_fit >= k_predicted / (1 + h / tau_min).
-    assert check.k_predicted / (1 + PERIOD / check.tau_predicted.min()) <= check.k_fit <= check.k_predicted
+    cross = check.fit("crossing_63")
+    tau_min = check.tau_predicted["crossing_63"].min()
+    assert cross.k_predicted / (1 + PERIOD / tau_min) <= cross.k_fit <= cross.k_predicted
+    assert check.fit() is check.fit("least_squares") and check.k_fit == check.fit().k_fit
+    # The fit reads several percent faster than the crossing (docs/physics.md section 6).
+    assert check.fit("least_squares").k_predicted > 1.05 * cross.k_predicted
     assert check.met, check.message
 
 
@@ -103,39 +131,86 @@ def test_sweep_design_is_seeded_and_within_its_ranges():
     a = viscosity_check(ViscosityProblem(CAROUSEL, "ideal", runs=12, seed=7))
     b = viscosity_check(ViscosityProblem(CAROUSEL, "ideal", runs=12, seed=7), progress=True)
     c = viscosity_check(ViscosityProblem(CAROUSEL, "ideal", runs=12, seed=8))
-    np.testing.assert_array_equal(a.tau, b.tau)
+    np.testing.assert_array_equal(a.tau["least_squares"], b.tau["least_squares"])
     assert not np.array_equal(a.slope, c.slope)
-    assert np.all((a.spacing >= 0.02) & (a.spacing <= 0.06))
-    # The start lies within [-1, 1] spacings of the lowest (moving up) or highest contact.
-    position = (CAROUSEL.n - 1) / 2 - np.abs(a.start)
-    assert np.all((position >= -1) & (position <= 1))
-    np.testing.assert_allclose(a.slope, 2 * CAROUSEL.force / a.spacing, rtol=1e-15)
+    assert np.all((a.design.spacing >= 0.02) & (a.design.spacing <= 0.06))
+    np.testing.assert_allclose(a.slope, 2 * CAROUSEL.force / a.design.spacing, rtol=1e-15)
+
+
+@pytest.mark.parametrize("n", [10, 20, 100])
+def test_default_starts_lie_inside_the_spread_away_from_the_equilibrium(n):
+    # The default design: every start inside the spread (at or above the lowest contact, or
+    # mirrored) and at least 3 spacings from the equilibrium set (for even n the band's near
+    # edge at 1/2 spacing from the centre); spacings 0.2/n .. 0.6/n m/s (n s = 0.2-0.6 m/s).
+    problem = ViscosityProblem(Apparatus.carousel(n=n), "ideal", runs=200, seed=3)
+    design = plan_runs(problem)
+    half = (n - 1) / 2
+    assert np.all(design.inside) and np.all(np.abs(design.start) <= half + 1e-12)
+    assert np.all(np.abs(design.start) - problem.resting_position >= EQUILIBRIUM_MARGIN - 1e-12)
+    assert np.all((design.spacing * n >= 0.2 - 1e-12) & (design.spacing * n <= 0.6 + 1e-12))
+    # Both directions, about half each (binomial, 200 draws: 4 sd = 28).
+    assert abs(np.sum(design.start < 0) - 100) <= 28
+
+
+def test_starts_outside_the_spread_are_fitted_apart():
+    # Starts from one spacing below to one above the lowest contact: the runs below (p < 0)
+    # form their own fits, never pooled with the starts inside, and are not judged.
+    check = viscosity_check(ViscosityProblem(CAROUSEL, "ideal", runs=40, seed=2, start=(-1.0, 1.0)))
+    for d in ("least_squares", "crossing_63"):
+        inside, outside = check.fit(d, "inside"), check.fit(d, "outside")
+        assert inside.runs == int(np.sum(check.inside)) and outside.runs == int(np.sum(~check.inside))
+        assert inside.runs + outside.runs == 40 and outside.met is None and inside.met is True
+        # Each group's k_fit is the proportional fit of its own runs only.
+        use = check.inside
+        assert inside.k_fit == pytest.approx(proportional_fit(check.slope[use], 1 / check.tau[d][use])[0],
+                                             rel=1e-12)
+    data = check.to_dict()
+    assert data["runs_outside"] == int(np.sum(~check.inside)) and len(data["fits"]) == 4
 
 
 def test_in_loop_sweep_meets_the_targets_on_a_small_sweep():
     # Encoders, Kalman filter and motor lag: the same targets as the full sweep (R^2 >= 0.98,
-    # k_fit within 5 % of the correction) on 40 runs of seed 1.
+    # k_fit within 5 % of the prediction) for both definitions on 40 runs of seed 1.
     check = viscosity_check(ViscosityProblem(CAROUSEL, "loop", runs=40, seed=1))
     assert check.ok.all()
-    assert check.r2 >= 0.98 and abs(check.ratio - 1) <= 0.05, check.message
-    # The motor lag alone (the fit on the true speed of the same runs) is within the target too.
-    assert abs(check.k_fit_true / check.k_predicted - 1) <= 0.05 and check.r2_true >= 0.98
+    for fit in check.fits:
+        assert fit.r2 >= 0.98 and abs(fit.ratio - 1) <= 0.05, (fit, check.message)
+        # The motor lag alone (the fit on the true speed of the same runs) is within the target too.
+        assert abs(fit.k_fit_true / fit.k_predicted - 1) <= 0.05 and fit.r2_true >= 0.98
+    assert check.met
 
 
 @pytest.mark.slow
-def test_full_sweeps_of_490_runs():
-    # Issue 9's criterion at full size (about 5 s): ideal and in the loop.
+@pytest.mark.parametrize("n", [10, 20, 100])
+def test_full_sweeps_of_490_runs(n):
+    # The issue's criterion at full size, ideal and in the loop: for each definition k_fit
+    # within 5 % of k_predicted and R^2 >= 0.98 over 490 runs (about 15 s per n).
     for mode in ("ideal", "loop"):
-        check = viscosity_check(ViscosityProblem(CAROUSEL, mode))
+        check = viscosity_check(ViscosityProblem(Apparatus.carousel(n=n), mode))
         assert check.runs == 490 and check.ok.all()
+        assert [f.runs for f in check.fits] == [490, 490]
         assert check.met, f"{mode}: {check.message}"
+
+
+def test_apparatus_with_contacts_keeps_the_total_friction():
+    a = CAROUSEL.with_contacts(25)
+    assert a.n == 25 and a.sensors.n_wheels == 25
+    assert a.total_force == pytest.approx(CAROUSEL.total_force, rel=1e-15)
+    assert a.mass == CAROUSEL.mass and a.plant.motors == CAROUSEL.plant.motors
+    assert Apparatus.carousel(n=25).total_force == pytest.approx(a.total_force, rel=1e-15)
+    with pytest.raises(ParameterError, match="'n' parameter of Apparatus.with_contacts"):
+        CAROUSEL.with_contacts(0)
 
 
 def test_viscosity_problem_refuses_what_it_cannot_run():
     with pytest.raises(ParameterError, match="'spacing' parameter of ViscosityProblem"):
         ViscosityProblem(CAROUSEL, spacing=(0.02, 0.09))              # 4.5 s > 0.35 m/s
     with pytest.raises(ParameterError, match="'start' parameter of ViscosityProblem"):
-        ViscosityProblem(CAROUSEL, start=(-3.0, 1.0))                 # start beyond v_max
+        ViscosityProblem(CAROUSEL, spacing=(0.02, 0.06), start=(-3.0, 1.0))   # start beyond v_max
+    with pytest.raises(ParameterError, match="'definitions' parameter of ViscosityProblem"):
+        ViscosityProblem(CAROUSEL, definitions=("least_squares", "least_squares"))
+    with pytest.raises(ParameterError, match="'definitions' parameter of ViscosityProblem"):
+        ViscosityProblem(CAROUSEL, definitions=("crossing",))
     with pytest.raises(ParameterError, match="'start' parameter of ViscosityProblem"):
         ViscosityProblem(CAROUSEL, start=(-1.0, 4.2))                 # inside the zero band
     with pytest.raises(ParameterError, match="'mode' parameter of ViscosityProblem"):
@@ -232,8 +307,13 @@ def test_cli_predict_json(capsys):
     captured = capsys.readouterr()
     data = json.loads(captured.out)
     assert captured.err == ""                                # no progress bar with --json
-    assert {"runs", "r2", "k_fit", "k_predicted"} <= set(data["viscosity"])
-    assert data["viscosity"]["runs"] == 6 and data["viscosity"]["mode"] == "loop"
+    fits = data["viscosity"]["fits"]
+    assert data["viscosity"]["n"] == 10 and len(fits) == 4
+    assert [(f["mode"], f["definition"]) for f in fits] == [
+        ("ideal", "least_squares"), ("ideal", "crossing_63"), ("loop", "least_squares"), ("loop", "crossing_63")]
+    assert all({"definition", "n", "k_fit", "k_predicted", "r2", "runs"} <= set(f) for f in fits)
+    assert all(f["runs"] == 6 and f["n"] == 10 and f["starts"] == "inside" for f in fits)
+    assert data["viscosity"]["loop"]["runs"] == 6 and data["viscosity"]["loop"]["mode"] == "loop"
     rows = data["friction_fraction"]
     assert [row["n"] for row in rows] == list(range(6))
     assert all({"n", "mu_ratio", "dT", "dT_predicted"} <= set(row) for row in rows)
@@ -256,3 +336,34 @@ def test_cli_predict_exit_codes(tmp_path, capsys):
     assert main(["predict", str(unequal)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "equal friction magnitude" in err[0]
+
+
+def test_cli_predict_with_contacts(capsys):
+    # --contacts N: N equal wheels sharing the carousel's F_tot; the fits say n = N; the
+    # friction-fraction check runs j = 0..N/2 (N even) or is left out (N odd).
+    assert main(["predict", "--runs", "4", "--contacts", "20", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["viscosity"]["n"] == 20 and {f["n"] for f in data["viscosity"]["fits"]} == {20}
+    assert [row["n"] for row in data["friction_fraction"]] == list(range(11))
+    assert main(["predict", "--runs", "4", "--contacts", "11"]) == 0
+    out = capsys.readouterr().out
+    assert "on 11 contacts" in out and "least_squares (4 starts inside the spread): k_fit" in out
+    assert "friction fraction: left out (11 contacts" in out
+    assert main(["predict", "--runs", "4", "--contacts", "11", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["friction_fraction"] == [] and data["friction_fraction_status"] is None
+    with pytest.raises(SystemExit) as exit_info:
+        main(["predict", "--contacts", "0"])
+    assert exit_info.value.code == 2
+    assert "--contacts: must be an integer >= 1, got 0" in capsys.readouterr().err
+    # The flag is bounded like the constructor it feeds (toolkit.scenes.limits.FLAGS).
+    from toolkit.predictions.apparatus import MAX_CONTACTS
+    from toolkit.scenes.limits import FLAGS
+
+    assert FLAGS["predict --contacts"].high == MAX_CONTACTS
+    with pytest.raises(SystemExit) as exit_info:
+        main(["predict", "--contacts", "20000"])
+    assert exit_info.value.code == 2
+    assert "--contacts: must be an integer <= 10000, got 20000" in capsys.readouterr().err
+    with pytest.raises(ParameterError, match="'n' parameter of Apparatus.with_contacts must be an integer in"):
+        Apparatus.carousel().with_contacts(20000)

@@ -36,6 +36,7 @@ from .scenes.build import Clip, SceneObjects, build_scene
 from .scenes.designs import copy_designs, design_names, load_design
 from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
 from .model.carousel import CAROUSEL, CarouselHardware, carousel_startup_plant
+from .model.parameters import PARAMETERS, Origin, Parameter, parameter
 from .analysis.precision import PrecisionReport, PrecisionRow, precision_report
 from .loop.closed_loop import ClosedLoopResult, simulate_closed_loop
 from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, VirtualViscosity
@@ -66,6 +67,8 @@ __all__ = [
     "simulate_batch", "BatchResult", "advance", "ExactState", "ExactStep",
     # work-precision report and stability suite
     "precision_report", "PrecisionReport", "PrecisionRow", "carousel_startup_plant",
+    # the non-ideal carousel's parameters and where each value comes from
+    "PARAMETERS", "Parameter", "Origin", "parameter",
     "stability_suite", "StabilityReport", "StabilityCase",
     # allocation (inverse design)
     "allocate", "evaluate_errors", "AllocationResult", "AllocationStatus", "Projection",

@@ -303,16 +303,21 @@ def _cmd_predict(args: argparse.Namespace) -> int:
     else:
         objects = _scene(args)
         apparatus = Apparatus(objects.plant_on(None), objects.sensors)
+    if args.contacts is not None:
+        apparatus = apparatus.with_contacts(args.contacts)
     progress = not args.json and sys.stderr.isatty()
     result = prediction_checks(apparatus, runs=args.runs, seed=args.seed, progress=progress)
     if args.json:
         _print_json(result.to_dict())
     else:
         for label, check in result.checks():
-            if hasattr(check, "k_fit"):
-                print(f"{label}: {check.runs} runs, 1/tau vs dF/dV: R^2 {check.r2:.4f}, k_fit "
-                      f"{check.k_fit:.4f}, k_predicted {check.k_predicted:.4f} (ratio {check.ratio:.4f}), "
+            if hasattr(check, "fits"):
+                print(f"{label}: {check.runs} runs on {apparatus.n} contacts, 1/tau = k dF/dV / m, "
                       f"{check.wall_time:.1f} s: {check.status.name}")
+                for fit in check.fits:
+                    print(f"  {fit.definition} ({fit.runs} starts {fit.starts} the spread): k_fit "
+                          f"{fit.k_fit:.4f}, k_predicted {fit.k_predicted:.4f} (ratio {fit.ratio:.4f}), "
+                          f"R^2 {fit.r2:.4f}")
             else:
                 print(f"{label}: {check.status.name} ({check.wall_time:.1f} s)")
                 for row in check.rows():
@@ -321,6 +326,8 @@ def _cmd_predict(args: argparse.Namespace) -> int:
                           f"{_seconds(row['dT_predicted'])})")
         if apparatus.sensors is None:
             print("the scene has no [sensors]: only the ideal checks ran")
+        if apparatus.n % 2:
+            print(f"friction fraction: left out ({apparatus.n} contacts; the split needs an even number)")
     return _finish([Shortfall("prediction", line, math.nan, "") for line in result.shortfalls()])
 
 
@@ -435,6 +442,10 @@ def _parser() -> argparse.ArgumentParser:
     predict.add_argument("--runs", type=_bounded("predict --runs"), default=490,
                          help="closed-loop runs of each viscosity sweep (default 490)")
     predict.add_argument("--seed", type=_bounded("predict --seed"), default=0, help="seed of the sweep (default 0)")
+    predict.add_argument("--contacts", type=_bounded("predict --contacts"), default=None, metavar="N",
+                         help="run the checks with N equal contacts sharing the apparatus's total "
+                              "friction (default: the scene's, ten on the carousel); the friction-"
+                              "fraction check needs N even")
     return parser
 
 

@@ -3,18 +3,27 @@ panels) and only draws.
 
 matplotlib is imported here and nowhere else; importing :mod:`toolkit` does not load it.
 Every function takes a ``title`` (the scene name): figures leave the study that made them.
+
+Backends: nothing here chooses or switches matplotlib's backend. Without ``ax`` a function
+makes its figure with ``pyplot``, so it shows wherever the user's figures show (inline in
+a notebook, a window in a script with ``plt.show()``). Figures written to files are drawn
+:func:`offscreen` (:func:`render_png`): plain :class:`matplotlib.figure.Figure` objects that
+no backend manages, so writing a report needs no backend, shows nothing and leaves the
+user's ``pyplot`` state alone.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
 
 __all__ = ["plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_estimation",
-           "plot_closed_loop", "figure_png",
+           "plot_closed_loop", "figure_png", "render_png", "offscreen",
            "plot_median_law", "plot_ratio_histogram", "plot_mean_median", "plot_outliers",
            "plot_summary_comparison", "plot_sweep", "plot_viscosity_check", "plot_friction_fraction_check",
            "MAX_LINES", "ERROR_LEVEL"]
@@ -29,15 +38,37 @@ _BRAKING_SAMPLES = 64
 _Z_CONTACTS, _Z_PREDICTION, _Z_EXACT, _Z_TARGET = 1.0, 3.0, 4.0, 6.0
 
 
-def _figure(nrows: int = 1, figsize: tuple[float, float] = (6.0, 4.0)):
-    import matplotlib
+#: Set inside :func:`offscreen`: figures are made without pyplot.
+_OFFSCREEN: contextvars.ContextVar[bool] = contextvars.ContextVar("toolkit_plots_offscreen", default=False)
 
-    matplotlib.use("Agg", force=False)
+
+@contextlib.contextmanager
+def offscreen() -> Iterator[None]:
+    """Within this context the functions of this module draw new figures as plain
+    :class:`matplotlib.figure.Figure` objects, outside ``pyplot``: no backend is chosen or
+    used, nothing is shown, nothing needs closing (for figures that only go to files)."""
+    token = _OFFSCREEN.set(True)
+    try:
+        yield
+    finally:
+        _OFFSCREEN.reset(token)
+
+
+def _subplots(nrows: int, ncols: int, figsize: tuple[float, float], **options: Any) -> np.ndarray:
+    """A new figure's axes, shape (nrows, ncols): with ``pyplot`` (the user's backend), or
+    :func:`offscreen` without it."""
+    if _OFFSCREEN.get():
+        from matplotlib.figure import Figure
+
+        return Figure(figsize=figsize, layout="constrained").subplots(nrows, ncols, squeeze=False, **options)
     import matplotlib.pyplot as plt
 
-    _, axes = plt.subplots(nrows, 1, figsize=figsize, layout="constrained", sharex=nrows > 1,
-                           squeeze=False)
-    return tuple(axes[:, 0])
+    _, axes = plt.subplots(nrows, ncols, figsize=figsize, layout="constrained", squeeze=False, **options)
+    return axes
+
+
+def _figure(nrows: int = 1, figsize: tuple[float, float] = (6.0, 4.0)):
+    return tuple(_subplots(nrows, 1, figsize, sharex=nrows > 1)[:, 0])
 
 
 def _axes(ax: Any, figsize: tuple[float, float] = (6.0, 4.0)):
@@ -507,23 +538,33 @@ def plot_closed_loop(loop: Any, axes: Any = None, *, title: str | None = None,
 
 def figure_png(ax: Any) -> bytes:
     """Render the figure of ``ax`` (an Axes or a sequence of Axes of one figure, as
-    :func:`plot_schedule` returns) to PNG bytes and close it."""
+    :func:`plot_schedule` returns) to PNG bytes; a figure ``pyplot`` manages is closed."""
     import io
-
-    import matplotlib.pyplot as plt
 
     if isinstance(ax, Sequence) or isinstance(ax, np.ndarray):
         ax = next(iter(np.ravel(np.asarray(ax, dtype=object))))
+    figure = ax.figure
     buffer = io.BytesIO()
-    ax.figure.savefig(buffer, format="png", dpi=120)
-    plt.close(ax.figure)
+    figure.savefig(buffer, format="png", dpi=120)
+    if getattr(figure.canvas, "manager", None) is not None:      # made by pyplot
+        import matplotlib.pyplot as plt
+
+        plt.close(figure)
     return buffer.getvalue()
+
+
+def render_png(draw: Callable[..., Any], *args: Any, **kwargs: Any) -> bytes:
+    """``draw(*args, **kwargs)`` (a function of this module) :func:`offscreen`, rendered to
+    PNG bytes: what the reports write."""
+    with offscreen():
+        return figure_png(draw(*args, **kwargs))
 
 
 # -- sweeps of the paper's experiments ---------------------------------------------------------
 def plot_median_law(results: Sequence[Any], ax: Any = None, *, labels: Sequence[str] | None = None,
                     paper_slope: float | None = 1.065, title: str | None = None):
-    """Steady speed against the median contact speed (the paper's Fig. 2b), with the fit.
+    """Steady speed against the median contact speed (the paper's median law, its Fig. 3b),
+    with the fit.
 
     Parameters
     ----------
@@ -556,7 +597,7 @@ def plot_median_law(results: Sequence[Any], ax: Any = None, *, labels: Sequence[
 def plot_ratio_histogram(results: Sequence[Any], ax: Any = None, *, labels: Sequence[str] | None = None,
                          title: str | None = None):
     """Histogram of ``speed / median`` over the runs with ``|median| > 0.1 v_max`` (the
-    paper's inset of Fig. 2b)."""
+    paper's inset of the median-law panel, its Fig. 3b)."""
     ax = _axes(ax, (5.0, 3.5))
     labels = list(labels) if labels is not None else [f"sweep {j + 1}" for j in range(len(results))]
     bins = np.linspace(0.0, 1.6, 41)
@@ -575,12 +616,10 @@ def plot_ratio_histogram(results: Sequence[Any], ax: Any = None, *, labels: Sequ
 
 
 def plot_mean_median(held_mean: Any, held_median: Any, axes: Any = None, *, title: str | None = None):
-    """The paper's Fig. 2c: speed against the median with the mean held (left) and against
-    the mean with the median held (right)."""
+    """The paper's mean-against-median panels (its Fig. 3c): speed against the median with
+    the mean held (left) and against the mean with the median held (right)."""
     if axes is None:
-        import matplotlib.pyplot as plt
-
-        _, axes = plt.subplots(1, 2, figsize=(9.0, 3.6), layout="constrained", sharey=True)
+        axes = tuple(_subplots(1, 2, (9.0, 3.6), sharey=True)[0])
     left, right = axes
     left.plot(held_mean.table["median"], held_mean.table["speed"], ".", ms=3)
     left.set_xlabel("median (m/s), mean held")
@@ -677,48 +716,63 @@ def plot_sweep(result: Any, ax: Any = None, *, title: str | None = None):
 
 
 def plot_viscosity_check(checks: Sequence[Any], ax: Any = None, *, labels: Sequence[str] | None = None,
-                         title: str | None = None):
-    """``1/tau`` against the commanded ``dF/dV / m`` (the paper's Fig. 6), each check's runs
-    with its fit through the origin, and the derived prediction ``k_predicted``.
+                         definition: str | None = None, starts: str = "inside", title: str | None = None):
+    """``1/tau`` against the commanded ``dF/dV / m`` (the paper's viscosity figure, its Fig. 5):
+    each check's runs of one group of starts with their fit through the origin, the ideal
+    model's prediction ``k_predicted`` and the purely viscous line.
 
     Parameters
     ----------
     checks : sequence of toolkit.predictions.ViscosityCheck
+    definition : str, optional
+        The time-constant definition drawn (default: each check's primary, ``"least_squares"``).
+    starts : {"inside", "outside"}
+        The group of starts drawn (the spread's inside by default).
     """
     ax = _axes(ax, (5.5, 4.5))
     labels = list(labels) if labels is not None else [c.problem.mode for c in checks]
-    reach = max(float(np.max(c.slope[c.ok] / c.problem.apparatus.mass)) for c in checks)
+    fits = [c.fit(definition, starts) for c in checks]
+    if any(f is None for f in fits):
+        from .errors import ParameterError, parameter_message
+
+        raise ParameterError(parameter_message("starts", "plot_viscosity_check",
+                                               "name a group of starts every check has runs in", starts))
+    name = fits[0].definition
+
+    def group(c: Any) -> np.ndarray:
+        return c.ok & (c.inside if starts == "inside" else ~c.inside)
+
+    reach = max(float(np.max(c.slope[group(c)] / c.problem.apparatus.mass)) for c in checks)
     line = np.array([0.0, reach])
-    for check, label in zip(checks, labels):
-        ok = check.ok
-        x = check.slope[ok] / check.problem.apparatus.mass
-        points = ax.plot(x, 1.0 / check.tau[ok], ".", ms=3, alpha=0.6,
-                         label=f"{label}: fit {check.k_fit:.3f}, R^2 {check.r2:.3f}")
-        ax.plot(line, check.k_fit * line, color=points[0].get_color(), lw=1.2)
-    ax.plot(line, checks[0].k_predicted * line, "k--", lw=1,
-            label=f"derived correction: {checks[0].k_predicted:.3f}")
-    ax.plot(line, line, color="0.6", lw=0.8, ls=":", label="purely viscous: 1")
+    for check, fit, label in zip(checks, fits, labels):
+        use = group(check)
+        x = check.slope[use] / check.problem.apparatus.mass
+        points = ax.plot(x, 1.0 / check.tau[name][use], ".", ms=3, alpha=0.6,
+                         label=f"{label}: k = {fit.k_fit:.3f}, R^2 {fit.r2:.3f}")
+        ax.plot(line, fit.k_fit * line, color=points[0].get_color(), lw=1.2)
+    ax.plot(line, fits[0].k_predicted * line, "k--", lw=1,
+            label=f"ideal model: k = {fits[0].k_predicted:.3f}")
+    ax.plot(line, line, color="0.6", lw=0.8, ls=":", label="purely viscous: k = 1")
     ax.set_xlabel("commanded dF/dV / m (1/s)")
-    ax.set_ylabel("1 / tau (1/s)")
+    ax.set_ylabel(f"1 / tau (1/s), tau by {name}")
     ax.legend(fontsize="x-small", loc="upper left")
-    _note(ax, f"{checks[0].problem.runs} runs per check", corner="lower right")
+    _note(ax, f"{fits[0].runs} runs (starts {starts} the spread), {fits[0].n} contacts", corner="lower right")
     _title(ax, title, "startup time constant against viscosity")
     return ax
 
 
 def plot_friction_fraction_check(checks: Sequence[Any], axes: Any = None, *,
                                  labels: Sequence[str] | None = None, title: str | None = None):
-    """The paper's Fig. 7: ``mu/mu0`` against the contacts reversed (left) and the transition
-    time against ``mu/mu0`` with the prediction ``dT = m 2 v_max / (F_tot mu/mu0)`` (right).
+    """The paper's friction-fraction figure (its Fig. 6b, c): ``mu/mu0`` against the contacts
+    reversed (left) and the transition time against ``mu/mu0`` with the prediction
+    ``dT = m 2 v_max / (F_tot mu/mu0)`` (right).
 
     Parameters
     ----------
     checks : sequence of toolkit.predictions.FrictionFractionCheck
     """
     if axes is None:
-        import matplotlib.pyplot as plt
-
-        _, axes = plt.subplots(1, 2, figsize=(10.0, 3.8), layout="constrained")
+        axes = tuple(_subplots(1, 2, (10.0, 3.8))[0])
     left, right = axes
     labels = list(labels) if labels is not None else [c.problem.mode for c in checks]
     for j, (check, label) in enumerate(zip(checks, labels)):

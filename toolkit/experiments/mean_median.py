@@ -1,4 +1,4 @@
-"""Mean against median (the paper's Fig. 2c): hold one, vary the other, watch the speed.
+"""Mean against median (the paper's Fig. 3c): hold one, vary the other, watch the speed.
 
 Each run builds ``n = 2 h`` speeds (``h`` below and ``h`` above a middle pair ``m +- g``;
 ``numpy.median`` is ``m``): ``held = "mean"`` draws the median ``m`` uniformly in

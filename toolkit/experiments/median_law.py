@@ -1,4 +1,4 @@
-"""The median law (the paper's Fig. 2b): steady speed against the median of random speeds.
+"""The median law (the paper's Fig. 3b): steady speed against the median of random speeds.
 
 Each run draws ``n`` contact speeds uniformly in ``[-v_max, v_max]``, starts the body from
 rest and lets it settle; the row holds the numpy median of the commanded speeds, the
@@ -29,8 +29,8 @@ compliance : motor compliance ``k``, (m/s)/N: a loaded motor droops by ``k`` tim
     contact force (the torque-speed line). The paper's 4.6 % speed rise on release does not
     determine ``k`` in this model: a sliding wheel carries ``f_i`` whether the body is held
     or not, so on release only motors whose slip reverses change speed
-    (:meth:`MedianLaw.release_rise`); ``k f = 0.046 * 0.2 m/s`` is an assumed value of that
-    order. Needs the single-run exact engine (the batch path has no compliance), about
+    (:meth:`MedianLaw.release_rise`); :data:`toolkit.PARAMETERS` ``compliance`` holds the
+    assumed value of that order and its origin. Needs the single-run exact engine (the batch path has no compliance), about
     0.2 ms per run.
 
 Everything but ``compliance`` runs on the vectorized exact batch path

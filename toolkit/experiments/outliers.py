@@ -35,6 +35,7 @@ import numpy as np
 from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+from ..model.carousel import CAROUSEL
 from ._common import (MAX_CONTACTS, MAX_SAMPLES, SETTLED_TOLERANCE, as_count, check_common, check_compliance,
                       setter, simulate_or_raise, wheels_for_runs)
 
@@ -62,7 +63,7 @@ class Outliers:
     acceleration : float, m/s^2
         ``F_tot / m``.
     lag : float, s
-        Motor time constant (the carousel: 0.0075 s).
+        Motor time constant (the carousel's, :data:`toolkit.PARAMETERS` ``motor_lag``).
     rate : float, Hz
         Command rate (the carousel: 50 Hz).
     settle_time, window : float, s
@@ -82,7 +83,7 @@ class Outliers:
     frequency: float = 1.0
     speed_limit: float = 0.35
     acceleration: float = 2.0
-    lag: float = 0.0075
+    lag: float = CAROUSEL.motor_lag
     rate: float = 50.0
     settle_time: float = 2.0
     window: float = 3.0

@@ -13,7 +13,9 @@ Read this package alone to know the whole model:
 - :mod:`~toolkit.model.plant`: the body on its contacts, ``m dV/dt in F(V) + F_ext - c V``,
   and its right-hand side :meth:`Plant.rhs`;
 - :mod:`~toolkit.model.sensors`: encoders as integer counts of position (the sensor law
-  :func:`measure`, gearbox backlash, records of exact simulations).
+  :func:`measure`, gearbox backlash, records of exact simulations);
+- :mod:`~toolkit.model.parameters`: the non-ideal carousel's parameters, each with its
+  origin (measured in the paper, bounded by it, fitted to it, assumed).
 
 Every solver, estimator and controller calls these; none re-derives them.
 """
@@ -24,6 +26,7 @@ from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase, 
 from .friction import (FRICTION_LAWS, STRIBECK_PEAK, STRIBECK_SPEED, compliant_breakpoints,
                        compliant_zero_set, contact_forces)
 from .motors import MotorPiece, Motors, implicit_step, motor_rate, reach, unsaturated_response
+from .parameters import PARAMETERS, Origin, Parameter, parameter
 from .plant import Plant
 from .sensors import Encoder, EncoderRecord, EncoderSample, Sensors, SensorState, measure, play, record_simulation
 from .signals import PiecewiseConstant, sample_count, sample_times
@@ -33,6 +36,7 @@ __all__ = [
     "FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",
     "compliant_breakpoints", "compliant_zero_set",
     "Motors", "motor_rate", "MotorPiece", "unsaturated_response", "implicit_step", "reach",
-    "PiecewiseConstant", "sample_count", "sample_times", "Plant", "Encoder",
+    "PiecewiseConstant", "sample_count", "sample_times", "Plant", "Encoder", "PARAMETERS", "Parameter", "Origin",
+    "parameter",
     "Sensors", "SensorState", "EncoderRecord", "EncoderSample", "measure", "play", "record_simulation",
 ]

@@ -4,8 +4,9 @@ The values are those of docs/physics.md section 5 and of the scene files ``desig
 and ``designs/startup11.toml`` (Shah & Gravish, arXiv 2501.09746): wheels of radius 0.045 m
 touching the ground 0.266 m from the axis, 48-count motor encoders behind a 74.83:1 gearbox
 (3591.84 counts per wheel turn), an 8192-count central encoder, 50 Hz sampling and commands,
-contact speeds within +-0.35 m/s, motors that settle in ~30 ms (lag 0.0075 s), and
-``F_tot / m = 2 m/s^2`` (the paper's transition time, docs/physics.md section 6).
+contact speeds within +-0.35 m/s, and ``F_tot / m = 2 m/s^2`` (the paper's transition time,
+docs/physics.md section 6). The non-idealities (the motors' lag, the gearbox backlash) are
+read from :data:`toolkit.model.parameters.PARAMETERS`, their one source.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 from ..errors import as_float, as_int
 from .contacts import ContactSet
 from .motors import Motors
+from .parameters import PARAMETERS
 from .plant import Plant
 from .sensors import Encoder, Sensors
 
@@ -44,9 +46,9 @@ class CarouselHardware:
     speed_limit : float, m/s
         ``v_max``: contact speeds within ``[-v_max, v_max]``.
     motor_lag : float, s
-        First-order time constant of the motors (settle, ``4 tau``, in ~30 ms).
+        First-order time constant of the motors (settle to 2 %, ``4 tau``, in ~30 ms).
     acceleration : float, m/s^2
-        ``F_tot / m``, from ``dT = 0.35 s`` for ``2 v_max = 0.7 m/s``.
+        ``F_tot / m``, fitted to ``dT = 0.35 s`` for ``2 v_max = 0.7 m/s``.
     n_wheels : int
         Contacts (wheels on hinged spokes, equal normal load).
     wheel_force : float, N
@@ -61,12 +63,12 @@ class CarouselHardware:
     contact_radius: float = 0.266
     wheel_radius: float = 0.045
     wheel_counts_per_rev: float = 3591.84
-    wheel_backlash: float = 0.0008
+    wheel_backlash: float = PARAMETERS["wheel_backlash"].value
     central_counts_per_rev: float = 8192.0
     rate: float = 50.0
     speed_limit: float = 0.35
-    motor_lag: float = 0.0075
-    acceleration: float = 2.0
+    motor_lag: float = PARAMETERS["motor_lag"].value
+    acceleration: float = PARAMETERS["acceleration"].value
     n_wheels: int = 10
     wheel_force: float = 1.0
     inertia: float = 0.353780

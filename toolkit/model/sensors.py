@@ -17,7 +17,7 @@ position, never speed (``floor(x / q)``), and models:
   read noise in counts, and sample-time jitter (the read instants, not the stamps), all
   drawn from a ``numpy.random.Generator`` passed in.
 
-:class:`Sensors` describes the suite (the carousel's: :meth:`Sensors.carousel`);
+:class:`Sensors` describes the suite (the carousel's: :meth:`CAROUSEL.sensors <toolkit.model.carousel.CarouselHardware.sensors>`);
 :class:`EncoderRecord` holds what it reports; :func:`record_simulation` turns an exact
 simulation into a record, with positions integrated exactly from its dense output.
 """

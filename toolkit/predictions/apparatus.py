@@ -31,6 +31,8 @@ __all__ = ["Apparatus", "CarryThen", "MODES"]
 
 #: The two ways a check runs: the ideal model, or sensors + estimator + motor lag in the loop.
 MODES = ("ideal", "loop")
+#: Most contacts an apparatus built by :meth:`Apparatus.with_contacts` may have.
+MAX_CONTACTS = 10_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,15 +76,32 @@ class Apparatus:
             Sensors.checked(self.sensors, plant.n, owner)
 
     @classmethod
-    def carousel(cls, mass: float = 1.0) -> Apparatus:
-        """The paper's carousel (:data:`toolkit.model.carousel.CAROUSEL`): ten equal wheels
-        with ``F_tot / m = 2 m/s^2``, motors of lag 7.5 ms within ``+-0.35 m/s``, the encoders
-        of :meth:`CAROUSEL.sensors <toolkit.model.carousel.CarouselHardware.sensors>` at 50 Hz. Without drag only ``F_tot / m`` matters, so
-        ``mass`` (kg) only sets the unit of the forces."""
+    def carousel(cls, mass: float = 1.0, n: int = 10) -> Apparatus:
+        """The paper's carousel (:data:`toolkit.model.carousel.CAROUSEL`): ``n`` (ten) equal
+        wheels with ``F_tot / m = 2 m/s^2``, motors of lag 7.5 ms within ``+-0.35 m/s``, the
+        encoders of :meth:`CAROUSEL.sensors <toolkit.model.carousel.CarouselHardware.sensors>` at 50 Hz. Without drag only ``F_tot / m``
+        matters, so ``mass`` (kg) only sets the unit of the forces."""
         mass = as_float(mass, "mass", "Apparatus.carousel", low=0.0, low_open=True)
-        n = 10
-        contacts = ContactSet(np.zeros(n), np.full(n, CAROUSEL.acceleration * mass / n))
-        return cls(Plant(contacts, mass=mass, motors=CAROUSEL.motors()), CAROUSEL.sensors(n))
+        return cls.with_total_force(n, CAROUSEL.acceleration * mass,
+                                    Plant(ContactSet([0.0], [1.0]), mass=mass, motors=CAROUSEL.motors()),
+                                    CAROUSEL.sensors(1), "Apparatus.carousel")
+
+    def with_contacts(self, n: int) -> Apparatus:
+        """The same apparatus with ``n`` equal contacts sharing its total friction ``F_tot``
+        (each ``F_tot / n``): the same body, motors, drag and kind of encoders, one wheel
+        encoder per contact."""
+        return self.with_total_force(n, self.total_force, self.plant, self.sensors, "Apparatus.with_contacts")
+
+    @classmethod
+    def with_total_force(cls, n: Any, total_force: float, plant: Plant, sensors: Sensors | None,
+                         owner: str) -> Apparatus:
+        """``n`` contacts of ``total_force / n`` (N) on ``plant``'s body and motors, with
+        ``sensors``' kind of encoders for ``n`` wheels."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= MAX_CONTACTS:
+            raise ParameterError(parameter_message("n", owner, f"be an integer in [1, {MAX_CONTACTS}]", n))
+        contacts = ContactSet(np.zeros(int(n)), np.full(int(n), total_force / int(n)))
+        return cls(replace(plant, contacts=contacts, commands=None, external_force=0.0),
+                   None if sensors is None else replace(sensors, n_wheels=int(n)))
 
     # -- properties -----------------------------------------------------------------------
     @property

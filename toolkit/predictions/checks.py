@@ -24,14 +24,14 @@ class PredictionChecks:
     viscosity, viscosity_ideal : ViscosityCheck
         In the loop (``None`` on an apparatus without sensors) and ideal.
     friction, friction_ideal : FrictionFractionCheck
-        Likewise.
+        Likewise; both ``None`` for an odd number of contacts (the split cancels in pairs).
     wall_time : float, s
     """
 
     viscosity: ViscosityCheck | None
     viscosity_ideal: ViscosityCheck
     friction: FrictionFractionCheck | None
-    friction_ideal: FrictionFractionCheck
+    friction_ideal: FrictionFractionCheck | None
     wall_time: float
 
     def checks(self) -> list[tuple[str, Any]]:
@@ -50,23 +50,35 @@ class PredictionChecks:
         return [f"{label}: {check.message}" for label, check in self.checks() if not check.met]
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able: ``viscosity`` (``runs``, ``r2``, ``k_fit``, ``k_predicted``, ..., and
-        ``ideal`` with the same keys) and ``friction_fraction`` (per ``n``: ``mu_ratio``,
-        ``dT``, ``dT_predicted``, ..., and ``ideal``). The top-level numbers are the loop's
-        when the apparatus has sensors, else the ideal ones (``mode`` says which)."""
-        vis_main = self.viscosity or self.viscosity_ideal
+        """JSON-able: ``viscosity`` (``n``, ``fits``: every :class:`~.viscosity.ViscosityFit`
+        of both modes, ideal first, each with its ``definition``, ``starts``, ``n``,
+        ``mode``, ``k_fit``, ``k_predicted``, ``r2``, ``runs``, ...; ``ideal`` and ``loop``:
+        each check's summary without its fits, ``loop`` None without sensors) and
+        ``friction_fraction`` (per ``n``: ``mu_ratio``, ``dT``, ``dT_predicted``, ..., and
+        ``ideal``; an empty list for an odd number of contacts). The friction rows' top-level
+        numbers are the loop's when the apparatus has sensors, else the ideal ones (``mode``
+        says which)."""
+        def summary(check: ViscosityCheck | None) -> dict[str, Any] | None:
+            if check is None:
+                return None
+            return {key: value for key, value in check.to_dict().items() if key != "fits"}
+
+        checks = [c for c in (self.viscosity_ideal, self.viscosity) if c is not None]
+        viscosity = {"n": self.viscosity_ideal.problem.apparatus.n,
+                     "fits": [fit.to_dict() for check in checks for fit in check.fits],
+                     "ideal": summary(self.viscosity_ideal), "loop": summary(self.viscosity)}
         fr_main = self.friction or self.friction_ideal
-        viscosity = {**vis_main.to_dict(), "ideal": self.viscosity_ideal.to_dict()}
-        ideal_rows = self.friction_ideal.rows()
-        friction = [{**row, "mode": fr_main.problem.mode, "ideal": ideal}
-                    for row, ideal in zip(fr_main.rows(), ideal_rows)]
-        return {"viscosity": viscosity, "friction_fraction": friction,
-                "friction_fraction_status": {
-                    "status": fr_main.status.name, "message": fr_main.message,
-                    "brake_force": fr_main.brake_force, "wall_time": fr_main.wall_time,
-                    "ideal": {"status": self.friction_ideal.status.name,
-                              "message": self.friction_ideal.message,
-                              "brake_force": self.friction_ideal.brake_force}},
+        friction: list[dict[str, Any]] = []
+        status: dict[str, Any] | None = None
+        if fr_main is not None and self.friction_ideal is not None:
+            friction = [{**row, "mode": fr_main.problem.mode, "ideal": ideal}
+                        for row, ideal in zip(fr_main.rows(), self.friction_ideal.rows())]
+            status = {"status": fr_main.status.name, "message": fr_main.message,
+                      "brake_force": fr_main.brake_force, "wall_time": fr_main.wall_time,
+                      "ideal": {"status": self.friction_ideal.status.name,
+                                "message": self.friction_ideal.message,
+                                "brake_force": self.friction_ideal.brake_force}}
+        return {"viscosity": viscosity, "friction_fraction": friction, "friction_fraction_status": status,
                 "met": self.met, "shortfalls": self.shortfalls(), "wall_time": self.wall_time}
 
 
@@ -77,7 +89,8 @@ def prediction_checks(apparatus: Apparatus | None = None, *, runs: int = 490, se
     Parameters
     ----------
     apparatus : Apparatus, optional
-        Default: :meth:`Apparatus.carousel`.
+        Default: :meth:`Apparatus.carousel`. The friction-fraction check needs an even number
+        of contacts and is left out for an odd number.
     runs : int
         Runs of each viscosity sweep, ``>= 2``.
     seed : int
@@ -93,7 +106,9 @@ def prediction_checks(apparatus: Apparatus | None = None, *, runs: int = 490, se
     vis_ideal = viscosity_check(ViscosityProblem(apparatus, "ideal", runs, seed=seed), progress=progress)
     vis_loop = (viscosity_check(ViscosityProblem(apparatus, "loop", runs, seed=seed), progress=progress)
                 if loop else None)
-    fr_ideal = friction_fraction_check(FrictionFractionProblem(apparatus, "ideal", seed=seed), progress=progress)
+    even = apparatus.n % 2 == 0
+    fr_ideal = (friction_fraction_check(FrictionFractionProblem(apparatus, "ideal", seed=seed), progress=progress)
+                if even else None)
     fr_loop = (friction_fraction_check(FrictionFractionProblem(apparatus, "loop", seed=seed), progress=progress)
-               if loop else None)
+               if loop and even else None)
     return PredictionChecks(vis_loop, vis_ideal, fr_loop, fr_ideal, time.perf_counter() - started)

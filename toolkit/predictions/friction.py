@@ -1,4 +1,4 @@
-"""The paper's friction-fraction experiment (its Fig. 7) in the closed loop.
+"""The paper's friction-fraction experiment (its Fig. 6) in the closed loop.
 
 Ten (in general ``N``, even) equal contacts: ``N/2 - j`` at ``+v_max`` and ``N/2 + j`` at
 ``-v_max`` (the allocator's split for :class:`~toolkit.allocation.FrictionFraction`
@@ -137,7 +137,8 @@ class FrictionFractionCheck:
     dT, dT_predicted : ndarray, s
         Measured and predicted transition times (``inf``: no transition).
     dT_measured_mu : ndarray, s
-        The prediction from the measured ratio (the paper's Fig. 7c curve).
+        The prediction from the measured ratio (the curve of the paper's transition-time
+        panel, its Fig. 6c).
     ok : ndarray of bool
         Each ``j`` within both targets.
     status : CheckStatus

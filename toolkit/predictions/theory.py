@@ -1,6 +1,6 @@
 """What the ideal model predicts for the paper's viscosity and friction-fraction experiments.
 
-Numerics only, on the model's own :class:`~toolkit.model.ContactSet`.
+Numerics only, on the model's own :class:`~toolkit.model.ContactSet` and its exact simulation.
 
 Viscosity of a finite staircase
 -------------------------------
@@ -9,23 +9,31 @@ average, the viscous law ``F = -k (V - c)`` with ``k = dF/dV = 2 f / s`` (docs/p
 section 6), whose startup from ``V0`` is exponential with ``tau = m / k``. The staircase is
 only approximately viscous: between two contact speeds its force is constant, so ``V(t)`` is
 piecewise linear and the body reaches its resting speed ``V_stop`` (the median, or for even
-``n`` the near edge of the zero-force band) in finite time.
+``n`` the near edge of the zero-force band) in finite time. So a startup has no single time
+constant: what ``tau`` is depends on how it is read off, and each definition
+(:data:`~toolkit.predictions._measure.TIME_CONSTANTS`) has its own **correction factor**
 
-We measure a time constant the way an experimenter fits one to a startup that settles:
-``tau`` is the time at which the body has covered ``1 - 1/e`` (63.2 %) of its way from
-``V0`` to where it comes to rest. For the linear law that is exactly ``m / k``. For the
-staircase it is the travel time (:func:`travel_time`, a sum of ``m dV / F`` over plateaus,
-exact) to ``V0 + (1 - 1/e)(V_stop - V0)``, so the **correction factor**
+    C = tau_staircase k / m                (1 for a purely viscous law),
 
-    C(n, u0) = tau_staircase k / m = (2 / s) * integral dV / (F(V) / f)
+which depends only on ``n`` and on where the start lies in spacings (and, for the fit, on
+the fit's window in units of ``m / k``): neither the spacing, nor the magnitudes, nor the
+mass. :func:`startup_correction` gives it for either definition.
 
-depends only on ``n`` and on where the start lies in units of the spacing. Between contact
-speeds the staircase force equals the linear law at the middle of each step, so ``C`` is a
-midpoint-rule estimate of ``integral du / u = 1``: far inside the spread ``C -> 1`` with an
-error of order ``(e^2 - 1) / (24 u0^2)``, ``u0 = (V_stop - V0) / s`` (the midpoint rule's
-error on ``1/u``; phase effects of where ``V0`` falls inside a step add to it); outside the
-spread (``V0`` below every contact) the force saturates at ``F_tot`` and ``C`` falls below
-that estimate. :func:`viscosity_correction` evaluates ``C`` exactly for any contact set.
+- ``"least_squares"`` (the paper's way: "we fit an exponential curve to the speed versus
+  time curve"): the exponential from the start to the settled speed, ``tau`` fitted by least
+  squares over the whole record (:func:`~toolkit.predictions._measure.exponential_time_constant`).
+  No closed form: :func:`least_squares_correction` fits the exact ideal trajectory of the
+  uniform staircase (:func:`toolkit.simulate`, exact method), sampled finely, over the same
+  window. For ten contacts and starts in the lowest spacing ``C = 0.735-0.780``; for 100,
+  ``0.972``.
+- ``"crossing_63"``: ``tau`` is the time at which the body has covered ``1 - 1/e`` (63.2 %)
+  of its way from ``V0`` to where it comes to rest. For the linear law that is exactly
+  ``m / k``; for the staircase it is the travel time (:func:`travel_time`, a sum of
+  ``m dV / F`` over plateaus, exact) to ``V0 + (1 - 1/e)(V_stop - V0)``, in closed form below
+  (:func:`staircase_correction`; :func:`viscosity_correction` for any contact set). Between
+  contact speeds the staircase force equals the linear law at the middle of each step, so
+  ``C`` is a midpoint-rule estimate of ``integral du / u = 1``: far inside the spread ``C -> 1``
+  with an error of order ``(e^2 - 1) / (24 u0^2)``, ``u0 = (V_stop - V0) / s``.
 
 Closed form for ``n`` equal steps (:func:`staircase_correction`). Measure speeds from the
 reference in spacings, ``x = (V - c) / s``; the contacts sit at ``p_j = j - (n + 1)/2``,
@@ -65,15 +73,17 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import as_float, as_float_array
+from ..errors import as_float, as_float_array, check_option
 from ..errors import ParameterError, parameter_message
-from ..model import ContactSet
+from ..model import ContactSet, Plant
+from ._measure import ONE_MINUS_INV_E, TIME_CONSTANTS, exponential_time_constant
 
 __all__ = ["travel_time", "resting_speed", "time_constant", "viscosity_correction",
-           "staircase_correction", "uniform_staircase", "transition_time", "ONE_MINUS_INV_E"]
+           "staircase_correction", "least_squares_correction", "startup_correction",
+           "uniform_staircase", "transition_time", "ONE_MINUS_INV_E"]
 
-#: The fraction of the way covered after one time constant of an exponential.
-ONE_MINUS_INV_E = 1.0 - math.exp(-1.0)
+#: Samples of the exact ideal trajectory a least-squares prediction is fitted to.
+FIT_SAMPLES = 1001
 
 
 def _check_contacts(contacts: Any, owner: str) -> ContactSet:
@@ -178,8 +188,7 @@ def staircase_correction(n: int, start: Any) -> Any:
         ``|x0| <= 1/2`` for even ``n``).
     """
     owner = "staircase_correction"
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ParameterError(parameter_message("n", owner, "be an integer >= 1", n))
+    n = _check_n(n, owner)
     x0 = as_float_array(start, "start", owner)
     u0 = np.abs(x0)                                   # by symmetry: start below, move up
     stop = 0.0 if n % 2 else 0.5
@@ -197,6 +206,85 @@ def staircase_correction(n: int, start: Any) -> Any:
         share = np.where(overlap > 0, overlap / np.where(push > 0, push, 1.0)[None, :], 0.0)
     out = np.where(moving, 2.0 * share.sum(axis=1), np.nan)
     return float(out[0]) if np.ndim(start) == 0 else out
+
+
+def _check_n(n: Any, owner: str) -> int:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ParameterError(parameter_message("n", owner, "be an integer >= 1", n))
+    return int(n)
+
+
+def least_squares_correction(n: int, start: Any, window: Any) -> Any:
+    """Correction ``C`` of the ``"least_squares"`` time constant of ``n`` equal, equally
+    spaced contacts, from the exact ideal trajectory.
+
+    In units where the spacing, the mass and the commanded slope are 1 (``x = (V - c) / s``,
+    time in ``m / k``) the ideal startup depends on ``n`` and ``x0`` only. Each start's
+    trajectory is simulated exactly (:func:`toolkit.simulate`) over ``[0, window]``, sampled
+    at :data:`FIT_SAMPLES` equal steps, and fitted as a record is
+    (:func:`~toolkit.predictions._measure.exponential_time_constant`, the settled speed the
+    last sample): the fitted ``tau`` is ``C``.
+
+    Parameters
+    ----------
+    n : int
+        Number of contacts, ``>= 1``.
+    start : float or array_like
+        ``x0 = (V0 - c) / s`` (dimensionless).
+    window : float or array_like
+        The fit's window in units of ``m / k`` (``> 0``), broadcast against ``start``: a
+        record of ``T`` seconds has ``window = T k / m``.
+
+    Returns
+    -------
+    float or ndarray
+        ``C``; ``nan`` where the body is already at rest.
+    """
+    from ..simulation import SimulationStatus, simulate
+
+    owner = "least_squares_correction"
+    n = _check_n(n, owner)
+    x0 = as_float_array(start, "start", owner)
+    w = as_float_array(window, "window", owner)
+    if np.any(w <= 0):
+        raise ParameterError(parameter_message("window", owner, "be > 0", np.ravel(window).tolist()))
+    x0, w = np.broadcast_arrays(x0, w)
+    plant = Plant(uniform_staircase(n, 0.0, 1.0, 0.5), mass=1.0)      # k = 2 f / s = 1
+    stop = 0.0 if n % 2 else 0.5
+    out = np.full(x0.shape, np.nan)
+    for index in np.ndindex(x0.shape):
+        if abs(x0[index]) <= stop:
+            continue
+        grid = np.linspace(0.0, float(w[index]), FIT_SAMPLES)
+        run = simulate(plant, float(w[index]), v0=float(x0[index]), t_eval=grid)
+        if run.status is not SimulationStatus.SUCCESS:
+            raise ParameterError(f"least_squares_correction: the exact run from x0 = {x0[index]} "
+                                 f"did not finish: {run.message}")
+        out[index] = exponential_time_constant(grid, np.asarray(run.V), 1)[0]
+    return float(out.reshape(-1)[0]) if np.ndim(start) == 0 and np.ndim(window) == 0 else out
+
+
+def startup_correction(definition: str, n: int, start: Any, window: Any = None) -> Any:
+    """``C = tau k / m`` of the ideal startup of ``n`` equal, equally spaced contacts under
+    one of the time-constant definitions (see the module docstring).
+
+    Parameters
+    ----------
+    definition : {"least_squares", "crossing_63"}
+    n : int
+    start : float or array_like
+        ``x0 = (V0 - c) / s``.
+    window : float or array_like, optional
+        The fit's window in units of ``m / k``; needed for ``"least_squares"`` only (the
+        crossing rule reads the stop, whatever comes after it).
+    """
+    definition = check_option(definition, "definition", "startup_correction", TIME_CONSTANTS)
+    if definition == "crossing_63":
+        return staircase_correction(n, start)
+    if window is None:
+        raise ParameterError(parameter_message("window", "startup_correction",
+                                               "be given for the least_squares definition", window))
+    return least_squares_correction(n, start, window)
 
 
 def uniform_staircase(n: int, center: float, spacing: float, force: float) -> ContactSet:

@@ -134,4 +134,5 @@ FLAGS: dict[str, Limit] = {
     "sweep --workers": Limit(low=1, high=1024, integer=True),
     "predict --runs": Limit(low=2, high=MAX_RUNS, integer=True),
     "predict --seed": Limit(low=0, integer=True),
+    "predict --contacts": Limit(low=1, high=10_000, integer=True),     # Apparatus.with_contacts' bound
 }

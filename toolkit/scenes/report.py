@@ -146,7 +146,7 @@ def estimation_files(study: Any, name: str, *, plots_too: bool = True) -> dict[s
     """``estimate.json`` and (``plots_too``) ``estimate.png``, rendered in memory."""
     payload = {"estimate.json": to_json({"scene": name, **estimation_to_dict(study)}).encode()}
     if plots_too:
-        payload["estimate.png"] = plots.figure_png(plots.plot_estimation(study, title=name))
+        payload["estimate.png"] = plots.render_png(plots.plot_estimation, study, title=name)
     return payload
 
 
@@ -208,19 +208,19 @@ def study_files(result: StudyResult) -> dict[str, bytes]:
     report = result.scene.report
     if report is not None and report.plots:
         name = result.scene.name
-        payload["force_curve.png"] = plots.figure_png(plots.plot_force_curve(result.curve, title=name))
+        payload["force_curve.png"] = plots.render_png(plots.plot_force_curve, result.curve, title=name)
         if result.simulation is not None:
-            payload["simulation.png"] = plots.figure_png(
-                plots.plot_simulation(result.simulation, plant=result.plant, title=name))
+            payload["simulation.png"] = plots.render_png(
+                plots.plot_simulation, result.simulation, plant=result.plant, title=name)
         if result.schedule is not None:
-            payload["schedule.png"] = plots.figure_png(
-                plots.plot_schedule(result.schedule, result.schedule_check, plant=result.plant, title=name))
+            payload["schedule.png"] = plots.render_png(
+                plots.plot_schedule, result.schedule, result.schedule_check, plant=result.plant, title=name)
         if result.estimation is not None:
-            payload["estimation.png"] = plots.figure_png(plots.plot_estimation(result.estimation, title=name))
+            payload["estimation.png"] = plots.render_png(plots.plot_estimation, result.estimation, title=name)
         if result.control is not None:
             c = result.control
             what = f"closed loop, {c.controller}" + (f" on the {c.estimator} estimate" if c.estimator else "")
-            payload["closed_loop.png"] = plots.figure_png(plots.plot_closed_loop(c.loop, title=name, what=what))
+            payload["closed_loop.png"] = plots.render_png(plots.plot_closed_loop, c.loop, title=name, what=what)
     if result.schedule is not None:
         payload["schedule.csv"] = schedule_csv(result.schedule).encode()
         payload["schedule.json"] = to_json(result.schedule.to_dict()).encode()
@@ -243,8 +243,8 @@ def write_precision(report: Any, out_dir: str | Path, *, title: str | None = Non
     data = report.to_dict()
     exact = [row for row in report.rows if row.method == "exact" and not math.isfinite(row.max_error)]
     reference = exact[0].wall_time if exact else None
-    png = plots.figure_png(plots.plot_precision(work_precision_curves(report), reference_time=reference,
-                                                 title=title))
+    png = plots.render_png(plots.plot_precision, work_precision_curves(report), reference_time=reference,
+                           title=title)
     return write_tree(out_dir, {"precision.json": to_json(data).encode(), "precision.png": png})
 
 
@@ -286,7 +286,7 @@ def write_sweep(result: Any, out_dir: str | Path, *, statistics: tuple[str, ...]
     payload = {"results.csv": result.table.to_csv(index=False, float_format="%.17g").encode(),
                "sweep.json": to_json(sweep_to_dict(result, statistics, shortfalls)).encode()}
     if plots_too:
-        payload["sweep.png"] = plots.figure_png(plots.plot_sweep(result, title=title))
+        payload["sweep.png"] = plots.render_png(plots.plot_sweep, result, title=title)
     return write_tree(out_dir, payload)
 
 

@@ -1,0 +1,23 @@
+"""Planar active contacts for locomotion planners (imported explicitly: ``import toolkit.planar``).
+
+Legs and contact patches that slip in the plane: the force and torque they put on a body for
+a body twist (:class:`PlanarContactSet`), continuous contact regions by quadrature with an
+error bound (:mod:`~toolkit.planar.regions`), the certified equilibrium twist
+(:mod:`~toolkit.planar.equilibrium`), the simulation of a planar body through slip and stick
+(:mod:`~toolkit.planar.simulation`, also through :func:`toolkit.simulate`), gaits
+(:mod:`~toolkit.planar.gaits`) and leg-velocity allocation (:mod:`~toolkit.planar.allocation`).
+The 1-D toolkit is the special case where everything lies on a line (docs/planar.md).
+Importing this package loads numpy and scipy only; cvxpy and casadi are imported by the
+methods that use them.
+"""
+
+from __future__ import annotations
+
+from .contacts import LineReduction, PlanarContactSet, WrenchSet, limit_factors, wrench_batch
+from .equilibrium import (EquilibriumStatus, PlanarEquilibrium, geometric_median, solve_equilibrium,
+                          weiszfeld)
+
+__all__ = [
+    "PlanarContactSet", "WrenchSet", "LineReduction", "limit_factors", "wrench_batch",
+    "PlanarEquilibrium", "EquilibriumStatus", "solve_equilibrium", "geometric_median", "weiszfeld",
+]

@@ -21,8 +21,19 @@ import math
 
 import numpy as np
 
-KERNELS = {"wrench": {}, "dissipation": {}, "terms": {}, "value": {}, "newton": {},
-           "solve_small": {}}
+KERNELS = {"slip": {"inline": "always"}, "wrench": {}, "dissipation": {}, "terms": {},
+           "value": {}, "newton": {}, "solve_small": {}}
+
+
+def slip(positions: np.ndarray, velocities: np.ndarray, dmat: np.ndarray, aniso: bool, i: int,
+         Vx: float, Vy: float, w: float) -> tuple[float, float]:
+    """``z_i = D_i^T s_i`` of contact ``i``, ``s_i = v_i - V - w J r_i`` (``D_i = I``
+    unless ``aniso``)."""
+    sx = velocities[i, 0] - Vx + w * positions[i, 1]
+    sy = velocities[i, 1] - Vy - w * positions[i, 0]
+    if aniso:
+        return (dmat[i, 0, 0] * sx + dmat[i, 1, 0] * sy, dmat[i, 0, 1] * sx + dmat[i, 1, 1] * sy)
+    return sx, sy
 
 
 def wrench(positions: np.ndarray, velocities: np.ndarray, forces: np.ndarray, dmat: np.ndarray,
@@ -48,13 +59,7 @@ def wrench(positions: np.ndarray, velocities: np.ndarray, forces: np.ndarray, dm
             if f == 0.0:
                 continue
             rx, ry = positions[i, 0], positions[i, 1]
-            sx = velocities[i, 0] - Vx + w * ry
-            sy = velocities[i, 1] - Vy - w * rx
-            if aniso:
-                zx = dmat[i, 0, 0] * sx + dmat[i, 1, 0] * sy
-                zy = dmat[i, 0, 1] * sx + dmat[i, 1, 1] * sy
-            else:
-                zx, zy = sx, sy
+            zx, zy = slip(positions, velocities, dmat, aniso, i, Vx, Vy, w)
             rho = math.hypot(zx, zy)
             if rho == 0.0:
                 continue
@@ -85,13 +90,7 @@ def dissipation(positions: np.ndarray, velocities: np.ndarray, forces: np.ndarra
             f = forces[i]
             if f == 0.0:
                 continue
-            sx = velocities[i, 0] - Vx + w * positions[i, 1]
-            sy = velocities[i, 1] - Vy - w * positions[i, 0]
-            if aniso:
-                zx = dmat[i, 0, 0] * sx + dmat[i, 1, 0] * sy
-                zy = dmat[i, 0, 1] * sx + dmat[i, 1, 1] * sy
-            else:
-                zx, zy = sx, sy
+            zx, zy = slip(positions, velocities, dmat, aniso, i, Vx, Vy, w)
             total += f * math.hypot(zx, zy)
         out[m] = total
 

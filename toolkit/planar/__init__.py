@@ -16,8 +16,14 @@ from __future__ import annotations
 from .contacts import LineReduction, PlanarContactSet, WrenchSet, limit_factors, wrench_batch
 from .equilibrium import (EquilibriumStatus, PlanarEquilibrium, geometric_median, solve_equilibrium,
                           weiszfeld)
+from .regions import (CurveRegion, DiscRegion, Quadrature, RegionWrench, RingRegion, disc_force_torque,
+                      ring_force_torque, terminal_ratio)
+from .simulation import PLANAR_METHODS, PlanarPlant, PlanarSimulationResult, simulate_planar
 
 __all__ = [
     "PlanarContactSet", "WrenchSet", "LineReduction", "limit_factors", "wrench_batch",
     "PlanarEquilibrium", "EquilibriumStatus", "solve_equilibrium", "geometric_median", "weiszfeld",
+    "DiscRegion", "RingRegion", "CurveRegion", "Quadrature", "RegionWrench", "disc_force_torque",
+    "ring_force_torque", "terminal_ratio",
+    "PlanarPlant", "PlanarSimulationResult", "simulate_planar", "PLANAR_METHODS",
 ]

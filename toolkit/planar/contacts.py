@@ -590,16 +590,24 @@ class PlanarContactSet:
             return None
         if np.max(np.abs(self.velocities[:, 0] * e[1] - self.velocities[:, 1] * e[0])) > tol_v:
             return None
-        weights = self.forces
-        if self._dmat.shape[0]:
-            Me = self.limits @ e
-            if np.max(np.abs(Me[:, 0] * e[1] - Me[:, 1] * e[0])) > 16 * _EPS * np.max(np.abs(Me)):
-                return None
-            z = np.einsum("nji,j->ni", self._dmat, e)
-            weights = self.forces * np.hypot(z[:, 0], z[:, 1])
+        weights = self.line_weights(e)
+        if weights is None:
+            return None
         speeds = self.velocities @ e
         origin = centre - (centre @ e) * e
         return LineReduction(ContactSet(speeds, weights), origin, e)
+
+    def line_weights(self, e: np.ndarray) -> np.ndarray | None:
+        """Friction magnitudes along the unit direction ``e``, ``f_i |D_i^T e|`` (N), when
+        ``e`` is an axis of every limit surface (so a slip along ``e`` gets a force along
+        it); None otherwise."""
+        if not self._dmat.shape[0]:
+            return self.forces
+        Me = self.limits @ e
+        if np.max(np.abs(Me[:, 0] * e[1] - Me[:, 1] * e[0])) > 16 * _EPS * np.max(np.abs(Me)):
+            return None
+        z = np.einsum("nji,j->ni", self._dmat, e)
+        return self.forces * np.hypot(z[:, 0], z[:, 1])
 
     def equilibrium(self, translation_only: bool = False, *, method: str = "auto",
                     tol: float = 1e-10) -> Any:

@@ -84,8 +84,9 @@ class PlanarEquilibrium:
     segment : ndarray of shape (2, 2) or None, m/s
         The two ends of a segment of equilibria (status SEGMENT), else None.
     unique : bool or None
-        True when the equilibrium is certified unique (the dissipation is strictly convex
-        there: docs/planar.md section 2), False when it is known not to be (a segment, or
+        True when the equilibrium is certified unique (the sliding contacts make the
+        dissipation strictly convex there, or every contact sticks and they fix the twist:
+        docs/planar.md section 2), False when it is known not to be (a segment, or
         contacts all at one point, where only ``V + omega J r`` is fixed), None when not
         established.
     translation_only : bool
@@ -264,6 +265,9 @@ def _result(contacts: PlanarContactSet, translation_only: bool, prob: NormSum, a
         velocity = np.array([Vc[0] + omega * centre[1], Vc[1] - omega * centre[0]])
     else:
         omega = 0.0
+    if translation_only and np.any(sol.stuck):
+        # A contact that does not slip fixes the velocity: its own, exactly (a data point).
+        velocity = np.array(contacts.velocities[active[np.flatnonzero(sol.stuck)[0]]], dtype=float)
     forces = np.zeros((contacts.n, 2))
     dmat = contacts.limit_factors
     g = sol.g * F
@@ -300,7 +304,10 @@ def _unique(prob: NormSum, sol: Solution) -> bool | None:
     rho = np.hypot(z[:, 0], z[:, 1])
     slide = ~sol.stuck & (rho > 0)
     if not np.any(slide):
-        return None
+        # Every contact sticks (Phi = 0): another minimizer would make them all stick too,
+        # so the twist is unique when the stuck contacts fix it (B of full column rank).
+        flat = prob.B.reshape(-1, prob.d)
+        return bool(np.linalg.matrix_rank(flat) == prob.d) or None
     u = z[slide] / rho[slide, None]
     perp = np.stack((-u[:, 1], u[:, 0]), axis=1)                 # I - u u^T = perp perp^T
     rows = np.einsum("ni,nij->nj", perp, prob.B[slide]) * np.sqrt(prob.f[slide] / rho[slide])[:, None]
@@ -341,13 +348,9 @@ def _reduce_1d(contacts: PlanarContactSet, translation_only: bool, S: float, tol
         if line is None:
             return None
         p, e = line
-        weights = contacts.forces.copy()
-        if not contacts.isotropic:
-            Me = contacts.limits @ e
-            if np.max(np.abs(Me[:, 0] * e[1] - Me[:, 1] * e[0])) > 16 * _EPS * np.max(np.abs(Me)):
-                return None
-            z = np.einsum("nji,j->ni", contacts.limit_factors, e)
-            weights = contacts.forces * np.hypot(z[:, 0], z[:, 1])
+        weights = contacts.line_weights(e)
+        if weights is None:
+            return None
         speeds = contacts.velocities @ e
         line1d = ContactSet(speeds, weights)
     else:

@@ -145,10 +145,16 @@ def _stuck_forces(prob: NormSum, idx: np.ndarray, target: np.ndarray,
     y = np.zeros_like(g) if start is None else start.copy()
     y *= np.minimum(1.0, fk / np.maximum(np.hypot(y[:, 0], y[:, 1]), 1e-300))[:, None]
     prev, tk = y.copy(), 1.0
-    for _ in range(2000):
+    value = np.inf
+    for _ in range(500):
         grad = (A.T @ (A @ y.ravel() - target)).reshape(-1, 2)
         new = y - grad / lip
         new *= np.minimum(1.0, fk / np.maximum(np.hypot(new[:, 0], new[:, 1]), 1e-300))[:, None]
+        r = A @ new.ravel() - target
+        new_value = float(r @ r)
+        if new_value > value:                    # adaptive restart (O'Donoghue & Candes)
+            tk = 1.0
+        value = min(value, new_value)
         t_next = 0.5 * (1 + np.sqrt(1 + 4 * tk * tk))
         y = new + ((tk - 1) / t_next) * (new - prev)
         y *= np.minimum(1.0, fk / np.maximum(np.hypot(y[:, 0], y[:, 1]), 1e-300))[:, None]
@@ -265,8 +271,43 @@ def _polish(prob: NormSum, x_bar: np.ndarray, stuck: np.ndarray) -> tuple[np.nda
     return origin + basis @ t, steps
 
 
+def _candidates(power: np.ndarray, zone_cut: float) -> list[np.ndarray]:
+    """Candidate sets of sticking contacts from the terms ``f_i |z_i|`` at a point: those below
+    ``zone_cut``, those small against the total at a few levels, the smallest one, none."""
+    total = float(np.sum(power))
+    candidates: list[np.ndarray] = []
+    one = np.zeros(power.size, bool)
+    one[int(np.argmin(power))] = True
+    cuts = [zone_cut * total / max(total, 1e-300)] if zone_cut > 0 else []
+    for zone in ([power <= c for c in cuts + [1e-12 * total, 1e-9 * total, 1e-6 * total,
+                                             1e-3 * total]] + [one, np.zeros(power.size, bool)]):
+        if not any(np.array_equal(zone, c) for c in candidates):
+            candidates.append(zone)
+    return candidates
+
+
+def _polish_best(prob: NormSum, x: np.ndarray, candidates: list[np.ndarray], tol: float,
+                 best: tuple, g_hint: np.ndarray | None) -> tuple[tuple, int]:
+    """Polish on each candidate set, keep the smallest certified gap; stop once it is at
+    the rounding level (``1e-3 tol``)."""
+    steps_total = 0
+    for stuck in candidates:
+        polished = _polish(prob, x, stuck)
+        if polished is None:
+            continue
+        xp, steps = polished
+        steps_total += steps
+        gap, g, res, st = certify(prob, xp, stuck, g_hint)
+        if gap <= best[0]:
+            best = (gap, xp, g, res, st)
+        if gap <= 1e-3 * tol:
+            break
+    return best, steps_total
+
+
 def solve_fast(prob: NormSum, tol: float, x0: np.ndarray | None = None) -> Solution:
-    """Certified minimizer of ``P`` by smoothing path following, exact polish, certificate.
+    """Certified minimizer of ``P``: exact Newton, then exact polish on the contacts that
+    stick, then (if still not certified) pseudo-Huber path following and the polish again.
 
     Parameters
     ----------
@@ -285,9 +326,16 @@ def solve_fast(prob: NormSum, tol: float, x0: np.ndarray | None = None) -> Solut
     best = (gap, trial, g, res, st)
     if gap <= tol:
         return Solution(trial, g, gap, res, st, iterations, "newton")
+    # Newton stalls at a kink: polish on the contacts that (nearly) stick there.
+    z = prob.z(trial)
+    best, steps = _polish_best(prob, trial, _candidates(prob.f * np.hypot(z[:, 0], z[:, 1]), 0.0),
+                               tol, best, None)
+    iterations += steps
+    if best[0] <= tol:
+        gap, x, g, res, st = best
+        return Solution(x, g, gap, res, st, iterations, "newton")
     mu = 0.1 * fmean
     mu_end = max(0.05 * tol / prob.n, 1e-14 * fmean)
-    g_bar = None
     while True:
         iterations += abs(_newton(prob, x, mu, 1e-3 * mu * prob.n if mu > mu_end else 1e-6 * mu, 50))
         z = prob.z(x)
@@ -298,31 +346,11 @@ def solve_fast(prob: NormSum, tol: float, x0: np.ndarray | None = None) -> Solut
             break
         mu = max(0.1 * mu, mu_end)
     gap, g, res = _certify_given(prob, x, g_bar)
-    if best is None or gap < best[0]:
+    if gap < best[0]:
         best = (gap, x.copy(), g, res, np.zeros(prob.n, bool))
-    # Exact polish: first every contact inside the smoothing zone, then the nearest one, then none.
-    zone = prob.f * rho <= 100.0 * mu
-    order = np.argsort(prob.f * rho)
-    candidates = [zone]
-    if np.count_nonzero(zone) != 1:
-        one = np.zeros(prob.n, bool)
-        one[order[0]] = True
-        candidates.append(one)
-    if np.any(zone):
-        candidates.append(np.zeros(prob.n, bool))
-    for stuck in candidates:
-        polished = _polish(prob, x, stuck)
-        if polished is None:
-            continue
-        xp, steps = polished
-        iterations += steps
-        gap, g, res, st = certify(prob, xp, stuck, g_bar)
-        if gap <= best[0]:
-            best = (gap, xp, g, res, st)
-        if gap <= 1e-3 * tol:
-            break
+    best, steps = _polish_best(prob, x, _candidates(prob.f * rho, 100.0 * mu), tol, best, g_bar)
     gap, x, g, res, st = best
-    return Solution(x, g, gap, res, st, iterations, "newton")
+    return Solution(x, g, gap, res, st, iterations + steps, "newton")
 
 
 def _certify_given(prob: NormSum, x: np.ndarray, g: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:

@@ -66,7 +66,7 @@ class PlanarEquilibrium:
         ``F_tot``.
     speed_scale : float, m/s
         ``sum f_i |v_i - v_mean| / F_tot`` (force-weighted mean deviation of the contact
-        velocities; 1 m/s when they are all equal): the scale of the gap.
+        velocities), at least ``1e-9 max |v_i|`` (1 m/s when all are 0): the scale of the gap.
     dissipation : float, W
         ``Phi`` at the returned twist.
     contact_forces : ndarray of shape (n, 2), N
@@ -133,21 +133,26 @@ class PlanarEquilibrium:
 
 
 def speed_scale(contacts: PlanarContactSet) -> float:
-    """``sum f_i |v_i - v_mean| / F_tot`` (m/s; 1 when all velocities are equal), with
-    ``v_mean`` the force-weighted mean velocity: the scale of the equilibrium's gap."""
+    """``sum f_i |v_i - v_mean| / F_tot`` (m/s), with ``v_mean`` the force-weighted mean
+    velocity, but at least ``1e-9 max |v_i|`` (1 when every velocity is 0): the scale of the
+    equilibrium's gap."""
     f = contacts.forces
     mean = f @ contacts.velocities / contacts.total_force
     dev = contacts.velocities - mean
     scale = float(f @ np.hypot(dev[:, 0], dev[:, 1])) / contacts.total_force
+    # A spread at the rounding of the velocities themselves is no spread (equal velocities).
+    scale = max(scale, 1e-9 * float(np.max(np.abs(contacts.velocities))))
     return scale if scale > 0 else 1.0
 
 
 def twist_problem(contacts: PlanarContactSet, translation_only: bool, centre: np.ndarray,
-                  S: float, L: float) -> tuple[NormSum, np.ndarray]:
+                  S: float, L: float, shift: np.ndarray | None = None) -> tuple[NormSum, np.ndarray]:
     """The scaled :class:`~toolkit.planar._socp.NormSum` of the equilibrium (``Q`` None).
 
-    Unknowns ``x = (Vc / S, omega L / S)`` with ``Vc`` the velocity at ``centre``; weights
-    ``f_i / F_tot``. Returns the problem and the indices of the contacts it holds (``f_i > 0``).
+    Unknowns ``x = ((Vc - shift) / S, omega L / S)`` with ``Vc`` the velocity at ``centre``
+    and ``shift`` a velocity taken off every contact (the mean: a Galilean change of frame that
+    keeps the scaled data of order 1); weights ``f_i / F_tot``. Returns the problem and the
+    indices of the contacts it holds (``f_i > 0``).
     """
     active = np.flatnonzero(contacts.forces > 0)
     f = contacts.forces[active] / contacts.total_force
@@ -159,7 +164,7 @@ def twist_problem(contacts: PlanarContactSet, translation_only: bool, centre: np
     if not translation_only:
         A[:, 0, 2] = -r[:, 1]
         A[:, 1, 2] = r[:, 0]
-    v = contacts.velocities[active] / S
+    v = (contacts.velocities[active] - (0.0 if shift is None else shift)) / S
     dmat = contacts.limit_factors
     if dmat.shape[0]:
         Dt = np.swapaxes(dmat[active], 1, 2)
@@ -232,7 +237,8 @@ def solve_equilibrium(contacts: PlanarContactSet, translation_only: bool = False
     centre = contacts.forces @ contacts.positions / contacts.total_force
     rel = contacts.positions - centre
     L = float(np.max(np.hypot(rel[:, 0], rel[:, 1]))) or 1.0
-    prob, active = twist_problem(contacts, bool(translation_only), centre, S, L)
+    mean = contacts.forces @ contacts.velocities / contacts.total_force
+    prob, active = twist_problem(contacts, bool(translation_only), centre, S, L, mean)
     scaled_tol = tol
     message = ""
     try:
@@ -249,18 +255,18 @@ def solve_equilibrium(contacts: PlanarContactSet, translation_only: bool = False
     except Exception as error:          # a back end that fails: a status, not a traceback
         return _failed(contacts, translation_only, S, tol, method, started, str(error))
     return _result(contacts, bool(translation_only), prob, active, sol, centre, S, L, tol,
-                   started, message)
+                   started, message, shift=mean)
 
 
 def _result(contacts: PlanarContactSet, translation_only: bool, prob: NormSum, active: np.ndarray,
             sol: Solution, centre: np.ndarray, S: float, L: float, tol: float, started: float,
             message: str, segment: np.ndarray | None = None, unique: bool | None = None,
-            velocity: np.ndarray | None = None) -> PlanarEquilibrium:
+            velocity: np.ndarray | None = None, shift: np.ndarray | None = None) -> PlanarEquilibrium:
     F = contacts.total_force
     x = sol.x
     if velocity is None:
         omega = 0.0 if translation_only else float(x[2] * S / L)
-        Vc = x[:2] * S
+        Vc = x[:2] * S + (0.0 if shift is None else shift)
         # Velocity at the reference point: V = Vc - omega J centre.
         velocity = np.array([Vc[0] + omega * centre[1], Vc[1] - omega * centre[0]])
     else:
@@ -375,9 +381,10 @@ def _reduce_1d(contacts: PlanarContactSet, translation_only: bool, S: float, tol
     centre = contacts.forces @ contacts.positions / contacts.total_force
     rel = contacts.positions - centre
     L = float(np.max(np.hypot(rel[:, 0], rel[:, 1]))) or 1.0
-    prob, act = twist_problem(contacts, translation_only, centre, S, L)
-    Vc = velocity if translation_only else velocity          # omega = 0: Vc = V
-    x = Vc / S if translation_only else np.array([Vc[0] / S, Vc[1] / S, 0.0])
+    mean = contacts.forces @ contacts.velocities / contacts.total_force
+    prob, act = twist_problem(contacts, translation_only, centre, S, L, mean)
+    Vc = (velocity - mean) / S                                # omega = 0: Vc = V
+    x = Vc if translation_only else np.array([Vc[0], Vc[1], 0.0])
     gap, g, residual, stuck = certify(prob, x)
     sol = Solution(x, g, gap, residual, stuck, 0, "median-1d")
     return _result(contacts, translation_only, prob, act, sol, centre, S, L, tol, started,

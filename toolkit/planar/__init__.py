@@ -19,6 +19,10 @@ from .equilibrium import (EquilibriumStatus, PlanarEquilibrium, geometric_median
 from .regions import (CurveRegion, DiscRegion, Quadrature, RegionWrench, RingRegion, disc_force_torque,
                       ring_force_torque, terminal_ratio)
 from .simulation import PLANAR_METHODS, PlanarPlant, PlanarSimulationResult, simulate_planar
+from .gaits import (AveragedModel, CycleMotion, Gait, GaitComparison, averaged_model, compare_averaged,
+                    dynamic_cycles, force_twist_map, quasi_static_cycle, serpenoid, tripod_gait)
+from .allocation import (PlanarAllocationResult, PlanarAllocationStatus, allocate_resistance, allocate_twist,
+                         infeasibility_margin)
 
 __all__ = [
     "PlanarContactSet", "WrenchSet", "LineReduction", "limit_factors", "wrench_batch",
@@ -26,4 +30,8 @@ __all__ = [
     "DiscRegion", "RingRegion", "CurveRegion", "Quadrature", "RegionWrench", "disc_force_torque",
     "ring_force_torque", "terminal_ratio",
     "PlanarPlant", "PlanarSimulationResult", "simulate_planar", "PLANAR_METHODS",
+    "Gait", "CycleMotion", "AveragedModel", "GaitComparison", "tripod_gait", "serpenoid",
+    "force_twist_map", "quasi_static_cycle", "dynamic_cycles", "averaged_model", "compare_averaged",
+    "allocate_twist", "allocate_resistance", "infeasibility_margin", "PlanarAllocationResult",
+    "PlanarAllocationStatus",
 ]

@@ -549,7 +549,11 @@ class PlanarContactSet:
             z, BA = s, A
         rho = np.hypot(z[..., 0], z[..., 1])
         active = self.forces > 0
-        stuck = np.any((rho == 0.0) & active, axis=-1)
+        # A slip at the rounding of the velocities it is computed from is a stick.
+        vel, rate = _as_twists(V, omega, "PlanarContactSet.resistance")
+        size = (np.abs(self.velocities).max(axis=1) + np.abs(vel).max(axis=-1)[..., None]
+                + np.abs(rate)[..., None] * np.abs(self.positions).max(axis=1))
+        stuck = np.any((rho <= 64 * _EPS * size) & active, axis=-1)
         with np.errstate(divide="ignore", invalid="ignore"):
             u = z / rho[..., None]
             scale = np.where(active, self.forces / rho, 0.0)

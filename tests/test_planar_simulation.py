@@ -45,7 +45,7 @@ def test_disc_stops_sliding_and_spinning_together_at_the_terminal_ratio(start):
     plant = _disc_plant()
     run = tk.simulate(plant, 5.0, v0=[v0, 0.0], omega0=w0)
     assert run.stop_time is not None and run.stop_time < 5.0
-    ratio = float(run.message.split("->")[1].strip())
+    ratio = run.terminal_ratio
     # The reduced ODE's ratio converges to the fixed point of F = 2 eps T (Brent, 1e-15).
     np.testing.assert_allclose(ratio, terminal_ratio(), rtol=0, atol=1e-10)
     t = np.linspace(0, run.stop_time * (1 - 1e-9), 200)

@@ -153,6 +153,9 @@ class PlanarSimulationResult:
         A bound on the solve error of every step's velocity, ``sqrt(2 gap / m)`` at its worst
         (0 for the other methods); the time-discretization error is not in it (see
         :func:`toolkit.planar.precision.precision_report`).
+    terminal_ratio : float or None
+        For ``"exact"`` on a passive axisymmetric region: the limit of ``|V| / (R |omega|)``
+        as both vanish (the reduced ODE run to ``R |omega| = e^-80`` of its start), else None.
     """
 
     t: np.ndarray
@@ -169,6 +172,7 @@ class PlanarSimulationResult:
     stop_time: float | None = None
     max_gap: float = 0.0
     solve_error: float = 0.0
+    terminal_ratio: float | None = None
 
     @property
     def success(self) -> bool:
@@ -187,7 +191,8 @@ class PlanarSimulationResult:
                 "message": self.message, "t_final": float(self.t[-1]),
                 "velocity_final": self.velocity[-1].tolist(), "omega_final": float(self.omega[-1]),
                 "steps": self.steps, "wall_time": self.wall_time, "stop_time": self.stop_time,
-                "max_gap": self.max_gap, "solve_error": self.solve_error}
+                "max_gap": self.max_gap, "solve_error": self.solve_error,
+                "terminal_ratio": self.terminal_ratio}
 
 
 def _freeze(*arrays: np.ndarray) -> None:
@@ -437,9 +442,10 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
         v[moving], w[moving], dist[moving], turn[moving] = y[0] * wt, wt, y[3], y[4]
         y_end = sol.sol(tau_end)
         dist[~moving], turn[~moving] = y_end[3], y_end[4]
+        ratio = float(y_end[0])
         message = (f"passive axisymmetric region: reduced ODE of the closed-form force and torque "
                    f"(DOP853, rtol 1e-13); stops at t = {stop:.12g} s with v / (R omega) -> "
-                   f"{float(y_end[0]):.12g}")
+                   f"{ratio:.12g}")
         setting = "reduced ODE, DOP853 rtol=1e-13"
     else:
         tg = np.minimum(grid, stop)
@@ -449,6 +455,7 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
         else:
             w = np.maximum(w0 - b * T0 * grid, 0.0)
             turn = (w0 * tg - 0.5 * b * T0 * tg * tg) / R
+        ratio = None
         message = (f"passive axisymmetric region, pure {'slide' if w0 == 0 else 'spin'}: "
                    f"closed form; stops at t = {stop:.12g} s")
         setting = "closed form"
@@ -457,7 +464,8 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
     heading = s.heading + spin * turn
     omega = spin * w / R
     return _result(grid, pos, heading, vel, omega, SimulationStatus.SUCCESS, "exact", setting,
-                   message, steps, started, stop_time=float(stop) if stop <= t_end else None)
+                   message, steps, started, stop_time=float(stop) if stop <= t_end else None,
+                   terminal_ratio=ratio)
 
 
 # -- Moreau-Jean ---------------------------------------------------------------------------------

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 KERNELS = {"slip": {"inline": "always"}, "wrench": {}, "dissipation": {}, "terms": {},
-           "value": {}, "newton": {}, "solve_small": {}}
+           "value": {}, "newton": {}, "solve_small": {}, "slide_forces": {}}
 
 
 def slip(positions: np.ndarray, velocities: np.ndarray, dmat: np.ndarray, aniso: bool, i: int,
@@ -282,3 +282,36 @@ def newton(c: np.ndarray, B: np.ndarray, f: np.ndarray, Q: np.ndarray, b: np.nda
         for j in range(d):
             x[j] = trial[j]
     return max_iter
+
+
+def slide_forces(c: np.ndarray, B: np.ndarray, f: np.ndarray, x: np.ndarray, g: np.ndarray,
+                 stuck: np.ndarray) -> float:
+    """The certificate's forces of the sliding contacts at ``x``: ``g_i = f_i z_i / |z_i|``
+    (into ``g``, shape (n, 2)), ``stuck[i]`` set where ``|z_i|`` is at the rounding of its own
+    terms (``64 eps (max |c_i| + max |B_i| max |x|)``: the direction is noise) with ``g_i = 0``
+    there; returns ``sum f_i |z_i|``."""
+    n = f.size
+    d = x.size
+    xmax = 0.0
+    for k in range(d):
+        xmax = max(xmax, abs(x[k]))
+    total = 0.0
+    for i in range(n):
+        z0 = c[i, 0]
+        z1 = c[i, 1]
+        bmax = 0.0
+        for k in range(d):
+            z0 -= B[i, 0, k] * x[k]
+            z1 -= B[i, 1, k] * x[k]
+            bmax = max(bmax, abs(B[i, 0, k]), abs(B[i, 1, k]))
+        rho = math.hypot(z0, z1)
+        total += f[i] * rho
+        size = max(abs(c[i, 0]), abs(c[i, 1])) + bmax * xmax
+        if stuck[i] or rho <= 64.0 * 2.220446049250313e-16 * size:
+            stuck[i] = True
+            g[i, 0] = 0.0
+            g[i, 1] = 0.0
+        else:
+            g[i, 0] = f[i] * z0 / rho
+            g[i, 1] = f[i] * z1 / rho
+    return total

@@ -175,15 +175,12 @@ def certify(prob: NormSum, x: np.ndarray, stuck: np.ndarray | None = None,
     least-norm distribution of the residual and shrinking into the discs (docs/planar.md
     section 2). Returns ``(gap, g, residual, stuck)``.
     """
-    z = prob.z(x)
-    rho = np.hypot(z[:, 0], z[:, 1])
-    # A slip at the rounding of its own terms is a stick (its direction is noise).
-    size = np.max(np.abs(prob.c), axis=1) + np.abs(prob.B).reshape(prob.n, -1).max(axis=1) * np.max(np.abs(x))
-    zero = rho <= 64 * _EPS * size
-    stuck = zero if stuck is None else (stuck | zero)
-    g = np.zeros_like(z)
-    slide = ~stuck
-    g[slide] = (prob.f[slide] / rho[slide])[:, None] * z[slide]
+    g = np.empty((prob.n, 2))
+    stuck = np.zeros(prob.n, bool) if stuck is None else np.array(stuck, dtype=bool)
+    # Sliding forces and the sum of the terms in one pass (a slip at the rounding of its own
+    # terms counts as a stick: its direction is noise).
+    point = np.ascontiguousarray(x, dtype=float)
+    phi = float(kernels("planar", prob.n).slide_forces(prob.c, prob.B, prob.f, point, g, stuck))
     r_slide = prob.BT(g)
     if prob.Q is None:
         want = -prob.b
@@ -195,12 +192,11 @@ def certify(prob: NormSum, x: np.ndarray, stuck: np.ndarray | None = None,
         g[idx] = _stuck_forces(prob, idx, want - r_slide, hint)
     r = prob.BT(g)
     residual = r - want
-    phi = float(np.sum(prob.f * rho))
     if prob.Q is None:
         gap, g = _balanced_gap(prob, x, g, residual, phi)
     else:
         rb = r + prob.b
-        dual = float(np.sum(g * prob.c)) - 0.5 * float(rb @ np.linalg.solve(prob.Q, rb))
+        dual = float(g.ravel() @ prob.c.ravel()) - 0.5 * float(rb @ np.linalg.solve(prob.Q, rb))
         gap = phi + 0.5 * float(x @ prob.Q @ x) - float(prob.b @ x) - dual
     return max(gap, 0.0), g, residual, stuck
 
@@ -216,7 +212,7 @@ def _balanced_gap(prob: NormSum, x: np.ndarray, g: np.ndarray, residual: np.ndar
     Bl = prob.Bx(lam)
     theta = float(np.max(np.hypot(Bl[:, 0], Bl[:, 1])))
     g2 = (g - prob.f[:, None] * Bl) / (1.0 + theta)
-    dual = float(np.sum(g2 * prob.c)) + 0.0
+    dual = float(g2.ravel() @ prob.c.ravel())
     # P(x) - dual: with b = 0 the dual objective is sum g . c.
     return phi - float(prob.b @ x) - dual, g2
 
@@ -252,7 +248,7 @@ def _polish(prob: NormSum, x_bar: np.ndarray, stuck: np.ndarray) -> tuple[np.nda
     scale = max(1.0, float(np.max(np.abs(rhs))), float(np.max(np.abs(A))) * float(np.max(np.abs(origin))))
     if np.max(np.abs(A @ origin - rhs)) > 1e-11 * scale:
         return None
-    _, sv, vt = np.linalg.svd(A)
+    _, sv, vt = np.linalg.svd(A, full_matrices=A.shape[0] < A.shape[1])     # vt: d x d
     rank = int(np.sum(sv > 1e-12 * sv[0])) if sv.size else 0
     basis = vt[rank:].T
     if basis.shape[1] == 0:

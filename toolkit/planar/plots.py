@@ -25,7 +25,7 @@ def plot_sliding_disc(result: Any, radius: float, *, terminal_ratio: float | Non
 
     Returns
     -------
-    matplotlib.figure.Figure
+    pair of matplotlib Axes
     """
     import matplotlib.pyplot as plt
 
@@ -51,12 +51,12 @@ def plot_sliding_disc(result: Any, radius: float, *, terminal_ratio: float | Non
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    return fig
+    return axes
 
 
 def plot_planar_precision(report: Any, *, ax: Any = None, title: str | None = None) -> Any:
     """Error against run time of a :class:`~toolkit.planar.precision.PlanarPrecisionReport`
-    (log-log, one line per method)."""
+    (log-log, one line per method); returns the Axes."""
     import matplotlib.pyplot as plt
 
     if ax is None:
@@ -73,4 +73,4 @@ def plot_planar_precision(report: Any, *, ax: Any = None, title: str | None = No
     if title:
         ax.set_title(title)
     fig.tight_layout()
-    return fig
+    return ax

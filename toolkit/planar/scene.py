@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ParameterError, parameter_message
+from ..shortfall import Shortfall
 from .contacts import PlanarContactSet
 from .equilibrium import PlanarEquilibrium
 from .precision import PlanarPrecisionReport, precision_report
@@ -109,9 +110,9 @@ class PlanarStudyResult:
     equilibrium : PlanarEquilibrium or None
         The equilibrium twist of a leg set (``body = "legs"``).
     precision : PlanarPrecisionReport or None
-    shortfalls : tuple of str
-        Requests missed (a run stopped by its budget, a ratio off the published value by more
-        than its rounding).
+    shortfalls : tuple of Shortfall
+        Requests missed (stage ``"planar"``: a run stopped by its budget, a ratio off the
+        published value by more than its rounding).
     """
 
     objects: PlanarSceneObjects
@@ -121,7 +122,7 @@ class PlanarStudyResult:
     published: tuple[float, str] | None
     equilibrium: PlanarEquilibrium | None
     precision: PlanarPrecisionReport | None
-    shortfalls: tuple[str, ...] = ()
+    shortfalls: tuple[Shortfall, ...] = ()
 
     def to_dict(self, samples: int = 101) -> dict[str, Any]:
         """JSON form (the value of the key ``planar``): ``body``, ``method``, ``status``,
@@ -158,7 +159,7 @@ class PlanarStudyResult:
             data["trajectory"] = {"t": sim.t[pick].tolist(), "speed": speed.tolist(), "rim_speed": rim.tolist(),
                                   "ratio": [None if not math.isfinite(r) else float(r) for r in ratio]}
         data["precision"] = None if self.precision is None else self.precision.to_dict()
-        data["shortfalls"] = list(self.shortfalls)
+        data["shortfalls"] = [s.to_dict() for s in self.shortfalls]
         return data
 
     def lines(self) -> list[str]:
@@ -193,7 +194,8 @@ def run_planar(objects: PlanarSceneObjects) -> PlanarStudyResult:
                           **objects.options)
     shortfalls = []
     if not sim.success:
-        shortfalls.append(f"the simulation stopped before t_end: {sim.message}")
+        shortfalls.append(Shortfall("planar", f"the simulation stopped before t_end: {sim.message}",
+                                    spec.t_end - float(sim.t[-1]), "s"))
     ratio = closed = published = None
     region = objects.region
     if region is not None:
@@ -205,14 +207,17 @@ def run_planar(objects: PlanarSceneObjects) -> PlanarStudyResult:
         if spec.body in ("disc", "ring") and abs(k - region.inertia_ratio) <= 1e-12:
             published = PUBLISHED[kind]
         if ratio is not None and published is not None and abs(ratio - published[0]) > PUBLISHED_TOLERANCE:
-            shortfalls.append(f"terminal ratio {ratio:.6g} is off the published {published[0]:g} by "
-                              f"more than its rounding {PUBLISHED_TOLERANCE:g}")
+            shortfalls.append(Shortfall("planar", f"terminal ratio {ratio:.6g} is off the published "
+                                        f"{published[0]:g} by more than its rounding {PUBLISHED_TOLERANCE:g}",
+                                        abs(ratio - published[0]), "1"))
     equilibrium = None
     if spec.body == "legs":
         equilibrium = plant.contacts.equilibrium()
     report = None
     if spec.precision is not None:
-        report = precision_report(plant, spec.t_end, v0=objects.v0, omega0=objects.omega0,
-                                  steps=tuple(spec.precision.get("steps", (4e-3, 2e-3, 1e-3))),
+        steps = tuple(spec.precision.get("steps", (4e-3, 2e-3, 1e-3)))
+        resolutions = spec.precision.get("resolutions")
+        report = precision_report(plant, spec.t_end, v0=objects.v0, omega0=objects.omega0, steps=steps,
+                                  resolutions=None if resolutions is None else tuple(int(r) for r in resolutions),
                                   epsilons=tuple(spec.precision.get("epsilons", (1e-2,))))
     return PlanarStudyResult(objects, sim, ratio, closed, published, equilibrium, report, tuple(shortfalls))

@@ -242,8 +242,8 @@ def simulate_planar(plant: PlanarPlant, t_end: float, *, v0: Any = 0.0, omega0: 
     budget : Budget, optional
         Wall time, steps and samples (default ``Budget()``).
     **options
-        ``"moreau"``: ``step`` (s, default ``t_end / 1000``), ``tol`` (relative duality gap
-        of a step, default 1e-12). ``"smooth"``: ``epsilon`` (m/s, required), ``solver``
+        ``"moreau"``: ``step`` (s, default ``t_end / 1000``), ``tol`` (duality gap of a step
+        relative to its kinetic and dissipation terms, default 1e-12). ``"smooth"``: ``epsilon`` (m/s, required), ``solver``
         (``"RK45"``, ``"Radau"``, ``"LSODA"``, ``"BDF"``; default ``"Radau"``), ``rtol``,
         ``atol``.
 
@@ -559,7 +559,11 @@ def _moreau_step(world: PlanarContactSet, M: np.ndarray, C: np.ndarray, wext: np
     Q = np.diag(D * (M + h * C) * D) / scale
     b = D * (M * x + h * wext) / scale
     prob = NormSum(prob.c, prob.B, prob.f, Q, b)
-    sol = solve_fast(prob, tol, x / D)
+    start = x / D
+    # The gap is asked relative to the step's own scale (the kinetic term dominates for
+    # small steps: its rounding would otherwise exceed an absolute tolerance).
+    relative = tol * max(1.0, float(start @ Q @ start), float(np.sum(prob.f * np.hypot(prob.c[:, 0], prob.c[:, 1]))))
+    sol = solve_fast(prob, relative, start)
     return sol.x * D, float(sol.gap * scale)
 
 

@@ -187,9 +187,9 @@ def terms(c: np.ndarray, B: np.ndarray, f: np.ndarray, Q: np.ndarray, b: np.ndar
 
 
 def solve_small(A: np.ndarray, r: np.ndarray, out: np.ndarray) -> bool:
-    """Solve the symmetric positive semi-definite system ``A out = r`` (d <= 3) by Cholesky
-    with a relative diagonal shift ``1e-14 trace(A)`` where a pivot would vanish; False when
-    ``A`` is zero or not finite."""
+    """Solve the symmetric positive semi-definite system ``A out = r`` (d <= 3) by Cholesky,
+    a pivot at or below ``1e-14 trace(A)`` (lost to rounding) replaced by that shift; False
+    when ``A`` is zero or not finite."""
     d = r.size
     L = np.zeros((d, d))
     scale = 0.0
@@ -202,8 +202,8 @@ def solve_small(A: np.ndarray, r: np.ndarray, out: np.ndarray) -> bool:
         s = A[j, j]
         for k in range(j):
             s -= L[j, k] * L[j, k]
-        if s <= shift:
-            s += shift
+        if not s > shift:               # a pivot lost to rounding (or NaN): the shift itself
+            s = shift
         L[j, j] = math.sqrt(s)
         for i in range(j + 1, d):
             t = A[i, j]

@@ -21,6 +21,8 @@ from .regions import (CurveRegion, DiscRegion, Quadrature, RegionWrench, RingReg
 from .simulation import PLANAR_METHODS, PlanarPlant, PlanarSimulationResult, simulate_planar
 from .gaits import (AveragedModel, CycleMotion, Gait, GaitComparison, averaged_model, compare_averaged,
                     dynamic_cycles, force_twist_map, quasi_static_cycle, serpenoid, tripod_gait)
+from .precision import PlanarPrecisionReport, PlanarPrecisionRow, precision_report
+from .plots import plot_planar_precision, plot_sliding_disc
 from .allocation import (PlanarAllocationResult, PlanarAllocationStatus, allocate_resistance, allocate_twist,
                          infeasibility_margin)
 
@@ -33,5 +35,6 @@ __all__ = [
     "Gait", "CycleMotion", "AveragedModel", "GaitComparison", "tripod_gait", "serpenoid",
     "force_twist_map", "quasi_static_cycle", "dynamic_cycles", "averaged_model", "compare_averaged",
     "allocate_twist", "allocate_resistance", "infeasibility_margin", "PlanarAllocationResult",
-    "PlanarAllocationStatus",
+    "PlanarAllocationStatus", "precision_report", "PlanarPrecisionReport", "PlanarPrecisionRow",
+    "plot_sliding_disc", "plot_planar_precision",
 ]

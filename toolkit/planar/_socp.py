@@ -229,7 +229,10 @@ def _start(prob: NormSum) -> np.ndarray:
 
 
 def _newton(prob: NormSum, x: np.ndarray, mu: float, tol: float, max_iter: int,
-            floor: float = 1e-300) -> int:
+            floor: float = 1e-12) -> int:
+    """The kernel's damped Newton on ``prob`` (scaled data of order 1: a slip below
+    ``floor`` gets the curvature of ``floor`` in the exact Hessian, the polish handles
+    contacts that stick)."""
     Q = prob._Qm()
     return int(kernels("planar", prob.n * max(max_iter, 1)).newton(
         prob.c, prob.B, prob.f, Q, prob.b, x, mu, tol, max_iter, floor))

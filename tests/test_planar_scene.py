@@ -108,3 +108,22 @@ def test_one_dimensional_scenes_never_load_the_planar_package(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
                          env=_env(), check=True)
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_docs_planar_sections_cited_in_the_code_exist():
+    import re
+    import subprocess as sp
+
+    doc = (ROOT / "docs" / "planar.md").read_text()
+    sections = set(re.findall(r"^## (\d+)\.", doc, flags=re.M))
+    files = sp.run(["git", "ls-files", "--", "toolkit", "tests", "notebooks"], cwd=ROOT, capture_output=True,
+                   text=True, check=True).stdout.split()
+    cite = re.compile(r"docs/planar\.md`?,?\s+sections?\s+(\d+)")
+    seen = 0
+    for name in files:
+        path = ROOT / name
+        if path.suffix in (".py", ".toml", ".ipynb") and path.is_file():
+            for match in cite.finditer(path.read_text(encoding="utf-8")):
+                seen += 1
+                assert match.group(1) in sections, f"{name} cites docs/planar.md section {match.group(1)}"
+    assert seen >= 15

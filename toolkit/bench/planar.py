@@ -24,7 +24,9 @@ import warnings
 import numpy as np
 
 from toolkit._compiled import load
-from toolkit.planar import PlanarContactSet, geometric_median, weiszfeld
+from toolkit.planar import (PlanarAllocationStatus, PlanarContactSet, allocate_twist, compare_averaged,
+                            dynamic_cycles, geometric_median, infeasibility_margin, quasi_static_cycle,
+                            tripod_gait, weiszfeld)
 
 TARGET_RATIO = 20.0
 
@@ -98,8 +100,46 @@ def main(argv: list[str] | None = None) -> int:
                   f"{gap_f:.1e}, cvxpy {ref.gap / (F * S):.1e}; |Phi_fast - Phi_cvxpy| "
                   f"{abs(fast.dissipation - ref.dissipation) / (F * S):.1e}; |x_fast - x_cvxpy| "
                   f"{float(np.max(np.abs(fast.twist - ref.twist))) / S:.1e}")
+    ok &= _allocation()
+    ok &= _gait()
     print(f"load average {os.getloadavg()[0]:.2f}; {'met' if ok else 'MISSED'}")
     return 0 if ok else 1
+
+
+def _allocation() -> bool:
+    """Leg velocities for target twists of a hexapod standing on six legs (0.5 x 9.81 N of
+    friction): realized within 1e-9, or infeasible with a checked certificate."""
+    hips = np.array([[0.1, 0.06], [0.0, 0.06], [-0.1, 0.06], [0.1, -0.06], [0.0, -0.06], [-0.1, -0.06]])
+    loads = np.full(6, 9.81 * 0.5 / 6)
+    ok = True
+    print("allocation (six legs, speed limit per leg):")
+    for target, vmax in (((0.1, 0.0, 0.3), 0.13), ((0.1, 0.0, 0.3), 0.11), ((0.1, 0.0, 0.5), 0.13),
+                         ((0.1, 0.0, 0.8), 0.12), ((0.3, 0.0, 0.0), 0.2)):
+        r = allocate_twist(hips, loads, vmax, target)
+        if r.status is PlanarAllocationStatus.REALIZED:
+            ok &= r.error <= 1e-9
+            detail = f"error {r.error:.1e} m/s, {int(r.slipping.sum())} legs slip"
+        else:
+            margin = infeasibility_margin(hips, loads, vmax, target, r.certificate) if r.certificate is not None else np.nan
+            ok &= r.status is PlanarAllocationStatus.INFEASIBLE and margin < 0
+            detail = f"certified: residual wrench >= {r.bound:.3g} N, margin {margin:.3g} W"
+        print(f"  target {target}, |v| <= {vmax}: {r.status.name} ({detail}; {r.wall_time * 1e3:.0f} ms)")
+    return ok
+
+
+def _gait() -> bool:
+    """A turning tripod: net motion over a cycle, quasi-static and dynamic (certified), against
+    the averaged (resistive-force) model."""
+    gait = tripod_gait(turn=0.3, load_shift=0.25, samples=240)
+    qs = quasi_static_cycle(gait, 240)
+    dyn = dynamic_cycles(gait, 0.01, 5e-5, cycles=3, steps_per_cycle=400)
+    cmp = compare_averaged(gait, qs, samples=240)
+    print(f"turning tripod, one 1 s cycle: quasi-static {qs.displacement.round(6)} m, {qs.rotation:.5f} rad "
+          f"(estimate {qs.error:.1e} m; gaps <= {qs.max_gap:.1e} W); 10 g body {dyn.displacement.round(6)} m, "
+          f"{dyn.rotation:.5f} rad (estimate {dyn.error:.1e} m); averaged model {cmp.averaged.displacement.round(6)} m, "
+          f"{cmp.averaged.rotation:.5f} rad: error {cmp.error:.2e} m ({100 * cmp.relative_error:.1f} %), "
+          f"{cmp.rotation_error:.4f} rad")
+    return bool(cmp.error > 10 * qs.error)
 
 
 if __name__ == "__main__":

@@ -945,6 +945,14 @@ class Scene:
 
 
 
+def _alone(data: Mapping[str, Any], kind: str, allowed: tuple[str, ...], declares: str) -> None:
+    """Refuse a section that a sweep or planar scene (which declares its own model) does not hold."""
+    others = [key for key in data if key not in allowed]
+    if others:
+        raise SceneError(f"A {kind} scene declares {declares}; remove [{others[0]}]. A {kind} scene "
+                         f"may hold {', '.join(f'[{k}]' for k in allowed)}.")
+
+
 def loads_scene(text: str, *, name: str = "scene") -> Scene:
     """Parse a scene from TOML text and check its form; see :func:`load_scene`."""
     try:
@@ -964,17 +972,9 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     meta = data.get("scene", {})
     _check_keys("scene", meta, ("name", "description"))
     if "sweep" in data:
-        others = [key for key in data if key not in _SWEEP_SECTIONS]
-        if others:
-            raise SceneError(f"A sweep scene declares its model in [sweep] (each run draws its own "
-                             f"contacts); remove [{others[0]}]. A sweep scene may hold "
-                             f"{', '.join(f'[{k}]' for k in _SWEEP_SECTIONS)}.")
+        _alone(data, "sweep", _SWEEP_SECTIONS, "its model in [sweep] (each run draws its own contacts)")
     elif "planar" in data:
-        others = [key for key in data if key not in _PLANAR_SECTIONS]
-        if others:
-            raise SceneError(f"A planar scene declares its body and contacts in [planar]; remove "
-                             f"[{others[0]}]. A planar scene may hold "
-                             f"{', '.join(f'[{k}]' for k in _PLANAR_SECTIONS)}.")
+        _alone(data, "planar", _PLANAR_SECTIONS, "its body and contacts in [planar]")
     elif "contacts" not in data:
         raise SceneError(f"The scene {name!r} needs a [contacts] section.")
     sections = {key: _SECTIONS[key](value) for key, value in data.items() if key in _SECTIONS}

@@ -23,6 +23,7 @@ from .gaits import (AveragedModel, CycleMotion, Gait, GaitComparison, averaged_m
                     dynamic_cycles, force_twist_map, quasi_static_cycle, serpenoid, tripod_gait)
 from .precision import PlanarPrecisionReport, PlanarPrecisionRow, precision_report
 from .plots import plot_planar_precision, plot_sliding_disc
+from ._warmup import warm_up
 from .allocation import (PlanarAllocationResult, PlanarAllocationStatus, allocate_resistance, allocate_twist,
                          infeasibility_margin)
 
@@ -36,5 +37,5 @@ __all__ = [
     "force_twist_map", "quasi_static_cycle", "dynamic_cycles", "averaged_model", "compare_averaged",
     "allocate_twist", "allocate_resistance", "infeasibility_margin", "PlanarAllocationResult",
     "PlanarAllocationStatus", "precision_report", "PlanarPrecisionReport", "PlanarPrecisionRow",
-    "plot_sliding_disc", "plot_planar_precision",
+    "plot_sliding_disc", "plot_planar_precision", "warm_up",
 ]

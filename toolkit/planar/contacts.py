@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 from .._compiled import kernels
-from .._validation import as_float, as_float_array, check_nonnegative
-from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..errors import (ParameterError, ParameterTypeError, as_float, as_float_array, check_nonnegative,
+                      parameter_message)
 from ..model import ContactSet
 
 __all__ = ["PlanarContactSet", "WrenchSet", "LineReduction", "limit_factors", "wrench_batch"]

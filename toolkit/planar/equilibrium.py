@@ -19,8 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, check_option
-from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..errors import ParameterError, ParameterTypeError, as_float, check_option, parameter_message
 from ._socp import NormSum, Solution, certify, solve_cvxpy, solve_fast
 from .contacts import PlanarContactSet, _canonical
 

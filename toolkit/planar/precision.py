@@ -18,8 +18,7 @@ import numpy as np
 
 import dataclasses
 
-from .._validation import as_int
-from ..errors import ParameterError, parameter_message
+from ..errors import ParameterError, as_int, parameter_message
 from .simulation import PlanarPlant, PlanarSimulationResult, simulate_planar
 
 __all__ = ["PlanarPrecisionRow", "PlanarPrecisionReport", "precision_report"]

@@ -16,8 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_float_array, as_int
-from ..errors import ParameterError, parameter_message
+from ..errors import ParameterError, as_float, as_float_array, as_int, parameter_message
 from .contacts import PlanarContactSet, _as_twists
 
 __all__ = ["Quadrature", "RegionWrench", "DiscRegion", "RingRegion", "CurveRegion",

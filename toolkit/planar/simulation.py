@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float, as_float_array, check_option
-from ..errors import ParameterError, ParameterTypeError, parameter_message
+from ..errors import (ParameterError, ParameterTypeError, as_float, as_float_array, check_option,
+                      parameter_message)
 from ..simulation import Budget, SimulationStatus
 from ._socp import NormSum, solve_fast
 from .contacts import PlanarContactSet

@@ -841,17 +841,11 @@ class PlanarSpec:
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> PlanarSpec:
-        body = _text("planar.body", _require("planar", table, "body"))
-        if body not in cls._BODY_KEYS:
-            raise SceneError(f"The 'planar.body' value in the scene must be one of {list(cls._BODY_KEYS)}. "
-                             f"Got {body!r} instead.{suggestion(body, cls._BODY_KEYS)}")
+        body = _choice("planar.body", _require("planar", table, "body"), cls._BODY_KEYS)
         _check_keys("planar", table, (*cls.COMMON, *cls._BODY_KEYS[body]))
         for key in ("mass", *cls._REQUIRED[body]):
             _require("planar", table, key)
-        method = _text("planar.method", table.get("method", "exact"))
-        if method not in cls.METHODS:
-            raise SceneError(f"The 'planar.method' value in the scene must be one of {list(cls.METHODS)}. "
-                             f"Got {method!r} instead.{suggestion(method, cls.METHODS)}")
+        method = _choice("planar.method", table.get("method", "exact"), cls.METHODS)
         if method == "smooth" and "epsilon" not in table:
             raise SceneError("The [planar] section needs the key 'epsilon' (m/s) with method = 'smooth'.")
 

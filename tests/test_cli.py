@@ -30,6 +30,11 @@ def test_run_succeeds_on_every_design(path, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "wrote" in out
     scene = load_scene(path)
+    if scene.planar is not None:         # a planar scene: its one stage
+        summary = json.loads((tmp_path / "planar.json").read_text())
+        assert summary["planar"]["shortfalls"] == [] and summary["planar"]["status"] == "SUCCESS"
+        assert (tmp_path / "planar.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        return
     if scene.sweep is not None:          # a sweep scene: its one stage, the sweep
         summary = json.loads((tmp_path / "sweep.json").read_text())
         assert summary["shortfalls"] == [] and summary["runs"] == scene.sweep.runs

@@ -13,7 +13,7 @@ import pytest
 NOTEBOOKS = sorted((Path(__file__).parents[1] / "notebooks").glob("*.ipynb"))
 
 #: A cell plots when it calls a toolkit plot function or draws with pyplot or an Axes.
-PLOTS = re.compile(r"\b(?:tk\.plot_\w+|plt\.subplots|plt\.figure)\(|\bax\d?\.plot\(")
+PLOTS = re.compile(r"\b(?:(?:tk|tp)\.plot_\w+|plt\.subplots|plt\.figure)\(|\bax\d?\.plot\(")
 #: The labels of a model number shown beside a paper number (toolkit.model.parameters.LABELS):
 #: [predicted], [bounded ...], [fitted to X; predicts Y].
 LABEL = re.compile(r"\[(?:predicted|bounded[^\]]*|fitted to [^\];]+; predicts [^\]]+)\]")

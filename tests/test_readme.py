@@ -20,8 +20,8 @@ import pytest
 
 import toolkit as tk
 from toolkit.cli import EXIT_CODES
-from toolkit.scenes.spec import (BodySpec, ContactsSpec, ControlSpec, EstimationSpec, MotorsSpec, ReportSpec,
-                           ScheduleSpec, SensorsSpec, SimulationSpec, SweepSpec, TargetSpec)
+from toolkit.scenes.spec import (BodySpec, ContactsSpec, ControlSpec, EstimationSpec, MotorsSpec, PlanarSpec,
+                           ReportSpec, ScheduleSpec, SensorsSpec, SimulationSpec, SweepSpec, TargetSpec)
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -257,6 +257,8 @@ def _table_row(section: str) -> str:
     ("estimation", EstimationSpec.KEYS),
     ("control", ControlSpec.COMMON),
     ("sweep", SweepSpec.COMMON),
+    ("planar", PlanarSpec.COMMON + tuple(k for keys in PlanarSpec._BODY_KEYS.values() for k in keys)
+     + tuple(PlanarSpec._BODY_KEYS)),
 ])
 def test_every_scene_key_is_in_the_readme_table(section: str, keys: tuple[str, ...]) -> None:
     row = _table_row(section)

@@ -31,14 +31,15 @@ from .analysis.precision import exact_speedup, precision_report, precision_short
 from .analysis.stability import stability_suite
 from .errors import SceneError, ToolkitError
 from .scenes._io import claim_output_dir
-from .scenes.build import SceneObjects, build_scene, sweep_scene_error
+from .scenes.build import SceneObjects, build_scene, planar_scene_error, sweep_scene_error
 from .scenes.limits import FLAGS, LIMITS
 from .scenes.report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
-                            study_to_dict, sweep_lines, sweep_to_dict, to_json, write_precision,
-                            write_schedule, write_study, write_sweep)
+                            study_to_dict, sweep_lines, sweep_to_dict, to_json, write_planar,
+                            write_precision, write_schedule, write_study, write_sweep)
 from .scenes.spec import Scene, load_scene
 from .scenes.study import (allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
-                           request_shortfalls, run_study, schedule_shortfalls, sweep_scene, sweep_shortfalls)
+                           planar_scene, request_shortfalls, run_study, schedule_shortfalls, sweep_scene,
+                           sweep_shortfalls)
 from .shortfall import Shortfall
 
 __all__ = ["main", "EXIT_CODES"]
@@ -68,6 +69,8 @@ def _parsed(args: argparse.Namespace, section: str | None = None, purpose: str =
     scene = load_scene(args.scene)
     if scene.sweep is not None and args.command not in ("run", "sweep"):
         raise sweep_scene_error(scene, args.command)
+    if scene.planar is not None and args.command != "run":
+        raise planar_scene_error(scene, args.command)
     if section is not None and getattr(scene, section) is None:
         raise SceneError(f"The scene {scene.name!r} has no [{section}] section {purpose}.")
     return scene
@@ -106,6 +109,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         args.runs = args.seed = args.scheduler = args.workers = None
         args.out = str(_out_dir(args, objects.scene))
         return _cmd_sweep(args)
+    if objects.planar is not None:         # a planar scene's one stage
+        return _run_planar(args, objects)
     with claim_output_dir(_out_dir(args, objects.scene)) as out:
         result = run_study(objects, strict=args.strict)
         written = write_study(result, out)
@@ -113,6 +118,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
         _print_json({**study_to_dict(result), "written": [str(p) for p in written]})
     else:
         for line in study_summary(result):
+            print(line)
+        print(f"wrote {', '.join(str(p) for p in written)}")
+    return _finish(result.shortfalls)
+
+
+def _run_planar(args: argparse.Namespace, objects: SceneObjects) -> int:
+    scene = objects.scene
+    with claim_output_dir(_out_dir(args, scene)) as out:
+        result = planar_scene(objects)
+        plots_too = scene.report is None or scene.report.plots
+        written = write_planar(result, out, plots_too=plots_too, title=scene.name)
+    if args.json:
+        _print_json({"scene": scene.name, "planar": result.to_dict(), "written": [str(p) for p in written]})
+    else:
+        for line in result.lines():
             print(line)
         print(f"wrote {', '.join(str(p) for p in written)}")
     return _finish(result.shortfalls)

@@ -51,7 +51,7 @@ from .limits import BYTES_PER_NUMBER, LIMITS, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES,
 from .spec import Scene, ScheduleSpec
 
 __all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "schedule_target",
-           "output_numbers", "sweep_scene_error"]
+           "output_numbers", "sweep_scene_error", "planar_scene_error"]
 
 _fail = scene_value_error
 #: Keys of ``[estimation]`` / ``[control]`` that set the encoders' noise.
@@ -173,6 +173,8 @@ class SceneObjects:
     control : ControlObjects or None
     sweep : experiment or None
         ``[sweep]`` (:mod:`toolkit.experiments`).
+    planar : toolkit.planar.scene.PlanarSceneObjects or None
+        ``[planar]`` (:mod:`toolkit.planar`, imported only for a planar scene).
     """
 
     scene: Scene
@@ -188,6 +190,7 @@ class SceneObjects:
     estimation: EstimationObjects | None = None
     control: ControlObjects | None = None
     sweep: Any = None
+    planar: Any = None
 
     def plant_on(self, contacts: ContactSet | None = None) -> Plant:
         """The scene's plant, on other contacts (e.g. allocated ones) when given.
@@ -210,6 +213,13 @@ def sweep_scene_error(scene: Scene, command: str) -> SceneError:
     return SceneError(f"The scene {scene.name!r} is a sweep scene: its runs draw their own contacts "
                       f"and it declares no [contacts], so '{command}' has nothing to work on. Run it "
                       "with 'active-contacts sweep'.")
+
+
+def planar_scene_error(scene: Scene, command: str) -> SceneError:
+    """The one refusal of a planar scene by a command of the 1-D toolkit."""
+    return SceneError(f"The scene {scene.name!r} is a planar scene: it declares a body on planar "
+                      f"contacts in [planar] and no [contacts], so '{command}' has nothing to work on. "
+                      "Run it with 'active-contacts run'.")
 
 
 def build_scene(scene: Scene) -> SceneObjects:
@@ -235,6 +245,8 @@ def build_scene(scene: Scene) -> SceneObjects:
     _check_limits(scene)
     if scene.sweep is not None:
         return SceneObjects(scene=scene, contacts=None, sweep=_sweep(scene))
+    if scene.planar is not None:
+        return SceneObjects(scene=scene, contacts=None, planar=_planar(scene))
     _check_across(scene)
     clips: list[Clip] = []
     contacts = _contacts(scene, clips)
@@ -553,6 +565,18 @@ def _sweep(scene: Scene) -> Any:
                              f"{suggestion(name, kind.STATISTICS)}")
     with _scene_keys("sweep", _same_keys("sweep", tuple(spec.params))):
         return kind(**spec.params)
+
+
+def _planar(scene: Scene) -> Any:
+    """The ``[planar]`` plant (toolkit.planar imported here: a 1-D scene never loads it)."""
+    from ..planar.scene import build_planar
+
+    keys = {"mass": "planar.mass", "inertia": "planar.inertia", "radius": "planar.radius",
+            "inner_radius": "planar.inner_radius", "force": ("planar.mu", "planar.mass", "planar.gravity"),
+            "positions": "planar.positions", "velocities": "planar.velocities", "forces": "planar.forces",
+            "resolution": "planar.resolution", "rings": "planar.resolution", "arcs": "planar.resolution"}
+    with _scene_keys("planar", keys):
+        return build_planar(scene.planar)
 
 
 def _simulation_options(scene: Scene) -> dict[str, Any]:

@@ -126,6 +126,21 @@ LIMITS: dict[str, Limit] = {
     "sweep.runs": Limit(low=1, high=MAX_RUNS, integer=True, flag="sweep --runs"),
     "sweep.seed": Limit(low=0, integer=True, flag="sweep --seed"),
     "sweep.chunk_size": Limit(low=1, integer=True),
+    "planar.mass": _POSITIVE,
+    "planar.inertia": _POSITIVE,
+    "planar.radius": _POSITIVE,
+    "planar.inner_radius": _NON_NEGATIVE,
+    "planar.mu": _POSITIVE,
+    "planar.gravity": _POSITIVE,
+    "planar.t_end": _POSITIVE,
+    "planar.step": _POSITIVE,
+    "planar.epsilon": _POSITIVE,
+    # A disc's quadrature has about pi resolution^2 nodes: 1000 rings, 3e6 nodes.
+    "planar.resolution": Limit(low=1, high=1000, integer=True),
+    "planar.forces[]": _NON_NEGATIVE,
+    "planar.precision.steps[]": _POSITIVE,
+    "planar.precision.epsilons[]": _POSITIVE,
+    "planar.precision.resolutions[]": Limit(low=1, high=1000, integer=True),
 }
 
 #: Command-line flags with no scene key of their own, bounded like the keys above.

@@ -23,7 +23,8 @@ from .study import StudyResult
 
 __all__ = ["study_summary", "study_to_dict", "study_files", "write_study", "to_json", "schedule_csv",
            "schedule_check", "schedule_lines", "shortfall_dicts", "shortfall_line", "write_precision",
-           "write_schedule", "estimation_to_dict", "estimation_lines", "estimation_files", "control_lines"]
+           "write_schedule", "estimation_to_dict", "estimation_lines", "estimation_files", "control_lines",
+           "write_planar"]
 
 
 def _clean(value: Any) -> Any:
@@ -287,6 +288,24 @@ def write_sweep(result: Any, out_dir: str | Path, *, statistics: tuple[str, ...]
                "sweep.json": to_json(sweep_to_dict(result, statistics, shortfalls)).encode()}
     if plots_too:
         payload["sweep.png"] = plots.render_png(plots.plot_sweep, result, title=title)
+    return write_tree(out_dir, payload)
+
+
+def write_planar(result: Any, out_dir: str | Path, *, plots_too: bool = True,
+                 title: str | None = None) -> list[Path]:
+    """Write ``planar.json`` (``{"scene", "planar": result.to_dict()}``) and, with
+    ``plots_too``, ``planar.png`` (the trajectory of a disc or ring; the work-precision plot
+    when the scene asks for it) into ``out_dir``, replacing it as a whole."""
+    from ..planar.plots import plot_planar_precision, plot_sliding_disc
+
+    payload = {"planar.json": to_json({"scene": title, "planar": result.to_dict()}).encode()}
+    region = result.objects.region
+    if plots_too and region is not None:
+        reference = result.published[0] if result.published is not None else result.closed_form_ratio
+        payload["planar.png"] = plots.figure_png(plot_sliding_disc(
+            result.simulation, region.radius, terminal_ratio=reference, title=title))
+    if plots_too and result.precision is not None:
+        payload["planar_precision.png"] = plots.figure_png(plot_planar_precision(result.precision, title=title))
     return write_tree(out_dir, payload)
 
 

@@ -25,6 +25,12 @@ unimported). All values are SI: m/s, N, kg, s, N s/m.
     [report]         plots; curve_points
     [sweep]          experiment = median_law | mean_median | outliers | residual_friction,
                      runs, seed, chunk_size, statistics, and the experiment's parameters
+    [planar]         body = disc | annulus | ring | legs, its parameters; mass; inertia;
+                     v0; omega0; t_end; method; step; resolution; epsilon; precision
+
+A *planar scene* declares ``[planar]`` (with optional ``[scene]`` and ``[report]``) and
+nothing else: a rigid body on planar contacts (:mod:`toolkit.planar`, imported only for such a
+scene), see :class:`PlanarSpec`.
 
 A *sweep scene* declares ``[sweep]`` (with optional ``[scene]`` and ``[report]``) and nothing
 else: each run of the experiment draws its own contacts, so the model (contact count, speed
@@ -95,7 +101,7 @@ __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
     "SimulationSpec", "EstimationSpec", "ControlSpec", "ReportSpec", "SweepSpec", "ESTIMATION_METHODS",
     "LOOP_ESTIMATORS", "CONTROLLERS", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
-    "MAX_SAMPLES",
+    "MAX_SAMPLES", "PlanarSpec",
 ]
 
 #: Section names of earlier plans, refused with a pointer to the sections that replaced them.
@@ -789,14 +795,108 @@ class SweepSpec:
                    statistics=statistics)
 
 
+@dataclass(frozen=True)
+class PlanarSpec:
+    """``[planar]``: a rigid body on planar contacts (:mod:`toolkit.planar`).
+
+    ``body`` = ``disc`` (``radius`` m, ``mu``), ``annulus`` (``radius``, ``inner_radius`` m,
+    ``mu``), ``ring`` (a thin ring: ``radius``, ``mu``), each with uniform pressure, friction
+    ``mu mass gravity`` (``gravity`` m/s^2, default 9.81) and, unless ``inertia`` (kg m^2) is
+    given, the inertia of its uniform shape; or ``legs`` (``positions`` [[x, y], ...] m,
+    ``velocities`` [[vx, vy], ...] m/s, ``forces`` N, ``inertia``). ``mass`` (kg); ``v0`` =
+    [vx, vy] (m/s) and ``omega0`` (rad/s) at the start; ``t_end`` (s); ``method`` = ``exact``
+    (default; a disc, annulus or ring, or legs on one line) / ``moreau`` (``step`` s) /
+    ``smooth`` (``epsilon`` m/s); ``resolution`` (rings of a disc's quadrature, arcs of a
+    ring's); ``precision = {steps = [s, ...], resolutions = [...], epsilons = [m/s, ...]}``:
+    also the work-precision rows against the exact method (Moreau-Jean at each step with the
+    matching quadrature resolution, the regularized law at each width).
+    """
+
+    body: str
+    mass: float
+    radius: float | None = None
+    inner_radius: float | None = None
+    mu: float | None = None
+    gravity: float = 9.81
+    inertia: float | None = None
+    positions: tuple[tuple[float, ...], ...] | None = None
+    velocities: tuple[tuple[float, ...], ...] | None = None
+    forces: tuple[float, ...] | None = None
+    v0: tuple[float, ...] = (0.0, 0.0)
+    omega0: float = 0.0
+    t_end: float = 1.0
+    method: str = "exact"
+    step: float | None = None
+    resolution: int | None = None
+    epsilon: float | None = None
+    precision: dict[str, Any] | None = None
+
+    COMMON = ("body", "mass", "inertia", "v0", "omega0", "t_end", "method", "step", "resolution",
+              "epsilon", "precision")
+    _BODY_KEYS = {"disc": ("radius", "mu", "gravity"), "annulus": ("radius", "inner_radius", "mu", "gravity"),
+                  "ring": ("radius", "mu", "gravity"), "legs": ("positions", "velocities", "forces")}
+    _REQUIRED = {"disc": ("radius", "mu"), "annulus": ("radius", "inner_radius", "mu"),
+                 "ring": ("radius", "mu"), "legs": ("positions", "velocities", "forces", "inertia")}
+    METHODS = ("exact", "moreau", "smooth")
+
+    @classmethod
+    def parse(cls, table: dict[str, Any]) -> PlanarSpec:
+        body = _choice("planar.body", _require("planar", table, "body"), cls._BODY_KEYS)
+        _check_keys("planar", table, (*cls.COMMON, *cls._BODY_KEYS[body]))
+        for key in ("mass", *cls._REQUIRED[body]):
+            _require("planar", table, key)
+        method = _choice("planar.method", table.get("method", "exact"), cls.METHODS)
+        if method == "smooth" and "epsilon" not in table:
+            raise SceneError("The [planar] section needs the key 'epsilon' (m/s) with method = 'smooth'.")
+
+        def optional(key: str, read: Callable[[str, Any], Any]) -> Any:
+            return read(f"planar.{key}", table[key]) if key in table else None
+
+        def points(key: str) -> tuple[tuple[float, ...], ...] | None:
+            if key not in table:
+                return None
+            raw = table[key]
+            if not isinstance(raw, list) or not raw:
+                raise _fail(f"planar.{key}", "be a non-empty array of [x, y] pairs", raw)
+            return tuple(_numbers(f"planar.{key}[{i}]", item) for i, item in enumerate(raw))
+
+        precision = None
+        if "precision" in table:
+            raw = _table("planar.precision", table["precision"])
+            _check_keys("planar.precision", raw, ("steps", "resolutions", "epsilons"))
+            precision = {k: _numbers(f"planar.precision.{k}", raw[k]) for k in ("steps", "epsilons") if k in raw}
+            if "resolutions" in raw:
+                values = raw["resolutions"]
+                if not isinstance(values, list) or not values:
+                    raise _fail("planar.precision.resolutions", "be a non-empty array of integers", values)
+                precision["resolutions"] = tuple(_integer(f"planar.precision.resolutions[{i}]", v)
+                                                 for i, v in enumerate(values))
+                if len(precision["resolutions"]) != len(precision.get("steps", (4e-3, 2e-3, 1e-3))):
+                    raise SceneError("In [planar.precision] give one resolution per step.")
+        return cls(
+            body=body, mass=_number("planar.mass", table["mass"]),
+            radius=optional("radius", _number), inner_radius=optional("inner_radius", _number),
+            mu=optional("mu", _number), gravity=_number("planar.gravity", table.get("gravity", 9.81)),
+            inertia=optional("inertia", _number), positions=points("positions"),
+            velocities=points("velocities"), forces=optional("forces", _numbers),
+            v0=_numbers("planar.v0", table.get("v0", [0.0, 0.0])),
+            omega0=_number("planar.omega0", table.get("omega0", 0.0)),
+            t_end=_number("planar.t_end", table.get("t_end", 1.0)), method=method,
+            step=optional("step", _number), resolution=optional("resolution", _integer),
+            epsilon=optional("epsilon", _number), precision=precision)
+
+
 _SECTIONS: dict[str, Callable[[dict[str, Any]], Any]] = {
     "contacts": ContactsSpec.parse, "body": BodySpec.parse, "motors": MotorsSpec.parse,
     "sensors": SensorsSpec.parse, "target": TargetSpec.parse, "schedule": ScheduleSpec.parse,
     "simulation": SimulationSpec.parse, "estimation": EstimationSpec.parse,
     "control": ControlSpec.parse, "report": ReportSpec.parse, "sweep": SweepSpec.parse,
+    "planar": PlanarSpec.parse,
 }
 #: The sections a sweep scene may hold besides [sweep].
 _SWEEP_SECTIONS = ("scene", "sweep", "report")
+#: The sections a planar scene may hold besides [planar].
+_PLANAR_SECTIONS = ("scene", "planar", "report")
 
 
 @dataclass(frozen=True)
@@ -808,8 +908,8 @@ class Scene:
     name, description : str
     contacts : ContactsSpec or None
         ``None`` only in a sweep scene (its runs draw their own contacts).
-    body, motors, sensors, target, schedule, simulation, estimation, control, report, sweep :
-        section spec or None
+    body, motors, sensors, target, schedule, simulation, estimation, control, report, sweep,
+    planar : section spec or None
     """
 
     name: str
@@ -825,15 +925,26 @@ class Scene:
     control: ControlSpec | None = None
     report: ReportSpec | None = None
     sweep: SweepSpec | None = None
+    planar: PlanarSpec | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
         """The stages this scene declares, in the order ``run`` executes them."""
+        if self.planar is not None:
+            return ("planar",) + (("report",) if self.report is not None else ())
         if self.sweep is not None:
             return ("sweep",) + (("report",) if self.report is not None else ())
         order = ("sensors", "target", "schedule", "simulation", "estimation", "control", "report")
         return ("curve",) + tuple(s for s in order if getattr(self, s) is not None)
 
+
+
+def _alone(data: Mapping[str, Any], kind: str, allowed: tuple[str, ...], declares: str) -> None:
+    """Refuse a section that a sweep or planar scene (which declares its own model) does not hold."""
+    others = [key for key in data if key not in allowed]
+    if others:
+        raise SceneError(f"A {kind} scene declares {declares}; remove [{others[0]}]. A {kind} scene "
+                         f"may hold {', '.join(f'[{k}]' for k in allowed)}.")
 
 
 def loads_scene(text: str, *, name: str = "scene") -> Scene:
@@ -855,11 +966,9 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     meta = data.get("scene", {})
     _check_keys("scene", meta, ("name", "description"))
     if "sweep" in data:
-        others = [key for key in data if key not in _SWEEP_SECTIONS]
-        if others:
-            raise SceneError(f"A sweep scene declares its model in [sweep] (each run draws its own "
-                             f"contacts); remove [{others[0]}]. A sweep scene may hold "
-                             f"{', '.join(f'[{k}]' for k in _SWEEP_SECTIONS)}.")
+        _alone(data, "sweep", _SWEEP_SECTIONS, "its model in [sweep] (each run draws its own contacts)")
+    elif "planar" in data:
+        _alone(data, "planar", _PLANAR_SECTIONS, "its body and contacts in [planar]")
     elif "contacts" not in data:
         raise SceneError(f"The scene {name!r} needs a [contacts] section.")
     sections = {key: _SECTIONS[key](value) for key, value in data.items() if key in _SECTIONS}
@@ -993,6 +1102,9 @@ def dumps_scene(scene: Scene) -> str:
             table = _section_table(spec)
             table = {"controller": spec.controller, **_plain(spec.params),
                      **{k: v for k, v in table.items() if k not in ("controller", "params")}}
+        elif key == "planar":
+            table = {k: v for k, v in _section_table(spec).items()
+                     if not (k == "gravity" and v == 9.81) and not (k == "method" and v == "exact")}
         elif key == "motors":
             table = _section_table(spec)
             limits = table.pop("speed_limits", None)

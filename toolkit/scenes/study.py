@@ -72,7 +72,7 @@ __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve
            "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
            "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
            "estimate_scene", "control_scene", "estimation_shortfalls", "control_shortfalls",
-           "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls"]
+           "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls", "planar_scene"]
 
 
 @dataclass(frozen=True)
@@ -602,6 +602,10 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
         from .build import sweep_scene_error
 
         raise sweep_scene_error(scene, "run_study")
+    if scene.planar is not None:
+        from .build import planar_scene_error
+
+        raise planar_scene_error(scene, "run_study")
     known = request_shortfalls(objects)
     if strict and known:
         raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
@@ -634,6 +638,26 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
     plant = objects.plant_on(contacts) if objects.plant is not None else None
     return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation,
                        schedule, check, simulation, tuple(found), estimation, loop, plant)
+
+
+# -- planar scenes ----------------------------------------------------------------------------------
+
+def planar_scene(scene: Scene | SceneObjects) -> Any:
+    """Run a planar scene's ``[planar]`` (:func:`toolkit.planar.scene.run_planar`): the
+    simulation, the terminal ratio of a disc or ring, the equilibrium of legs, the optional
+    work-precision rows. Returns a :class:`toolkit.planar.scene.PlanarStudyResult`.
+
+    Raises
+    ------
+    SceneError
+        The scene has no ``[planar]``.
+    """
+    from ..planar.scene import run_planar   # the planar package loads with a planar scene only
+
+    objects = _built(scene)
+    if objects.planar is None:
+        raise SceneError(f"The scene {objects.scene.name!r} has no [planar] section to run.")
+    return run_planar(objects.planar)
 
 
 # -- sweeps -------------------------------------------------------------------------------------

@@ -13,9 +13,8 @@ methods that use them.
 
 from __future__ import annotations
 
-from .contacts import LineReduction, PlanarContactSet, WrenchSet, limit_factors, wrench_batch
-from .equilibrium import (EquilibriumStatus, PlanarEquilibrium, geometric_median, solve_equilibrium,
-                          weiszfeld)
+from .contacts import LineReduction, PlanarContactSet, WrenchSet, geometric_median, limit_factors, wrench_batch
+from .equilibrium import EquilibriumStatus, PlanarEquilibrium, solve_equilibrium, weiszfeld
 from .regions import (CurveRegion, DiscRegion, Quadrature, RegionWrench, RingRegion, disc_force_torque,
                       ring_force_torque, terminal_ratio)
 from .simulation import PLANAR_METHODS, PlanarPlant, PlanarSimulationResult, simulate_planar

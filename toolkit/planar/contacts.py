@@ -21,8 +21,9 @@ from .._compiled import kernels
 from ..errors import (ParameterError, ParameterTypeError, as_float, as_float_array, check_nonnegative,
                       parameter_message)
 from ..model import ContactSet
+from .equilibrium import PlanarEquilibrium, _canonical, solve_equilibrium
 
-__all__ = ["PlanarContactSet", "WrenchSet", "LineReduction", "limit_factors", "wrench_batch"]
+__all__ = ["PlanarContactSet", "WrenchSet", "LineReduction", "limit_factors", "wrench_batch", "geometric_median"]
 
 _EPS = float(np.finfo(float).eps)
 _NO_LIMITS = np.zeros((0, 2, 2))
@@ -622,19 +623,20 @@ class PlanarContactSet:
         and :class:`toolkit.planar.equilibrium.PlanarEquilibrium` for the result
         (``velocity`` (2,), ``omega``, ``gap``, ``status``, ...).
         """
-        from .equilibrium import solve_equilibrium
-
         return solve_equilibrium(self, translation_only=translation_only, method=method, tol=tol)
 
 
-def _canonical(e: np.ndarray) -> np.ndarray:
-    """A unit direction with round-off components snapped to 0 and its first non-zero
-    component positive (so the x axis is exactly (1, 0))."""
-    e = np.where(np.abs(e) <= 4 * _EPS, 0.0, e)
-    e = e / np.hypot(e[0], e[1])
-    if e[0] < 0 or (e[0] == 0 and e[1] < 0):
-        e = -e
-    return e + 0.0
+def geometric_median(points: Any, weights: Any = None, *, method: str = "auto",
+                     tol: float = 1e-10) -> PlanarEquilibrium:
+    """The weighted geometric median (Fermat-Weber point) of planar points, certified.
+
+    ``points`` (n, 2) play the contact velocities of a translation-only
+    :class:`PlanarContactSet` with ``weights`` (n,) its magnitudes: the result's
+    ``velocity`` is the median, ``gap`` its certificate (see :func:`solve_equilibrium`).
+    """
+    P = np.asarray(points, dtype=float)
+    contacts = PlanarContactSet(np.zeros_like(P), P, weights)
+    return solve_equilibrium(contacts, translation_only=True, method=method, tol=tol)
 
 
 def wrench_batch(positions: Any, velocities: Any, forces: Any, V: Any, omega: Any,

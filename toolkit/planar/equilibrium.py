@@ -21,10 +21,9 @@ import numpy as np
 
 from ..errors import ParameterError, ParameterTypeError, as_float, check_option, parameter_message
 from ._socp import NormSum, Solution, certify, solve_cvxpy, solve_fast
-from .contacts import PlanarContactSet, _canonical
 
 __all__ = ["EquilibriumStatus", "PlanarEquilibrium", "METHODS", "solve_equilibrium",
-           "geometric_median", "weiszfeld", "speed_scale", "twist_problem"]
+           "weiszfeld", "speed_scale", "twist_problem"]
 
 #: Methods of :func:`solve_equilibrium`.
 METHODS = ("auto", "newton", "cvxpy", "weiszfeld")
@@ -131,7 +130,20 @@ class PlanarEquilibrium:
         return self.gap / (self.total_force * self.speed_scale)
 
 
-def speed_scale(contacts: PlanarContactSet) -> float:
+_EPS = float(np.finfo(float).eps)
+
+
+def _canonical(e: np.ndarray) -> np.ndarray:
+    """A unit direction with round-off components snapped to 0 and its first non-zero
+    component positive (so the x axis is exactly (1, 0))."""
+    e = np.where(np.abs(e) <= 4 * _EPS, 0.0, e)
+    e = e / np.hypot(e[0], e[1])
+    if e[0] < 0 or (e[0] == 0 and e[1] < 0):
+        e = -e
+    return e + 0.0
+
+
+def speed_scale(contacts: Any) -> float:
     """``sum f_i |v_i - v_mean| / F_tot`` (m/s), with ``v_mean`` the force-weighted mean
     velocity, but at least ``1e-9 max |v_i|`` (1 when every velocity is 0): the scale of the
     equilibrium's gap."""
@@ -144,7 +156,7 @@ def speed_scale(contacts: PlanarContactSet) -> float:
     return scale if scale > 0 else 1.0
 
 
-def twist_problem(contacts: PlanarContactSet, translation_only: bool, centre: np.ndarray,
+def twist_problem(contacts: Any, translation_only: bool, centre: np.ndarray,
                   S: float, L: float, shift: np.ndarray | None = None) -> tuple[NormSum, np.ndarray]:
     """The scaled :class:`~toolkit.planar._socp.NormSum` of the equilibrium (``Q`` None).
 
@@ -189,7 +201,7 @@ def _collinear(points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return points[0], e
 
 
-def solve_equilibrium(contacts: PlanarContactSet, translation_only: bool = False, *,
+def solve_equilibrium(contacts: Any, translation_only: bool = False, *,
                       method: str = "auto", tol: float = 1e-10) -> PlanarEquilibrium:
     """The equilibrium twist (or velocity) of planar contacts, certified.
 
@@ -214,7 +226,7 @@ def solve_equilibrium(contacts: PlanarContactSet, translation_only: bool = False
     PlanarEquilibrium
     """
     owner = "PlanarContactSet.equilibrium"
-    if not isinstance(contacts, PlanarContactSet):
+    if not all(hasattr(contacts, name) for name in ("velocities", "forces", "limit_factors", "line_reduction")):
         raise ParameterTypeError(parameter_message("contacts", owner, "be a PlanarContactSet", contacts))
     if not isinstance(translation_only, (bool, np.bool_)):
         raise ParameterTypeError(parameter_message("translation_only", owner, "be a bool", translation_only))
@@ -257,7 +269,7 @@ def solve_equilibrium(contacts: PlanarContactSet, translation_only: bool = False
                    started, message, shift=mean)
 
 
-def _result(contacts: PlanarContactSet, translation_only: bool, prob: NormSum, active: np.ndarray,
+def _result(contacts: Any, translation_only: bool, prob: NormSum, active: np.ndarray,
             sol: Solution, centre: np.ndarray, S: float, L: float, tol: float, started: float,
             message: str, segment: np.ndarray | None = None, unique: bool | None = None,
             velocity: np.ndarray | None = None, shift: np.ndarray | None = None) -> PlanarEquilibrium:
@@ -321,7 +333,7 @@ def _unique(prob: NormSum, sol: Solution) -> bool | None:
     return bool(eig[0] > 1e-9 * eig[-1]) or None
 
 
-def _failed(contacts: PlanarContactSet, translation_only: bool, S: float, tol: float,
+def _failed(contacts: Any, translation_only: bool, S: float, tol: float,
             method: str, started: float, message: str) -> PlanarEquilibrium:
     nan2 = np.full(2, np.nan)
     return PlanarEquilibrium(
@@ -336,7 +348,7 @@ def _failed(contacts: PlanarContactSet, translation_only: bool, S: float, tol: f
 
 
 # -- the exact 1-D reduction ------------------------------------------------------------------
-def _reduce_1d(contacts: PlanarContactSet, translation_only: bool, S: float, tol: float,
+def _reduce_1d(contacts: Any, translation_only: bool, S: float, tol: float,
                started: float) -> PlanarEquilibrium | None:
     """The equilibrium through :meth:`toolkit.ContactSet.equilibrium` when the problem is 1-D.
 
@@ -444,16 +456,3 @@ def _weiszfeld_solution(prob: NormSum, tol: float) -> Solution:
     y, iterations = weiszfeld(prob.c, prob.f, tol=1e-15)
     gap, g, residual, stuck = certify(prob, y)
     return Solution(y, g, gap, residual, stuck, iterations, "weiszfeld")
-
-
-def geometric_median(points: Any, weights: Any = None, *, method: str = "auto",
-                     tol: float = 1e-10) -> PlanarEquilibrium:
-    """The weighted geometric median (Fermat-Weber point) of planar points, certified.
-
-    ``points`` (n, 2) play the contact velocities of a translation-only
-    :class:`PlanarContactSet` with ``weights`` (n,) its magnitudes: the result's
-    ``velocity`` is the median, ``gap`` its certificate (see :func:`solve_equilibrium`).
-    """
-    P = np.asarray(points, dtype=float)
-    contacts = PlanarContactSet(np.zeros_like(P), P, weights)
-    return solve_equilibrium(contacts, translation_only=True, method=method, tol=tol)

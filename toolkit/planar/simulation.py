@@ -110,6 +110,10 @@ class PlanarPlant:
         """True for a schedule of contacts (a gait)."""
         return not isinstance(self.contacts, (PlanarContactSet, Quadrature) + _REGIONS)
 
+    def simulate(self, t_end: float, **arguments: Any) -> PlanarSimulationResult:
+        """:func:`simulate_planar` of this plant (what :func:`toolkit.simulate` calls)."""
+        return simulate_planar(self, t_end, **arguments)
+
     def contacts_at(self, t: float) -> PlanarContactSet:
         """The contacts (body frame) at time ``t`` (s)."""
         if self._quadrature is not None:

@@ -96,9 +96,10 @@ def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exac
     Parameters
     ----------
     plant : Plant
-        (A :class:`toolkit.planar.PlanarPlant` is simulated by
-        :func:`toolkit.planar.simulation.simulate_planar`, which takes the same arguments
-        with ``v0`` a 2-vector and returns its own result.)
+        Or a plant of another kind that simulates itself (a ``simulate(t_end, **arguments)``
+        method taking these arguments): a :class:`toolkit.planar.PlanarPlant` is simulated by
+        :func:`toolkit.planar.simulation.simulate_planar`, with ``v0`` a 2-vector, and
+        returns its own result. This package imports none of them.
     t_end : float, s
         Horizon, ``> 0``.
     v0 : float, m/s
@@ -129,12 +130,9 @@ def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exac
     0.5
     """
     if not isinstance(plant, Plant):
-        if type(plant).__module__ == "toolkit.planar.simulation":
-            # A planar plant: its own module, imported here only (1-D use never loads it).
-            from ..planar.simulation import simulate_planar
-
-            return simulate_planar(plant, t_end, v0=v0, method=method, t_eval=t_eval,
-                                   budget=budget, **options)
+        own = getattr(type(plant), "simulate", None)
+        if callable(own):                # a plant of another kind (planar) simulates itself
+            return own(plant, t_end, v0=v0, method=method, t_eval=t_eval, budget=budget, **options)
         raise ParameterTypeError(parameter_message("plant", "simulate", "be a Plant", plant))
     if not (type(t_end) is float and 0.0 < t_end < math.inf):
         t_end = as_float(t_end, "t_end", "simulate", low=0.0, low_open=True)

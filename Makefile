@@ -11,7 +11,7 @@ MIN_VENV  := .venv-min
 MIN_BIN   := $(MIN_VENV)/bin
 MIN_STAMP := $(MIN_VENV)/.installed
 
-.PHONY: demo test test-min bench clean venv
+.PHONY: demo test test-quick test-min bench clean venv
 
 venv: $(STAMP)
 
@@ -29,6 +29,10 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q tests/test_compiled.py tests/test_lines.py tests/test_planar_kernels.py
+
+# While developing: every test but those marked slow (notebooks, subprocess sweeps, the wheel).
+test-quick: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not slow"
 
 $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 	test -x $(MIN_BIN)/python || $(PYTHON) -m venv $(MIN_VENV)

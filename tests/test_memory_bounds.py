@@ -115,6 +115,7 @@ def _label(case: tuple) -> str:
     return "-".join([scene, method, *map(str, options.values())])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("index", range(len(_cases())), ids=[_label(c) for c in _cases()])
 def test_method_at_1e9_returns_a_budget_status_under_1_gib(child_runs: list[dict], index: int) -> None:
     scene, method, options, budget = _cases()[index]

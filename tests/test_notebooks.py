@@ -64,6 +64,7 @@ def test_notebook_is_stored_without_outputs(path):
     assert all(not cell.get("outputs") for cell in notebook.cells if cell.cell_type == "code")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
 def test_notebook_runs_shows_its_figures_and_labels_its_numbers(path, monkeypatch):
     from nbclient import NotebookClient

@@ -25,10 +25,13 @@ demo: $(STAMP)
 	$(BIN)/active-contacts run designs/carousel.toml --out out/carousel
 
 # The kernel tests run twice: compiled (as every test), and as plain Python under numba's
-# own switch (the same source must give the same numbers).
+# own switch (the same source must give the same numbers): the kernels' own tests and the
+# exactness tests of the engines they run (the exact method, advance).
+KERNEL_TESTS := tests/test_compiled.py tests/test_lines.py tests/test_planar_kernels.py \
+	tests/test_simulation_exact.py tests/test_simulation_stepper.py
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
-	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q tests/test_compiled.py tests/test_lines.py tests/test_planar_kernels.py
+	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q $(KERNEL_TESTS)
 
 # While developing: every test but those marked slow (notebooks, subprocess sweeps, the wheel).
 test-quick: $(STAMP)
@@ -42,7 +45,7 @@ $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 
 test-min: $(MIN_STAMP)
 	$(MIN_BIN)/python -m pytest -q
-	NUMBA_DISABLE_JIT=1 $(MIN_BIN)/python -m pytest -q tests/test_compiled.py tests/test_lines.py tests/test_planar_kernels.py
+	NUMBA_DISABLE_JIT=1 $(MIN_BIN)/python -m pytest -q $(KERNEL_TESTS)
 
 bench: $(STAMP)
 	$(BIN)/python -m toolkit.bench all

@@ -22,7 +22,7 @@ import pytest
 import toolkit
 from toolkit import _compiled
 from toolkit._compiled import core
-from toolkit.model import ContactSet, Motors, PiecewiseConstant, Plant
+from toolkit.model import ContactSet, MotorPiece, Motors, PiecewiseConstant, Plant, motor_rate
 from toolkit.simulation import (ExactState, SimulationStatus, advance, simulate,
                                 simulate_batch, _stepper)
 
@@ -323,6 +323,96 @@ def test_first_root_prefilter_is_the_search_over_every_function(rng):
     assert i >= 0                                      # (the widest horizon found a root)
 
 
+# -- the dynamic-motor engine: the motor law's one compiled form ---------------------------------
+@pytest.mark.parametrize("lag, rate", [(0.0075, math.inf), (0.0075, 5.0), (0.0, 3.0),
+                                       (0.03, 40.0)])
+def test_compiled_motor_piece_is_the_motor_law(rng, lag, rate):
+    # The motor law is written in toolkit/model/motors.py (motor_rate, solved by MotorPiece);
+    # the engine's kernels hold its one compiled form (core.motor_build, motor_speed,
+    # motor_coefficients, motor_displacement). Both on one grid of offsets (through the ramp
+    # phases and the approach): speeds and displacements agree to rtol 4 eps (the same
+    # operations; NumPy's exp and libm's may differ in the last bit), atol 4 eps times the
+    # speed (displacement) scale; the rates of the closed form at each offset are the law's
+    # motor_rate at the speeds there (rtol 4 eps: the same division, clipped at the rate
+    # limit where rounding puts a settling motor a hair past it).
+    module = _compiled.load("core")
+    n = 9
+    motors = Motors(lag=lag, rate_limit=rate)
+    start = rng.uniform(-0.35, 0.35, n)
+    u = rng.uniform(-0.35, 0.35, n)
+    u[0] = start[0]                                    # a motor already there
+    piece = MotorPiece.build(0.0, start, u, lag, rate)
+    table = np.empty((5, n))
+    module.motor_build(start, u, lag, rate, table)
+    for row, values in zip(table, (piece.start, piece.u, piece.ramp, piece.ramp_end,
+                                   piece.after)):
+        np.testing.assert_array_equal(row, values)
+    grid = np.concatenate(([0.0], np.geomspace(1e-5, 0.5, 60), piece.ramp_end))
+    v, q, e = np.empty(n), np.empty(n), np.empty(n)
+    out = np.empty(n)
+    speed_scale, distance_scale = 0.35, 0.35 * 0.5
+    for s in grid:
+        expected_v, expected_q, expected_e, expected_end = piece.coefficients(float(s))
+        phase_end = module.motor_coefficients(table, lag, float(s), v, q, e)
+        np.testing.assert_allclose(v, expected_v, rtol=4 * EPS, atol=4 * EPS * speed_scale)
+        np.testing.assert_allclose(v, piece.speeds(np.array([s]))[0], rtol=4 * EPS,
+                                   atol=4 * EPS * speed_scale)
+        np.testing.assert_array_equal(q, expected_q)
+        np.testing.assert_allclose(e, expected_e, rtol=4 * EPS, atol=4 * EPS * speed_scale / max(lag, 1e-3))
+        assert phase_end == expected_end
+        np.testing.assert_allclose(q + e, motor_rate(motors, u, v), rtol=4 * EPS,
+                                   atol=4 * EPS * speed_scale / max(lag, 1e-3))
+        module.motor_displacement(table, lag, float(s), out)
+        np.testing.assert_allclose(out, piece.displacement(float(s)), rtol=4 * EPS,
+                                   atol=4 * EPS * distance_scale)
+
+
+def test_pairwise_sum_is_numpys_sum(rng):
+    # The engine's sums are NumPy's own doubles (np.add.reduce on a contiguous float64 array:
+    # blocks of 8 partial sums, halved above 128 terms): compared exactly, at every length
+    # up to 300 and a few long ones, with terms spread over ten decades (where the order of
+    # additions changes the rounding).
+    module = _compiled.load("core")
+    for n in [*range(0, 300), 1000, 4099, 70001]:
+        values = rng.standard_normal(n) * 10.0 ** rng.uniform(-5, 5, n)
+        assert module.pairwise_sum(values, 0, n) == float(np.add.reduce(values)), n
+    values = rng.standard_normal(500)
+    assert module.pairwise_sum(values, 100, 250) == float(np.add.reduce(values[100:350]))
+
+
+def test_filippov_acceleration_solves_the_inclusion(rng):
+    # core.filippov returns the body's acceleration a among tied contacts moving at rates
+    # `slopes`: 0 in G + sum_j w_j Sign(slope_j - a) - m a. Identity check: when the body
+    # follows a level, the others' push minus m a lies within that level's stiction (plus the
+    # tolerance given); otherwise a is no slope and the equation holds with a single value
+    # (to rounding: atol 8 eps times the force scale).
+    module = _compiled.load("core")
+    tol = 1e-12
+    followed = free = 0
+    for _ in range(400):
+        T = int(rng.integers(1, 7))
+        slopes = rng.choice([-2.0, -0.5, 0.0, 0.5, 1.5], T) + (rng.random() < 0.3) * rng.normal(0, 1, T)
+        weights = rng.uniform(0.1, 2.0, T)
+        G, m = rng.normal(0.0, 3.0), rng.uniform(0.2, 3.0)
+        scratch = np.empty((3, T))
+        order = np.empty(T, dtype=np.int64)
+        a, follows, level = module.filippov(G, slopes, weights, T, m, tol, order, scratch[0],
+                                            scratch[1])
+        scale = abs(G) + weights.sum() + m * abs(a)
+        if follows:
+            followed += 1
+            assert a == level and np.any(slopes == level)
+            here = slopes == level
+            residual = G + np.sum(weights[~here] * np.sign(slopes[~here] - a)) - m * a
+            assert abs(residual) <= weights[here].sum() + tol + 8 * EPS * scale
+        else:
+            free += 1
+            assert not np.any(slopes == a)
+            residual = G + np.sum(weights * np.sign(slopes - a)) - m * a
+            assert abs(residual) <= 8 * EPS * scale
+    assert followed > 50 and free > 50
+
+
 # -- one source: compiled and as Python ----------------------------------------------------------
 _SCENES = """
 import json, numpy as np
@@ -339,6 +429,16 @@ plants = {
     "compliant": Plant(cs, 1.0, motors=Motors(compliance=0.02)),
     "schedule": Plant(cs, 1.0, commands=PiecewiseConstant([1.0, 2.5],
                                                           [speeds, -speeds, speeds[::-1]])),
+    # The dynamic-motor engine: lag and rate limit under a schedule, and compliant lagging
+    # motors with drag (every kind of round: free, stuck, released, saturating).
+    "lag_rate": Plant(cs, 1.0, damping=0.2, external_force=0.1,
+                      motors=Motors(lag=0.0075, rate_limit=5.0, speed_limits=(-0.35, 0.35)),
+                      commands=PiecewiseConstant([0.5, 1.0, 2.5],
+                                                 [speeds, speeds[::-1], -speeds, speeds])),
+    "compliant_lag": Plant(cs, 1.0, damping=0.3,
+                           motors=Motors(lag=0.01, compliance=0.02),
+                           commands=PiecewiseConstant([1.0, 2.5],
+                                                      [speeds, -speeds, speeds[::-1]])),
 }
 for name, plant in plants.items():
     r = simulate(plant, 5.0, t_eval=times)

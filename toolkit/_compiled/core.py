@@ -20,6 +20,12 @@ callers keep validation, result assembly and I/O; the kernels do the loops.
   brackets on monotone pieces, bisection at any scale, Newton's or Brent's method);
   :func:`free_first_root`, :func:`stuck_first_root`: its event functions built from the
   engine's state (a body sliding free; a body stuck to a contact) and their first root.
+- :func:`dynamic_run`: the engine with lagging or rate-limited motors, whole: the motors'
+  closed form (:func:`motor_build`, :func:`motor_coefficients`), the contacts tied with the
+  body, the Filippov solution among them (:func:`filippov`), compliant contacts
+  (:func:`compliant_round`), each segment's first event, the budget and Zeno guards, over
+  every piece of constant command; :func:`advance_dynamic`: one sample period of a closed
+  loop (the no-event certificate, else the engine) with its exact displacements.
 - :func:`batch`: many constant-speed scenes, each through :func:`ideal_piece` (so each
   equals the single run), in parallel over scenes (``prange``).
 
@@ -27,9 +33,12 @@ How the laws stay written once. The friction law is evaluated here from the pref
 :class:`toolkit.model.ContactSet` builds (``net force = magnitude above - magnitude below``,
 snapped within the tie tolerance): :meth:`ContactSet.force` and the exact engine both call
 :func:`net_force`. The compliant landscape comes from
-:func:`toolkit.model.friction.compliant_breakpoints`. The motor law is not evaluated here
-except in :func:`quiet_piece`, which evaluates :class:`toolkit.model.motors.MotorPiece`'s
-closed form of a lag without a ramp phase (the certificate refuses any other phase).
+:func:`toolkit.model.friction.compliant_breakpoints`. The motor law of
+:mod:`toolkit.model.motors` (``motor_rate``, solved by ``MotorPiece``) has its one compiled form
+here, :func:`motor_build`, :func:`motor_speed`, :func:`motor_coefficients` and
+:func:`motor_displacement` (and the lag-only closed form :func:`quiet_piece` evaluates);
+``tests/test_compiled.py`` evaluates both on one grid. Sums are NumPy's own
+(:func:`pairwise_sum`), so the engine's numbers are the NumPy engine's it replaced.
 
 Segment rows are ``(t0, V0, c1, B, lam, C, D)`` with
 ``V(t0 + s) = V0 + c1 s + B x(lam, s) + C x(mu, s) + D s exp(-mu s)``,
@@ -55,10 +64,15 @@ CROSS, STICK, RELEASE, SATURATION, COMMAND = 0, 1, 2, 3, 4
 # Return codes of the loops.
 DONE, MAX_STEPS, ZENO, PAUSE = 0, 1, 2, 3
 # Layout of the loop state arrays (fstate: floats, istate: ints).
-F_T, F_V, F_TSUM, F_TERR, F_RATE = 0, 1, 2, 3, 4
+# The dynamic-motor engine (dynamic_run) also keeps its piece's offset and its mode there.
+F_T, F_V, F_TSUM, F_TERR, F_RATE, F_OFF, F_REL = range(7)
 (I_J, I_AT, I_STUCK, I_NSEG, I_NEV, I_ROUNDS, I_NEVAL, I_STARTED, I_MAXSTEPS, I_WINDOW,
- I_CHUNK) = range(11)
-N_FSTATE, N_ISTATE = 5, 11
+ I_CHUNK, I_HINT, I_PIECE) = range(13)
+N_FSTATE, N_ISTATE = 7, 13
+# A dynamic-motor plant's constants, one array (advance_dynamic).
+(P_TOTAL, P_MASS, P_DAMPING, P_COMPLIANCE, P_TAU, P_RATE, P_RAMP_GAP, P_SPEED_BOUND,
+ P_MARGIN) = range(9)
+N_PARAMS = 9
 
 #: ``(-1)^k / (k + 2)!`` for k = 0..14, highest first: the series of
 #: ``(x + expm1(-x)) / x^2``, truncated below ``1e-17`` relative for ``0 <= x < 0.5``.
@@ -83,6 +97,11 @@ KERNELS = {
     "brent_root": _IEEE, "polish_root": _IEEE, "all_zero": _INLINE, "first_root_all": _IEEE,
     "first_root": _IEEE,
     "free_first_root": _IEEE, "stuck_first_root": _IEEE,
+    # The dynamic-motor engine: the motor law's closed form and the rounds of the engine.
+    "motor_build": _IEEE, "motor_speed": {"inline": "always", "error_model": "numpy"},
+    "motor_coefficients": _IEEE, "motor_displacement": _IEEE, "pairwise_sum": _IEEE, "pairwise_block": _INLINE,
+    "filippov": _IEEE, "compliant_round": _IEEE, "dynamic_run": _IEEE,
+    "advance_dynamic": _IEEE, "advance_outputs": _IEEE,
 }
 
 
@@ -582,10 +601,32 @@ def quiet_piece(forces: np.ndarray, total_force: float, m: float, c: float, tau:
                 out: np.ndarray) -> tuple[bool, float, float]:
     """The no-event certificate of one piece of constant command ``u`` (clipped, m/s) over
     ``S`` seconds from contact speeds ``start`` and body speed ``V`` (m/s), stuck to contact
-    ``stuck`` (-1: free), external force ``E`` (N); see
-    :func:`toolkit.simulation._exact._quiet_piece` for the argument. When certified, returns
+    ``stuck`` (-1: free), external force ``E`` (N), when it shows that :func:`dynamic_run`
+    would run it as one closed-form segment without an event. When certified, returns
     ``(True, V_end, body_displacement)`` and fills ``out[0]`` with the contact speeds at ``S``
-    and ``out[1]`` with their displacements (m); else ``(False, nan, nan)``."""
+    and ``out[1]`` with their displacements (m); else ``(False, nan, nan)`` (the caller runs
+    the engine).
+
+    The certificate uses the engine's own closed forms on ``[0, S]``. Without a ramp phase
+    (no motor on its rate limit) contact ``i`` moves as ``v_i(s) = v_i + e_i x_mu(s)`` with
+    ``x_r(s) = expm1_ratio(r, s)``, and the body
+
+    - free (no contact tied now): ``V(s) = V + r0 x_lam(s)`` under the constant force ``m r0``
+      of the current signs. The crossing function ``g_i = V(s) - v_i(s)`` has
+      ``g_i' = r0 exp(-lam s) - e_i exp(-mu s)``, zero at most once, at
+      ``s* = log(e_i / r0) / (mu - lam)``: its range on ``[0, S]`` is spanned by ``g_i(0)``,
+      ``g_i(S)`` and ``g_i(s*)`` when ``0 < s* < S``. No crossing when these share a sign.
+    - stuck to contact ``k`` (and any contacts on its very track: the same start and
+      command, e.g. at a speed limit): ``V = v_k(s)``; the gap
+      ``v_k(s) - v_i(s) = (v_k - v_i) + (e_k - e_i) x_mu(s)`` is monotone (no crossing when
+      its ends share a sign), and so is the stiction margin
+      ``h(s) = G - c v_k - m dv_k/dt = h0 + e_k (m mu - c) x_mu(s)``: it stays stuck when
+      ``|h| <= W`` (the group's total force) at both ends.
+
+    "Share a sign" and "``<= W``" hold with a relative margin ``margin_rel`` (``2^-40``) of
+    the speed or force scale, far above the rounding of the engine's tie tests and event
+    functions (``64 eps``, ``4 (N + 1) eps``, a few ulp), so the engine finds no tie and no
+    event either and the two evaluate the same closed forms: they agree to rounding."""
     n = start.size
     mu = 1.0 / tau
     lam = c / m
@@ -1152,6 +1193,610 @@ def stuck_first_root(v: np.ndarray, q: np.ndarray, e: np.ndarray, tied: np.ndarr
     if p >= others:
         return s, -1, (1.0 if p == others else -1.0)
     return s, rows[p], 0.0
+
+
+# -- dynamic motors: the motor law's closed form ------------------------------------------------
+# One piece of constant command ``u`` from speeds ``start``: the solution of the motor law of
+# :mod:`toolkit.model.motors` (:class:`~toolkit.model.motors.MotorPiece`, its one compiled form
+# here; ``tests/test_compiled.py`` evaluates both on one grid). ``motor`` is a table (5, n):
+# rows ``start``, ``u``, ``ramp`` (slope at the rate limit, m/s^2, 0 where no ramp),
+# ``ramp_end`` (offset where the ramp ends, s) and ``after`` (speed there, m/s).
+M_START, M_U, M_RAMP, M_END, M_AFTER = 0, 1, 2, 3, 4
+
+
+def motor_build(start: np.ndarray, u: np.ndarray, tau: float, rate: float,
+                motor: np.ndarray) -> None:
+    """:meth:`MotorPiece.build`: each motor ramps at the rate limit ``rate`` (m/s^2) while its
+    gap to the command exceeds ``rate tau``, then approaches it with time constant ``tau``."""
+    n = start.size
+    for i in range(n):
+        s0 = start[i]
+        ui = u[i]
+        motor[M_START, i] = s0
+        motor[M_U, i] = ui
+        motor[M_RAMP, i] = 0.0
+        motor[M_END, i] = 0.0
+        motor[M_AFTER, i] = s0
+        if rate < INF:
+            gap = ui - s0
+            direction = sign(gap)
+            excess = abs(gap) - rate * tau
+            if excess > 0:
+                motor[M_RAMP, i] = direction * rate
+                motor[M_END, i] = excess / rate
+                motor[M_AFTER, i] = ui - direction * rate * tau
+
+
+def motor_speed(motor: np.ndarray, tau: float, i: int, s: float) -> float:
+    """Speed of contact ``i`` at offset ``s`` (s) of the piece (:meth:`MotorPiece.speeds_at`)."""
+    end = motor[M_END, i]
+    if s < end:
+        return motor[M_START, i] + motor[M_RAMP, i] * s
+    if tau > 0:
+        ui = motor[M_U, i]
+        return ui + (motor[M_AFTER, i] - ui) * math.exp(-(s - end) / tau)
+    return motor[M_AFTER, i]
+
+
+def motor_coefficients(motor: np.ndarray, tau: float, s: float, v: np.ndarray, q: np.ndarray,
+                       e: np.ndarray) -> float:
+    """:meth:`MotorPiece.coefficients` at offset ``s``: speeds ``v``, ramp slopes ``q`` and
+    exponential rates ``e`` (``v(s + x) = v + q x + e expm1_ratio(1 / tau, x)``) into the
+    arrays given; returns the offset of the next phase change (``inf``: none)."""
+    phase_end = INF
+    for i in range(v.size):
+        v[i] = motor_speed(motor, tau, i, s)
+        end = motor[M_END, i]
+        if s < end:
+            q[i] = motor[M_RAMP, i]
+            e[i] = 0.0
+            phase_end = min(phase_end, end)
+        else:
+            q[i] = 0.0
+            e[i] = (motor[M_U, i] - v[i]) / tau if tau > 0 else 0.0
+    return phase_end
+
+
+def motor_displacement(motor: np.ndarray, tau: float, s: float, out: np.ndarray) -> None:
+    """Distance (m) each contact travels over the offsets ``[0, s]``: the exact integral of
+    :func:`motor_speed` (:meth:`MotorPiece.displacement`), into ``out`` (n,)."""
+    for i in range(out.size):
+        on_ramp = min(s, motor[M_END, i])
+        rest = s - on_ramp
+        distance = motor[M_START, i] * on_ramp + 0.5 * motor[M_RAMP, i] * on_ramp * on_ramp
+        ui = motor[M_U, i]
+        if tau > 0:
+            out[i] = distance + (ui * rest
+                                 + (motor[M_AFTER, i] - ui) * (tau * -math.expm1(-rest / tau)))
+        else:
+            out[i] = distance + motor[M_AFTER, i] * rest
+
+
+# -- dynamic motors: the engine -----------------------------------------------------------------
+def pairwise_sum(values: np.ndarray, lo: int, n: int) -> float:
+    """``values[lo:lo + n]`` summed as NumPy sums a contiguous float64 array (``np.add.reduce``:
+    blocks of up to 128 terms in 8 partial sums, halved recursively above), so that the
+    engine's sums are the very doubles of NumPy's (tested against NumPy). The halving is
+    walked with an explicit stack (numba caches no recursive kernel)."""
+    if n <= 128:
+        return pairwise_block(values, lo, n)
+    los = np.empty(64, dtype=np.int64)         # depth log2(n / 128) + 1: far below 64
+    ns = np.empty(64, dtype=np.int64)
+    stage = np.zeros(64, dtype=np.int64)      # 0: new, 1: left half summed, 2: both
+    lefts = np.empty(64)
+    top = 0
+    los[0] = lo
+    ns[0] = n
+    result = 0.0
+    while top >= 0:
+        count = ns[top]
+        if count <= 128:
+            result = pairwise_block(values, los[top], count)
+            top -= 1
+            continue
+        half = count // 2
+        half -= half % 8
+        if stage[top] == 0:
+            stage[top] = 1
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top], half, 0
+            top += 1
+        elif stage[top] == 1:
+            lefts[top] = result
+            stage[top] = 2
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top] + half, count - half, 0
+            top += 1
+        else:
+            result = lefts[top] + result
+            top -= 1
+    return result
+
+
+def pairwise_block(values: np.ndarray, lo: int, n: int) -> float:
+    """:func:`pairwise_sum` of at most 128 terms: 8 partial sums (fewer than 8 terms: one)."""
+    if n < 8:
+        total = -0.0
+        for i in range(lo, lo + n):
+            total += values[i]
+        return total
+    r0, r1, r2, r3 = values[lo], values[lo + 1], values[lo + 2], values[lo + 3]
+    r4, r5, r6, r7 = values[lo + 4], values[lo + 5], values[lo + 6], values[lo + 7]
+    i = 8
+    stop = n - n % 8
+    while i < stop:
+        r0 += values[lo + i]
+        r1 += values[lo + i + 1]
+        r2 += values[lo + i + 2]
+        r3 += values[lo + i + 3]
+        r4 += values[lo + i + 4]
+        r5 += values[lo + i + 5]
+        r6 += values[lo + i + 6]
+        r7 += values[lo + i + 7]
+        i += 8
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        total += values[lo + i]
+        i += 1
+    return total
+
+
+def filippov(G_out: float, slopes: np.ndarray, weights: np.ndarray, T: int, mass: float,
+             tol: float, order: np.ndarray, levels: np.ndarray,
+             level_w: np.ndarray) -> tuple[float, bool, float]:
+    """Solve ``0 in G_out + sum_j w_j Sign(slope_j - a) - m a`` for the body's acceleration
+    ``a`` over the ``T`` tied contacts (``slopes``, ``weights``; ``order``, ``levels`` and
+    ``level_w`` (T,) are scratch). Returns ``(a, follows, level)``: ``follows`` when the body
+    follows the contacts whose slope is ``level`` (then ``a = level``). The left side
+    decreases in ``a``, so the levels are tried in ascending order."""
+    if T == 0:
+        return (G_out - 0.0) / mass, False, 0.0
+    if T == 1:                                  # (the loop below for one level, unrolled)
+        level, w0 = slopes[0], weights[0]
+        if abs(G_out + 0.0 - 0.0 - mass * level) <= w0 + tol:
+            return level, True, level
+        a = (G_out + (w0 - 0.0) - 0.0) / mass
+        if a < level:
+            return a, False, 0.0
+        return (G_out - w0) / mass, False, 0.0
+    for j in range(T):                          # stable insertion sort of the slopes
+        x = slopes[j]
+        p = j
+        while p > 0 and slopes[order[p - 1]] > x:
+            order[p] = order[p - 1]
+            p -= 1
+        order[p] = j
+    K = 0                                       # the distinct levels and the weight at each
+    for p in range(T):
+        x = slopes[order[p]]
+        if K == 0 or x != levels[K - 1]:
+            levels[K] = x
+            level_w[K] = weights[order[p]]
+            K += 1
+        else:
+            level_w[K - 1] += weights[order[p]]
+    total = 0.0
+    for k in range(K):
+        total += level_w[k]
+    below = 0.0
+    for k in range(K):
+        level = levels[k]
+        below_next = below + level_w[k]
+        base = G_out + (total - below_next) - below - mass * level
+        if abs(base) <= level_w[k] + tol:
+            return level, True, level
+        a = (G_out + (total - below) - below) / mass
+        if a < level:
+            return a, False, 0.0
+        below = below_next
+    return (G_out - total) / mass, False, 0.0
+
+
+def compliant_round(f: np.ndarray, m: float, c: float, k: float, mu: float, E: float,
+                    V: float, v: np.ndarray, q: np.ndarray, e: np.ndarray, hint: int,
+                    tie_v: float, region: np.ndarray, slip: np.ndarray, on_edge: np.ndarray,
+                    gather: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+                    gamma: np.ndarray, delta: np.ndarray,
+                    rows: np.ndarray) -> tuple[int, float, float, float, float, float]:
+    """One round of compliant contacts (saturated-linear force ``f clip((v - V) / (k f), -1,
+    1)``, :func:`toolkit.model.friction.contact_forces`): the closed-form segment
+    ``(B, lam, c1, C, D)`` of the contacts' current regions and the event functions of the
+    slips reaching ``+-k f`` (rows of ``alpha`` .. ``delta``, the contact of each in ``rows``:
+    every upper limit first, then every lower one). Returns ``(count, B, lam, c1, C, D)``; the
+    other arrays (n,) are scratch."""
+    n = v.size
+    any_edge = False
+    for i in range(n):
+        kf = k * f[i]
+        s = v[i] - V
+        slip[i] = s
+        region[i] = 1.0 if s > kf else (-1.0 if s < -kf else 0.0)
+        edge = abs(abs(s) - kf) <= tie_v and f[i] > 0
+        if i == hint:
+            edge = f[i] > 0
+        on_edge[i] = edge
+        any_edge = any_edge or edge
+    if any_edge:
+        # The force is continuous: V' is known, and the slip's derivative picks the side.
+        for i in range(n):
+            kf = k * f[i]
+            if kf > 0:
+                gather[i] = f[i] * min(max(slip[i] / kf, -1.0), 1.0)
+            else:
+                gather[i] = 0.0
+        acc = (pairwise_sum(gather, 0, n) + E - c * V) / m
+        for i in range(n):
+            if on_edge[i]:
+                edge_sign = sign(slip[i])
+                drift = (q[i] + e[i]) - acc
+                region[i] = edge_sign if drift * edge_sign > 0 else 0.0
+                slip[i] = edge_sign * (k * f[i])
+    count = 0
+    for i in range(n):
+        if not f[i] > 0:
+            region[i] = 2.0                     # lifted contacts never matter
+        if region[i] == 0.0:
+            count += 1
+    b = c + float(count) / k
+    used = 0
+    for i in range(n):
+        if region[i] == 0.0:
+            gather[used] = v[i]
+            used += 1
+    alpha_a = pairwise_sum(gather, 0, used) / k
+    used = 0
+    for i in range(n):
+        if abs(region[i]) == 1.0:
+            gather[used] = f[i] * region[i]
+            used += 1
+    alpha_a = alpha_a + pairwise_sum(gather, 0, used) + E
+    used = 0
+    for i in range(n):
+        if region[i] == 0.0:
+            gather[used] = q[i]
+            used += 1
+    beta_a = pairwise_sum(gather, 0, used) / k
+    used = 0
+    for i in range(n):
+        if region[i] == 0.0:
+            gather[used] = e[i]
+            used += 1
+    gamma_a = pairwise_sum(gather, 0, used) / k
+    C = 0.0
+    D = 0.0
+    if b == 0.0:
+        c1, B, lam = 0.0, alpha_a / m, 0.0
+    else:
+        lam = b / m
+        c1 = beta_a / b
+        if gamma_a != 0.0:
+            if b != m * mu:
+                C = gamma_a / (b - m * mu)
+            else:
+                D = -gamma_a / b
+        B = (alpha_a - b * V) / m - c1 - C - D
+    count = 0
+    for i in range(n):                          # slips reaching +k f (upper) from inside
+        if region[i] == 0.0 or region[i] == 1.0:
+            alpha[count] = 0.0 if (on_edge[i] and slip[i] > 0) else (V - v[i]) + k * f[i]
+            rows[count] = i
+            count += 1
+    for i in range(n):                          # ... and -k f (lower)
+        if region[i] == 0.0 or region[i] == -1.0:
+            alpha[count] = 0.0 if (on_edge[i] and slip[i] < 0) else (V - v[i]) - k * f[i]
+            rows[count] = i
+            count += 1
+    for r in range(count):
+        i = rows[r]
+        beta[r] = c1 - q[i]
+        gamma[r] = B
+        delta[r] = C - e[i]
+    return count, B, lam, c1, C, D
+
+
+def dynamic_run(f: np.ndarray, total: float, m: float, c: float, k: float, tau: float,
+                rate: float, bounds: np.ndarray, commands: np.ndarray, externals: np.ndarray,
+                motor: np.ndarray, fstate: np.ndarray, istate: np.ndarray, seg: np.ndarray,
+                ev: np.ndarray) -> int:
+    """The dynamic-motor engine (motor lag ``tau`` s, rate limit ``rate`` m/s^2; compliance
+    ``k`` (m/s)/N or Coulomb contacts of magnitudes ``f`` (N, total ``total``); mass ``m`` kg,
+    drag ``c`` N s/m) over the pieces ``[bounds[p], bounds[p + 1])`` of constant command
+    ``commands[p]`` (m/s, clipped to the speed limits) and external force ``externals[p]``
+    (N); the one engine of ``simulate`` and ``advance`` with lagging or rate-limited motors.
+
+    State in ``fstate`` / ``istate`` as :func:`ideal_piece` keeps it, plus the piece
+    ``I_PIECE``, its offset ``F_OFF``, and the engine's mode: ``I_STUCK`` (the contact the body
+    follows, -1 free), ``I_HINT`` (the contact whose event ended the last segment, -1 none)
+    and ``F_REL`` (+-1 while the body leaves ``I_STUCK`` upward / downward). ``I_STARTED = 0``:
+    piece ``I_PIECE`` starts now, from the contact speeds in ``motor[M_START]`` when it is the
+    first (else from where the previous piece ended); ``motor`` (5, n) holds the current
+    piece (:func:`motor_build`).
+
+    Each round: the motors' coefficients (:func:`motor_coefficients`), the contacts tied with
+    the body (within ``64 eps`` of the speed scale), the Filippov solution of the tied
+    contacts (:func:`filippov`), the events of this instant, one closed-form segment and its
+    first event (:func:`free_first_root`, :func:`stuck_first_root`; compliant contacts:
+    :func:`compliant_round` and :func:`first_root`). Returns ``DONE``, ``MAX_STEPS``,
+    ``ZENO`` (stopped at ``fstate[F_T]``) or ``PAUSE`` (as :func:`ideal_piece`).
+    """
+    n = f.size
+    P = bounds.size - 1
+    mu = 1.0 / tau if tau > 0 else 0.0
+    t = fstate[F_T]
+    V = fstate[F_V]
+    off = fstate[F_OFF]
+    releasing = fstate[F_REL]
+    rate_ev = fstate[F_RATE]
+    p = istate[I_PIECE]
+    stuck = istate[I_STUCK]
+    hint = istate[I_HINT]
+    started = istate[I_STARTED] != 0
+    nseg = istate[I_NSEG]
+    nev = istate[I_NEV]
+    rounds = istate[I_ROUNDS]
+    n_eval = istate[I_NEVAL]
+    max_steps = istate[I_MAXSTEPS]
+    window = istate[I_WINDOW]
+    free = min(seg.shape[0] - nseg, ev.shape[0] - nev)
+    if free < 8:
+        return PAUSE
+    # A round stores one segment row and at most four event rows (a command, a release, a
+    # stick and a crossing).
+    chunk = min((free - 4) // 4, istate[I_CHUNK])
+    work = np.empty((8, n))
+    v, q, e, side, signs, gather, slip, region = (work[0], work[1], work[2], work[3],
+                                                  work[4], work[5], work[6], work[7])
+    flags = np.empty((3, n), dtype=np.bool_)
+    tied, group, on_edge = flags[0], flags[1], flags[2]
+    fns = np.empty((4, 2 * n))
+    alpha, beta, gamma, delta = fns[0], fns[1], fns[2], fns[3]
+    rows = np.empty(2 * n, dtype=np.int64)
+    tied_idx = np.empty(n, dtype=np.int64)
+    order = np.empty(n, dtype=np.int64)
+    small = np.empty((4, n))
+    t_slopes, t_weights, levels, level_w = small[0], small[1], small[2], small[3]
+    code = DONE
+    done = 0
+    while p < P:
+        a = bounds[p]
+        b = bounds[p + 1]
+        if not started:
+            if p > 0:                           # the speeds where the previous piece ended
+                span = a - bounds[p - 1]
+                for i in range(n):
+                    v[i] = motor_speed(motor, tau, i, span)
+                nev = push_event(ev, nev, a, COMMAND, -1, V)
+                motor_build(v, commands[p], tau, rate, motor)
+            else:
+                for i in range(n):
+                    v[i] = motor[M_START, i]
+                motor_build(v, commands[p], tau, rate, motor)
+            started = True
+            off = 0.0
+            t = a
+        E = externals[p]
+        length = b - a                          # offsets from a keep phase ends exact
+        while off < length:
+            phase_end = motor_coefficients(motor, tau, off, v, q, e)
+            off_next = min(length, phase_end)
+            t_next = b if off_next == length else a + off_next
+            horizon = off_next - off
+            scale = abs(V)
+            steepest = 0.0
+            top = 0.0
+            for i in range(n):
+                top = max(top, abs(v[i]))
+                steepest = max(steepest, abs(q[i] + e[i]))
+            scale = max(scale, top)
+            tie_v = 64.0 * EPS * scale
+            tol = 4.0 * (n + 1) * EPS * (total + abs(E) + c * abs(V) + m * steepest)
+            n_eval += 1
+            if k > 0:
+                count, B, lam, c1, C, D = compliant_round(
+                    f, m, c, k, mu, E, V, v, q, e, hint, tie_v, region, slip, on_edge,
+                    gather, alpha, beta, gamma, delta, rows)
+                nseg = push_segment(seg, nseg, t, V, c1, B, lam, C, D)
+                s, r = first_root(alpha[:count], beta[:count], gamma[:count], delta[:count],
+                                  lam, mu, D, horizon)
+                x = s if r >= 0 else horizon
+                V_new = (V + c1 * x + B * expm1_ratio(lam, x) + C * expm1_ratio(mu, x)
+                         + D * x * math.exp(-mu * x))
+                if r >= 0:
+                    off += s
+                    t = a + off
+                    V = V_new
+                    hint = rows[r]
+                    nev = push_event(ev, nev, t, SATURATION, hint, V)
+                else:
+                    off = off_next
+                    t = t_next
+                    V = V_new
+                    hint = -1
+            else:
+                # Coulomb contacts: which are tied with the body now?
+                for i in range(n):
+                    tied[i] = abs(v[i] - V) <= tie_v
+                if hint >= 0:
+                    tied[hint] = True
+                if stuck >= 0:
+                    tied[stuck] = True
+                T = 0
+                for i in range(n):
+                    tied[i] = tied[i] and f[i] > 0
+                    if tied[i]:
+                        tied_idx[T] = i
+                        T += 1
+                anchor = hint if hint >= 0 else stuck
+                if anchor >= 0 and tied[anchor]:
+                    V = v[anchor]
+                used = 0
+                for i in range(n):
+                    side[i] = sign(v[i] - V)
+                    if not tied[i]:
+                        gather[used] = f[i] * side[i]
+                        used += 1
+                G_out = pairwise_sum(gather, 0, used) + E - c * V
+                for j in range(T):
+                    i = tied_idx[j]
+                    t_slopes[j] = q[i] + e[i]
+                    if releasing != 0.0 and i == stuck:
+                        t_slopes[j] = -releasing * INF
+                    t_weights[j] = f[i]
+                acc, follows, level = filippov(G_out, t_slopes, t_weights, T, m, tol, order,
+                                               levels, level_w)
+                new_stuck = -1
+                if follows:
+                    for j in range(T):
+                        if t_slopes[j] == level:
+                            new_stuck = tied_idx[j]
+                            break
+                # Events at this instant.
+                if stuck >= 0 and new_stuck != stuck:
+                    nev = push_event(ev, nev, t, RELEASE, stuck, V)
+                if new_stuck >= 0 and new_stuck != stuck:
+                    nev = push_event(ev, nev, t, STICK, new_stuck, V)
+                if hint >= 0 and (new_stuck < 0 or hint != new_stuck) and hint != stuck:
+                    nev = push_event(ev, nev, t, CROSS, hint, V)
+                stuck = new_stuck
+                hint = -1
+                releasing = 0.0
+                if stuck < 0:
+                    for i in range(n):
+                        signs[i] = side[i]
+                    for j in range(T):
+                        signs[tied_idx[j]] = sign(t_slopes[j] - acc)
+                    for i in range(n):
+                        gather[i] = f[i] * signs[i]
+                    r0 = (pairwise_sum(gather, 0, n) + E - c * V) / m
+                    lam = c / m
+                    nseg = push_segment(seg, nseg, t, V, 0.0, r0, lam, 0.0, 0.0)
+                    s, r = free_first_root(v, q, e, tied, V, r0, acc, lam, mu, horizon)
+                    step = horizon if r < 0 else s
+                    V_new = V + r0 * expm1_ratio(lam, step)
+                else:
+                    for i in range(n):
+                        group[i] = False
+                    for j in range(T):
+                        if follows and t_slopes[j] == level:
+                            group[tied_idx[j]] = True
+                    used = 0
+                    for i in range(n):
+                        if group[i]:
+                            gather[used] = f[i]
+                            used += 1
+                    W = pairwise_sum(gather, 0, used)
+                    used = 0
+                    for i in range(n):
+                        signs[i] = side[i]
+                        if tied[i] and not group[i]:
+                            signs[i] = sign((q[i] + e[i]) - acc)
+                        if not group[i]:
+                            gather[used] = f[i] * signs[i]
+                            used += 1
+                    G_fixed = pairwise_sum(gather, 0, used) + E
+                    qc, ec, vc = q[stuck], e[stuck], v[stuck]
+                    h0 = G_fixed - c * vc - m * (qc + ec)
+                    nseg = push_segment(seg, nseg, t, V, qc, 0.0, 0.0, ec, 0.0)
+                    s, r, releasing = stuck_first_root(v, q, e, tied, group, stuck, W, tol, h0,
+                                                       c, m, mu, horizon)
+                    step = horizon if r < 0 and releasing == 0.0 else s
+                    V_new = vc + qc * step + ec * expm1_ratio(mu, step)
+                if r >= 0 or releasing != 0.0:
+                    off += step
+                    t = a + off
+                else:
+                    off = off_next
+                    t = t_next
+                V = V_new
+                hint = r if r >= 0 else -1
+            rounds += 1
+            code = budget_code(rounds, max_steps, ev, nev, window, rate_ev)
+            done += 1
+            if code == DONE and done >= chunk and (off < length or p + 1 < P):
+                code = PAUSE
+            if code != DONE:
+                break
+        if code != DONE:
+            break
+        t = b
+        p += 1
+        started = False
+    fstate[F_T] = t
+    fstate[F_V] = V
+    fstate[F_OFF] = off
+    fstate[F_REL] = releasing
+    istate[I_PIECE] = p
+    istate[I_STUCK] = stuck
+    istate[I_HINT] = hint
+    istate[I_STARTED] = 1 if started else 0
+    istate[I_NSEG] = nseg
+    istate[I_NEV] = nev
+    istate[I_ROUNDS] = rounds
+    istate[I_NEVAL] = n_eval
+    return code
+
+
+def advance_dynamic(f: np.ndarray, params: np.ndarray, try_quiet: bool, t0: float, t1: float,
+                    V: float, stuck: int, hint: int, releasing: float, start: np.ndarray,
+                    u: np.ndarray, E: float, motor: np.ndarray, fstate: np.ndarray,
+                    istate: np.ndarray, seg: np.ndarray, ev: np.ndarray,
+                    out: np.ndarray) -> tuple[int, bool, float]:
+    """One step of :func:`toolkit.simulation.advance` with lagging or rate-limited motors:
+    from body speed ``V`` (m/s; mode ``stuck``, ``hint``, ``releasing`` of
+    :func:`dynamic_run`) and contact speeds ``start`` at ``t0`` to ``t1`` (s) under the
+    command ``u`` (clipped, m/s) and external force ``E`` (N). ``params``: the plant's
+    constants (``P_TOTAL`` .. ``P_MARGIN``).
+
+    When ``try_quiet``, the no-event certificate first (:func:`quiet_piece`); else, or when it
+    is unsure, :func:`dynamic_run` over the one piece. Returns ``(code, quiet, body)``: the
+    engine's code (``PAUSE``: resume with :func:`dynamic_run`, then :func:`advance_outputs`),
+    whether the certificate ran the step, and the body's displacement (m); ``out`` (2, n)
+    receives the contact speeds at the end and their displacements (m); the end time and
+    speed are ``fstate[F_T]``, ``fstate[F_V]``."""
+    total, m, c, k = params[P_TOTAL], params[P_MASS], params[P_DAMPING], params[P_COMPLIANCE]
+    tau, rate = params[P_TAU], params[P_RATE]
+    if try_quiet:
+        certified, V_end, body = quiet_piece(f, total, m, c, tau, params[P_RAMP_GAP],
+                                             params[P_SPEED_BOUND], params[P_MARGIN], start,
+                                             u, V, stuck, E, t1 - t0, out)
+        if certified and V_end - V_end == 0.0:          # (finite)
+            fstate[F_T] = t1
+            fstate[F_V] = V_end
+            return DONE, True, body
+    n = f.size
+    bounds = np.empty(2)
+    bounds[0] = t0
+    bounds[1] = t1
+    externals = np.empty(1)
+    externals[0] = E
+    commands = u.reshape((1, n))
+    for i in range(n):
+        motor[M_START, i] = start[i]
+    fstate[F_T] = t0
+    fstate[F_V] = V
+    fstate[F_OFF] = 0.0
+    fstate[F_REL] = releasing
+    istate[I_PIECE] = 0
+    istate[I_STARTED] = 0
+    istate[I_STUCK] = stuck
+    istate[I_HINT] = hint
+    code = dynamic_run(f, total, m, c, k, tau, rate, bounds, commands, externals, motor,
+                       fstate, istate, seg, ev)
+    body = 0.0
+    if code != PAUSE:
+        body = advance_outputs(motor, tau, t0, fstate, istate, seg, out)
+    return code, False, body
+
+
+def advance_outputs(motor: np.ndarray, tau: float, t0: float, fstate: np.ndarray,
+                    istate: np.ndarray, seg: np.ndarray, out: np.ndarray) -> float:
+    """The outputs of a finished (or stopped) :func:`advance_dynamic` step from ``t0`` (s):
+    ``out[0]`` the contact speeds at ``fstate[F_T]``, ``out[1]`` their displacements (m);
+    returns the body's displacement (m, :func:`displacement` of the segments)."""
+    span = fstate[F_T] - t0
+    for i in range(out.shape[1]):
+        out[0, i] = motor_speed(motor, tau, i, span)
+    motor_displacement(motor, tau, span, out[1])
+    mu = 1.0 / tau if tau > 0 else 0.0
+    return displacement(seg, istate[I_NSEG], mu, fstate[F_T])
 
 
 # -- many constant-speed scenes ----------------------------------------------------------------

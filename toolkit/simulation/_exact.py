@@ -40,12 +40,11 @@ one-piece run with sample times is a single kernel call (:func:`toolkit._compile
 The result's events, contact-speed table and dense output are built from the run's record on
 first access (``SimulationResult._trusted``): a caller that reads only ``t``, ``V`` and
 ``force`` (a sweep, a benchmark, a loop) does not pay for them.
-The dynamic-motor engine (lag, rate limit with a command schedule) is NumPy code here
-(each round: motor coefficients, ties, the Filippov solution, the segment) around its event
-root finder, a kernel: :func:`toolkit._compiled.core.first_root`, called with the event
-functions the kernel builds itself for a free or a stuck body
-(:func:`~toolkit._compiled.core.free_first_root`,
-:func:`~toolkit._compiled.core.stuck_first_root`) and with those of compliant contacts.
+The dynamic-motor engine (lag, rate limit with a command schedule) is a kernel too,
+:func:`toolkit._compiled.core.dynamic_run`: one call runs every piece of constant command
+(each round: the motor law's closed form, the tied contacts, the Filippov solution, the
+segment and its first event, found by :func:`toolkit._compiled.core.first_root`); this module
+passes it the schedule's pieces and resumes it while it pauses.
 A process runs the kernels as Python until it has done enough work to pay for loading the
 compiled ones (:func:`toolkit._compiled.kernels`): the results are the same either way.
 
@@ -104,8 +103,6 @@ _EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _ROOT_WORK = 15             # interpreted work (about us) of the first-root search per function
 _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than an Enum member)
-# The ufuncs' own reductions: np.sum / np.max add a Python layer (the same results).
-_sum, _max, _abs = np.add.reduce, np.maximum.reduce, np.abs
 _EMPTY = np.empty(0)
 _EMPTY.setflags(write=False)
 _NO_FIRST = np.empty(0, dtype=np.int64)      # (never written: the kernel caches nothing in it)
@@ -170,6 +167,7 @@ class _Recorder:
             fstate = np.zeros(_core.N_FSTATE)
             istate = np.zeros(_core.N_ISTATE, dtype=np.int64)
             istate[_core.I_STUCK] = -1
+            istate[_core.I_HINT] = -1
             istate[_core.I_MAXSTEPS] = min(budget.max_steps, _STEP_CAP, max(budget.max_samples // 2, 1))
             istate[_core.I_WINDOW] = self.window
             istate[_core.I_CHUNK] = _MAX_CHUNK
@@ -679,323 +677,110 @@ def _first_root(fns: _EventFunctions, horizon: float) -> tuple[float, int]:
 
 
 # -- dynamic motors: the engine ----------------------------------------------------------------
-def _filippov(G_out: float, slopes: np.ndarray, weights: np.ndarray, mass: float,
-              tol: float) -> tuple[float, np.ndarray | None]:
-    """Solve ``0 in G_out + sum_i w_i Sign(slope_i - a) - m a`` for the body's acceleration.
-
-    Returns ``(a, group)`` where ``group`` is the boolean mask of the tied contacts the body
-    follows (their slope is ``a``) or ``None`` when it leaves every one of them.
-    """
-    if slopes.size <= 1:            # the loop below for none or one tied contact, unrolled
-        if not slopes.size:
-            return (G_out - 0.0) / mass, None
-        level, w0 = float(slopes[0]), float(weights[0])
-        if abs(G_out + 0.0 - 0.0 - mass * level) <= w0 + tol:
-            return level, slopes == level
-        a = (G_out + (w0 - 0.0) - 0.0) / mass
-        if a < level:
-            return a, None
-        return (G_out - w0) / mass, None
-    order = np.argsort(slopes)
-    s, w = slopes[order], weights[order]
-    distinct, start = np.unique(s, return_index=True)
-    W = np.add.reduceat(w, start)
-    below = np.concatenate(([0.0], np.cumsum(W)))
-    total = below[-1]
-    for k, level in enumerate(distinct):
-        base = G_out + (total - below[k + 1]) - below[k] - mass * level
-        if abs(base) <= W[k] + tol:
-            return float(level), slopes == level
-        a = (G_out + (total - below[k]) - below[k]) / mass      # free, below level k
-        if a < level:
-            return a, None
-    return (G_out - total) / mass, None
-
-
-def _run_dynamic(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
-    """Integrate with lagging / rate-limited motors; returns the final ``(t, V)``."""
-    V = v0
-    mode = _FREE
-    for a, b, motor in _motor_pieces(plant, t_end):
-        E = plant.external(a)
-        if a > 0:
-            rec.event(a, "command", None, V)
-        t, V, mode, stopped = _dynamic_piece(plant, motor, E, b, V, mode, rec)
-        if stopped:
-            return t, V
-    return t_end, V
-
-
-#: The engine's mode between events: ``(stuck, hint, releasing)``: the contact the body is
-#: stuck to (or None), the contact whose event ended the previous segment (or None), and
-#: +-1 when the body leaves ``stuck`` upward / downward (else 0).
-_Mode = tuple[int | None, int | None, float]
-_FREE: _Mode = (None, None, 0.0)
-
-
-def _dynamic_piece(plant: Plant, motor: MotorPiece, E: float, b: float, V: float, mode: _Mode,
-                   rec: _Recorder) -> tuple[float, float, _Mode, bool]:
-    """Integrate from ``motor.a`` to ``b`` (s) under one constant command (the contact speeds
-    of ``motor``) and external force ``E`` (N), from body speed ``V`` (m/s) in engine mode
-    ``mode``; the one engine of :func:`simulate_exact` and :func:`advance`.
-
-    Returns
-    -------
-    (t, V, mode, stopped)
-        The time and speed reached (``b`` unless the budget stopped the run, then
-        ``stopped``), and the engine's mode there.
-    """
-    m, c, k = plant.mass, plant.damping, plant.compliance
-    f = plant.contacts.forces
-    tau = plant.motors.lag
-    mu = 1.0 / tau if tau > 0 else 0.0
-    n = plant.n
-    stuck, hint, releasing = mode
-    a = motor.a
-    t, off, length = a, 0.0, b - a     # offsets from a keep phase ends exact
-    while off < length:
-        v, q, e, phase_end = motor.coefficients(off)
-        off_next = min(length, phase_end)
-        t_next = b if off_next == length else a + off_next
-        horizon = off_next - off
-        slope_now = q + e
-        scale = max(abs(V), float(_max(_abs(v))))
-        tie_v = 64.0 * _EPS * scale
-        tol = 4.0 * (n + 1) * _EPS * (plant.contacts.total_force + abs(E) + c * abs(V)
-                                      + m * float(_max(_abs(slope_now))))
-        rec.n_evaluations += 1
-        if k > 0:
-            fns, seg, kinds = _compliant_step(plant, V, v, q, e, E, mu, hint, tie_v)
-            rec.segment(t, V, *seg)
-            s, i = _first_root(fns, horizon)
-            if i >= 0:
-                off += s
-                t, V, hint = a + off, _segment_value(V, seg, mu, s), int(kinds[i])
-                rec.event(t, "saturation", hint, V)
-            else:
-                off = off_next
-                t, V, hint = t_next, _segment_value(V, seg, mu, horizon), None
-            if rec.stop(t):
-                return t, V, (stuck, hint, releasing), True
-            continue
-        # Coulomb contacts: which are tied with the body now?
-        tied = np.abs(v - V) <= tie_v
-        if hint is not None:
-            tied[hint] = True
-        if stuck is not None:
-            tied[stuck] = True
-        tied &= f > 0
-        anchor = hint if hint is not None else stuck
-        if anchor is not None and tied[anchor]:
-            V = float(v[anchor])
-        side = np.sign(v - V)
-        G_out = float(_sum(f[~tied] * side[~tied])) + E - c * V
-        t_slopes = slope_now[tied].copy()
-        if releasing != 0.0:
-            t_slopes[np.flatnonzero(tied) == stuck] = -releasing * math.inf
-        acc, group = _filippov(G_out, t_slopes, f[tied], m, tol)
-        tied_idx = np.flatnonzero(tied)
-        new_stuck = int(tied_idx[group][0]) if group is not None else None
-        # Events at this instant.
-        if stuck is not None and new_stuck != stuck:
-            rec.event(t, "release", stuck, V)
-        if new_stuck is not None and new_stuck != stuck:
-            rec.event(t, "stick", new_stuck, V)
-        if hint is not None and (new_stuck is None or hint != new_stuck) and hint != stuck:
-            rec.event(t, "cross", hint, V)
-        stuck, hint, releasing = new_stuck, None, 0.0
-        if stuck is None:
-            signs = side.copy()
-            signs[tied] = np.sign(t_slopes - acc)
-            r0 = (float(_sum(f * signs)) + E - c * V) / m
-            lam = c / m
-            rec.segment(t, V, r0, lam)
-            # The crossing functions V(s) - v_i(s) and their first root, in one kernel call.
-            s, i = _kernels(_ROOT_WORK * min(n, _core.SMALL + 1) + 2 * n).free_first_root(
-                v, q, e, tied, V, r0, acc, lam, mu, horizon)
-            s, i = float(s), int(i)
-            step = horizon if i < 0 else s
-            V_new = V + r0 * _scalar_expm1_ratio(lam, step)
-        else:
-            group_mask = np.zeros(n, dtype=bool)
-            group_mask[tied_idx[group]] = True
-            W = float(_sum(f[group_mask]))
-            signs = side.copy()
-            signs[tied & ~group_mask] = np.sign(slope_now[tied & ~group_mask] - acc)
-            G_fixed = float(_sum(f[~group_mask] * signs[~group_mask])) + E
-            qc, ec, vc = float(q[stuck]), float(e[stuck]), float(v[stuck])
-            h0 = G_fixed - c * vc - m * (qc + ec)
-            rec.segment(t, V, 0.0, 0.0, qc, ec)
-            # The crossings of the other contacts and the stiction margins, their first root.
-            s, i, releasing = _kernels(_ROOT_WORK * min(n + 2, _core.SMALL + 1) + 2 * n
-                                       ).stuck_first_root(v, q, e, tied, group_mask, stuck, W,
-                                                          tol, h0, c, m, mu, horizon)
-            s, i, releasing = float(s), int(i), float(releasing)
-            step = horizon if i < 0 and not releasing else s
-            V_new = vc + qc * step + ec * _scalar_expm1_ratio(mu, step)
-        if i >= 0 or releasing:
-            off += step
-            t = a + off
-        else:
-            off, t = off_next, t_next
-        V = float(V_new)
-        hint = i if i >= 0 else None
-        if rec.stop(t):
-            return t, V, (stuck, hint, releasing), True
-    return b, V, (stuck, hint, releasing), False
-
-
-# -- dynamic motors: a piece without events, certified ---------------------------------------
 #: Relative margin of the no-event certificate (about 4500 ulp): far above the rounding of the
 #: engine's event functions and tie tests (a few ulp, ``64 eps``, ``4 (N + 1) eps``), so that a
-#: certified piece is one the engine would also run as one segment without an event.
+#: certified piece is one the engine would also run as one segment without an event
+#: (:func:`toolkit._compiled.core.quiet_piece`).
 _QUIET_MARGIN = 2.0 ** -40
+#: Interpreted work (about us) of one round of the dynamic-motor engine, and per contact.
+_ROUND_WORK, _CONTACT_WORK = 60, 12
 
 
-class _QuietPlant:
-    """What :func:`_quiet_piece` reads of a plant, read once (the plant is frozen): Coulomb
-    contacts (no compliance) and motors with a lag; None stands for any other plant."""
+class _DynamicPlant:
+    """What the dynamic-motor engine reads of a plant, read once (the plant is frozen): the
+    magnitudes and one array of constants (:data:`toolkit._compiled.core.P_TOTAL` ..
+    ``P_MARGIN``), and whether the no-event certificate of :func:`advance` applies (Coulomb
+    contacts, motors with a lag)."""
 
-    __slots__ = ("forces", "total_force", "mass", "damping", "tau", "mu", "lam", "ramp_gap",
-                 "speed_bound", "args")
+    __slots__ = ("forces", "params", "quiet", "tau", "rate", "mu", "n", "__weakref__")
 
     def __init__(self, plant: Plant) -> None:
         motors = plant.motors
-        self.forces = plant.contacts.forces
-        self.total_force = float(plant.contacts.total_force)
-        self.mass, self.damping, self.tau = plant.mass, plant.damping, motors.lag
-        self.mu = 1.0 / motors.lag
-        self.lam = plant.damping / plant.mass
-        # Gap |u - v| above which a motor ramps at its rate limit (MotorPiece.build).
-        self.ramp_gap = motors.rate_limit * motors.lag
-        # Bound on |u| for clipped commands (inf without finite speed limits).
-        self.speed_bound = max(abs(motors.speed_limits[0]), abs(motors.speed_limits[1]))
-        self.args = (self.forces, self.total_force, self.mass, self.damping, self.tau,
-                     self.ramp_gap, self.speed_bound, _QUIET_MARGIN)
+        self.forces = np.ascontiguousarray(plant.contacts.forces, dtype=float)
+        self.n = self.forces.size
+        self.tau, self.rate = motors.lag, motors.rate_limit
+        self.mu = 1.0 / motors.lag if motors.lag > 0 else 0.0
+        self.quiet = plant.compliance == 0 and motors.lag > 0
+        params = np.empty(_core.N_PARAMS)
+        params[_core.P_TOTAL] = float(plant.contacts.total_force)
+        params[_core.P_MASS] = plant.mass
+        params[_core.P_DAMPING] = plant.damping
+        params[_core.P_COMPLIANCE] = plant.compliance
+        params[_core.P_TAU] = motors.lag
+        params[_core.P_RATE] = motors.rate_limit
+        # Gap |u - v| above which a motor ramps at its rate limit (MotorPiece.build), and a
+        # bound on |u| for clipped commands (inf without finite speed limits).
+        params[_core.P_RAMP_GAP] = motors.rate_limit * motors.lag
+        params[_core.P_SPEED_BOUND] = max(abs(motors.speed_limits[0]), abs(motors.speed_limits[1]))
+        params[_core.P_MARGIN] = _QUIET_MARGIN
+        params.setflags(write=False)
+        self.params = params
+
+    def run(self, bounds: np.ndarray, commands: np.ndarray, externals: np.ndarray,
+            motor: np.ndarray, rec: _Recorder) -> int:
+        """:func:`toolkit._compiled.core.dynamic_run` from the state in ``rec``: one call, or
+        more while it pauses (the wall clock looked at, the buffers grown); returns its code
+        (-1: the wall clock ran out)."""
+        p = self.params
+        n_rounds = int(rec.istate[_core.I_ROUNDS])
+        work = (bounds.size - 1) * (_ROUND_WORK + _CONTACT_WORK * self.n)
+        while True:
+            code = _kernels(work).dynamic_run(
+                self.forces, p[_core.P_TOTAL], p[_core.P_MASS], p[_core.P_DAMPING],
+                p[_core.P_COMPLIANCE], self.tau, self.rate, bounds, commands, externals, motor,
+                rec.fstate, rec.istate, rec.seg, rec.ev)
+            if code != _core.PAUSE:
+                break
+            if time.perf_counter() > rec.deadline:
+                return -1
+            rec.room()
+        if not _COMPILED:                 # the rounds run interpreted count towards compiling
+            rounds = int(rec.istate[_core.I_ROUNDS]) - n_rounds
+            _compiled.charge(rounds * (_ROUND_WORK + _CONTACT_WORK * self.n))
+        if code == _core.DONE and time.perf_counter() > rec.deadline:
+            return -1
+        return code
 
 
-_QUIET_PLANTS: weakref.WeakKeyDictionary[Plant, _QuietPlant | None] = weakref.WeakKeyDictionary()
+_DYNAMIC_PLANTS: weakref.WeakKeyDictionary[Plant, _DynamicPlant] = weakref.WeakKeyDictionary()
+_DYNAMIC_LAST: list[Any] = [None, None]  # the last plant asked for (a weak reference), its entry
 
 
-_QUIET_LAST: list[Any] = [None, None]    # the last plant asked for (a weak reference), its entry
+def _dynamic_plant(plant: Plant) -> _DynamicPlant:
+    """The per-plant constants of the dynamic-motor engine (cached weakly; a closed loop
+    steps one plant, so the last one is kept at hand)."""
+    last, entry = _DYNAMIC_LAST
+    if last is not None and last() is plant:
+        return entry
+    entry = _DYNAMIC_PLANTS.get(plant)
+    if entry is None:
+        entry = _DYNAMIC_PLANTS[plant] = _DynamicPlant(plant)
+    _DYNAMIC_LAST[:] = weakref.ref(plant), entry
+    return entry
 
 
-def _quiet_plant(plant: Plant) -> _QuietPlant | None:
-    """The per-plant constants of :func:`_quiet_piece` (cached weakly), or None when the
-    shortcut does not apply (compliant contacts, motors without a lag)."""
-    last, quiet = _QUIET_LAST
-    if last is not None and last() is plant:     # a closed loop steps one plant: no lookup
-        return quiet
-    try:
-        quiet = _QUIET_PLANTS[plant]
-    except KeyError:
-        quiet = (_QuietPlant(plant) if plant.compliance == 0 and plant.motors is not None
-                 and plant.motors.lag > 0 else None)
-        _QUIET_PLANTS[plant] = quiet
-    _QUIET_LAST[:] = weakref.ref(plant), quiet
-    return quiet
-
-
-def _quiet_piece(quiet: _QuietPlant, start: np.ndarray, u: np.ndarray, V: float,
-                 stuck: int | None, E: float,
-                 S: float) -> tuple[float, np.ndarray, np.ndarray, float] | None:
-    """One piece of constant command ``u`` (clipped, m/s) over ``S`` seconds from contact
-    speeds ``start`` and body speed ``V`` (m/s), stuck to ``stuck`` or free, external force
-    ``E`` (N), when a cheap certificate shows that :func:`_dynamic_piece` would run it as one
-    closed-form segment without an event; None otherwise (the caller runs the engine).
-
-    The certificate uses the engine's own closed forms on ``[0, S]``. Without a ramp phase
-    (no motor on its rate limit) contact ``i`` moves as ``v_i(s) = v_i + e_i x_mu(s)`` with
-    ``x_r(s) = expm1_ratio(r, s)``, and the body
-
-    - free (no contact tied now): ``V(s) = V + r0 x_lam(s)`` under the constant force ``m r0``
-      of the current signs. The crossing function ``g_i = V(s) - v_i(s)`` has
-      ``g_i' = r0 exp(-lam s) - e_i exp(-mu s)``, zero at most once, at
-      ``s* = log(e_i / r0) / (mu - lam)``: its range on ``[0, S]`` is spanned by ``g_i(0)``,
-      ``g_i(S)`` and ``g_i(s*)`` when ``0 < s* < S``. No crossing when these share a sign.
-    - stuck to contact ``k`` (and any contacts on its very track: the same start and
-      command, e.g. at a speed limit): ``V = v_k(s)``; the gap
-      ``v_k(s) - v_i(s) = (v_k - v_i) + (e_k - e_i) x_mu(s)`` is monotone (no crossing when
-      its ends share a sign), and so is the stiction margin
-      ``h(s) = G - c v_k - m dv_k/dt = h0 + e_k (m mu - c) x_mu(s)``: it stays stuck when
-      ``|h| <= W`` (the group's total force) at both ends.
-
-    "Share a sign" and "``<= W``" hold with a margin of ``2^-40`` relative to the speed or
-    force scale, far above the rounding of the engine's tie tests and event functions
-    (``64 eps``, ``4 (N + 1) eps``, a few ulp), so the engine finds no tie and no event either
-    and the two evaluate the same closed forms: they agree to rounding.
-
-    Returns
-    -------
-    (V_end, speeds_end, travelled, body_displacement) or None
-        Body speed (m/s) and contact speeds (fresh, shape (n,)) at ``S``; the exact
-        displacements over the piece (m): each contact's (fresh, shape (n,)), the body's.
-    """
-    out = np.empty((2, start.size))
-    certified, V_end, body = _kernels(10 * start.size).quiet_piece(
-        *quiet.args, start, u, V, -1 if stuck is None else stuck, E, S, out)
-    if not certified:
-        return None
-    return V_end, out[0], out[1], body
-
-
-def _segment_value(V0: float, seg: tuple[float, ...], mu: float, s: float) -> float:
-    B, lam, c1, C, D = seg
-    return (V0 + c1 * s + B * _scalar_expm1_ratio(lam, s) + C * _scalar_expm1_ratio(mu, s)
-            + D * s * math.exp(-mu * s))
-
-
-def _compliant_step(plant: Plant, V: float, v: np.ndarray, q: np.ndarray, e: np.ndarray,
-                    E: float, mu: float, hint: int | None,
-                    tie_v: float) -> tuple[_EventFunctions, tuple[float, ...], np.ndarray]:
-    """Closed-form segment and saturation event functions of compliant contacts."""
-    m, c, k = plant.mass, plant.damping, plant.compliance
-    f = plant.contacts.forces
-    kf = k * f
-    slip = v - V
-    region = np.where(slip > kf, 1.0, np.where(slip < -kf, -1.0, 0.0))
-    on_edge = (np.abs(np.abs(slip) - kf) <= tie_v) & (f > 0)
-    if hint is not None:
-        on_edge[hint] = f[hint] > 0
-    if on_edge.any():
-        # Force is continuous: V' is known; the slip's derivative picks the side.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            force = np.where(kf > 0, f * np.clip(slip / np.where(kf > 0, kf, 1.0), -1, 1), 0.0)
-        acc = (float(np.sum(force)) + E - c * V) / m
-        drift = (q + e) - acc
-        edge_sign = np.sign(slip)
-        outward = drift * edge_sign > 0
-        region = np.where(on_edge, np.where(outward, edge_sign, 0.0), region)
-        slip = np.where(on_edge, edge_sign * kf, slip)
-    region = np.where(f > 0, region, 2.0)                 # lifted contacts never matter
-    linear = region == 0.0
-    b = c + float(np.count_nonzero(linear)) / k
-    alpha_a = float(np.sum(v[linear])) / k + float(np.sum(f[np.abs(region) == 1.0] *
-                                                           region[np.abs(region) == 1.0])) + E
-    beta_a = float(np.sum(q[linear])) / k
-    gamma_a = float(np.sum(e[linear])) / k
-    C = D = 0.0
-    if b == 0.0:
-        c1, B, lam = 0.0, alpha_a / m, 0.0
-    else:
-        lam = b / m
-        c1 = beta_a / b
-        if gamma_a != 0.0:
-            if b != m * mu:
-                C = gamma_a / (b - m * mu)
-            else:
-                D = -gamma_a / b
-        B = (alpha_a - b * V) / m - c1 - C - D
-    # Event functions: slip reaching +kf (upper) and -kf (lower) from inside the region.
-    V_minus_v = V - v
-    upper = np.where(on_edge & (slip > 0), 0.0, V_minus_v + kf)
-    lower = np.where(on_edge & (slip < 0), 0.0, V_minus_v - kf)
-    want_upper = (region == 0.0) | (region == 1.0)
-    want_lower = (region == 0.0) | (region == -1.0)
-    rows = np.concatenate((np.flatnonzero(want_upper), np.flatnonzero(want_lower)))
-    alpha = np.concatenate((upper[want_upper], lower[want_lower]))
-    fns = _EventFunctions(alpha, c1 - q[rows], np.full(rows.size, B), C - e[rows], lam, mu, D)
-    return fns, (B, lam, c1, C, D), rows
+def _run_dynamic(plant: Plant, t_end: float, v0: float, rec: _Recorder) -> tuple[float, float]:
+    """Integrate with lagging / rate-limited motors: one kernel call over every piece of
+    constant command (:func:`toolkit._compiled.core.dynamic_run`); returns the final
+    ``(t, V)``."""
+    dyn = _dynamic_plant(plant)
+    bounds = np.array(_piece_bounds(plant, t_end))
+    starts = bounds[:-1]
+    low, high = plant.motors.speed_limits
+    commands = np.ascontiguousarray(np.clip(plant.commands(starts).reshape(starts.size, plant.n),
+                                            low, high), dtype=float)
+    ext = plant.external_force
+    externals = (np.asarray(ext(starts), dtype=float).reshape(starts.size)
+                 if isinstance(ext, PiecewiseConstant) else np.full(starts.size, float(ext)))
+    motor = np.empty((5, plant.n))
+    motor[_core.M_START] = plant.initial_speeds()
+    rec.fstate[_core.F_V] = v0
+    code = dyn.run(bounds, commands, externals, motor, rec)
+    t, V = float(rec.fstate[_core.F_T]), float(rec.fstate[_core.F_V])
+    if code != _core.DONE:
+        rec.stopped(code, t)
+        return t, V
+    return t_end, V
 
 
 # -- entry point ------------------------------------------------------------------------------

@@ -7,30 +7,31 @@ speeds: with lagging motors these are states, not the commands), one command hel
 exact displacements over the step (what encoders count) and the events inside it.
 
 It runs the engine of :func:`toolkit.simulation.simulate` (``method="exact"``) itself, one
-piece of constant command: ``_dynamic_piece`` with lagging or rate-limited motors,
-``_ideal_piece`` otherwise. Stepping ``0 .. T`` under a command schedule therefore gives
-the trajectory of one ``simulate`` run of that schedule, to rounding. No restart cost: the
-state carries the engine's sliding mode, and nothing is built per call but the step's own
-closed forms (with ideal motors, the force landscape of the new command).
+piece of constant command: :func:`toolkit._compiled.core.advance_dynamic` with lagging or
+rate-limited motors, ``_ideal_piece`` otherwise. Stepping ``0 .. T`` under a command schedule
+therefore gives the trajectory of one ``simulate`` run of that schedule, to rounding. No
+restart cost: the state carries the engine's sliding mode, and nothing is built per call but
+the step's own closed forms (with ideal motors, the force landscape of the new command).
 
 Most steps of a closed loop hold no event: the body slides between two contact speeds, or
 stays stuck to one contact while its motor settles. A cheap certificate
-(:func:`toolkit.simulation._exact._quiet_piece`: the range of every crossing function and of
-the stiction margin over the step, bounded from the engine's closed forms) recognises them,
-and such a step evaluates the engine's one closed-form segment directly, to rounding what
-the engine computes; when the certificate is unsure, the engine runs. The certificate and the
-ideal-motor engine are compiled kernels (:mod:`toolkit._compiled.core`); the dynamic-motor
-engine that runs the other steps is NumPy code around a compiled event root finder
-(:func:`toolkit._compiled.core.first_root`).
+(:func:`toolkit._compiled.core.quiet_piece`: the range of every crossing function and of the
+stiction margin over the step, bounded from the engine's closed forms) recognises them, and
+such a step evaluates the engine's one closed-form segment directly, to rounding what the
+engine computes; when the certificate is unsure, the engine runs, in the same kernel call
+(:func:`toolkit._compiled.core.dynamic_run`): a step with lagging motors never leaves
+compiled code.
 
 Displacements are exact closed forms: the integral of each stored segment of ``V``
-(:meth:`_Recorder.displacement`) and of each contact's motor track
-(:meth:`toolkit.model.motors.MotorPiece.displacement`).
+(:func:`toolkit._compiled.core.displacement`) and of each contact's motor track
+(:func:`toolkit._compiled.core.motor_displacement`, the compiled form of
+:meth:`toolkit.model.motors.MotorPiece.displacement`).
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,22 +39,24 @@ import numpy as np
 
 from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
-from ..model import MotorPiece, Plant
-from ._exact import (_FREE, _build_landscape, _dynamic_piece, _ideal_piece, _quiet_piece,
-                     _quiet_plant, _Recorder)
+from .._compiled import core as _core
+from ..model import Plant
+from ._exact import _build_landscape, _dynamic_plant, _ideal_piece, _kernels, _Recorder
 from ._result import Budget, Event, SimulationStatus, refuse_backlash, status_message
 
 __all__ = ["ExactState", "ExactStep", "advance"]
 
 _DEFAULT_BUDGET = Budget()
 _SUCCESS = SimulationStatus.SUCCESS
-_NO_PENDING = _FREE[1:]
+_NO_PENDING: tuple[int | None, float] = (None, 0.0)
 _QUIET_MESSAGE = status_message(_SUCCESS, "0 events")
-#: Take the certified no-event shortcut (:func:`toolkit.simulation._exact._quiet_piece`)
+#: Take the certified no-event shortcut (:func:`toolkit._compiled.core.quiet_piece`)
 #: when it applies; False runs the full engine on every step (tests compare the two).
 _QUIET = True
 #: Wall-time budgets below this (s) always run the engine, which checks the clock.
 _QUIET_WALL_TIME = 1e-3
+#: Interpreted work (about us) of a step: the certificate, and the engine per contact.
+_QUIET_WORK, _ENGINE_WORK = 20, 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -226,33 +229,49 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
         if speeds.shape != (n,):
             raise ParameterError(parameter_message(
                 "state", "advance", f"hold {n} contact speeds", speeds.shape))
-        if (_QUIET and state._pending == _NO_PENDING and budget.wall_time >= _QUIET_WALL_TIME
-                and (quiet := _quiet_plant(plant)) is not None):
-            S = t1 - t0
-            piece = _quiet_piece(quiet, speeds, u, state.V, state.stuck, external, S)
-            if piece is not None:
-                V, speeds_end, travelled, body = piece
-                speeds_end.setflags(write=False)
-                travelled.setflags(write=False)
-                if math.isfinite(V):
-                    return ExactStep._trusted(
-                        ExactState._trusted(t1, V, speeds_end, state.stuck, _NO_PENDING),
-                        body, travelled, (), _SUCCESS, _QUIET_MESSAGE, True)
-        mu = 1.0 / motors.lag if motors.lag > 0 else 0.0
-        rec = _Recorder(budget, 2 * n + 2, mu)
-        motor = MotorPiece.build(t0, speeds, u, motors.lag, motors.rate_limit)
-        t, V, (stuck, hint, releasing), _ = _dynamic_piece(
-            plant, motor, external, t1, state.V, (state.stuck, *state._pending), rec)
-        speeds_end = motor.speeds_at(t - t0)
-        travelled = motor.displacement(t - t0)
-        pending = (hint, releasing)
+        dyn = _dynamic_plant(plant)
+        hint, releasing = state._pending
+        try_quiet = (_QUIET and dyn.quiet and hint is None and releasing == 0.0
+                     and budget.wall_time >= _QUIET_WALL_TIME)
+        rec = _Recorder(budget, 2 * n + 2, dyn.mu)
+        out = np.empty((2, n))
+        motor = np.empty((5, n))
+        u = np.ascontiguousarray(u)
+        stuck = -1 if state.stuck is None else state.stuck
+        code, quiet, body = _kernels(_QUIET_WORK + _ENGINE_WORK * n).advance_dynamic(
+            dyn.forces, dyn.params, try_quiet, t0, t1, state.V, stuck,
+            -1 if hint is None else hint, releasing, speeds, u, external, motor, rec.fstate,
+            rec.istate, rec.seg, rec.ev, out)
+        if quiet:
+            speeds_end, travelled = out[0], out[1]
+            speeds_end.setflags(write=False)
+            travelled.setflags(write=False)
+            return ExactStep._trusted(
+                ExactState._trusted(t1, float(rec.fstate[_core.F_V]), speeds_end, state.stuck,
+                                    _NO_PENDING), body, travelled, (), _SUCCESS,
+                _QUIET_MESSAGE, True)
+        if code == _core.PAUSE:          # the buffers filled up or a chunk of rounds ran
+            code = dyn.run(np.array([t0, t1]), u.reshape(1, n), np.array([external]), motor,
+                           rec)
+            body = _kernels().advance_outputs(motor, dyn.tau, t0, rec.fstate, rec.istate,
+                                              rec.seg, out)
+        elif code == _core.DONE and time.perf_counter() > rec.deadline:
+            code = -1                    # (the wall clock, looked at after the kernel)
+        t, V = float(rec.fstate[_core.F_T]), float(rec.fstate[_core.F_V])
+        if code != _core.DONE:
+            rec.stopped(code, t)
+        k, h = int(rec.istate[_core.I_STUCK]), int(rec.istate[_core.I_HINT])
+        stuck = None if k < 0 else k
+        pending = (None if h < 0 else h, float(rec.fstate[_core.F_REL]))
+        speeds_end, travelled = out[0], out[1]
     else:
         rec = _Recorder(budget, 2 * n + 2, 0.0)
         t, V, stuck, _ = _ideal_piece(plant, _build_landscape(plant, u), external, t0, t1,
                                       state.V, state.stuck, rec)
         speeds_end = u.copy()
         travelled = u * (t - t0)
-        pending = _FREE[1:]
+        pending = _NO_PENDING
+        body = rec.displacement(t)
     speeds_end.setflags(write=False)
     travelled.setflags(write=False)
     status = rec.status
@@ -262,5 +281,5 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
     events = rec.events()
     detail = rec.detail if status is not _SUCCESS else f"{len(events)} events"
     return ExactStep(ExactState._trusted(float(t), float(V), speeds_end, stuck, pending),
-                     rec.displacement(t), travelled, events, status,
+                     body, travelled, events, status,
                      status_message(status, detail))

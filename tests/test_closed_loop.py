@@ -135,17 +135,141 @@ def test_filter_under_speed_hold_is_ten_times_better_than_differencing():
 
 
 def test_loop_bench_runs_and_restores_the_loop(capsys):
-    # The benchmark times each stage by wrapping the loop's advance and SensorReader: after
-    # it the module's own functions are back (identity), and the timed stages account for
-    # at most the whole run (their sum plus bookkeeping is the total by construction).
+    # The benchmark runs the loop both ways (the compiled loop and, as its baseline, the
+    # Python loop) and times the estimator by wrapping its methods: afterwards the loop is
+    # back to compiled and the estimator has its own methods; both ways gave the same
+    # trajectory (the bench prints it).
     import toolkit.loop.closed_loop as closed_loop
     from toolkit.bench import loop
-    from toolkit.model.sensors import SensorReader
-    from toolkit.simulation._stepper import advance
 
-    assert loop.main(["--seconds", "1", "--repeat", "1"]) == 0
-    assert closed_loop.advance is advance and closed_loop.SensorReader is SensorReader
+    loop.main(["--seconds", "1", "--repeat", "1"])
+    assert closed_loop._COMPILED is True
     out = capsys.readouterr().out
-    for stage in ("plant step (advance)", "sensors (SensorReader.read)", "estimator", "controller",
-                  "bookkeeping"):
+    assert out.count("same trajectory and estimates: True") == 2
+    assert out.count("same trajectory: True") == 2
+    for stage in ("estimator (observe + commanded)", "the Python loop (baseline", "one kernel call"):
         assert out.count(stage) == 2
+
+
+# -- the compiled loop (toolkit.simulation.SampledRun) against the Python loop ---------------------
+CAROUSEL_PLANT = Plant(ContactSet([0.0] * 10, [1.0] * 10), 5.0,
+                       motors=Motors(lag=0.0075, speed_limits=(-VMAX, VMAX)))
+
+
+def _both(*args, **kwargs):
+    """The loop compiled (the default) and in Python around advance (the second method)."""
+    import toolkit.loop.closed_loop as closed_loop
+
+    compiled = simulate_closed_loop(*args, **kwargs)
+    closed_loop._COMPILED = False
+    try:
+        python = simulate_closed_loop(*args, **kwargs)
+    finally:
+        closed_loop._COMPILED = True
+    return compiled, python
+
+
+@pytest.mark.parametrize("case", ["speed_hold+kalman", "viscosity+kalman", "viscosity", "speed_hold",
+                                  "open_loop+sensors", "carry", "carry+kalman", "brake",
+                                  "ideal_motors", "ideal_motors+kalman", "rate_limit"])
+def test_compiled_loop_is_the_python_loop(case):
+    # The kernel runs the same engines (advance's), the sensor law's compiled form and the
+    # laws' compiled forms (or calls a Python law / estimator per sample): every recorded
+    # array equals the Python loop's bit for bit (atol 0), counts included.
+    from toolkit import Sensors
+    from toolkit.predictions.apparatus import CarryThen
+
+    sensors = Sensors.carousel(10)
+    plant, controller, kwargs = CAROUSEL_PLANT, VirtualViscosity(50.0, 0.15), {}
+    if case.startswith("speed_hold"):
+        controller = SpeedHold(0.2, 50.0)
+    elif case == "open_loop+sensors":
+        controller = OpenLoop(PiecewiseConstant([0.5, 1.2], np.array([[0.1] * 10, [0.3] * 10, [-0.2] * 10])
+                                                + np.linspace(-0.02, 0.02, 10)))
+    elif case.startswith("carry"):
+        controller = CarryThen(VirtualViscosity(30.0, 0.0), 0.1, 0.12)
+    elif case == "brake":
+        controller = FrictionBrake(0.4, 0.5, 0.05)                # no compiled form: Python law
+    elif case.startswith("ideal_motors"):
+        plant = Plant(plant.contacts, 5.0, motors=Motors(speed_limits=(-VMAX, VMAX)))
+    elif case == "rate_limit":
+        plant = Plant(plant.contacts, 5.0, damping=0.3,
+                      motors=Motors(lag=0.0075, rate_limit=3.0, speed_limits=(-VMAX, VMAX)))
+    if "kalman" in case or case == "open_loop+sensors":
+        kwargs["sensors"] = sensors
+    compiled, python = _both(plant, controller, 2.0, v0=0.1, seed=1, **kwargs)
+    assert compiled.status is python.status
+    for name in ("times", "speed", "estimate", "variance", "commands", "force", "contact_speeds",
+                 "position"):
+        np.testing.assert_array_equal(getattr(compiled, name), getattr(python, name), err_msg=name)
+    if "sensors" in kwargs:
+        np.testing.assert_array_equal(compiled.record.central_counts, python.record.central_counts)
+        np.testing.assert_array_equal(compiled.record.wheel_counts, python.record.wheel_counts)
+
+
+def test_compiled_sensor_law_is_the_sensor_reader():
+    # The sensor law is written in toolkit/model/sensors.py (SensorReader.read: the play
+    # operator, then floor of position over the count); its compiled form
+    # (toolkit._compiled.core.sensor_read) on the same positions gives the same integer counts
+    # and the same motor-side positions (exactly: the same operations), through reversals.
+    from toolkit import Sensors
+    from toolkit import _compiled
+    from toolkit.model.sensors import SensorReader
+
+    core = _compiled.load("core")
+    rng = np.random.default_rng(3)
+    sensors = Sensors.carousel(10)
+    start = rng.uniform(-0.3, 0.3, 10)
+    state = sensors.initial_state(start)
+    reader = SensorReader(sensors, state)
+    play = np.array(state.motor, dtype=float)
+    X, x = 0.0, np.zeros(10)
+    wheel = np.empty(10, dtype=np.int64)
+    for k in range(400):
+        X += 0.004 * np.sin(k / 17.0)
+        x = x + 0.003 * np.sin(k / 9.0 + np.arange(10))          # reversals through the play
+        c, w = reader.read(X, x)
+        central = core.sensor_read(X, x, play, 0.5 * sensors.backlash,
+                                   sensors.central.distance_per_count,
+                                   sensors.wheel.distance_per_count, wheel)
+        assert central == c
+        np.testing.assert_array_equal(wheel, w)
+    np.testing.assert_array_equal(play, reader.state.motor)
+
+
+def test_failed_step_in_the_compiled_loop_reports_as_the_python_loop():
+    # A step budget the plant cannot meet stops the loop at the same sample with the same
+    # status and message in both loops (the kernel's stop re-run through advance).
+    from toolkit.simulation import Budget
+
+    budget = Budget(max_steps=1)
+    compiled, python = _both(CAROUSEL_PLANT, SpeedHold(0.2, 50.0), 1.0, budget=budget)
+    assert compiled.status is python.status and compiled.status.name == "MAX_STEPS"
+    assert compiled.message == python.message
+    np.testing.assert_array_equal(compiled.speed, python.speed)
+
+
+def test_sampled_batch_runs_each_loop_as_one():
+    # Many loops of one plant on the true speed, in parallel: each run equals the single
+    # compiled loop of its law (the same kernel; arrays equal bit for bit) whatever the
+    # number of threads, and past its own length a run is NaN.
+    from toolkit.simulation import SampledLaw, SampledRun, sampled_batch
+
+    rng = np.random.default_rng(5)
+    laws, lengths, starts = [], [], []
+    for r in range(12):
+        speeds = np.sort(rng.uniform(-0.3, 0.3, 10))
+        laws.append(SampledLaw(speeds[None, :], carry=np.full(10, 0.1 * (r % 3)), switch=0.1 - 1e-11,
+                               start=0.1, period=0.02))
+        lengths.append(int(rng.integers(5, 60)))
+        starts.append(np.full(10, 0.1 * (r % 3)))
+    v0 = rng.uniform(-0.2, 0.2, 12)
+    out = sampled_batch(CAROUSEL_PLANT, laws, lengths, 50.0, v0=v0, contact_speeds=np.array(starts))
+    assert (out["codes"] == 0).all() and (out["reached"] == lengths).all()
+    for r in range(12):
+        plant = Plant(ContactSet(starts[r], CAROUSEL_PLANT.contacts.forces), 5.0, motors=CAROUSEL_PLANT.motors)
+        run = SampledRun(plant, out["times"][:lengths[r]], v0=v0[r], law=laws[r])
+        run.run_to(lengths[r])
+        np.testing.assert_array_equal(out["speed"][r, :lengths[r]], run.speed)
+        np.testing.assert_array_equal(out["commands"][r, :lengths[r]], run.commands)
+        assert np.isnan(out["speed"][r, lengths[r]:]).all()

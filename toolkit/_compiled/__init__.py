@@ -1,21 +1,47 @@
 """Compiled kernels: one source, run by numba compiled or by Python as written.
 
-The kernel module of this package, :mod:`.core` (the exact method's event loop, dense
-evaluator, no-event certificate and batch path, the event root finder of its dynamic-motor
-engine, and the Coulomb force on many speeds), is
-plain Python functions over arrays and scalars. It imports nothing heavy, so the rest of the
-toolkit may import it freely (a process that never runs a kernel never loads numba).
-:func:`load` returns it compiled: the first time, it replaces every function the module lists
-in ``KERNELS`` by ``numba.njit(cache=True, **options)`` of that very function. numba resolves
-a kernel's globals when it compiles it, so kernels that call each other call the compiled
-versions; callers go through the module attribute (``load("core").ideal_piece(...)``), never
-through a name imported before :func:`load`; a kernel calls only kernels of its own module.
+The kernel modules of this package, :mod:`.core` (the exact method's event loops for ideal and
+for lagging motors, dense evaluator, no-event certificate, batch path, sampled closed loops,
+and the Coulomb force on many speeds) and :mod:`.lines` (the quantized lines of the
+estimators' holds), are plain Python functions over arrays and scalars. They import nothing
+heavy, so the rest of the toolkit may import them freely (a process that never runs a kernel
+never loads numba). :func:`load` returns one compiled: the first time, it replaces every
+function the module lists in ``KERNELS`` by ``numba.njit(cache=True, **options)`` of that very
+function. numba resolves a kernel's globals when it compiles it, so kernels that call each
+other call the compiled versions; callers go through the module attribute
+(``load("core").ideal_piece(...)``), never through a name imported before :func:`load`; a
+kernel calls only kernels of its own module.
 
 There is no second implementation to keep in step: with ``NUMBA_DISABLE_JIT=1`` (numba's own
 switch) :func:`load` returns the same functions uncompiled and the same source runs as
 Python (as it does before a process compiles, see :func:`kernels`), each call inside
 ``np.errstate(all="ignore")`` since compiled code does not warn either. The tests run the
 kernel tests both ways (``make test``).
+
+When a process compiles (the policy, stated here once)
+------------------------------------------------------
+- **Work nobody times** runs the kernels as Python until the process has done about 0.25 s
+  of work in them (:data:`COMPILE_AFTER`), then compiles (:func:`kernels`): loading numba
+  and the machine code costs about that much even from the cache, more than a short CLI run
+  spends in the kernels, so a short run never loads numba. ``ACTIVE_CONTACTS_COMPILE=eager``
+  compiles at the first call instead.
+- **Every time the toolkit reports** (the precision report's run times, the estimators'
+  ``wall_time``, ``simulate_closed_loop``'s and the stages' in ``result.json``, a sweep's,
+  the benchmarks') is of machine code loaded or compiled before the clock starts: the code
+  that reports it calls :func:`warm` first (the kernel modules compiled, then the timed call
+  itself once, untimed, on a short horizon: numba compiles or loads each kernel lazily, at
+  its first call with its argument types, so only the kernels that call uses) and reports
+  that one-time cost on its own (a ``compile_time`` field, a line of its own).
+
+Results never depend on either choice: compiled and interpreted kernels run the same source
+with the same IEEE operations and libm calls (tested).
+
+Threads. A parallel kernel (``prange``: many scenes, many loops) runs on the cores the load
+average leaves idle (:func:`parallel`), at least one: on a shared machine a thread waiting
+for a busy core stalls the whole loop (measured: 2 threads 5-30x slower than 1 at a load of
+3 on 2 cores). OpenMP's threads wait passively between loops (``OMP_WAIT_POLICY=PASSIVE``
+unless set), so they take no core from the serial code around them. Each scene or loop is
+computed alone, so results do not depend on the number of threads.
 
 Caching. ``cache=True`` stores the machine code beside the source (``__pycache__``), keyed on
 the source file, so a fresh process loads it instead of compiling. Where that directory is not
@@ -27,25 +53,32 @@ If numba cannot be imported, the kernels run as Python with a warning.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
+import sys
+import time
+from collections.abc import Callable, Iterator
 from types import ModuleType
 from typing import Any
 
 import numpy as np
 
-__all__ = ["COMPILE_AFTER", "charge", "compiled", "kernels", "load", "loaded"]
+__all__ = ["COMPILE_AFTER", "MODULES", "charge", "compiled", "ensure_compiled", "kernels",
+           "load", "loaded", "parallel", "threads", "warm"]
 
 _LOADED: dict[str, Any] = {}          # name -> the compiled module (or its _Interpreted)
+
+#: The kernel modules of this package.
+MODULES = ("core", "lines")
 
 #: Work (in units of about one interpreted microsecond: a query time, a contact, an event
 #: round) that a process runs through the kernels as Python before it compiles them. Loading
 #: compiled kernels costs about 0.25 s even from a warm cache (numba and its compiler runtime),
 #: more than a short run of the CLI spends in them interpreted; a process that keeps calling
 #: them compiles once it has spent about that much interpreting (the ski-rental rule: never
-#: more than twice the better choice in hindsight). The two run the same source with the same
-#: IEEE operations and libm calls, so results do not depend on the switch (tested).
-#: ``ACTIVE_CONTACTS_COMPILE=eager`` compiles at the first kernel call instead.
+#: more than twice the better choice in hindsight). Timed work does not wait for it
+#: (:func:`warm`; the module docstring states the policy).
 COMPILE_AFTER = 250_000
 _WORK = [0]
 _EAGER = os.environ.get("ACTIVE_CONTACTS_COMPILE", "").strip().lower() == "eager"
@@ -98,6 +131,65 @@ def kernels(name: str, work: int = 0) -> ModuleType | _Interpreted:
     return _interpreted(name)
 
 
+def ensure_compiled(*names: str) -> float:
+    """Load the kernel modules ``names`` (default: every one of :data:`MODULES`) compiled now:
+    from here on this process runs their machine code (numba compiles or loads each kernel
+    at its first call). Returns the seconds this took (0 when already loaded)."""
+    started = time.perf_counter()
+    for name in names or MODULES:
+        load(name)
+    return time.perf_counter() - started
+
+
+def warm(run: Callable[[], Any] | None = None, *names: str) -> float:
+    """The timing policy in one call (module docstring): :func:`ensure_compiled` ``(*names)``,
+    then ``run()`` once, untimed (the call about to be timed, on a short horizon: it compiles
+    or loads exactly the kernels it uses). Returns the seconds both took: the one-time cost
+    a report shows on its own."""
+    started = time.perf_counter()
+    ensure_compiled(*names)
+    if run is not None:
+        run()
+    return time.perf_counter() - started
+
+
+#: Work (about interpreted microseconds, as :func:`kernels` counts it) below which a parallel
+#: kernel runs on one thread (waking threads costs more than they save).
+PARALLEL_AFTER = 20_000
+
+
+def threads(work: int = PARALLEL_AFTER) -> int:
+    """Threads for a parallel kernel doing ``work``: 1 below :data:`PARALLEL_AFTER`, else the
+    cores left idle by the others, ``floor(cores - load + 1)`` (the 1-minute load average
+    counts this process), within ``[1, cores]``."""
+    cores = os.cpu_count() or 1
+    if work < PARALLEL_AFTER or cores == 1:
+        return 1
+    try:
+        load = os.getloadavg()[0]
+    except OSError:                 # (no load average on this platform)
+        return cores
+    return max(1, min(cores, int(cores - load + 1.0)))
+
+
+@contextlib.contextmanager
+def parallel(work: int) -> Iterator[int]:
+    """Run the parallel kernels called inside on :func:`threads` ``(work)`` threads (numba's
+    ``set_num_threads``, restored after); yields the number. Nothing to set while the
+    kernels run as Python."""
+    count = threads(work)
+    numba = sys.modules.get("numba") if any(compiled(name) for name in MODULES) else None
+    if numba is None:
+        yield count
+        return
+    before = numba.get_num_threads()
+    numba.set_num_threads(min(count, numba.config.NUMBA_NUM_THREADS))
+    try:
+        yield count
+    finally:
+        numba.set_num_threads(before)
+
+
 def charge(work: int) -> None:
     """Count ``work`` units run interpreted toward :data:`COMPILE_AFTER`."""
     _WORK[0] += work
@@ -109,6 +201,8 @@ def load(name: str) -> ModuleType | _Interpreted:
     ``NUMBA_DISABLE_JIT=1`` its source run as Python."""
     module = _LOADED.get(name)
     if module is None:
+        # OpenMP threads that wait passively (module docstring), unless the user chose.
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
         try:
             import numba
         except ImportError:          # a broken install: the same source, run as Python

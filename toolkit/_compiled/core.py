@@ -62,7 +62,7 @@ INF = math.inf
 # caller maps these codes to its names).
 CROSS, STICK, RELEASE, SATURATION, COMMAND = 0, 1, 2, 3, 4
 # Return codes of the loops.
-DONE, MAX_STEPS, ZENO, PAUSE = 0, 1, 2, 3
+DONE, MAX_STEPS, ZENO, PAUSE, FAILED_STEP = 0, 1, 2, 3, 4
 # Layout of the loop state arrays (fstate: floats, istate: ints).
 # The dynamic-motor engine (dynamic_run) also keeps its piece's offset and its mode there.
 F_T, F_V, F_TSUM, F_TERR, F_RATE, F_OFF, F_REL = range(7)
@@ -102,6 +102,11 @@ KERNELS = {
     "motor_coefficients": _IEEE, "motor_displacement": _IEEE, "pairwise_sum": _IEEE, "pairwise_block": _INLINE,
     "filippov": _IEEE, "compliant_round": _IEEE, "dynamic_run": _IEEE,
     "advance_dynamic": _IEEE, "advance_outputs": _IEEE,
+    # Sampled loops: the sensor law's and the laws' compiled forms, one loop, many loops.
+    "sensor_read": _INLINE, "law_output": _IEEE, "sampled_steps": _IEEE, "grown": {},
+    "sampled_batch": {"parallel": True, "error_model": "numpy"},
+    # Counter-based random numbers for sweeps.
+    "mulhilo": _INLINE, "philox_block": _INLINE, "philox_uniform": {},
 }
 
 
@@ -1799,6 +1804,332 @@ def advance_outputs(motor: np.ndarray, tau: float, t0: float, fstate: np.ndarray
     return displacement(seg, istate[I_NSEG], mu, fstate[F_T])
 
 
+# -- sampled loops: the exact plant under a law held over each sample period -------------------
+# A law the kernels evaluate (toolkit.simulation.SampledLaw): a piecewise-constant table of
+# commands (rows ``law_rows[j]`` on ``[law_times[j-1], law_times[j])``) and forces, optionally
+# shifted by a PI law on the speed error and clipped (``law_i[L_SHIFT]``), optionally after a
+# carry phase (``law_i[L_CARRY]``: the row ``carry`` until ``law_f[L_SWITCH]``, the inner
+# law's clock starting at ``law_f[L_START]``). Estimates: the true speed (EST_TRUTH) or given
+# by the caller per sample (EST_GIVEN); commands: the law's (LAW_TABLE) or given (LAW_GIVEN).
+L_CARRY, L_SHIFT = 0, 1
+L_SWITCH, L_START, L_REFERENCE, L_KP, L_KI, L_PERIOD, L_LOW, L_HIGH = range(8)
+EST_TRUTH, EST_GIVEN = 0, 1
+LAW_TABLE, LAW_GIVEN = 0, 1
+# The loop's state between calls (floats: time, speed, body position, releasing; ints: the
+# contact the body follows, the hint of the engine's last event).
+S_T, S_V, S_X, S_REL = 0, 1, 2, 3
+S_STUCK, S_HINT = 0, 1
+
+
+def sensor_read(X: float, x: np.ndarray, motor: np.ndarray, half: float, qc: float,
+                qw: float, wheel: np.ndarray) -> int:
+    """The sensor law of :mod:`toolkit.model.sensors` at one read instant, noiseless (its one
+    compiled form: :class:`~toolkit.model.sensors.SensorReader` without missed counts, noise
+    or jitter; tested against it): the play operator of width ``2 half`` (m) moves the
+    motor-side positions ``motor`` (n,) towards the contact positions ``x`` (m), then every
+    position is quantized, ``floor(position / q)``. Returns the central count (body position
+    ``X``, m, counts of ``qc`` m) and writes the wheel counts (counts of ``qw`` m) to
+    ``wheel``."""
+    for i in range(x.size):
+        motor[i] = min(max(motor[i], x[i] - half), x[i] + half)
+        wheel[i] = math.floor(motor[i] / qw)
+    return math.floor(X / qc)
+
+
+def law_output(law_i: np.ndarray, law_f: np.ndarray, carry: np.ndarray,
+               law_times: np.ndarray, law_rows: np.ndarray, law_forces: np.ndarray,
+               z: np.ndarray, t: float, estimate: float, out: np.ndarray) -> float:
+    """The law's commands (m/s, into ``out`` (n,)) and outside force (N, returned) at sample
+    time ``t`` (s) from the speed estimate (m/s), and its state ``z`` (1,) moved to the next
+    sample (the PI law's integral of the speed error, m). The controllers' own arithmetic
+    (:mod:`toolkit.controllers`: ``output`` then ``update``), in the same operations."""
+    n = out.size
+    if law_i[L_CARRY] != 0 and t < law_f[L_SWITCH]:
+        for i in range(n):
+            out[i] = carry[i]
+        return 0.0
+    inner = t
+    if law_i[L_CARRY] != 0:              # the inner clock, snapped to the sample grid
+        period = law_f[L_PERIOD]
+        inner = t - law_f[L_START]
+        grid = round(inner / period) * period
+        if abs(inner - grid) <= 1e-9 * period:
+            inner = grid
+    K = law_times.size
+    j = 0                                # the row of the table at the inner time
+    while j < K and law_times[j] <= inner:
+        j += 1
+    if law_i[L_SHIFT] != 0:
+        reference = law_f[L_REFERENCE]
+        error = reference - estimate
+        centre = reference + law_f[L_KP] * error + law_f[L_KI] * z[0]
+        low, high = law_f[L_LOW], law_f[L_HIGH]
+        for i in range(n):
+            out[i] = min(max(law_rows[j, i] + centre, low), high)
+        z[0] = z[0] + (reference - estimate) * law_f[L_PERIOD]
+    else:
+        for i in range(n):
+            out[i] = law_rows[j, i]
+    return law_forces[j]
+
+
+def sampled_steps(k0: int, k1: int, times: np.ndarray, f: np.ndarray, params: np.ndarray,
+                  dynamic: bool, try_quiet: bool, low: float, high: float,
+                  budget_i: np.ndarray, rate_ev: float, est_kind: int, law_kind: int,
+                  law_i: np.ndarray, law_f: np.ndarray, carry: np.ndarray,
+                  law_times: np.ndarray, law_rows: np.ndarray, law_forces: np.ndarray,
+                  z: np.ndarray, sensors: bool, sens_f: np.ndarray, play: np.ndarray,
+                  state_f: np.ndarray, state_i: np.ndarray, speeds: np.ndarray,
+                  x: np.ndarray, speed: np.ndarray, position: np.ndarray,
+                  estimate: np.ndarray, variance: np.ndarray, commands: np.ndarray,
+                  force: np.ndarray, contact: np.ndarray, central: np.ndarray,
+                  wheel: np.ndarray) -> tuple[int, int]:
+    """Samples ``k0 .. k1 - 1`` of a sampled loop (``times`` (S,), s): at each, the estimate
+    (the true speed, or the caller's), the law's commands and force (or the caller's), the
+    plant over the period (:func:`advance_dynamic` with lagging motors, :func:`ideal_piece`
+    on the staircase of the commands otherwise: the engines of ``advance``, the same
+    numbers), the exact displacements, and the next sample's record (speed, position,
+    contact speeds, and with ``sensors`` the counts of :func:`sensor_read`). The plant:
+    magnitudes ``f``, constants ``params`` (``P_TOTAL`` ..), command limits ``low``,
+    ``high``; ``budget_i``: ``[max rounds, Zeno window]`` per step, ``rate_ev`` the event
+    rate. ``sens_f``: ``[qc, qw, half]``. ``state_f``, ``state_i``, ``speeds``, ``x`` and
+    ``play`` carry the plant's and the sensors' state between calls. Returns
+    ``(code, k)``: ``DONE`` and the next sample to run, or the code of a step the budget
+    stopped (``MAX_STEPS``, ``ZENO``; ``FAILED_STEP`` for a speed that left the
+    floating-point range) and the number of samples recorded (the failed step's start is
+    the last)."""
+    n = f.size
+    S = times.size
+    tau = params[P_TAU]
+    mu = 1.0 / tau if tau > 0 else 0.0
+    m, c = params[P_MASS], params[P_DAMPING]
+    seg = np.empty((64, 7))
+    ev = np.empty((64, 4))
+    fstate = np.zeros(N_FSTATE)
+    istate = np.zeros(N_ISTATE, dtype=np.int64)
+    motor = np.empty((5, n))
+    out = np.empty((2, n))
+    u = np.empty(n)
+    bounds = np.empty(2)
+    externals = np.empty(1)
+    scratch = np.empty((3, n + 1))            # the staircase of ideal motors' commands
+    first = np.empty(n, dtype=np.int64)
+    order = np.empty(n, dtype=np.int64)
+    rows2 = np.empty((1, n))
+    forces2 = f.reshape((1, n))
+    K = -1
+    qc, qw, half = sens_f[0], sens_f[1], sens_f[2]
+    for k in range(k0, k1):
+        if est_kind == EST_TRUTH:
+            estimate[k] = speed[k]
+            variance[k] = 0.0
+        if law_kind == LAW_TABLE:
+            force[k] = law_output(law_i, law_f, carry, law_times, law_rows, law_forces, z,
+                                  times[k], estimate[k], commands[k])
+        if k + 1 == S:
+            return DONE, k + 1
+        t0, t1 = times[k], times[k + 1]
+        V = state_f[S_V]
+        E = force[k]
+        for i in range(n):
+            u[i] = min(max(commands[k, i], low), high)
+        # One step of the plant, with fresh budget counters (advance's _Recorder).
+        for j in range(N_FSTATE):
+            fstate[j] = 0.0
+        for j in range(N_ISTATE):
+            istate[j] = 0
+        istate[I_STUCK] = -1
+        istate[I_HINT] = -1
+        istate[I_MAXSTEPS] = budget_i[0]
+        istate[I_WINDOW] = budget_i[1]
+        istate[I_CHUNK] = 1 << 14
+        fstate[F_RATE] = rate_ev
+        if dynamic:
+            code, quiet, body = advance_dynamic(
+                f, params, try_quiet and state_i[S_HINT] < 0 and state_f[S_REL] == 0.0,
+                t0, t1, V, state_i[S_STUCK], state_i[S_HINT], state_f[S_REL], speeds, u, E,
+                motor, fstate, istate, seg, ev, out)
+            if quiet:
+                V = fstate[F_V]
+                state_f[S_REL] = 0.0
+                state_i[S_HINT] = -1
+            else:
+                while code == PAUSE:             # buffers full or a chunk of rounds: grow
+                    if min(seg.shape[0] - istate[I_NSEG], ev.shape[0] - istate[I_NEV]) < 16:
+                        seg = grown(seg)
+                        ev = grown(ev)
+                    bounds[0] = t0
+                    bounds[1] = t1
+                    externals[0] = E
+                    code = dynamic_run(f, params[P_TOTAL], m, c, params[P_COMPLIANCE], tau,
+                                       params[P_RATE], bounds, u.reshape((1, n)), externals,
+                                       motor, fstate, istate, seg, ev)
+                    if code != PAUSE:
+                        body = advance_outputs(motor, tau, t0, fstate, istate, seg, out)
+                if code != DONE:
+                    return code, k + 1
+                V = fstate[F_V]
+                state_i[S_STUCK] = istate[I_STUCK]
+                state_i[S_HINT] = istate[I_HINT]
+                state_f[S_REL] = fstate[F_REL]
+            for i in range(n):
+                speeds[i] = out[0, i]
+                x[i] = x[i] + out[1, i]
+        else:
+            same = K >= 0
+            for i in range(n):
+                same = same and rows2[0, i] == u[i]
+            if not same:                         # the staircase of the new commands
+                for i in range(n):
+                    rows2[0, i] = u[i]
+                K = sorted_landscape(rows2, forces2, 0, order, scratch, first)
+            fstate[F_T] = t0
+            fstate[F_V] = V
+            istate[I_STUCK] = state_i[S_STUCK]
+            code = ideal_piece(True, K, scratch, first, u, f, scratch[1, K], m, c, E, t1,
+                               fstate, istate, seg, ev)
+            while code == PAUSE:
+                if min(seg.shape[0] - istate[I_NSEG], ev.shape[0] - istate[I_NEV]) < 16:
+                    seg = grown(seg)
+                    ev = grown(ev)
+                code = ideal_piece(True, K, scratch, first, u, f, scratch[1, K], m, c, E, t1,
+                                   fstate, istate, seg, ev)
+            if code != DONE:
+                return code, k + 1
+            V = fstate[F_V]
+            state_i[S_STUCK] = istate[I_STUCK]
+            body = displacement(seg, istate[I_NSEG], 0.0, t1)
+            span = t1 - t0
+            for i in range(n):
+                speeds[i] = u[i]
+                x[i] = x[i] + u[i] * span
+        if not (V - V == 0.0):
+            return FAILED_STEP, k + 1
+        state_f[S_T] = t1
+        state_f[S_V] = V
+        state_f[S_X] = state_f[S_X] + body
+        speed[k + 1] = V
+        position[k + 1] = state_f[S_X]
+        for i in range(n):
+            contact[k + 1, i] = speeds[i]
+        if sensors:
+            central[k + 1] = sensor_read(state_f[S_X], x, play, half, qc, qw, wheel[k + 1])
+    return DONE, k1
+
+
+def grown(buffer: np.ndarray) -> np.ndarray:
+    """A copy of ``buffer`` with twice its rows plus 16."""
+    rows, width = buffer.shape
+    bigger = np.empty((2 * rows + 16, width))
+    bigger[:rows] = buffer
+    return bigger
+
+
+def sampled_batch(samples: np.ndarray, times: np.ndarray, f: np.ndarray, params: np.ndarray,
+                  dynamic: bool, try_quiet: bool, low: float, high: float,
+                  budget_i: np.ndarray, rate_ev: float, law_i: np.ndarray, law_f: np.ndarray,
+                  carry: np.ndarray, law_times: np.ndarray, law_rows: np.ndarray,
+                  law_forces: np.ndarray, v0: np.ndarray, start_speeds: np.ndarray,
+                  speed: np.ndarray, commands: np.ndarray, force: np.ndarray,
+                  contact: np.ndarray, codes: np.ndarray, reached: np.ndarray) -> None:
+    """Many sampled loops of one plant on the true speed (no sensors, no estimator), each
+    through :func:`sampled_steps` from rest of its motors at ``start_speeds[r]`` and body
+    speed ``v0[r]`` over ``samples[r]`` samples of ``times``, with its own law (row ``r`` of
+    ``law_i`` .. ``law_forces``), in parallel over runs (``prange``). Per run: the speeds
+    (rows of ``speed``, ``contact``), commands and forces, the code and the samples
+    recorded."""
+    R = samples.size
+    n = f.size
+    for r in prange(R):
+        S = samples[r]
+        state_f = np.zeros(4)
+        state_i = np.full(2, -1, dtype=np.int64)
+        state_f[S_V] = v0[r]
+        speeds = start_speeds[r].copy()
+        x = np.zeros(n)
+        z = np.zeros(1)
+        play = np.zeros(n)
+        estimate = np.empty(S)
+        variance = np.empty(S)
+        position = np.empty(S)
+        central = np.empty(0, dtype=np.int64)
+        wheel = np.empty((0, n), dtype=np.int64)
+        speed[r, 0] = v0[r]
+        position[0] = 0.0
+        for i in range(n):
+            contact[r, 0, i] = speeds[i]
+        codes[r], reached[r] = sampled_steps(
+            0, S, times[:S], f, params, dynamic, try_quiet, low, high, budget_i, rate_ev,
+            EST_TRUTH, LAW_TABLE, law_i[r], law_f[r], carry[r], law_times[r], law_rows[r],
+            law_forces[r], z, False, np.zeros(3), play, state_f, state_i, speeds, x,
+            speed[r], position, estimate, variance, commands[r], force[r], contact[r],
+            central, wheel)
+
+
+# -- counter-based random numbers: Philox4x64-10 ------------------------------------------------
+# Salmon et al., "Parallel random numbers: as easy as 1, 2, 3" (SC 2011), the generator of
+# numpy.random.Philox: block ``b`` of run ``i``'s stream ``s`` under key ``(k0, k1)`` is the
+# Philox of the counter ``(b + 1, 0, i, s)`` (NumPy's Philox(counter=(0, 0, i, s), key=(k0, k1))
+# increments its counter before each block: the same four words; tested against it). A draw
+# depends on (key, run, stream, position) only: not on how runs are grouped.
+PHILOX_M0 = np.uint64(0xD2E7470EE14C6C93)
+PHILOX_M1 = np.uint64(0xCA5A826395121157)
+PHILOX_W0 = np.uint64(0x9E3779B97F4A7C15)
+PHILOX_W1 = np.uint64(0xBB67AE8584CAA73B)
+LOW32 = np.uint64(0xFFFFFFFF)
+SHIFT32 = np.uint64(32)
+SHIFT11 = np.uint64(11)
+DOUBLE_UNIT = 1.0 / 9007199254740992.0          # 2^-53
+
+
+def mulhilo(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
+    """The high and low 64-bit words of the 128-bit product ``a b`` (unsigned)."""
+    a_lo, a_hi = a & LOW32, a >> SHIFT32
+    b_lo, b_hi = b & LOW32, b >> SHIFT32
+    p0 = a_lo * b_lo
+    p1 = a_lo * b_hi
+    p2 = a_hi * b_lo
+    p3 = a_hi * b_hi
+    carry = ((p0 >> SHIFT32) + (p1 & LOW32) + (p2 & LOW32)) >> SHIFT32
+    return p3 + (p1 >> SHIFT32) + (p2 >> SHIFT32) + carry, a * b
+
+
+def philox_block(c0: np.uint64, c1: np.uint64, c2: np.uint64, c3: np.uint64, k0: np.uint64,
+                 k1: np.uint64, out: np.ndarray) -> None:
+    """Ten Philox4x64 rounds of the counter ``(c0, c1, c2, c3)`` under the key ``(k0, k1)``:
+    four 64-bit words into ``out`` (4,), uint64."""
+    for r in range(10):
+        if r > 0:
+            k0 = k0 + PHILOX_W0
+            k1 = k1 + PHILOX_W1
+        hi0, lo0 = mulhilo(PHILOX_M0, c0)
+        hi1, lo1 = mulhilo(PHILOX_M1, c2)
+        c0, c1, c2, c3 = hi1 ^ c1 ^ k0, lo1, hi0 ^ c3 ^ k1, lo0
+    out[0] = c0
+    out[1] = c1
+    out[2] = c2
+    out[3] = c3
+
+
+def philox_uniform(k0: np.uint64, k1: np.uint64, first: int, stream: int, out: np.ndarray) -> None:
+    """Uniform doubles in ``[0, 1)`` (``(word >> 11) 2^-53``, as NumPy's ``random()``): row
+    ``j`` of ``out`` (runs, m) holds the first ``m`` draws of run ``first + j``'s stream
+    ``stream`` (about 15 ns a draw: one thread is enough)."""
+    runs, m = out.shape
+    blocks = (m + 3) // 4
+    words = np.empty(4, dtype=np.uint64)
+    for j in range(runs):
+        c2 = np.uint64(first + j)
+        c3 = np.uint64(stream)
+        zero = np.uint64(0)
+        for b in range(blocks):
+            philox_block(np.uint64(b + 1), zero, c2, c3, k0, k1, words)
+            for w in range(4):
+                p = 4 * b + w
+                if p < m:
+                    out[j, p] = float(words[w] >> SHIFT11) * DOUBLE_UNIT
+
+
 # -- many constant-speed scenes ----------------------------------------------------------------
 def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.ndarray,
                      land: np.ndarray, first: np.ndarray) -> int:
@@ -1844,11 +2175,13 @@ def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.n
 
 
 def batch_scene(speeds: np.ndarray, forces: np.ndarray, s: int, m: float, c: float, E: float,
-                v0: float, t_end: float, order: np.ndarray, land: np.ndarray,
+                v0: float, t_end: float, probe: float, order: np.ndarray, land: np.ndarray,
                 first: np.ndarray, fstate: np.ndarray, istate: np.ndarray,
-                seg: np.ndarray, ev: np.ndarray) -> tuple[float, int, bool, int]:
+                seg: np.ndarray, ev: np.ndarray) -> tuple[float, int, bool, int, float]:
     """Scene ``s`` of :func:`batch` through :func:`ideal_piece` (scratch arrays given):
-    ``(final speed, events, stuck at the end, code)``."""
+    ``(final speed, events, stuck at the end, code, speed at probe)``; the speed at ``probe``
+    (s, in ``[0, t_end]``; NaN when ``probe`` is negative) is the run's own closed form there
+    (its segments stay in ``seg``: no second run)."""
     K = sorted_landscape(speeds, forces, s, order, land, first)
     n = speeds.shape[1]
     fstate[F_T] = 0.0
@@ -1866,15 +2199,24 @@ def batch_scene(speeds: np.ndarray, forces: np.ndarray, s: int, m: float, c: flo
     # ``first`` is complete, so the engine never reads the speeds and forces it is given.
     code = ideal_piece(True, K, land, first, fstate, fstate, land[1, K], m, c, E, t_end,
                        fstate, istate, seg, ev)
-    return fstate[F_V], istate[I_NEV], istate[I_STUCK] >= 0, code
+    at_probe = math.nan
+    if probe >= 0.0 and code == DONE:
+        nseg = istate[I_NSEG]
+        k = nseg - 1
+        while k > 0 and seg[k, 0] > probe:     # the segment that holds the probe time
+            k -= 1
+        at_probe = segment_value(seg[k, 1], seg[k, 2], seg[k, 3], seg[k, 4], seg[k, 5],
+                                 seg[k, 6], 0.0, probe - seg[k, 0])[0]
+    return fstate[F_V], istate[I_NEV], istate[I_STUCK] >= 0, code, at_probe
 
 
 def batch(speeds: np.ndarray, forces: np.ndarray, mass: np.ndarray, damping: np.ndarray,
-          external: np.ndarray, v0: np.ndarray, t_end: float, V: np.ndarray,
-          events: np.ndarray, stuck: np.ndarray, codes: np.ndarray) -> None:
+          external: np.ndarray, v0: np.ndarray, t_end: float, probe: float, V: np.ndarray,
+          events: np.ndarray, stuck: np.ndarray, codes: np.ndarray,
+          V_probe: np.ndarray) -> None:
     """Every scene ``s`` (rows of ``speeds``, ``forces``; entries of the per-scene arrays)
     through :func:`batch_scene`, in parallel over blocks of scenes, each block with its own
-    scratch arrays."""
+    scratch arrays; ``V_probe`` receives each speed at ``probe`` (NaN when negative)."""
     S, n = speeds.shape
     rows = 4 * n + 16                 # a scene has at most 2 n + 2 rounds of two rows each
     block = 256
@@ -1888,6 +2230,6 @@ def batch(speeds: np.ndarray, forces: np.ndarray, mass: np.ndarray, damping: np.
         seg = np.empty((rows, 7))
         ev = np.empty((rows, 4))
         for s in range(blk * block, min(S, (blk + 1) * block)):
-            V[s], events[s], stuck[s], codes[s] = batch_scene(
-                speeds, forces, s, mass[s], damping[s], external[s], v0[s], t_end,
+            V[s], events[s], stuck[s], codes[s], V_probe[s] = batch_scene(
+                speeds, forces, s, mass[s], damping[s], external[s], v0[s], t_end, probe,
                 order, land, first, fstate, istate, seg, ev)

@@ -9,6 +9,11 @@ two pure functions a closed loop calls once per sample::
 
 Pure functions of an explicit state make the same law usable in the toolkit's closed loop
 and as a discrete-time ``control.NonlinearIOSystem`` (:mod:`toolkit.loop.interop`).
+
+A law whose arithmetic the compiled loop can run also offers it as data:
+``law.sampled()`` returns a :class:`toolkit.simulation.SampledLaw` (the same operations, in
+the kernel; None when it has none), and :func:`toolkit.simulate_closed_loop` then runs the law
+in the kernel instead of calling ``output`` and ``update`` per sample.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import numpy as np
 
 from ..errors import ParameterError, parameter_message
 from ..model import Plant
+from ..simulation import SampledLaw
 
 __all__ = ["Controller", "ControlLaw", "Action"]
 
@@ -78,6 +84,10 @@ class StatelessLaw:
 
     def output(self, t: float, z: np.ndarray, estimate: float) -> Action:  # pragma: no cover
         raise NotImplementedError
+
+    def sampled(self) -> SampledLaw | None:
+        """The law as the compiled loop runs it (None: no compiled form)."""
+        return None
 
 
 def speed_limits(plant: Plant) -> tuple[float, float]:

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import PiecewiseConstant, Plant
+from ..simulation import SampledLaw
 from .base import Action, StatelessLaw
 
 __all__ = ["OpenLoop"]
@@ -57,3 +58,7 @@ class _OpenLoopLaw(StatelessLaw):
 
     def output(self, t: float, z: np.ndarray, estimate: float) -> Action:
         return Action(self.schedule(t))
+
+    def sampled(self) -> SampledLaw:
+        """The schedule's table (rows between its switching times)."""
+        return SampledLaw(self.schedule.values, self.schedule.times)

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import as_float
 from ..model import Plant
+from ..simulation import SampledLaw
 from .base import Action, speed_limits
 from .viscosity import VirtualViscosity
 
@@ -76,3 +77,9 @@ class _SpeedHoldLaw:
 
     def update(self, t: float, z: np.ndarray, estimate: float) -> np.ndarray:
         return z + (self.settings.reference - estimate) * self.period
+
+    def sampled(self) -> SampledLaw:
+        """The staircase's shape shifted by the PI law and clipped to the limits."""
+        s = self.settings
+        return SampledLaw(self.shape[None, :], pi=(s.reference, s.kp, s.ki), limits=self.limits,
+                          period=self.period)

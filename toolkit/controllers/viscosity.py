@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import as_float
 from ..allocation import Viscosity, allocate
 from ..model import Plant
+from ..simulation import SampledLaw
 from .base import Action, StatelessLaw, speed_limits
 
 __all__ = ["VirtualViscosity"]
@@ -63,3 +64,7 @@ class _ConstantLaw(StatelessLaw):
 
     def output(self, t: float, z: np.ndarray, estimate: float) -> Action:
         return Action(self.speeds)
+
+    def sampled(self) -> SampledLaw:
+        """One constant row: the staircase."""
+        return SampledLaw(self.speeds[None, :])

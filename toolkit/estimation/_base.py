@@ -184,6 +184,12 @@ class Estimator(abc.ABC):
         self.commanded(sample.command, sample.force)
         return out
 
+    def warm_up(self, record: EncoderRecord) -> None:
+        """Run once, untimed, over the first 50 samples of ``record``, so that a timed
+        :meth:`run` that follows pays no one-time cost (kernels compiled or loaded: the
+        policy of :mod:`toolkit._compiled`); whoever times an estimator calls it first."""
+        self.run(record.head(50))
+
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
         """Estimate the body speed at every sample of ``record`` (reset first)."""

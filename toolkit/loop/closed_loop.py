@@ -13,6 +13,16 @@ the exact engine with motor lag and limits, which also returns the exact body an
 displacements that the encoders count). Without sensors the controller acts on the true
 speed (an ideal loop). With sample-time jitter the whole sample (read and command) happens
 at ``t_k + d_k`` while the record stamps ``t_k``.
+
+Where it runs. A loop the compiled kernels support (:func:`toolkit.simulation.sampled_supported`:
+noiseless sensors without jitter, any plant ``advance`` steps but compliant ideal motors)
+runs in :class:`toolkit.simulation.SampledRun`: the plant steps and the sensor law in the
+kernel, and the controller's law too when it has a compiled form (``law.sampled()``:
+:class:`~toolkit.controllers.VirtualViscosity`, :class:`~toolkit.controllers.SpeedHold`,
+:class:`~toolkit.controllers.OpenLoop`, a carry phase before them); without an estimator such a
+loop is one kernel call, with one (a Python object today) the kernel and ``observe`` /
+``commanded`` alternate each sample. Other loops run in Python around ``advance`` and the
+:class:`~toolkit.model.sensors.SensorReader`. Both give the same numbers (tested).
 """
 
 from __future__ import annotations
@@ -29,12 +39,18 @@ from ..controllers.base import ControlLaw, Controller
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant, sample_count, sample_times
 from ..model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors, measure  # noqa: F401
-from ..simulation import Budget, ExactState, SimulationStatus, advance, refuse_backlash
+from ..simulation import (Budget, ExactState, SampledLaw, SampledRun, SimulationStatus, advance,
+                          refuse_backlash, sampled_supported)
 
-__all__ = ["ClosedLoopResult", "simulate_closed_loop", "MAX_SAMPLES"]
+__all__ = ["ClosedLoopResult", "simulate_closed_loop", "MAX_SAMPLES", "LOOP_RATE"]
 
 #: Most samples one closed-loop run may take (the arrays it keeps grow with them).
 MAX_SAMPLES = 10_000_000
+#: Sample rate of a loop without sensors unless given, Hz.
+LOOP_RATE = 50.0
+#: Run loops the kernel supports in the kernel (:class:`toolkit.simulation.SampledRun`);
+#: False: every loop in Python around ``advance`` (tests compare the two).
+_COMPILED = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,7 +117,7 @@ def _check(plant: Any, controller: Any, sensors: Any, estimator: Any, rate: Any,
     elif estimator is not None:
         raise ParameterError(parameter_message(
             "estimator", owner, "come with the sensors it reads (sensors=Sensors(...))", estimator))
-    rate = 50.0 if rate is None else as_float(rate, "rate", owner, low=0.0, low_open=True)
+    rate = LOOP_RATE if rate is None else as_float(rate, "rate", owner, low=0.0, low_open=True)
     t_end = as_float(t_end, "t_end", owner, low=0.0, low_open=True)
     samples = sample_count(t_end, rate)
     period = 1.0 / rate
@@ -110,6 +126,108 @@ def _check(plant: Any, controller: Any, sensors: Any, estimator: Any, rate: Any,
             "rate", owner, f"give at most {MAX_SAMPLES} samples over t_end = {t_end:g} s with a "
             "period the simulation clock resolves", rate))
     return rate, samples
+
+
+def _run_sampled(plant: Plant, law: ControlLaw, program: SampledLaw | None, times: np.ndarray,
+                 sensors: Sensors | None, estimator: Any, v0: float,
+                 budget: Budget | None) -> SampledRun:
+    """The loop in the compiled kernel (:class:`toolkit.simulation.SampledRun`): the plant
+    steps and the sensor law always; the law too when it has a compiled form (``program``);
+    a Python estimator (or law) is called per sample between two kernel calls."""
+    run = SampledRun(plant, times, v0=v0, sensors=sensors, law=program,
+                     estimator=estimator is not None, budget=budget)
+    samples = times.size
+    if estimator is None and program is not None:
+        run.run_to(samples)                       # every sample in one kernel call
+        return run
+    t_list = times.tolist()
+    output, update = law.output, law.update
+    z = law.initial_state()
+    previous, previous_force = plant.initial_speeds(), 0.0
+    observe = commanded = None
+    if estimator is not None:
+        observe, commanded = estimator.observe, estimator.commanded
+    central, wheel, estimate, variance = run.central, run.wheel, run.estimate, run.variance
+    commands, force, speed = run.commands, run.force, run.speed
+    for k in range(samples):
+        t = t_list[k]
+        if observe is not None:
+            est, var = observe(EncoderSample(t, int(central[k]), wheel[k], previous,
+                                             previous_force))
+            estimate[k], variance[k] = est, var
+        else:
+            est = float(speed[k])
+        if program is None:
+            action = output(t, z, est)
+            commands[k] = action.commands
+            force[k] = float(action.force)
+            z = update(t, z, est)
+        if not run.run_to(k + 1):
+            break
+        previous, previous_force = commands[k], float(force[k])
+        if commanded is not None:
+            commanded(previous, previous_force)
+    return run
+
+
+def _run_python(plant: Plant, law: ControlLaw, times: np.ndarray, sensors: Sensors | None,
+                estimator: Any, v0: float, seed: Any, budget: Budget | None) -> tuple[Any, ...]:
+    """The loop in Python around :func:`~toolkit.simulation.advance` and the sensor law's
+    :class:`~toolkit.model.sensors.SensorReader`: noisy sensors, jitter, and the plants and
+    budgets the kernel does not run (:func:`toolkit.simulation.sampled_supported`)."""
+    rng = np.random.default_rng(seed)
+    samples, n = times.size, plant.n
+    period = float(times[1] - times[0]) if samples > 1 else 0.0
+    t_list = times.tolist()
+    speed, estimate, variance = [0.0] * samples, [0.0] * samples, [0.0] * samples
+    position, force = [0.0] * samples, [0.0] * samples
+    commands, contact = np.empty((samples, n)), np.empty((samples, n))
+    central, wheel = [0] * samples, np.zeros((samples, n), dtype=np.int64)
+    state = ExactState.initial(plant, v0)
+    X, x = 0.0, np.zeros(n)
+    reader = None
+    if sensors is not None:
+        reader = SensorReader(sensors, sensors.initial_state(state.contact_speeds), rng)
+        observe, commanded = estimator.observe, estimator.commanded
+        jitter = sensors.jitter
+    else:
+        jitter = 0.0
+    output, update = law.output, law.update
+    z = law.initial_state()
+    status, message, last = SimulationStatus.SUCCESS, "", samples
+    previous, previous_force = state.contact_speeds, 0.0
+    for k in range(samples):
+        t = t_list[k]
+        V = state.V
+        speed[k], position[k], contact[k] = V, X, state.contact_speeds
+        if reader is not None:
+            c, w = reader.read(X, x)
+            central[k] = c
+            wheel[k] = w
+            estimate[k], variance[k] = est, _ = observe(EncoderSample(t, c, w, previous, previous_force))
+        else:
+            estimate[k] = est = V
+        action = output(t, z, est)
+        u = action.commands
+        commands[k] = u
+        force[k] = f = float(action.force)
+        if reader is not None:
+            commanded(u, f)
+        previous, previous_force = u, f
+        z = update(t, z, est)
+        if k + 1 == samples:
+            break
+        t_next = t_list[k + 1]
+        if jitter > 0:
+            t_next += float(np.clip(rng.normal(0.0, jitter), -0.25 * period, 0.25 * period))
+        step = advance(plant, state, u, t_next, external=float(f), budget=budget)
+        if step.status is not SimulationStatus.SUCCESS:
+            status, message, last = step.status, step.message, k + 1
+            break
+        state, X, x = step.state, X + step.body_displacement, x + step.contact_displacements
+    return (np.array(speed), np.array(estimate), np.array(variance), np.array(position),
+            np.array(force), np.array(central, dtype=np.int64), wheel, commands, contact, status,
+            message, last)
 
 
 def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
@@ -156,59 +274,21 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
             plant.contacts.forces, plant.mass, sensors,
             motor_lag=motors.lag if motors is not None else 0.0, damping=plant.damping,
             speed_limits=motors.speed_limits if motors is not None else (-math.inf, math.inf)))
-    rng = np.random.default_rng(seed)
-    n = plant.n
     times = sample_times(t_end, rate)
-    t_list = times.tolist()
-    speed, estimate, variance = [0.0] * samples, [0.0] * samples, [0.0] * samples
-    position, force = [0.0] * samples, [0.0] * samples
-    commands, contact = np.empty((samples, n)), np.empty((samples, n))
-    central, wheel = [0] * samples, np.zeros((samples, n), dtype=np.int64)
-    state = ExactState(0.0, float(v0), plant.initial_speeds())
-    X, x = 0.0, np.zeros(n)
-    reader = None
+    initial = plant.initial_speeds()
     if sensors is not None:
-        reader = SensorReader(sensors, sensors.initial_state(state.contact_speeds), rng)
-        estimator.reset(speed=float(v0), contact_speeds=state.contact_speeds)
-        observe, commanded = estimator.observe, estimator.commanded
-        jitter = sensors.jitter
+        estimator.reset(speed=float(v0), contact_speeds=initial)
+    if _COMPILED and sampled_supported(plant, sensors, budget):
+        program = getattr(law, "sampled", None)
+        run = _run_sampled(plant, law, None if program is None else program(), times,
+                           sensors, estimator, float(v0), budget)
+        speed, estimate, variance, position = run.speed, run.estimate, run.variance, run.position
+        force, central, wheel, commands = run.force, run.central, run.wheel, run.commands
+        contact, status, message, last = run.contact, run.status, run.message, run.last
     else:
-        jitter = 0.0
-    output, update = law.output, law.update
-    z = law.initial_state()
-    status, message, last = SimulationStatus.SUCCESS, "", samples
-    previous, previous_force = state.contact_speeds, 0.0
-    for k in range(samples):
-        t = t_list[k]
-        V = state.V
-        speed[k], position[k], contact[k] = V, X, state.contact_speeds
-        if reader is not None:
-            c, w = reader.read(X, x)
-            central[k] = c
-            wheel[k] = w
-            estimate[k], variance[k] = est, _ = observe(EncoderSample(t, c, w, previous, previous_force))
-        else:
-            estimate[k] = est = V
-        action = output(t, z, est)
-        u = action.commands
-        commands[k] = u
-        force[k] = f = float(action.force)
-        if reader is not None:
-            commanded(u, f)
-        previous, previous_force = u, f
-        z = update(t, z, est)
-        if k + 1 == samples:
-            break
-        t_next = t_list[k + 1]
-        if jitter > 0:
-            t_next += float(np.clip(rng.normal(0.0, jitter), -0.25 * period, 0.25 * period))
-        step = advance(plant, state, u, t_next, external=float(f), budget=budget)
-        if step.status is not SimulationStatus.SUCCESS:
-            status, message, last = step.status, step.message, k + 1
-            break
-        state, X, x = step.state, X + step.body_displacement, x + step.contact_displacements
-    speed, estimate, variance = np.array(speed), np.array(estimate), np.array(variance)
-    position, force, central = np.array(position), np.array(force), np.array(central, dtype=np.int64)
+        (speed, estimate, variance, position, force, central, wheel, commands, contact, status,
+         message, last) = _run_python(plant, law, times, sensors, estimator, float(v0), seed,
+                                      budget)
     keep = slice(0, last)
     record = None
     if sensors is not None:

@@ -26,6 +26,7 @@ from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import ContactSet, Motors, Plant
 from ..model.carousel import CAROUSEL
 from ..model.sensors import Sensors
+from ..simulation import SampledLaw
 
 __all__ = ["Apparatus", "CarryThen", "MODES"]
 
@@ -207,3 +208,13 @@ class _CarryLaw:
         if t < self.switch:
             return z
         return self.law.update(self._inner(t), z, estimate)
+
+    def sampled(self) -> SampledLaw | None:
+        """The inner law's compiled form after a carry phase (None when the inner law has
+        none, or a carry phase of its own)."""
+        inner = getattr(self.law, "sampled", None)
+        inner = inner() if inner is not None else None
+        if inner is None or inner.carry is not None:
+            return None
+        return replace(inner, carry=self.carry, switch=self.switch, start=self.start,
+                       period=self.period)

@@ -54,9 +54,9 @@ import numpy as np
 
 from ..controllers import VirtualViscosity
 from ..errors import ParameterError, ParameterTypeError, as_float, as_int, check_option, parameter_message
-from ..loop.closed_loop import simulate_closed_loop
+from ..loop.closed_loop import LOOP_RATE, simulate_closed_loop
 from ..model import ContactSet, sample_count
-from ..simulation import SimulationStatus
+from ..simulation import SimulationStatus, sampled_batch
 from ._measure import TIME_CONSTANTS, proportional_fit, startup_time_constant
 from .apparatus import Apparatus, CarryThen
 from .theory import least_squares_correction, resting_speed, travel_time, viscosity_correction
@@ -293,29 +293,58 @@ def _simulate_startups(problem: ViscosityProblem, design: ViscosityDesign,
                        progress: bool) -> tuple[list[Any], list[str]]:
     """Run every closed-loop startup. Returns per run ``(times, estimate, speed)`` from the
     staircase's switch-on (times from 0, s; speeds m/s), or ``None`` for a run that did not
-    finish, and the failure messages."""
+    finish, and the failure messages.
+
+    In the loop (encoders and the Kalman filter) each run is one closed loop
+    (:func:`simulate_closed_loop`: compiled, the filter called per sample); ideal, every run
+    at once (:func:`toolkit.simulation.sampled_batch`, in parallel over the cores: each run
+    equals its :func:`simulate_closed_loop` at the default 50 Hz, the same kernel; tested)."""
     a, p = problem.apparatus, problem
-    loop = p.mode == "loop"
     records: list[Any] = []
     failures: list[str] = []
+    plants = [a.run_plant(design.v0[r], p.mode) for r in range(p.runs)]
+    controllers = [CarryThen(VirtualViscosity(float(design.slope[r]), 0.0), p.pre_roll,
+                             float(design.v0[r])) for r in range(p.runs)]
+    lengths = [p.pre_roll + float(design.stop_time[r]) + p.tail for r in range(p.runs)]
     bar = _progress(p.runs, progress, f"viscosity ({p.mode})")
     try:
-        for r in range(p.runs):
-            plant = a.run_plant(design.v0[r], p.mode)
-            controller = VirtualViscosity(float(design.slope[r]), 0.0)
-            run = simulate_closed_loop(plant, CarryThen(controller, p.pre_roll, float(design.v0[r])),
-                                       p.pre_roll + design.stop_time[r] + p.tail, v0=float(design.v0[r]),
-                                       sensors=a.sensors if loop else None, seed=design.seeds[r])
-            bar.update(1)
-            if run.status is not SimulationStatus.SUCCESS:
-                failures.append(f"run {r}: {run.message}")
-                records.append(None)
-                continue
-            first = int(np.searchsorted(run.times, p.pre_roll - 1e-9))
-            records.append((run.times[first:] - run.times[first], run.estimate[first:], run.speed[first:]))
+        if p.mode == "loop":
+            runs = []
+            for r in range(p.runs):
+                run = simulate_closed_loop(plants[r], controllers[r], lengths[r], v0=float(design.v0[r]),
+                                           sensors=a.sensors, seed=design.seeds[r])
+                bar.update(1)
+                failed = None if run.status is SimulationStatus.SUCCESS else run.message
+                runs.append((run.times, run.estimate, run.speed, failed))
+        else:
+            runs = _together(plants, controllers, lengths, design.v0)
+            bar.update(p.runs)
     finally:
         bar.close()
+    for r, (times, estimate, speed, failed) in enumerate(runs):
+        if failed is not None:
+            failures.append(f"run {r}: {failed}")
+            records.append(None)
+            continue
+        first = int(np.searchsorted(times, p.pre_roll - 1e-9))
+        records.append((times[first:] - times[first], estimate[first:], speed[first:]))
     return records, failures
+
+
+def _together(plants: list[Any], controllers: list[Any], lengths: list[float],
+              v0: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, str | None]]:
+    """The ideal runs at once on the true speed: ``(times, estimate, speed, failure)`` each."""
+    laws = [controller.bind(plant, 1.0 / LOOP_RATE).sampled()
+            for plant, controller in zip(plants, controllers)]
+    samples = [sample_count(length, LOOP_RATE) for length in lengths]
+    batch = sampled_batch(plants[0], laws, samples, LOOP_RATE, v0=v0,
+                          contact_speeds=np.array([plant.initial_speeds() for plant in plants]))
+    runs = []
+    for r, count in enumerate(samples):
+        failed = None if batch["codes"][r] == 0 else f"a plant step stopped (code {batch['codes'][r]})"
+        speed = batch["speed"][r, :count]
+        runs.append((batch["times"][:count], speed, speed, failed))
+    return runs
 
 
 def measure_time_constants(problem: ViscosityProblem, records: list[Any]) -> dict[str, Any]:

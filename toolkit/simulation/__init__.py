@@ -24,6 +24,10 @@ Also public: :func:`warm_up` (compile or load the kernels before timing anything
 :func:`clear_cache` (forget a plant's cached landscapes: time a run from scratch) and
 :func:`refuse_backlash` (the check every method but Moreau-Jean makes). Everything else in
 this package is private: other packages use this face only.
+
+:class:`SampledRun` runs a whole sampled loop (plant steps, noiseless sensors, a law with a
+compiled form, :class:`SampledLaw`) in the compiled kernels, :func:`sampled_batch` many of
+them in parallel.
 """
 
 from __future__ import annotations
@@ -41,12 +45,13 @@ from ..model import Plant
 from ._batch import BatchResult, simulate_batch
 from ._result import Budget, Event, SimulationResult, SimulationStatus, refuse_backlash
 from ._exact import clear_cache
+from ._sampled import SampledLaw, SampledRun, sampled_batch, sampled_supported
 from ._stepper import ExactState, ExactStep, advance
 from ._warmup import warm_up
 
 __all__ = ["simulate", "simulate_batch", "BatchResult", "SimulationStatus", "Budget", "Event",
            "SimulationResult", "METHODS", "advance", "ExactState", "ExactStep", "clear_cache", "warm_up",
-           "refuse_backlash"]
+           "refuse_backlash", "SampledLaw", "SampledRun", "sampled_batch", "sampled_supported"]
 
 _SCIPY_OPTIONS = ("friction", "epsilon", "rtol", "atol")
 

@@ -1,4 +1,5 @@
-"""Compile the kernels ahead of timing: :func:`warm_up` (benchmarks and the tests call it).
+"""Compile the kernels ahead of timing: :func:`warm_up` (benchmarks and the tests call it; the
+policy is :mod:`toolkit._compiled`'s).
 
 It lives with the simulation, not in :mod:`toolkit._compiled`, because it exercises the
 kernels through the simulation's and the contact model's own entry points: the compiled
@@ -12,17 +13,19 @@ import time
 import numpy as np
 
 from .._compiled import load
-from ..model import ContactSet, Motors, Plant
+from ..model import ContactSet, Motors, PiecewiseConstant, Plant
 from ._batch import simulate_batch
+from ._sampled import SampledLaw, SampledRun
 from ._stepper import ExactState, advance
 
 __all__ = ["warm_up"]
 
 
 def warm_up() -> float:
-    """Compile (or load from the cache) the kernels the exact method, the batch path and
-    :meth:`ContactSet.force` run, on tiny inputs of the usual array kinds; returns the time
-    it took (s). Benchmarks and the tests call it before timing anything."""
+    """Compile (or load from the cache) the kernels the exact method (ideal and lagging
+    motors), ``advance``, the sampled loops, the batch path and :meth:`ContactSet.force` run,
+    on tiny inputs of the usual array kinds; returns the time it took (s). Benchmarks and the
+    tests call it before timing anything."""
     from . import simulate as _simulate   # the package's entry point (it imports this module)
 
     started = time.perf_counter()
@@ -44,7 +47,14 @@ def warm_up() -> float:
         command = np.array([-0.2, 0.1, 0.3 - 0.01 * k])
         command.setflags(write=k % 2 == 0)      # the caller's command, writable or not
         state = advance(lagged, state, command, 0.02 * (k + 1)).state
+    schedule = PiecewiseConstant([0.5], [[-0.2, 0.1, 0.3], [0.2, -0.1, 0.0]])
+    for motors in (Motors(lag=0.01, rate_limit=2.0), Motors(lag=0.01, compliance=0.05)):
+        _simulate(Plant(contacts, 1.0, motors=motors, commands=schedule), 1.0)
+    times = np.arange(4) * 0.02
+    for plant in (lagged, Plant(contacts, 1.0)):
+        SampledRun(plant, times, law=SampledLaw(np.array([[0.1, 0.2, 0.3]]))).run_to(4)
     simulate_batch(np.array([[0.1, -0.1, 0.2]]), None, 1.0, 1.0)
+    simulate_batch(np.array([[0.1, -0.1, 0.2]]), None, 1.0, 1.0, t_probe=0.5)
     simulate_batch(np.array([[0.1, -0.1, 0.2]]), np.ones((1, 3)), np.ones(1), 1.0,
                    damping=np.zeros(1), external=np.zeros(1), v0=np.zeros(1))
     return time.perf_counter() - started

@@ -1,5 +1,5 @@
-"""Sweeps: seeds, chunking, schedulers (local, process pool, Dask LocalCluster) and the
-median-law experiment against closed forms."""
+"""Sweeps: keyed random numbers, chunking, schedulers (local, process pool, Dask LocalCluster)
+and the median-law experiment against closed forms."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import toolkit as tk
-from toolkit import ContactSet, ParameterError, ParameterTypeError
+from toolkit import ContactSet, ParameterError, ParameterTypeError, simulate_batch
 from toolkit.experiments import (MeanMedian, MedianLaw, Outliers, ResidualFriction, carousel_wheels,
                                  ideal_median_law_slope, median_law_slope)
-from toolkit.sweeps import run_seeds, sweep
+from toolkit.sweeps import RunKeys, run_keys, sweep
 
 #: Every experiment with its non-idealities switched on, and a run count small enough to
 #: sweep it several times (chunking, schedulers).
@@ -26,12 +26,37 @@ NONIDEAL = [
 ]
 
 
-def test_run_seeds_are_the_spawned_children():
-    # Identity: SeedSequence(seed, spawn_key=(i,)) is child i of SeedSequence(seed).spawn().
-    children = np.random.SeedSequence(7).spawn(12)
-    direct = run_seeds(7, 3, 12)
-    for a, b in zip(children[3:], direct):
-        assert np.array_equal(a.generate_state(4), b.generate_state(4))
+def test_run_keys_draw_numpys_philox_streams():
+    # Second method: the compiled counter-based draws of runs 3..11 (stream 2, seed above
+    # 2**64: both key words used) are NumPy's Philox with counter (0, 0, i, 2) and that key,
+    # bit for bit, and any grouping of the runs gives the same rows (identity).
+    seed = 2**70 + 12345
+    keys = run_keys(seed, 3, 12)
+    u = keys.uniform(2, 9)
+    for j in range(9):
+        reference = np.random.Generator(np.random.Philox(counter=[0, 0, 3 + j, 2],
+                                                         key=[seed % 2**64, seed >> 64]))
+        np.testing.assert_array_equal(u[j], reference.random(9))
+        np.testing.assert_array_equal(keys.generator(j, 2).random(9), u[j])
+    np.testing.assert_array_equal(run_keys(seed, 7, 9).uniform(2, 9), u[4:6])
+    np.testing.assert_array_equal(keys.uniform(2, 9, -0.35, 0.35), -0.35 + 0.7 * u)
+    assert not np.array_equal(keys.uniform(1, 9), u)           # another stream
+    with pytest.raises(ParameterError, match="'seed' parameter of run_keys"):
+        run_keys(2**128, 0, 1)
+
+
+def test_run_keys_normals_are_standard_normal():
+    # Box-Muller on the keyed uniforms: mean 0, variance 1 and independent pairs, over 2e5
+    # draws (standard errors 0.0022 for the mean, 0.0032 for the variance and the
+    # correlation: tolerances 5 of them); a Kolmogorov-Smirnov test against scipy's normal
+    # CDF at the 1e-3 level.
+    from scipy import stats
+
+    z = RunKeys(5, 0, 20_000).normal(1, 10)
+    assert z.shape == (20_000, 10)
+    assert abs(z.mean()) < 5 * 0.0022 and abs(z.var() - 1.0) < 5 * 0.0032
+    assert abs(np.corrcoef(z[:, 0], z[:, 1])[0, 1]) < 5 * 0.0071
+    assert stats.kstest(z.ravel(), "norm").pvalue > 1e-3
 
 
 def test_tables_do_not_depend_on_chunking():
@@ -72,15 +97,38 @@ def test_one_wheel_seed_is_one_carousel_in_every_experiment():
     # normals first, always): the same loads in all four experiments, whether or not the
     # wheel radii are spread (identity, bit for bit).
     _, loads = carousel_wheels(np.random.default_rng(0), 10, 0.2, 0.36)
-    seeds = run_seeds(1, 0, 3)
+    keys = run_keys(1, 0, 3)
     for experiment in (MedianLaw(friction_spread=0.36, wheel_seed=0),
                        MedianLaw(friction_spread=0.36, wheel_seed=0, wheel_radius_std=0.05)):
-        np.testing.assert_array_equal(experiment.draw(seeds)[2], np.tile(loads, (3, 1)))
-    np.testing.assert_array_equal(MeanMedian(friction_spread=0.36, wheel_seed=0).loads(seeds), np.tile(loads, (3, 1)))
-    np.testing.assert_array_equal(Outliers(friction_spread=0.36, wheel_seed=0).plant(seeds[0])[0].contacts.forces,
+        np.testing.assert_array_equal(experiment.draw(keys)[2], np.tile(loads, (3, 1)))
+    np.testing.assert_array_equal(MeanMedian(friction_spread=0.36, wheel_seed=0).loads(keys), np.tile(loads, (3, 1)))
+    np.testing.assert_array_equal(Outliers(friction_spread=0.36, wheel_seed=0).plant(keys)[0].contacts.forces,
                                   loads)
-    np.testing.assert_array_equal(ResidualFriction(friction_spread=0.36, wheel_seed=0).contacts(seeds[0]).forces,
+    np.testing.assert_array_equal(ResidualFriction(friction_spread=0.36, wheel_seed=0).contacts(keys).forces,
                                   loads)
+
+
+def test_settled_check_reads_the_one_run_at_half_time():
+    # The settled check needs the speed at half the horizon: simulate_batch(t_probe=...) reads
+    # it from the run's own closed-form segments. Second method: a second batch stopped at
+    # that time (the old way), rtol 1e-12 / atol 1e-15 (the same segment, evaluated at a
+    # time inside it instead of as the end of a run). Drag makes some runs still move at the
+    # probe (exponential approach); a short horizon leaves others before their stop.
+    rng = np.random.default_rng(31)
+    speeds = rng.uniform(-0.35, 0.35, (300, 10))
+    forces = rng.uniform(0.1, 0.3, (300, 10))
+    for t_end, damping in ((0.3, 0.0), (20.0, 0.5), (20.0, 0.0)):
+        whole = simulate_batch(speeds, forces, 1.0, t_end, damping=damping, t_probe=0.5 * t_end)
+        half = simulate_batch(speeds, forces, 1.0, 0.5 * t_end, damping=damping)
+        np.testing.assert_allclose(whole.probe_speeds, half.final_speeds, rtol=1e-12, atol=1e-15)
+    # The median law's settled column is the old two-run rule, run by run.
+    experiment = MedianLaw(settle_time=0.2, damping=0.2)
+    table = sweep(experiment, 200, seed=8).table
+    _, actual, forces = experiment.draw(run_keys(8, 0, 200))
+    old = np.abs(simulate_batch(actual, forces, 1.0, 0.2, damping=0.2).final_speeds
+                 - simulate_batch(actual, forces, 1.0, 0.1, damping=0.2).final_speeds) <= 1e-9
+    np.testing.assert_array_equal(table["settled"].to_numpy(), old)
+    assert 0 < old.sum() < 200
 
 
 def test_even_n_from_rest_stops_at_the_near_band_edge():
@@ -89,7 +137,7 @@ def test_even_n_from_rest_stops_at_the_near_band_edge():
     # speed itself, so the match is to rounding of the motion (atol 1e-15 m/s).
     experiment = MedianLaw(n=10)
     result = sweep(experiment, 200, seed=11)
-    commanded, actual, forces = experiment.draw(run_seeds(11, 0, 200))
+    commanded, actual, forces = experiment.draw(run_keys(11, 0, 200))
     expected = [np.clip(0.0, *ContactSet(actual[j], forces[j]).equilibrium()) for j in range(200)]
     np.testing.assert_allclose(result.table["speed"], expected, rtol=0, atol=1e-15)
     np.testing.assert_array_equal(result.table["median"], np.median(commanded, axis=1))
@@ -161,7 +209,7 @@ def test_compliance_moves_the_stop_into_the_band_by_k_f():
     k = 0.02
     experiment = MedianLaw(compliance=k)
     result = sweep(experiment, 120, seed=9)
-    _, actual, forces = experiment.draw(run_seeds(9, 0, 120))
+    _, actual, forces = experiment.draw(run_keys(9, 0, 120))
     kf = k * forces[0, 0]
     checked = 0
     for j in range(120):
@@ -180,7 +228,7 @@ def test_unequal_friction_moves_the_stop_to_the_weighted_median():
     # (a point almost surely); from rest the body stops there or at its near edge.
     experiment = MedianLaw(friction_spread=0.2)
     result = sweep(experiment, 100, seed=4)
-    _, actual, forces = experiment.draw(run_seeds(4, 0, 100))
+    _, actual, forces = experiment.draw(run_keys(4, 0, 100))
     expected = [np.clip(0.0, *ContactSet(actual[j], forces[j]).equilibrium()) for j in range(100)]
     settled = result.table["settled"].to_numpy()
     assert settled.mean() > 0.9            # a nearly balanced start can still creep at 20 s
@@ -310,10 +358,10 @@ def test_mean_median_with_unequal_wheels_stops_at_the_weighted_equilibrium():
     # one speed, whatever the mean (one carousel: the same loads in every run).
     experiment = MeanMedian(held="median", level=0.05, gap=0.01, friction_spread=0.36, wheel_seed=0)
     result = sweep(experiment, 40, seed=2)
-    seeds = run_seeds(2, 0, 40)
-    loads = experiment.loads(seeds)
-    expected = [np.clip(0.0, *ContactSet(experiment.speeds(s), loads[j]).equilibrium())
-                for j, s in enumerate(seeds)]
+    keys = run_keys(2, 0, 40)
+    loads = experiment.loads(keys)
+    expected = [np.clip(0.0, *ContactSet(experiment.speeds(keys, j), loads[j]).equilibrium())
+                for j in range(40)]
     np.testing.assert_allclose(result.table["speed"], expected, rtol=0, atol=1e-15)
     assert result.summary["speed_range"] == 0.0 and result.summary["mean_range"] > 0.03
 
@@ -354,9 +402,9 @@ def test_residual_friction_divides_by_each_carousels_own_total():
     # mu0 = sum f_i of the run's own wheels (a Coulomb bearing and drag cancel over the
     # symmetric probes), so mu_ratio = |band force| / sum f_i (identities, rtol 1e-12).
     experiment = ResidualFriction(n=0, friction_spread=0.36, bearing_drag=0.0)
-    seeds = run_seeds(3, 0, 20)
+    keys = run_keys(3, 0, 20)
     table = sweep(experiment, 20, seed=3).table
-    totals = np.array([experiment.contacts(s).forces.sum() for s in seeds])
+    totals = np.array([experiment.contacts(keys.run(j)).forces.sum() for j in range(20)])
     np.testing.assert_allclose(table["mu0"], totals, rtol=1e-12)
     np.testing.assert_allclose(table["mu_ratio"], np.abs(table["band_force"]) / totals, rtol=1e-12)
 
@@ -382,9 +430,9 @@ def test_release_rise_closed_form():
     # rises by 2 k f / (|u| - k f) (closed forms, rtol 1e-12).
     k = 0.05
     experiment = MedianLaw(compliance=k)
-    seeds = run_seeds(5, 0, 30)
-    rise = experiment.release_rise(seeds)
-    _, actual, forces = experiment.draw(seeds)
+    keys = run_keys(5, 0, 30)
+    rise = experiment.release_rise(keys)
+    _, actual, forces = experiment.draw(keys)
     final = sweep(experiment, 30, seed=5).table["true_speed"].to_numpy()
     kf = k * forces
     checked = 0

@@ -1,15 +1,18 @@
 """Sweeps: many seeded runs of one experiment, on this machine or on a Dask cluster.
 
 An *experiment* (for example :class:`toolkit.experiments.MedianLaw`) says what one run is:
-it draws its scene from the run's own random generator, simulates it and returns one row of
+it draws its scene from the run's own random numbers, simulates it and returns one row of
 results. :func:`sweep` runs it ``runs`` times and gathers a tidy table (a pandas DataFrame,
 one row per run) and the experiment's summary statistics.
 
 Reproducibility
 ---------------
-Run ``i`` draws from ``numpy.random.default_rng(SeedSequence(seed, spawn_key=(i,)))``,
-exactly the ``i``-th child of ``SeedSequence(seed).spawn(runs)``. A run's numbers depend only
-on ``seed`` and ``i``, never on how runs are grouped or where they execute.
+Random numbers are counter-based (:class:`RunKeys`): draw ``p`` of stream ``s`` of run ``i``
+is the Philox4x64-10 block of the counter ``(p // 4 + 1, 0, i, s)`` under the key ``seed``
+(NumPy's ``Philox``, compiled: :func:`toolkit._compiled.core.philox_uniform`). A run's
+numbers depend only on ``seed``, ``i`` and the stream, never on how runs are grouped or
+where they execute, and a chunk draws all of its runs' numbers at once, without a Python
+step per run.
 
 Runs are grouped into chunks of ``chunk_size`` consecutive runs (a fixed function of
 ``runs`` and ``chunk_size``, not of the number of workers). An experiment evaluates a whole
@@ -42,14 +45,15 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from ._compiled import warm
 from .errors import as_float, as_int, suggestion
 from .errors import ParameterError, ParameterTypeError, parameter_message
 
 if TYPE_CHECKING:       # the table type, imported only with the first sweep at run time
     import pandas as pd
 
-__all__ = ["Experiment", "SweepResult", "sweep", "run_seeds", "bootstrap", "Bootstrap", "MAX_RUNS",
-           "DEFAULT_CHUNK_SIZE", "MAX_RESAMPLES"]
+__all__ = ["Experiment", "RunKeys", "SweepResult", "sweep", "run_keys", "bootstrap", "Bootstrap",
+           "MAX_RUNS", "DEFAULT_CHUNK_SIZE", "MAX_RESAMPLES"]
 
 #: Most runs one sweep may take (its table holds one row per run).
 MAX_RUNS = 10_000_000
@@ -67,8 +71,8 @@ class Experiment(Protocol):
 
     name: str
 
-    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
-        """Evaluate one chunk: one entry per column, each an array with one value per seed."""
+    def run(self, keys: RunKeys) -> dict[str, np.ndarray]:
+        """Evaluate one chunk: one entry per column, each an array with one value per run."""
         ...
 
     def summarize(self, table: Any) -> dict[str, float]:
@@ -91,8 +95,13 @@ class SweepResult:
     scheduler : str
         ``"local"``, ``"processes"`` or ``"dask"``.
     wall_time : float, s
+        The sweep's run time: local, of compiled kernels only (loaded, and the experiment's
+        first run, before the clock: ``compile_time``); with a pool or Dask, the workers'
+        start-up and their own compiling included.
     chunks : int
         Number of chunks the runs were split into.
+    compile_time : float, s
+        The one-time cost paid before the clock started (:func:`toolkit._compiled.warm`).
     """
 
     experiment: Experiment
@@ -104,13 +113,15 @@ class SweepResult:
     scheduler: str
     wall_time: float
     chunks: int = field(default=0)
+    compile_time: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary (not the table): experiment name, runs, seed, scheduler,
         wall time and the summary statistics."""
         return {"experiment": self.experiment.name, "runs": self.runs, "seed": self.seed,
                 "chunk_size": self.chunk_size, "scheduler": self.scheduler,
-                "wall_time": self.wall_time, "summary": dict(self.summary)}
+                "wall_time": self.wall_time, "compile_time": self.compile_time,
+                "summary": dict(self.summary)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,13 +203,98 @@ def bootstrap(result: SweepResult, statistic: str | Callable[[Any], float], *, r
     return Bootstrap(float(compute(table)), replicates)
 
 
-def run_seeds(seed: int, start: int, stop: int) -> list[np.random.SeedSequence]:
-    """Children ``start .. stop-1`` of ``SeedSequence(seed).spawn(...)``, built directly."""
-    return [np.random.SeedSequence(seed, spawn_key=(i,)) for i in range(start, stop)]
+#: Interpreted work (about us) of one Philox block of four draws (toolkit._compiled).
+_BLOCK_WORK = 40
+_MASK64 = (1 << 64) - 1
+
+
+@dataclass(frozen=True)
+class RunKeys:
+    """The random numbers of runs ``start .. stop - 1`` of a sweep with root ``seed``.
+
+    Counter-based (Philox4x64-10, the generator of ``numpy.random.Philox``): the numbers of
+    run ``i``'s stream ``s`` are those of ``Philox(counter=(0, 0, i, s), key=(seed mod 2^64,
+    seed // 2^64))``, so they depend on ``(seed, i, s)`` only. :meth:`uniform` and
+    :meth:`normal` draw a whole chunk at once (one compiled call); :meth:`generator` gives one
+    run's stream as a ``numpy.random.Generator`` for experiments that draw run by run.
+
+    Parameters
+    ----------
+    seed : int
+        ``0 <= seed < 2**128``.
+    start, stop : int
+        The runs, ``0 <= start < stop``.
+    """
+
+    seed: int
+    start: int
+    stop: int
+
+    def __len__(self) -> int:
+        return self.stop - self.start
+
+    @property
+    def indices(self) -> np.ndarray:
+        """The run indices, shape (runs,)."""
+        return np.arange(self.start, self.stop)
+
+    def _key(self) -> tuple[np.uint64, np.uint64]:
+        return np.uint64(self.seed & _MASK64), np.uint64(self.seed >> 64)
+
+    def uniform(self, stream: int, n: int, low: float = 0.0, high: float = 1.0) -> np.ndarray:
+        """The first ``n`` draws of each run's stream ``stream``, uniform in ``[low, high)``
+        (``low + (high - low) u``, as ``Generator.uniform``): shape (runs, n)."""
+        from ._compiled import kernels
+
+        out = np.empty((len(self), n))
+        k0, k1 = self._key()
+        kernels("core", _BLOCK_WORK * len(self) * ((n + 3) // 4)).philox_uniform(
+            k0, k1, self.start, int(stream), out)
+        if low != 0.0 or high != 1.0:
+            out = low + (high - low) * out
+        return out
+
+    def normal(self, stream: int, n: int) -> np.ndarray:
+        """``n`` standard normals per run from stream ``stream``: shape (runs, n). Box-Muller
+        on consecutive pairs of uniforms ``(u, w)``: ``sqrt(-2 ln(1 - u)) (cos, sin)(2 pi w)``
+        (not NumPy's ziggurat: the same law, other numbers)."""
+        pairs = (n + 1) // 2
+        u = self.uniform(stream, 2 * pairs)
+        radius = np.sqrt(-2.0 * np.log1p(-u[:, 0::2]))
+        angle = 2.0 * np.pi * u[:, 1::2]
+        z = np.empty((len(self), 2 * pairs))
+        z[:, 0::2] = radius * np.cos(angle)
+        z[:, 1::2] = radius * np.sin(angle)
+        return z[:, :n]
+
+    def generator(self, j: int, stream: int = 0) -> np.random.Generator:
+        """Run ``start + j``'s stream ``stream`` as a ``numpy.random.Generator`` (its
+        ``random()`` draws are :meth:`uniform`'s)."""
+        k0, k1 = self._key()
+        return np.random.Generator(np.random.Philox(counter=[0, 0, self.start + j, stream],
+                                                    key=[int(k0), int(k1)]))
+
+    def run(self, j: int) -> RunKeys:
+        """The keys of run ``start + j`` alone."""
+        return RunKeys(self.seed, self.start + j, self.start + j + 1)
+
+    def label(self, j: int) -> str:
+        """``"run i"`` for messages."""
+        return f"run {self.start + j}"
+
+
+def run_keys(seed: int, start: int, stop: int) -> RunKeys:
+    """The keys of runs ``start .. stop - 1`` of a sweep with root ``seed`` (checked)."""
+    seed = as_int(seed, "seed", "run_keys", low=0)
+    start = as_int(start, "start", "run_keys", low=0)
+    stop = as_int(stop, "stop", "run_keys", low=start + 1)
+    if seed >= 2**128:
+        raise ParameterError(parameter_message("seed", "run_keys", "be < 2**128", seed))
+    return RunKeys(seed, start, stop)
 
 
 def _run_chunk(experiment: Any, seed: int, start: int, stop: int) -> dict[str, np.ndarray]:
-    columns = experiment.run(run_seeds(seed, start, stop))
+    columns = experiment.run(RunKeys(seed, start, stop))
     for name, values in columns.items():
         if np.shape(values) != (stop - start,):
             raise RuntimeError(f"Experiment {experiment.name!r} returned column {name!r} of shape "
@@ -267,7 +363,8 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     runs : int
         Number of runs, ``1 .. MAX_RUNS``.
     seed : int
-        Root seed (``>= 0``); run ``i`` uses child ``i`` of ``SeedSequence(seed)``.
+        Root seed (``0 <= seed < 2**128``): the key of every run's random numbers
+        (:class:`RunKeys`).
     scheduler : None, "processes", str address or distributed.Client
         Where chunks run (see the module docstring).
     workers : int, optional
@@ -308,6 +405,9 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     if not isinstance(progress, (bool, np.bool_)):
         raise ParameterTypeError(parameter_message("progress", _OWNER, "be True or False", progress))
     bounds = [(a, min(a + chunk_size, runs)) for a in range(0, runs, chunk_size)]
+    compile_time = 0.0
+    if kind == "local":          # the timing policy: compiled, and run 0 once, before the clock
+        compile_time = warm(lambda: _run_chunk(experiment, seed, 0, 1), "core")
     started = time.perf_counter()
     bar = _progress(runs, progress, experiment.name)
     parts: list[dict[str, np.ndarray] | None] = [None] * len(bounds)
@@ -355,4 +455,4 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     table = pd.DataFrame(columns)
     summary = experiment.summarize(table)
     return SweepResult(experiment, table, summary, runs, seed, chunk_size, kind,
-                       time.perf_counter() - started, len(bounds))
+                       time.perf_counter() - started, len(bounds), compile_time)

@@ -1,7 +1,7 @@
 """The paper's experiments as sweepable definitions (one module per experiment).
 
 Each experiment is a frozen dataclass that :func:`toolkit.sweep` runs many times with
-reproducible seeds (``run(seeds)`` evaluates a chunk of runs, ``summarize(table)`` gives the
+reproducible random numbers (``run(keys)`` evaluates a chunk of runs: :class:`toolkit.sweeps.RunKeys`, ``summarize(table)`` gives the
 summary statistics); its parameters include the non-idealities of the real carousel.
 """
 

@@ -9,8 +9,9 @@ One carousel per ``wheel_seed``
 which draws ``n`` normals when ``spread > 0``). Every experiment that takes a ``wheel_seed``
 builds its wheels with ``carousel_wheels(numpy.random.default_rng(wheel_seed), ...)``, so one
 ``wheel_seed`` (with the same ``n``, ``friction_spread`` and mean load) is one carousel in all
-four experiments. Without a ``wheel_seed`` each run draws its own carousel from
-:func:`run_wheel_rng`, the run's first child sequence (independent of the run's speeds).
+four experiments. Without a ``wheel_seed`` each run draws its own carousel from streams of
+its own (:class:`toolkit.sweeps.RunKeys`: :data:`STREAM_RADIUS` and :data:`STREAM_LOADS`,
+independent of the run's speeds, :data:`STREAM_RUN`), all runs of a chunk at once.
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ from ..model import unequal_loads
 #: A run counts as settled when its speed changed by at most this over the checked
 #: interval, m/s (exact simulation: a settled body's speed does not change at all).
 SETTLED_TOLERANCE = 1e-9
+#: The random streams of a run (:class:`toolkit.sweeps.RunKeys`): its own scene (speeds,
+#: amplitudes ...), its carousel's wheel radius errors, its carousel's loads.
+STREAM_RUN, STREAM_RADIUS, STREAM_LOADS = 0, 1, 2
 #: Most contacts one run may have.
 MAX_CONTACTS = 10_000
 #: Most samples (command steps, probe speeds) one run may build.
@@ -105,24 +109,22 @@ def carousel_wheels(rng: np.random.Generator, n: int, mean_load: float, friction
     return radius_error, unequal_loads(mean_load, friction_spread, n, rng)
 
 
-def run_wheel_rng(seq: np.random.SeedSequence) -> np.random.Generator:
-    """The generator of a run's own carousel: the run's first child sequence, built directly
-    (``seq.spawn`` would change ``seq``)."""
-    return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, 0)))
-
-
-def wheels_for_runs(seeds: list[np.random.SeedSequence], wheel_seed: int | None, n: int, mean_load: float,
+def wheels_for_runs(keys: Any, wheel_seed: int | None, n: int, mean_load: float,
                     friction_spread: float = 0.0, radius_std: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Radius errors and loads of each run, shape (runs, n) each: one carousel
-    (``wheel_seed``) for every run, or each run its own (:func:`run_wheel_rng`)."""
+    """Radius errors and loads of each run of ``keys`` (:class:`toolkit.sweeps.RunKeys`),
+    shape (runs, n) each: one carousel (``wheel_seed``) for every run, or each run its own,
+    from its streams :data:`STREAM_RADIUS` (``radius_std`` times standard normals) and
+    :data:`STREAM_LOADS` (the lognormal loads of :func:`toolkit.model.unequal_loads`)."""
+    runs = len(keys)
     if wheel_seed is not None:
         radius, loads = carousel_wheels(np.random.default_rng(wheel_seed), n, mean_load, friction_spread,
                                         radius_std)
-        return np.tile(radius, (len(seeds), 1)), np.tile(loads, (len(seeds), 1))
-    if friction_spread == 0.0 and radius_std == 0.0:    # nothing random: skip the generators
-        return np.zeros((len(seeds), n)), np.full((len(seeds), n), float(mean_load))
-    pairs = [carousel_wheels(run_wheel_rng(seq), n, mean_load, friction_spread, radius_std) for seq in seeds]
-    return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+        return np.tile(radius, (runs, 1)), np.tile(loads, (runs, 1))
+    radius = (radius_std * keys.normal(STREAM_RADIUS, n) if radius_std > 0.0
+              else np.zeros((runs, n)))
+    loads = (unequal_loads(mean_load, friction_spread, n, normals=keys.normal(STREAM_LOADS, n))
+             if friction_spread > 0.0 else np.full((runs, n), float(mean_load)))
+    return radius, loads
 
 
 def simulate_or_raise(plant: Any, t_end: float, what: str, **options: Any) -> Any:

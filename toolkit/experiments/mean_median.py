@@ -27,7 +27,9 @@ import numpy as np
 from ..errors import as_float
 from ..errors import ParameterError, SolverError, parameter_message
 from ..simulation import simulate_batch
-from ._common import MAX_CONTACTS, SETTLED_TOLERANCE, as_count, check_common, setter, wheels_for_runs
+from ..sweeps import RunKeys
+from ._common import (MAX_CONTACTS, SETTLED_TOLERANCE, STREAM_RUN, as_count, check_common, setter,
+                      wheels_for_runs)
 from .median_law import median_law_slope
 
 __all__ = ["MeanMedian"]
@@ -94,11 +96,11 @@ class MeanMedian:
                 f"{' + median_range' if self.held == 'mean' else ''} < speed_limit / 2 = "
                 f"{0.5 * self.speed_limit:g}", self.level))
 
-    def speeds(self, seed: np.random.SeedSequence) -> np.ndarray:
-        """One run's contact speeds, shape (n,), m/s (rejection-sampled within the limits;
-        the outer offsets are at most ``v_max / 2``, so with the checked room a draw is
-        accepted with a probability bounded away from 0)."""
-        rng = np.random.default_rng(seed)
+    def speeds(self, keys: RunKeys, j: int = 0) -> np.ndarray:
+        """Run ``j`` of ``keys``' contact speeds, shape (n,), m/s, from its own stream
+        (rejection-sampled within the limits; the outer offsets are at most ``v_max / 2``, so
+        with the checked room a draw is accepted with a probability bounded away from 0)."""
+        rng = keys.generator(j, STREAM_RUN)
         h, g, v_max = self.n // 2 - 1, self.gap, self.speed_limit
         for _ in range(10_000):
             m = rng.uniform(-self.median_range, self.median_range) if self.held == "mean" else self.level
@@ -113,24 +115,26 @@ class MeanMedian:
             speeds = np.concatenate((m - g - below, [m - g, m + g], m + g + above))
             if np.all(np.abs(speeds) <= v_max):
                 return speeds
-        raise SolverError(f"MeanMedian run {seed.spawn_key}: no speed set within the limits in 10000 draws.")
+        raise SolverError(f"MeanMedian {keys.label(j)}: no speed set within the limits in 10000 draws.")
 
-    def loads(self, seeds: list[np.random.SeedSequence]) -> np.ndarray:
+    def loads(self, keys: RunKeys) -> np.ndarray:
         """Each run's friction magnitudes, shape (runs, n), N: the carousel of ``wheel_seed``
         (:func:`toolkit.experiments.carousel_wheels`, the same wheels as every experiment
         with that seed) or each run's own carousel."""
-        return wheels_for_runs(seeds, self.wheel_seed, self.n, self.acceleration / self.n,
+        return wheels_for_runs(keys, self.wheel_seed, self.n, self.acceleration / self.n,
                                self.friction_spread)[1]
 
-    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
+    def run(self, keys: RunKeys) -> dict[str, np.ndarray]:
         """Columns ``mean``, ``median`` (of the speeds) and ``speed`` (at ``settle_time``),
         m/s, and ``settled`` (the speed changed by at most
         :data:`~toolkit.experiments._common.SETTLED_TOLERANCE` over the second half: unequal
-        loads can leave a small net force, and a run still moving is not at its steady speed)."""
-        speeds = np.array([self.speeds(seq) for seq in seeds])
-        forces = self.loads(seeds)
-        half, final = (np.array(simulate_batch(speeds, forces, 1.0, t, v0=0.0).final_speeds)
-                       for t in (0.5 * self.settle_time, self.settle_time))
+        loads can leave a small net force, and a run still moving is not at its steady speed;
+        read from the same run's closed form at half the time)."""
+        speeds = np.array([self.speeds(keys, j) for j in range(len(keys))])
+        forces = self.loads(keys)
+        batch = simulate_batch(speeds, forces, 1.0, self.settle_time, v0=0.0,
+                               t_probe=0.5 * self.settle_time)
+        half, final = batch.probe_speeds, batch.final_speeds
         return {"mean": speeds.mean(axis=1), "median": np.median(speeds, axis=1),
                 "speed": final, "settled": np.abs(final - half) <= SETTLED_TOLERANCE}
 

@@ -49,8 +49,9 @@ from ..errors import as_float
 from ..errors import ParameterError, parameter_message
 from ..model import ContactSet, Motors, Plant
 from ..simulation import simulate_batch
-from ._common import (MAX_CONTACTS, MAX_TIME, SETTLED_TOLERANCE, as_count, check_common, check_compliance,
-                      setter, simulate_or_raise, wheels_for_runs)
+from ..sweeps import RunKeys
+from ._common import (MAX_CONTACTS, MAX_TIME, SETTLED_TOLERANCE, STREAM_RUN, as_count, check_common,
+                      check_compliance, setter, simulate_or_raise, wheels_for_runs)
 
 __all__ = ["MedianLaw", "median_law_slope", "ideal_median_law_slope"]
 
@@ -185,16 +186,15 @@ class MedianLaw:
                                          high=MAX_TIME))
 
     # -- one chunk ------------------------------------------------------------------------
-    def draw(self, seeds: list[np.random.SeedSequence]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def draw(self, keys: RunKeys) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded speeds (k, n), actual contact speeds (k, n) and friction magnitudes
-        (k, n) of each run. The speeds come from the run's own generator; the wheels (radius
-        errors, then loads: :func:`toolkit.experiments.carousel_wheels`) from ``wheel_seed``
-        (one carousel, the same in every experiment) or from the run's own carousel
-        generator."""
+        (k, n) of each run of ``keys``, all runs at once. The speeds come from each run's
+        own stream; the wheels (radius errors and loads) from ``wheel_seed`` (one carousel,
+        :func:`toolkit.experiments.carousel_wheels`, the same in every experiment) or from
+        each run's carousel streams (:func:`~toolkit.experiments._common.wheels_for_runs`)."""
         n = self.n
-        commanded = np.array([np.random.default_rng(seq).uniform(-self.speed_limit, self.speed_limit, n)
-                              for seq in seeds]).reshape(len(seeds), n)
-        radius, forces = wheels_for_runs(seeds, self.wheel_seed, n, self.acceleration * self.mass / n,
+        commanded = keys.uniform(STREAM_RUN, n, -self.speed_limit, self.speed_limit)
+        radius, forces = wheels_for_runs(keys, self.wheel_seed, n, self.acceleration * self.mass / n,
                                          self.friction_spread, self.wheel_radius_std)
         actual = commanded * (1.0 + self.wheel_radius_bias + radius)
         return commanded, actual, forces
@@ -203,24 +203,25 @@ class MedianLaw:
         """Observation time of each run, s (``settle_time``, default 20 s)."""
         return 20.0 if self.settle_time is None else self.settle_time
 
-    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
+    def run(self, keys: RunKeys) -> dict[str, np.ndarray]:
         """Columns ``median`` (numpy median of the commanded speeds, m/s), ``speed`` (the
         reported settled speed, m/s), ``true_speed`` (m/s), ``ratio`` (``speed / median``)
-        and ``settled`` (speed steady over the second half of the run)."""
-        commanded, actual, forces = self.draw(seeds)
+        and ``settled`` (speed steady over the second half of the run: the speed at half the
+        horizon read from the same run's closed form, no second simulation)."""
+        commanded, actual, forces = self.draw(keys)
         t_end = self.horizon()
         k = commanded.shape[0]
         if self.compliance == 0.0:
-            half, final = (np.array(simulate_batch(actual, forces, self.mass, t, v0=0.0,
-                                                   damping=self.damping).final_speeds)
-                           for t in (0.5 * t_end, t_end))
+            batch = simulate_batch(actual, forces, self.mass, t_end, v0=0.0, damping=self.damping,
+                                   t_probe=0.5 * t_end)
+            half, final = batch.probe_speeds, batch.final_speeds
         else:
             half, final = np.empty(k), np.empty(k)
             motors = Motors(compliance=self.compliance)
             for j in range(k):
                 plant = Plant(ContactSet(actual[j], forces[j]), self.mass, damping=self.damping,
                               motors=motors)
-                result = simulate_or_raise(plant, t_end, f"MedianLaw run {seeds[j].spawn_key}", v0=0.0,
+                result = simulate_or_raise(plant, t_end, f"MedianLaw {keys.label(j)}", v0=0.0,
                                            t_eval=[0.5 * t_end, t_end])
                 half[j], final[j] = result.V
         settled = np.abs(final - half) <= SETTLED_TOLERANCE
@@ -231,7 +232,7 @@ class MedianLaw:
         return {"median": median, "speed": reported, "true_speed": final, "ratio": ratio,
                 "settled": settled}
 
-    def release_rise(self, seeds: list[np.random.SeedSequence]) -> np.ndarray:
+    def release_rise(self, keys: RunKeys) -> np.ndarray:
         """Each motor's relative speed rise when the body, held at ``V = 0``, is released
         and settles (the paper's motor characterisation: every motor rose 4.6 +- 2.0 %).
 
@@ -251,13 +252,13 @@ class MedianLaw:
         """
         from ..model.friction import contact_forces
 
-        _, actual, forces = self.draw(seeds)
+        _, actual, forces = self.draw(keys)
         k = self.compliance
         rise = np.empty_like(actual)
         motors = Motors(compliance=k) if k > 0 else None
-        for j, seq in enumerate(seeds):
+        for j in range(len(keys)):
             plant = Plant(ContactSet(actual[j], forces[j]), self.mass, damping=self.damping, motors=motors)
-            end = float(simulate_or_raise(plant, self.horizon(), f"MedianLaw run {seq.spawn_key}", v0=0.0).V[-1])
+            end = float(simulate_or_raise(plant, self.horizon(), f"MedianLaw {keys.label(j)}", v0=0.0).V[-1])
             held = actual[j] - k * contact_forces(actual[j], forces[j], compliance=k)
             released = actual[j] - k * contact_forces(actual[j] - end, forces[j], compliance=k)
             with np.errstate(divide="ignore", invalid="ignore"):

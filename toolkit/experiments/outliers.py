@@ -36,8 +36,9 @@ from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import ContactSet, Motors, PiecewiseConstant, Plant
 from ..model.carousel import CAROUSEL
-from ._common import (MAX_CONTACTS, MAX_SAMPLES, SETTLED_TOLERANCE, as_count, check_common, check_compliance,
-                      setter, simulate_or_raise, wheels_for_runs)
+from ..sweeps import RunKeys
+from ._common import (MAX_CONTACTS, MAX_SAMPLES, SETTLED_TOLERANCE, STREAM_RUN, as_count, check_common,
+                      check_compliance, setter, simulate_or_raise, wheels_for_runs)
 
 __all__ = ["Outliers"]
 
@@ -123,9 +124,10 @@ class Outliers:
         check_compliance(self, _OWNER, self.acceleration / self.n)
         set_("amplitude", as_float(self.amplitude, "amplitude", _OWNER, low=0.0, high=self.speed_limit))
 
-    def plant(self, seed: np.random.SeedSequence) -> tuple[Plant, np.ndarray, float]:
-        """The run's plant (commands sampled at ``rate``), the outlier indices and ``A``."""
-        rng = np.random.default_rng(seed)
+    def plant(self, keys: RunKeys, j: int = 0) -> tuple[Plant, np.ndarray, float]:
+        """Run ``j`` of ``keys``: its plant (commands sampled at ``rate``), the outlier
+        indices and ``A``, drawn from its own stream."""
+        rng = keys.generator(j, STREAM_RUN)
         v_max = self.speed_limit
         speeds = rng.uniform(-v_max, v_max, self.n)
         amplitude = rng.uniform(0.0, self.amplitude) if self.random_amplitude else self.amplitude
@@ -143,27 +145,27 @@ class Outliers:
                                            + phase)
         rows[1:, fastest] = np.clip(wave, -v_max, v_max)
         # the carousel of ``wheel_seed`` (the same wheels in every experiment) or the run's own
-        forces = wheels_for_runs([seed], self.wheel_seed, self.n, self.acceleration / self.n,
+        forces = wheels_for_runs(keys.run(j), self.wheel_seed, self.n, self.acceleration / self.n,
                                  self.friction_spread)[1][0]
         motors = Motors(lag=self.lag, speed_limits=(-v_max, v_max), compliance=self.compliance)
         plant = Plant(ContactSet(speeds, forces), 1.0, motors=motors,
                       commands=PiecewiseConstant(times, rows))
         return plant, fastest, amplitude
 
-    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
+    def run(self, keys: RunKeys) -> dict[str, np.ndarray]:
         """Columns ``amplitude`` (m/s), ``rest_speed`` (``V*`` before the outliers start,
         m/s), ``deviation`` (largest ``|V - V*|`` over the window, m/s), ``lowest_outlier``
         (lowest outlier contact speed minus ``V*``, m/s), ``held`` (the stiction rule
         held at ``V*`` throughout, bool) and ``settled`` (the speed was steady, within
         :data:`SETTLED_TOLERANCE`, over the last half second before the outliers started:
         unequal loads can leave the body creeping, which is not the outliers' doing)."""
-        k = len(seeds)
+        k = len(keys)
         amplitude, rest, deviation, lowest = (np.empty(k) for _ in range(4))
         held, settled = np.empty(k, dtype=bool), np.empty(k, dtype=bool)
         t_end = self.settle_time + self.window
-        for j, seq in enumerate(seeds):
-            plant, fastest, amplitude[j] = self.plant(seq)
-            result = simulate_or_raise(plant, t_end, f"Outliers run {seq.spawn_key}", v0=0.0)
+        for j in range(k):
+            plant, fastest, amplitude[j] = self.plant(keys, j)
+            result = simulate_or_raise(plant, t_end, f"Outliers {keys.label(j)}", v0=0.0)
             inside = result.t >= self.settle_time
             rest[j] = result.speed_at(self.settle_time)
             earlier = result.speed_at(max(self.settle_time - 0.5, 0.0))

@@ -45,6 +45,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..model import ContactSet, Plant
+from ..sweeps import RunKeys
 from ._common import MAX_SAMPLES, as_count, check_common, setter, simulate_or_raise, wheels_for_runs
 
 __all__ = ["ResidualFriction"]
@@ -104,11 +105,11 @@ class ResidualFriction:
         """``F_tot = 10 f``, N."""
         return self.acceleration * self.mass
 
-    def contacts(self, seed: np.random.SeedSequence, n: int | None = None) -> ContactSet:
-        """The run's wheels with ``5 - n`` forwards (default: this split), and the bearing as a
-        contact at speed 0 when it has friction."""
+    def contacts(self, keys: RunKeys, n: int | None = None) -> ContactSet:
+        """The wheels of the first run of ``keys`` with ``5 - n`` forwards (default: this
+        split), and the bearing as a contact at speed 0 when it has friction."""
         n = self.n if n is None else n
-        forces = wheels_for_runs([seed], self.wheel_seed, 10, self.nominal_force / 10.0,
+        forces = wheels_for_runs(keys.run(0), self.wheel_seed, 10, self.nominal_force / 10.0,
                                  self.friction_spread)[1][0]
         v = self.speed_limit
         speeds = np.array([v] * (5 - n) + [-v] * (5 + n))
@@ -125,20 +126,21 @@ class ResidualFriction:
         probe = self.probe_speeds()
         return float(np.abs(contacts.force(probe) - self.bearing_drag * probe).mean())
 
-    def run(self, seeds: list[np.random.SeedSequence]) -> dict[str, np.ndarray]:
+    def run(self, keys: RunKeys) -> dict[str, np.ndarray]:
         """Columns ``mu_ratio`` (quasi-static, over the same rig's ``mu0``), ``mu0`` (the
         rig's reading with every wheel reversed, N), ``band_force`` (net wheel force inside
         the band, N), ``dT`` and ``dT_ideal`` (s; ``inf`` where the body never reaches
         ``-v_max``)."""
-        k = len(seeds)
+        k = len(keys)
         mu, mu0, band, dT = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
         v = self.speed_limit
         ideal = (self.mass * 2.0 * v / (self.nominal_force * self.n / 5.0)) if self.n else math.inf
-        for j, seq in enumerate(seeds):
-            contacts = self.contacts(seq)
+        for j in range(k):
+            run = keys.run(j)
+            contacts = self.contacts(run)
             wheels = ContactSet(contacts.speeds[:10], contacts.forces[:10])
             band[j] = float(wheels.force(0.0))
-            mu0[j] = self.rig_reading(self.contacts(seq, 5))
+            mu0[j] = self.rig_reading(self.contacts(run, 5))
             mu[j] = self.rig_reading(contacts) / mu0[j]
             dT[j] = self._transition(contacts)
         return {"mu_ratio": mu, "mu0": mu0, "band_force": band, "dT": dT, "dT_ideal": np.full(k, ideal)}

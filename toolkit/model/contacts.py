@@ -450,13 +450,14 @@ class ContactDistribution:
         return point, point
 
 
-def unequal_loads(mean: Any, spread: float, size: int, rng: np.random.Generator) -> np.ndarray:
+def unequal_loads(mean: Any, spread: float, size: int, rng: np.random.Generator | None = None, *,
+                  normals: Any = None) -> np.ndarray:
     """Friction magnitudes of contacts that differ at random (unequal wheels), N.
 
     Each ``f_i`` is lognormal with mean ``mean`` and relative standard deviation ``spread``:
     ``f_i = mean exp(sigma z_i - sigma^2 / 2)``, ``sigma^2 = ln(1 + spread^2)``, ``z_i``
-    standard normal from ``rng`` (always positive, unlike a clipped normal). ``spread = 0``
-    gives ``mean`` exactly and draws nothing.
+    standard normal from ``rng``, or the ``normals`` given (always positive, unlike a clipped
+    normal). ``spread = 0`` gives ``mean`` exactly and draws nothing.
 
     Parameters
     ----------
@@ -465,15 +466,19 @@ def unequal_loads(mean: Any, spread: float, size: int, rng: np.random.Generator)
     spread : float
         Relative standard deviation, ``>= 0``.
     size : int
-    rng : numpy.random.Generator
+    rng : numpy.random.Generator, optional
+        Draws the ``z_i`` (when ``normals`` is not given).
+    normals : array_like of shape (..., size), optional
+        The ``z_i`` already drawn, e.g. many carousels at once (one row each).
 
     Returns
     -------
-    ndarray of shape (size,), N
+    ndarray of shape (size,) (or that of ``normals``), N
     """
     spread = as_float(spread, "spread", "unequal_loads", low=0.0)
     mean = np.broadcast_to(np.asarray(mean, dtype=float), (size,))
     if spread == 0.0:
         return mean.copy()
     sigma = float(np.sqrt(np.log1p(spread * spread)))
-    return mean * np.exp(sigma * rng.standard_normal(size) - 0.5 * sigma * sigma)
+    z = rng.standard_normal(size) if normals is None else np.asarray(normals, dtype=float)
+    return mean * np.exp(sigma * z - 0.5 * sigma * sigma)

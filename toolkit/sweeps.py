@@ -31,13 +31,21 @@ The chunks are the same in all three, so the tables are identical bit for bit.
 Sampling uncertainty: :func:`bootstrap` resamples a sweep's runs with replacement and
 recomputes a summary statistic (or any function of the table) on each resample: the spread
 a finite number of runs leaves on every number a sweep gives.
+
+Interrupts. Ctrl-C (``KeyboardInterrupt``) or SIGTERM during a sweep stops it: a process
+pool's workers are terminated and waited for, a Dask cluster's chunks cancelled, and the
+exception propagates (``active-contacts`` then exits 130 with nothing written).
 """
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
+import signal
+import threading
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from collections.abc import Callable
@@ -344,6 +352,78 @@ def _client(scheduler: Any) -> Any:
             scheduler)) from None
 
 
+@contextlib.contextmanager
+def _terminate_interrupts() -> Iterator[None]:
+    """While a sweep runs (in the main thread), SIGTERM interrupts it as Ctrl-C does
+    (``KeyboardInterrupt``), so that either stops the workers and leaves nothing behind; the
+    previous handler is back afterwards."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    before = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
+def _ignore_interrupts() -> None:
+    """A pool worker's initializer: Ctrl-C in a terminal reaches every process of its group;
+    the parent stops the workers itself (:func:`_run_pool`), so they ignore it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers: int,
+              done: Any) -> None:
+    """The chunks on a pool of ``workers`` fresh interpreters ("spawn": a forked child of a
+    process whose compiled kernels started OpenMP threads would be killed). Any exception
+    here, an interrupt included, terminates the workers at once and waits for them (no
+    process left behind) before it propagates."""
+    context = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                               initializer=_ignore_interrupts)
+    try:
+        futures = {pool.submit(_run_chunk, experiment, seed, a, b): j
+                   for j, (a, b) in enumerate(bounds)}
+        for future in as_completed(futures):
+            done(futures[future], future.result())
+    except BaseException:
+        stop = getattr(pool, "terminate_workers", None)          # Python >= 3.14
+        if stop is not None:
+            stop()
+        else:
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _run_dask(experiment: Any, seed: int, bounds: list[tuple[int, int]], scheduler: Any,
+              done: Any) -> None:
+    """The chunks on a Dask cluster; an exception here, an interrupt included, cancels the
+    chunks still queued or running there (the cluster's workers are not ours to stop)."""
+    client, own = _client(scheduler)
+    futures: dict[Any, int] = {}
+    try:
+        from distributed import as_completed as dask_completed
+        futures = {client.submit(_run_chunk, experiment, seed, a, b, pure=False): j
+                   for j, (a, b) in enumerate(bounds)}
+        for future in dask_completed(list(futures)):
+            done(futures[future], future.result())
+    except BaseException:
+        if futures:
+            client.cancel(list(futures), force=True)
+        raise
+    finally:
+        if own:
+            client.close()
+
+
 def _progress(total: int, enabled: bool, name: str) -> Any:
     if not enabled:
         return None
@@ -411,39 +491,22 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     started = time.perf_counter()
     bar = _progress(runs, progress, experiment.name)
     parts: list[dict[str, np.ndarray] | None] = [None] * len(bounds)
+
+    def done(j: int, part: dict[str, np.ndarray]) -> None:
+        parts[j] = part
+        if bar is not None:
+            bar.update(bounds[j][1] - bounds[j][0])
+
     try:
-        if kind == "local":
-            for j, (a, b) in enumerate(bounds):
-                parts[j] = _run_chunk(experiment, seed, a, b)
-                if bar is not None:
-                    bar.update(b - a)
-        elif kind == "processes":
-            workers = (os.cpu_count() or 1) if workers is None else workers
-            # "spawn": a forked child of a process whose compiled kernels started OpenMP
-            # threads (numba's parallel batch) would be killed; fresh interpreters are safe.
-            context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=min(workers, len(bounds)), mp_context=context) as pool:
-                futures = {pool.submit(_run_chunk, experiment, seed, a, b): j
-                           for j, (a, b) in enumerate(bounds)}
-                for future in as_completed(futures):
-                    j = futures[future]
-                    parts[j] = future.result()
-                    if bar is not None:
-                        bar.update(bounds[j][1] - bounds[j][0])
-        else:
-            client, own = _client(scheduler)
-            try:
-                from distributed import as_completed as dask_completed
-                futures = {client.submit(_run_chunk, experiment, seed, a, b, pure=False): j
-                           for j, (a, b) in enumerate(bounds)}
-                for future in dask_completed(list(futures)):
-                    j = futures[future]
-                    parts[j] = future.result()
-                    if bar is not None:
-                        bar.update(bounds[j][1] - bounds[j][0])
-            finally:
-                if own:
-                    client.close()
+        with _terminate_interrupts():
+            if kind == "local":
+                for j, (a, b) in enumerate(bounds):
+                    done(j, _run_chunk(experiment, seed, a, b))
+            elif kind == "processes":
+                workers = (os.cpu_count() or 1) if workers is None else workers
+                _run_pool(experiment, seed, bounds, min(workers, len(bounds)), done)
+            else:
+                _run_dask(experiment, seed, bounds, scheduler, done)
     finally:
         if bar is not None:
             bar.close()

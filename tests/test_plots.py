@@ -185,11 +185,26 @@ def precision_curves():
     settings = [MethodSetting("exact"),
                 MethodSetting("rk45", {"friction": "sign", "rtol": 1e-6, "atol": 1e-9},
                               tk.Budget(max_steps=200)),          # stopped by its budget
-                MethodSetting("moreau", {"step": 1e-3}), MethodSetting("moreau", {"step": 1e-4})]
+                MethodSetting("moreau", {"step": 1e-3}), MethodSetting("moreau", {"step": 1e-4}),
+                *(MethodSetting("lsoda", {"friction": "tanh", "epsilon": eps, "rtol": rtol,
+                                          "atol": 1e-3 * rtol})
+                  for eps in (1e-3, 1e-5) for rtol in (1e-4, 1e-8))]
     return work_precision_curves(tk.precision_report(plant, 1.0, repeats=1, settings=settings))
 
 
-def test_precision_plot_marks_the_error_level_hollow_markers_and_settings(precision_curves):
+def test_work_precision_curves_are_families_through_their_tolerances(precision_curves):
+    # A family (method, integrator, friction law) and smoothing width per curve; its points
+    # are its tolerance settings (every row of the report with a finite error, once).
+    keys = [(curve.family, curve.smoothing) for curve in precision_curves]
+    assert keys == [("exact", None), ("rk45 sign", None), ("moreau", None), ("lsoda tanh", 1e-3),
+                    ("lsoda tanh", 1e-5)]
+    sizes = {key: curve.wall_time.size for key, curve in zip(keys, precision_curves)}
+    assert sizes == {("exact", None): 1, ("rk45 sign", None): 1, ("moreau", None): 2,
+                     ("lsoda tanh", 1e-3): 2, ("lsoda tanh", 1e-5): 2}
+    assert all(np.all(np.diff(curve.wall_time) >= 0) for curve in precision_curves)
+
+
+def test_precision_plot_draws_a_named_line_per_family(precision_curves):
     ax = plots.plot_precision(precision_curves, title=SCENE)
     (level,) = by_gid(ax, "error level")
     np.testing.assert_array_equal(level.get_ydata(), [1e-6, 1e-6])
@@ -197,19 +212,24 @@ def test_precision_plot_marks_the_error_level_hollow_markers_and_settings(precis
     assert any(label.startswith("hollow: stopped by a budget or failed") for label in labels)
     assert "1e-6 m/s error level" in labels
     assert any(text.get_text() == "1e-6 m/s " for text in ax.texts)
-    # Setting labels: the successful runs on each method's Pareto front, method first.
-    annotated = [text.get_text() for text in by_gid(ax, "setting label")]
-    moreau = next(curve for curve in precision_curves if curve.method == "moreau")
-    # Both Moreau steps are on its front (the finer one is slower and more accurate).
-    assert {f"moreau {setting}" for setting in moreau.settings} <= set(annotated)
-    assert all(not label.startswith("rk45") for label in annotated)   # the stopped run
+    # The legend names each family once and each smoothing width once; no text on a point.
+    assert [label for label in labels if not label.startswith(("hollow", "1e-6", "epsilon"))] == [
+        "exact", "rk45 sign", "moreau", "lsoda tanh"]
+    assert [label for label in labels if label.startswith("epsilon")] == [
+        "epsilon = 0.001 m/s", "epsilon = 1e-05 m/s"]
+    assert by_gid(ax, "setting label") == [] and len(ax.texts) == 1
+    # One line per curve through its points (loose tolerance to tight, in run time), the
+    # colour of its family: the two lsoda widths share one.
+    lines = by_gid(ax, "family line")
+    assert len(lines) == len(precision_curves)
+    for line, curve in zip(lines, precision_curves):
+        np.testing.assert_array_equal(line.get_xdata(), curve.wall_time)
+        np.testing.assert_array_equal(line.get_ydata(), np.maximum(curve.max_error, 1e-17))
+    assert lines[3].get_color() == lines[4].get_color() != lines[2].get_color()
+    # The legend stands beside the axes (it covers no point).
+    assert ax.get_legend().get_bbox_to_anchor().x0 > ax.get_window_extent().x1 - 1
     assert ax.get_title().startswith(SCENE)
     assert ax.get_xscale() == ax.get_yscale() == "log"
-
-
-def test_pareto_front_keeps_points_nothing_beats():
-    points = [(1.0, 1e-3, "a"), (2.0, 1e-4, "b"), (3.0, 1e-3, "c"), (0.5, 1e-2, "d")]
-    assert [p[2] for p in plots._pareto(points)] == ["d", "a", "b"]
 
 
 # -- force curve ------------------------------------------------------------------------------

@@ -372,25 +372,26 @@ def plot_schedule(schedule: Any, check: Any = None, axes: Any = None, *, plant: 
 
 
 # -- work-precision ---------------------------------------------------------------------------
-def _pareto(points: list[tuple[float, float, str]]) -> list[tuple[float, float, str]]:
-    """Points ``(time, error, label)`` no other point of the list beats in both time and error."""
-    front, best = [], math.inf
-    for time_, error, label in sorted(points, key=lambda p: (p[0], p[1])):
-        if error < best:
-            front.append((time_, error, label))
-            best = error
-    return front
+#: Markers of the smoothing widths (one per distinct epsilon, finest last); unsmoothed: a disc.
+_SMOOTHING_MARKERS = ("v", "s", "^", "D", "P", "X", "*")
 
 
 def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None = None,
                    title: str | None = None):
-    """Log-log error against wall time, one series per method.
+    """Work-precision diagram: log-log error against wall time, one line per method family.
+
+    As in DiffEqDevTools' work-precision diagrams, each family (a method with its integrator
+    and friction law) is a line through its tolerance settings, named in the legend; a family
+    smoothed at several widths ``epsilon`` has one line per width, in the family's colour and
+    line style (solid for the first ten families, then dashed, then dotted), the width told by
+    the marker (a second legend block). Unsmoothed families (``sign``, exact, Moreau) use
+    discs.
 
     Parameters
     ----------
     curves : sequence of WorkPrecisionCurve
-        From :func:`toolkit.analysis.precision.work_precision_curves`. Runs a budget stopped (or
-        that failed) are drawn with hollow markers, explained in the legend (their error
+        From :func:`toolkit.analysis.precision.work_precision_curves`. Runs a budget stopped
+        (or that failed) are drawn with hollow markers, explained in the legend (their error
         covers only the part they simulated).
     ax : matplotlib Axes, optional
     reference_time : float, optional, s
@@ -402,28 +403,40 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
     Notes
     -----
     A horizontal line marks :data:`ERROR_LEVEL` (1e-6 m/s), the level of the exact
-    method's speed-up; the successful runs on the Pareto front (no other run both faster
-    and more accurate than it within its method) are labelled with method and setting.
+    method's speed-up. The legend sits beside the axes, so no label covers a point.
 
     Returns
     -------
     matplotlib Axes
     """
-    ax = _axes(ax, (7.0, 5.0))
+    ax = _axes(ax, (9.5, 5.5))
     floor = 1e-17   # an exact zero error drawn at the bottom of the log axis
-    fronts, hollow = [], False
-    for index, curve in enumerate(curves):
-        color = f"C{index % 10}"
+    families = list(dict.fromkeys(curve.family or curve.method for curve in curves))
+    colors = {family: f"C{index % 10}" for index, family in enumerate(families)}
+    styles = {family: ("-", "--", ":")[min(index // 10, 2)] for index, family in enumerate(families)}
+    widths = sorted({curve.smoothing for curve in curves if curve.smoothing is not None},
+                    reverse=True)
+    markers = {width: _SMOOTHING_MARKERS[index % len(_SMOOTHING_MARKERS)]
+               for index, width in enumerate(widths)}
+    hollow = False
+    for curve in curves:
+        family = curve.family or curve.method
+        color, marker = colors[family], markers.get(curve.smoothing, "o")
         error = np.maximum(curve.max_error, floor)
-        ax.loglog([], [], "o", color=color, label=curve.method)   # settings differ in kind: no lines
         done = np.asarray(curve.success, dtype=bool)
-        ax.loglog(curve.wall_time[done], error[done], "o", color=color, zorder=3)
-        ax.loglog(curve.wall_time[~done], error[~done], "o", mfc="none", color=color, zorder=3)
+        ax.loglog(curve.wall_time, error, styles[family], color=color, lw=1.2, zorder=2,
+                  gid="family line")
+        ax.loglog(curve.wall_time[done], error[done], marker, color=color, ms=5, ls="none", zorder=3)
+        ax.loglog(curve.wall_time[~done], error[~done], marker, mfc="none", color=color, ms=5,
+                  ls="none", zorder=3)
         hollow |= bool(np.any(~done))
-        fronts += _pareto([(float(w), float(e), f"{curve.method} {s}".strip())
-                           for w, e, s, ok in zip(curve.wall_time, error, curve.settings, done) if ok])
+    for family in families:                          # the legend: families, then widths
+        ax.loglog([], [], styles[family], color=colors[family], lw=1.6, label=family, gid="family")
+    for width in widths:
+        ax.loglog([], [], markers[width], color="0.4", ls="none", label=f"epsilon = {width:g} m/s",
+                  gid="smoothing")
     if hollow:
-        ax.loglog([], [], "o", mfc="none", color="0.4", gid="hollow",
+        ax.loglog([], [], "o", mfc="none", color="0.4", ls="none", gid="hollow",
                   label="hollow: stopped by a budget or failed\n(error over the part simulated)")
     _level = f"{ERROR_LEVEL:.0e}".replace("e-0", "e-")
     ax.axhline(ERROR_LEVEL, color="0.3", lw=0.8, ls="-.", zorder=1, gid="error level",
@@ -432,16 +445,10 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
             ha="right", va="bottom", fontsize="x-small", color="0.3")
     if reference_time is not None:
         ax.axvline(reference_time, color="k", ls="--", lw=1, label="exact (the reference)")
-    left, right = np.log10(ax.get_xlim())
-    for rank, (w, e, text) in enumerate(sorted(fronts)):
-        flip = math.log10(w) > (left + right) / 2        # right half: label to the left
-        ax.annotate(text, (w, e), xytext=(-5 if flip else 5, 5 if rank % 2 == 0 else -9),
-                    textcoords="offset points", ha="right" if flip else "left", fontsize=6,
-                    color="0.2", gid="setting label")
     ax.set_xlabel("wall time per run (s)")
     ax.set_ylabel("max |V - V_exact| over the run (m/s)")
     _title(ax, title, "work-precision (error vs. run time)")
-    ax.legend(fontsize="x-small", loc="best")
+    ax.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     return ax
 
 

@@ -282,6 +282,9 @@ class PrecisionRow:
     min_step : float or None, s
         The smallest step of an adaptive solver (from the same untimed run as
         ``step_collapse``).
+    options : tuple of (str, value) pairs
+        The setting's options (:attr:`MethodSetting.options`), for grouping the rows into
+        families (:func:`work_precision_curves`).
     """
 
     method: str
@@ -300,6 +303,7 @@ class PrecisionRow:
     stalled: bool
     reversals: int
     min_step: float | None
+    options: tuple[tuple[str, Any], ...] = ()
 
     @property
     def label(self) -> str:
@@ -347,7 +351,12 @@ class Speedup:
 
 @dataclass(frozen=True)
 class WorkPrecisionCurve:
-    """The points of one method in the log-log plot of error against run time.
+    """One line of the work-precision plot: a method family through its tolerance settings.
+
+    A family is a method with what stays fixed along its line (the integrator, the friction
+    law and its smoothing width ``epsilon``); its points are its tolerance settings
+    (``rtol``/``atol``, or the step of a time-stepping method), as in DiffEqDevTools'
+    work-precision diagrams.
 
     Attributes
     ----------
@@ -357,6 +366,10 @@ class WorkPrecisionCurve:
     max_error : ndarray of shape (k,), m/s
     success : ndarray of shape (k,), bool
         False for runs a budget stopped (their error covers only the part they simulated).
+    family : str
+        The method and its fixed options, e.g. ``"casadi cvodes tanh"`` (the line's name).
+    smoothing : float or None
+        The smoothing width ``epsilon`` (m/s) of a smoothed law, None for the others.
     """
 
     method: str
@@ -364,6 +377,8 @@ class WorkPrecisionCurve:
     wall_time: np.ndarray
     max_error: np.ndarray
     success: np.ndarray
+    family: str = ""
+    smoothing: float | None = None
 
 
 @dataclass(frozen=True)
@@ -552,7 +567,7 @@ def _row(setting: MethodSetting, result: SimulationResult, wall: float, plant: P
         n_evaluations=result.n_evaluations, n_events=result.n_events, status=result.status,
         message=result.message, chattering=bool(chattering), step_collapse=collapse,
         creep=_creep(result.V, reference, plant, v0), stalled=stalled, reversals=reversals,
-        min_step=min_step)
+        min_step=min_step, options=setting.options)
 
 
 def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: int = 3,
@@ -697,22 +712,38 @@ def precision_shortfalls(report: PrecisionReport, error: float = ERROR_LEVEL) ->
     return shortfalls
 
 
-def work_precision_curves(report: PrecisionReport) -> tuple[WorkPrecisionCurve, ...]:
-    """The data of the log-log plot of ``max_error`` against ``wall_time``, one curve per method.
+#: Options that move a point along its family's line (tolerances, step sizes).
+TOLERANCE_OPTIONS = ("rtol", "atol", "step")
 
-    Points are sorted by run time; rows with a non-finite error are left out.
+
+def _family(row: PrecisionRow) -> tuple[str, float | None]:
+    """The family of a row: its method and fixed options (integrator, friction law) as a
+    label, and its smoothing width (``epsilon``, None without)."""
+    options = dict(row.options)
+    fixed = [str(options[name]) for name in ("integrator", "friction") if name in options]
+    smoothing = options.get("epsilon")
+    return " ".join([row.method, *fixed]), None if smoothing is None else float(smoothing)
+
+
+def work_precision_curves(report: PrecisionReport) -> tuple[WorkPrecisionCurve, ...]:
+    """The data of the work-precision plot: one curve per method family and smoothing width
+    (:class:`WorkPrecisionCurve`), through its tolerance settings.
+
+    Families come in the order of their first row; points are sorted by run time; rows with
+    a non-finite error are left out.
     """
+    groups: dict[tuple[str, float | None], list[PrecisionRow]] = {}
+    for row in report.rows:
+        if math.isfinite(row.max_error):
+            groups.setdefault(_family(row), []).append(row)
     curves = []
-    for method in dict.fromkeys(row.method for row in report.rows):
-        rows = sorted((row for row in report.rows
-                       if row.method == method and math.isfinite(row.max_error)),
-                      key=lambda row: row.wall_time)
-        if not rows:
-            continue
+    for (family, smoothing), rows in groups.items():
+        rows = sorted(rows, key=lambda row: row.wall_time)
         arrays = [np.array([row.wall_time for row in rows]),
                   np.array([row.max_error for row in rows]),
                   np.array([row.status is SimulationStatus.SUCCESS for row in rows])]
         for array in arrays:
             array.setflags(write=False)
-        curves.append(WorkPrecisionCurve(method, tuple(row.setting for row in rows), *arrays))
+        curves.append(WorkPrecisionCurve(rows[0].method, tuple(row.setting for row in rows),
+                                         *arrays, family=family, smoothing=smoothing))
     return tuple(curves)

@@ -485,6 +485,8 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     if not isinstance(progress, (bool, np.bool_)):
         raise ParameterTypeError(parameter_message("progress", _OWNER, "be True or False", progress))
     bounds = [(a, min(a + chunk_size, runs)) for a in range(0, runs, chunk_size)]
+    import pandas as pd   # the table type (imported with the first sweep, before the clock)
+
     compile_time = 0.0
     if kind == "local":          # the timing policy: compiled, and run 0 once, before the clock
         compile_time = warm(lambda: _run_chunk(experiment, seed, 0, 1), "core")
@@ -510,8 +512,6 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     finally:
         if bar is not None:
             bar.close()
-    import pandas as pd   # noqa: F811 (the table type; imported with the first sweep)
-
     columns = {"run": np.arange(runs)}
     for name in parts[0]:
         columns[name] = np.concatenate([part[name] for part in parts])

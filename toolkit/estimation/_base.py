@@ -185,10 +185,11 @@ class Estimator(abc.ABC):
         return out
 
     def warm_up(self, record: EncoderRecord) -> None:
-        """Run once, untimed, over the first 50 samples of ``record``, so that a timed
-        :meth:`run` that follows pays no one-time cost (kernels compiled or loaded: the
-        policy of :mod:`toolkit._compiled`); whoever times an estimator calls it first."""
-        self.run(record.head(50))
+        """Run once, untimed, over ``record``, so that a timed :meth:`run` that follows pays
+        no one-time cost (each kernel compiled or loaded at its first call, wherever in the
+        record that comes: the policy of :mod:`toolkit._compiled`); whoever times an
+        estimator calls it first."""
+        self.run(record)
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:

@@ -25,7 +25,7 @@ simulation into a record, with positions integrated exactly from its dense outpu
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -544,15 +544,6 @@ class EncoderRecord:
     def has_truth(self) -> bool:
         """True when the true body speed is recorded."""
         return self.truth_speed is not None
-
-    def head(self, k: int) -> EncoderRecord:
-        """The record of the first ``k`` samples (``k >= 1``; every sample when ``k`` exceeds
-        them)."""
-        k = min(as_int(k, "k", "EncoderRecord.head", low=1), self.n_samples)
-        cut = {name: (value[:k] if isinstance(value, np.ndarray) and name != "initial_commands"
-                      else value)
-               for name, value in ((f.name, getattr(self, f.name)) for f in fields(self))}
-        return EncoderRecord(**cut)
 
     def sample(self, k: int) -> EncoderSample:
         """Sample ``k`` as an :class:`EncoderSample` (what a closed loop sees)."""

@@ -33,7 +33,7 @@ from .errors import SceneError, ToolkitError
 from .scenes._io import claim_output_dir
 from .scenes.build import SceneObjects, build_scene, planar_scene_error, sweep_scene_error
 from .scenes.limits import FLAGS, LIMITS
-from .scenes.report import (schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
+from .scenes.report import (compile_line, schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
                             study_to_dict, sweep_lines, sweep_to_dict, to_json, write_planar,
                             write_precision, write_schedule, write_study, write_sweep)
 from .scenes.spec import Scene, load_scene
@@ -201,6 +201,7 @@ def _cmd_precision(args: argparse.Namespace) -> int:
         for row in report.rows:
             print(f"{row.method:8} {row.setting:46} {row.max_error:10.2e} {row.final_error:11.2e} "
                   f"{row.wall_time:10.2e} {row.n_evaluations:8d}  {row.status.name}{_flags(row)}")
+        print(compile_line(report.compile_time))
         if any(row.method == "exact" for row in report.rows):
             speedup = exact_speedup(report)
             print(f"exact {speedup.exact.wall_time:.2e} s; fastest reference with max_error <= "

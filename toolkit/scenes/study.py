@@ -53,6 +53,7 @@ from typing import Any
 
 import numpy as np
 
+from .._compiled import warm
 from ..allocation import (AllocationResult, AllocationStatus, EquilibriumSpeed, FrictionFraction,
                          allocate, build_problem)
 from ..errors import ParameterError, SceneError
@@ -175,6 +176,9 @@ class StudyResult:
     estimation: EstimationStudy | None = None
     control: ControlStudy | None = None
     plant: Plant | None = None
+    #: The one-time cost paid before the timed stages (s): kernels compiled, each timed call
+    #: run once first (:func:`toolkit._compiled.warm`); in no ``wall_time`` of the result.
+    compile_time: float = 0.0
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -254,10 +258,11 @@ def design_scene_schedule(scene: Scene | SceneObjects, contacts: ContactSet | No
     return result, check
 
 
-def _simulation(objects: SceneObjects, contacts: ContactSet) -> SimulationResult:
+def _simulation(objects: SceneObjects, contacts: ContactSet, fraction: float = 1.0) -> SimulationResult:
+    """The scene's ``[simulation]`` (over ``fraction`` of its horizon: the warm-up run)."""
     spec = objects.scene.simulation
-    return simulate(objects.plant_on(contacts), spec.t_end, v0=spec.v0, method=spec.method,
-                    **objects.simulation_options)
+    return simulate(objects.plant_on(contacts), fraction * spec.t_end, v0=spec.v0,
+                    method=spec.method, **objects.simulation_options)
 
 
 # -- shortfalls ----------------------------------------------------------------------------------
@@ -415,12 +420,17 @@ class EstimationStudy:
         The exact run that was recorded.
     plant : Plant
         The plant simulated.
+    compile_time : float, s
+        The one-time cost paid before the estimators were timed (the kernels compiled and
+        each estimator run once over the record, untimed: the policy of
+        :mod:`toolkit._compiled`); in no estimator's ``wall_time``.
     """
 
     record: Any
     results: tuple[Any, ...]
     simulation: SimulationResult
     plant: Any
+    compile_time: float = 0.0
 
     @property
     def duration(self) -> float:
@@ -464,9 +474,12 @@ def estimate_scene(scene: Scene | SceneObjects, simulation: SimulationResult | N
     else:
         run = simulation if simulation is not None else _simulation(built, built.contacts)
     record = record_simulation(run, plant, objects.sensors, rng=np.random.default_rng(spec.seed))
-    results = tuple(estimator.run(record, speed=objects.v0, speed_std=spec.speed_std)
-                    for estimator in objects.estimators.values())
-    return EstimationStudy(record, results, run, plant)
+    compile_time = warm(None, "core", "lines")     # every wall time below: compiled code
+    results = []
+    for estimator in objects.estimators.values():
+        compile_time += warm(lambda: estimator.warm_up(record))
+        results.append(estimator.run(record, speed=objects.v0, speed_std=spec.speed_std))
+    return EstimationStudy(record, tuple(results), run, plant, compile_time)
 
 
 def estimation_shortfalls(scene: Scene | SceneObjects, study: EstimationStudy) -> list[Shortfall]:
@@ -495,12 +508,17 @@ class ControlStudy:
     cross_check : float or None, m/s
         Largest difference of speed and estimate between python-control's simulation of the
         loop and the toolkit's (None when not asked for, or the loop stopped early).
+    compile_time : float, s
+        The one-time cost paid before the loop was timed (the kernels compiled and the loop
+        run once, untimed: the policy of :mod:`toolkit._compiled`); not in the loop's
+        ``wall_time``.
     """
 
     loop: Any
     controller: str
     estimator: str | None
     cross_check: float | None = None
+    compile_time: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able: settings, status, final speed, estimation error, wall time, the series."""
@@ -509,7 +527,7 @@ class ControlStudy:
         return {"controller": self.controller, "estimator": self.estimator,
                 "status": loop.status, "message": loop.message, "samples": int(loop.times.size),
                 "final_speed": float(loop.speed[-1]), "wall_time": loop.wall_time,
-                "estimate_rms_error": float(np.sqrt(np.mean(error ** 2))),
+                "compile_time": self.compile_time, "estimate_rms_error": float(np.sqrt(np.mean(error ** 2))),
                 "estimate_max_error": float(np.max(np.abs(error))),
                 "cross_check_max_difference": self.cross_check,
                 "times": loop.times, "speed": loop.speed, "estimate": loop.estimate,
@@ -544,6 +562,10 @@ def control_scene(scene: Scene | SceneObjects, schedule: ScheduleResult | None =
     rate = None if objects.sensors is not None else objects.rate
     arguments = dict(sensors=objects.sensors, estimator=objects.estimator, v0=spec.v0, seed=spec.seed,
                      budget=objects.budget)
+    # The loop's wall time is of compiled code: the kernels loaded and the loop run once first,
+    # untimed (toolkit._compiled.warm: a kernel compiles at its first call, wherever it comes).
+    compile_time = warm(lambda: simulate_closed_loop(plant, controller, spec.duration, rate=rate,
+                                                     **arguments), "core", "lines")
     loop = simulate_closed_loop(plant, controller, spec.duration, rate=rate, **arguments)
     difference = None
     if spec.cross_check and loop.status is SimulationStatus.SUCCESS:
@@ -555,7 +577,7 @@ def control_scene(scene: Scene | SceneObjects, schedule: ScheduleResult | None =
         y = response.outputs
         difference = float(max(np.max(np.abs(y[0] - loop.speed)), np.max(np.abs(y[1] - loop.estimate))))
     name = getattr(objects.estimator, "name", None) if objects.sensors is not None else None
-    return ControlStudy(loop, spec.controller, name, difference)
+    return ControlStudy(loop, spec.controller, name, difference, compile_time)
 
 
 def control_shortfalls(scene: Scene | SceneObjects, study: ControlStudy) -> list[Shortfall]:
@@ -624,20 +646,26 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
         schedule, check = design_scene_schedule(objects, contacts)
         found += schedule_shortfalls(objects, schedule, check)
     simulation = None
+    compile_time = 0.0
     if scene.simulation is not None:
+        if scene.simulation.method == "exact":       # its wall time: of compiled kernels
+            compile_time += warm(lambda: _simulation(objects, contacts, 1e-3), "core")
         simulation = _simulation(objects, contacts)
         found += simulation_shortfalls(scene, simulation)
     estimation = None
     if scene.estimation is not None:
         estimation = estimate_scene(objects, simulation)
         found += estimation_shortfalls(objects, estimation)
+        compile_time += estimation.compile_time
     loop = None
     if scene.control is not None:
         loop = control_scene(objects, schedule)
         found += control_shortfalls(objects, loop)
+        compile_time += loop.compile_time
     plant = objects.plant_on(contacts) if objects.plant is not None else None
     return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation,
-                       schedule, check, simulation, tuple(found), estimation, loop, plant)
+                       schedule, check, simulation, tuple(found), estimation, loop, plant,
+                       compile_time)
 
 
 # -- planar scenes ----------------------------------------------------------------------------------

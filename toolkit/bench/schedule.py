@@ -19,6 +19,7 @@ import time
 
 from ..scenes.designs import load_design
 from ..schedule import design_schedule
+from ..simulation import warm_up
 from ..scenes.build import build_scene
 
 SCENES = ("brake_schedule", "carousel")
@@ -27,6 +28,7 @@ SCENES = ("brake_schedule", "carousel")
 def main(argv: list[str]) -> int:
     quick = "--quick" in argv
     iterations = 10 if quick else 30
+    print(f"kernels compiled or loaded from the cache in {warm_up():.2f} s (not timed)")
     print(f"{'scene':>15} {'method':>22} {'wall [s]':>9} {'status':>9} {'sup error':>10}"
           f" {'objective':>10}  ipopt")
     for name in SCENES:

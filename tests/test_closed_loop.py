@@ -176,10 +176,9 @@ def test_compiled_loop_is_the_python_loop(case):
     # The kernel runs the same engines (advance's), the sensor law's compiled form and the
     # laws' compiled forms (or calls a Python law / estimator per sample): every recorded
     # array equals the Python loop's bit for bit (atol 0), counts included.
-    from toolkit import Sensors
     from toolkit.predictions.apparatus import CarryThen
 
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     plant, controller, kwargs = CAROUSEL_PLANT, VirtualViscosity(50.0, 0.15), {}
     if case.startswith("speed_hold"):
         controller = SpeedHold(0.2, 50.0)
@@ -212,13 +211,12 @@ def test_compiled_sensor_law_is_the_sensor_reader():
     # operator, then floor of position over the count); its compiled form
     # (toolkit._compiled.core.sensor_read) on the same positions gives the same integer counts
     # and the same motor-side positions (exactly: the same operations), through reversals.
-    from toolkit import Sensors
     from toolkit import _compiled
     from toolkit.model.sensors import SensorReader
 
     core = _compiled.load("core")
     rng = np.random.default_rng(3)
-    sensors = Sensors.carousel(10)
+    sensors = CAROUSEL.sensors(10)
     start = rng.uniform(-0.3, 0.3, 10)
     state = sensors.initial_state(start)
     reader = SensorReader(sensors, state)

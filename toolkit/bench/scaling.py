@@ -34,7 +34,7 @@ import numpy as np
 from toolkit.experiments import MedianLaw
 from toolkit.loop.closed_loop import simulate_closed_loop
 from toolkit.controllers import VirtualViscosity
-from toolkit.model import ContactSet, Motors, PiecewiseConstant, Plant, Sensors
+from toolkit.model import ContactSet, Motors, PiecewiseConstant, Plant
 from toolkit.model.carousel import CAROUSEL
 from toolkit.simulation import simulate, warm_up
 from toolkit.sweeps import sweep
@@ -84,7 +84,7 @@ _LOOP_PLANT = Plant(ContactSet([0.0] * 10, [1.0] * 10), 5.0, motors=CAROUSEL.mot
 
 
 def _loop(seconds: float, sensors: bool) -> Callable[[], Any]:
-    suite = Sensors.carousel(10) if sensors else None
+    suite = CAROUSEL.sensors(10) if sensors else None
     return lambda: simulate_closed_loop(_LOOP_PLANT, VirtualViscosity(50.0, 0.15), seconds,
                                         sensors=suite, seed=1)
 

@@ -6,7 +6,7 @@ machine may be shared: the load average is printed), measured in this run:
 
 - first call in a fresh process with the kernels compiled at once
   (``ACTIVE_CONTACTS_COMPILE=eager``): ``simulate`` of the carousel startup with 1004 sample
-  times, and :func:`toolkit.simulation._warmup.warm_up` (every kernel the toolkit runs), with a cold
+  times, and :func:`toolkit.simulation.warm_up` (every kernel the toolkit runs), with a cold
   numba cache (an empty ``NUMBA_CACHE_DIR``: numba compiles) and a warm one (the same
   directory afterwards: numba loads machine code);
 - the same first ``simulate`` call without that switch (the default: kernels run as Python
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
               f"compiled at once: cold cache {min(cold_first):.2f} s, warm cache "
               f"{min(warm_first) * 1e3:.1f} ms; default (run as Python until it pays): "
               f"{min(lazy_first) * 1e3:.1f} ms")
-        print(f"every kernel (toolkit.simulation._warmup.warm_up): cold cache {min(cold_all):.1f} s, "
+        print(f"every kernel (toolkit.simulation.warm_up): cold cache {min(cold_all):.1f} s, "
               f"warm cache {min(warm_all):.2f} s")
 
         baseline = args.baseline

@@ -168,7 +168,7 @@ ISSUE_10_TESTS = {
         "tests/test_plots.py::test_schedule_draws_the_target_on_top_and_titles_the_scene",
         "tests/test_plots.py::test_schedule_error_panel_is_the_exact_tracking_error_against_its_bounds",
         "tests/test_plots.py::test_fast_braking_target_is_the_minimum_time_curve",
-        "tests/test_plots.py::test_precision_plot_marks_the_error_level_hollow_markers_and_settings",
+        "tests/test_plots.py::test_precision_plot_draws_a_named_line_per_family",
         "tests/test_plots.py::test_simulation_shades_the_zero_force_band_and_keeps_the_status_out_of_the_title",
         "tests/test_plots.py::test_simulation_thins_many_contacts_and_notes_a_stopped_run",
         "tests/test_cli.py::test_curve_text_lists_every_step_even_narrow_ones"],

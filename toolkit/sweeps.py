@@ -21,8 +21,8 @@ chunk at once (vectorized over runs where it can: the exact batch path). The chu
 - ``scheduler=None`` (default): one after another in this process (the vectorized exact
   batch path; no process pool unless asked for: on a shared 2-core machine a pool's start-up
   of fresh interpreters costs more than it saves on the sweeps of the paper's sizes);
-- ``scheduler="processes"``: to a ``concurrent.futures`` process pool (``workers``; fresh
-  interpreters, the "spawn" start method);
+- ``scheduler="processes"``: to a pool of worker processes (``workers``; fresh interpreters,
+  the "spawn" start method);
 - ``scheduler="tcp://host:port"`` or a ``distributed.Client``: to a Dask cluster
   (``pip install active-contacts[dask]``).
 
@@ -41,12 +41,12 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import multiprocessing.connection
 import os
 import signal
 import threading
 import time
 from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
@@ -371,36 +371,82 @@ def _terminate_interrupts() -> Iterator[None]:
         signal.signal(signal.SIGTERM, before)
 
 
-def _ignore_interrupts() -> None:
-    """A pool worker's initializer: Ctrl-C in a terminal reaches every process of its group;
-    the parent stops the workers itself (:func:`_run_pool`), so they ignore it."""
+def _pool_worker(connection: Any) -> None:
+    """A pool worker: chunks ``(j, experiment, seed, a, b)`` in, ``(j, columns, error)`` out,
+    until ``None``. Ctrl-C in a terminal reaches every process of its group; the parent stops
+    the workers itself (:func:`_run_pool`), so they ignore it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while True:
+        task = connection.recv()
+        if task is None:
+            return
+        j, experiment, seed, a, b = task
+        try:
+            connection.send((j, _run_chunk(experiment, seed, a, b), None))
+        except Exception as error:                  # (reported to the parent, raised there)
+            try:
+                connection.send((j, None, error))
+            except Exception:                       # an error that does not pickle
+                connection.send((j, None, RuntimeError(repr(error))))
 
 
 def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers: int,
               done: Any) -> None:
-    """The chunks on a pool of ``workers`` fresh interpreters ("spawn": a forked child of a
-    process whose compiled kernels started OpenMP threads would be killed). Any exception
-    here, an interrupt included, terminates the workers at once and waits for them (no
-    process left behind) before it propagates."""
+    """The chunks on ``workers`` fresh interpreters ("spawn": a forked child of a process whose
+    compiled kernels started OpenMP threads would be killed), each fed one chunk at a time
+    through a pipe of its own.
+
+    No thread reads for the parent (a ``concurrent.futures`` pool's does, and it blocks for
+    good on a result half written by a worker terminated mid-send): the parent waits on the
+    workers' pipes and sentinels itself. Any exception here, an interrupt included, terminates
+    the workers and waits for them (no process left behind) before it propagates; a worker
+    that dies on its own is reported, not waited for.
+    """
     context = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
-                               initializer=_ignore_interrupts)
-    try:
-        futures = {pool.submit(_run_chunk, experiment, seed, a, b): j
-                   for j, (a, b) in enumerate(bounds)}
-        for future in as_completed(futures):
-            done(futures[future], future.result())
-    except BaseException:
-        stop = getattr(pool, "terminate_workers", None)          # Python >= 3.14
-        if stop is not None:
-            stop()
+    tasks = iter(enumerate(bounds))
+    pool: list[tuple[Any, Any]] = []
+    busy: dict[Any, Any] = {}                          # connection -> its worker process
+
+    def feed(process: Any, connection: Any) -> None:
+        task = next(tasks, None)
+        if task is None:
+            connection.send(None)
+            busy.pop(connection, None)
         else:
-            for process in list((getattr(pool, "_processes", None) or {}).values()):
+            j, (a, b) = task
+            connection.send((j, experiment, seed, a, b))
+            busy[connection] = process
+
+    try:
+        for _ in range(workers):
+            connection, child = context.Pipe()
+            process = context.Process(target=_pool_worker, args=(child,), daemon=True)
+            process.start()
+            child.close()
+            pool.append((process, connection))
+            feed(process, connection)
+        while busy:
+            sentinels = {process.sentinel: process for process in busy.values()}
+            for ready in multiprocessing.connection.wait([*busy, *sentinels]):
+                if ready in sentinels:
+                    if any(busy.get(c) is sentinels[ready] and c.poll() for c in busy):
+                        continue                       # (its last result is still to read)
+                    raise RuntimeError(f"a sweep worker (pid {sentinels[ready].pid}) died "
+                                       f"with exit code {sentinels[ready].exitcode}")
+                j, columns, error = ready.recv()
+                if error is not None:
+                    raise error
+                done(j, columns)
+                feed(busy[ready], ready)
+    finally:
+        for process, connection in pool:
+            if process.is_alive() and connection in busy:
                 process.terminate()
-        pool.shutdown(wait=True, cancel_futures=True)
-        raise
-    pool.shutdown(wait=True)
+            process.join(timeout=5)
+            if process.is_alive():
+                process.kill()
+                process.join()
+            connection.close()
 
 
 def _run_dask(experiment: Any, seed: int, bounds: list[tuple[int, int]], scheduler: Any,

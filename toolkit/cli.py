@@ -21,6 +21,7 @@ folder is checked before any work and replaced as a whole at the end.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -474,6 +475,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``active-contacts`` console script; returns the exit code."""
     parser = _parser()
     args = parser.parse_args(argv)
+    previous = _terminate_as_interrupt()
     try:
         return args.handler(args)
     except ToolkitError as error:
@@ -485,6 +487,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("active-contacts: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate_as_interrupt() -> Any:
+    """SIGTERM ends a command as Ctrl-C does (``KeyboardInterrupt``: workers stopped, partial
+    outputs removed, exit 130); returns the previous handler (None off the main thread)."""
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    try:
+        return signal.signal(signal.SIGTERM, interrupt)
+    except ValueError:                 # not the main thread (an embedding caller's thread)
+        return None
 
 
 if __name__ == "__main__":

@@ -2,8 +2,8 @@
 
 The kernel modules of this package, :mod:`.core` (the exact method's event loops for ideal and
 for lagging motors, dense evaluator, no-event certificate, batch path, sampled closed loops,
-and the Coulomb force on many speeds) and :mod:`.lines` (the quantized lines of the
-estimators' holds), are plain Python functions over arrays and scalars. They import nothing
+and the Coulomb force on many speeds), :mod:`.lines` (the quantized lines of the estimators'
+holds) and :mod:`.planar` (the planar contacts' forces), are plain Python functions over arrays and scalars. They import nothing
 heavy, so the rest of the toolkit may import them freely (a process that never runs a kernel
 never loads numba). :func:`load` returns one compiled: the first time, it replaces every
 function the module lists in ``KERNELS`` by ``numba.njit(cache=True, **options)`` of that very
@@ -70,7 +70,7 @@ __all__ = ["COMPILE_AFTER", "MODULES", "charge", "compiled", "ensure_compiled", 
 _LOADED: dict[str, Any] = {}          # name -> the compiled module (or its _Interpreted)
 
 #: The kernel modules of this package.
-MODULES = ("core", "lines")
+MODULES = ("core", "lines", "planar")
 
 #: Work (in units of about one interpreted microsecond: a query time, a contact, an event
 #: round) that a process runs through the kernels as Python before it compiles them. Loading

@@ -24,6 +24,7 @@ import numpy as np
 from toolkit.controllers import VirtualViscosity
 from toolkit.loop.closed_loop import simulate_closed_loop
 from toolkit.model import sample_count
+from toolkit.simulation import warm_up
 from toolkit.predictions import (Apparatus, FrictionFractionProblem, ViscosityCheck, ViscosityProblem,
                                  friction_fraction_check, viscosity_check)
 

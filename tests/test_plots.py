@@ -205,7 +205,9 @@ def test_work_precision_curves_are_families_through_their_tolerances(precision_c
 
 
 def test_precision_plot_draws_a_named_line_per_family(precision_curves):
-    ax = plots.plot_precision(precision_curves, title=SCENE)
+    from toolkit.analysis.precision import ERROR_LEVEL
+
+    ax = plots.plot_precision(precision_curves, title=SCENE, error_level=ERROR_LEVEL)
     (level,) = by_gid(ax, "error level")
     np.testing.assert_array_equal(level.get_ydata(), [1e-6, 1e-6])
     labels = [text.get_text() for text in ax.get_legend().get_texts()]

@@ -26,12 +26,11 @@ __all__ = ["plot_force_curve", "plot_simulation", "plot_schedule", "plot_precisi
            "plot_closed_loop", "figure_png", "render_png", "offscreen",
            "plot_median_law", "plot_ratio_histogram", "plot_mean_median", "plot_outliers",
            "plot_summary_comparison", "plot_sweep", "plot_viscosity_check", "plot_friction_fraction_check",
-           "MAX_LINES", "ERROR_LEVEL"]
+           "MAX_LINES"]
 
 #: Most contact-speed lines drawn in one panel; larger sets are thinned (and the panel says so).
 MAX_LINES = 50
 #: Error level (m/s) marked in the work-precision plot: the level of the exact method's speed-up.
-ERROR_LEVEL = 1e-6
 #: Samples of the closed-form minimum-time braking curve.
 _BRAKING_SAMPLES = 64
 #: Drawing order: contact speeds < prediction < exact simulation < target.
@@ -377,7 +376,7 @@ _SMOOTHING_MARKERS = ("v", "s", "^", "D", "P", "X", "*")
 
 
 def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None = None,
-                   title: str | None = None):
+                   title: str | None = None, error_level: float | None = None):
     """Work-precision diagram: log-log error against wall time, one line per method family.
 
     As in DiffEqDevTools' work-precision diagrams, each family (a method with its integrator
@@ -399,11 +398,14 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
         measurable (no independent reference).
     title : str, optional
         The scene name, put first in the title.
+    error_level : float, optional, m/s
+        Drawn as a horizontal line.
 
     Notes
     -----
-    A horizontal line marks :data:`ERROR_LEVEL` (1e-6 m/s), the level of the exact
-    method's speed-up. The legend sits beside the axes, so no label covers a point.
+    A horizontal line marks ``error_level`` when given (the report passes
+    :data:`toolkit.analysis.precision.ERROR_LEVEL`, 1e-6 m/s, the level of the exact
+    method's speed-up). The legend sits beside the axes, so no label covers a point.
 
     Returns
     -------
@@ -438,11 +440,12 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
     if hollow:
         ax.loglog([], [], "o", mfc="none", color="0.4", ls="none", gid="hollow",
                   label="hollow: stopped by a budget or failed\n(error over the part simulated)")
-    _level = f"{ERROR_LEVEL:.0e}".replace("e-0", "e-")
-    ax.axhline(ERROR_LEVEL, color="0.3", lw=0.8, ls="-.", zorder=1, gid="error level",
-               label=f"{_level} m/s error level")
-    ax.text(0.995, ERROR_LEVEL, f"{_level} m/s ", transform=ax.get_yaxis_transform(),
-            ha="right", va="bottom", fontsize="x-small", color="0.3")
+    if error_level is not None:
+        shown = f"{error_level:.0e}".replace("e-0", "e-")
+        ax.axhline(error_level, color="0.3", lw=0.8, ls="-.", zorder=1, gid="error level",
+                   label=f"{shown} m/s error level")
+        ax.text(0.995, error_level, f"{shown} m/s ", transform=ax.get_yaxis_transform(),
+                ha="right", va="bottom", fontsize="x-small", color="0.3")
     if reference_time is not None:
         ax.axvline(reference_time, color="k", ls="--", lw=1, label="exact (the reference)")
     ax.set_xlabel("wall time per run (s)")

@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import plots
 from ._io import atomic_write_text, write_tree
-from ..analysis.precision import work_precision_curves
+from ..analysis.precision import ERROR_LEVEL, work_precision_curves
 from ..shortfall import Shortfall
 from .study import StudyResult
 
@@ -256,7 +256,8 @@ def write_precision(report: Any, out_dir: str | Path, *, title: str | None = Non
     data = report.to_dict()
     exact = [row for row in report.rows if row.method == "exact" and not math.isfinite(row.max_error)]
     reference = exact[0].wall_time if exact else None
-    png = plots.render_png(plots.plot_precision, work_precision_curves(report), reference_time=reference,
+    png = plots.render_png(plots.plot_precision, work_precision_curves(report), error_level=ERROR_LEVEL,
+                           reference_time=reference,
                            title=title)
     return write_tree(out_dir, {"precision.json": to_json(data).encode(), "precision.png": png})
 

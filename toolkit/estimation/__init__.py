@@ -17,11 +17,22 @@ from __future__ import annotations
 
 from ._base import EstimationResult, Estimator, chi2_band
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
+from ._prior import ModelPrior
+from .alpha_beta import AlphaBetaTracker, kalata_gains
 from .finite_difference import CentralDifference, WheelDifference
-from .kalman import KalmanEstimator, RTSSmoother, steady_state_gain
-from .unscented import UnscentedEstimator
+from .kalman import NominalKalman, RTSSmoother, steady_state_gain
 
-__all__ = ["Estimator", "EstimationResult", "EstimatorModel", "chi2_band", "contact_speed_estimates",
+
+class KalmanEstimator(NominalKalman):
+    """The default filter behind the name ``kalman`` (for now the nominal one)."""
+
+    name = "kalman"
+
+
+from .unscented import UnscentedEstimator
+from .window import AdaptiveWindow
+
+__all__ = ["Estimator", "EstimationResult", "EstimatorModel", "ModelPrior", "chi2_band", "contact_speed_estimates",
            "ContactSpeedTracker",
-           "CentralDifference", "WheelDifference", "KalmanEstimator", "RTSSmoother",
-           "steady_state_gain", "UnscentedEstimator"]
+           "CentralDifference", "WheelDifference", "KalmanEstimator", "NominalKalman", "RTSSmoother",
+           "steady_state_gain", "UnscentedEstimator", "AdaptiveWindow", "AlphaBetaTracker", "kalata_gains"]

@@ -24,7 +24,13 @@ from .._validation import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 
-__all__ = ["Estimator", "EstimationResult", "chi2_band", "check_covariance"]
+__all__ = ["Estimator", "EstimationResult", "chi2_band", "check_covariance", "PHASES", "phase_masks",
+           "nees_band"]
+
+#: The phases of a record scored separately (:func:`phase_masks`).
+PHASES = ("startup", "cruise", "brake", "braked")
+#: Length of the startup and brake phases after their command, s (:func:`phase_masks`).
+SETTLE_TIME = 1.0
 
 
 def chi2_band(samples: int, dim: int, level: float = 0.95) -> tuple[float, float]:
@@ -39,6 +45,54 @@ def chi2_band(samples: int, dim: int, level: float = 0.95) -> tuple[float, float
     tail = 0.5 * (1.0 - level)
     lo, hi = chi2.ppf([tail, 1.0 - tail], samples * dim) / samples
     return float(lo), float(hi)
+
+
+def nees_band(dim: int = 2, level: float = 0.95) -> tuple[float, float]:
+    """Two-sided ``level`` interval of one ``dim``-dimensional NEES: ``chi2(dim)`` quantiles."""
+    from scipy.stats import chi2
+
+    tail = 0.5 * (1.0 - level)
+    lo, hi = chi2.ppf([tail, 1.0 - tail], dim)
+    return float(lo), float(hi)
+
+
+def phase_masks(record: EncoderRecord, settle: float = SETTLE_TIME) -> dict[str, np.ndarray | None]:
+    """Which samples of ``record`` belong to each phase of :data:`PHASES`.
+
+    The rule, from the commands alone: the *brake* is the largest command change after the
+    first sample (the largest ``max_i |u_i(t_k) - u_i(t_k-1)|``; the first such row when
+    several tie); *startup* is the first ``settle`` seconds of the record, *cruise* from
+    there to the brake, *brake* the ``settle`` seconds from the brake's sample, *braked* the
+    rest. ``settle`` (default 1 s) covers the carousel's arrival on its contacts after a
+    change (0.1-0.15 s of sliding) and the creep across a zero-force band of unequal wheels
+    (up to about 0.5 s with a 5 % spread). A record whose commands never change after the
+    first sample has no brake: its *brake* and *braked* are ``None`` (so is *cruise* when
+    the record is shorter than ``settle``).
+
+    Returns
+    -------
+    dict of str to ndarray of shape (k,), bool, or None
+    """
+    t = record.times
+    start = t[0]
+    jumps = np.zeros(t.size)
+    if t.size > 1:
+        jumps[1:] = np.max(np.abs(np.diff(record.commands, axis=0)), axis=1)
+    brake = int(np.argmax(jumps)) if jumps.max(initial=0.0) > 0.0 else None
+    startup = t < start + settle
+    if brake is None or t[brake] < start + settle:
+        # No brake, or one inside the startup: the startup then ends at it.
+        if brake is not None:
+            startup = t < t[brake]
+        end = t.size if brake is None else brake
+        cruise = ~startup & (np.arange(t.size) < end)
+    else:
+        cruise = ~startup & (t < t[brake])
+    masks: dict[str, np.ndarray | None] = {"startup": startup, "cruise": cruise, "brake": None, "braked": None}
+    if brake is not None:
+        masks["brake"] = (t >= t[brake]) & (t < t[brake] + settle)
+        masks["braked"] = t >= t[brake] + settle
+    return {name: (mask if mask is not None and mask.any() else None) for name, mask in masks.items()}
 
 
 def check_covariance(value: Any, name: str, owner: str, dim: int) -> np.ndarray:
@@ -83,6 +137,12 @@ class EstimationResult:
     nees_mean, nis_mean : float or None
     nees_band, nis_band : tuple of float or None
         The 95 % chi-square bands of those means (:func:`chi2_band`).
+    rms_phases : dict of str to float or None, m/s
+        RMS error in each phase of :func:`phase_masks` (``None`` for a phase the record
+        lacks); ``None`` without the truth.
+    nees_in_band : float or None
+        Fraction of the samples whose NEES lies in the two-sided 95 % interval of one
+        chi-square(2) (:func:`nees_band`); ``None`` without a covariance or the truth.
     """
 
     method: str
@@ -100,6 +160,8 @@ class EstimationResult:
     nis_mean: float | None = None
     nees_band: tuple[float, float] | None = None
     nis_band: tuple[float, float] | None = None
+    rms_phases: dict[str, float | None] | None = None
+    nees_in_band: float | None = None
 
     @property
     def real_time_ratio(self) -> float:
@@ -119,7 +181,9 @@ class EstimationResult:
         return {"method": self.method, "samples": int(self.times.size), "wall_time": self.wall_time,
                 "real_time_ratio": self.real_time_ratio, "rms_error": self.rms_error,
                 "max_error": self.max_error, "nees_mean": self.nees_mean, "nees_band": self.nees_band,
-                "nis_mean": self.nis_mean, "nis_band": self.nis_band}
+                "nis_mean": self.nis_mean, "nis_band": self.nis_band,
+                "rms_phases": None if self.rms_phases is None else dict(self.rms_phases),
+                "nees_in_band": self.nees_in_band}
 
 
 def score(record: EncoderRecord, method: str, speed: np.ndarray, variance: np.ndarray,
@@ -135,10 +199,16 @@ def score(record: EncoderRecord, method: str, speed: np.ndarray, variance: np.nd
         error = fields["speed"] - record.truth_speed
         fields["rms_error"] = float(np.sqrt(np.mean(error**2)))
         fields["max_error"] = float(np.max(np.abs(error)))
+        fields["rms_phases"] = {name: None if mask is None else float(np.sqrt(np.mean(error[mask] ** 2)))
+                                for name, mask in phase_masks(record).items()}
         if covariance is not None and position is not None and record.truth_position is not None:
             e = np.stack((position - record.truth_position, error), axis=1)
             nees = np.einsum("ki,kij,kj->k", e, np.linalg.inv(covariance[:, :2, :2]), e)
-            fields.update(nees=nees, nees_mean=float(np.mean(nees)), nees_band=chi2_band(K, 2))
+            lo, hi = nees_band(2)
+            finite = np.isfinite(nees)
+            fields.update(nees=nees, nees_mean=float(np.mean(nees)), nees_band=chi2_band(K, 2),
+                          nees_in_band=float(np.mean((nees[finite] >= lo) & (nees[finite] <= hi)))
+                          if finite.any() else None)
     if nis is not None:
         fields.update(nis=np.asarray(nis, dtype=float), nis_mean=float(np.mean(nis)),
                       nis_band=chi2_band(K, 1))

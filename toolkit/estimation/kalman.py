@@ -61,7 +61,7 @@ where the Gaussian filter has the body reach the equilibrium set after the wheel
 became exact, lasts while the contacts stay steady, and fails at a reading no line allows
 (the state then restarts from the reading and a one-period difference). It needs ideal
 encoders, ``contact_drift = 0``, no drag and no friction spread
-(:attr:`KalmanEstimator.holds_exact`). On
+(:attr:`NominalKalman.holds_exact`). On
 the acceptance record the NEES mean is then 1.77 (1.64 in the first second, 2.44
 cruising, 1.56 around the brake, 1.22 braked); over random grid phases the filter passes
 Bar-Shalom's Monte Carlo test (the mean NEES over 30 records inside its 95 % band at 96-98 %
@@ -123,7 +123,7 @@ from ._base import EstimationResult, Estimator, check_covariance, score
 from ._hold import Hold, WheelLines
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 
-__all__ = ["KalmanEstimator", "RTSSmoother", "steady_state_gain", "measurement_variance"]
+__all__ = ["NominalKalman", "RTSSmoother", "steady_state_gain", "measurement_variance"]
 
 
 def _side(speed: float, bounds: Any) -> int | None:
@@ -178,7 +178,7 @@ def _make_filter(model: EstimatorModel) -> Any:
     return kf
 
 
-class KalmanEstimator(Estimator):
+class NominalKalman(Estimator):
     """Kalman filter of ``(X, V)`` with the contact force as known input (see the module).
 
     Parameters
@@ -194,7 +194,7 @@ class KalmanEstimator(Estimator):
         :attr:`holds_exact`).
     """
 
-    name = "kalman"
+    name = "kalman_nominal"
 
     def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None,
                  exact_holds: bool = True) -> None:
@@ -522,7 +522,7 @@ class KalmanEstimator(Estimator):
 
 
 class RTSSmoother(Estimator):
-    """Rauch-Tung-Striebel smoother over the :class:`KalmanEstimator`'s pass (offline only).
+    """Rauch-Tung-Striebel smoother over the :class:`NominalKalman`'s pass (offline only).
 
     The forward pass is the filter's; the backward pass is filterpy's
     ``KalmanFilter.rts_smoother`` on the augmented state ``(X, V, 1)`` whose transitions
@@ -532,7 +532,7 @@ class RTSSmoother(Estimator):
     name = "rts"
 
     def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None) -> None:
-        self.forward = KalmanEstimator(model, initial_covariance=initial_covariance)
+        self.forward = NominalKalman(model, initial_covariance=initial_covariance)
         self.model = model
 
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
@@ -541,11 +541,11 @@ class RTSSmoother(Estimator):
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
-        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
+        raise NotImplementedError("The RTS smoother is offline: call run(record); step the NominalKalman.")
 
     def commanded(self, command: Any, force: float = 0.0) -> None:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
-        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
+        raise NotImplementedError("The RTS smoother is offline: call run(record); step the NominalKalman.")
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:

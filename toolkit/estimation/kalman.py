@@ -120,7 +120,7 @@ from .._validation import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, check_covariance, score
-from ._hold import Hold, WheelLines
+from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 
 __all__ = ["NominalKalman", "RTSSmoother", "steady_state_gain", "measurement_variance"]
@@ -254,10 +254,11 @@ class NominalKalman(Estimator):
         self._on_set = False
         self._edge, self._edge_var = None, math.inf
         self._increment = self.model.increment
-        self._lines = WheelLines(self.model) if self.holds_exact else None
-        self._hold = Hold(self._q, self.model.n)
+        self._layer = HoldLayer(self.model)
+        self._lines = self._layer.lines if self.holds_exact else None
         self._anchor = (math.nan, 0)          # (time, central count) of the last sample
         self.holding = False                   # the last step was an exact hold
+        self.hold_failed = False               # the last step's reading left every line of a hold
         self._stuck_settled = False            # the body reached the set on settled contacts
         self._hold_force = 0.0                 # the last period's outside force (a change ends a hold), N
         self.last_input = (0.0, 0.0)
@@ -278,10 +279,11 @@ class NominalKalman(Estimator):
         speeds and the outside force ``force``, N), then update with the sample (central
         ``count`` read at ``t``, s; ``wheels`` the wheel counts)."""
         kf = self.kf
+        self.hold_failed = False
         anchor, self._anchor = self._anchor, (t, count)
         lines = self._lines if wheels is not None else None
         if lines is not None:
-            lines.push(t, wheels, track, steady)
+            self._layer.wheels(t, wheels, track, steady)
         if track is None:
             self._start(z)
             self.last_nis = np.nan
@@ -291,10 +293,12 @@ class NominalKalman(Estimator):
             # it sees the body reach the set again.
             self._hold_force = force
             self.holding = self._stuck_settled = False
+            self._layer.stop()
         if (lines is not None and steady and lines.active
                 and self._held(t, count, anchor, track[0], var_v)):
             return
         self.holding = False
+        self._layer.stop()
         x = kf.x
         V = x.item(1)
         model = self.model
@@ -366,51 +370,33 @@ class NominalKalman(Estimator):
 
     def _held(self, t: float, count: int, anchor: tuple[float, int], speeds: np.ndarray,
               var_v: float) -> bool:
-        """The exact hold's step (:mod:`toolkit.estimation._hold`) where the body rides a
-        settled contact: continue the hold, or start one where the Gaussian filter has the
-        body on the equilibrium set since it reached the set after the wheels' lines became
-        exact (and the outside force has not changed since), and set the state to the
-        posterior's moments. A failed hold (no line fits the counts, or no wheel's speeds
-        meet the body's) resets the state to what the reading and the one-period difference
-        of the readings know, ``(z, (c_k - c_{k-1}) q / h)`` with ``P = (q^2 / 12) [[1, 1 / h],
-        [1 / h, 2 / h^2]]`` (the reading's error is in both; the transition ``F = 0``: the
-        smoother does not carry the failed hold's information back), and hands the body back to the Gaussian steps until they see it
-        reach the set again. False when there is no hold (the Gaussian step follows)."""
-        hold, lines = self._hold, self._lines
+        """The exact-hold layer (:class:`toolkit.estimation._hold.HoldLayer`) where the body
+        rides a settled contact: continue the hold, or start one where the Gaussian filter has
+        the body on the equilibrium set since it reached the set after the wheels' lines
+        became exact (and the outside force has not changed since), and set the state to the
+        posterior's moments. A failed hold resets the state to what the reading and the
+        one-period difference of the readings know (the transition ``F = 0``: the smoother
+        does not carry the failed hold's information back) and hands the body back to the
+        Gaussian steps until they see it reach the set again. False when there is no hold
+        (the Gaussian step follows)."""
         kf = self.kf
-        if not self.holding:
-            if not (self._on_set and self._stuck_settled):
-                return False
-            # Prior odds of the wheels: the Gaussian belief in the body's speed against each
-            # contact's estimate (floored: the counts may still show the belief wrong).
-            d2 = (speeds - kf.x.item(1)) ** 2 / (kf.P.item(3) + var_v)
-            hold.start(anchor[0], anchor[1], np.maximum(np.exp(-0.5 * (d2 - d2.min())), 1e-300))
         x, P = kf.x, kf.P
-        h, q = self._h, self._q
-        z = (count + 0.5) * q
-        # The NIS of the reading against the straight line's prediction, with the count's
-        # q^2 / 12 (its variance over a uniform grid phase).
-        innovation = z - (x.item(0) + h * x.item(1))
-        self.last_nis = innovation * innovation / (P.item(0) + 2.0 * h * P.item(1) + h * h * P.item(3)
-                                                   + q * q / 12.0)
-        state = hold.push(t, count, lines)
-        if state is None:
+        out = self._layer.step(t, count, anchor, speeds, var_v, (x.item(0), x.item(1)), P,
+                               self._on_set and self._stuck_settled)
+        if out is None:
+            return False
+        self.last_nis = out.nis
+        kf.x = out.state[:, None].copy()
+        kf.P = out.covariance
+        if out.failed:
+            self.hold_failed = True
             self.holding = False
             self._on_set = self._stuck_settled = False
-            # The reading errs by e_k (variance q^2 / 12), the difference by (e_k - e_k-1) / dt.
-            dt = t - anchor[0]
-            restart = (q * q / 12.0) * np.array([[1.0, 1.0 / dt], [1.0 / dt, 2.0 / (dt * dt)]])
-            speed = (count - anchor[1]) * q / dt
-            kf.x = np.array([[z], [speed]])
-            kf.P = restart
-            self.last_input = (z, speed)
+            self.last_input = (float(out.state[0]), float(out.state[1]))
             self.last_F = self._F_reset
-            self.last_Q = restart
+            self.last_Q = out.covariance
             return True
         # The hold's step as the smoother sees it: x+ = F x (Q = 0: the line is exact).
-        X, V, pxx, pxv, pvv = state
-        kf.x = np.array([[X], [V]])
-        kf.P = np.array([[pxx, pxv], [pxv, pvv]])
         self.last_input = (0.0, 0.0)
         self.last_F = self._F
         self.last_Q = self._Q0
@@ -499,9 +485,11 @@ class NominalKalman(Estimator):
         Fs = [self._F]
         Qs = [np.zeros((2, 2))]
         nis = [math.nan]
+        failed = [False]
         for k in range(1, K):
             advance(z_l[k], R_l[k], track[k - 1], var_l[k - 1], steady_l[k - 1], bounds[k - 1], force_l[k - 1],
                     counts_l[k], times_l[k], wheels[k])
+            failed.append(self.hold_failed)
             x = kf.x
             xs.append((x.item(0), x.item(1)))
             Ps.append(kf.P)
@@ -512,6 +500,8 @@ class NominalKalman(Estimator):
         X, P, U, Q = np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Qs)
         self._pending = (track[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1], force_l[-1])
         self.transitions = np.array(Fs)
+        #: Per sample: the reading left every line of an exact hold (the hold failed).
+        self.hold_failures = np.array(failed)
         return X, P, U, Q, np.array(nis), time.perf_counter() - started
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,

@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections import deque
@@ -15,8 +16,10 @@ import numpy as np
 from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, score
 from ._input import ContactSpeedTracker, EstimatorModel
-from ._prior import DEFAULT_DRAG, ModelPrior
-from .monitor import NoiseMatcher
+from ._prior import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
+from .identification import LagIdentifier
+from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
+from .window import AdaptiveWindow
 from ..model.motors import MotorPiece
 from .._compiled import kernels
 from ._hold import HoldLayer
@@ -140,7 +143,9 @@ class RobustFilter(Estimator):
     #: Samples over which the encoders must look ideal for the exact lines (:meth:`_ideal`).
     IDEAL_WINDOW = 50
     #: Largest share of wheel readings that may break their lines in that window.
-    LINE_BREAKS = 0.1
+    LINE_BREAKS = 0.03
+    #: Largest widening of the covariances per failing sample (a factor).
+    WIDEN_MAX = 10.0
 
     def __init__(self, model: EstimatorModel, prior: ModelPrior | None = None, *,
                  forgetting: float = 0.0, switching: float = 0.02) -> None:
@@ -151,12 +156,23 @@ class RobustFilter(Estimator):
         self.h = model.sensors.period
         self.q = model.sensors.central.distance_per_count
         self.forgetting = forgetting
+        lag_range = self.prior.lag_range
+        if lag_range is None:
+            lag_range = (0.0, max(DEFAULT_LAG, model.motor_lag))
+        self._lag_range = lag_range
+        self.monitor = ConsistencyMonitor(10, 1e-3)
+        q_c = model.sensors.central.distance_per_count
+        self._foaw = AdaptiveWindow(model.sensors, fit="best", band=q_c)
         # The contacts' largest acceleration as the model-free mode's intensity in a
         # transient: (F_tot / m) per sqrt(h) (an acceleration that may flip every period).
         self._reach_rate = float(model.forces.sum()) / model.mass / math.sqrt(model.sensors.period)
-        m = 3
-        self.M = np.full((m, m), switching / (m - 1))
-        np.fill_diagonal(self.M, 1.0 - switching)
+        # Row i to column j: the physical modes (free, stuck) switch between themselves with
+        # probability ``switching`` per sample and into the model-free one with ``escape``;
+        # the model-free one returns to either with ``switching / 2``.
+        escape = 1e-3
+        self.M = np.array([[1.0 - switching - escape, switching, escape],
+                           [switching, 1.0 - switching - escape, escape],
+                           [0.5 * switching, 0.5 * switching, 1.0 - switching]])
         self.reset()
 
     # -- parameters --------------------------------------------------------------------------
@@ -177,16 +193,26 @@ class RobustFilter(Estimator):
         by more than 1e-4 relative since the last build)."""
         e = theta[:self.n]
         drift = max(self._bank.drift, self.model.contact_drift)
-        if (self._built is None or np.max(np.abs(e - self._built)) > 1e-4
+        lag = self.lag
+        if (self._built is None or np.max(np.abs(e - self._built)) > 1e-4 or lag != self._built_lag
                 or not self._built_drift / 1.5 <= drift <= 1.5 * self._built_drift):
             m = self.model
             forces = m.forces * np.maximum(1.0 + e, 1e-3)
-            self._hat = EstimatorModel(forces, m.mass, m.sensors, motor_lag=m.motor_lag, damping=m.damping,
+            self._hat = EstimatorModel(forces, m.mass, m.sensors, motor_lag=lag, damping=m.damping,
                                        max_window=m.max_window, speed_limits=m.speed_limits,
                                        contact_drift=drift)
             self._built = e.copy()
             self._built_drift = max(drift, 1e-12)
+            self._built_lag = lag
         return self._hat
+
+    @property
+    def lag(self) -> float:
+        """The motor lag the flow uses, s: the identified one once a command change has been
+        seen through and it lies within the prior's range, else the nominal one."""
+        lag = self._lag_id.lag
+        lo, hi = self._lag_range
+        return self.model.motor_lag if lag is None else min(max(lag, lo), hi)
 
     # -- the recursion --------------------------------------------------------------------------
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
@@ -205,13 +231,23 @@ class RobustFilter(Estimator):
         self.x, self.P = x, P
         self._built = None
         self._built_drift = 1e-12
+        self._built_lag = self.model.motor_lag
         self._hat = None
+        sensors = self.model.sensors
+        self._lag_id = LagIdentifier(sensors.wheel.distance_per_count, sensors.backlash, sensors.period,
+                                     self._lag_range[1])
+        self._lag_id.start(contact_speeds)
+        self.monitor.reset()
+        self._foaw.reset(speed=speed)
+        self.fallback = False
+        self.out_x, self.out_P = self.x, self.P
         self._gains = np.zeros((2, n + 1))
         self._free_stuck = False
         self._mu_prev = self.mu
         self._tracker = ContactSpeedTracker(self.model, contact_speeds, residuals=True)
         self._bank = WheelSpeedBank(self.model)
         self._noise = NoiseMatcher(100)
+        self._wheel_noise = (0.0, 0.0)
         self._layer = HoldLayer(self.model)
         self._lines = self._layer.lines
         self._anchor = (math.nan, 0)
@@ -326,7 +362,7 @@ class RobustFilter(Estimator):
         x_new[0] = x[0] + h * x[1]
         A = np.eye(self.d)
         A[0, 1] = h
-        intensity = max(self._bank.drift, 1e-4) if steady else self._reach_rate
+        intensity = self._bank.drift if steady else self._reach_rate
         Q = np.zeros((self.d, self.d))
         Q[:2, :2] = intensity ** 2 * np.array([[h ** 3 / 3.0, h * h / 2.0], [h * h / 2.0, h]])
         return x_new, A @ P @ A.T + Q
@@ -355,7 +391,9 @@ class RobustFilter(Estimator):
         ideal = self._repairs = self._ideal(var_v, prior[0][1])
         if steady and self._layer.ready:
             k = int(np.argmin(np.abs(track[0] - prior[0][1])))
-            stuck = self._mu_prev[1] + (self._mu_prev[0] if self._free_stuck else 0.0)
+            # Among the physical modes (the model-free one says nothing of sticking).
+            physical = self._mu_prev[0] + self._mu_prev[1]
+            stuck = (self._mu_prev[1] + (self._mu_prev[0] if self._free_stuck else 0.0)) / max(physical, 1e-300)
             out = self._layer.step(t, c, anchor, track[0], float(var[k]), prior[0], prior[1],
                                    stuck >= self.HOLD_START and ideal, repair=ideal)
             if out is not None:
@@ -368,9 +406,12 @@ class RobustFilter(Estimator):
             self._layer.stop()
         # The modes: mixing, prediction, update (the Gaussian filters run on beneath a hold).
         cbar, xs, Ps = self._mix()
-        preds = [self._predict_free(xs[0], Ps[0], track, var, steady, force),
-                 self._predict_stuck(xs[1], Ps[1], track, var),
-                 self._predict_kinematic(xs[2], Ps[2], steady)]
+        free = self._predict_free(xs[0], Ps[0], track, var, steady, force)
+        preds = [free, self._predict_stuck(xs[1], Ps[1], track, var),
+                 # The model-free mode speaks only where the contacts hold their speeds; in a
+                 # transient it follows the free mode (the flow knows the motor law).
+                 self._predict_kinematic(xs[2], Ps[2], steady) if steady
+                 else self._predict_free(xs[2], Ps[2], track, var, steady, force)]
         x_pred = sum(cbar[j] * preds[j][0][0] for j in range(3))
         predicted = sum(cbar[j] * (preds[j][1][0, 0] + (preds[j][0][0] - x_pred) ** 2) for j in range(3))
         speed = sum(cbar[j] * preds[j][0][1] for j in range(3))
@@ -383,7 +424,7 @@ class RobustFilter(Estimator):
         z = (c + 0.5) * q
         # The measurement noise: the quantization's, plus what covariance matching finds in
         # the innovations (read noise, jitter) against the modes' combined prediction.
-        R = R0 + self._noise.extra(speed)
+        R = R0 + max(self._noise.extra(speed), q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed)
         self._noise.push(z - x_pred, predicted, R0, speed)
         updated = [self._update(xp, Pp, z, R) for xp, Pp in preds]
         mu = cbar * np.array([u[2] for u in updated])
@@ -454,13 +495,57 @@ class RobustFilter(Estimator):
             anchor, self._anchor = self._anchor, (sample.time, c)
             self._step(c, sample.time, anchor, *pending)
         self._observed = (sample.time, wheels)
-        return float(self.x[1]), float(self.P[1, 1])
+        speed = self._foaw.observe(dataclasses.replace(sample, central_count=c))[0]
+        self._act((speed, self._foaw.matched_variance))
+        return float(self.out_x[1]), float(self.out_P[1, 1])
+
+    def _act(self, window: tuple[float, float]) -> None:
+        """The consistency monitor's verdict on this sample and what the filter does about
+        it: while the windowed NIS fails, widen the modes' ``(X, V)`` covariances by the
+        window's mean NIS (at most :attr:`WIDEN_MAX` per sample) and fall back towards the
+        window (FOAW) estimate: the output is the covariance intersection of the filter's
+        speed and the window's (consistent whatever their correlation)."""
+        verdict = self.monitor.push(self.last_nis)
+        self.fallback = not verdict.passes
+        self.out_x, self.out_P = self.x, self.P
+        if not self.fallback:
+            return
+        factor = min(max(self.monitor.mean, 1.0), self.WIDEN_MAX)
+        for P in self.Ps:
+            P[:2, :] *= math.sqrt(factor)
+            P[:, :2] *= math.sqrt(factor)
+        self._combine()
+        v1, p1 = float(self.x[1]), float(self.P[1, 1])
+        v2, p2 = window
+        if not (p2 > 0.0 and math.isfinite(v2)):
+            self.out_x, self.out_P = self.x, self.P
+            return
+        # Covariance intersection of two scalar estimates: 1 / P = w / p1 + (1 - w) / p2 with
+        # w minimizing P, which for scalars puts all the weight on the smaller variance; the
+        # trace-optimal w is then 0 or 1, so the fused speed is the sharper of the two.
+        x, P = self.x.copy(), self.P.copy()
+        if p2 < p1:
+            # The window's speed replaces the filter's; the position keeps its own estimate
+            # (its correlation with the speed unknown: dropped).
+            x[1] = v2
+            P[1, :] = 0.0
+            P[:, 1] = 0.0
+            P[1, 1] = p2
+        self.out_x, self.out_P = x, P
 
     def commanded(self, command: Any, force: float = 0.0) -> None:
         t, wheels = self._observed
         self._observed = None
         self._last_command, self._last_force = command, float(force)
         speeds, var, steady, track = self._tracker.push(t, wheels, command)
+        self._lag_id.push(t, wheels, command)
+        if steady:
+            # The wheels' window residuals against their speeds: read noise (counts) and
+            # jitter (s), which the central encoder shares (read by the same electronics at
+            # the same instants).
+            q_w = self._tracker.model.sensors.wheel.distance_per_count
+            a, b = fit_noise(self._tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
+            self._wheel_noise = (a / (q_w * q_w), b)
         var_c = self._tracker.contact_variance.copy()
         track = np.array(track, dtype=float)
         banked = self._bank.push(wheels, steady, speeds, var_c, self._tracker.reading_variance)
@@ -474,10 +559,13 @@ class RobustFilter(Estimator):
         started = time.perf_counter()
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         xs, Ps = [], []
+        fallback = []
         for k in range(record.n_samples):
             self.step(record.sample(k))
-            xs.append(self.x[:2].copy())
-            Ps.append(self.P[:2, :2].copy())
+            xs.append(self.out_x[:2].copy())
+            Ps.append(self.out_P[:2, :2].copy())
+            fallback.append(self.fallback)
+        self.fallbacks = np.array(fallback)
         wall = time.perf_counter() - started
         X, P = np.array(xs), np.array(Ps)
         return score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0], covariance=P)

@@ -113,6 +113,27 @@ def matched_variance(innovations: np.ndarray, predicted: np.ndarray, floor: floa
     return max(floor, float(np.mean(innovations * innovations) - np.mean(predicted)))
 
 
+def fit_noise(excess: np.ndarray, speed2: np.ndarray) -> tuple[float, float]:
+    """Least squares of ``excess ~ a + b speed2`` with ``a, b >= 0`` (the best fit with one of
+    them at zero when the free fit has a negative one)."""
+    e, x = np.asarray(excess, dtype=float), np.asarray(speed2, dtype=float)
+    n = e.size
+    if n == 0:
+        return 0.0, 0.0
+    sx, sxx, se, sxe = x.sum(), x @ x, e.sum(), x @ e
+    det = n * sxx - sx * sx
+    a = b = -1.0
+    if det > 1e-12 * max(n * sxx, 1e-300):
+        a = (sxx * se - sx * sxe) / det
+        b = (n * sxe - sx * se) / det
+    if a < 0.0 or b < 0.0:
+        fits = [(max(se / n, 0.0), 0.0)]
+        if sxx > 0.0:
+            fits.append((0.0, max(sxe / sxx, 0.0)))
+        a, b = min(fits, key=lambda ab: float(np.sum((e - ab[0] - ab[1] * x) ** 2)))
+    return float(a), float(b)
+
+
 class NoiseMatcher:
     """Covariance matching of a scalar measurement's extra noise, ``a + b V^2``, over a window.
 
@@ -149,21 +170,7 @@ class NoiseMatcher:
             # missed count, are not noise of every reading).
             keep = np.argsort(rows[:, 0])[:rows.shape[0] - rows.shape[0] // 20]
             rows = rows[keep]
-        e, x = rows[:, 0], rows[:, 1]
-        n = e.size
-        sx, sxx, se, sxe = x.sum(), x @ x, e.sum(), x @ e
-        det = n * sxx - sx * sx
-        a = b = -1.0
-        if det > 1e-12 * max(n * sxx, 1e-300):
-            a = (sxx * se - sx * sxe) / det
-            b = (n * sxe - sx * se) / det
-        if a < 0.0 or b < 0.0:
-            # The best fit with one of them at zero (the least-squares fit under a, b >= 0).
-            fits = [(max(se / n, 0.0), 0.0)]
-            if sxx > 0.0:
-                fits.append((0.0, max(sxe / sxx, 0.0)))
-            a, b = min(fits, key=lambda ab: float(np.sum((e - ab[0] - ab[1] * x) ** 2)))
-        self.a, self.b = float(a), float(b)
+        self.a, self.b = fit_noise(rows[:, 0], rows[:, 1])
 
     def extra(self, speed: float) -> float:
         """The matched extra variance at ``speed``, ``a + b V^2`` (m^2)."""

@@ -53,6 +53,10 @@ class AdaptiveWindow(Estimator):
     ----------
     window : int
         The window ``n`` of the last estimate (sample periods; 0 before two readings).
+    matched_variance : float, (m/s)^2
+        The last estimate's variance with the per-reading noise taken from the window's
+        residuals about its line (at least the quantization's; best-fit windows of at least
+        three periods), for a filter that falls back on the window.
     """
 
     def __init__(self, sensors: Sensors, *, fit: str = "end", max_window: int = DEFAULT_MAX_WINDOW,
@@ -96,13 +100,24 @@ class AdaptiveWindow(Estimator):
         self.window = n
         white = self._q * self._q / 12.0
         if n == 0:
-            return self._speed, white * 2.0 * self.sensors.rate ** 2
+            self.matched_variance = white * 2.0 * self.sensors.rate ** 2
+            return self._speed, self.matched_variance
         if self.fit == "end":
             span = self._t[m - 1] - self._t[m - 1 - n]
-            return slope, 2.0 * white / (span * span)
+            self.matched_variance = 2.0 * white / (span * span)
+            return slope, self.matched_variance
         t = self._t[m - 1 - n:m]
         dt = t - t.mean()
-        return slope, white / float(dt @ dt)
+        S = float(dt @ dt)
+        if n >= 3:
+            # The window's own residuals about its line (covariance matching): at least the
+            # quantization's q^2 / 12 per reading.
+            y = self._y[m - 1 - n:m]
+            r = y - y.mean() - slope * dt
+            self.matched_variance = max(white, float(r @ r) / (n - 1)) / S
+        else:
+            self.matched_variance = white / S
+        return slope, white / S
 
     def commanded(self, command: Any, force: float = 0.0) -> None:
         """Unused: a window estimator does not predict."""

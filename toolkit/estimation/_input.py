@@ -796,6 +796,8 @@ class ContactSpeedTracker:
         ``q^2 / 12``).
     white_variance : float, (m/s)^2
         The last row's variance (the white quantization's, or the transient's).
+    window_length : int
+        Readings in the last row's window (0 in a transient).
     """
 
     def __init__(self, model: EstimatorModel, initial: Any = None, residuals: bool = False) -> None:
@@ -803,6 +805,7 @@ class ContactSpeedTracker:
         self._residuals = residuals
         self.contact_variance = np.zeros(model.n)
         self.white_variance = 0.0
+        self.window_length = 0
         self._q = model.sensors.wheel.distance_per_count
         self.reading_variance = np.full(model.n, self._q * self._q / 12.0)
         self._settle = model.settle
@@ -868,6 +871,7 @@ class ContactSpeedTracker:
             speeds = (tt @ (wb - wb[0])) * (q / S)
             variance = (q * q / 12.0) / S
             self.white_variance = variance
+            self.window_length = j - start + 1
             if self._residuals:
                 m = j - start + 1
                 if m >= 4:
@@ -889,6 +893,7 @@ class ContactSpeedTracker:
             variance = (q * model.sensors.rate) ** 2
         if not ok:
             self.white_variance = float(variance)
+            self.window_length = 0
         if self._residuals and not ok:
             self.contact_variance = np.full(model.n, float(variance))
             self.reading_variance = np.full(model.n, q * q / 12.0)

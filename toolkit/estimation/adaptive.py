@@ -247,7 +247,7 @@ class RobustFilter(Estimator):
         self._tracker = ContactSpeedTracker(self.model, contact_speeds, residuals=True)
         self._bank = WheelSpeedBank(self.model)
         self._noise = NoiseMatcher(100)
-        self._wheel_noise = (0.0, 0.0)
+        self._wheel_noise = getattr(self, "_primed", None) or (0.0, 0.0)
         self._layer = HoldLayer(self.model)
         self._lines = self._layer.lines
         self._anchor = (math.nan, 0)
@@ -266,6 +266,20 @@ class RobustFilter(Estimator):
         self._wheel_offset = np.zeros(n, dtype=np.int64)
         self._first = True
         self.last_nis = math.nan
+
+    def prime(self, samples: list[EncoderSample], commands: list[Any], initial: Any = None) -> None:
+        """Learn the encoders' read noise and jitter from the wheels over ``samples`` (and the
+        commands sent with them) before running from the first of them: what the filter would
+        know of its encoders by the last one (a replay starts from it)."""
+        tracker = ContactSpeedTracker(self.model, initial, residuals=True)
+        noise = None
+        for sample, command in zip(samples, commands):
+            speeds, _, steady, _ = tracker.push(sample.time, sample.wheel_counts, command)
+            if steady and tracker.window_length >= 5:
+                q_w = self.model.sensors.wheel.distance_per_count
+                a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
+                noise = (a / (q_w * q_w), b)
+        self._primed = noise
 
     def _predict_free(self, x: np.ndarray, P: np.ndarray, track: np.ndarray, var: np.ndarray, steady: bool,
                       force: float) -> tuple[np.ndarray, np.ndarray]:
@@ -539,7 +553,7 @@ class RobustFilter(Estimator):
         self._last_command, self._last_force = command, float(force)
         speeds, var, steady, track = self._tracker.push(t, wheels, command)
         self._lag_id.push(t, wheels, command)
-        if steady:
+        if steady and self._tracker.window_length >= 15:
             # The wheels' window residuals against their speeds: read noise (counts) and
             # jitter (s), which the central encoder shares (read by the same electronics at
             # the same instants).
@@ -609,6 +623,9 @@ class KalmanEstimator(Estimator):
         replayed over the samples so far (it then stands where it would had it run all along)."""
         self.tripped = (sample.time, reason)
         robust = self.robust = RobustFilter(self.model, self.prior)
+        robust.prime([past for past, _, _ in self._history] + [sample],
+                     [command for _, command, _ in self._history] + [sample.command],
+                     self._reset_args["contact_speeds"])
         robust.reset(**self._reset_args)
         for past, command, force in self._history:
             robust.observe(past)
@@ -658,6 +675,8 @@ class KalmanEstimator(Estimator):
         verdicts = np.zeros(record.n_samples, dtype=np.int64)
         if trip is not None:
             robust = self.robust = RobustFilter(self.model, self.prior)
+            robust.prime([record.sample(k) for k in range(trip + 1)], list(record.commands[:trip + 1]),
+                         record.initial_commands)
             robust.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
             X, P = X.copy(), P.copy()
             for k in range(record.n_samples):

@@ -18,16 +18,12 @@ from __future__ import annotations
 from ._base import EstimationResult, Estimator, chi2_band
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 from ._prior import ModelPrior
+from .adaptive import ADAPTING, FALLBACK, NOMINAL, AdaptiveKalman, KalmanEstimator, WheelSpeedBank
+from .identification import LagIdentifier
+from .monitor import ConsistencyMonitor, NoiseMatcher
 from .alpha_beta import AlphaBetaTracker, kalata_gains
 from .finite_difference import CentralDifference, WheelDifference
 from .kalman import NominalKalman, RTSSmoother, steady_state_gain
-
-
-class KalmanEstimator(NominalKalman):
-    """The default filter behind the name ``kalman`` (for now the nominal one)."""
-
-    name = "kalman"
-
 
 from .unscented import UnscentedEstimator
 from .window import AdaptiveWindow
@@ -35,4 +31,6 @@ from .window import AdaptiveWindow
 __all__ = ["Estimator", "EstimationResult", "EstimatorModel", "ModelPrior", "chi2_band", "contact_speed_estimates",
            "ContactSpeedTracker",
            "CentralDifference", "WheelDifference", "KalmanEstimator", "NominalKalman", "RTSSmoother",
-           "steady_state_gain", "UnscentedEstimator", "AdaptiveWindow", "AlphaBetaTracker", "kalata_gains"]
+           "steady_state_gain", "UnscentedEstimator", "AdaptiveWindow", "AlphaBetaTracker", "kalata_gains",
+           "AdaptiveKalman", "WheelSpeedBank", "LagIdentifier", "ConsistencyMonitor", "NoiseMatcher",
+           "NOMINAL", "ADAPTING", "FALLBACK"]

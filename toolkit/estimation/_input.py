@@ -131,6 +131,7 @@ class EstimatorModel:
     _follow: float = field(init=False, repr=False)
     _plants: tuple = field(init=False, repr=False)
     _friction_noise: np.ndarray = field(init=False, repr=False)
+    _between: Any = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
@@ -182,6 +183,9 @@ class EstimatorModel:
         spread = np.outer(g, g) * (self._friction_var / self.mass**2)
         spread.setflags(write=False)
         object.__setattr__(self, "_friction_noise", spread)
+        # The between-contacts shortcut: for unequal magnitudes (an adaptive filter's model at
+        # its estimates), where bodies creep across bands the nominal equal ones hold exactly.
+        object.__setattr__(self, "_between", self._quiet_between if np.ptp(forces) > 0 else None)
 
     @property
     def n(self) -> int:
@@ -312,11 +316,38 @@ class EstimatorModel:
                 if gains is not None:
                     self._coast_gains(V, track[0], True, gains)
                 return 0.5 * dV * self.sensors.period, dV, self._friction_noise, None, None, False
+            if steady and self._between is not None:
+                quiet = self._between(V, track[0], force, w)
+                if quiet is not None:
+                    if gains is not None:
+                        self._coast_gains(V, track[0], True, gains)
+                    return 0.5 * quiet * self.sensors.period, quiet, self._friction_noise, None, None, False
         step = self.flow(V, track, force)
         out = self._linearized(V, track, force, step, contact_std)
         if gains is not None:
             self.force_gains(V, track, force, gains, out, step)
         return out
+
+    def _quiet_between(self, V: float, speeds: np.ndarray, force: float, w: float) -> float | None:
+        """A body between two held contact speeds that cannot reach either within the period
+        (the region's net force, the friction law's, carries it less far than the nearer
+        neighbour in its direction, less ``w``, and the other neighbour is farther than
+        ``w``): ``dV = F h / m`` with ``F`` the region's constant force (as the whole-friction
+        shortcut, for any region). None otherwise (the flow decides)."""
+        below, above = -math.inf, math.inf
+        for v in speeds.tolist():
+            if v < V:
+                below = max(below, v)
+            elif v > V:
+                above = min(above, v)
+            else:
+                return None                          # on a contact speed: stick or pass
+        dV = (float(contact_forces(speeds - V, self.forces).sum()) + force) * self.sensors.period / self.mass
+        if dV >= 0.0:
+            ok = above - V > dV + w and V - below > w
+        else:
+            ok = V - below > -dV + w and above - V > w
+        return dV if ok else None
 
     def _coast_gains(self, V: float, speeds: np.ndarray, free: bool, gains: np.ndarray) -> None:
         """:meth:`increment`'s ``gains`` of a period without events: a body that slides
@@ -823,8 +854,17 @@ class ContactSpeedTracker:
         self._lag = model.motor_lag
         low, high = model.speed_limits
         # Clipping only when the motors have limits (the loop's per-sample cost otherwise).
-        self._clip = model.clip if (math.isfinite(low) or math.isfinite(high)) else (lambda u: u)
+        self._clip = self._clipped if (math.isfinite(low) or math.isfinite(high)) else (lambda u: u)
+        self._limits = (low, high)
         self._law_floor = self._q * self._q / 6.0 / model.sensors.period**2
+
+    def _clipped(self, u: np.ndarray) -> np.ndarray:
+        """The command clipped by the motor law (:meth:`EstimatorModel.clip`) when it leaves the
+        speed limits (the common case, inside them, costs two comparisons)."""
+        low, high = self._limits
+        if low <= u.min() and u.max() <= high:
+            return u
+        return self.model.clip(u)
 
     def push(self, t: float, wheel_counts: Any, command: Any
              ) -> tuple[np.ndarray, float, bool, np.ndarray]:

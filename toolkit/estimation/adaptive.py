@@ -1,11 +1,53 @@
-"""The default estimator: the nominal filter while the model holds, an adaptive one after.
+"""The default estimator: the nominal filter while its model holds, an adaptive one after.
 
-(Under construction: the adapting filter alone.)
+:class:`KalmanEstimator` (``kalman``) runs :class:`~toolkit.estimation.kalman.NominalKalman`,
+which trusts the scene, under a :class:`~toolkit.estimation.monitor.ConsistencyMonitor`
+(the windowed NIS of its innovations, and any exact hold that fails). At the first sample
+where the data contradict the model it hands over, for good, to :class:`AdaptiveKalman`,
+replayed from the start of the run over the samples kept so far (it then stands where it
+would had it run all along; its estimates from that sample on are the output). In a world
+that matches the scene the monitor passes and the result is the nominal filter's, to the
+bit: the adaptive parts cost nothing there.
+
+:class:`AdaptiveKalman` does not trust what the scene cannot know (derivations in
+docs/physics.md section 8):
+
+- *Parameters as states.* An extended Kalman filter of ``(X, V, e_1 .. e_n, dc)``: the body's
+  position and speed, each wheel's relative friction error (``f_i (1 + e_i)``) and the
+  drag's error (N s/m), with the prior of :class:`~toolkit.estimation.ModelPrior` and a slow
+  random walk (forgetting). The known input is the plant's exact flow at the current
+  estimates (the model rebuilt when they move), linearized; its sensitivity to the
+  parameters is :meth:`EstimatorModel.force_gains`. Identifiable is what the body's motion
+  feels: while it slides through a region the net force ``sum_i f_i e_i s_i - dc V`` of
+  that region's signs ``s_i``; while it rides contact ``k`` nothing (stiction absorbs it).
+  The filter's covariance carries the rest at the prior.
+- *The body's modes* as an interacting multiple model (filterpy's ``IMMEstimator``
+  arithmetic, compiled in :mod:`toolkit._compiled.imm`; ``reference=True`` runs filterpy's
+  own objects, and the tests find the two equal): *free* (the flow decides: sliding,
+  coasting in a zero-force band or creeping across it, sticking where the estimated
+  friction holds the body), *stuck* (the body rides the contact nearest its speed, whatever
+  the estimated friction says: a marginal stiction is undecided until the counts decide)
+  and *free-form* (no model: a random walk of the speed at the motors' wander, where the
+  contacts hold their speeds; the mode the filter falls back on when neither physical one
+  explains the counts).
+- *Contact speeds* from the wheels: least-squares windows (:class:`ContactSpeedTracker`,
+  with each wheel's read noise from its residuals), then per wheel a random-walk Kalman
+  filter weighted over hypotheses of the motors' wander (:class:`WheelSpeedBank`), and
+  where the encoders read exactly, each wheel's exact set of lines.
+- *Motor lag* identified from the wheels after each command change
+  (:class:`~toolkit.estimation.identification.LagIdentifier`).
+- *Noise*: read noise and jitter matched from the central innovations and from the wheels'
+  residuals (:class:`~toolkit.estimation.monitor.NoiseMatcher`).
+- *The exact holds* (:class:`~toolkit.estimation._hold.HoldLayer`) as the optional layer of
+  the step (predict, layer, update): used where the modes say the body rides a settled
+  contact and the encoders look ideal (lines hold, innovations quiet); within a hold a
+  reading one count behind every line is a missed count, repaired.
+- *The monitor acts*: while its windowed NIS fails, the filter widens its covariances and
+  falls back towards the window (FOAW) estimate, and its result says so (``fallback``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections import deque
@@ -13,34 +55,44 @@ from typing import Any
 
 import numpy as np
 
+from .._compiled import kernels
+from .._validation import as_float, as_int
+from ..errors import ParameterTypeError, parameter_message
+from ..model.friction import contact_forces
+from ..model.motors import MotorPiece
 from ..model.sensors import EncoderRecord, EncoderSample
-from ._base import EstimationResult, Estimator, score
+from ._base import EstimationResult, Estimator, check_covariance, score
+from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel
 from ._prior import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
 from .identification import LagIdentifier
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
 from .window import AdaptiveWindow
-from ..model.motors import MotorPiece
-from .._compiled import kernels
-from ._hold import HoldLayer
 
-__all__ = ["KalmanEstimator", "RobustFilter"]
+__all__ = ["KalmanEstimator", "AdaptiveKalman", "WheelSpeedBank", "NOMINAL", "ADAPTING", "FALLBACK"]
+
+#: Verdicts of :attr:`KalmanEstimator.verdicts` (per sample): the nominal filter's model
+#: holds; the adaptive filter runs; the adaptive filter's own monitor fails and it falls back
+#: towards the window estimate.
+NOMINAL, ADAPTING, FALLBACK = 0, 1, 2
 
 
 class WheelSpeedBank:
-    """Each settled contact's speed as a random walk observed through its wheel's counts: a
-    Kalman filter of ``(x_i, v_i)`` per wheel and per hypothesis of the walk's intensity
-    (:data:`DRIFTS`), the hypotheses weighted by the likelihood of all wheels' readings (a
-    multiple-model estimate of the motors' wander, shared by the wheels), and the read
-    noise matched from the pooled innovations (:class:`~toolkit.estimation.monitor.NoiseMatcher`).
+    """Each settled contact's speed as a random walk observed through its wheel's counts.
 
-    Between command changes only (``steady``); a change restarts the filters (the motor law
-    and the gearbox play then move the contacts), keeping the hypotheses' weights.
+    A Kalman filter of ``(x_i, v_i)`` per wheel and per hypothesis of the walk's intensity
+    (:data:`DRIFTS`), the hypotheses weighted by the likelihood of all wheels' readings (a
+    multiple-model estimate of the motors' wander, shared by the wheels, with a fading
+    memory :data:`FORGET`); each wheel's reading noise is what its window's residuals show
+    (:attr:`ContactSpeedTracker.reading_variance`: quantization, read noise, jitter). Between
+    command changes only; a change restarts the filters (the motor law and the gearbox play
+    then move the contacts), keeping the hypotheses' weights. The arithmetic is the compiled
+    :func:`toolkit._compiled.imm.bank_step`.
     """
 
     #: Hypotheses of the wander's intensity, m/s per sqrt(s).
     DRIFTS = (0.0, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3)
-    #: Fading memory of the hypotheses' log-likelihoods per sample (a window of ~100 samples).
+    #: Fading memory of the hypotheses' log-likelihoods per sample (about 100 samples).
     FORGET = 0.99
 
     def __init__(self, model: EstimatorModel) -> None:
@@ -48,97 +100,82 @@ class WheelSpeedBank:
         self.h = model.sensors.period
         self.q = model.sensors.wheel.distance_per_count
         h = self.h
-        unit = np.array([[h ** 3 / 3.0, h * h / 2.0], [h * h / 2.0, h]])
-        self._Q = np.array([d * d * unit for d in self.DRIFTS])           # (H, 2, 2)
+        self._Q = np.array([[d * d * h ** 3 / 3.0, d * d * h * h / 2.0, d * d * h] for d in self.DRIFTS])
+        self._drifts = np.array(self.DRIFTS)
         self._log_weights = np.zeros(len(self.DRIFTS))
-        self.reset_filters()
-
-    def reset_filters(self) -> None:
-        self._x = None
+        self._drift = float(np.mean(self._drifts))
+        self._x: np.ndarray | None = None
+        self._P = np.zeros((len(self.DRIFTS), self.n, 3))
         self.samples = 0
 
     @property
     def weights(self) -> np.ndarray:
+        """The hypotheses' posterior weights."""
         w = np.exp(self._log_weights - self._log_weights.max())
         return w / w.sum()
 
     @property
     def drift(self) -> float:
         """The weighted mean of the wander's intensity, m/s per sqrt(s)."""
-        return float(self.weights @ np.array(self.DRIFTS))
-
-    def predicted(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The next readings' predicted positions (m), their stds (m) and the contacts' speeds
-        (m/s) under the most likely hypothesis; None without filters."""
-        if self._x is None:
-            return None
-        best = int(np.argmax(self._log_weights))
-        x, P, h = self._x[best], self._P[best], self.h
-        var = P[:, 0, 0] + 2.0 * h * P[:, 0, 1] + h * h * P[:, 1, 1] + self._Q[best, 0, 0]
-        return x[:, 0] + h * x[:, 1], np.sqrt(var), x[:, 1]
+        return self._drift
 
     def push(self, wheels: np.ndarray, steady: bool, speeds: np.ndarray, variance: np.ndarray,
              noise: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """One sample's wheel counts with the window estimates (speeds, m/s, their variances
-        and each wheel's per-reading noise, m^2, :class:`ContactSpeedTracker`); the contacts'
-        speeds (m/s) and variances ((m/s)^2), or None while there is no filter (a transient,
-        or its first reading)."""
-        q, h = self.q, self.h
+        and each wheel's per-reading noise, m^2); the contacts' speeds (m/s) and variances
+        ((m/s)^2), or None while there is no filter (a transient, or its first reading)."""
+        q = self.q
         z = (np.asarray(wheels, dtype=float) + 0.5) * q
-        noise = np.asarray(noise, dtype=float)
         if not steady:
-            self.reset_filters()
+            self._x = None
+            self.samples = 0
             return None
         H = len(self.DRIFTS)
-        R0 = q * q / 12.0
         if self._x is None:
-            self._x = np.broadcast_to(np.stack((z, speeds), axis=1), (H, self.n, 2)).copy()
-            P = np.zeros((H, self.n, 2, 2))
-            P[:, :, 0, 0] = R0
-            P[:, :, 1, 1] = variance
-            self._P = P
+            self._x = np.empty((H, self.n, 2))
+            self._x[:, :, 0] = z
+            self._x[:, :, 1] = speeds
+            self._P[:] = 0.0
+            self._P[:, :, 0] = q * q / 12.0
+            self._P[:, :, 2] = variance
             self.samples = 1
             return None
-        x, P = self._x, self._P
-        # Predict: x += h v; P = F P F^T + Q (F = [[1, h], [0, 1]]).
-        x[..., 0] += h * x[..., 1]
-        p00, p01, p11 = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
-        n00 = p00 + 2.0 * h * p01 + h * h * p11
-        n01 = p01 + h * p11
-        P[..., 0, 0] = n00 + self._Q[:, None, 0, 0]
-        P[..., 0, 1] = P[..., 1, 0] = n01 + self._Q[:, None, 0, 1]
-        P[..., 1, 1] = p11 + self._Q[:, None, 1, 1]
-        # Update with the readings; their noise is what the windows' residuals show (the
-        # quantization, read noise, jitter: white over a window, where a wander bends lines
-        # only over longer spans).
-        y = z - x[..., 0]
-        S = P[..., 0, 0] + noise
-        K0, K1 = P[..., 0, 0] / S, P[..., 1, 0] / S
-        x[..., 0] += K0 * y
-        x[..., 1] += K1 * y
-        p00, p01, p11 = P[..., 0, 0].copy(), P[..., 0, 1].copy(), P[..., 1, 1].copy()
-        P[..., 0, 0] = p00 - K0 * p00
-        P[..., 0, 1] = P[..., 1, 0] = p01 - K0 * p01
-        P[..., 1, 1] = p11 - K1 * p01
-        self._log_weights = self.FORGET * self._log_weights - 0.5 * np.sum(y * y / S + np.log(S), axis=1)
+        kernels("imm", 20 * H * self.n).bank_step(self._x, self._P, self._Q, z, np.asarray(noise, dtype=float),
+                                                  self.h, self._log_weights, self.FORGET)
         self._log_weights -= self._log_weights.max()
         self.samples += 1
         w = self.weights
-        v = w @ x[..., 1]
-        var = w @ (P[..., 1, 1] + (x[..., 1] - v) ** 2)
+        self._drift = float(w @ self._drifts)
+        v = w @ self._x[:, :, 1]
+        var = w @ (self._P[:, :, 2] + (self._x[:, :, 1] - v) ** 2)
         return v, var
 
 
-class RobustFilter(Estimator):
-    """Interacting multiple model over the body's modes, each an augmented-state EKF of ``(X,
-    V, e_1 .. e_n, dc)``: the body's position and speed, each wheel's relative friction error
-    and the drag's error. Mode *free*: the exact flow of the model at the current parameter
-    estimates (sliding, coasting or creeping, sticking where that model sticks); mode
-    *stuck*: the body rides the contact nearest its speed."""
+class AdaptiveKalman(Estimator):
+    """The adaptive filter (see the module): an interacting multiple model of the body's
+    modes over an augmented-state EKF of the friction errors and the drag.
 
-    name = "kalman_robust"
-    FREE, STUCK = 0, 1
-    #: The stuck mode's probability from which a hold may start.
+    Parameters
+    ----------
+    model : EstimatorModel
+        The nominal scene (never the truth).
+    prior : ModelPrior, optional
+        What the filter believes beyond the nominal scene (default ``ModelPrior()``).
+    forgetting : float, 1/s
+        Random-walk intensity of the parameters (``e_i`` per s, ``dc`` N s/m per s, squared
+        per second), ``>= 0``: slow changes are tracked.
+    switching : float
+        Probability per sample that the physical modes (free, stuck) switch, in ``(0,
+        0.5)``.
+    reference : bool
+        Run filterpy's ``IMMEstimator`` over ``KalmanFilter`` objects instead of the compiled
+        kernels (the same arithmetic; slower; the tests' reference).
+    """
+
+    name = "kalman_adaptive"
+    #: Modes: the flow decides; riding the nearest contact; no model.
+    FREE, STUCK, FREEFORM = 0, 1, 2
+    #: The stuck probability (among the physical modes) from which a hold may start.
     HOLD_START = 0.9
     #: Samples over which the encoders must look ideal for the exact lines (:meth:`_ideal`).
     IDEAL_WINDOW = 50
@@ -146,37 +183,46 @@ class RobustFilter(Estimator):
     LINE_BREAKS = 0.03
     #: Largest widening of the covariances per failing sample (a factor).
     WIDEN_MAX = 10.0
+    #: Probability per sample of leaving a physical mode for the free-form one.
+    ESCAPE = 1e-3
 
     def __init__(self, model: EstimatorModel, prior: ModelPrior | None = None, *,
-                 forgetting: float = 0.0, switching: float = 0.02) -> None:
-        self.model = model
-        self.prior = ModelPrior() if prior is None else prior
+                 forgetting: float = 1e-4, switching: float = 0.02, reference: bool = False) -> None:
+        owner = type(self).__name__
+        if not isinstance(model, EstimatorModel):
+            raise ParameterTypeError(parameter_message("model", owner, "be an EstimatorModel", model))
+        prior = ModelPrior() if prior is None else prior
+        if not isinstance(prior, ModelPrior):
+            raise ParameterTypeError(parameter_message("prior", owner, "be a ModelPrior or None", prior))
+        self.model, self.prior = model, prior
+        self.forgetting = as_float(forgetting, "forgetting", owner, low=0.0)
+        switching = as_float(switching, "switching", owner, low=0.0, high=0.5, low_open=True)
+        if not isinstance(reference, bool):
+            raise ParameterTypeError(parameter_message("reference", owner, "be a bool", reference))
+        self.reference = reference
         self.n = model.n
         self.d = self.n + 3
         self.h = model.sensors.period
         self.q = model.sensors.central.distance_per_count
-        self.forgetting = forgetting
-        lag_range = self.prior.lag_range
-        if lag_range is None:
-            lag_range = (0.0, max(DEFAULT_LAG, model.motor_lag))
-        self._lag_range = lag_range
+        self._lag_range = prior.lag_range if prior.lag_range is not None else (
+            0.0, max(DEFAULT_LAG, model.motor_lag))
         self.monitor = ConsistencyMonitor(10, 1e-3)
-        q_c = model.sensors.central.distance_per_count
-        self._foaw = AdaptiveWindow(model.sensors, fit="best", band=q_c)
-        # The contacts' largest acceleration as the model-free mode's intensity in a
-        # transient: (F_tot / m) per sqrt(h) (an acceleration that may flip every period).
-        self._reach_rate = float(model.forces.sum()) / model.mass / math.sqrt(model.sensors.period)
-        # Row i to column j: the physical modes (free, stuck) switch between themselves with
-        # probability ``switching`` per sample and into the model-free one with ``escape``;
-        # the model-free one returns to either with ``switching / 2``.
-        escape = 1e-3
-        self.M = np.array([[1.0 - switching - escape, switching, escape],
-                           [switching, 1.0 - switching - escape, escape],
+        self._foaw = AdaptiveWindow(model.sensors, fit="best", band=self.q)
+        # The contacts' largest acceleration as the free-form mode's intensity in a transient:
+        # (F_tot / m) per sqrt(h) (an acceleration that may flip every period).
+        self._reach_rate = float(model.forces.sum()) / model.mass / math.sqrt(self.h)
+        e = self.ESCAPE
+        # Row i to column j (row-stochastic, as filterpy's IMMEstimator uses it).
+        self.M = np.array([[1.0 - switching - e, switching, e],
+                           [switching, 1.0 - switching - e, e],
                            [0.5 * switching, 0.5 * switching, 1.0 - switching]])
+        self._primed: tuple[float, float] | None = None
         self.reset()
 
-    # -- parameters --------------------------------------------------------------------------
+    # -- parameters ----------------------------------------------------------------------------
     def _prior_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and variance of ``(e_1 .. e_n, dc)``: the spread's; the drag's range as a
+        Gaussian of its midpoint and half-width (the default: the nominal drag, 2 N s/m)."""
         n = self.n
         mean = np.zeros(n + 1)
         var = np.full(n + 1, self.prior.friction_spread ** 2)
@@ -185,21 +231,21 @@ class RobustFilter(Estimator):
         else:
             lo, hi = self.prior.drag_range
             mean[n] = 0.5 * (lo + hi) - self.model.damping
-            var[n] = (0.5 * (hi - lo)) ** 2
+            var[n] = max(0.5 * (hi - lo), 1e-9) ** 2
         return mean, var
 
     def _model_at(self, theta: np.ndarray) -> EstimatorModel:
-        """The model with the friction magnitudes ``f (1 + e)`` (rebuilt only when they moved
-        by more than 1e-4 relative since the last build)."""
+        """The model at the estimated magnitudes ``f (1 + e)``, the identified lag and the
+        motors' wander (rebuilt when a magnitude moved by more than 1e-3 relative, the lag
+        changed or the wander by more than half; the rest is the linear correction)."""
         e = theta[:self.n]
         drift = max(self._bank.drift, self.model.contact_drift)
         lag = self.lag
-        if (self._built is None or np.max(np.abs(e - self._built)) > 1e-4 or lag != self._built_lag
+        if (self._built is None or np.max(np.abs(e - self._built)) > 1e-3 or lag != self._built_lag
                 or not self._built_drift / 1.5 <= drift <= 1.5 * self._built_drift):
             m = self.model
-            forces = m.forces * np.maximum(1.0 + e, 1e-3)
-            self._hat = EstimatorModel(forces, m.mass, m.sensors, motor_lag=lag, damping=m.damping,
-                                       max_window=m.max_window, speed_limits=m.speed_limits,
+            self._hat = EstimatorModel(m.forces * np.maximum(1.0 + e, 1e-3), m.mass, m.sensors, motor_lag=lag,
+                                       damping=m.damping, max_window=m.max_window, speed_limits=m.speed_limits,
                                        contact_drift=drift)
             self._built = e.copy()
             self._built_drift = max(drift, 1e-12)
@@ -208,142 +254,221 @@ class RobustFilter(Estimator):
 
     @property
     def lag(self) -> float:
-        """The motor lag the flow uses, s: the identified one once a command change has been
-        seen through and it lies within the prior's range, else the nominal one."""
+        """The motor lag the flow uses, s: the identified one (within the prior's range) once
+        a command change has been seen through, else the nominal one."""
         lag = self._lag_id.lag
         lo, hi = self._lag_range
         return self.model.motor_lag if lag is None else min(max(lag, lo), hi)
 
+    @property
+    def parameters(self) -> dict[str, Any]:
+        """What the filter has identified: ``friction`` (the magnitudes' estimates, N, shape
+        (n,)) and their std, ``drag`` (N s/m) and its std, ``lag`` (s; None before a change
+        was seen through) and its std, ``wander`` (the motors', m/s per sqrt(s)), ``read_noise``
+        (counts) and ``jitter`` (s) from the wheels."""
+        n, x, P = self.n, self.x, self.P
+        f = self.model.forces
+        return {"friction": f * (1.0 + x[2:2 + n]), "friction_std": f * np.sqrt(np.diag(P)[2:2 + n]),
+                "drag": float(self.model.damping + x[2 + n]), "drag_std": float(math.sqrt(P[2 + n, 2 + n])),
+                "lag": self._lag_id.lag, "lag_std": self._lag_id.lag_std, "wander": self._bank.drift,
+                "read_noise": math.sqrt(self._wheel_noise[0]), "jitter": math.sqrt(self._wheel_noise[1])}
+
+    def prime(self, samples: list[EncoderSample], commands: list[Any], initial: Any = None) -> None:
+        """Learn the encoders' read noise and jitter from the wheels over ``samples`` (with
+        the commands sent at them) before a run from the first of them: what the filter knows
+        of its encoders by the last one (a replay starts from it). Kept by :meth:`reset`."""
+        tracker = ContactSpeedTracker(self.model, initial, residuals=True)
+        q_w = self.model.sensors.wheel.distance_per_count
+        noise = None
+        for sample, command in zip(samples, commands):
+            speeds, _, steady, _ = tracker.push(sample.time, sample.wheel_counts, command)
+            if steady and tracker.window_length >= 5:
+                a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
+                noise = (a / (q_w * q_w), b)
+        self._primed = noise
+
     # -- the recursion --------------------------------------------------------------------------
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
               contact_speeds: Any = None) -> None:
+        owner = f"{type(self).__name__}.reset"
+        speed = as_float(speed, "speed", owner)
+        std = 0.05 if speed_std is None else as_float(speed_std, "speed_std", owner, low=0.0, low_open=True)
         d, n = self.d, self.n
         mean, var = self._prior_moments()
         x = np.zeros(d)
         x[1] = speed
         x[2:] = mean
         P = np.zeros((d, d))
-        P[1, 1] = (0.05 if speed_std is None else speed_std) ** 2
+        P[1, 1] = std * std
         P[2:, 2:] = np.diag(var)
-        self.xs = [x.copy(), x.copy(), x.copy()]
-        self.Ps = [P.copy(), P.copy(), P.copy()]
+        self.xs = np.array([x, x, x])
+        self.Ps = np.array([P, P, P])
         self.mu = np.array([1.0 - 2e-3, 1e-3, 1e-3])
-        self.x, self.P = x, P
-        self._built = None
+        self.xs, self.Ps = self.xs.copy(), self.Ps.copy()
+        self.x, self.P = x.copy(), P.copy()
+        self.out_x, self.out_P = self.x, self.P
+        self._xs0, self._Ps0 = np.empty_like(self.xs), np.empty_like(self.Ps)
+        self._cbar = np.empty(3)
+        self._row0, self._row1 = np.zeros(d), np.zeros(d)
+        self._Q2 = np.zeros((2, 2))
+        self._means, self._rows0, self._rows1 = np.empty((3, d)), np.empty((3, d)), np.empty((3, d))
+        self._noises, self._nis = np.empty((3, 2, 2)), np.empty(3)
+        self._built: np.ndarray | None = None
         self._built_drift = 1e-12
         self._built_lag = self.model.motor_lag
-        self._hat = None
+        self._hat: EstimatorModel | None = None
+        self._gains = np.zeros((2, n + 1))
+        self._stuck_on: int | None = None
+        self._mu_prev = self.mu
         sensors = self.model.sensors
         self._lag_id = LagIdentifier(sensors.wheel.distance_per_count, sensors.backlash, sensors.period,
                                      self._lag_range[1])
         self._lag_id.start(contact_speeds)
-        self.monitor.reset()
-        self._foaw.reset(speed=speed)
-        self.fallback = False
-        self.out_x, self.out_P = self.x, self.P
-        self._gains = np.zeros((2, n + 1))
-        self._free_stuck = False
-        self._mu_prev = self.mu
         self._tracker = ContactSpeedTracker(self.model, contact_speeds, residuals=True)
         self._bank = WheelSpeedBank(self.model)
         self._noise = NoiseMatcher(100)
-        self._wheel_noise = getattr(self, "_primed", None) or (0.0, 0.0)
+        self._wheel_noise = self._primed or (0.0, 0.0)
         self._layer = HoldLayer(self.model)
         self._lines = self._layer.lines
+        self._moments, self._empty = np.zeros(5), np.zeros((1, 2))
+        self.monitor.reset()
+        self._foaw.reset(speed=speed)
+        self.fallback = False
+        self.holding = self.hold_failed = False
         self._anchor = (math.nan, 0)
-        self.holding = False
-        self.hold_failed = False
-        self._moments = np.zeros(5)
-        self._empty = np.zeros((1, 2))
-        self._pending = None
-        self._observed = None
-        self._count_prev = None
+        self._pending: tuple | None = None
+        self._observed: tuple | None = None
+        self._count_prev: int | None = None
         self._repeats = 0
         self._central_offset = 0
+        self._wheel_offset = np.zeros(n, dtype=np.int64)
         self._repairs = False
         self._deaths: deque[int] = deque(maxlen=self.IDEAL_WINDOW)
         self._nis_history: deque[float] = deque(maxlen=self.IDEAL_WINDOW)
-        self._wheel_offset = np.zeros(n, dtype=np.int64)
         self._first = True
         self.last_nis = math.nan
+        self.imm = self._reference_imm() if self.reference else None
 
-    def prime(self, samples: list[EncoderSample], commands: list[Any], initial: Any = None) -> None:
-        """Learn the encoders' read noise and jitter from the wheels over ``samples`` (and the
-        commands sent with them) before running from the first of them: what the filter would
-        know of its encoders by the last one (a replay starts from it)."""
-        tracker = ContactSpeedTracker(self.model, initial, residuals=True)
-        noise = None
-        for sample, command in zip(samples, commands):
-            speeds, _, steady, _ = tracker.push(sample.time, sample.wheel_counts, command)
-            if steady and tracker.window_length >= 5:
-                q_w = self.model.sensors.wheel.distance_per_count
-                a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
-                noise = (a / (q_w * q_w), b)
-        self._primed = noise
+    def _reference_imm(self) -> Any:
+        """filterpy's IMMEstimator over three KalmanFilter objects (``reference=True``)."""
+        from filterpy.kalman import IMMEstimator, KalmanFilter
 
+        filters = []
+        for j in range(3):
+            kf = KalmanFilter(dim_x=self.d, dim_z=1)
+            kf.x = self.xs[j].copy()
+            kf.P = self.Ps[j].copy()
+            kf.H = np.zeros((1, self.d))
+            kf.H[0, 0] = 1.0
+            filters.append(kf)
+        return IMMEstimator(filters, self.mu.copy(), self.M)
+
+    # -- the modes' transitions (each fills row0, row1, Q2 and returns the predicted mean) ----
     def _predict_free(self, x: np.ndarray, P: np.ndarray, track: np.ndarray, var: np.ndarray, steady: bool,
-                      force: float) -> tuple[np.ndarray, np.ndarray]:
-        n = self.n
+                      force: float) -> np.ndarray:
+        """The free mode: the flow at the estimated parameters, or the stuck mode's motion
+        where that flow keeps the body on a contact."""
+        n, h = self.n, self.h
         theta = x[2:]
+        V = float(x[1])
+        k = self._stuck_on
+        if (steady and k is not None and self._sticks(theta, track[0], k, force)
+                and abs(V - track[0, k]) <= 2.0 * math.sqrt(max(P[1, 1], 0.0) + var[k]) + 1e-9):
+            # Stuck at the last step on contact k, which still holds it (the set-valued
+            # friction at the estimated magnitudes): the stuck mode's motion, no flow needed.
+            return self._predict_stuck(x, track, var, k)
         hat = self._model_at(theta)
         delta = theta.copy()
-        delta[:n] -= self._built              # what the built model does not hold yet
-        V = float(x[1])
+        delta[:n] -= self._built                       # what the built model does not hold yet
         gains = self._gains
         var_v = float(var[int(np.argmin(np.abs(track[0] - V)))])
-        dx, dV, Q, slopes, arrival, on_set = hat.increment(
-            V, track, math.sqrt(var_v), math.sqrt(max(P[1, 1], 0.0)), steady, None, force, gains)
-        JX, J = slopes if slopes is not None else (self.h, 1.0)
-        A = np.eye(self.d)
-        A[0, 1] = JX
-        A[1, 1] = J
-        A[0, 2:] = gains[0]
-        A[1, 2:] = gains[1]
+        dx, dV, Q, slopes, _, on_set = hat.increment(V, track, math.sqrt(var_v), math.sqrt(max(P[1, 1], 0.0)),
+                                                     steady, None, force, gains)
+        JX, J = slopes if slopes is not None else (h, 1.0)
         correction = gains @ delta
         x_new = x.copy()
-        x_new[0] = x[0] + self.h * V + dx + correction[0]
+        x_new[0] = x[0] + h * V + dx + correction[0]
         x_new[1] = V + dV + correction[1]
-        # The flow ends with the body on a contact's speed: the free mode predicts it stuck,
-        # which is the stuck mode's motion (with that contact).
-        ends = hat.end_speeds(track)
-        self._free_stuck = bool(on_set and np.min(np.abs(ends - x_new[1])) <= 1e-9)
-        if self._free_stuck:
-            return self._predict_stuck(x, P, track, var, int(np.argmin(np.abs(ends - x_new[1]))))
-        Qfull = np.zeros((self.d, self.d))
-        Qfull[:2, :2] = Q
-        if self.forgetting > 0:
-            Qfull[2:, 2:] += np.diag(np.full(n + 1, self.forgetting * self.h))
-        return x_new, A @ P @ A.T + Qfull
+        gap = np.abs(hat.end_speeds(track) - x_new[1])
+        k = int(np.argmin(gap))
+        self._stuck_on = k if (on_set and gap[k] <= 1e-9) else None
+        if self._stuck_on is not None:
+            # The flow ends with the body on a contact's speed: the stuck mode's motion.
+            return self._predict_stuck(x, track, var, k)
+        row0, row1 = self._row0, self._row1
+        row0[:] = 0.0
+        row1[:] = 0.0
+        row0[0], row0[1], row1[1] = 1.0, JX, J
+        row0[2:] = gains[0]
+        row1[2:] = gains[1]
+        self._Q2[:] = Q
+        return x_new
 
-    def _predict_stuck(self, x: np.ndarray, P: np.ndarray, track: np.ndarray, var: np.ndarray,
-                       k: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        model, h = self.model, self.h
+    def _sticks(self, theta: np.ndarray, speeds: np.ndarray, k: int, force: float) -> bool:
+        """A body at contact ``k``'s speed stays on it at the magnitudes ``f (1 + e)``: the
+        other contacts' force (the friction law), the outside force and the drag lie within
+        contact ``k``'s set-valued ``[-f_k, f_k]``."""
+        forces = self.model.forces * np.maximum(1.0 + theta[:self.n], 1e-3)
+        v = float(speeds[k])
+        G = float(contact_forces(speeds - v, forces).sum()) + force - (self.model.damping + theta[self.n]) * v
+        return abs(G) <= forces[k]
+
+    def _predict_stuck(self, x: np.ndarray, track: np.ndarray, var: np.ndarray, k: int | None = None
+                       ) -> np.ndarray:
+        """The stuck mode: the body rides contact ``k`` (the nearest to its speed): its speed is
+        the contact's (the motor law in a transient), its position moves with it; the
+        contact's estimate errs by ``var[k]`` and wanders (the bank's intensity)."""
+        h = self.h
         if k is None:
             k = int(np.argmin(np.abs(track[0] - x[1])))
-        start, target = track[0, k:k + 1], track[1, k:k + 1]
-        piece = MotorPiece.build(0.0, start, target, model.motor_lag, math.inf)
+        start, target = float(track[0, k]), float(track[1, k])
         x_new = x.copy()
-        x_new[0] = x[0] + float(piece.displacement(h)[0])
-        x_new[1] = float(piece.speeds_at(h)[0])
-        A = np.eye(self.d)
-        A[0, 1] = 0.0
-        A[1, 1] = 0.0
-        Q = np.zeros((self.d, self.d))
-        Q[:2, :2] = var[k] * np.array([[h * h, h], [h, 1.0]]) + model._held_noise
-        return x_new, A @ P @ A.T + Q
+        if start == target:
+            x_new[0] = x[0] + start * h
+            x_new[1] = start
+        else:
+            piece = MotorPiece.build(0.0, track[0, k:k + 1], track[1, k:k + 1], self.lag, math.inf)
+            x_new[0] = x[0] + float(piece.displacement(h)[0])
+            x_new[1] = float(piece.speeds_at(h)[0])
+        row0, row1 = self._row0, self._row1
+        row0[:] = 0.0
+        row1[:] = 0.0
+        row0[0] = 1.0
+        drift = self._bank.drift ** 2
+        Q = self._Q2
+        Q[0, 0] = var[k] * h * h + drift * h ** 3 / 3.0
+        Q[0, 1] = Q[1, 0] = var[k] * h + drift * h * h / 2.0
+        Q[1, 1] = var[k] + drift * h
+        return x_new
 
+    def _predict_freeform(self, x: np.ndarray, steady: bool) -> np.ndarray:
+        """The free-form mode: the speed a random walk (the motors' wander where the contacts
+        hold their speeds, the contacts' whole acceleration per sqrt(h) otherwise)."""
+        h = self.h
+        x_new = x.copy()
+        x_new[0] = x[0] + h * x[1]
+        row0, row1 = self._row0, self._row1
+        row0[:] = 0.0
+        row1[:] = 0.0
+        row0[0], row0[1], row1[1] = 1.0, h, 1.0
+        s2 = (self._bank.drift if steady else self._reach_rate) ** 2
+        self._Q2[:] = s2 * np.array([[h ** 3 / 3.0, h * h / 2.0], [h * h / 2.0, h]])
+        return x_new
+
+    # -- one sample -----------------------------------------------------------------------------
     def _contact_speeds(self, track: np.ndarray, var_v: np.ndarray, steady: bool
                         ) -> tuple[np.ndarray, np.ndarray]:
-        """The period's track with each settled contact at its wheel's exact line when that is
-        sharper than the window's least-squares line: the speed's uniform posterior over the
+        """The period's track with each settled contact at its wheel's exact line where the
+        encoders look ideal and that line is sharper: the speed's uniform posterior over the
         polygon of lines the wheel's counts allow since its window started."""
         var = np.array(var_v, dtype=float)
         lines = self._lines
-        if not (steady and lines.active):
+        if not (steady and lines.active and self._repairs):
             return track, var
         track = track.copy()
         line_moments = kernels("lines", 50 * self.n).line_moments
-        for k in range(self.n):
+        # The contacts the body may meet within the period: the three nearest its speed.
+        for k in np.argsort(np.abs(track[0] - self.x[1]))[:3].tolist():
             if lines.counts[k] >= 3 and line_moments(lines.polys[k], int(lines.counts[k]), self._empty, 0,
                                                      self._moments) > 0.0:
                 v, w = float(self._moments[1]), float(self._moments[4])
@@ -352,104 +477,36 @@ class RobustFilter(Estimator):
                     var[k] = w
         return track, var
 
-    def _mix(self) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
-        """IMM mixing (filterpy's IMMEstimator: ``M`` row-stochastic, from row i to column j)."""
-        M, mu = self.M, self.mu
-        cbar = mu @ M
-        omega = M * mu[:, None] / cbar
-        xs, Ps = [], []
-        for j in range(len(mu)):
-            x = sum(omega[i, j] * self.xs[i] for i in range(len(mu)))
-            P = np.zeros((self.d, self.d))
-            for i in range(len(mu)):
-                y = self.xs[i] - x
-                P += omega[i, j] * (np.outer(y, y) + self.Ps[i])
-            xs.append(x)
-            Ps.append(P)
-        return cbar, xs, Ps
-
-    def _predict_kinematic(self, x: np.ndarray, P: np.ndarray, steady: bool) -> tuple[np.ndarray, np.ndarray]:
-        """The model-free mode: the speed a random walk (the motors' wander the wheels show
-        when the contacts hold, the contacts' whole acceleration otherwise), no parameters."""
-        h = self.h
-        x_new = x.copy()
-        x_new[0] = x[0] + h * x[1]
-        A = np.eye(self.d)
-        A[0, 1] = h
-        intensity = self._bank.drift if steady else self._reach_rate
-        Q = np.zeros((self.d, self.d))
-        Q[:2, :2] = intensity ** 2 * np.array([[h ** 3 / 3.0, h * h / 2.0], [h * h / 2.0, h]])
-        return x_new, A @ P @ A.T + Q
-
-    def _update(self, x: np.ndarray, P: np.ndarray, z: float, R: float
-                ) -> tuple[np.ndarray, np.ndarray, float, float]:
-        S = P[0, 0] + R
-        K = P[:, 0] / S
-        y = z - x[0]
-        x = x + K * y
-        P = P - np.outer(K, P[0, :])
-        P = 0.5 * (P + P.T)
-        likelihood = math.exp(-0.5 * y * y / S) / math.sqrt(2.0 * math.pi * S)
-        return x, P, likelihood, y * y / S
-
-    def _step(self, c: int, t: float, anchor: tuple[float, int], track: np.ndarray,
-              var_v: np.ndarray, steady: bool, force: float) -> None:
+    def _step(self, c: int, t: float, anchor: tuple[float, int], track: np.ndarray, var_v: np.ndarray,
+              steady: bool, force: float) -> None:
+        """Predict (the modes), the optional layer (an exact hold), update (the modes)."""
         q = self.q
+        self._repairs = ideal = self._ideal()
         track, var = self._contact_speeds(track, var_v, steady)
-        prior = (float(self.x[0]), float(self.x[1])), self.P[:2, :2].copy()
-        # The optional layer first (it needs only the last posterior): while the modes say the
-        # body rides a settled contact and the encoders look ideal, the exact hold's posterior
-        # is the estimate, and a reading one count short of every line is a missed count.
+        prior_x, prior_P = (float(self.x[0]), float(self.x[1])), self.P[:2, :2].copy()
+        # The layer needs only the last posterior: where the modes say the body rides a
+        # settled contact and the encoders look ideal, the exact hold's posterior is the
+        # estimate, and a reading a count short of every line is a missed count, repaired.
         out = None
-        self.hold_failed = False
-        ideal = self._repairs = self._ideal(var_v, prior[0][1])
         if steady and self._layer.ready:
-            k = int(np.argmin(np.abs(track[0] - prior[0][1])))
-            # Among the physical modes (the model-free one says nothing of sticking).
+            k = int(np.argmin(np.abs(track[0] - prior_x[1])))
             physical = self._mu_prev[0] + self._mu_prev[1]
-            stuck = (self._mu_prev[1] + (self._mu_prev[0] if self._free_stuck else 0.0)) / max(physical, 1e-300)
-            out = self._layer.step(t, c, anchor, track[0], float(var[k]), prior[0], prior[1],
+            stuck = (self._mu_prev[1] + (self._mu_prev[0] if self._stuck_on is not None else 0.0)) / max(
+                physical, 1e-300)
+            out = self._layer.step(t, c, anchor, track[0], float(var[k]), prior_x, prior_P,
                                    stuck >= self.HOLD_START and ideal, repair=ideal)
-            if out is not None:
-                self.hold_failed = out.failed
-                if out.repaired:
-                    self._central_offset += out.repaired
-                    c += out.repaired
-                    self._anchor = (t, c)
+            if out is not None and out.repaired:
+                self._central_offset += out.repaired
+                c += out.repaired
+                self._anchor = (t, c)
         else:
             self._layer.stop()
-        # The modes: mixing, prediction, update (the Gaussian filters run on beneath a hold).
-        cbar, xs, Ps = self._mix()
-        free = self._predict_free(xs[0], Ps[0], track, var, steady, force)
-        preds = [free, self._predict_stuck(xs[1], Ps[1], track, var),
-                 # The model-free mode speaks only where the contacts hold their speeds; in a
-                 # transient it follows the free mode (the flow knows the motor law).
-                 self._predict_kinematic(xs[2], Ps[2], steady) if steady
-                 else self._predict_free(xs[2], Ps[2], track, var, steady, force)]
-        x_pred = sum(cbar[j] * preds[j][0][0] for j in range(3))
-        predicted = sum(cbar[j] * (preds[j][1][0, 0] + (preds[j][0][0] - x_pred) ** 2) for j in range(3))
-        speed = sum(cbar[j] * preds[j][0][1] for j in range(3))
-        if c == self._count_prev:
-            self._repeats += 1
-        else:
-            self._repeats = 0
+        self.hold_failed = out is not None and out.failed
+        self._repeats = self._repeats + 1 if c == self._count_prev else 0
         self._count_prev = c
         R0 = q * q / 12.0 * (1 + self._repeats)
         z = (c + 0.5) * q
-        # The measurement noise: the quantization's, plus what covariance matching finds in
-        # the innovations (read noise, jitter) against the modes' combined prediction.
-        R = R0 + max(self._noise.extra(speed), q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed)
-        self._noise.push(z - x_pred, predicted, R0, speed)
-        updated = [self._update(xp, Pp, z, R) for xp, Pp in preds]
-        mu = cbar * np.array([u[2] for u in updated])
-        total = mu.sum()
-        self.mu = mu / total if total > 0 and np.isfinite(total) else cbar
-        self.xs, self.Ps = [u[0] for u in updated], [u[1] for u in updated]
-        self._combine()
-        self.last_nis = float(self.mu @ np.array([u[3] for u in updated]))
-        # The NIS of the reading against the combined prediction with the quantization alone
-        # (the test of ideal encoders, :meth:`_ideal`).
-        self._nis_history.append((z - x_pred) ** 2 / (predicted + R0))
+        self._modes(z, R0, track, var, steady, force)
         self.holding = out is not None and not out.failed
         if self.holding:
             self.last_nis = out.nis
@@ -461,29 +518,114 @@ class RobustFilter(Estimator):
             self.P[:2, :2] = out.covariance
         self._mu_prev = self.mu
 
-    def _ideal(self, var_v: np.ndarray, speed: float) -> bool:
+    def _modes(self, z: float, R0: float, track: np.ndarray, var: np.ndarray, steady: bool, force: float) -> None:
+        """The IMM cycle: mix, each mode's prediction, the measurement noise, update, combine."""
+        K = kernels("imm", 40 * self.d * self.d)
+        xs0, Ps0, cbar = self._xs0, self._Ps0, self._cbar
+        K.mix(self.mu, self.M, self.xs, self.Ps, xs0, Ps0, cbar)
+        means, rows0, rows1, noises = self._means, self._rows0, self._rows1, self._noises
+        for j in range(3):
+            if j == self.FREE or (j == self.FREEFORM and not steady):
+                # The free-form mode speaks where the contacts hold their speeds; in a
+                # transient it follows the flow (which knows the motor law).
+                means[j] = self._predict_free(xs0[j], Ps0[j], track, var, steady, force)
+            elif j == self.STUCK:
+                means[j] = self._predict_stuck(xs0[j], track, var)
+            else:
+                means[j] = self._predict_freeform(xs0[j], steady)
+            rows0[j], rows1[j], noises[j] = self._row0, self._row1, self._Q2
+        # The measurement noise: the quantization's plus what covariance matching finds in
+        # the innovations against the modes' combined prediction, or in the wheels' residuals
+        # (read noise, jitter: the same electronics read all encoders at the same instants).
+        x_pred = float(cbar @ means[:, 0])
+        predicted = 0.0
+        for j in range(3):
+            # The predicted variance of X: (A P0 A^T)[0, 0] + Q[0, 0] with row 0 of A.
+            r = rows0[j]
+            predicted += cbar[j] * (float(r @ Ps0[j] @ r) + noises[j, 0, 0] + (means[j, 0] - x_pred) ** 2)
+        speed = float(cbar @ means[:, 1])
+        q = self.q
+        wheel = q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed
+        R = R0 + max(self._noise.extra(speed), wheel)
+        self._noise.push(z - x_pred, predicted, R0, speed)
+        self._nis_history.append((z - x_pred) ** 2 / (predicted + R0))
+        if self.reference:
+            self._modes_reference(z, R, means, list(zip(rows0.copy(), rows1.copy())), noises.copy())
+            return
+        self.x, self.P = np.empty(self.d), np.empty((self.d, self.d))
+        K.cycle(Ps0, means, rows0, rows1, noises, self.forgetting * self.h, cbar, z, R, self.xs, self.Ps,
+                self.mu, self.x, self.P, self._nis)
+        self.last_nis = float(self.mu @ self._nis)
+
+    def _modes_reference(self, z: float, R: float, means: list, rows: list, noises: list) -> None:
+        """The same cycle on filterpy's IMMEstimator: each filter's transition ``F`` (the
+        identity but for the rows of ``(X, V)``), ``Q``, and the input that makes ``F x0 +
+        B u`` the mode's prediction from the mixed state ``x0``."""
+        imm = self.imm
+        xs0 = self._xs0
+        for j, kf in enumerate(imm.filters):
+            F = np.eye(self.d)
+            F[0], F[1] = rows[j]
+            kf.F = F
+            Q = np.eye(self.d) * (self.forgetting * self.h)
+            Q[:2, :2] = noises[j]
+            kf.Q = Q
+            kf.B = (means[j] - F @ xs0[j])[:, None]
+            kf.R = np.array([[R]])
+        imm.predict(u=np.array([1.0]))
+        imm.update(np.array([z]))
+        self.xs = np.array([kf.x.ravel() for kf in imm.filters])
+        self.Ps = np.array([kf.P for kf in imm.filters])
+        self.mu = imm.mu.copy()
+        self.x, self.P = imm.x.ravel().copy(), imm.P.copy()
+        self.last_nis = float(self.mu @ np.array([(kf.y.item() ** 2) / kf.S.item() for kf in imm.filters]))
+
+    def _ideal(self) -> bool:
         """The encoders look ideal (they only quantize, and may miss a count): over the last
-        :attr:`IDEAL_WINDOW` samples, the wheels' exact lines broke (a reading no line of the
-        window allows, after repairing missed counts) on at most :attr:`LINE_BREAKS` of the
-        wheel readings, and the central innovations' 90th percentile NIS is within twice
-        chi-square(1)'s (2.71). Rare outliers (a missed count) pass; read noise or jitter,
-        which break lines within a few readings and spread a third of the innovations, do
-        not."""
+        :attr:`IDEAL_WINDOW` samples the wheels' exact lines broke (a reading no line of the
+        window allows, missed counts repaired) on at most :attr:`LINE_BREAKS` of the wheel
+        readings, and the central innovations' 90th percentile NIS is within twice that of
+        chi-square(1) (2.71): rare outliers (a missed count) pass; read noise, jitter or a
+        wandering motor, which break lines within a few readings, do not."""
         if len(self._nis_history) < self.IDEAL_WINDOW:
             return False
         if sum(self._deaths) > self.LINE_BREAKS * self.n * len(self._deaths):
             return False
-        return float(np.percentile(self._nis_history, 90)) <= 2.0 * 2.706
+        nis = np.fromiter(self._nis_history, float, len(self._nis_history))
+        return float(np.partition(nis, 44)[44]) <= 2.0 * 2.706       # the 45th of 50
 
-    def _combine(self) -> None:
-        mu = self.mu
-        x = sum(mu[i] * self.xs[i] for i in range(len(mu)))
-        P = np.zeros((self.d, self.d))
-        for i in range(len(mu)):
-            y = self.xs[i] - x
-            P += mu[i] * (np.outer(y, y) + self.Ps[i])
-        self.x, self.P = x, P
+    def _act(self) -> None:
+        """The consistency monitor's verdict on this sample, and what the filter does: while
+        the windowed NIS fails, widen the modes' ``(X, V)`` covariances by the window's mean
+        NIS (at most :attr:`WIDEN_MAX`) and fall back towards the window (FOAW) estimate:
+        the output's speed is the covariance intersection of the filter's and the window's
+        (consistent whatever their correlation; for two scalars it keeps the sharper)."""
+        verdict = self.monitor.push(self.last_nis)
+        self.fallback = not verdict.passes
+        self.out_x, self.out_P = self.x, self.P
+        if not self.fallback:
+            return
+        root = math.sqrt(min(max(self.monitor.mean, 1.0), self.WIDEN_MAX))
+        self.Ps[:, :2, :] *= root
+        self.Ps[:, :, :2] *= root
+        self.x, self.P = np.empty(self.d), np.empty((self.d, self.d))
+        kernels("imm").combine(self.mu, self.xs, self.Ps, self.x, self.P)
+        if self.reference:
+            for j, kf in enumerate(self.imm.filters):
+                kf.P = self.Ps[j].copy()
+        speed = self._foaw.estimate()[0]
+        variance = self._foaw.matched_variance
+        if variance > 0.0 and math.isfinite(speed) and variance < self.P[1, 1]:
+            x, P = self.x.copy(), self.P.copy()
+            x[1] = speed
+            P[1, :] = 0.0
+            P[:, 1] = 0.0
+            P[1, 1] = variance
+            self.out_x, self.out_P = x, P
+        else:
+            self.out_x, self.out_P = self.x, self.P
 
+    # -- the interface --------------------------------------------------------------------------
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         if self._observed is not None:
             self.commanded(self._last_command, self._last_force)
@@ -498,10 +640,13 @@ class RobustFilter(Estimator):
         self._deaths.append(self._lines.deaths if self._lines.active else 0)
         if self._first:
             q = self.q
-            for x, P in zip(self.xs, self.Ps):
-                x[0] = (c + 0.5) * q
-                P[0, 0] = q * q / 12.0
-            self._combine()
+            self.xs[:, 0] = (c + 0.5) * q
+            self.Ps[:, 0, :] = 0.0
+            self.Ps[:, :, 0] = 0.0
+            self.Ps[:, 0, 0] = q * q / 12.0
+            self.x, self.P = self.xs[0].copy(), self.Ps[0].copy()
+            if self.reference:
+                self.imm = self._reference_imm()
             self._first = False
             self._count_prev = c
             self._anchor = (sample.time, c)
@@ -509,89 +654,82 @@ class RobustFilter(Estimator):
             anchor, self._anchor = self._anchor, (sample.time, c)
             self._step(c, sample.time, anchor, *pending)
         self._observed = (sample.time, wheels)
-        speed = self._foaw.observe(dataclasses.replace(sample, central_count=c))[0]
-        self._act((speed, self._foaw.matched_variance))
+        self._foaw.push(sample.time, c)
+        self._act()
         return float(self.out_x[1]), float(self.out_P[1, 1])
 
-    def _act(self, window: tuple[float, float]) -> None:
-        """The consistency monitor's verdict on this sample and what the filter does about
-        it: while the windowed NIS fails, widen the modes' ``(X, V)`` covariances by the
-        window's mean NIS (at most :attr:`WIDEN_MAX` per sample) and fall back towards the
-        window (FOAW) estimate: the output is the covariance intersection of the filter's
-        speed and the window's (consistent whatever their correlation)."""
-        verdict = self.monitor.push(self.last_nis)
-        self.fallback = not verdict.passes
-        self.out_x, self.out_P = self.x, self.P
-        if not self.fallback:
-            return
-        factor = min(max(self.monitor.mean, 1.0), self.WIDEN_MAX)
-        for P in self.Ps:
-            P[:2, :] *= math.sqrt(factor)
-            P[:, :2] *= math.sqrt(factor)
-        self._combine()
-        v1, p1 = float(self.x[1]), float(self.P[1, 1])
-        v2, p2 = window
-        if not (p2 > 0.0 and math.isfinite(v2)):
-            self.out_x, self.out_P = self.x, self.P
-            return
-        # Covariance intersection of two scalar estimates: 1 / P = w / p1 + (1 - w) / p2 with
-        # w minimizing P, which for scalars puts all the weight on the smaller variance; the
-        # trace-optimal w is then 0 or 1, so the fused speed is the sharper of the two.
-        x, P = self.x.copy(), self.P.copy()
-        if p2 < p1:
-            # The window's speed replaces the filter's; the position keeps its own estimate
-            # (its correlation with the speed unknown: dropped).
-            x[1] = v2
-            P[1, :] = 0.0
-            P[:, 1] = 0.0
-            P[1, 1] = p2
-        self.out_x, self.out_P = x, P
-
     def commanded(self, command: Any, force: float = 0.0) -> None:
+        if self._observed is None:
+            raise RuntimeError("commanded() follows observe(): once per observed sample.")
+        if type(force) is not float or not math.isfinite(force):
+            force = as_float(force, "force", f"{type(self).__name__}.commanded")
         t, wheels = self._observed
         self._observed = None
-        self._last_command, self._last_force = command, float(force)
-        speeds, var, steady, track = self._tracker.push(t, wheels, command)
+        self._last_command, self._last_force = command, force
+        tracker = self._tracker
+        speeds, _, steady, track = tracker.push(t, wheels, command)
         self._lag_id.push(t, wheels, command)
-        if steady and self._tracker.window_length >= 15:
-            # The wheels' window residuals against their speeds: read noise (counts) and
-            # jitter (s), which the central encoder shares (read by the same electronics at
-            # the same instants).
-            q_w = self._tracker.model.sensors.wheel.distance_per_count
-            a, b = fit_noise(self._tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
+        if steady and tracker.window_length >= 15 and tracker.window_length % 5 == 0:
+            # Read noise (counts) and jitter (s) from the wheels' residuals against their
+            # speeds (windows of 15 readings: clear of the transient).
+            q_w = self.model.sensors.wheel.distance_per_count
+            a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
             self._wheel_noise = (a / (q_w * q_w), b)
-        var_c = self._tracker.contact_variance.copy()
+        var = tracker.contact_variance.copy()
         track = np.array(track, dtype=float)
-        banked = self._bank.push(wheels, steady, speeds, var_c, self._tracker.reading_variance)
+        banked = self._bank.push(wheels, steady, speeds, var, tracker.reading_variance)
         if banked is not None and self._bank.samples >= 5:
             track[:] = banked[0]
-            var_c = banked[1]
-        self._pending = (track, var_c, steady, float(force))
+            var = banked[1]
+        self._pending = (track, var, steady, force)
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
+        if not isinstance(record, EncoderRecord):
+            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
+                                                       "be an EncoderRecord", record))
         started = time.perf_counter()
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
-        xs, Ps = [], []
-        fallback = []
-        for k in range(record.n_samples):
+        K = record.n_samples
+        X, P = np.empty((K, 2)), np.empty((K, 2, 2))
+        fallback = np.zeros(K, dtype=bool)
+        for k in range(K):
             self.step(record.sample(k))
-            xs.append(self.out_x[:2].copy())
-            Ps.append(self.out_P[:2, :2].copy())
-            fallback.append(self.fallback)
-        self.fallbacks = np.array(fallback)
+            X[k], P[k], fallback[k] = self.out_x[:2], self.out_P[:2, :2], self.fallback
+        #: Per sample of the last run: the filter fell back towards the window estimate.
+        self.fallbacks = fallback
         wall = time.perf_counter() - started
-        X, P = np.array(xs), np.array(Ps)
         return score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0], covariance=P)
 
 
-#: Verdict codes of :attr:`KalmanEstimator.verdicts`.
-NOMINAL, ADAPTING = 0, 1
-
-
 class KalmanEstimator(Estimator):
-    """The default estimator (``kalman``): the nominal filter while it is consistent with
-    the data, the adaptive filter from the first sample where it is not (see the module)."""
+    """The default estimator (``kalman``): the nominal filter while it is consistent with the
+    data, the adaptive filter from the first sample where it is not (see the module).
+
+    Parameters
+    ----------
+    model : EstimatorModel
+        The nominal scene.
+    prior : ModelPrior, optional
+        The adaptive filter's prior (default ``ModelPrior()``).
+    initial_covariance : array_like of shape (2, 2), optional
+        The nominal filter's prior covariance of ``(X, V)`` (:class:`NominalKalman`).
+    exact_holds : bool
+        The nominal filter's exact holds (default True).
+    window : int
+        Samples of the monitor's windowed NIS (``>= 1``).
+    false_alarm : float
+        The monitor's false-alarm level per window, in ``(0, 1)``.
+
+    Attributes
+    ----------
+    verdicts : list of int
+        Per sample: :data:`NOMINAL`, :data:`ADAPTING` or :data:`FALLBACK`.
+    tripped : tuple of (float, str) or None
+        When (s) and why the nominal model was left.
+    adaptive : AdaptiveKalman or None
+        The adaptive filter once it runs.
+    """
 
     name = "kalman"
 
@@ -599,12 +737,18 @@ class KalmanEstimator(Estimator):
                  initial_covariance: Any = None, exact_holds: bool = True, window: int = 10,
                  false_alarm: float = 1e-4) -> None:
         from .kalman import NominalKalman
-        from .monitor import ConsistencyMonitor
 
-        self.model = model
-        self.prior = ModelPrior() if prior is None else prior
+        owner = type(self).__name__
+        if not isinstance(model, EstimatorModel):
+            raise ParameterTypeError(parameter_message("model", owner, "be an EstimatorModel", model))
+        prior = ModelPrior() if prior is None else prior
+        if not isinstance(prior, ModelPrior):
+            raise ParameterTypeError(parameter_message("prior", owner, "be a ModelPrior or None", prior))
+        if initial_covariance is not None:
+            initial_covariance = check_covariance(initial_covariance, "initial_covariance", owner, 2)
+        self.model, self.prior = model, prior
         self.nominal = NominalKalman(model, initial_covariance=initial_covariance, exact_holds=exact_holds)
-        self.monitor = ConsistencyMonitor(window, false_alarm)
+        self.monitor = ConsistencyMonitor(as_int(window, "window", owner, low=1), false_alarm)
         self.reset()
 
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
@@ -612,46 +756,66 @@ class KalmanEstimator(Estimator):
         self._reset_args = dict(speed=speed, speed_std=speed_std, contact_speeds=contact_speeds)
         self.nominal.reset(**self._reset_args)
         self.monitor.reset()
-        self.robust: RobustFilter | None = None
+        self.adaptive: AdaptiveKalman | None = None
         self._history: list[tuple[EncoderSample, Any, float]] = []
         self._waiting: EncoderSample | None = None
+        self._last_command: Any = None
+        self._last_force = 0.0
         self.verdicts: list[int] = []
         self.tripped: tuple[float, str] | None = None
 
+    def warm_up(self) -> None:
+        """Load (compile, or read from numba's cache) the kernels the filters run, so that
+        a timed run pays no one-time compilation."""
+        from .._compiled import load
+
+        for name in ("core", "lines", "window", "imm"):
+            load(name)
+
+    def _adaptive(self) -> AdaptiveKalman:
+        return AdaptiveKalman(self.model, self.prior)
+
     def _switch(self, sample: EncoderSample, reason: str) -> tuple[float, float]:
-        """The model failed at ``sample``: the adaptive filter from the start of the run,
-        replayed over the samples so far (it then stands where it would had it run all along)."""
+        """The nominal model failed at ``sample``: the adaptive filter from the start of the
+        run, replayed over the samples kept (it then stands where it would had it run all
+        along)."""
         self.tripped = (sample.time, reason)
-        robust = self.robust = RobustFilter(self.model, self.prior)
-        robust.prime([past for past, _, _ in self._history] + [sample],
-                     [command for _, command, _ in self._history] + [sample.command],
-                     self._reset_args["contact_speeds"])
-        robust.reset(**self._reset_args)
+        adaptive = self.adaptive = self._adaptive()
+        adaptive.prime([past for past, _, _ in self._history] + [sample],
+                       [command for _, command, _ in self._history] + [sample.command],
+                       self._reset_args["contact_speeds"])
+        adaptive.reset(**self._reset_args)
         for past, command, force in self._history:
-            robust.observe(past)
-            robust.commanded(command, force)
-        return robust.observe(sample)
+            adaptive.observe(past)
+            adaptive.commanded(command, force)
+        self._history = []
+        return adaptive.observe(sample)
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
-        if self._waiting is not None:            # no command given after the last sample
+        if self._waiting is not None:             # no command given after the last sample
             self.commanded(self._last_command, self._last_force)
         self._waiting = sample
-        if self.robust is not None:
-            self.verdicts.append(ADAPTING)
-            return self.robust.observe(sample)
+        if self.adaptive is not None:
+            out = self.adaptive.observe(sample)
+            self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
+            return out
         out = self.nominal.observe(sample)
-        verdict = self.monitor.push(self.nominal.last_nis, "an exact hold failed" if self.nominal.hold_failed else "")
+        verdict = self.monitor.push(self.nominal.last_nis,
+                                    "an exact hold failed" if self.nominal.hold_failed else "")
         if verdict.passes:
             self.verdicts.append(NOMINAL)
             return out
-        self.verdicts.append(ADAPTING)
-        return self._switch(sample, verdict.reason)
+        out = self._switch(sample, verdict.reason)
+        self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
+        return out
 
     def commanded(self, command: Any, force: float = 0.0) -> None:
+        if self._waiting is None:
+            raise RuntimeError("commanded() follows observe(): once per observed sample.")
         sample, self._waiting = self._waiting, None
         self._last_command, self._last_force = command, force
-        if self.robust is not None:
-            self.robust.commanded(command, force)
+        if self.adaptive is not None:
+            self.adaptive.commanded(command, force)
         else:
             self.nominal.commanded(command, force)
             self._history.append((sample, command, force))
@@ -660,31 +824,34 @@ class KalmanEstimator(Estimator):
             speed_std: float | None = None) -> EstimationResult:
         """Offline: the nominal filter's pass (its vectorized wheel estimates), the monitor
         over its NIS and hold failures, and from the first failing sample on the adaptive
-        filter's pass over the whole record (what stepping gives)."""
+        filter's pass over the record (what stepping gives)."""
+        if not isinstance(record, EncoderRecord):
+            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
+                                                       "be an EncoderRecord", record))
         started = time.perf_counter()
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         X, P, _, _, nis, _ = self.nominal.filter(record, speed=speed, speed_std=speed_std)
         failures = self.nominal.hold_failures
+        K = record.n_samples
         trip = None
-        for k in range(record.n_samples):
+        for k in range(K):
             verdict = self.monitor.push(nis[k], "an exact hold failed" if failures[k] else "")
             if not verdict.passes:
                 trip = k
                 self.tripped = (float(record.times[k]), verdict.reason)
                 break
-        verdicts = np.zeros(record.n_samples, dtype=np.int64)
+        verdicts = np.full(K, NOMINAL, dtype=np.int64)
         if trip is not None:
-            robust = self.robust = RobustFilter(self.model, self.prior)
-            robust.prime([record.sample(k) for k in range(trip + 1)], list(record.commands[:trip + 1]),
-                         record.initial_commands)
-            robust.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
+            adaptive = self.adaptive = self._adaptive()
+            adaptive.prime([record.sample(k) for k in range(trip + 1)], list(record.commands[:trip + 1]),
+                           record.initial_commands)
+            adaptive.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
             X, P = X.copy(), P.copy()
-            for k in range(record.n_samples):
-                robust.step(record.sample(k))
+            for k in range(K):
+                adaptive.step(record.sample(k))
                 if k >= trip:
-                    X[k] = robust.x[:2]
-                    P[k] = robust.P[:2, :2]
-            verdicts[trip:] = ADAPTING
+                    X[k], P[k] = adaptive.out_x[:2], adaptive.out_P[:2, :2]
+                    verdicts[k] = FALLBACK if adaptive.fallback else ADAPTING
         self.verdicts = verdicts.tolist()
         wall = time.perf_counter() - started
         return score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0], covariance=P,

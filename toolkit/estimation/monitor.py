@@ -155,15 +155,22 @@ class NoiseMatcher:
         self.window = as_int(window, "window", "NoiseMatcher", low=2)
         self.reset()
 
+    #: Updates between refits (the window moves little in between).
+    REFIT = 5
+
     def reset(self) -> None:
         self._rows: deque[tuple[float, float]] = deque(maxlen=self.window)
+        self._count = 0
         self.a = 0.0
         self.b = 0.0
 
     def push(self, innovation: float, predicted: float, base: float, speed: float) -> None:
         """Take one update's innovation (m), ``H P H^T`` and ``R0`` (m^2) and speed (m/s);
-        refit ``a`` (m^2) and ``b`` (s^2)."""
+        refit ``a`` (m^2) and ``b`` (s^2) every :data:`REFIT` updates."""
         self._rows.append((innovation * innovation - predicted - base, speed * speed))
+        self._count += 1
+        if self._count % self.REFIT and len(self._rows) >= 20:
+            return
         rows = np.array(self._rows)
         if rows.shape[0] >= 20:
             # Trimmed: the largest 5 % of the excesses left out (rare outliers, such as a

@@ -84,15 +84,29 @@ class AdaptiveWindow(Estimator):
         self.window = 0
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
+        return self.observe_count(sample.time, sample.central_count)
+
+    def observe_count(self, time: float, count: int) -> tuple[float, float]:
+        """:meth:`observe` of a central ``count`` read at ``time`` (s)."""
+        self.push(time, count)
+        return self.estimate()
+
+    def push(self, time: float, count: int) -> None:
+        """Keep a central ``count`` read at ``time`` (s) without estimating (:meth:`estimate`
+        then gives what :meth:`observe_count` would have)."""
         if self._m == self._cap:                        # keep the newest keep - 1, then append
             kept = self._keep - 1
             self._t[:kept] = self._t[self._m - kept:self._m]
             self._y[:kept] = self._y[self._m - kept:self._m]
             self._m = kept
         m = self._m
-        self._t[m] = sample.time
-        self._y[m] = (sample.central_count + 0.5) * self._q
-        self._m = m = m + 1
+        self._t[m] = time
+        self._y[m] = (count + 0.5) * self._q
+        self._m = m + 1
+
+    def estimate(self) -> tuple[float, float]:
+        """The estimate at the last reading kept (``(speed, variance)``, m/s and (m/s)^2)."""
+        m = self._m
         a = max(0, m - self._keep)
         count = m - a
         slope, n = kernels("window", 2 * count * count).foaw(self._t[a:m], self._y[a:m], count, self.band,

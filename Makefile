@@ -28,7 +28,7 @@ demo: $(STAMP)
 # own switch (the same source must give the same numbers).
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
-	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q tests/test_compiled.py tests/test_lines.py tests/test_baselines.py
+	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q tests/test_compiled.py tests/test_lines.py tests/test_baselines.py tests/test_imm.py
 
 $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 	test -x $(MIN_BIN)/python || $(PYTHON) -m venv $(MIN_VENV)
@@ -38,7 +38,7 @@ $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 
 test-min: $(MIN_STAMP)
 	$(MIN_BIN)/python -m pytest -q
-	NUMBA_DISABLE_JIT=1 $(MIN_BIN)/python -m pytest -q tests/test_compiled.py tests/test_lines.py tests/test_baselines.py
+	NUMBA_DISABLE_JIT=1 $(MIN_BIN)/python -m pytest -q tests/test_compiled.py tests/test_lines.py tests/test_baselines.py tests/test_imm.py
 
 bench: $(STAMP)
 	$(BIN)/python -m toolkit.bench all

@@ -30,28 +30,19 @@ KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "ba
 
 
 def mix(mu, M, xs, Ps, xs0, Ps0, cbar):  # noqa: ANN001, ANN201 (numba kernel)
-    """IMM mixing of ``m`` modes: ``cbar[j] = sum_i mu[i] M[i, j]``, ``w[i, j] = mu[i] M[i,
-    j] / cbar[j]``, ``xs0[j] = sum_i w[i, j] xs[i]``, ``Ps0[j] = sum_i w[i, j] (Ps[i] + (xs[i]
-    - xs0[j]) (xs[i] - xs0[j])^T)``."""
-    m, d = xs.shape
+    """IMM mixing of ``m`` modes: ``cbar[j] = sum_i mu[i] M[i, j]`` and mode ``j``'s mixed
+    state and covariance, :func:`combine` of the modes with weights ``mu[i] M[i, j] /
+    cbar[j]``."""
+    m = xs.shape[0]
+    w = np.empty(m)
     for j in range(m):
         c = 0.0
         for i in range(m):
             c += mu[i] * M[i, j]
         cbar[j] = c
-    for j in range(m):
-        for a in range(d):
-            s = 0.0
-            for i in range(m):
-                s += mu[i] * M[i, j] / cbar[j] * xs[i, a]
-            xs0[j, a] = s
-        for a in range(d):
-            for b in range(d):
-                s = 0.0
-                for i in range(m):
-                    w = mu[i] * M[i, j] / cbar[j]
-                    s += w * (Ps[i, a, b] + (xs[i, a] - xs0[j, a]) * (xs[i, b] - xs0[j, b]))
-                Ps0[j, a, b] = s
+        for i in range(m):
+            w[i] = mu[i] * M[i, j] / c
+        combine(w, xs, Ps, xs0[j], Ps0[j])
 
 
 def predict_rows(P, row0, row1, Q, qtheta, out):  # noqa: ANN001, ANN201 (numba kernel)

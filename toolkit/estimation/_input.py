@@ -132,6 +132,7 @@ class EstimatorModel:
     _plants: tuple = field(init=False, repr=False)
     _friction_noise: np.ndarray = field(init=False, repr=False)
     _between: Any = field(init=False, repr=False)
+    _read_noise: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
@@ -186,6 +187,7 @@ class EstimatorModel:
         # The between-contacts shortcut: for unequal magnitudes (an adaptive filter's model at
         # its estimates), where bodies creep across bands the nominal equal ones hold exactly.
         object.__setattr__(self, "_between", self._quiet_between if np.ptp(forces) > 0 else None)
+        object.__setattr__(self, "_read_noise", self.sensors.read_noise_variance)
 
     @property
     def n(self) -> int:
@@ -196,6 +198,14 @@ class EstimatorModel:
     def settle(self) -> int:
         """Samples after a command change before the wheel differences are trusted."""
         return self._settle
+
+    def reading_variance(self, speed: Any) -> Any:
+        """Variance of one wheel reading, m^2: the quantization's ``q^2 / 12``, the declared
+        read noise's (:attr:`Sensors.read_noise_variance` counts^2) and the jitter's ``(v
+        sigma_t)^2`` for a contact at ``speed`` (m/s)."""
+        sensors = self.sensors
+        q = sensors.wheel.distance_per_count
+        return q * q * (1.0 / 12.0 + self._read_noise) + (speed * sensors.jitter) ** 2
 
     def clip(self, commands: Any) -> np.ndarray:
         """Commands clipped to the motors' speed limits (the motor law's clip), m/s."""
@@ -769,7 +779,7 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
         for i in range(L):
             cov += (w[J[:, i]] - w_s) * tt[:, i, None]
         speeds[chunk] = cov * (q / S)[:, None]
-        variance[chunk] = (q * q / 12.0) / S
+        variance[chunk] = model.reading_variance(np.abs(speeds[chunk]).max(axis=1)) / S
     steady = (idx - last_change) >= settle
     steady &= ~changed
     transient = ~ok
@@ -909,7 +919,7 @@ class ContactSpeedTracker:
             tt = t_rel - t_rel.sum() / (j - start + 1)
             S = float(tt @ tt)
             speeds = (tt @ (wb - wb[0])) * (q / S)
-            variance = (q * q / 12.0) / S
+            variance = float(model.reading_variance(float(np.abs(speeds).max()))) / S
             self.white_variance = variance
             self.window_length = j - start + 1
             if self._residuals:

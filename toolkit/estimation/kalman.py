@@ -33,7 +33,8 @@ while the count repeats (``|V| h < q``, or stuck) the errors of consecutive samp
 same number: ``r`` repeated readings carry the information of one. So each reading gets
 ``R_k = (q^2 / 12) (1 + r_k)`` with ``r_k`` the number of preceding samples with the same
 count: the ``r + 1`` readings of one count together weigh as one, never as ``r + 1``
-independent ones. Read noise adds ``(sigma_n q)^2`` and jitter ``(V sigma_t)^2`` (a read
+independent ones. Read noise adds its variance (a normal of std ``sigma_n`` counts rounded to
+whole counts: :attr:`Sensors.read_noise_variance` times ``q^2``) and jitter ``(V sigma_t)^2`` (a read
 ``d`` seconds off its stamp is ``V d`` off in position), with ``V`` the speed estimate.
 
 When the count changes at every sample at constant speed the errors are still a
@@ -157,12 +158,12 @@ def measurement_variance(counts: np.ndarray, speed: np.ndarray, model: Estimator
     run = np.cumsum(same)
     reset = np.maximum.accumulate(np.where(same == 0, run, 0))
     repeats = run - reset
-    return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
+    return (q * q / 12.0) * (1.0 + repeats) + sensors.read_noise_variance * q * q + (speed * sensors.jitter) ** 2
 
 
 def _measurement_variance_one(repeats: int, speed: float, q: float, sensors: Any) -> float:
     """:func:`measurement_variance` of one sample (same expression), m^2."""
-    return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
+    return (q * q / 12.0) * (1.0 + repeats) + sensors.read_noise_variance * q * q + (speed * sensors.jitter) ** 2
 
 
 def _make_filter(model: EstimatorModel) -> Any:

@@ -1,0 +1,185 @@
+"""The adaptive filter's compiled IMM arithmetic (toolkit._compiled.imm) against filterpy,
+its reference: mixing and combination against IMMEstimator, the sparse prediction against the
+dense ``F P F^T + Q``, the update against KalmanFilter.update, the wheels' bank against a
+plain 2-state Kalman filter. ``make test`` runs this file compiled and again as Python under
+``NUMBA_DISABLE_JIT=1`` (the same source)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from toolkit._compiled import load
+
+K = load("imm")
+filterpy = pytest.importorskip("filterpy.kalman")
+
+
+def _spd(rng: np.random.Generator, d: int, scale: float = 1.0) -> np.ndarray:
+    A = rng.normal(size=(d, d)) * scale
+    return A @ A.T + np.eye(d) * scale * scale * 0.1
+
+
+def _filters(rng: np.random.Generator, m: int, d: int) -> list:
+    out = []
+    for _ in range(m):
+        kf = filterpy.KalmanFilter(dim_x=d, dim_z=1)
+        kf.x = rng.normal(size=d)
+        kf.P = _spd(rng, d)
+        kf.H = np.zeros((1, d))
+        kf.H[0, 0] = 1.0
+        out.append(kf)
+    return out
+
+
+def test_mixing_and_combination_equal_filterpy_imm():
+    # Random modes, unequal mode probabilities, a row-stochastic M with unequal rows: the
+    # kernel's mixed states (filterpy computes them inside IMMEstimator.predict, just before
+    # each filter's own predict, so an identity transition exposes them) and its
+    # combination equal filterpy's to rounding (1e-12 relative).
+    rng = np.random.default_rng(3)
+    m, d = 3, 7
+    filters = _filters(rng, m, d)
+    mu = np.array([0.7, 0.25, 0.05])
+    M = np.array([[0.9, 0.08, 0.02], [0.1, 0.85, 0.05], [0.3, 0.2, 0.5]])
+    xs = np.array([f.x.copy() for f in filters])
+    Ps = np.array([f.P.copy() for f in filters])
+    imm = filterpy.IMMEstimator(filters, mu.copy(), M)
+    for f in filters:
+        f.F = np.eye(d)
+        f.Q = np.zeros((d, d))
+    imm.predict()
+    xs0, Ps0, cbar = np.empty_like(xs), np.empty_like(Ps), np.empty(m)
+    K.mix(mu, M, xs, Ps, xs0, Ps0, cbar)
+    np.testing.assert_allclose(cbar, mu @ M, rtol=1e-14)
+    for j, f in enumerate(filters):
+        np.testing.assert_allclose(xs0[j], f.x, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(Ps0[j], f.P, rtol=1e-12, atol=1e-14)
+    x, P = np.empty(d), np.empty((d, d))
+    K.combine(mu, xs0, Ps0, x, P)
+    np.testing.assert_allclose(x, imm.x, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(P, imm.P, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sparse_prediction_equals_the_dense_product(seed):
+    # A transition that is the identity but for its first two rows (the body's (X, V) over
+    # the augmented state): the kernel's A P A^T + Q equals numpy's dense product (1e-12
+    # relative), symmetric exactly.
+    rng = np.random.default_rng(seed)
+    d = 13
+    P = _spd(rng, d, 1e-3)
+    A = np.eye(d)
+    A[0] = rng.normal(size=d)
+    A[1] = rng.normal(size=d)
+    Q2 = _spd(rng, 2, 1e-4)
+    qtheta = 1e-6
+    out = np.empty((d, d))
+    K.predict_rows(P, A[0].copy(), A[1].copy(), Q2, qtheta, out)
+    Q = np.eye(d) * qtheta
+    Q[:2, :2] = Q2
+    expected = A @ P @ A.T + Q
+    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    assert np.array_equal(out, out.T)
+
+
+def test_update_equals_filterpy_update():
+    # A scalar measurement of the first state: the kernel's Joseph-form update equals
+    # filterpy's (state and covariance to 1e-12 relative); its likelihood is filterpy's
+    # (Gaussian density of the innovation, 1e-12 relative) and its NIS y^2 / S.
+    rng = np.random.default_rng(4)
+    d = 9
+    kf = _filters(rng, 1, d)[0]
+    kf.R = np.array([[0.37]])
+    x, P = kf.x.copy(), kf.P.copy()
+    z = 1.3
+    kf.update(np.array([z]))
+    likelihood, nis = K.update_first(x, P, z, 0.37)
+    np.testing.assert_allclose(x, kf.x, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(P, kf.P, rtol=1e-12, atol=1e-14)
+    assert likelihood == pytest.approx(kf.likelihood, rel=1e-12)
+    assert nis == pytest.approx(kf.y.item() ** 2 / kf.S.item(), rel=1e-12)
+    # An innovation far in the tail: filterpy floors the likelihood at the smallest normal
+    # float, and so does the kernel (the mode then keeps a vanishing, not zero, weight).
+    x2, P2 = np.zeros(d), np.eye(d) * 1e-6
+    assert K.update_first(x2, P2, 1.0, 1e-6)[0] == 2.2250738585072014e-308
+
+
+def test_cycle_equals_filterpy_predict_and_update():
+    # One whole step: mixing, each mode's prediction (transition rows, process noise, and the
+    # input that makes F x0 + B u its mean), the update, the mode probabilities and the
+    # combination, against IMMEstimator.predict(u) / update(z) (1e-10 relative).
+    rng = np.random.default_rng(5)
+    m, d = 3, 6
+    filters = _filters(rng, m, d)
+    mu = np.array([0.5, 0.3, 0.2])
+    M = np.array([[0.97, 0.02, 0.01], [0.02, 0.97, 0.01], [0.01, 0.01, 0.98]])
+    xs = np.array([f.x.copy() for f in filters])
+    Ps = np.array([f.P.copy() for f in filters])
+    xs0, Ps0, cbar = np.empty_like(xs), np.empty_like(Ps), np.empty(m)
+    K.mix(mu, M, xs, Ps, xs0, Ps0, cbar)
+    rows0, rows1 = rng.normal(size=(m, d)), rng.normal(size=(m, d))
+    rows0[:, 0] = 1.0
+    means = rng.normal(size=(m, d))
+    Qs = np.array([_spd(rng, 2, 0.1) for _ in range(m)])
+    qtheta, z, R = 1e-4, 0.4, 0.25
+    for j, f in enumerate(filters):
+        F = np.eye(d)
+        F[0], F[1] = rows0[j], rows1[j]
+        f.F = F
+        f.Q = np.eye(d) * qtheta
+        f.Q[:2, :2] = Qs[j]
+        f.B = (means[j] - F @ xs0[j])[:, None]
+        f.R = np.array([[R]])
+    imm = filterpy.IMMEstimator(filters, mu.copy(), M)
+    imm.predict(u=np.array([1.0]))
+    imm.update(np.array([z]))
+    xs_out, Ps_out, mu_out, x, P, nis = (np.empty_like(xs), np.empty_like(Ps), np.empty(m), np.empty(d),
+                                         np.empty((d, d)), np.empty(m))
+    K.cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R, xs_out, Ps_out, mu_out, x, P, nis)
+    np.testing.assert_allclose(mu_out, imm.mu, rtol=1e-10)
+    for j, f in enumerate(filters):
+        np.testing.assert_allclose(xs_out[j], f.x, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(Ps_out[j], f.P, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(x, imm.x, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(P, imm.P, rtol=1e-10, atol=1e-12)
+
+
+def test_bank_step_equals_a_plain_kalman_filter():
+    # Every (hypothesis, wheel) filter is the 2-state constant-speed filter with the
+    # hypothesis's random-walk noise: the kernel equals filterpy's KalmanFilter on each
+    # (1e-12 relative), and each hypothesis's log-weight gains its log-likelihood sum.
+    rng = np.random.default_rng(6)
+    H, n, h = 3, 4, 0.02
+    drifts = np.array([0.0, 1e-3, 1e-2])
+    Q = np.array([[d * d * h ** 3 / 3, d * d * h * h / 2, d * d * h] for d in drifts])
+    x = rng.normal(size=(H, n, 2)) * [1e-3, 0.1]
+    P = np.empty((H, n, 3))
+    P[..., 0], P[..., 1], P[..., 2] = 1e-8, 1e-9, 1e-6
+    z = rng.normal(size=n) * 1e-3
+    noise = np.full(n, 5e-10) * (1 + np.arange(n))
+    logw = np.array([0.0, -1.0, 2.0])
+    expected_logw = 0.99 * logw.copy()
+    ref = []
+    for a in range(H):
+        for i in range(n):
+            kf = filterpy.KalmanFilter(dim_x=2, dim_z=1)
+            kf.x = x[a, i].copy()
+            kf.P = np.array([[P[a, i, 0], P[a, i, 1]], [P[a, i, 1], P[a, i, 2]]])
+            kf.F = np.array([[1.0, h], [0.0, 1.0]])
+            kf.Q = np.array([[Q[a, 0], Q[a, 1]], [Q[a, 1], Q[a, 2]]])
+            kf.H = np.array([[1.0, 0.0]])
+            kf.R = np.array([[noise[i]]])
+            kf.predict()
+            S = kf.P[0, 0] + noise[i]
+            y = z[i] - kf.x[0]
+            expected_logw[a] -= 0.5 * (y * y / S + math.log(S))
+            kf.update(np.array([z[i]]))
+            ref.append((a, i, kf.x.copy(), kf.P.copy()))
+    K.bank_step(x, P, Q, z, noise, h, logw, 0.99)
+    for a, i, xr, Pr in ref:
+        np.testing.assert_allclose(x[a, i], xr, rtol=1e-12, atol=1e-16)
+        np.testing.assert_allclose(P[a, i], [Pr[0, 0], Pr[0, 1], Pr[1, 1]], rtol=1e-10, atol=1e-20)
+    np.testing.assert_allclose(logw, expected_logw, rtol=1e-12)

@@ -150,7 +150,8 @@ def test_cycle_equals_filterpy_predict_and_update():
 def test_bank_step_equals_a_plain_kalman_filter():
     # Every (hypothesis, wheel) filter is the 2-state constant-speed filter with the
     # hypothesis's random-walk noise: the kernel equals filterpy's KalmanFilter on each
-    # (1e-12 relative), and each hypothesis's log-weight gains its log-likelihood sum.
+    # (1e-12 relative), and each hypothesis's log-weight gains its log-likelihood sum. A
+    # wheel standing in its gearbox play (not seen) is predicted and not updated.
     rng = np.random.default_rng(6)
     H, n, h = 3, 4, 0.02
     drifts = np.array([0.0, 1e-3, 1e-2])
@@ -178,8 +179,27 @@ def test_bank_step_equals_a_plain_kalman_filter():
             expected_logw[a] -= 0.5 * (y * y / S + math.log(S))
             kf.update(np.array([z[i]]))
             ref.append((a, i, kf.x.copy(), kf.P.copy()))
-    K.bank_step(x, P, Q, z, noise, h, logw, 0.99)
+    # Held contacts (the law moves nothing: cx = 0), the play engaged (seen, no shift):
+    # x + h o, o is the constant-speed transition.
+    zero, one = np.zeros(n), np.ones(n)
+    K.bank_step(x, P, Q, zero, h * one, zero, zero, one, z, noise, logw, 0.99)
     for a, i, xr, Pr in ref:
         np.testing.assert_allclose(x[a, i], xr, rtol=1e-12, atol=1e-16)
         np.testing.assert_allclose(P[a, i], [Pr[0, 0], Pr[0, 1], Pr[1, 1]], rtol=1e-10, atol=1e-20)
     np.testing.assert_allclose(logw, expected_logw, rtol=1e-12)
+
+
+def test_bank_step_skips_a_wheel_in_its_play():
+    # seen = 0: the prediction only (x + cx + g o, P grown by the transition and noise), no
+    # log-likelihood term.
+    x = np.array([[[1.0, 0.5]]])
+    P = np.array([[[1e-6, 1e-7, 1e-4]]])
+    Q = np.array([[1e-9, 2e-9, 3e-8]])
+    logw = np.zeros(1)
+    g = 0.02
+    K.bank_step(x, P, Q, np.array([0.003]), np.array([g]), np.array([1e-6]), np.zeros(1), np.zeros(1),
+                np.array([9.0]), np.array([1e-8]), logw, 0.5)
+    np.testing.assert_allclose(x[0, 0], [1.0 + 0.003 + g * 0.5, 0.5], rtol=1e-15)
+    np.testing.assert_allclose(P[0, 0], [1e-6 + 2 * g * 1e-7 + g * g * 1e-4 + 1e-9, 1e-7 + g * 1e-4 + 2e-9,
+                                         1e-4 + 3e-8 + 1e-6], rtol=1e-14)
+    assert logw[0] == 0.0

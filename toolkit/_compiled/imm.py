@@ -16,8 +16,9 @@ modes' states in arrays and calls these per sample.
 - :func:`cycle`: after :func:`mix` and the modes' predicted means (nonlinear, computed by
   the caller from the mixed states), the rest of one IMM step: each mode's
   :func:`predict_rows` and :func:`update_first`, the mode probabilities, :func:`combine`.
-- :func:`bank_step`: the wheels' random-walk filters (every hypothesis and wheel at once):
-  predict, update with the readings, add each hypothesis's log-likelihood.
+- :func:`bank_step`: the wheels' filters (every hypothesis and wheel at once): predict over
+  the period (the motor law's affine transition, and a random walk), update with the
+  readings, add each hypothesis's log-likelihood.
 """
 
 from __future__ import annotations
@@ -124,29 +125,38 @@ def combine(mu, xs, Ps, x, P):  # noqa: ANN001, ANN201 (numba kernel)
             P[a, b] = s
 
 
-def bank_step(x, P, Q, z, noise, h, logw, forget):  # noqa: ANN001, ANN201 (numba kernel)
-    """One sample of the wheels' filters: ``x`` (H, n, 2) positions and speeds, ``P`` (H, n,
-    3) their covariances ``(p_xx, p_xv, p_vv)``, ``Q`` (H, 3) each hypothesis's process noise
-    per period, ``z`` (n,) the readings (m), ``noise`` (n,) their variances (m^2); predict
-    over ``h``, update, and set ``logw[H] <- forget logw - sum_i (y^2 / S + log S) / 2``."""
+def bank_step(x, P, Q, cx, gx, qv, shift, seen, z, noise, logw, forget):  # noqa: ANN001, ANN201 (numba kernel)
+    """One sample of the wheels' filters: ``x`` (H, n, 2) contact positions and speed offsets,
+    ``P`` (H, n, 3) their covariances ``(p_xx, p_xo, p_oo)``, ``Q`` (H, 3) each hypothesis's
+    process noise per period. Per wheel: ``x+ = x + cx + gx o`` (the law's displacement and
+    the offset's), ``o+ = o`` plus ``qv`` on its variance (the law's own error). The reading
+    ``z`` (noise variance ``noise``) sees the contact through the gearbox play: ``x + shift``
+    where ``seen`` is 1 (the play engaged), nothing where it is 0 (the encoder stands in the
+    play: no update). Sets ``logw[H] <- forget logw - sum_i (y^2 / S + log S) / 2`` over the
+    wheels seen."""
     H, n = x.shape[0], x.shape[1]
     for hyp in range(H):
         total = 0.0
         for i in range(n):
-            x[hyp, i, 0] += h * x[hyp, i, 1]
-            p00 = P[hyp, i, 0] + 2.0 * h * P[hyp, i, 1] + h * h * P[hyp, i, 2] + Q[hyp, 0]
-            p01 = P[hyp, i, 1] + h * P[hyp, i, 2] + Q[hyp, 1]
-            p11 = P[hyp, i, 2] + Q[hyp, 2]
-            S = p00 + noise[i]
-            y = z[i] - x[hyp, i, 0]
-            k0 = p00 / S
-            k1 = p01 / S
-            x[hyp, i, 0] += k0 * y
-            x[hyp, i, 1] += k1 * y
-            P[hyp, i, 0] = p00 - k0 * p00
-            P[hyp, i, 1] = p01 - k0 * p01
-            P[hyp, i, 2] = p11 - k1 * p01
-            total += y * y / S + math.log(S)
+            g = gx[i]
+            x[hyp, i, 0] += cx[i] + g * x[hyp, i, 1]
+            p00 = P[hyp, i, 0] + 2.0 * g * P[hyp, i, 1] + g * g * P[hyp, i, 2] + Q[hyp, 0]
+            p01 = P[hyp, i, 1] + g * P[hyp, i, 2] + Q[hyp, 1]
+            p11 = P[hyp, i, 2] + Q[hyp, 2] + qv[i]
+            if seen[i] > 0.0:
+                S = p00 + noise[i]
+                y = z[i] - (x[hyp, i, 0] + shift[i])
+                k0 = p00 / S
+                k1 = p01 / S
+                x[hyp, i, 0] += k0 * y
+                x[hyp, i, 1] += k1 * y
+                p11 = p11 - k1 * p01
+                p01 = p01 - k0 * p01
+                p00 = p00 - k0 * p00
+                total += y * y / S + math.log(S)
+            P[hyp, i, 0] = p00
+            P[hyp, i, 1] = p01
+            P[hyp, i, 2] = p11
         logw[hyp] = forget * logw[hyp] - 0.5 * total
 
 

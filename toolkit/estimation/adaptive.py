@@ -59,8 +59,8 @@ from .._compiled import kernels
 from .._validation import as_float, as_int
 from ..errors import ParameterTypeError, parameter_message
 from ..model.friction import contact_forces
-from ..model.motors import MotorPiece
-from ..model.sensors import EncoderRecord, EncoderSample
+from ..model.motors import MotorPiece, unsaturated_response
+from ..model.sensors import EncoderRecord, EncoderSample, play
 from ._base import EstimationResult, Estimator, check_covariance, score
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel
@@ -89,27 +89,35 @@ def _checked(model: Any, prior: Any, owner: str) -> tuple[EstimatorModel, ModelP
 
 
 class WheelSpeedBank:
-    """Each settled contact's speed as a random walk observed through its wheel's counts.
+    """Each contact's speed from its wheel's counts, through command changes and reversals.
 
-    A Kalman filter of ``(x_i, v_i)`` per wheel and per hypothesis of the walk's intensity
-    (:data:`DRIFTS`), the hypotheses weighted by the likelihood of all wheels' readings (a
-    multiple-model estimate of the motors' wander, shared by the wheels, with a fading
-    memory :data:`FORGET`); each wheel's reading noise is what its window's residuals show
-    (:attr:`ContactSpeedTracker.reading_variance`: quantization, read noise, jitter). Between
-    command changes only; a change restarts the filters (the motor law and the gearbox play
-    then move the contacts), keeping the hypotheses' weights. The arithmetic is the compiled
-    :func:`toolkit._compiled.imm.bank_step`.
+    The motor law (:class:`~toolkit.model.motors.MotorPiece` at the identified lag) carries
+    each contact's *nominal* speed ``n_i`` under the commands sent; the contact runs at ``n_i +
+    o_i``, its offset ``o_i`` the motor's wander about its command (a random walk) and the
+    error of the start. Per wheel and per hypothesis of the wander's intensity
+    (:data:`DRIFTS`) a Kalman filter of ``(x_i, o_i)`` (the encoder's position and the
+    offset): over a period the encoder moves by the law's displacement plus ``h o_i``, except
+    while the gearbox play is being taken up (after a reversal, or a start from rest: the
+    encoder stands still until the contact has travelled the play, the sensor law's play
+    operator). The hypotheses are weighted by the likelihood of all wheels' readings (the
+    wander is the motors', shared), with a fading memory :data:`FORGET`; each reading's noise
+    is what its wheel's window residuals show (:attr:`ContactSpeedTracker.reading_variance`);
+    the law's own error adds :data:`LAW_ERROR` of each speed change it predicts. The
+    arithmetic is the compiled :func:`toolkit._compiled.imm.bank_step`.
     """
 
     #: Hypotheses of the wander's intensity, m/s per sqrt(s).
     DRIFTS = (0.0, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3)
     #: Fading memory of the hypotheses' log-likelihoods per sample (about 100 samples).
     FORGET = 0.99
+    #: Relative error of the speed change the motor law predicts over a period (its std).
+    LAW_ERROR = 0.3
 
     def __init__(self, model: EstimatorModel) -> None:
         self.n = model.n
         self.h = model.sensors.period
         self.q = model.sensors.wheel.distance_per_count
+        self.play = model.sensors.backlash
         h = self.h
         self._Q = np.array([[d * d * h ** 3 / 3.0, d * d * h * h / 2.0, d * d * h] for d in self.DRIFTS])
         self._drifts = np.array(self.DRIFTS)
@@ -117,7 +125,11 @@ class WheelSpeedBank:
         self._drift = float(np.mean(self._drifts))
         self._x: np.ndarray | None = None
         self._P = np.zeros((len(self.DRIFTS), self.n, 3))
-        self.samples = 0
+        self._nominal = np.zeros(self.n)          # the law's speeds, m/s
+        self._y = np.zeros(self.n)                # the encoders' side of the play, m
+        self._h_all = np.full(self.n, h)
+        #: Sub-steps of a period at which the contact's path meets the play operator.
+        self._substeps = h * np.arange(1, 9) / 8.0
 
     @property
     def weights(self) -> np.ndarray:
@@ -130,36 +142,71 @@ class WheelSpeedBank:
         """The weighted mean of the wander's intensity, m/s per sqrt(s)."""
         return self._drift
 
-    def push(self, wheels: np.ndarray, steady: bool, speeds: np.ndarray, variance: np.ndarray,
-             noise: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """One sample's wheel counts with the window estimates (speeds, m/s, their variances
-        and each wheel's per-reading noise, m^2); the contacts' speeds (m/s) and variances
-        ((m/s)^2), or None while there is no filter (a transient, or its first reading)."""
+    def start(self, wheels: np.ndarray, speeds: np.ndarray, variance: np.ndarray) -> None:
+        """The first readings and the contacts' speeds then (m/s) with their variances; the
+        play as the sensor law starts it (loaded behind a moving contact, centred at rest)."""
+        q, H = self.q, len(self.DRIFTS)
+        self._nominal = np.array(speeds, dtype=float)
+        self._y = (np.asarray(wheels, dtype=float) + 0.5) * q          # the encoder side, m
+        self._x = np.zeros((H, self.n, 2))
+        self._x[:, :, 0] = self._y + np.sign(self._nominal) * 0.5 * self.play
+        self._P[:] = 0.0
+        self._P[:, :, 0] = q * q / 12.0
+        self._P[:, :, 2] = variance
+
+    def restart(self, which: np.ndarray, wheels: np.ndarray, speeds: np.ndarray, variance: np.ndarray) -> None:
+        """Restart the filters of the wheels ``which`` (bool, (n,)) from their readings and
+        window estimates (a large transient has ended: see :class:`AdaptiveKalman`)."""
+        if not which.any():
+            return
         q = self.q
-        z = (np.asarray(wheels, dtype=float) + 0.5) * q
-        if not steady:
-            self._x = None
-            self.samples = 0
-            return None
-        H = len(self.DRIFTS)
-        if self._x is None:
-            self._x = np.empty((H, self.n, 2))
-            self._x[:, :, 0] = z
-            self._x[:, :, 1] = speeds
-            self._P[:] = 0.0
-            self._P[:, :, 0] = q * q / 12.0
-            self._P[:, :, 2] = variance
-            self.samples = 1
-            return None
-        kernels("imm", 20 * H * self.n).bank_step(self._x, self._P, self._Q, z, np.asarray(noise, dtype=float),
-                                                  self.h, self._log_weights, self.FORGET)
+        y = (np.asarray(wheels, dtype=float) + 0.5) * q
+        self._nominal = np.where(which, speeds, self._nominal)
+        self._y = np.where(which, y, self._y)
+        self._x[:, which, 0] = (y + np.sign(speeds) * 0.5 * self.play)[which]
+        self._x[:, which, 1] = 0.0
+        self._P[:, which, 0] = q * q / 12.0
+        self._P[:, which, 1] = 0.0
+        self._P[:, which, 2] = np.broadcast_to(variance, (self.n,))[which]
+
+    def push(self, wheels: np.ndarray, command: np.ndarray, lag: float, noise: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """The readings at the end of a period over which ``command`` (m/s, clipped) was held,
+        with the motors' ``lag`` (s) and each reading's noise variance (m^2); the contacts'
+        speeds (m/s) and their variances ((m/s)^2) at the readings."""
+        h = self.h
+        z = (np.asarray(wheels, dtype=float) + 0.5) * self.q
+        u = np.asarray(command, dtype=float)
+        start = self._nominal
+        s = self._substeps
+        if lag > 0.0:
+            piece = MotorPiece.build(0.0, start, u, lag, math.inf)
+            moved = piece.displacement(s[:, None])                     # (substeps, n)
+        else:
+            # Ideal motors take the command at once (the motor law without a lag).
+            moved = s[:, None] * unsaturated_response(start, u, h, 0.0, math.inf)
+        end = (moved[-1] - moved[-2]) / (s[-1] - s[-2]) if lag <= 0.0 else piece.speeds_at(h)
+        self._nominal = end
+        # The encoder sees the contact through the play (the sensor law's play operator) along
+        # the most likely path over the period: where it ends engaged it reads the contact
+        # shifted by the play's half width; where it stands in the play it reads nothing new.
+        best = int(np.argmax(self._log_weights))
+        x, o = self._x[best, :, 0], self._x[best, :, 1]
+        path = x + moved + s[:, None] * o
+        y = play(path, self.play, self._y)[-1]
+        shift = y - path[-1]
+        seen = (np.abs(np.abs(shift) - 0.5 * self.play) <= 1e-9 * max(self.play, 1e-12)) | (self.play == 0.0)
+        law_error = (self.LAW_ERROR * (end - start)) ** 2
+        kernels("imm", 20 * self._Q.shape[0] * self.n).bank_step(
+            self._x, self._P, self._Q, moved[-1], self._h_all, law_error, shift, seen.astype(float), z,
+            np.asarray(noise, dtype=float), self._log_weights, self.FORGET)
+        self._y = np.where(seen, self._x[best, :, 0] + shift, y)
         self._log_weights -= self._log_weights.max()
-        self.samples += 1
         w = self.weights
         self._drift = float(w @ self._drifts)
-        v = w @ self._x[:, :, 1]
-        var = w @ (self._P[:, :, 2] + (self._x[:, :, 1] - v) ** 2)
-        return v, var
+        o = w @ self._x[:, :, 1]
+        var = w @ (self._P[:, :, 2] + (self._x[:, :, 1] - o) ** 2)
+        return end + o, var
 
 
 class AdaptiveKalman(Estimator):
@@ -196,6 +243,9 @@ class AdaptiveKalman(Estimator):
     WIDEN_MAX = 10.0
     #: Probability per sample of leaving a physical mode for the free-form one.
     ESCAPE = 1e-3
+    #: A command step (m/s) beyond which, with the lag not yet identified, the contact's
+    #: transient is taken from the windows rather than the motor law (:meth:`commanded`).
+    LARGE_STEP = 0.02
 
     def __init__(self, model: EstimatorModel, prior: ModelPrior | None = None, *,
                  forgetting: float = 1e-4, switching: float = 0.02, reference: bool = False) -> None:
@@ -332,6 +382,8 @@ class AdaptiveKalman(Estimator):
         self._lag_id.start(contact_speeds)
         self._tracker = ContactSpeedTracker(self.model, contact_speeds, residuals=True)
         self._bank = WheelSpeedBank(self.model)
+        self._initial = None if contact_speeds is None else np.array(contact_speeds, dtype=float)
+        self._held: np.ndarray | None = None
         self._noise = NoiseMatcher(100)
         self._wheel_noise = self._primed or (0.0, 0.0)
         self._layer = HoldLayer(self.model)
@@ -681,12 +733,30 @@ class AdaptiveKalman(Estimator):
             q_w = self.model.sensors.wheel.distance_per_count
             a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
             self._wheel_noise = (a / (q_w * q_w), b)
-        var = tracker.contact_variance.copy()
-        track = np.array(track, dtype=float)
-        banked = self._bank.push(wheels, steady, speeds, var, tracker.reading_variance)
-        if banked is not None and self._bank.samples >= 5:
-            track[:] = banked[0]
-            var = banked[1]
+        u = self.model.clip(np.asarray(command, dtype=float))
+        if self._held is None:
+            # The first sample: the motors run at their initial speeds (or the first command).
+            initial = u if self._initial is None else self._initial
+            var = np.full(self.n, tracker.white_variance)
+            self._bank.start(wheels, initial, var)
+            self._large = np.zeros(self.n, dtype=bool)
+            speeds = initial
+        else:
+            banked, var_b = self._bank.push(wheels, self._held, self.lag, tracker.reading_variance)
+            # A large transient (a reversal, or a step beyond LARGE_STEP) under a lag not yet
+            # identified: the law's path is not trusted there; the window estimates (the motor
+            # law from the change, then the settled lines) stand in until the windows hold
+            # five readings, when the bank restarts from them.
+            if self._lag_id.lag is None and self._lag_range[0] != self._lag_range[1]:
+                held = self._held
+                self._large |= (np.abs(u - held) > self.LARGE_STEP) | (np.sign(u) != np.sign(held))
+            back = self._large & steady & (tracker.window_length >= 5)
+            self._bank.restart(back, wheels, speeds, tracker.contact_variance)
+            self._large &= ~back
+            var = np.where(self._large, tracker.contact_variance, var_b)
+            speeds = np.where(self._large | back, speeds, banked)
+        self._held = u
+        track = np.stack((speeds, speeds if steady else u))
         self._pending = (track, var, steady, force)
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,

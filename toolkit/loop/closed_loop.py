@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float
+from .._validation import as_float, as_float_array
 from ..controllers.base import ControlLaw, Controller
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant
@@ -117,7 +117,7 @@ def _check(plant: Any, controller: Any, sensors: Any, estimator: Any, rate: Any,
 def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
                          sensors: Sensors | None = None, estimator: Any = None,
                          rate: float | None = None, v0: float = 0.0, seed: Any = None,
-                         budget: Budget | None = None) -> ClosedLoopResult:
+                         budget: Budget | None = None, wander: Any = None) -> ClosedLoopResult:
     """Run ``controller`` on ``plant`` from ``t = 0`` to ``t_end`` at the sample rate.
 
     Parameters
@@ -142,12 +142,24 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
         Seeds the sensors' missed counts, read noise and jitter.
     budget : Budget, optional
         Guards of each plant step.
+    wander : array_like of shape (k, n), m/s, optional
+        The motors' wander about their commands (a true world's,
+        :meth:`toolkit.model.truth.TrueWorld.wander`): over the period after sample ``j`` the
+        motors run towards ``command + wander[j]`` (rows past the end: the last one). The
+        record and the result log the commands sent.
 
     Returns
     -------
     ClosedLoopResult
     """
     rate, samples = _check(plant, controller, sensors, estimator, rate, t_end)
+    offsets = None
+    if wander is not None:
+        offsets = as_float_array(wander, "wander", "simulate_closed_loop", ndim=2)
+        if offsets.shape[1] != plant.n:
+            raise ParameterError(parameter_message("wander", "simulate_closed_loop",
+                                                   f"have one column per contact ({plant.n})",
+                                                   f"an array of shape {offsets.shape}"))
     started = time.perf_counter()
     period = 1.0 / rate
     law: ControlLaw = controller.bind(plant, period)
@@ -204,7 +216,8 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
         t_next = t_list[k + 1]
         if jitter > 0:
             t_next += float(np.clip(rng.normal(0.0, jitter), -0.25 * period, 0.25 * period))
-        step = advance(plant, state, u, t_next, external=float(f), budget=budget)
+        step = advance(plant, state, u if offsets is None else u + offsets[min(k, offsets.shape[0] - 1)],
+                       t_next, external=float(f), budget=budget)
         if step.status is not SimulationStatus.SUCCESS:
             status, message, last = step.status, step.message, k + 1
             break

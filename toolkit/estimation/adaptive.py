@@ -264,9 +264,11 @@ class AdaptiveKalman(Estimator):
             0.0, max(DEFAULT_LAG, model.motor_lag))
         self.monitor = ConsistencyMonitor(10, 1e-3)
         self._foaw = AdaptiveWindow(model.sensors, fit="best", band=self.q)
-        # The contacts' largest acceleration as the free-form mode's intensity in a transient:
-        # (F_tot / m) per sqrt(h) (an acceleration that may flip every period).
-        self._reach_rate = float(model.forces.sum()) / model.mass / math.sqrt(self.h)
+        # The free-form mode's intensity while the contacts move: the force the prior's
+        # friction spread leaves unknown, as an acceleration held over a period (m/s per
+        # sqrt(s): sigma_F / m sqrt(h)).
+        spread_force = self.prior.friction_spread * float(np.sqrt(np.sum(model.forces ** 2)))
+        self._moving_rate = max(spread_force, 1e-3 * float(model.forces.sum())) / model.mass * math.sqrt(self.h)
         e = self.ESCAPE
         # Row i to column j (row-stochastic, as filterpy's IMMEstimator uses it).
         self.M = np.array([[1.0 - switching - e, switching, e],
@@ -501,7 +503,8 @@ class AdaptiveKalman(Estimator):
 
     def _predict_freeform(self, x: np.ndarray, steady: bool) -> np.ndarray:
         """The free-form mode: the speed a random walk (the motors' wander where the contacts
-        hold their speeds, the contacts' whole acceleration per sqrt(h) otherwise)."""
+        hold their speeds; while they move, at least the force the prior's friction spread
+        leaves unknown, held over a period)."""
         h = self.h
         x_new = x.copy()
         x_new[0] = x[0] + h * x[1]
@@ -509,7 +512,7 @@ class AdaptiveKalman(Estimator):
         row0[:] = 0.0
         row1[:] = 0.0
         row0[0], row0[1], row1[1] = 1.0, h, 1.0
-        s2 = (self._bank.drift if steady else self._reach_rate) ** 2
+        s2 = (self._bank.drift if steady else max(self._bank.drift, self._moving_rate)) ** 2
         self._Q2[:] = s2 * np.array([[h ** 3 / 3.0, h * h / 2.0], [h * h / 2.0, h]])
         return x_new
 
@@ -583,9 +586,10 @@ class AdaptiveKalman(Estimator):
         K.mix(self.mu, self.M, self.xs, self.Ps, xs0, Ps0, cbar)
         means, rows0, rows1, noises = self._means, self._rows0, self._rows1, self._noises
         for j in range(3):
-            if j == self.FREE or (j == self.FREEFORM and not steady):
-                # The free-form mode speaks where the contacts hold their speeds; in a
-                # transient it follows the flow (which knows the motor law).
+            if j == self.FREE or (j == self.FREEFORM and np.max(np.abs(track[1] - track[0])) > self.LARGE_STEP):
+                # In a large transient (the contacts sweep past the body) the free-form mode
+                # follows the flow, which knows the motor law; elsewhere it is the model-free
+                # alternative (a random walk of the speed).
                 means[j] = self._predict_free(xs0[j], Ps0[j], track, var, steady, force)
             elif j == self.STUCK:
                 means[j] = self._predict_stuck(xs0[j], track, var)

@@ -841,6 +841,10 @@ class ContactSpeedTracker:
         Readings in the last row's window (0 in a transient).
     """
 
+    #: With ``residuals``: windows of eight readings or more refit the residual variance
+    #: every this many rows (it moves little from one row to the next).
+    RESIDUALS_EVERY = 5
+
     def __init__(self, model: EstimatorModel, initial: Any = None, residuals: bool = False) -> None:
         self.model = model
         self._residuals = residuals
@@ -924,15 +928,14 @@ class ContactSpeedTracker:
             self.window_length = j - start + 1
             if self._residuals:
                 m = j - start + 1
-                if m >= 4:
+                if m >= 4 and (m < 8 or m % self.RESIDUALS_EVERY == 0):
                     centred = wb - wb.mean(axis=0)
                     along = tt @ centred
                     rss = np.einsum("ij,ij->j", centred, centred) - along * along / S
                     self.reading_variance = (q * q) * np.maximum(rss / (m - 2), 1.0 / 12.0)
-                    self.contact_variance = self.reading_variance / S
-                else:
+                elif m < 4:
                     self.reading_variance = np.full(model.n, q * q / 12.0)
-                    self.contact_variance = np.full(model.n, variance)
+                self.contact_variance = (self.reading_variance / S if m >= 4 else np.full(model.n, variance))
         elif lc >= 0:
             t_c, u_c, before = self._change  # type: ignore[misc]
             law = unsaturated_response(before, u_c, t - t_c, self._lag, math.inf)

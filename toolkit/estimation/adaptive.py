@@ -179,28 +179,40 @@ class WheelSpeedBank:
         u = np.asarray(command, dtype=float)
         start = self._nominal
         s = self._substeps
-        if lag > 0.0:
+        if lag > 0.0 and not np.array_equal(start, u):
             piece = MotorPiece.build(0.0, start, u, lag, math.inf)
             moved = piece.displacement(s[:, None])                     # (substeps, n)
+            end = piece.speeds_at(h)
         else:
-            # Ideal motors take the command at once (the motor law without a lag).
-            moved = s[:, None] * unsaturated_response(start, u, h, 0.0, math.inf)
-        end = (moved[-1] - moved[-2]) / (s[-1] - s[-2]) if lag <= 0.0 else piece.speeds_at(h)
+            # Settled motors hold the command; ideal ones take it at once (the motor law
+            # without a lag).
+            end = unsaturated_response(start, u, h, 0.0, math.inf)
+            moved = s[:, None] * end
         self._nominal = end
         # The encoder sees the contact through the play (the sensor law's play operator) along
         # the most likely path over the period: where it ends engaged it reads the contact
         # shifted by the play's half width; where it stands in the play it reads nothing new.
         best = int(np.argmax(self._log_weights))
         x, o = self._x[best, :, 0], self._x[best, :, 1]
-        path = x + moved + s[:, None] * o
-        y = play(path, self.play, self._y)[-1]
-        shift = y - path[-1]
-        seen = (np.abs(np.abs(shift) - 0.5 * self.play) <= 1e-9 * max(self.play, 1e-12)) | (self.play == 0.0)
+        half = 0.5 * self.play
+        shift = self._y - x
+        # Engaged behind a contact that keeps moving the same way over the whole period: the
+        # play stays loaded (the operator's fixed point); only the others walk its path.
+        loaded = (np.abs(np.abs(shift) - half) <= 1e-9 * max(half, 1e-12)) & (
+            np.sign(start + o) == np.sign(end + o)) & (np.sign(end + o) == -np.sign(shift)) | (self.play == 0.0)
+        seen = loaded.copy()
+        if not loaded.all():
+            walk = ~loaded
+            path = x[walk] + moved[:, walk] + s[:, None] * o[walk]
+            y = play(path, self.play, self._y[walk])[-1]
+            shift[walk] = y - path[-1]
+            seen[walk] = np.abs(np.abs(shift[walk]) - half) <= 1e-9 * max(half, 1e-12)
         law_error = (self.LAW_ERROR * (end - start)) ** 2
         kernels("imm", 20 * self._Q.shape[0] * self.n).bank_step(
             self._x, self._P, self._Q, moved[-1], self._h_all, law_error, shift, seen.astype(float), z,
             np.asarray(noise, dtype=float), self._log_weights, self.FORGET)
-        self._y = np.where(seen, self._x[best, :, 0] + shift, y)
+        self._y = np.where(seen, self._x[best, :, 0] + shift, self._y if loaded.all() else
+                           np.where(loaded, self._y, x + moved[-1] + h * o + shift))
         self._log_weights -= self._log_weights.max()
         w = self.weights
         self._drift = float(w @ self._drifts)
@@ -377,6 +389,7 @@ class AdaptiveKalman(Estimator):
         self._hat: EstimatorModel | None = None
         self._gains = np.zeros((2, n + 1))
         self._stuck_on: int | None = None
+        self._sticks_key: tuple | None = None
         self._mu_prev = self.mu
         sensors = self.model.sensors
         self._lag_id = LagIdentifier(sensors.wheel.distance_per_count, sensors.backlash, sensors.period,
@@ -468,7 +481,9 @@ class AdaptiveKalman(Estimator):
         """A body at contact ``k``'s speed stays on it at the magnitudes ``f (1 + e)``: the
         other contacts' force (the friction law), the outside force and the drag lie within
         contact ``k``'s set-valued ``[-f_k, f_k]``."""
-        forces = self.model.forces * np.maximum(1.0 + theta[:self.n], 1e-3)
+        if self._sticks_key is None or not np.array_equal(theta, self._sticks_key[0]):
+            self._sticks_key = (theta.copy(), self.model.forces * np.maximum(1.0 + theta[:self.n], 1e-3))
+        forces = self._sticks_key[1]
         v = float(speeds[k])
         G = float(contact_forces(speeds - v, forces).sum()) + force - (self.model.damping + theta[self.n]) * v
         return abs(G) <= forces[k]

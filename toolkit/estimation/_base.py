@@ -248,6 +248,23 @@ class Estimator(abc.ABC):
         outside force (N) applied to the body with them (a rig's; held, like the command,
         until the next sample); used for the prediction to the next one."""
 
+    def _check_record(self, record: Any) -> None:
+        """Refuse anything but an :class:`EncoderRecord` for :meth:`run`."""
+        if not isinstance(record, EncoderRecord):
+            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
+                                                       "be an EncoderRecord", record))
+
+    def _take_observed(self, force: Any) -> tuple[Any, float]:
+        """For :meth:`commanded`: the pending observation (``self._observed``, cleared) and
+        ``force`` checked as a finite float (N)."""
+        observed = self._observed
+        if observed is None:
+            raise RuntimeError("commanded() follows observe(): once per observed sample.")
+        if type(force) is not float or not math.isfinite(force):
+            force = as_float(force, "force", f"{type(self).__name__}.commanded")
+        self._observed = None
+        return observed, force
+
     def step(self, sample: EncoderSample) -> tuple[float, float]:
         """:meth:`observe` the sample, then :meth:`commanded` with its command and force."""
         out = self.observe(sample)
@@ -257,9 +274,7 @@ class Estimator(abc.ABC):
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
         """Estimate the body speed at every sample of ``record`` (reset first)."""
-        if not isinstance(record, EncoderRecord):
-            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
-                                                       "be an EncoderRecord", record))
+        self._check_record(record)
         started = time.perf_counter()
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         out = np.array([self.step(record.sample(k)) for k in range(record.n_samples)])

@@ -111,9 +111,7 @@ class AlphaBetaTracker(Estimator):
             speed_std: float | None = None) -> EstimationResult:
         """Estimate every sample of ``record``; the result carries the position estimates
         and the steady covariance (the tracker's NEES)."""
-        if not isinstance(record, EncoderRecord):
-            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
-                                                       "be an EncoderRecord", record))
+        self._check_record(record)
         started = time.perf_counter()
         self.reset(speed=speed)
         states = []

@@ -266,6 +266,7 @@ class NominalKalman(Estimator):
         self.last_F = self._F
         self.last_Q = np.zeros((2, 2))
         self.last_nis = np.nan
+        self.last_cell = 1.0                   # probability of the last reading's count cell
 
     def _start(self, z: float) -> None:
         kf = self.kf
@@ -285,6 +286,7 @@ class NominalKalman(Estimator):
         lines = self._lines if wheels is not None else None
         if lines is not None:
             self._layer.wheels(t, wheels, track, steady)
+        self.last_cell = 1.0
         if track is None:
             self._start(z)
             self.last_nis = np.nan
@@ -361,6 +363,7 @@ class NominalKalman(Estimator):
             kf.predict(u=np.array([[u[0]], [u[1]]]), B=self._I2, F=F, Q=Q)
             self.last_input = u
             self.last_F = F
+        self.last_cell = self._cell_probability(count, kf.x.item(0), kf.P.item(0), kf.x.item(1))
         # z as a float: filterpy's y = z - H x is the same (1, 1) array, and its deepcopy(z)
         # of a float is free (of an array it is not).
         kf.update(z, H=self._H)
@@ -368,6 +371,25 @@ class NominalKalman(Estimator):
         self.last_nis = kf.y.item() ** 2 * kf.SI.item()
         if inc is not None:
             kf.update(inc[0], R=inc[1], H=self._H_speed)
+
+    def _cell_probability(self, count: int, mean: float, variance: float, speed: float) -> float:
+        """The probability of the reading's count cell ``[c q, (c + 1) q)`` under the predicted
+        position ``N(mean, variance + declared read noise and jitter)`` (m, m^2; ``speed``
+        for the jitter, m/s): the quantized likelihood, where the Gaussian NIS (which
+        spreads the cell into ``q^2 / 12`` of noise) understates how far off a reading is."""
+        q = self._q
+        sensors = self.model.sensors
+        var = variance + sensors.read_noise_variance * q * q + (speed * sensors.jitter) ** 2
+        if var <= 0.0:
+            return 1.0 if count * q <= mean < (count + 1) * q else 0.0
+        scale = 1.0 / math.sqrt(2.0 * var)
+        lo, hi = (count * q - mean) * scale, ((count + 1) * q - mean) * scale
+        # Phi(b) - Phi(a) from the tail on the mean's far side (no cancellation there).
+        if lo > 0.0:
+            return 0.5 * (math.erfc(lo) - math.erfc(hi))
+        if hi < 0.0:
+            return 0.5 * (math.erfc(-hi) - math.erfc(-lo))
+        return 1.0 - 0.5 * (math.erfc(-lo) + math.erfc(hi))
 
     def _held(self, t: float, count: int, anchor: tuple[float, int], speeds: np.ndarray,
               var_v: float) -> bool:
@@ -435,12 +457,7 @@ class NominalKalman(Estimator):
         """The contact speeds commanded at the last observed sample (m/s, shape (n,)) and
         the outside force applied with them (N, held to the next sample): they drive the
         prediction to the next sample."""
-        if self._observed is None:
-            raise RuntimeError("commanded() follows observe(): once per observed sample.")
-        if type(force) is not float or not math.isfinite(force):
-            force = as_float(force, "force", f"{type(self).__name__}.commanded")
-        t, wheels = self._observed
-        self._observed = None
+        (t, wheels), force = self._take_observed(force)
         self._last_command, self._last_force = command, force
         speeds, var, steady, track = self._tracker.push(t, wheels, command)
         self._pending = (track, var, steady, self.model.bounds_row(track, force), force)
@@ -450,9 +467,7 @@ class NominalKalman(Estimator):
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Run over a record: states (k, 2), covariances (k, 2, 2), inputs (k, 2) (row k:
         the period ending at sample k), process noises (k, 2, 2), NIS (k,), wall time (s)."""
-        if not isinstance(record, EncoderRecord):
-            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
-                                                       "be an EncoderRecord", record))
+        self._check_record(record)
         started = time.perf_counter()
         model = self.model
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
@@ -487,10 +502,12 @@ class NominalKalman(Estimator):
         Qs = [np.zeros((2, 2))]
         nis = [math.nan]
         failed = [False]
+        cells = [1.0]
         for k in range(1, K):
             advance(z_l[k], R_l[k], track[k - 1], var_l[k - 1], steady_l[k - 1], bounds[k - 1], force_l[k - 1],
                     counts_l[k], times_l[k], wheels[k])
             failed.append(self.hold_failed)
+            cells.append(self.last_cell)
             x = kf.x
             xs.append((x.item(0), x.item(1)))
             Ps.append(kf.P)
@@ -503,6 +520,8 @@ class NominalKalman(Estimator):
         self.transitions = np.array(Fs)
         #: Per sample: the reading left every line of an exact hold (the hold failed).
         self.hold_failures = np.array(failed)
+        #: Per sample: the probability of its count cell under the prediction.
+        self.cell_probabilities = np.array(cells)
         return X, P, U, Q, np.array(nis), time.perf_counter() - started
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,

@@ -203,3 +203,61 @@ def test_bank_step_skips_a_wheel_in_its_play():
     np.testing.assert_allclose(P[0, 0], [1e-6 + 2 * g * 1e-7 + g * g * 1e-4 + 1e-9, 1e-7 + g * 1e-4 + 2e-9,
                                          1e-4 + 3e-8 + 1e-6], rtol=1e-14)
     assert logw[0] == 0.0
+
+
+def test_bank_moments_are_the_mixture_of_the_hypotheses():
+    # Against NumPy's weighted moments (1e-13 relative: sums of six terms): the weights are the
+    # softmax of the log-likelihoods (shifted to a maximum 0 in place), the offset's mixture
+    # variance is the within- plus the between-hypotheses part.
+    rng = np.random.default_rng(8)
+    H, n = 6, 5
+    x = rng.normal(size=(H, n, 2)) * [1e-3, 1e-3]
+    P = np.abs(rng.normal(size=(H, n, 3))) * 1e-7
+    logw = rng.normal(size=H) * 3.0 - 40.0
+    drifts = np.array([0.0, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3])
+    w = np.exp(logw - logw.max())
+    w /= w.sum()
+    mean = w @ x[:, :, 1]
+    var = w @ (P[:, :, 2] + (x[:, :, 1] - mean) ** 2)
+    expected_logw = logw - logw.max()
+    o, v = np.empty(n), np.empty(n)
+    drift = K.bank_moments(x, P, logw, drifts, o, v)
+    np.testing.assert_allclose(drift, w @ drifts, rtol=1e-13)
+    np.testing.assert_allclose(o, mean, rtol=1e-13, atol=1e-20)
+    np.testing.assert_allclose(v, var, rtol=1e-13)
+    np.testing.assert_allclose(logw, expected_logw, rtol=0, atol=1e-14)
+
+
+def test_predicted_first_is_the_mixture_prediction():
+    # Mode j's predicted variance of the first state is (A_j P0_j A_j^T + Q_j)[0, 0] with
+    # A_j's first row r_j: against the dense NumPy product (1e-12 relative), plus the
+    # modes' spread about the mixture mean.
+    rng = np.random.default_rng(9)
+    m, d = 3, 7
+    cbar = np.array([0.7, 0.2, 0.1])
+    means = rng.normal(size=(m, d))
+    rows0 = rng.normal(size=(m, d))
+    rows0[1, 3:] = 0.0                       # zero entries are skipped: the same sum
+    Ps0 = np.array([_spd(rng, d) for _ in range(m)])
+    Qs = np.array([_spd(rng, 2) for _ in range(m)])
+    x0 = cbar @ means[:, 0]
+    var = sum(cbar[j] * (rows0[j] @ Ps0[j] @ rows0[j] + Qs[j, 0, 0] + (means[j, 0] - x0) ** 2)
+              for j in range(m))
+    got = K.predicted_first(cbar, means, rows0, Ps0, Qs)
+    np.testing.assert_allclose(got, (x0, var, cbar @ means[:, 1]), rtol=1e-12)
+
+
+def test_play_loaded_is_the_play_operators_fixed_point():
+    # Loaded: the encoder sits the play's half width behind a contact whose speed keeps its
+    # sign over the period; a reversal, a shift short of the half width, or an encoder ahead
+    # of its contact are not. Without play every wheel is loaded.
+    half = 4e-4
+    shift = np.array([-half, -half, -half, -0.5 * half, half, half])
+    start = np.array([0.1, 0.1, 0.1, 0.1, -0.1, 0.1])
+    end = np.array([0.2, -0.05, 0.1, 0.1, -0.2, 0.1])
+    o = np.zeros(6)
+    loaded = np.empty(6)
+    missing = K.play_loaded(shift, start, end, o, half, loaded)
+    np.testing.assert_array_equal(loaded, [1.0, 0.0, 1.0, 0.0, 1.0, 0.0])
+    assert missing == 3
+    assert K.play_loaded(shift, start, end, o, 0.0, loaded) == 0 and loaded.all()

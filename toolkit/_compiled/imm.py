@@ -19,6 +19,11 @@ modes' states in arrays and calls these per sample.
 - :func:`bank_step`: the wheels' filters (every hypothesis and wheel at once): predict over
   the period (the motor law's affine transition, and a random walk), update with the
   readings, add each hypothesis's log-likelihood.
+- :func:`bank_moments`: the hypotheses' weights from their log-likelihoods, the weighted
+  wander intensity and each wheel's offset mean and variance over the hypotheses.
+- :func:`predicted_first`: the modes' mixture prediction of the first state (its mean and
+  variance) and the second's mean, before the update.
+- :func:`play_loaded`: which wheels keep their gearbox play loaded over a period.
 """
 
 from __future__ import annotations
@@ -27,7 +32,9 @@ import math
 
 import numpy as np
 
-KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {}}
+KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {},
+           "bank_moments": {}, "play_loaded": {}, "sign_of": {},
+           "predicted_first": {}}
 
 
 def mix(mu, M, xs, Ps, xs0, Ps0, cbar):  # noqa: ANN001, ANN201 (numba kernel)
@@ -158,6 +165,92 @@ def bank_step(x, P, Q, cx, gx, qv, shift, seen, z, noise, logw, forget):  # noqa
             P[hyp, i, 1] = p01
             P[hyp, i, 2] = p11
         logw[hyp] = forget * logw[hyp] - 0.5 * total
+
+
+def predicted_first(cbar, means, rows0, Ps0, Qs):  # noqa: ANN001, ANN201 (numba kernel)
+    """With mode probabilities ``cbar`` (m,), predicted means ``means`` (m, d), the first rows
+    of the transitions ``rows0`` (m, d) from the mixed covariances ``Ps0`` (m, d, d) and the
+    process noises ``Qs`` (m, 2, 2): the mixture's ``(mean of x0, variance of x0, mean of
+    x1)``, the variance ``sum_j cbar_j (r_j P0_j r_j^T + Q_j[0, 0] + (mean_j - mean)^2)``."""
+    m, d = means.shape[0], means.shape[1]
+    x0 = 0.0
+    x1 = 0.0
+    for j in range(m):
+        x0 += cbar[j] * means[j, 0]
+        x1 += cbar[j] * means[j, 1]
+    var = 0.0
+    for j in range(m):
+        quad = 0.0
+        for a in range(d):
+            ra = rows0[j, a]
+            if ra == 0.0:
+                continue
+            row = 0.0
+            for b in range(d):
+                row += Ps0[j, a, b] * rows0[j, b]
+            quad += ra * row
+        dev = means[j, 0] - x0
+        var += cbar[j] * (quad + Qs[j, 0, 0] + dev * dev)
+    return x0, var, x1
+
+
+def bank_moments(x, P, logw, drifts, o, var):  # noqa: ANN001, ANN201 (numba kernel)
+    """After :func:`bank_step`: ``logw`` shifted to its maximum 0 (in place), the weights
+    ``w = exp(logw) / sum``, and per wheel the mixture's offset mean ``o[i] = sum_h w_h
+    x[h, i, 1]`` and variance ``var[i] = sum_h w_h (P[h, i, 2] + (x[h, i, 1] - o[i])^2)``
+    (written in place); returns ``sum_h w_h drifts[h]``."""
+    H, n = x.shape[0], x.shape[1]
+    top = logw[0]
+    for h in range(1, H):
+        top = max(top, logw[h])
+    w = np.empty(H)
+    total = 0.0
+    for h in range(H):
+        logw[h] -= top
+        w[h] = math.exp(logw[h])
+        total += w[h]
+    drift = 0.0
+    for h in range(H):
+        w[h] /= total
+        drift += w[h] * drifts[h]
+    for i in range(n):
+        m = 0.0
+        for h in range(H):
+            m += w[h] * x[h, i, 1]
+        v = 0.0
+        for h in range(H):
+            d = x[h, i, 1] - m
+            v += w[h] * (P[h, i, 2] + d * d)
+        o[i] = m
+        var[i] = v
+    return drift
+
+
+def sign_of(v):  # noqa: ANN001, ANN201 (numba kernel)
+    """-1, 0 or 1: the sign of ``v``."""
+    return 1 if v > 0.0 else (-1 if v < 0.0 else 0)
+
+
+def play_loaded(shift, start, end, o, half, loaded):  # noqa: ANN001, ANN201 (numba kernel)
+    """Per wheel, 1 where the encoder stays engaged behind its contact over the period (the
+    play operator's fixed point: the encoder ``shift`` from the contact is the play's half
+    width ``half`` to 1e-9 relative, behind a contact whose speed ``start + o`` to ``end +
+    o`` keeps its sign), else 0, in ``loaded``; returns how many are not. Without play
+    (``half = 0``) every wheel is loaded."""
+    n = shift.shape[0]
+    missing = 0
+    tol = 1e-9 * max(half, 1e-12)
+    for i in range(n):
+        ok = half == 0.0
+        if not ok:
+            a, b = start[i] + o[i], end[i] + o[i]
+            sa = sign_of(a)
+            sb = sign_of(b)
+            ok = abs(abs(shift[i]) - half) <= tol and sa == sb and sb == -sign_of(shift[i])
+        loaded[i] = 1.0 if ok else 0.0
+        if not ok:
+            missing += 1
+    return missing
 
 
 def cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R, xs, Ps, mu, x, P, nis):  # noqa: ANN001, ANN201

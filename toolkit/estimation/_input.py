@@ -386,6 +386,11 @@ class EstimatorModel:
         ``-V`` averaged over the start and end speeds.
         """
         h, n = self.sensors.period, self.n
+        if step is not None and not step.events and self.damping == 0.0:
+            # No event in the period: the signs hold throughout and the response to a force
+            # is the free body's (or none, stuck all along): the closed form.
+            self._coast_gains(V, track[0], step.state.stuck is None, gains)
+            return gains
         if out is None:
             out = self.increment(V, track, 0.0, 0.0, False, None, force)
         delta = 1e-7 * float(self.forces.sum())

@@ -130,6 +130,7 @@ class WheelSpeedBank:
         self._nominal = np.zeros(self.n)          # the law's speeds, m/s
         self._y = np.zeros(self.n)                # the encoders' side of the play, m
         self._h_all = np.full(self.n, h)
+        self._loaded = np.zeros(self.n)
         #: Sub-steps of a period at which the contact's path meets the play operator.
         self._substeps = h * np.arange(1, 9) / 8.0
 
@@ -200,26 +201,26 @@ class WheelSpeedBank:
         shift = self._y - x
         # Engaged behind a contact that keeps moving the same way over the whole period: the
         # play stays loaded (the operator's fixed point); only the others walk its path.
-        loaded = (np.abs(np.abs(shift) - half) <= 1e-9 * max(half, 1e-12)) & (
-            np.sign(start + o) == np.sign(end + o)) & (np.sign(end + o) == -np.sign(shift)) | (self.play == 0.0)
+        K = kernels("imm", 20 * self._Q.shape[0] * self.n)
+        loaded = self._loaded
+        walking = K.play_loaded(shift, start, end, o, half, loaded)
         seen = loaded.copy()
-        if not loaded.all():
-            walk = ~loaded
+        if walking:
+            walk = loaded == 0.0
             path = x[walk] + moved[:, walk] + s[:, None] * o[walk]
             y = play(path, self.play, self._y[walk])[-1]
             shift[walk] = y - path[-1]
             seen[walk] = np.abs(np.abs(shift[walk]) - half) <= 1e-9 * max(half, 1e-12)
         law_error = (self.LAW_ERROR * (end - start)) ** 2
-        kernels("imm", 20 * self._Q.shape[0] * self.n).bank_step(
-            self._x, self._P, self._Q, moved[-1], self._h_all, law_error, shift, seen.astype(float), z,
-            np.asarray(noise, dtype=float), self._log_weights, self.FORGET)
-        self._y = np.where(seen, self._x[best, :, 0] + shift, self._y if loaded.all() else
-                           np.where(loaded, self._y, x + moved[-1] + h * o + shift))
-        self._log_weights -= self._log_weights.max()
-        w = self.weights
-        self._drift = float(w @ self._drifts)
-        o = w @ self._x[:, :, 1]
-        var = w @ (self._P[:, :, 2] + (self._x[:, :, 1] - o) ** 2)
+        K.bank_step(self._x, self._P, self._Q, moved[-1], self._h_all, law_error, shift, seen, z,
+                    np.asarray(noise, dtype=float), self._log_weights, self.FORGET)
+        if walking:
+            self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift,
+                               np.where(loaded > 0.0, self._y, x + moved[-1] + h * o + shift))
+        else:
+            self._y = self._x[best, :, 0] + shift
+        o, var = np.empty(self.n), np.empty(self.n)
+        self._drift = K.bank_moments(self._x, self._P, self._log_weights, self._drifts, o, var)
         return end + o, var
 
 
@@ -260,6 +261,9 @@ class AdaptiveKalman(Estimator):
     #: A command step (m/s) beyond which, with the lag not yet identified, the contact's
     #: transient is taken from the windows rather than the motor law (:meth:`commanded`).
     LARGE_STEP = 0.02
+    #: Relative move of an estimated friction magnitude that rebuilds the flow's model (below
+    #: it the sensitivities carry the change, linearly).
+    REBUILD = 1e-2
 
     def __init__(self, model: EstimatorModel, prior: ModelPrior | None = None, *,
                  forgetting: float = 1e-4, switching: float = 0.02, reference: bool = False) -> None:
@@ -313,7 +317,7 @@ class AdaptiveKalman(Estimator):
         e = theta[:self.n]
         drift = max(self._bank.drift, self.model.contact_drift)
         lag = self.lag
-        if (self._built is None or np.max(np.abs(e - self._built)) > 1e-3 or lag != self._built_lag
+        if (self._built is None or np.max(np.abs(e - self._built)) > self.REBUILD or lag != self._built_lag
                 or not self._built_drift / 1.5 <= drift <= 1.5 * self._built_drift):
             m = self.model
             self._hat = EstimatorModel(m.forces * np.maximum(1.0 + e, 1e-3), m.mass, m.sensors, motor_lag=lag,
@@ -391,7 +395,6 @@ class AdaptiveKalman(Estimator):
         self._hat: EstimatorModel | None = None
         self._gains = np.zeros((2, n + 1))
         self._stuck_on: int | None = None
-        self._sticks_key: tuple | None = None
         self._mu_prev = self.mu
         sensors = self.model.sensors
         self._lag_id = LagIdentifier(sensors.wheel.distance_per_count, sensors.backlash, sensors.period,
@@ -483,9 +486,7 @@ class AdaptiveKalman(Estimator):
         """A body at contact ``k``'s speed stays on it at the magnitudes ``f (1 + e)``: the
         other contacts' force (the friction law), the outside force and the drag lie within
         contact ``k``'s set-valued ``[-f_k, f_k]``."""
-        if self._sticks_key is None or not np.array_equal(theta, self._sticks_key[0]):
-            self._sticks_key = (theta.copy(), self.model.forces * np.maximum(1.0 + theta[:self.n], 1e-3))
-        forces = self._sticks_key[1]
+        forces = self.model.forces * np.maximum(1.0 + theta[:self.n], 1e-3)
         v = float(speeds[k])
         G = float(contact_forces(speeds - v, forces).sum()) + force - (self.model.damping + theta[self.n]) * v
         return abs(G) <= forces[k]
@@ -602,8 +603,9 @@ class AdaptiveKalman(Estimator):
         xs0, Ps0, cbar = self._xs0, self._Ps0, self._cbar
         K.mix(self.mu, self.M, self.xs, self.Ps, xs0, Ps0, cbar)
         means, rows0, rows1, noises = self._means, self._rows0, self._rows1, self._noises
+        large = float(np.max(np.abs(track[1] - track[0]))) > self.LARGE_STEP
         for j in range(3):
-            if j == self.FREE or (j == self.FREEFORM and np.max(np.abs(track[1] - track[0])) > self.LARGE_STEP):
+            if j == self.FREE or (j == self.FREEFORM and large):
                 # In a large transient (the contacts sweep past the body) the free-form mode
                 # follows the flow, which knows the motor law; elsewhere it is the model-free
                 # alternative (a random walk of the speed).
@@ -616,13 +618,9 @@ class AdaptiveKalman(Estimator):
         # The measurement noise: the quantization's plus what covariance matching finds in
         # the innovations against the modes' combined prediction, or in the wheels' residuals
         # (read noise, jitter: the same electronics read all encoders at the same instants).
-        x_pred = float(cbar @ means[:, 0])
-        predicted = 0.0
-        for j in range(3):
-            # The predicted variance of X: (A P0 A^T)[0, 0] + Q[0, 0] with row 0 of A.
-            r = rows0[j]
-            predicted += cbar[j] * (float(r @ Ps0[j] @ r) + noises[j, 0, 0] + (means[j, 0] - x_pred) ** 2)
-        speed = float(cbar @ means[:, 1])
+        # The mixture's predicted X (its variance: (A P0 A^T)[0, 0] + Q[0, 0] with row 0 of A,
+        # per mode, and the modes' spread) and V.
+        x_pred, predicted, speed = K.predicted_first(cbar, means, rows0, Ps0, noises)
         q = self.q
         wheel = q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed
         R = R0 + max(self._noise.extra(speed), wheel)
@@ -766,11 +764,14 @@ class AdaptiveKalman(Estimator):
             if self._lag_id.lag is None and self._lag_range[0] != self._lag_range[1]:
                 held = self._held
                 self._large |= (np.abs(u - held) > self.LARGE_STEP) | (np.sign(u) != np.sign(held))
-            back = self._large & steady & (tracker.window_length >= 5)
-            self._bank.restart(back, wheels, speeds, tracker.contact_variance)
-            self._large &= ~back
-            var = np.where(self._large, tracker.contact_variance, var_b)
-            speeds = np.where(self._large | back, speeds, banked)
+            if self._large.any():
+                back = self._large & steady & (tracker.window_length >= 5)
+                self._bank.restart(back, wheels, speeds, tracker.contact_variance)
+                self._large &= ~back
+                var = np.where(self._large, tracker.contact_variance, var_b)
+                speeds = np.where(self._large | back, speeds, banked)
+            else:
+                var, speeds = var_b, banked
         self._held = u
         track = np.stack((speeds, speeds if steady else u))
         self._pending = (track, var, steady, force)

@@ -6,7 +6,8 @@ from may differ: :class:`WorldTruth` says how (unequal wheels, bearing drag, ano
 motors that wander about their commands, noisy, missing or late encoder reads), every random
 part drawn reproducibly from a seed. :func:`realize` turns a nominal :class:`Plant` and
 :class:`Sensors` into the true ones (and the motors' wander) for an open- or closed-loop run.
-Estimators never read a :class:`TrueWorld`; only simulations and scores do.
+Estimators never read a :class:`TrueWorld`; only simulations and scores do (docs/physics.md
+section 10).
 """
 
 from __future__ import annotations

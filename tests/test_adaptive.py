@@ -226,3 +226,19 @@ def test_monitor_threshold_is_the_chi_square_quantile():
         assert monitor.push(1.0).passes
     assert not monitor.push(40.0).passes
     assert not ConsistencyMonitor(10, 1e-4).push(0.0, "a hold failed").passes
+
+
+def test_warm_up_loads_the_kernels_and_leaves_the_estimates_alone(spread):
+    # Every registered estimator: after warm_up its kernel modules are loaded in this process
+    # (compiled, or the Python source under NUMBA_DISABLE_JIT), and its run equals a fresh
+    # estimator's bit for bit (warm_up resets what it ran).
+    from toolkit._compiled import loaded
+    from toolkit.estimation import ESTIMATOR_NAMES, build_estimator
+
+    for name in ESTIMATOR_NAMES:
+        est = build_estimator(name, spread.model)
+        assert est.warm_up() >= 0.0
+        assert set(est.KERNELS) <= set(loaded()), name
+        warm = est.run(spread.record, speed_std=1e-4)
+        fresh = build_estimator(name, spread.model).run(spread.record, speed_std=1e-4)
+        np.testing.assert_array_equal(warm.speed, fresh.speed, err_msg=name)

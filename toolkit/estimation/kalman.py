@@ -196,6 +196,7 @@ class NominalKalman(Estimator):
     """
 
     name = "kalman_nominal"
+    KERNELS = ("core", "lines")
 
     def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None,
                  exact_holds: bool = True) -> None:
@@ -540,6 +541,7 @@ class RTSSmoother(Estimator):
     """
 
     name = "rts"
+    KERNELS = ("core", "lines")
 
     def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None) -> None:
         self.forward = NominalKalman(model, initial_covariance=initial_covariance)

@@ -42,6 +42,7 @@ class UnscentedEstimator(NominalKalman):
     """
 
     name = "unscented"
+    KERNELS = ("core",)
 
     def __init__(self, model: Any, *, initial_covariance: Any = None) -> None:
         # The sigma points are the UKF's way with the sign nonlinearity: no exact holds.

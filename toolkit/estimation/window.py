@@ -59,6 +59,8 @@ class AdaptiveWindow(Estimator):
         three periods), for a filter that falls back on the window.
     """
 
+    KERNELS = ("window",)
+
     def __init__(self, sensors: Sensors, *, fit: str = "end", max_window: int = DEFAULT_MAX_WINDOW,
                  band: float | None = None) -> None:
         owner = type(self).__name__

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from toolkit import ParameterError, ParameterTypeError
-from toolkit.estimation import (CentralDifference, EstimatorModel, KalmanEstimator, RTSSmoother,
+from toolkit.estimation import (CentralDifference, EstimatorModel, NominalKalman, RTSSmoother,
                                 UnscentedEstimator, WheelDifference,
                                 chi2_band, steady_state_gain)
 from toolkit.model import ContactSet, Plant
@@ -44,7 +44,7 @@ def test_chi2_band_matches_the_normal_approximation():
 
 def test_kalman_on_a_constant_speed_body_beats_one_count_per_run():
     record, model = _constant_speed_record()
-    result = KalmanEstimator(model).run(record, speed=0.12, speed_std=0.01)
+    result = NominalKalman(model).run(record, speed=0.12, speed_std=0.01)
     fd = CentralDifference(model.sensors).run(record, speed=0.12)
     q_rate = model.sensors.central.speed_step
     # Finite differences err by up to one count per period (sawtooth, test_sensors); the
@@ -57,8 +57,8 @@ def test_kalman_on_a_constant_speed_body_beats_one_count_per_run():
 
 def test_run_and_step_give_the_same_estimates(scenario):
     record, model = scenario.record, scenario.model
-    offline = KalmanEstimator(model).run(record, speed_std=1e-4)
-    loop = KalmanEstimator(model)
+    offline = NominalKalman(model).run(record, speed_std=1e-4)
+    loop = NominalKalman(model)
     loop.reset(speed_std=1e-4)
     stepped = np.array([loop.step(record.sample(k)) for k in range(record.n_samples)])
     # Same per-sample code; the contact-speed windows see the same counts: rounding only.
@@ -97,7 +97,7 @@ def test_filter_follows_the_brake_exactly(scenario):
     # <= 3.0 um/s on the samples 5.02 .. 5.12 s. Bound: 10 um/s, a third of one wheel
     # window's std (the former eight-sub-interval average erred by 156-171 um/s there).
     record = scenario.record
-    kf = KalmanEstimator(scenario.model).run(record, speed_std=1e-4)
+    kf = NominalKalman(scenario.model).run(record, speed_std=1e-4)
     window = (record.times > 5.01) & (record.times < 5.13)
     assert window.sum() == 6
     assert np.max(np.abs(kf.speed[window] - record.truth_speed[window])) < 10e-6
@@ -108,7 +108,7 @@ def test_smoother_is_no_worse_than_the_filter_in_each_phase(scenario):
     # that holds, the smoother is no worse in any phase of the run (startup, cruise, brake
     # window, braked). Measured over the record 0.0151 vs 0.0220 mm/s.
     record = scenario.record
-    kf = KalmanEstimator(scenario.model).run(record, speed_std=1e-4)
+    kf = NominalKalman(scenario.model).run(record, speed_std=1e-4)
     rts = RTSSmoother(scenario.model).run(record, speed_std=1e-4)
     t = record.times
     for lo, hi in ((0.0, 1.0), (1.0, 5.0), (5.0, 5.3), (5.3, 10.1)):
@@ -121,7 +121,7 @@ def test_smoother_is_no_worse_than_the_filter_in_each_phase(scenario):
 def test_acceptance_kalman_beats_finite_differences_tenfold(scenario):
     record, model = scenario.record, scenario.model
     fd = CentralDifference(model.sensors).run(record)
-    kf = KalmanEstimator(model).run(record, speed_std=1e-4)
+    kf = NominalKalman(model).run(record, speed_std=1e-4)
     assert kf.rms_error <= fd.rms_error / 10
 
 
@@ -131,7 +131,7 @@ def test_acceptance_kalman_near_the_smoother(scenario):
     # with the white model throughout; 0.049 vs 0.030, 1.66x, before the wheel windows'
     # least-squares lines).
     record, model = scenario.record, scenario.model
-    kf = KalmanEstimator(model).run(record, speed_std=1e-4)
+    kf = NominalKalman(model).run(record, speed_std=1e-4)
     rts = RTSSmoother(model).run(record, speed_std=1e-4)
     assert kf.rms_error <= 1.5 * rts.rms_error
 
@@ -144,7 +144,7 @@ def test_acceptance_kalman_near_the_smoother(scenario):
                    "the filter is consistent over phases (test_kalman_is_consistent_over_grid_phases)")
 def test_acceptance_kalman_consistent(scenario):
     record, model = scenario.record, scenario.model
-    kf = KalmanEstimator(model).run(record, speed_std=1e-4)
+    kf = NominalKalman(model).run(record, speed_std=1e-4)
     assert kf.nees_band[0] <= kf.nees_mean <= kf.nees_band[1]
 
 
@@ -162,15 +162,15 @@ def test_the_model_clips_commands_as_the_motors_do():
     assert raw.max() > 0.35 >= sc.record.commands.max()
     logged = dataclasses.replace(sc.record, commands=raw)
     np.testing.assert_array_equal(sc.model.clip(raw), sc.record.commands)
-    clipped = KalmanEstimator(sc.model).run(sc.record, speed_std=1e-4)
-    from_raw = KalmanEstimator(sc.model).run(logged, speed_std=1e-4)
+    clipped = NominalKalman(sc.model).run(sc.record, speed_std=1e-4)
+    from_raw = NominalKalman(sc.model).run(logged, speed_std=1e-4)
     np.testing.assert_array_equal(from_raw.speed, clipped.speed)
-    loop = KalmanEstimator(sc.model)
+    loop = NominalKalman(sc.model)
     loop.reset(speed_std=1e-4, contact_speeds=sc.record.initial_commands)
     stepped = np.array([loop.step(logged.sample(k))[0] for k in range(logged.n_samples)])
     np.testing.assert_allclose(stepped, clipped.speed, rtol=0, atol=1e-12)
-    white = KalmanEstimator(sc.model, exact_holds=False).run(sc.record, speed_std=1e-4)
-    free = KalmanEstimator(dataclasses.replace(sc.model, speed_limits=(-np.inf, np.inf)),
+    white = NominalKalman(sc.model, exact_holds=False).run(sc.record, speed_std=1e-4)
+    free = NominalKalman(dataclasses.replace(sc.model, speed_limits=(-np.inf, np.inf)),
                            exact_holds=False).run(logged, speed_std=1e-4)
     assert white.rms_error <= free.rms_error / 2
 
@@ -191,7 +191,7 @@ def test_kalman_is_consistent_over_grid_phases():
     # 500 correlated samples is a few %), time average within 2 +- 0.4 (its spread over the
     # three sets is 0.15).
     N = 30
-    table = np.array([KalmanEstimator(sc.model).run(sc.record, speed_std=1e-4).nees
+    table = np.array([NominalKalman(sc.model).run(sc.record, speed_std=1e-4).nees
                       for sc in (carousel_brake_scenario(seed=0, grid_phase=p) for p in range(N))])
     ensemble = table[:, 1:].mean(axis=0)
     lo, hi = chi2_band(N, 2)
@@ -201,16 +201,16 @@ def test_kalman_is_consistent_over_grid_phases():
 
 def test_exact_holds_only_with_ideal_encoders_and_steady_motors(scenario):
     model = scenario.model
-    assert KalmanEstimator(model).holds_exact
-    assert not KalmanEstimator(model, exact_holds=False).holds_exact
+    assert NominalKalman(model).holds_exact
+    assert not NominalKalman(model, exact_holds=False).holds_exact
     assert not UnscentedEstimator(model).holds_exact
-    assert not KalmanEstimator(dataclasses.replace(model, contact_drift=1e-4)).holds_exact
-    assert not KalmanEstimator(dataclasses.replace(model, friction_uncertainty=0.05)).holds_exact
+    assert not NominalKalman(dataclasses.replace(model, contact_drift=1e-4)).holds_exact
+    assert not NominalKalman(dataclasses.replace(model, friction_uncertainty=0.05)).holds_exact
     for noise in ({"count_noise": 0.3}, {"jitter": 1e-4}, {"missed_count_prob": 0.01}):
         sensors = dataclasses.replace(model.sensors, **noise)
-        assert not KalmanEstimator(dataclasses.replace(model, sensors=sensors)).holds_exact
+        assert not NominalKalman(dataclasses.replace(model, sensors=sensors)).holds_exact
     with pytest.raises(ParameterTypeError, match="exact_holds"):
-        KalmanEstimator(model, exact_holds=1)
+        NominalKalman(model, exact_holds=1)
 
 
 def test_a_reading_off_the_line_ends_the_hold(scenario):
@@ -224,7 +224,7 @@ def test_a_reading_off_the_line_ends_the_hold(scenario):
     k = int(np.searchsorted(record.times, 3.0))
     counts[k:] += 2
     slipped = dataclasses.replace(record, central_counts=counts)
-    loop = KalmanEstimator(scenario.model)
+    loop = NominalKalman(scenario.model)
     loop.reset(speed_std=1e-4, contact_speeds=record.initial_commands)
     held, speed, std = [], [], []
     for j in range(record.n_samples):
@@ -237,7 +237,7 @@ def test_a_reading_off_the_line_ends_the_hold(scenario):
     assert held[k - 20:k].all() and not held[k:250].any()
     # The restart's covariance: the reading errs by e_k, the one-period difference by
     # (e_k - e_k-1) / h, both uniform of variance q^2 / 12 (identity).
-    replay = KalmanEstimator(scenario.model)
+    replay = NominalKalman(scenario.model)
     replay.reset(speed_std=1e-4, contact_speeds=record.initial_commands)
     for j in range(k + 1):
         replay.step(slipped.sample(j))
@@ -261,8 +261,8 @@ def test_no_hold_on_a_body_that_met_a_settling_contact():
     sensors = CAROUSEL.sensors(10)
     run = simulate_closed_loop(plant, VirtualViscosity(3000.0, 0.15), 4.0, sensors=sensors, v0=0.3)
     model = EstimatorModel(plant.contacts.forces, 5.0, sensors, motor_lag=0.0075, speed_limits=(-0.35, 0.35))
-    exact = KalmanEstimator(model).run(run.record, speed=0.3)
-    white = KalmanEstimator(model, exact_holds=False).run(run.record, speed=0.3)
+    exact = NominalKalman(model).run(run.record, speed=0.3)
+    white = NominalKalman(model, exact_holds=False).run(run.record, speed=0.3)
     np.testing.assert_array_equal(exact.speed, white.speed)
     assert np.nanmean(exact.nees[run.record.times > 1.5]) < 2.0
 
@@ -279,8 +279,8 @@ def test_no_hold_while_an_outside_force_ramps():
     run = simulate_closed_loop(plant, ForceDrive(np.linspace(-0.3, 0.3, 10), 0.0, 0.2, 2.0), 4.0,
                                sensors=sensors, seed=1)
     model = EstimatorModel(plant.contacts.forces, 5.0, sensors, motor_lag=0.0075, speed_limits=(-0.35, 0.35))
-    exact = KalmanEstimator(model).run(run.record)
-    white = KalmanEstimator(model, exact_holds=False).run(run.record)
+    exact = NominalKalman(model).run(run.record)
+    white = NominalKalman(model, exact_holds=False).run(run.record)
     np.testing.assert_array_equal(exact.speed, white.speed)
 
 
@@ -291,7 +291,7 @@ def test_holds_after_a_slow_reversal_wait_for_the_gearbox_play():
     # 2.5 / 2.9 over 5.5-6 / 6-8 / 8-10 s (white model: 2031 / 1104 / 782, its wheel windows
     # spanning the play). Asserted below 5 in each (a consistent filter's mean is 2).
     sc = carousel_brake_scenario(seed=0, grid_phase=2, brake=-0.0106)
-    r = KalmanEstimator(sc.model).run(sc.record, speed_std=1e-4)
+    r = NominalKalman(sc.model).run(sc.record, speed_std=1e-4)
     t = sc.record.times
     for a, b in ((5.5, 6.0), (6.0, 8.0), (8.0, 10.01)):
         assert np.mean(r.nees[(t >= a) & (t < b)]) < 5.0, (a, b)
@@ -302,8 +302,8 @@ def test_a_reused_wheel_buffer_gives_the_offline_estimates(scenario):
     # so stepping equals the offline run (identity to rounding).
     from toolkit.model.sensors import EncoderSample
     record = scenario.record
-    offline = KalmanEstimator(scenario.model).run(record, speed_std=1e-4)
-    loop = KalmanEstimator(scenario.model)
+    offline = NominalKalman(scenario.model).run(record, speed_std=1e-4)
+    loop = NominalKalman(scenario.model)
     loop.reset(speed_std=1e-4, contact_speeds=record.initial_commands)
     buffer = np.zeros(record.wheel_counts.shape[1], dtype=np.int64)
     speeds = []
@@ -319,7 +319,7 @@ def test_wheel_polygons_stay_small_with_a_long_lag():
     # counts allows a quadrilateral; measured 3-4) and none empties or overflows.
     from toolkit.estimation._hold import CAPACITY
     sc = carousel_brake_scenario(seed=0, grid_phase=1, lag=0.02)
-    loop = KalmanEstimator(sc.model)
+    loop = NominalKalman(sc.model)
     loop.reset(speed_std=1e-4, contact_speeds=sc.record.initial_commands)
     worst = 0
     for k in range(sc.record.n_samples):
@@ -362,8 +362,8 @@ def test_wheel_baseline_settles_on_the_weighted_median(scenario):
                                  np.array([[np.nan, 0.0], [0.0, 1.0]])])
 def test_bad_covariances_are_refused(bad):
     _, model = _constant_speed_record(t_end=0.1)
-    with pytest.raises(ParameterError, match="^The 'initial_covariance' parameter of KalmanEstimator must"):
-        KalmanEstimator(model, initial_covariance=bad)
+    with pytest.raises(ParameterError, match="^The 'initial_covariance' parameter of NominalKalman must"):
+        NominalKalman(model, initial_covariance=bad)
 
 
 @pytest.mark.parametrize("kwargs, name", [({"mass": 0.0}, "mass"), ({"mass": float("inf")}, "mass"),
@@ -385,7 +385,7 @@ def test_importing_the_toolkit_does_not_load_filterpy():
 
 @pytest.mark.parametrize("make", [lambda sc: CentralDifference(sc.sensors),
                                   lambda sc: WheelDifference(sc.sensors, sc.model.forces),
-                                  lambda sc: KalmanEstimator(sc.model),
+                                  lambda sc: NominalKalman(sc.model),
                                   lambda sc: UnscentedEstimator(sc.model)],
                          ids=["central_difference", "wheel_difference", "kalman", "unscented"])
 def test_observe_then_commanded_equals_run(scenario, make):
@@ -588,7 +588,7 @@ def test_filter_after_an_arrival_forgets_the_old_speed_error():
     # An arrival step has the transition [[1, 0.015], [0, 0]]: the prior speed variance is
     # the contact estimate's, whatever P_VV was before (exact: 0 * P_VV + Q_VV).
     model, track = _three_contacts([0.03, 0.3])
-    kf = KalmanEstimator(model)
+    kf = NominalKalman(model)
     kf.reset(speed=0.0, speed_std=0.01)
     kf._advance(0.0, 1e-8, None, 0.0, True)
     bounds = model.bounds_row(track)
@@ -638,7 +638,7 @@ def test_filter_fuses_the_edge_when_a_held_body_leaves_the_set():
     # update. Second method: the Kalman equations written out.
     model, track = _three_contacts([0.03, 0.3])
     h, var_v = 0.02, 4e-6
-    kf = KalmanEstimator(model)
+    kf = NominalKalman(model)
     kf.reset(speed=0.03, speed_std=1e-4)
     kf._advance(0.0, 1e-8, None, 0.0, True)
     bounds = model.bounds_row(track)
@@ -686,7 +686,7 @@ def test_filter_fuses_the_information_gained_on_an_edge():
     # the Kalman equations.
     model, track = _three_contacts([0.03, 0.3])
     bounds = model.bounds_row(track)
-    kf = KalmanEstimator(model)
+    kf = NominalKalman(model)
     kf.reset(speed=0.03, speed_std=1e-4)
     kf._advance(0.0, 1e-8, None, 0.0, True)
     h, R = 0.02, 1e-8
@@ -792,11 +792,11 @@ def test_filter_with_the_rig_force_tracks_the_rig_driven_body(rig_run):
     run, model = rig_run
     assert run.record.force is not None
     np.testing.assert_array_equal(run.record.force, run.force)
-    offline = KalmanEstimator(model).run(run.record, speed=0.28)
+    offline = NominalKalman(model).run(run.record, speed=0.28)
     np.testing.assert_allclose(offline.speed, run.estimate, rtol=0, atol=1e-12)
     fd = CentralDifference(model.sensors).run(run.record, speed=0.28)
     assert offline.rms_error <= fd.rms_error / 10
-    blind = KalmanEstimator(model).run(dataclasses.replace(run.record, force=None), speed=0.28)
+    blind = NominalKalman(model).run(dataclasses.replace(run.record, force=None), speed=0.28)
     assert blind.rms_error > fd.rms_error
     # The unscented variant takes the force the same way (the exact flow of each sigma
     # point has it as its external force): measured 0.35 mm/s.
@@ -806,9 +806,9 @@ def test_filter_with_the_rig_force_tracks_the_rig_driven_body(rig_run):
 
 def test_commanded_force_is_checked(rig_run):
     _, model = rig_run
-    est = KalmanEstimator(model)
+    est = NominalKalman(model)
     est.observe(rig_run[0].record.sample(0))
-    with pytest.raises(ParameterError, match="'force' parameter of KalmanEstimator.commanded must be finite"):
+    with pytest.raises(ParameterError, match="'force' parameter of NominalKalman.commanded must be finite"):
         est.commanded(np.zeros(10), float("nan"))
 
 
@@ -884,7 +884,7 @@ def test_without_a_lag_the_wheel_lines_wait_for_the_play_too():
     slowest = np.abs(target[target < 0]).min()
     assert lines._start_time() == pytest.approx(1.0 + model.sensors.wheel.backlash / slowest, rel=1e-12)
     sc = carousel_brake_scenario(seed=0, lag=0.0, brake=-0.0106)
-    loop = KalmanEstimator(sc.model)
+    loop = NominalKalman(sc.model)
     loop.reset(speed_std=1e-4, contact_speeds=sc.record.initial_commands)
     held = []
     for k in range(sc.record.n_samples):
@@ -894,5 +894,5 @@ def test_without_a_lag_the_wheel_lines_wait_for_the_play_too():
     turning = sc.record.commands[-1][sc.record.commands[-1] < 0]
     first = t[np.flatnonzero(held & (t > 5.0))[0]]
     assert first >= 5.0 + sc.sensors.wheel.backlash / np.abs(turning).min()
-    nees = KalmanEstimator(sc.model).run(sc.record, speed_std=1e-4).nees
+    nees = NominalKalman(sc.model).run(sc.record, speed_std=1e-4).nees
     assert np.max(nees[held & (t > 5.0)]) < 10.0

@@ -52,8 +52,12 @@ from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
 # sensors and estimation (filterpy is imported only where a filter is built)
 from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
 from .estimation import (CentralDifference, EstimationResult, Estimator, EstimatorModel, KalmanEstimator,
-                         RTSSmoother, UnscentedEstimator, WheelDifference, chi2_band)
+                         RTSSmoother, UnscentedEstimator, WheelDifference, chi2_band, AdaptiveKalman, AdaptiveWindow,
+                         AlphaBetaTracker, ModelPrior, NominalKalman, build_estimator)
 from .analysis.scenarios import BrakeScenario, carousel_brake_scenario
+from .analysis.robustness import ROBUSTNESS_CASES, loop_robustness, robustness_table
+from .model.truth import TrueWorld, WorldTruth, realize
+from .model.record_io import read_record_csv, write_record_csv
 
 __version__ = "0.1.0"
 
@@ -82,6 +86,9 @@ __all__ = [
     "Encoder", "Sensors", "EncoderRecord", "EncoderSample", "measure", "record_simulation",
     "Estimator", "EstimationResult", "EstimatorModel", "CentralDifference", "WheelDifference",
     "KalmanEstimator", "RTSSmoother", "UnscentedEstimator", "chi2_band", "carousel_brake_scenario",
+    "AdaptiveKalman", "NominalKalman", "AdaptiveWindow", "AlphaBetaTracker", "ModelPrior", "build_estimator",
+    "WorldTruth", "TrueWorld", "realize", "read_record_csv", "write_record_csv",
+    "ROBUSTNESS_CASES", "robustness_table", "loop_robustness",
     # sweeps (pandas is imported with the first sweep; dask only for a cluster)
     "sweep", "SweepResult", "MedianLaw", "MeanMedian", "Outliers", "ResidualFriction",
     # plots (matplotlib is imported when one is drawn)

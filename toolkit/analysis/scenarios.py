@@ -10,15 +10,16 @@ recorded through the sensor law.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import as_int
-from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+from ..errors import ParameterTypeError, as_int, parameter_message
+from ..model import ContactSet, Motors, PiecewiseConstant, Plant, sample_times
 from ..model.carousel import CAROUSEL
 from ..model.sensors import EncoderRecord, Sensors, record_simulation
-from ..estimation import EstimatorModel
+from ..model.truth import TrueWorld, WorldTruth, realize
+from ..estimation import EstimatorModel, ModelPrior
 
 __all__ = ["BrakeScenario", "carousel_brake_scenario"]
 
@@ -30,13 +31,22 @@ class BrakeScenario:
     Attributes
     ----------
     plant : Plant
+        The true plant (the nominal one when the world is nominal), with the commands as
+        sent (the motors' wander is in ``world``).
     result : SimulationResult
-        The exact run.
+        The exact run of the true plant (its commands include the wander).
     record : EncoderRecord
-        Its encoder record (with the truth, for scoring).
+        Its encoder record (with the truth, for scoring); its commands are those sent.
     sensors : Sensors
+        The nominal encoders (what the estimators are told).
     model : EstimatorModel
-        The estimator's knowledge: nominal forces, mass, encoders, motor lag.
+        The estimator's knowledge: the nominal forces, mass, encoders, motor lag and drag.
+    prior : ModelPrior
+        What the adaptive estimator believes beyond the nominal scene.
+    world : TrueWorld
+        The true plant, encoders and wander (simulation and scores only).
+    nominal : Plant
+        The plant the scene declares.
     """
 
     plant: Plant
@@ -44,11 +54,15 @@ class BrakeScenario:
     record: EncoderRecord
     sensors: Sensors
     model: EstimatorModel
+    prior: ModelPrior = ModelPrior()
+    world: TrueWorld | None = None
+    nominal: Plant | None = None
 
 
 def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: float = 5.0,
                             cruise: float = 0.2, brake: float = -0.1, spread: float = 0.05,
                             lag: float = 0.0075, grid_phase: int | None = None,
+                            truth: WorldTruth | None = None, prior: ModelPrior | None = None,
                             **noise: float) -> BrakeScenario:
     """Build, simulate exactly and record the carousel's startup-then-brake run.
 
@@ -61,33 +75,57 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
         Contacts at ``cruise + linspace(-spread, spread, 10)`` from rest, then at
         ``brake + linspace(-spread, spread, 10)`` from ``brake_time``.
     lag : float, s
-        Motor lag.
+        Motor lag (nominal).
     grid_phase : int, optional
         Seeds uniform draws of where the body and the contacts start on their encoders'
         count grids (within one count: ``record_simulation``'s ``central_position`` and
         ``contact_positions``); ``None``: every grid starts on a count edge.
+    truth : WorldTruth, optional
+        How the simulated world departs from the nominal scene (drawn from ``seed``:
+        :func:`~toolkit.model.truth.realize`); default: not at all.
+    prior : ModelPrior, optional
+        The estimators' prior knowledge (default ``ModelPrior()``); the model is built from
+        the nominal scene only, never from ``truth``.
     **noise
-        ``missed_count_prob``, ``count_noise``, ``jitter`` of :class:`Sensors`.
+        ``missed_count_prob``, ``count_noise``, ``jitter`` of the nominal :class:`Sensors`
+        (declared, so the estimators are told them).
     """
     from ..simulation import simulate
 
+    owner = "carousel_brake_scenario"
+    prior = ModelPrior() if prior is None else prior
+    if not isinstance(prior, ModelPrior):
+        raise ParameterTypeError(parameter_message("prior", owner, "be a ModelPrior or None", prior))
     n = CAROUSEL.n_wheels
     forces = np.full(n, CAROUSEL.wheel_force)
     mass = CAROUSEL.moving_mass
     offsets = np.linspace(-spread, spread, n)
     commands = PiecewiseConstant([brake_time], [cruise + offsets, brake + offsets])
     v_max = CAROUSEL.speed_limit
-    plant = Plant(ContactSet(cruise + offsets, forces), mass,
-                  motors=Motors(lag=lag, speed_limits=(-v_max, v_max)), commands=commands)
-    result = simulate(plant, t_end)
+    nominal = Plant(ContactSet(cruise + offsets, forces), mass,
+                    motors=Motors(lag=lag, speed_limits=(-v_max, v_max)), commands=commands)
     sensors = CAROUSEL.sensors(n, **noise)
+    world = realize(nominal, sensors, truth, seed)
+    plant = world.plant
+    stamps = sample_times(t_end, sensors.rate)
+    wander = world.wander(stamps.size)
+    simulated = plant
+    if wander is not None:
+        # The motors run at the command plus their wander, switched at each sample.
+        rows = np.asarray([commands(t) for t in stamps]) + wander
+        simulated = replace(plant, commands=PiecewiseConstant(stamps[1:], rows))
+    result = simulate(simulated, t_end)
     positions: dict = {}
     if grid_phase is not None:
         draw = np.random.default_rng(as_int(grid_phase, "grid_phase", "carousel_brake_scenario", low=0))
         positions = {"central_position": draw.uniform(0.0, sensors.central.distance_per_count),
                      "contact_positions": draw.uniform(0.0, sensors.wheel.distance_per_count, n)}
-    record = record_simulation(result, plant, sensors, rng=np.random.default_rng(seed), **positions)
-    # The plant's friction is exactly the scene's (equal forces): no friction spread to model.
+    record = record_simulation(result, simulated, world.sensors, rng=np.random.default_rng(seed), **positions)
+    if wander is not None:
+        # The record logs the commands sent, not the speeds the wandering motors ran at.
+        record = replace(record, commands=np.asarray([commands(t) for t in record.times]),
+                         initial_commands=nominal.initial_speeds())
+    # The estimators know the nominal scene: its forces, lag and drag (none).
     model = EstimatorModel(forces, mass, sensors, motor_lag=lag, friction_uncertainty=0.0,
                            speed_limits=(-v_max, v_max))
-    return BrakeScenario(plant, result, record, sensors, model)
+    return BrakeScenario(plant, result, record, sensors, model, prior, world, nominal)

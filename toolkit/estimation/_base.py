@@ -24,7 +24,13 @@ from ..errors import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 
-__all__ = ["Estimator", "EstimationResult", "chi2_band", "check_covariance"]
+__all__ = ["Estimator", "EstimationResult", "chi2_band", "check_covariance", "PHASES", "phase_masks",
+           "nees_band"]
+
+#: The phases of a record scored separately (:func:`phase_masks`).
+PHASES = ("startup", "cruise", "brake", "braked")
+#: Length of the startup and brake phases after their command, s (:func:`phase_masks`).
+SETTLE_TIME = 1.0
 
 
 def chi2_band(samples: int, dim: int, level: float = 0.95) -> tuple[float, float]:
@@ -39,6 +45,54 @@ def chi2_band(samples: int, dim: int, level: float = 0.95) -> tuple[float, float
     tail = 0.5 * (1.0 - level)
     lo, hi = chi2.ppf([tail, 1.0 - tail], samples * dim) / samples
     return float(lo), float(hi)
+
+
+def nees_band(dim: int = 2, level: float = 0.95) -> tuple[float, float]:
+    """Two-sided ``level`` interval of one ``dim``-dimensional NEES: ``chi2(dim)`` quantiles."""
+    from scipy.stats import chi2
+
+    tail = 0.5 * (1.0 - level)
+    lo, hi = chi2.ppf([tail, 1.0 - tail], dim)
+    return float(lo), float(hi)
+
+
+def phase_masks(record: EncoderRecord, settle: float = SETTLE_TIME) -> dict[str, np.ndarray | None]:
+    """Which samples of ``record`` belong to each phase of :data:`PHASES`.
+
+    The rule, from the commands alone: the *brake* is the largest command change after the
+    first sample (the largest ``max_i |u_i(t_k) - u_i(t_k-1)|``; the first such row when
+    several tie); *startup* is the first ``settle`` seconds of the record, *cruise* from
+    there to the brake, *brake* the ``settle`` seconds from the brake's sample, *braked* the
+    rest. ``settle`` (default 1 s) covers the carousel's arrival on its contacts after a
+    change (0.1-0.15 s of sliding) and the creep across a zero-force band of unequal wheels
+    (up to about 0.5 s with a 5 % spread). A record whose commands never change after the
+    first sample has no brake: its *brake* and *braked* are ``None`` (so is *cruise* when
+    the record is shorter than ``settle``).
+
+    Returns
+    -------
+    dict of str to ndarray of shape (k,), bool, or None
+    """
+    t = record.times
+    start = t[0]
+    jumps = np.zeros(t.size)
+    if t.size > 1:
+        jumps[1:] = np.max(np.abs(np.diff(record.commands, axis=0)), axis=1)
+    brake = int(np.argmax(jumps)) if jumps.max(initial=0.0) > 0.0 else None
+    startup = t < start + settle
+    if brake is None or t[brake] < start + settle:
+        # No brake, or one inside the startup: the startup then ends at it.
+        if brake is not None:
+            startup = t < t[brake]
+        end = t.size if brake is None else brake
+        cruise = ~startup & (np.arange(t.size) < end)
+    else:
+        cruise = ~startup & (t < t[brake])
+    masks: dict[str, np.ndarray | None] = {"startup": startup, "cruise": cruise, "brake": None, "braked": None}
+    if brake is not None:
+        masks["brake"] = (t >= t[brake]) & (t < t[brake] + settle)
+        masks["braked"] = t >= t[brake] + settle
+    return {name: (mask if mask is not None and mask.any() else None) for name, mask in masks.items()}
 
 
 def check_covariance(value: Any, name: str, owner: str, dim: int) -> np.ndarray:
@@ -83,6 +137,12 @@ class EstimationResult:
     nees_mean, nis_mean : float or None
     nees_band, nis_band : tuple of float or None
         The 95 % chi-square bands of those means (:func:`chi2_band`).
+    rms_phases : dict of str to float or None, m/s
+        RMS error in each phase of :func:`phase_masks` (``None`` for a phase the record
+        lacks); ``None`` without the truth.
+    nees_in_band : float or None
+        Fraction of the samples whose NEES lies in the two-sided 95 % interval of one
+        chi-square(2) (:func:`nees_band`); ``None`` without a covariance or the truth.
     """
 
     method: str
@@ -100,6 +160,8 @@ class EstimationResult:
     nis_mean: float | None = None
     nees_band: tuple[float, float] | None = None
     nis_band: tuple[float, float] | None = None
+    rms_phases: dict[str, float | None] | None = None
+    nees_in_band: float | None = None
 
     @property
     def real_time_ratio(self) -> float:
@@ -119,7 +181,9 @@ class EstimationResult:
         return {"method": self.method, "samples": int(self.times.size), "wall_time": self.wall_time,
                 "real_time_ratio": self.real_time_ratio, "rms_error": self.rms_error,
                 "max_error": self.max_error, "nees_mean": self.nees_mean, "nees_band": self.nees_band,
-                "nis_mean": self.nis_mean, "nis_band": self.nis_band}
+                "nis_mean": self.nis_mean, "nis_band": self.nis_band,
+                "rms_phases": None if self.rms_phases is None else dict(self.rms_phases),
+                "nees_in_band": self.nees_in_band}
 
 
 def score(record: EncoderRecord, method: str, speed: np.ndarray, variance: np.ndarray,
@@ -135,10 +199,16 @@ def score(record: EncoderRecord, method: str, speed: np.ndarray, variance: np.nd
         error = fields["speed"] - record.truth_speed
         fields["rms_error"] = float(np.sqrt(np.mean(error**2)))
         fields["max_error"] = float(np.max(np.abs(error)))
+        fields["rms_phases"] = {name: None if mask is None else float(np.sqrt(np.mean(error[mask] ** 2)))
+                                for name, mask in phase_masks(record).items()}
         if covariance is not None and position is not None and record.truth_position is not None:
             e = np.stack((position - record.truth_position, error), axis=1)
             nees = np.einsum("ki,kij,kj->k", e, np.linalg.inv(covariance[:, :2, :2]), e)
-            fields.update(nees=nees, nees_mean=float(np.mean(nees)), nees_band=chi2_band(K, 2))
+            lo, hi = nees_band(2)
+            finite = np.isfinite(nees)
+            fields.update(nees=nees, nees_mean=float(np.mean(nees)), nees_band=chi2_band(K, 2),
+                          nees_in_band=float(np.mean((nees[finite] >= lo) & (nees[finite] <= hi)))
+                          if finite.any() else None)
     if nis is not None:
         fields.update(nis=np.asarray(nis, dtype=float), nis_mean=float(np.mean(nis)),
                       nis_band=chi2_band(K, 1))
@@ -158,6 +228,9 @@ class Estimator(abc.ABC):
 
     #: Short name used in results and benchmarks.
     name: str = "estimator"
+    #: The compiled kernel modules (:mod:`toolkit._compiled`) it runs, loaded by :meth:`warm_up`
+    #: (the exact flow's ``core`` for those that predict with the plant).
+    KERNELS: tuple[str, ...] = ()
 
     @abc.abstractmethod
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
@@ -178,30 +251,81 @@ class Estimator(abc.ABC):
         outside force (N) applied to the body with them (a rig's; held, like the command,
         until the next sample); used for the prediction to the next one."""
 
+    def _check_record(self, record: Any) -> None:
+        """Refuse anything but an :class:`EncoderRecord` for :meth:`run`."""
+        if not isinstance(record, EncoderRecord):
+            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
+                                                       "be an EncoderRecord", record))
+
+    def _take_observed(self, force: Any) -> tuple[Any, float]:
+        """For :meth:`commanded`: the pending observation (``self._observed``, cleared) and
+        ``force`` checked as a finite float (N)."""
+        observed = self._observed
+        if observed is None:
+            raise RuntimeError("commanded() follows observe(): once per observed sample.")
+        if type(force) is not float or not math.isfinite(force):
+            force = as_float(force, "force", f"{type(self).__name__}.commanded")
+        self._observed = None
+        return observed, force
+
+    def warm_up(self, record: EncoderRecord | None = None) -> float:
+        """Compile (or load from numba's cache) the kernels this estimator runs, so that a
+        timed :meth:`run` that follows pays no one-time cost (the policy of
+        :mod:`toolkit._compiled`): :attr:`KERNELS` loaded, then the estimator run once,
+        untimed, over ``record`` (default: a short record of its own model,
+        :func:`warm_record`), and reset. Whoever times an estimator calls it first; returns
+        the time it took (s)."""
+        from .._compiled import load
+
+        started = time.perf_counter()
+        for name in self.KERNELS:
+            load(name)
+        if record is None:
+            model = getattr(self, "model", None)
+            sensors = model.sensors if model is not None else getattr(self, "sensors", None)
+            record = None if sensors is None else warm_record(sensors, model)
+        if record is not None:
+            self.run(record)
+            self.reset()
+        return time.perf_counter() - started
+
     def step(self, sample: EncoderSample) -> tuple[float, float]:
         """:meth:`observe` the sample, then :meth:`commanded` with its command and force."""
         out = self.observe(sample)
         self.commanded(sample.command, sample.force)
         return out
 
-    def warm_up(self, record: EncoderRecord) -> None:
-        """Run once, untimed, over ``record``, so that a timed :meth:`run` that follows pays
-        no one-time cost (each kernel compiled or loaded at its first call, wherever in the
-        record that comes: the policy of :mod:`toolkit._compiled`); whoever times an
-        estimator calls it first."""
-        self.run(record)
-
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
         """Estimate the body speed at every sample of ``record`` (reset first)."""
-        if not isinstance(record, EncoderRecord):
-            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
-                                                       "be an EncoderRecord", record))
+        self._check_record(record)
         started = time.perf_counter()
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         out = np.array([self.step(record.sample(k)) for k in range(record.n_samples)])
         wall = time.perf_counter() - started
         return score(record, self.name, out[:, 0], out[:, 1], wall)
+
+
+def warm_record(sensors: Any, model: Any = None) -> EncoderRecord:
+    """A 1.5 s record for :meth:`Estimator.warm_up`: the model's wheels (``model``, an
+    :class:`~toolkit.estimation.EstimatorModel`; without one, 1 N each on a 1 kg body) start
+    from rest towards 0.1-0.2 m/s and step to -0.05 to -0.1 m/s at 0.8 s (within the motors'
+    speed limits), read through ``sensors`` (noise drawn from seed 0)."""
+    from ..model import ContactSet, Motors, PiecewiseConstant, Plant
+    from ..model.sensors import record_simulation
+    from ..simulation import simulate
+
+    n = sensors.n_wheels
+    forces = np.ones(n) if model is None else model.forces
+    mass = 1.0 if model is None else model.mass
+    limits = (-math.inf, math.inf) if model is None else model.speed_limits
+    up = np.clip(np.linspace(0.1, 0.2, n), 0.5 * limits[0], 0.5 * limits[1])
+    down = -0.5 * up
+    motors = Motors(lag=0.0 if model is None else model.motor_lag, speed_limits=limits)
+    plant = Plant(ContactSet(up, forces), mass, damping=0.0 if model is None else model.damping,
+                  motors=motors, commands=PiecewiseConstant([0.8], [up, down]))
+    return record_simulation(simulate(plant, 1.5), plant, sensors, rng=np.random.default_rng(0),
+                             central_position=1e-5)
 
 
 def positive(value: Any, name: str, owner: str) -> float:

@@ -51,6 +51,7 @@ Gaussian model.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -69,9 +70,23 @@ TOLERANCE = 1e-8
 #: its settled line) below which a wheel's line starts, in counts; the wheels' strips take
 #: it as their tolerance (the polygon a thousandth of a count wider: no line is lost).
 TRANSIENT = 1e-3
+#: Readings a wheel's line must have held before a reading that leaves it may be repaired as a
+#: missed count (:meth:`WheelLines.push`).
+REPAIR_AFTER = 5
+#: How far behind the line's positions a reading must lie to be repaired, counts.
+REPAIR_GAP = 0.25
 #: Half sides of the starting box (m of intercept, m/s of speed): any line; the first two
 #: readings cut it to one count and ``2 q / h``.
 _BOX = (1.0e3, 1.0e3)
+
+
+def _behind(poly: np.ndarray, n: int, tau: float, lo: float, q: float, direction: float) -> bool:
+    """The reading's strip ``[lo, lo + q)`` lies at least :data:`REPAIR_GAP` counts behind
+    (against ``direction``) every position ``x + tau v`` the polygon's lines reach at ``tau``."""
+    positions = poly[:n, 0] + tau * poly[:n, 1]
+    if direction > 0:
+        return bool(positions.min() - (lo + q) >= REPAIR_GAP * q)
+    return bool(lo - positions.max() >= REPAIR_GAP * q)
 
 
 def _box(poly: np.ndarray) -> None:
@@ -95,6 +110,7 @@ class WheelLines:
         self._q = model.sensors.wheel.distance_per_count
         self._play = model.sensors.wheel.backlash
         self._lag = model.motor_lag
+        self._period = model.sensors.period
         self._tol = TRANSIENT * self._q      # the transient's remainder counts as on a bound
         self.polys = np.empty((n, CAPACITY, 2))
         self.counts = np.zeros(n, dtype=np.int64)
@@ -108,10 +124,21 @@ class WheelLines:
         self._held: np.ndarray | None = None     # the speeds of the last steady period, m/s
         self._last: tuple[float, np.ndarray] | None = None
 
-    def push(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool) -> None:
+    def push(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool,
+             repair: bool = False) -> np.ndarray | None:
         """Row at time ``t`` (s) with wheel counts ``wheels`` (copied); ``track`` and
-        ``steady`` of the period ending at it (``track`` None for the first row)."""
+        ``steady`` of the period ending at it (``track`` None for the first row).
+
+        With ``repair``, a wheel whose reading leaves every line of its window but whose
+        reading one count further along its motion (``sign`` of its speed) does not is taken
+        to have missed a count (the counter lost a transition for good): its line goes on
+        with the repaired reading. Returns the counts added to each wheel's reading from
+        now on (ints, shape (n,); None when nothing was repaired)."""
         wheels = np.array(wheels, dtype=float)
+        self._repair = repair
+        self._motion = None if track is None else np.sign(track[0])
+        self.repaired = None
+        self.deaths = 0
         last, self._last = self._last, (t, wheels)
         if track is None:
             return
@@ -136,9 +163,11 @@ class WheelLines:
             self._restart(np.ones(self.counts.size, dtype=bool), t0, w0)
         self._extend(t, wheels)
         dead = self.counts <= 0
+        self.deaths = int(dead.sum())
         if dead.any():
             # No line (or no room) for these readings: a new window from this row.
             self._restart(dead, t, wheels)
+        return self.repaired
 
     def _restart(self, which: np.ndarray, t: float, wheels: np.ndarray) -> None:
         """New windows for the wheels ``which`` (bool mask) from the row at ``t`` (s)."""
@@ -187,9 +216,33 @@ class WheelLines:
         return ready
 
     def _extend(self, t: float, wheels: np.ndarray) -> None:
+        before = self.counts.copy()
         kernels("lines", 30 * self.counts.size).extend_lines(
             self.polys, self.counts, t, self.starts, wheels, self._first, self._q, self._tol,
             self._scratch, self._out)
+        if getattr(self, "_repair", False) and self._motion is not None:
+            # Only lines that held for REPAIR_AFTER readings: a count missed by an encoder
+            # that otherwise reads exactly, not noise that breaks lines within a few samples.
+            dead = ((self.counts == 0) & (before > 0) & (self._motion != 0)
+                    & (t - self.starts >= REPAIR_AFTER * self._period))
+            for i in np.flatnonzero(dead):
+                # A missed count leaves the reading a whole count behind the line's range;
+                # a line that only bends (a wandering motor) misses it by a sliver.
+                dead[i] = _behind(self.polys[i], int(before[i]), t - self.starts[i],
+                                  (wheels[i] - self._first[i]) * self._q, self._q, self._motion[i])
+            if dead.any():
+                # A failed clip leaves the polygon's rows untouched: retry the dead wheels
+                # with their reading one count along the motion.
+                shift = np.where(dead, self._motion, 0.0)
+                counts = np.where(dead, before, 0)
+                kernels("lines", 30 * int(dead.sum())).extend_lines(
+                    self.polys, counts, t, self.starts, wheels + shift, self._first, self._q, self._tol,
+                    self._scratch, self._out)
+                fixed = dead & (counts > 0)
+                if fixed.any():
+                    self.counts[fixed] = counts[fixed]
+                    wheels[fixed] += shift[fixed]
+                    self.repaired = np.where(fixed, shift, 0.0).astype(np.int64)
 
 
 class Hold:
@@ -226,6 +279,11 @@ class Hold:
                                                  self._scratch, self._polys[1])
         self._polys = (self._polys[1], self._polys[0])
 
+    def behind(self, t: float, count: int, direction: float) -> bool:
+        """The reading ``count`` at ``t`` lies at least half a count behind (against
+        ``direction``) every position the hold's lines reach then (:func:`_behind`)."""
+        return _behind(self._polys[0], self._n, t - self.t_a, (count - self.c_a) * self._q, self._q, direction)
+
     def push(self, t: float, count: int, lines: WheelLines
              ) -> tuple[float, float, float, float, float] | None:
         """Take the central ``count`` read at ``t`` (s); the state's mean and covariance
@@ -248,3 +306,124 @@ class Hold:
         # (X, V) = A (x, v) + (c_a q + ..., 0) with A = [[1, tau], [0, 1]].
         return (self.c_a * q + mx + mv * tau, mv,
                 vxx + 2.0 * tau * vxv + tau * tau * vvv, vxv + tau * vvv, vvv)
+
+
+@dataclass(frozen=True)
+class HoldStep:
+    """What the hold layer did at one sample.
+
+    Attributes
+    ----------
+    failed : bool
+        The reading left every line (or no wheel's speeds meet the body's): the hold ended.
+    state : ndarray of shape (2,)
+        The body's ``(X, V)`` after the sample (m, m/s): the posterior's mean on a hold; on a
+        failure, what the reading and the one-period difference of the readings know.
+    covariance : ndarray of shape (2, 2)
+        Its covariance (exact on a hold; ``(q^2 / 12) [[1, 1 / dt], [1 / dt, 2 / dt^2]]`` on a
+        failure, the reading's error being in both).
+    nis : float
+        The reading's NIS against the straight line's prediction from the prior, with the
+        count's ``q^2 / 12``.
+    repaired : int
+        Counts added to the central reading (and to every later one): 1 or -1 where the
+        reading left every line but the reading one count further along the motion did not
+        (a missed count, with ``repair``); 0 otherwise.
+    """
+
+    failed: bool
+    state: np.ndarray
+    covariance: np.ndarray
+    nis: float
+    repaired: int = 0
+
+
+class HoldLayer:
+    """The exact holds as one optional layer of a filter's step (predict, layer, update).
+
+    The filter pushes every sample's wheel counts (:meth:`wheels`); where it believes the
+    body rides a settled contact it lets the layer start a hold, and while a hold lasts the
+    layer's posterior replaces the filter's Gaussian update (:meth:`step`). Which conditions
+    allow a start is the filter's to say (the nominal filter: the body reached the set after
+    the wheels' lines became exact; the adaptive one: its consistency monitor passes and its
+    modes say stuck).
+
+    Parameters
+    ----------
+    model : EstimatorModel
+    """
+
+    def __init__(self, model: EstimatorModel) -> None:
+        self.lines = WheelLines(model)
+        self._q = model.sensors.central.distance_per_count
+        self._h = model.sensors.period
+        self._hold = Hold(self._q, model.n)
+        self.holding = False
+
+    def wheels(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool,
+               repair: bool = False) -> np.ndarray | None:
+        """Push one sample's wheel counts with the period ending at it (:meth:`WheelLines.push`;
+        with ``repair`` the counts it adds to missed wheels, else None)."""
+        return self.lines.push(t, wheels, track, steady, repair)
+
+    @property
+    def ready(self) -> bool:
+        """The wheels' lines are exact (the contacts settled since the last change)."""
+        return self.lines.active
+
+    def stop(self) -> None:
+        """End a hold (the contacts or the outside force changed, or the filter says so)."""
+        self.holding = False
+
+    def step(self, t: float, count: int, anchor: tuple[float, int], speeds: np.ndarray, var_v: float,
+             x: tuple[float, float], P: np.ndarray, start: bool, repair: bool = False) -> HoldStep | None:
+        """The layer at one sample: continue the hold, or start one when ``start`` (from the
+        previous sample ``anchor = (time, count)``), and push the reading.
+
+        Parameters
+        ----------
+        t : float, s
+        count : int
+            The central count read at ``t``.
+        anchor : tuple of (float, int)
+            Time and central count of the previous sample.
+        speeds : ndarray of shape (n,), m/s
+            The contacts' estimated speeds; with ``var_v`` ((m/s)^2) and the prior belief in
+            the body's speed ``x[1]`` (variance ``P[1, 1]``) they give the prior odds of the
+            wheels (``exp(-d_i^2 / 2)`` in stds of the difference, floored at 1e-300 of the
+            largest: the counts may show the belief wrong).
+        x, P : the prior ``(X, V)`` at the previous sample and its covariance (2, 2).
+        repair : bool
+            Take a reading that leaves every line, but would not one count further along the
+            motion, as a missed count (:attr:`HoldStep.repaired`).
+
+        Returns
+        -------
+        HoldStep or None
+            None when no hold runs at this sample (the filter's Gaussian update follows).
+        """
+        hold, q, h = self._hold, self._q, self._h
+        if not self.holding:
+            if not start:
+                return None
+            d2 = (speeds - x[1]) ** 2 / (P[1, 1] + var_v)
+            hold.start(anchor[0], anchor[1], np.maximum(np.exp(-0.5 * (d2 - d2.min())), 1e-300))
+        z = (count + 0.5) * q
+        innovation = z - (x[0] + h * x[1])
+        nis = innovation * innovation / (P[0, 0] + 2.0 * h * P[0, 1] + h * h * P[1, 1] + q * q / 12.0)
+        state = hold.push(t, count, self.lines)
+        repaired = 0
+        if state is None and repair and x[1] != 0.0 and hold.behind(t, count, 1.0 if x[1] > 0.0 else -1.0):
+            # A failed push leaves the polygons untouched: the reading one count along.
+            repaired = 1 if x[1] > 0.0 else -1
+            state = hold.push(t, count + repaired, self.lines)
+            if state is None:
+                repaired = 0
+        if state is None:
+            self.holding = False
+            dt = t - anchor[0]
+            restart = (q * q / 12.0) * np.array([[1.0, 1.0 / dt], [1.0 / dt, 2.0 / (dt * dt)]])
+            return HoldStep(True, np.array([z, (count - anchor[1]) * q / dt]), restart, nis)
+        self.holding = True
+        X, V, pxx, pxv, pvv = state
+        return HoldStep(False, np.array([X, V]), np.array([[pxx, pxv], [pxv, pvv]]), nis, repaired)

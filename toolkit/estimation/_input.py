@@ -131,6 +131,8 @@ class EstimatorModel:
     _follow: float = field(init=False, repr=False)
     _plants: tuple = field(init=False, repr=False)
     _friction_noise: np.ndarray = field(init=False, repr=False)
+    _between: Any = field(init=False, repr=False)
+    _read_noise: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
@@ -182,6 +184,10 @@ class EstimatorModel:
         spread = np.outer(g, g) * (self._friction_var / self.mass**2)
         spread.setflags(write=False)
         object.__setattr__(self, "_friction_noise", spread)
+        # The between-contacts shortcut: for unequal magnitudes (an adaptive filter's model at
+        # its estimates), where bodies creep across bands the nominal equal ones hold exactly.
+        object.__setattr__(self, "_between", self._quiet_between if np.ptp(forces) > 0 else None)
+        object.__setattr__(self, "_read_noise", self.sensors.read_noise_variance)
 
     @property
     def n(self) -> int:
@@ -192,6 +198,14 @@ class EstimatorModel:
     def settle(self) -> int:
         """Samples after a command change before the wheel differences are trusted."""
         return self._settle
+
+    def reading_variance(self, speed: Any) -> Any:
+        """Variance of one wheel reading, m^2: the quantization's ``q^2 / 12``, the declared
+        read noise's (:attr:`Sensors.read_noise_variance` counts^2) and the jitter's ``(v
+        sigma_t)^2`` for a contact at ``speed`` (m/s)."""
+        sensors = self.sensors
+        q = sensors.wheel.distance_per_count
+        return q * q * (1.0 / 12.0 + self._read_noise) + (speed * sensors.jitter) ** 2
 
     def clip(self, commands: Any) -> np.ndarray:
         """Commands clipped to the motors' speed limits (the motor law's clip), m/s."""
@@ -227,8 +241,14 @@ class EstimatorModel:
         return unsaturated_response(track[..., 0, :], track[..., 1, :], self.sensors.period,
                                     self.motor_lag, math.inf)
 
+    def end_speeds_at(self, track: np.ndarray, s: float) -> np.ndarray:
+        """Contact speeds ``s`` seconds into the period of ``track`` (the motor law), m/s."""
+        if self.motor_lag <= 0.0:
+            return track[1]
+        return unsaturated_response(track[0], track[1], s, self.motor_lag, math.inf)
+
     def increment(self, V: float, track: np.ndarray, contact_std: float, speed_std: float,
-                  steady: bool, bounds: Any = None, force: float = 0.0
+                  steady: bool, bounds: Any = None, force: float = 0.0, gains: np.ndarray | None = None
                   ) -> tuple[float, float, np.ndarray, tuple[float, float] | None, float | None, bool]:
         """Known input over one sample period from body speed ``V`` (m/s).
 
@@ -246,6 +266,10 @@ class EstimatorModel:
             :meth:`bounds_row` of ``track`` and ``force`` (computed when needed and not given).
         force : float, N
             Outside force held over the period (known exactly).
+        gains : ndarray of shape (2, n + 1), optional
+            Filled, when given, with the first-order sensitivity of ``(X+, V+)`` to relative
+            errors ``e_i`` of the friction magnitudes (``f_i (1 + e_i)``, columns ``0 .. n -
+            1``) and to an error of the drag (N s/m, column ``n``) (:meth:`force_gains`).
 
         Returns
         -------
@@ -282,18 +306,122 @@ class EstimatorModel:
             smin, smax, lo_eq, hi_eq, lo0, hi0 = b
             w = 2.0 * math.sqrt(speed_std * speed_std + contact_std * contact_std)
             if steady and lo_eq <= V <= hi_eq:
+                if gains is not None:
+                    self._coast_gains(V, track[0], lo_eq < V < hi_eq, gains)
                 return 0.0, 0.0, self._held_noise, None, None, True
             if (not steady and V - w <= hi0 and V + w >= lo0
                     and max(abs(lo_eq - lo0), abs(hi_eq - hi0)) <= self._follow):
-                return self._carried(V, track, b, contact_std, force)
+                out = self._carried(V, track, b, contact_std, force)
+                if gains is not None:
+                    if out[3] is None and out[4] is None:     # inside the set, or on its edge contact
+                        self._coast_gains(V, track[0], lo_eq < V < hi_eq and lo0 < V < hi0, gains)
+                    else:
+                        self.force_gains(V, track, force, gains, out)
+                return out
             # Every contact speed of the period out of reach: the whole friction one way.
             push = force * self.sensors.period / self.mass if force != 0.0 else 0.0
             reach = max(w, self._reach + abs(push))
             if smin - V > reach or V - smax > reach:
                 dV = push + (self._reach if smin - V > reach else -self._reach)
+                if gains is not None:
+                    self._coast_gains(V, track[0], True, gains)
                 return 0.5 * dV * self.sensors.period, dV, self._friction_noise, None, None, False
+            if steady and self._between is not None:
+                quiet = self._between(V, track[0], force, w)
+                if quiet is not None:
+                    if gains is not None:
+                        self._coast_gains(V, track[0], True, gains)
+                    return 0.5 * quiet * self.sensors.period, quiet, self._friction_noise, None, None, False
         step = self.flow(V, track, force)
-        return self._linearized(V, track, force, step, contact_std)
+        out = self._linearized(V, track, force, step, contact_std)
+        if gains is not None:
+            self.force_gains(V, track, force, gains, out, step)
+        return out
+
+    def _quiet_between(self, V: float, speeds: np.ndarray, force: float, w: float) -> float | None:
+        """A body between two held contact speeds that cannot reach either within the period
+        (the region's net force, the friction law's, carries it less far than the nearer
+        neighbour in its direction, less ``w``, and the other neighbour is farther than
+        ``w``): ``dV = F h / m`` with ``F`` the region's constant force (as the whole-friction
+        shortcut, for any region). None otherwise (the flow decides)."""
+        below, above = -math.inf, math.inf
+        for v in speeds.tolist():
+            if v < V:
+                below = max(below, v)
+            elif v > V:
+                above = min(above, v)
+            else:
+                return None                          # on a contact speed: stick or pass
+        dV = (float(contact_forces(speeds - V, self.forces).sum()) + force) * self.sensors.period / self.mass
+        if dV >= 0.0:
+            ok = above - V > dV + w and V - below > w
+        else:
+            ok = V - below > -dV + w and above - V > w
+        return dV if ok else None
+
+    def _coast_gains(self, V: float, speeds: np.ndarray, free: bool, gains: np.ndarray) -> None:
+        """:meth:`increment`'s ``gains`` of a period without events: a body that slides
+        (``free``) feels each force error ``f_i e_i sign(v_i - V)`` and ``-dc V`` for the
+        whole period (``dV = dF h / m``, ``dx = dF h^2 / (2 m)``); a stuck one none."""
+        if not free:
+            gains[:] = 0.0
+            return
+        h, m, n = self.sensors.period, self.mass, self.n
+        gv = h / m
+        gains[1, :n] = self.forces * np.sign(speeds - V) * gv
+        gains[1, n] = -V * gv
+        gains[0] = gains[1] * (0.5 * h)
+
+    def force_gains(self, V: float, track: np.ndarray, force: float, gains: np.ndarray,
+                    out: tuple | None = None, step: Any = None) -> np.ndarray:
+        """First-order sensitivity of the period's end ``(X+, V+)`` to the force errors, into
+        ``gains`` (2, n + 1): columns ``i < n`` a relative error ``e_i`` of ``f_i``, column
+        ``n`` an error of the drag (N s/m).
+
+        The end state's response ``g_F`` to an extra outside force held over the period is
+        the exact flow's, by a central difference of 1e-7 ``F_tot`` (so crossings, sticking
+        and release are the simulator's: a body that ends stuck feels none); each force error
+        acts through it with the contact's sign relative to the body averaged over the
+        period (the signs flip at the step's crossings), ``f_i s_i``, and the drag's
+        ``-V`` averaged over the start and end speeds.
+        """
+        h, n = self.sensors.period, self.n
+        if step is not None and not step.events and self.damping == 0.0:
+            # No event in the period: the signs hold throughout and the response to a force
+            # is the free body's (or none, stuck all along): the closed form.
+            self._coast_gains(V, track[0], step.state.stuck is None, gains)
+            return gains
+        if out is None:
+            out = self.increment(V, track, 0.0, 0.0, False, None, force)
+        delta = 1e-7 * float(self.forces.sum())
+        up = self.flow(V, track, force + delta)
+        down = self.flow(V, track, force - delta)
+        g_x = (up.body_displacement - down.body_displacement) / (2.0 * delta)
+        g_v = (up.state.V - down.state.V) / (2.0 * delta)
+        # The contacts' signs relative to the body, averaged over the period: each crossing
+        # flips the signs of the contacts at the body's speed at that instant.
+        start, target = track[0], track[1]
+        sign = np.sign(start - V)
+        average = np.zeros(n)
+        t_prev = 0.0
+        events = step.events if step is not None else self.flow(V, track, force).events
+        for event in events:
+            if event.kind != "cross":
+                continue
+            average += sign * (event.time - t_prev)
+            t_prev = event.time
+            speeds = self.end_speeds_at(track, event.time)
+            at = np.abs(speeds - event.speed) <= 1e-9 * max(1.0, abs(event.speed))
+            if event.contact is not None:
+                at[event.contact] = True
+            sign = np.where(at, -sign, sign)
+        average = (average + sign * (h - t_prev)) / h
+        gains[0, :n] = self.forces * average * g_x
+        gains[1, :n] = self.forces * average * g_v
+        V_mean = V + 0.5 * out[1]
+        gains[0, n] = -V_mean * g_x
+        gains[1, n] = -V_mean * g_v
+        return gains
 
     def flow(self, V: float, track: np.ndarray, force: float = 0.0) -> Any:
         """The plant's exact flow over one period from body speed ``V`` (m/s): the
@@ -656,7 +784,7 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
         for i in range(L):
             cov += (w[J[:, i]] - w_s) * tt[:, i, None]
         speeds[chunk] = cov * (q / S)[:, None]
-        variance[chunk] = (q * q / 12.0) / S
+        variance[chunk] = model.reading_variance(np.abs(speeds[chunk]).max(axis=1)) / S
     steady = (idx - last_change) >= settle
     steady &= ~changed
     transient = ~ok
@@ -698,11 +826,38 @@ class ContactSpeedTracker:
     model : EstimatorModel
     initial : array_like of shape (n,), m/s, optional
         As in :func:`contact_speed_estimates`.
+    residuals : bool
+        Also estimate each contact's variance from its window's residuals
+        (:attr:`contact_variance`: covariance matching, for encoders noisier than their
+        quantization); default False.
+
+    Attributes
+    ----------
+    contact_variance : ndarray of shape (n,), (m/s)^2
+        With ``residuals``: each contact's slope variance, ``s_i^2 / S`` with ``s_i^2`` the
+        window's residual variance (``RSS / (m - 2)``, at least the quantization's ``q^2 /
+        12``); the row's variance elsewhere (fewer than 4 readings, or a transient).
+    reading_variance : ndarray of shape (n,), m^2
+        With ``residuals``: each wheel's residual variance per reading, ``s_i^2`` (at least
+        ``q^2 / 12``).
+    white_variance : float, (m/s)^2
+        The last row's variance (the white quantization's, or the transient's).
+    window_length : int
+        Readings in the last row's window (0 in a transient).
     """
 
-    def __init__(self, model: EstimatorModel, initial: Any = None) -> None:
+    #: With ``residuals``: windows of eight readings or more refit the residual variance
+    #: every this many rows (it moves little from one row to the next).
+    RESIDUALS_EVERY = 5
+
+    def __init__(self, model: EstimatorModel, initial: Any = None, residuals: bool = False) -> None:
         self.model = model
+        self._residuals = residuals
+        self.contact_variance = np.zeros(model.n)
+        self.white_variance = 0.0
+        self.window_length = 0
         self._q = model.sensors.wheel.distance_per_count
+        self.reading_variance = np.full(model.n, self._q * self._q / 12.0)
         self._settle = model.settle
         self._keep = model.max_window + 1
         self._initial = None if initial is None else np.array(initial, dtype=float)
@@ -718,8 +873,17 @@ class ContactSpeedTracker:
         self._lag = model.motor_lag
         low, high = model.speed_limits
         # Clipping only when the motors have limits (the loop's per-sample cost otherwise).
-        self._clip = model.clip if (math.isfinite(low) or math.isfinite(high)) else (lambda u: u)
+        self._clip = self._clipped if (math.isfinite(low) or math.isfinite(high)) else (lambda u: u)
+        self._limits = (low, high)
         self._law_floor = self._q * self._q / 6.0 / model.sensors.period**2
+
+    def _clipped(self, u: np.ndarray) -> np.ndarray:
+        """The command clipped by the motor law (:meth:`EstimatorModel.clip`) when it leaves the
+        speed limits (the common case, inside them, costs two comparisons)."""
+        low, high = self._limits
+        if low <= u.min() and u.max() <= high:
+            return u
+        return self.model.clip(u)
 
     def push(self, t: float, wheel_counts: Any, command: Any
              ) -> tuple[np.ndarray, float, bool, np.ndarray]:
@@ -764,7 +928,19 @@ class ContactSpeedTracker:
             tt = t_rel - t_rel.sum() / (j - start + 1)
             S = float(tt @ tt)
             speeds = (tt @ (wb - wb[0])) * (q / S)
-            variance = (q * q / 12.0) / S
+            variance = float(model.reading_variance(float(np.abs(speeds).max()))) / S
+            self.white_variance = variance
+            self.window_length = j - start + 1
+            if self._residuals:
+                m = j - start + 1
+                if m >= 4 and (m < 8 or m % self.RESIDUALS_EVERY == 0):
+                    centred = wb - wb.mean(axis=0)
+                    along = tt @ centred
+                    rss = np.einsum("ij,ij->j", centred, centred) - along * along / S
+                    self.reading_variance = (q * q) * np.maximum(rss / (m - 2), 1.0 / 12.0)
+                elif m < 4:
+                    self.reading_variance = np.full(model.n, q * q / 12.0)
+                self.contact_variance = (self.reading_variance / S if m >= 4 else np.full(model.n, variance))
         elif lc >= 0:
             t_c, u_c, before = self._change  # type: ignore[misc]
             law = unsaturated_response(before, u_c, t - t_c, self._lag, math.inf)
@@ -773,6 +949,12 @@ class ContactSpeedTracker:
         else:
             speeds = u if self._initial is None else self._initial
             variance = (q * model.sensors.rate) ** 2
+        if not ok:
+            self.white_variance = float(variance)
+            self.window_length = 0
+        if self._residuals and not ok:
+            self.contact_variance = np.full(model.n, float(variance))
+            self.reading_variance = np.full(model.n, q * q / 12.0)
         steady = (j - lc) >= self._settle and not changed
         if changed:
             # The speeds at the change: this row's own estimate (contact_speed_estimates).

@@ -33,7 +33,8 @@ while the count repeats (``|V| h < q``, or stuck) the errors of consecutive samp
 same number: ``r`` repeated readings carry the information of one. So each reading gets
 ``R_k = (q^2 / 12) (1 + r_k)`` with ``r_k`` the number of preceding samples with the same
 count: the ``r + 1`` readings of one count together weigh as one, never as ``r + 1``
-independent ones. Read noise adds ``(sigma_n q)^2`` and jitter ``(V sigma_t)^2`` (a read
+independent ones. Read noise adds its variance (a normal of std ``sigma_n`` counts rounded to
+whole counts: :attr:`Sensors.read_noise_variance` times ``q^2``) and jitter ``(V sigma_t)^2`` (a read
 ``d`` seconds off its stamp is ``V d`` off in position), with ``V`` the speed estimate.
 
 When the count changes at every sample at constant speed the errors are still a
@@ -61,7 +62,7 @@ where the Gaussian filter has the body reach the equilibrium set after the wheel
 became exact, lasts while the contacts stay steady, and fails at a reading no line allows
 (the state then restarts from the reading and a one-period difference). It needs ideal
 encoders, ``contact_drift = 0``, no drag and no friction spread
-(:attr:`KalmanEstimator.holds_exact`). On
+(:attr:`NominalKalman.holds_exact`). On
 the acceptance record the NEES mean is then 1.77 (1.64 in the first second, 2.44
 cruising, 1.56 around the brake, 1.22 braked); over random grid phases the filter passes
 Bar-Shalom's Monte Carlo test (the mean NEES over 30 records inside its 95 % band at 96-98 %
@@ -120,10 +121,10 @@ from ..errors import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, check_covariance, score
-from ._hold import Hold, WheelLines
+from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 
-__all__ = ["KalmanEstimator", "RTSSmoother", "steady_state_gain", "measurement_variance"]
+__all__ = ["NominalKalman", "RTSSmoother", "steady_state_gain", "measurement_variance"]
 
 
 def _side(speed: float, bounds: Any) -> int | None:
@@ -157,12 +158,12 @@ def measurement_variance(counts: np.ndarray, speed: np.ndarray, model: Estimator
     run = np.cumsum(same)
     reset = np.maximum.accumulate(np.where(same == 0, run, 0))
     repeats = run - reset
-    return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
+    return (q * q / 12.0) * (1.0 + repeats) + sensors.read_noise_variance * q * q + (speed * sensors.jitter) ** 2
 
 
 def _measurement_variance_one(repeats: int, speed: float, q: float, sensors: Any) -> float:
     """:func:`measurement_variance` of one sample (same expression), m^2."""
-    return (q * q / 12.0) * (1.0 + repeats) + (sensors.count_noise * q) ** 2 + (speed * sensors.jitter) ** 2
+    return (q * q / 12.0) * (1.0 + repeats) + sensors.read_noise_variance * q * q + (speed * sensors.jitter) ** 2
 
 
 def _make_filter(model: EstimatorModel) -> Any:
@@ -178,7 +179,7 @@ def _make_filter(model: EstimatorModel) -> Any:
     return kf
 
 
-class KalmanEstimator(Estimator):
+class NominalKalman(Estimator):
     """Kalman filter of ``(X, V)`` with the contact force as known input (see the module).
 
     Parameters
@@ -194,7 +195,8 @@ class KalmanEstimator(Estimator):
         :attr:`holds_exact`).
     """
 
-    name = "kalman"
+    name = "kalman_nominal"
+    KERNELS = ("core", "lines")
 
     def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None,
                  exact_holds: bool = True) -> None:
@@ -254,16 +256,18 @@ class KalmanEstimator(Estimator):
         self._on_set = False
         self._edge, self._edge_var = None, math.inf
         self._increment = self.model.increment
-        self._lines = WheelLines(self.model) if self.holds_exact else None
-        self._hold = Hold(self._q, self.model.n)
+        self._layer = HoldLayer(self.model)
+        self._lines = self._layer.lines if self.holds_exact else None
         self._anchor = (math.nan, 0)          # (time, central count) of the last sample
         self.holding = False                   # the last step was an exact hold
+        self.hold_failed = False               # the last step's reading left every line of a hold
         self._stuck_settled = False            # the body reached the set on settled contacts
         self._hold_force = 0.0                 # the last period's outside force (a change ends a hold), N
         self.last_input = (0.0, 0.0)
         self.last_F = self._F
         self.last_Q = np.zeros((2, 2))
         self.last_nis = np.nan
+        self.last_cell = 1.0                   # probability of the last reading's count cell
 
     def _start(self, z: float) -> None:
         kf = self.kf
@@ -278,10 +282,12 @@ class KalmanEstimator(Estimator):
         speeds and the outside force ``force``, N), then update with the sample (central
         ``count`` read at ``t``, s; ``wheels`` the wheel counts)."""
         kf = self.kf
+        self.hold_failed = False
         anchor, self._anchor = self._anchor, (t, count)
         lines = self._lines if wheels is not None else None
         if lines is not None:
-            lines.push(t, wheels, track, steady)
+            self._layer.wheels(t, wheels, track, steady)
+        self.last_cell = 1.0
         if track is None:
             self._start(z)
             self.last_nis = np.nan
@@ -291,10 +297,12 @@ class KalmanEstimator(Estimator):
             # it sees the body reach the set again.
             self._hold_force = force
             self.holding = self._stuck_settled = False
+            self._layer.stop()
         if (lines is not None and steady and lines.active
                 and self._held(t, count, anchor, track[0], var_v)):
             return
         self.holding = False
+        self._layer.stop()
         x = kf.x
         V = x.item(1)
         model = self.model
@@ -356,6 +364,7 @@ class KalmanEstimator(Estimator):
             kf.predict(u=np.array([[u[0]], [u[1]]]), B=self._I2, F=F, Q=Q)
             self.last_input = u
             self.last_F = F
+        self.last_cell = self._cell_probability(count, kf.x.item(0), kf.P.item(0), kf.x.item(1))
         # z as a float: filterpy's y = z - H x is the same (1, 1) array, and its deepcopy(z)
         # of a float is free (of an array it is not).
         kf.update(z, H=self._H)
@@ -364,53 +373,54 @@ class KalmanEstimator(Estimator):
         if inc is not None:
             kf.update(inc[0], R=inc[1], H=self._H_speed)
 
+    def _cell_probability(self, count: int, mean: float, variance: float, speed: float) -> float:
+        """The probability of the reading's count cell ``[c q, (c + 1) q)`` under the predicted
+        position ``N(mean, variance + declared read noise and jitter)`` (m, m^2; ``speed``
+        for the jitter, m/s): the quantized likelihood, where the Gaussian NIS (which
+        spreads the cell into ``q^2 / 12`` of noise) understates how far off a reading is."""
+        q = self._q
+        sensors = self.model.sensors
+        var = variance + sensors.read_noise_variance * q * q + (speed * sensors.jitter) ** 2
+        if var <= 0.0:
+            return 1.0 if count * q <= mean < (count + 1) * q else 0.0
+        scale = 1.0 / math.sqrt(2.0 * var)
+        lo, hi = (count * q - mean) * scale, ((count + 1) * q - mean) * scale
+        # Phi(b) - Phi(a) from the tail on the mean's far side (no cancellation there).
+        if lo > 0.0:
+            return 0.5 * (math.erfc(lo) - math.erfc(hi))
+        if hi < 0.0:
+            return 0.5 * (math.erfc(-hi) - math.erfc(-lo))
+        return 1.0 - 0.5 * (math.erfc(-lo) + math.erfc(hi))
+
     def _held(self, t: float, count: int, anchor: tuple[float, int], speeds: np.ndarray,
               var_v: float) -> bool:
-        """The exact hold's step (:mod:`toolkit.estimation._hold`) where the body rides a
-        settled contact: continue the hold, or start one where the Gaussian filter has the
-        body on the equilibrium set since it reached the set after the wheels' lines became
-        exact (and the outside force has not changed since), and set the state to the
-        posterior's moments. A failed hold (no line fits the counts, or no wheel's speeds
-        meet the body's) resets the state to what the reading and the one-period difference
-        of the readings know, ``(z, (c_k - c_{k-1}) q / h)`` with ``P = (q^2 / 12) [[1, 1 / h],
-        [1 / h, 2 / h^2]]`` (the reading's error is in both; the transition ``F = 0``: the
-        smoother does not carry the failed hold's information back), and hands the body back to the Gaussian steps until they see it
-        reach the set again. False when there is no hold (the Gaussian step follows)."""
-        hold, lines = self._hold, self._lines
+        """The exact-hold layer (:class:`toolkit.estimation._hold.HoldLayer`) where the body
+        rides a settled contact: continue the hold, or start one where the Gaussian filter has
+        the body on the equilibrium set since it reached the set after the wheels' lines
+        became exact (and the outside force has not changed since), and set the state to the
+        posterior's moments. A failed hold resets the state to what the reading and the
+        one-period difference of the readings know (the transition ``F = 0``: the smoother
+        does not carry the failed hold's information back) and hands the body back to the
+        Gaussian steps until they see it reach the set again. False when there is no hold
+        (the Gaussian step follows)."""
         kf = self.kf
-        if not self.holding:
-            if not (self._on_set and self._stuck_settled):
-                return False
-            # Prior odds of the wheels: the Gaussian belief in the body's speed against each
-            # contact's estimate (floored: the counts may still show the belief wrong).
-            d2 = (speeds - kf.x.item(1)) ** 2 / (kf.P.item(3) + var_v)
-            hold.start(anchor[0], anchor[1], np.maximum(np.exp(-0.5 * (d2 - d2.min())), 1e-300))
         x, P = kf.x, kf.P
-        h, q = self._h, self._q
-        z = (count + 0.5) * q
-        # The NIS of the reading against the straight line's prediction, with the count's
-        # q^2 / 12 (its variance over a uniform grid phase).
-        innovation = z - (x.item(0) + h * x.item(1))
-        self.last_nis = innovation * innovation / (P.item(0) + 2.0 * h * P.item(1) + h * h * P.item(3)
-                                                   + q * q / 12.0)
-        state = hold.push(t, count, lines)
-        if state is None:
+        out = self._layer.step(t, count, anchor, speeds, var_v, (x.item(0), x.item(1)), P,
+                               self._on_set and self._stuck_settled)
+        if out is None:
+            return False
+        self.last_nis = out.nis
+        kf.x = out.state[:, None].copy()
+        kf.P = out.covariance
+        if out.failed:
+            self.hold_failed = True
             self.holding = False
             self._on_set = self._stuck_settled = False
-            # The reading errs by e_k (variance q^2 / 12), the difference by (e_k - e_k-1) / dt.
-            dt = t - anchor[0]
-            restart = (q * q / 12.0) * np.array([[1.0, 1.0 / dt], [1.0 / dt, 2.0 / (dt * dt)]])
-            speed = (count - anchor[1]) * q / dt
-            kf.x = np.array([[z], [speed]])
-            kf.P = restart
-            self.last_input = (z, speed)
+            self.last_input = (float(out.state[0]), float(out.state[1]))
             self.last_F = self._F_reset
-            self.last_Q = restart
+            self.last_Q = out.covariance
             return True
         # The hold's step as the smoother sees it: x+ = F x (Q = 0: the line is exact).
-        X, V, pxx, pxv, pvv = state
-        kf.x = np.array([[X], [V]])
-        kf.P = np.array([[pxx, pxv], [pxv, pvv]])
         self.last_input = (0.0, 0.0)
         self.last_F = self._F
         self.last_Q = self._Q0
@@ -448,12 +458,7 @@ class KalmanEstimator(Estimator):
         """The contact speeds commanded at the last observed sample (m/s, shape (n,)) and
         the outside force applied with them (N, held to the next sample): they drive the
         prediction to the next sample."""
-        if self._observed is None:
-            raise RuntimeError("commanded() follows observe(): once per observed sample.")
-        if type(force) is not float or not math.isfinite(force):
-            force = as_float(force, "force", f"{type(self).__name__}.commanded")
-        t, wheels = self._observed
-        self._observed = None
+        (t, wheels), force = self._take_observed(force)
         self._last_command, self._last_force = command, force
         speeds, var, steady, track = self._tracker.push(t, wheels, command)
         self._pending = (track, var, steady, self.model.bounds_row(track, force), force)
@@ -463,9 +468,7 @@ class KalmanEstimator(Estimator):
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Run over a record: states (k, 2), covariances (k, 2, 2), inputs (k, 2) (row k:
         the period ending at sample k), process noises (k, 2, 2), NIS (k,), wall time (s)."""
-        if not isinstance(record, EncoderRecord):
-            raise ParameterTypeError(parameter_message("record", f"{type(self).__name__}.run",
-                                                       "be an EncoderRecord", record))
+        self._check_record(record)
         started = time.perf_counter()
         model = self.model
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
@@ -499,9 +502,13 @@ class KalmanEstimator(Estimator):
         Fs = [self._F]
         Qs = [np.zeros((2, 2))]
         nis = [math.nan]
+        failed = [False]
+        cells = [1.0]
         for k in range(1, K):
             advance(z_l[k], R_l[k], track[k - 1], var_l[k - 1], steady_l[k - 1], bounds[k - 1], force_l[k - 1],
                     counts_l[k], times_l[k], wheels[k])
+            failed.append(self.hold_failed)
+            cells.append(self.last_cell)
             x = kf.x
             xs.append((x.item(0), x.item(1)))
             Ps.append(kf.P)
@@ -512,6 +519,10 @@ class KalmanEstimator(Estimator):
         X, P, U, Q = np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Qs)
         self._pending = (track[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1], force_l[-1])
         self.transitions = np.array(Fs)
+        #: Per sample: the reading left every line of an exact hold (the hold failed).
+        self.hold_failures = np.array(failed)
+        #: Per sample: the probability of its count cell under the prediction.
+        self.cell_probabilities = np.array(cells)
         return X, P, U, Q, np.array(nis), time.perf_counter() - started
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
@@ -522,7 +533,7 @@ class KalmanEstimator(Estimator):
 
 
 class RTSSmoother(Estimator):
-    """Rauch-Tung-Striebel smoother over the :class:`KalmanEstimator`'s pass (offline only).
+    """Rauch-Tung-Striebel smoother over the :class:`NominalKalman`'s pass (offline only).
 
     The forward pass is the filter's; the backward pass is filterpy's
     ``KalmanFilter.rts_smoother`` on the augmented state ``(X, V, 1)`` whose transitions
@@ -530,9 +541,10 @@ class RTSSmoother(Estimator):
     """
 
     name = "rts"
+    KERNELS = ("core", "lines")
 
     def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None) -> None:
-        self.forward = KalmanEstimator(model, initial_covariance=initial_covariance)
+        self.forward = NominalKalman(model, initial_covariance=initial_covariance)
         self.model = model
 
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
@@ -541,11 +553,11 @@ class RTSSmoother(Estimator):
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
-        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
+        raise NotImplementedError("The RTS smoother is offline: call run(record); step the NominalKalman.")
 
     def commanded(self, command: Any, force: float = 0.0) -> None:
         """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
-        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
+        raise NotImplementedError("The RTS smoother is offline: call run(record); step the NominalKalman.")
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:

@@ -2,7 +2,7 @@
 
 Same state ``(X, V)``, measurement, noise and known inputs (contact speeds and the outside
 force) as
-:class:`~toolkit.estimation.kalman.KalmanEstimator` (whose per-sample loop it reuses), but
+:class:`~toolkit.estimation.kalman.NominalKalman` (whose per-sample loop it reuses), but
 the prediction propagates each sigma point through the plant's exact flow over the period
 (:meth:`~toolkit.estimation.EstimatorModel.flow`, the simulator's
 :func:`~toolkit.simulation.advance`: the contacts from the wheel-measured speeds towards the
@@ -27,12 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from .kalman import KalmanEstimator
+from .kalman import NominalKalman
 
 __all__ = ["UnscentedEstimator"]
 
 
-class UnscentedEstimator(KalmanEstimator):
+class UnscentedEstimator(NominalKalman):
     """UKF on ``filterpy.kalman.UnscentedKalmanFilter`` with Julier sigma points (kappa = 1).
 
     Parameters
@@ -42,6 +42,7 @@ class UnscentedEstimator(KalmanEstimator):
     """
 
     name = "unscented"
+    KERNELS = ("core",)
 
     def __init__(self, model: Any, *, initial_covariance: Any = None) -> None:
         # The sigma points are the UKF's way with the sign nonlinearity: no exact holds.

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import as_float
+from ..errors import as_float, as_float_array
 from ..controllers.base import ControlLaw, Controller
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant, sample_count, sample_times
@@ -171,10 +171,12 @@ def _run_sampled(plant: Plant, law: ControlLaw, program: SampledLaw | None, time
 
 
 def _run_python(plant: Plant, law: ControlLaw, times: np.ndarray, sensors: Sensors | None,
-                estimator: Any, v0: float, seed: Any, budget: Budget | None) -> tuple[Any, ...]:
+                estimator: Any, v0: float, seed: Any, budget: Budget | None,
+                offsets: np.ndarray | None = None) -> tuple[Any, ...]:
     """The loop in Python around :func:`~toolkit.simulation.advance` and the sensor law's
-    :class:`~toolkit.model.sensors.SensorReader`: noisy sensors, jitter, and the plants and
-    budgets the kernel does not run (:func:`toolkit.simulation.sampled_supported`)."""
+    :class:`~toolkit.model.sensors.SensorReader`: noisy sensors, jitter, the motors' wander
+    (``offsets``), and the plants and budgets the kernel does not run
+    (:func:`toolkit.simulation.sampled_supported`)."""
     rng = np.random.default_rng(seed)
     samples, n = times.size, plant.n
     period = float(times[1] - times[0]) if samples > 1 else 0.0
@@ -220,7 +222,8 @@ def _run_python(plant: Plant, law: ControlLaw, times: np.ndarray, sensors: Senso
         t_next = t_list[k + 1]
         if jitter > 0:
             t_next += float(np.clip(rng.normal(0.0, jitter), -0.25 * period, 0.25 * period))
-        step = advance(plant, state, u, t_next, external=float(f), budget=budget)
+        held = u if offsets is None else u + offsets[min(k, offsets.shape[0] - 1)]
+        step = advance(plant, state, held, t_next, external=float(f), budget=budget)
         if step.status is not SimulationStatus.SUCCESS:
             status, message, last = step.status, step.message, k + 1
             break
@@ -233,7 +236,7 @@ def _run_python(plant: Plant, law: ControlLaw, times: np.ndarray, sensors: Senso
 def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
                          sensors: Sensors | None = None, estimator: Any = None,
                          rate: float | None = None, v0: float = 0.0, seed: Any = None,
-                         budget: Budget | None = None) -> ClosedLoopResult:
+                         budget: Budget | None = None, wander: Any = None) -> ClosedLoopResult:
     """Run ``controller`` on ``plant`` from ``t = 0`` to ``t_end`` at the sample rate.
 
     Parameters
@@ -258,12 +261,24 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
         Seeds the sensors' missed counts, read noise and jitter.
     budget : Budget, optional
         Guards of each plant step.
+    wander : array_like of shape (k, n), m/s, optional
+        The motors' wander about their commands (a true world's,
+        :meth:`toolkit.model.truth.TrueWorld.wander`): over the period after sample ``j`` the
+        motors run towards ``command + wander[j]`` (rows past the end: the last one). The
+        record and the result log the commands sent.
 
     Returns
     -------
     ClosedLoopResult
     """
     rate, samples = _check(plant, controller, sensors, estimator, rate, t_end)
+    offsets = None
+    if wander is not None:
+        offsets = as_float_array(wander, "wander", "simulate_closed_loop", ndim=2)
+        if offsets.shape[1] != plant.n:
+            raise ParameterError(parameter_message("wander", "simulate_closed_loop",
+                                                   f"have one column per contact ({plant.n})",
+                                                   f"an array of shape {offsets.shape}"))
     started = time.perf_counter()
     period = 1.0 / rate
     law: ControlLaw = controller.bind(plant, period)
@@ -278,7 +293,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     initial = plant.initial_speeds()
     if sensors is not None:
         estimator.reset(speed=float(v0), contact_speeds=initial)
-    if _COMPILED and sampled_supported(plant, sensors, budget):
+    if _COMPILED and offsets is None and sampled_supported(plant, sensors, budget):
         program = getattr(law, "sampled", None)
         run = _run_sampled(plant, law, None if program is None else program(), times,
                            sensors, estimator, float(v0), budget)
@@ -288,7 +303,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     else:
         (speed, estimate, variance, position, force, central, wheel, commands, contact, status,
          message, last) = _run_python(plant, law, times, sensors, estimator, float(v0), seed,
-                                      budget)
+                                      budget, offsets)
     keep = slice(0, last)
     record = None
     if sensors is not None:

@@ -189,6 +189,21 @@ class Sensors:
         """Gearbox play of each wheel at the contact, m."""
         return self.wheel.backlash
 
+    @property
+    def read_noise_variance(self) -> float:
+        """Variance of the read noise the sensor law adds, counts^2: a normal draw of std
+        ``count_noise`` rounded to whole counts (:meth:`SensorReader.read`), so ``sum_k k^2
+        P(k)`` with ``P(k)`` the normal's mass on ``[k - 1/2, k + 1/2)``: not ``count_noise^2``
+        (0.325 against 0.25 at half a count)."""
+        sigma = self.count_noise
+        if sigma == 0.0:
+            return 0.0
+        from scipy.special import ndtr
+
+        k = np.arange(1, int(math.ceil(12.0 * sigma)) + 2)
+        mass = ndtr((k + 0.5) / sigma) - ndtr((k - 0.5) / sigma)
+        return float(2.0 * np.sum(k * k * mass))
+
     def initial_state(self, contact_speeds: Any = None, *, central_position: float = 0.0,
                       contact_positions: Any = None) -> SensorState:
         """The sensors' state before the first sample.

@@ -1,0 +1,263 @@
+"""The adaptive filter's compiled IMM arithmetic (toolkit._compiled.imm) against filterpy,
+its reference: mixing and combination against IMMEstimator, the sparse prediction against the
+dense ``F P F^T + Q``, the update against KalmanFilter.update, the wheels' bank against a
+plain 2-state Kalman filter. ``make test`` runs this file compiled and again as Python under
+``NUMBA_DISABLE_JIT=1`` (the same source)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from toolkit._compiled import load
+
+K = load("imm")
+filterpy = pytest.importorskip("filterpy.kalman")
+
+
+def _spd(rng: np.random.Generator, d: int, scale: float = 1.0) -> np.ndarray:
+    A = rng.normal(size=(d, d)) * scale
+    return A @ A.T + np.eye(d) * scale * scale * 0.1
+
+
+def _filters(rng: np.random.Generator, m: int, d: int) -> list:
+    out = []
+    for _ in range(m):
+        kf = filterpy.KalmanFilter(dim_x=d, dim_z=1)
+        kf.x = rng.normal(size=d)
+        kf.P = _spd(rng, d)
+        kf.H = np.zeros((1, d))
+        kf.H[0, 0] = 1.0
+        out.append(kf)
+    return out
+
+
+def test_mixing_and_combination_equal_filterpy_imm():
+    # Random modes, unequal mode probabilities, a row-stochastic M with unequal rows: the
+    # kernel's mixed states (filterpy computes them inside IMMEstimator.predict, just before
+    # each filter's own predict, so an identity transition exposes them) and its
+    # combination equal filterpy's to rounding (1e-12 relative).
+    rng = np.random.default_rng(3)
+    m, d = 3, 7
+    filters = _filters(rng, m, d)
+    mu = np.array([0.7, 0.25, 0.05])
+    M = np.array([[0.9, 0.08, 0.02], [0.1, 0.85, 0.05], [0.3, 0.2, 0.5]])
+    xs = np.array([f.x.copy() for f in filters])
+    Ps = np.array([f.P.copy() for f in filters])
+    imm = filterpy.IMMEstimator(filters, mu.copy(), M)
+    for f in filters:
+        f.F = np.eye(d)
+        f.Q = np.zeros((d, d))
+    imm.predict()
+    xs0, Ps0, cbar = np.empty_like(xs), np.empty_like(Ps), np.empty(m)
+    K.mix(mu, M, xs, Ps, xs0, Ps0, cbar)
+    np.testing.assert_allclose(cbar, mu @ M, rtol=1e-14)
+    for j, f in enumerate(filters):
+        np.testing.assert_allclose(xs0[j], f.x, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(Ps0[j], f.P, rtol=1e-12, atol=1e-14)
+    x, P = np.empty(d), np.empty((d, d))
+    K.combine(mu, xs0, Ps0, x, P)
+    np.testing.assert_allclose(x, imm.x, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(P, imm.P, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sparse_prediction_equals_the_dense_product(seed):
+    # A transition that is the identity but for its first two rows (the body's (X, V) over
+    # the augmented state): the kernel's A P A^T + Q equals numpy's dense product (1e-12
+    # relative), symmetric exactly.
+    rng = np.random.default_rng(seed)
+    d = 13
+    P = _spd(rng, d, 1e-3)
+    A = np.eye(d)
+    A[0] = rng.normal(size=d)
+    A[1] = rng.normal(size=d)
+    Q2 = _spd(rng, 2, 1e-4)
+    qtheta = 1e-6
+    out = np.empty((d, d))
+    K.predict_rows(P, A[0].copy(), A[1].copy(), Q2, qtheta, out)
+    Q = np.eye(d) * qtheta
+    Q[:2, :2] = Q2
+    expected = A @ P @ A.T + Q
+    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    assert np.array_equal(out, out.T)
+
+
+def test_update_equals_filterpy_update():
+    # A scalar measurement of the first state: the kernel's Joseph-form update equals
+    # filterpy's (state and covariance to 1e-12 relative); its likelihood is filterpy's
+    # (Gaussian density of the innovation, 1e-12 relative) and its NIS y^2 / S.
+    rng = np.random.default_rng(4)
+    d = 9
+    kf = _filters(rng, 1, d)[0]
+    kf.R = np.array([[0.37]])
+    x, P = kf.x.copy(), kf.P.copy()
+    z = 1.3
+    kf.update(np.array([z]))
+    likelihood, nis = K.update_first(x, P, z, 0.37)
+    np.testing.assert_allclose(x, kf.x, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(P, kf.P, rtol=1e-12, atol=1e-14)
+    assert likelihood == pytest.approx(kf.likelihood, rel=1e-12)
+    assert nis == pytest.approx(kf.y.item() ** 2 / kf.S.item(), rel=1e-12)
+    # An innovation far in the tail: filterpy floors the likelihood at the smallest normal
+    # float, and so does the kernel (the mode then keeps a vanishing, not zero, weight).
+    x2, P2 = np.zeros(d), np.eye(d) * 1e-6
+    assert K.update_first(x2, P2, 1.0, 1e-6)[0] == 2.2250738585072014e-308
+
+
+def test_cycle_equals_filterpy_predict_and_update():
+    # One whole step: mixing, each mode's prediction (transition rows, process noise, and the
+    # input that makes F x0 + B u its mean), the update, the mode probabilities and the
+    # combination, against IMMEstimator.predict(u) / update(z) (1e-10 relative).
+    rng = np.random.default_rng(5)
+    m, d = 3, 6
+    filters = _filters(rng, m, d)
+    mu = np.array([0.5, 0.3, 0.2])
+    M = np.array([[0.97, 0.02, 0.01], [0.02, 0.97, 0.01], [0.01, 0.01, 0.98]])
+    xs = np.array([f.x.copy() for f in filters])
+    Ps = np.array([f.P.copy() for f in filters])
+    xs0, Ps0, cbar = np.empty_like(xs), np.empty_like(Ps), np.empty(m)
+    K.mix(mu, M, xs, Ps, xs0, Ps0, cbar)
+    rows0, rows1 = rng.normal(size=(m, d)), rng.normal(size=(m, d))
+    rows0[:, 0] = 1.0
+    means = rng.normal(size=(m, d))
+    Qs = np.array([_spd(rng, 2, 0.1) for _ in range(m)])
+    qtheta, z, R = 1e-4, 0.4, 0.25
+    for j, f in enumerate(filters):
+        F = np.eye(d)
+        F[0], F[1] = rows0[j], rows1[j]
+        f.F = F
+        f.Q = np.eye(d) * qtheta
+        f.Q[:2, :2] = Qs[j]
+        f.B = (means[j] - F @ xs0[j])[:, None]
+        f.R = np.array([[R]])
+    imm = filterpy.IMMEstimator(filters, mu.copy(), M)
+    imm.predict(u=np.array([1.0]))
+    imm.update(np.array([z]))
+    xs_out, Ps_out, mu_out, x, P, nis = (np.empty_like(xs), np.empty_like(Ps), np.empty(m), np.empty(d),
+                                         np.empty((d, d)), np.empty(m))
+    K.cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R, xs_out, Ps_out, mu_out, x, P, nis)
+    np.testing.assert_allclose(mu_out, imm.mu, rtol=1e-10)
+    for j, f in enumerate(filters):
+        np.testing.assert_allclose(xs_out[j], f.x, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(Ps_out[j], f.P, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(x, imm.x, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(P, imm.P, rtol=1e-10, atol=1e-12)
+
+
+def test_bank_step_equals_a_plain_kalman_filter():
+    # Every (hypothesis, wheel) filter is the 2-state constant-speed filter with the
+    # hypothesis's random-walk noise: the kernel equals filterpy's KalmanFilter on each
+    # (1e-12 relative), and each hypothesis's log-weight gains its log-likelihood sum. A
+    # wheel standing in its gearbox play (not seen) is predicted and not updated.
+    rng = np.random.default_rng(6)
+    H, n, h = 3, 4, 0.02
+    drifts = np.array([0.0, 1e-3, 1e-2])
+    Q = np.array([[d * d * h ** 3 / 3, d * d * h * h / 2, d * d * h] for d in drifts])
+    x = rng.normal(size=(H, n, 2)) * [1e-3, 0.1]
+    P = np.empty((H, n, 3))
+    P[..., 0], P[..., 1], P[..., 2] = 1e-8, 1e-9, 1e-6
+    z = rng.normal(size=n) * 1e-3
+    noise = np.full(n, 5e-10) * (1 + np.arange(n))
+    logw = np.array([0.0, -1.0, 2.0])
+    expected_logw = 0.99 * logw.copy()
+    ref = []
+    for a in range(H):
+        for i in range(n):
+            kf = filterpy.KalmanFilter(dim_x=2, dim_z=1)
+            kf.x = x[a, i].copy()
+            kf.P = np.array([[P[a, i, 0], P[a, i, 1]], [P[a, i, 1], P[a, i, 2]]])
+            kf.F = np.array([[1.0, h], [0.0, 1.0]])
+            kf.Q = np.array([[Q[a, 0], Q[a, 1]], [Q[a, 1], Q[a, 2]]])
+            kf.H = np.array([[1.0, 0.0]])
+            kf.R = np.array([[noise[i]]])
+            kf.predict()
+            S = kf.P[0, 0] + noise[i]
+            y = z[i] - kf.x[0]
+            expected_logw[a] -= 0.5 * (y * y / S + math.log(S))
+            kf.update(np.array([z[i]]))
+            ref.append((a, i, kf.x.copy(), kf.P.copy()))
+    # Held contacts (the law moves nothing: cx = 0), the play engaged (seen, no shift):
+    # x + h o, o is the constant-speed transition.
+    zero, one = np.zeros(n), np.ones(n)
+    K.bank_step(x, P, Q, zero, h * one, zero, zero, one, z, noise, logw, 0.99)
+    for a, i, xr, Pr in ref:
+        np.testing.assert_allclose(x[a, i], xr, rtol=1e-12, atol=1e-16)
+        np.testing.assert_allclose(P[a, i], [Pr[0, 0], Pr[0, 1], Pr[1, 1]], rtol=1e-10, atol=1e-20)
+    np.testing.assert_allclose(logw, expected_logw, rtol=1e-12)
+
+
+def test_bank_step_skips_a_wheel_in_its_play():
+    # seen = 0: the prediction only (x + cx + g o, P grown by the transition and noise), no
+    # log-likelihood term.
+    x = np.array([[[1.0, 0.5]]])
+    P = np.array([[[1e-6, 1e-7, 1e-4]]])
+    Q = np.array([[1e-9, 2e-9, 3e-8]])
+    logw = np.zeros(1)
+    g = 0.02
+    K.bank_step(x, P, Q, np.array([0.003]), np.array([g]), np.array([1e-6]), np.zeros(1), np.zeros(1),
+                np.array([9.0]), np.array([1e-8]), logw, 0.5)
+    np.testing.assert_allclose(x[0, 0], [1.0 + 0.003 + g * 0.5, 0.5], rtol=1e-15)
+    np.testing.assert_allclose(P[0, 0], [1e-6 + 2 * g * 1e-7 + g * g * 1e-4 + 1e-9, 1e-7 + g * 1e-4 + 2e-9,
+                                         1e-4 + 3e-8 + 1e-6], rtol=1e-14)
+    assert logw[0] == 0.0
+
+
+def test_bank_moments_are_the_mixture_of_the_hypotheses():
+    # Against NumPy's weighted moments (1e-13 relative: sums of six terms): the weights are the
+    # softmax of the log-likelihoods (shifted to a maximum 0 in place), the offset's mixture
+    # variance is the within- plus the between-hypotheses part.
+    rng = np.random.default_rng(8)
+    H, n = 6, 5
+    x = rng.normal(size=(H, n, 2)) * [1e-3, 1e-3]
+    P = np.abs(rng.normal(size=(H, n, 3))) * 1e-7
+    logw = rng.normal(size=H) * 3.0 - 40.0
+    drifts = np.array([0.0, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3])
+    w = np.exp(logw - logw.max())
+    w /= w.sum()
+    mean = w @ x[:, :, 1]
+    var = w @ (P[:, :, 2] + (x[:, :, 1] - mean) ** 2)
+    expected_logw = logw - logw.max()
+    o, v = np.empty(n), np.empty(n)
+    drift = K.bank_moments(x, P, logw, drifts, o, v)
+    np.testing.assert_allclose(drift, w @ drifts, rtol=1e-13)
+    np.testing.assert_allclose(o, mean, rtol=1e-13, atol=1e-20)
+    np.testing.assert_allclose(v, var, rtol=1e-13)
+    np.testing.assert_allclose(logw, expected_logw, rtol=0, atol=1e-14)
+
+
+def test_predicted_first_is_the_mixture_prediction():
+    # Mode j's predicted variance of the first state is (A_j P0_j A_j^T + Q_j)[0, 0] with
+    # A_j's first row r_j: against the dense NumPy product (1e-12 relative), plus the
+    # modes' spread about the mixture mean.
+    rng = np.random.default_rng(9)
+    m, d = 3, 7
+    cbar = np.array([0.7, 0.2, 0.1])
+    means = rng.normal(size=(m, d))
+    rows0 = rng.normal(size=(m, d))
+    rows0[1, 3:] = 0.0                       # zero entries are skipped: the same sum
+    Ps0 = np.array([_spd(rng, d) for _ in range(m)])
+    Qs = np.array([_spd(rng, 2) for _ in range(m)])
+    x0 = cbar @ means[:, 0]
+    var = sum(cbar[j] * (rows0[j] @ Ps0[j] @ rows0[j] + Qs[j, 0, 0] + (means[j, 0] - x0) ** 2)
+              for j in range(m))
+    got = K.predicted_first(cbar, means, rows0, Ps0, Qs)
+    np.testing.assert_allclose(got, (x0, var, cbar @ means[:, 1]), rtol=1e-12)
+
+
+def test_play_loaded_is_the_play_operators_fixed_point():
+    # Loaded: the encoder sits the play's half width behind a contact whose speed keeps its
+    # sign over the period; a reversal, a shift short of the half width, or an encoder ahead
+    # of its contact are not. Without play every wheel is loaded.
+    half = 4e-4
+    shift = np.array([-half, -half, -half, -0.5 * half, half, half])
+    start = np.array([0.1, 0.1, 0.1, 0.1, -0.1, 0.1])
+    end = np.array([0.2, -0.05, 0.1, 0.1, -0.2, 0.1])
+    o = np.zeros(6)
+    loaded = np.empty(6)
+    missing = K.play_loaded(shift, start, end, o, half, loaded)
+    np.testing.assert_array_equal(loaded, [1.0, 0.0, 1.0, 0.0, 1.0, 0.0])
+    assert missing == 3
+    assert K.play_loaded(shift, start, end, o, 0.0, loaded) == 0 and loaded.all()

@@ -1,0 +1,273 @@
+"""Kernels of the adaptive filter's interacting multiple model: plain Python over arrays.
+
+Compiled by :func:`toolkit._compiled.load` (``load("imm")``); as written, this module imports
+nothing but ``math`` and NumPy and runs as Python (``NUMBA_DISABLE_JIT=1``). The arithmetic is
+filterpy's (``filterpy.kalman.IMMEstimator`` over ``KalmanFilter`` objects: the tests run
+both on the same steps and find them equal to rounding); the adaptive filter keeps its
+modes' states in arrays and calls these per sample.
+
+- :func:`mix`: the IMM's mixing (``M`` row-stochastic, from row i to column j): the predicted
+  mode probabilities ``cbar = mu M`` and each mode's mixed state and covariance.
+- :func:`predict_rows`: ``P <- A P A^T + Q`` for a transition that is the identity but for
+  its first two rows (the body's ``(X, V)`` over the augmented state), ``Q`` on ``(X, V)``.
+- :func:`update_first`: the Kalman update with a scalar measurement of the first state; the
+  Gaussian likelihood of the innovation and its NIS.
+- :func:`combine`: the modes' mixture mean and covariance.
+- :func:`cycle`: after :func:`mix` and the modes' predicted means (nonlinear, computed by
+  the caller from the mixed states), the rest of one IMM step: each mode's
+  :func:`predict_rows` and :func:`update_first`, the mode probabilities, :func:`combine`.
+- :func:`bank_step`: the wheels' filters (every hypothesis and wheel at once): predict over
+  the period (the motor law's affine transition, and a random walk), update with the
+  readings, add each hypothesis's log-likelihood.
+- :func:`bank_moments`: the hypotheses' weights from their log-likelihoods, the weighted
+  wander intensity and each wheel's offset mean and variance over the hypotheses.
+- :func:`predicted_first`: the modes' mixture prediction of the first state (its mean and
+  variance) and the second's mean, before the update.
+- :func:`play_loaded`: which wheels keep their gearbox play loaded over a period.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {},
+           "bank_moments": {}, "play_loaded": {}, "sign_of": {},
+           "predicted_first": {}}
+
+
+def mix(mu, M, xs, Ps, xs0, Ps0, cbar):  # noqa: ANN001, ANN201 (numba kernel)
+    """IMM mixing of ``m`` modes: ``cbar[j] = sum_i mu[i] M[i, j]`` and mode ``j``'s mixed
+    state and covariance, :func:`combine` of the modes with weights ``mu[i] M[i, j] /
+    cbar[j]``."""
+    m = xs.shape[0]
+    w = np.empty(m)
+    for j in range(m):
+        c = 0.0
+        for i in range(m):
+            c += mu[i] * M[i, j]
+        cbar[j] = c
+        for i in range(m):
+            w[i] = mu[i] * M[i, j] / c
+        combine(w, xs, Ps, xs0[j], Ps0[j])
+
+
+def predict_rows(P, row0, row1, Q, qtheta, out):  # noqa: ANN001, ANN201 (numba kernel)
+    """``out = A P A^T + Q`` with ``A`` the identity but for its rows 0 and 1 (``row0``,
+    ``row1``, of length ``d``), ``Q`` (2, 2) added to the first two rows and columns and
+    ``qtheta`` to the other diagonal entries (a random walk of the parameters)."""
+    d = P.shape[0]
+    # AP = A P: rows 0 and 1 combine P's rows, the others are P's.
+    for b in range(d):
+        s0 = 0.0
+        s1 = 0.0
+        for c in range(d):
+            s0 += row0[c] * P[c, b]
+            s1 += row1[c] * P[c, b]
+        out[0, b] = s0
+        out[1, b] = s1
+        for a in range(2, d):
+            out[a, b] = P[a, b]
+    # (A P) A^T: columns 0 and 1 combine (A P)'s columns, the others stay.
+    for a in range(d):
+        s0 = 0.0
+        s1 = 0.0
+        for c in range(d):
+            s0 += out[a, c] * row0[c]
+            s1 += out[a, c] * row1[c]
+        out[a, 0] = s0
+        out[a, 1] = s1
+    for a in range(2):
+        for b in range(2):
+            out[a, b] += Q[a, b]
+    for a in range(2, d):
+        out[a, a] += qtheta
+    for a in range(d):
+        for b in range(a + 1, d):
+            v = 0.5 * (out[a, b] + out[b, a])
+            out[a, b] = v
+            out[b, a] = v
+
+
+def update_first(x, P, z, R):  # noqa: ANN001, ANN201 (numba kernel)
+    """Kalman update of ``(x, P)`` in place with ``z = x[0] + noise`` of variance ``R``;
+    returns ``(likelihood, nis)`` of the innovation (Gaussian density; NIS ``y^2 / S``)."""
+    d = x.shape[0]
+    S = P[0, 0] + R
+    y = z - x[0]
+    k = np.empty(d)
+    for a in range(d):
+        k[a] = P[a, 0] / S
+    for a in range(d):
+        x[a] += k[a] * y
+    p0 = np.empty(d)
+    for b in range(d):
+        p0[b] = P[0, b]
+    # Joseph's form (filterpy's): (I - k H) P (I - k H)^T + k R k^T.
+    for a in range(d):
+        for b in range(a, d):
+            v = P[a, b] - k[a] * p0[b] - p0[a] * k[b] + k[a] * k[b] * S
+            P[a, b] = v
+            P[b, a] = v
+    nis = y * y / S
+    # filterpy's likelihood, floored at the smallest normal float.
+    return max(math.exp(-0.5 * nis) / math.sqrt(2.0 * math.pi * S), 2.2250738585072014e-308), nis
+
+
+def combine(mu, xs, Ps, x, P):  # noqa: ANN001, ANN201 (numba kernel)
+    """The mixture's mean ``x`` and covariance ``P`` of the modes ``(xs[i], Ps[i])`` with
+    weights ``mu``."""
+    m, d = xs.shape
+    for a in range(d):
+        s = 0.0
+        for i in range(m):
+            s += mu[i] * xs[i, a]
+        x[a] = s
+    for a in range(d):
+        for b in range(d):
+            s = 0.0
+            for i in range(m):
+                s += mu[i] * (Ps[i, a, b] + (xs[i, a] - x[a]) * (xs[i, b] - x[b]))
+            P[a, b] = s
+
+
+def bank_step(x, P, Q, cx, gx, qv, shift, seen, z, noise, logw, forget):  # noqa: ANN001, ANN201 (numba kernel)
+    """One sample of the wheels' filters: ``x`` (H, n, 2) contact positions and speed offsets,
+    ``P`` (H, n, 3) their covariances ``(p_xx, p_xo, p_oo)``, ``Q`` (H, 3) each hypothesis's
+    process noise per period. Per wheel: ``x+ = x + cx + gx o`` (the law's displacement and
+    the offset's), ``o+ = o`` plus ``qv`` on its variance (the law's own error). The reading
+    ``z`` (noise variance ``noise``) sees the contact through the gearbox play: ``x + shift``
+    where ``seen`` is 1 (the play engaged), nothing where it is 0 (the encoder stands in the
+    play: no update). Sets ``logw[H] <- forget logw - sum_i (y^2 / S + log S) / 2`` over the
+    wheels seen."""
+    H, n = x.shape[0], x.shape[1]
+    for hyp in range(H):
+        total = 0.0
+        for i in range(n):
+            g = gx[i]
+            x[hyp, i, 0] += cx[i] + g * x[hyp, i, 1]
+            p00 = P[hyp, i, 0] + 2.0 * g * P[hyp, i, 1] + g * g * P[hyp, i, 2] + Q[hyp, 0]
+            p01 = P[hyp, i, 1] + g * P[hyp, i, 2] + Q[hyp, 1]
+            p11 = P[hyp, i, 2] + Q[hyp, 2] + qv[i]
+            if seen[i] > 0.0:
+                S = p00 + noise[i]
+                y = z[i] - (x[hyp, i, 0] + shift[i])
+                k0 = p00 / S
+                k1 = p01 / S
+                x[hyp, i, 0] += k0 * y
+                x[hyp, i, 1] += k1 * y
+                p11 = p11 - k1 * p01
+                p01 = p01 - k0 * p01
+                p00 = p00 - k0 * p00
+                total += y * y / S + math.log(S)
+            P[hyp, i, 0] = p00
+            P[hyp, i, 1] = p01
+            P[hyp, i, 2] = p11
+        logw[hyp] = forget * logw[hyp] - 0.5 * total
+
+
+def predicted_first(cbar, means, rows0, Ps0, Qs):  # noqa: ANN001, ANN201 (numba kernel)
+    """With mode probabilities ``cbar`` (m,), predicted means ``means`` (m, d), the first rows
+    of the transitions ``rows0`` (m, d) from the mixed covariances ``Ps0`` (m, d, d) and the
+    process noises ``Qs`` (m, 2, 2): the mixture's ``(mean of x0, variance of x0, mean of
+    x1)``, the variance ``sum_j cbar_j (r_j P0_j r_j^T + Q_j[0, 0] + (mean_j - mean)^2)``."""
+    m, d = means.shape[0], means.shape[1]
+    x0 = 0.0
+    x1 = 0.0
+    for j in range(m):
+        x0 += cbar[j] * means[j, 0]
+        x1 += cbar[j] * means[j, 1]
+    var = 0.0
+    for j in range(m):
+        quad = 0.0
+        for a in range(d):
+            ra = rows0[j, a]
+            if ra == 0.0:
+                continue
+            row = 0.0
+            for b in range(d):
+                row += Ps0[j, a, b] * rows0[j, b]
+            quad += ra * row
+        dev = means[j, 0] - x0
+        var += cbar[j] * (quad + Qs[j, 0, 0] + dev * dev)
+    return x0, var, x1
+
+
+def bank_moments(x, P, logw, drifts, o, var):  # noqa: ANN001, ANN201 (numba kernel)
+    """After :func:`bank_step`: ``logw`` shifted to its maximum 0 (in place), the weights
+    ``w = exp(logw) / sum``, and per wheel the mixture's offset mean ``o[i] = sum_h w_h
+    x[h, i, 1]`` and variance ``var[i] = sum_h w_h (P[h, i, 2] + (x[h, i, 1] - o[i])^2)``
+    (written in place); returns ``sum_h w_h drifts[h]``."""
+    H, n = x.shape[0], x.shape[1]
+    top = logw[0]
+    for h in range(1, H):
+        top = max(top, logw[h])
+    w = np.empty(H)
+    total = 0.0
+    for h in range(H):
+        logw[h] -= top
+        w[h] = math.exp(logw[h])
+        total += w[h]
+    drift = 0.0
+    for h in range(H):
+        w[h] /= total
+        drift += w[h] * drifts[h]
+    for i in range(n):
+        m = 0.0
+        for h in range(H):
+            m += w[h] * x[h, i, 1]
+        v = 0.0
+        for h in range(H):
+            d = x[h, i, 1] - m
+            v += w[h] * (P[h, i, 2] + d * d)
+        o[i] = m
+        var[i] = v
+    return drift
+
+
+def sign_of(v):  # noqa: ANN001, ANN201 (numba kernel)
+    """-1, 0 or 1: the sign of ``v``."""
+    return 1 if v > 0.0 else (-1 if v < 0.0 else 0)
+
+
+def play_loaded(shift, start, end, o, half, loaded):  # noqa: ANN001, ANN201 (numba kernel)
+    """Per wheel, 1 where the encoder stays engaged behind its contact over the period (the
+    play operator's fixed point: the encoder ``shift`` from the contact is the play's half
+    width ``half`` to 1e-9 relative, behind a contact whose speed ``start + o`` to ``end +
+    o`` keeps its sign), else 0, in ``loaded``; returns how many are not. Without play
+    (``half = 0``) every wheel is loaded."""
+    n = shift.shape[0]
+    missing = 0
+    tol = 1e-9 * max(half, 1e-12)
+    for i in range(n):
+        ok = half == 0.0
+        if not ok:
+            a, b = start[i] + o[i], end[i] + o[i]
+            sa = sign_of(a)
+            sb = sign_of(b)
+            ok = abs(abs(shift[i]) - half) <= tol and sa == sb and sb == -sign_of(shift[i])
+        loaded[i] = 1.0 if ok else 0.0
+        if not ok:
+            missing += 1
+    return missing
+
+
+def cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R, xs, Ps, mu, x, P, nis):  # noqa: ANN001, ANN201
+    """One IMM step after mixing: mode ``j``'s covariance ``A_j Ps0[j] A_j^T + Q_j`` (rows
+    ``rows0[j]``, ``rows1[j]``; :func:`predict_rows`) about its predicted mean ``means[j]``,
+    the update with ``z`` (variance ``R``), ``mu = cbar * likelihood`` normalized, and the
+    mixture ``(x, P)``; ``xs``, ``Ps``, ``mu``, ``x``, ``P`` and each mode's NIS ``nis``
+    written in place."""
+    m = means.shape[0]
+    total = 0.0
+    for j in range(m):
+        predict_rows(Ps0[j], rows0[j], rows1[j], Qs[j], qtheta, Ps[j])
+        for a in range(means.shape[1]):
+            xs[j, a] = means[j, a]
+        likelihood, nis[j] = update_first(xs[j], Ps[j], z, R)
+        mu[j] = cbar[j] * likelihood
+        total += mu[j]
+    for j in range(m):
+        mu[j] /= total
+    combine(mu, xs, Ps, x, P)

@@ -1,0 +1,141 @@
+"""Online identification of what the nominal model does not know, from the wheel counts.
+
+:class:`LagIdentifier`: the motors' first-order lag. After a command change from settled
+speeds ``v0`` to ``u`` the motor law (:class:`toolkit.model.motors.MotorPiece`) moves each
+contact by ``u t + (v0 - u) tau (1 - exp(-t / tau))``: once the transient has died out its
+position runs on the line ``x_c + u t + (v0 - u) tau`` whose intercept is linear in ``tau``
+(the law's displacement is evaluated, never rewritten: its slope in ``tau`` is taken from
+the law at two lags). Each wheel's encoder sees the contact through its gearbox play, which
+shifts the line by half the play at a start from rest and by the whole play at a reversal
+(the play operator of :mod:`toolkit.model.sensors`). The least-squares line through a
+wheel's readings once the transient is over (``settle`` after the change, the longest lag
+the prior allows times eight) gives its intercept at the change; the reading just before
+the change gives the start; each wheel gives ``tau``, and the wheels' estimates are pooled
+with weights ``(v0 - u)^2`` (the intercept's error is a fraction of a count whatever the
+step, so a larger step pins ``tau`` better: ``sigma_tau ~ q / (sqrt(12 m) |v0 - u|)`` per
+wheel for ``m`` readings). With ideal encoders the error is the quantization's alone: a
+fraction of ``q / |v0 - u|`` (0.4 ms for the carousel's wheels at a 0.2 m/s step).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..errors import as_float
+from ..model.motors import MotorPiece
+
+__all__ = ["LagIdentifier"]
+
+
+class LagIdentifier:
+    """The motors' lag from the wheel counts around command changes (see the module).
+
+    Parameters
+    ----------
+    wheel_resolution : float, m per count
+    backlash : float, m
+        The wheels' gearbox play.
+    period : float, s
+    longest_lag : float, s
+        The largest lag the prior allows: the line is fitted from eight of it (and at least
+        ``settle_time``) after the change.
+    settle_time : float, s
+        At least this long after a change before the line (the play's take-up).
+
+    Attributes
+    ----------
+    lag : float or None, s
+        The pooled estimate (None before a change has been seen through).
+    lag_std : float or None, s
+        Its standard deviation from the quantization (white readings).
+    estimates : list of (float, float)
+        ``(lag, std)`` of each change seen through.
+    """
+
+    def __init__(self, wheel_resolution: float, backlash: float, period: float, longest_lag: float,
+                 settle_time: float = 0.1) -> None:
+        owner = "LagIdentifier"
+        self.q = as_float(wheel_resolution, "wheel_resolution", owner, low=0.0, low_open=True)
+        self.backlash = as_float(backlash, "backlash", owner, low=0.0)
+        self.period = as_float(period, "period", owner, low=0.0, low_open=True)
+        longest = as_float(longest_lag, "longest_lag", owner, low=0.0)
+        self.delay = max(8.0 * longest, as_float(settle_time, "settle_time", owner, low=0.0))
+        self.lag: float | None = None
+        self.lag_std: float | None = None
+        self.estimates: list[tuple[float, float]] = []
+        self._change: dict[str, Any] | None = None
+        self._last: tuple[float, np.ndarray, np.ndarray] | None = None   # (t, positions, command)
+        self._initial: np.ndarray | None = None
+
+    def start(self, initial: Any) -> None:
+        """The speeds the motors had settled at before the first sample (None: the first
+        command)."""
+        self._initial = None if initial is None else np.array(initial, dtype=float)
+
+    def push(self, t: float, wheels: Any, command: Any) -> None:
+        """One sample: its time (s), wheel counts and the command sent then (m/s)."""
+        x = (np.asarray(wheels, dtype=float) + 0.5) * self.q
+        u = np.asarray(command, dtype=float)
+        last = self._last
+        before = self._initial if last is None else last[2]
+        if before is not None and np.any(u != before):
+            # A change at this sample (the command acts from t on): finish the open one first.
+            self._finish()
+            self._change = {"t": t, "x": x.copy(), "v0": before.copy(), "u": u.copy(), "rows": []}
+        elif self._change is not None and t - self._change["t"] >= self.delay:
+            self._change["rows"].append((t, x.copy()))
+        self._last = (t, x, u)
+
+    def finish(self) -> float | None:
+        """Close the open change (use its line so far); the pooled lag (s) or None."""
+        self._finish()
+        return self.lag
+
+    def _finish(self) -> None:
+        change, self._change = self._change, None
+        if change is None or len(change["rows"]) < 3:
+            return
+        v0, u = change["v0"], change["u"]
+        step = v0 - u
+        use = np.abs(step) > 1e-9
+        if not use.any():
+            return
+        times = np.array([r[0] for r in change["rows"]]) - change["t"]
+        X = np.array([r[1] for r in change["rows"]])
+        tbar = times.mean()
+        tt = times - tbar
+        S = float(tt @ tt)
+        slope = (tt @ (X - X.mean(axis=0))) / S
+        intercept = X.mean(axis=0) - slope * tbar                   # the line at the change
+        # The play's shift of the encoder's line: half the play from rest, all of it at a
+        # reversal, none when the motion keeps its sign.
+        shift = -0.5 * (np.sign(u) - np.sign(v0)) * self.backlash
+        # The law's displacement past its transient is linear in tau: its slope from the law.
+        horizon = float(times[-1])
+        slope_tau = self._tau_slope(v0, u, horizon)
+        offset = intercept - change["x"] - shift                     # (v0 - u) tau, per wheel
+        lags = offset[use] / slope_tau[use]
+        weights = step[use] ** 2
+        lag = float(weights @ lags / weights.sum())
+        # Each intercept errs by the line's intercept error and the start reading's: q^2 / 12
+        # (1 / m + tbar^2 / S) + q^2 / 12, white.
+        m = times.size
+        var_offset = (self.q ** 2 / 12.0) * (1.0 / m + tbar * tbar / S + 1.0)
+        std = math.sqrt(var_offset / float(weights.sum()))
+        self.estimates.append((lag, std))
+        values = np.array(self.estimates)
+        w = 1.0 / values[:, 1] ** 2
+        self.lag = float(w @ values[:, 0] / w.sum())
+        self.lag_std = float(1.0 / math.sqrt(w.sum()))
+
+    @staticmethod
+    def _tau_slope(v0: np.ndarray, u: np.ndarray, horizon: float) -> np.ndarray:
+        """d/dtau of the motor law's displacement beyond ``u t`` at ``horizon`` (its
+        transient over): ``v0 - u``, taken from the law at two small lags."""
+        a, b = 1e-4, 2e-4
+        da = MotorPiece.build(0.0, v0, u, a, math.inf).displacement(horizon) - u * horizon
+        db = MotorPiece.build(0.0, v0, u, b, math.inf).displacement(horizon) - u * horizon
+        return (db - da) / (b - a)

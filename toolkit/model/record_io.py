@@ -1,0 +1,222 @@
+"""Encoder records as CSV files: what a 50 Hz logger on the hardware writes, and what a
+simulated run saves in the same form.
+
+The format (UTF-8 text; ``#`` lines first, then one header row, then one row per sample)::
+
+    # active-contacts encoder record 1
+    # central_resolution = 0.00020401...     (m per central count; optional)
+    # wheel_resolution = 7.8715...e-05       (m per wheel count at the contact; optional)
+    # wheel_backlash = 0.0008                (m at the contact; optional, default 0)
+    # initial_commands = 0.0 0.0 ...         (m/s, the commands before the first row; optional)
+    time_s,central_count,wheel_count_1,...,wheel_count_n,command_1_m_s,...,command_n_m_s[,force_N]
+    0.0,0,0,...,0.15,...
+
+Required columns, in this order: the sample time (s, strictly increasing), the central
+encoder's count, one count per wheel channel, one commanded contact speed per wheel (m/s,
+sent at that sample and held to the next). Optional, after them: ``force_N`` (an outside
+force held over the period), then the simulated truth ``truth_speed_m_s``,
+``truth_position_m`` and ``truth_contact_speed_1_m_s .. _n_m_s`` (for scoring; a hardware log
+has none). Counts are integers; every number finite. The resolutions come from the comment
+lines or, when the file has none, from the scene's encoders (``sensors``); both present must
+agree. Numbers are written with 17 significant digits (``repr``), so a record written and
+read back is the same record, bit for bit (tested). A malformed file is refused with its line
+number, the column, the rule and the value found.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ParameterError, ParameterTypeError, SceneFileNotFoundError, parameter_message
+from .sensors import EncoderRecord, Sensors
+
+__all__ = ["write_record_csv", "read_record_csv", "RECORD_MAGIC"]
+
+#: The first line of every record file (its version).
+RECORD_MAGIC = "# active-contacts encoder record 1"
+_META = ("central_resolution", "wheel_resolution", "wheel_backlash", "initial_commands")
+
+
+def _header(n: int, force: bool, truth: bool) -> list[str]:
+    names = (["time_s", "central_count"] + [f"wheel_count_{i}" for i in range(1, n + 1)]
+             + [f"command_{i}_m_s" for i in range(1, n + 1)])
+    if force:
+        names.append("force_N")
+    if truth:
+        names += ["truth_speed_m_s", "truth_position_m"] + [f"truth_contact_speed_{i}_m_s" for i in range(1, n + 1)]
+    return names
+
+
+def write_record_csv(record: EncoderRecord, path: Any) -> Path:
+    """Write ``record`` to ``path`` (CSV, the format of the module docstring); return the path.
+
+    The truth columns are written when the record has the true speed, position and contact
+    speeds (a simulated record); ``force_N`` when it has a force.
+    """
+    owner = "write_record_csv"
+    if not isinstance(record, EncoderRecord):
+        raise ParameterTypeError(parameter_message("record", owner, "be an EncoderRecord", record))
+    path = Path(path)
+    n = record.n_wheels
+    truth = (record.truth_speed is not None and record.truth_position is not None
+             and record.truth_contact_speeds is not None)
+    force = record.force is not None
+    lines = [RECORD_MAGIC,
+             f"# central_resolution = {record.central_resolution!r}",
+             f"# wheel_resolution = {record.wheel_resolution!r}",
+             f"# wheel_backlash = {record.wheel_backlash!r}"]
+    if record.initial_commands is not None:
+        lines.append("# initial_commands = " + " ".join(repr(float(v)) for v in record.initial_commands))
+    lines.append(",".join(_header(n, force, truth)))
+    for k in range(record.n_samples):
+        row = [repr(float(record.times[k])), str(int(record.central_counts[k]))]
+        row += [str(int(c)) for c in record.wheel_counts[k]]
+        row += [repr(float(u)) for u in record.commands[k]]
+        if force:
+            row.append(repr(float(record.force[k])))
+        if truth:
+            row += [repr(float(record.truth_speed[k])), repr(float(record.truth_position[k]))]
+            row += [repr(float(v)) for v in record.truth_contact_speeds[k]]
+        lines.append(",".join(row))
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+class _Reader:
+    """Parses one file, refusing with the line number."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.owner = f"read_record_csv({path.name})"
+
+    def fail(self, line: int, what: str, rule: str, value: Any) -> ParameterError:
+        return ParameterError(parameter_message(what, f"{self.owner} on line {line}", rule, value))
+
+    def number(self, text: str, line: int, column: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise self.fail(line, column, "be a number", text) from None
+        if not math.isfinite(value):
+            raise self.fail(line, column, "be finite", text)
+        return value
+
+    def count(self, text: str, line: int, column: str) -> int:
+        try:
+            return int(text)
+        except ValueError:
+            raise self.fail(line, column, "be an integer count", text) from None
+
+
+def read_record_csv(path: Any, sensors: Sensors | None = None) -> EncoderRecord:
+    """Read an encoder record written by :func:`write_record_csv` or by a logger.
+
+    Parameters
+    ----------
+    path : str or Path
+    sensors : Sensors, optional
+        The encoders that wrote it (a scene's ``[sensors]``): their resolutions and backlash
+        when the file gives none; checked against the file's when both do, and their wheel
+        count against the file's channels.
+
+    Raises
+    ------
+    SceneFileNotFoundError
+        The file does not exist.
+    ParameterError
+        A malformed file, naming the line, the column, the rule and the value.
+    """
+    owner = "read_record_csv"
+    path = Path(path)
+    if sensors is not None and not isinstance(sensors, Sensors):
+        raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors or None", sensors))
+    if not path.is_file():
+        raise SceneFileNotFoundError(f"The record file {str(path)!r} does not exist.")
+    reader = _Reader(path)
+    lines = path.read_text(encoding="utf-8").splitlines()
+    if not lines or lines[0].strip() != RECORD_MAGIC:
+        raise reader.fail(1, "first line", f"be {RECORD_MAGIC!r}", lines[0] if lines else "")
+    meta: dict[str, Any] = {}
+    index = 1
+    while index < len(lines) and lines[index].startswith("#"):
+        body = lines[index][1:].strip()
+        if body:
+            key, sep, value = body.partition("=")
+            key = key.strip()
+            if not sep or key not in _META:
+                raise reader.fail(index + 1, "comment", f"be 'key = value' with a key in {list(_META)}", body)
+            if key == "initial_commands":
+                meta[key] = np.array([reader.number(v, index + 1, key) for v in value.split()])
+            else:
+                meta[key] = reader.number(value.strip(), index + 1, key)
+        index += 1
+    if index == len(lines):
+        raise reader.fail(index, "header", "follow the comment lines", "end of file")
+    header = [name.strip() for name in lines[index].split(",")]
+    header_line = index + 1
+    wheels = sum(1 for name in header if name.startswith("wheel_count_"))
+    if wheels < 1:
+        raise reader.fail(header_line, "header", "name at least one 'wheel_count_1' column", lines[index])
+    force = "force_N" in header
+    truth = "truth_speed_m_s" in header
+    expected = _header(wheels, force, truth)
+    if header != expected:
+        raise reader.fail(header_line, "header", f"be {','.join(expected)!r}", lines[index])
+    n = wheels
+    rows = [(number + 1, line) for number, line in enumerate(lines[index + 1:], start=index + 1) if line.strip()]
+    if not rows:
+        raise reader.fail(header_line + 1, "data", "hold at least one sample row", "end of file")
+    k = len(rows)
+    times, central = np.empty(k), np.empty(k, dtype=np.int64)
+    wheel, commands = np.empty((k, n), dtype=np.int64), np.empty((k, n))
+    extra = np.empty((k, len(expected) - 2 - 2 * n))
+    for j, (line, text) in enumerate(rows):
+        fields = text.split(",")
+        if len(fields) != len(expected):
+            raise reader.fail(line, "row", f"have {len(expected)} comma-separated fields", len(fields))
+        times[j] = reader.number(fields[0], line, "time_s")
+        if j and not times[j] > times[j - 1]:
+            raise reader.fail(line, "time_s", f"increase strictly (previous row {float(times[j - 1])!r})", fields[0])
+        central[j] = reader.count(fields[1], line, "central_count")
+        for i in range(n):
+            wheel[j, i] = reader.count(fields[2 + i], line, expected[2 + i])
+            commands[j, i] = reader.number(fields[2 + n + i], line, expected[2 + n + i])
+        for i, column in enumerate(expected[2 + 2 * n:]):
+            extra[j, i] = reader.number(fields[2 + 2 * n + i], line, column)
+    resolutions = {}
+    for key, from_sensors in (("central_resolution", None if sensors is None else sensors.central.distance_per_count),
+                              ("wheel_resolution", None if sensors is None else sensors.wheel.distance_per_count),
+                              ("wheel_backlash", None if sensors is None else sensors.backlash)):
+        value = meta.get(key, from_sensors)
+        if value is None:
+            if key == "wheel_backlash":
+                value = 0.0
+            else:
+                raise ParameterError(parameter_message(
+                    "sensors", owner, f"be given when the file states no {key} (the scene's [sensors])", None))
+        if from_sensors is not None and not math.isclose(value, from_sensors, rel_tol=1e-12, abs_tol=1e-15):
+            raise ParameterError(parameter_message(
+                key, f"{owner}({path.name})", f"equal the scene's encoders' {from_sensors!r}", value))
+        resolutions[key] = value
+    if sensors is not None and sensors.n_wheels != n:
+        raise ParameterError(parameter_message("sensors", owner, f"have the file's {n} wheel channels",
+                                               sensors.n_wheels))
+    initial = meta.get("initial_commands")
+    if initial is not None and initial.shape != (n,):
+        raise ParameterError(parameter_message("initial_commands", f"{owner}({path.name})",
+                                               f"hold {n} speeds", initial.size))
+    column = 0
+    fields: dict[str, Any] = {}
+    if force:
+        fields["force"] = extra[:, 0]
+        column = 1
+    if truth:
+        fields.update(truth_speed=extra[:, column], truth_position=extra[:, column + 1],
+                      truth_contact_speeds=extra[:, column + 2:column + 2 + n])
+    return EncoderRecord(times, central, wheel, commands, resolutions["central_resolution"],
+                         resolutions["wheel_resolution"], resolutions["wheel_backlash"],
+                         initial_commands=initial, **fields)

@@ -224,22 +224,35 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     from .scenes.spec import EstimationSpec
     from .scenes.study import estimate_scene, estimation_shortfalls
 
+    from .model.record_io import read_record_csv, record_csv_text
+    from .scenes._io import atomic_write_text, check_output_file
+    from .scenes.study import estimate_record
+
     scene = _parsed(args)
+    if args.record is not None and args.save_record is not None:
+        raise SceneError("--save-record writes the simulated record; with --record there is none to write "
+                         "(give one of the two).")
+    save = None if args.save_record is None else check_output_file(args.save_record)
     if scene.estimation is None:      # the scene's own run, recorded: never another scenario
         if scene.sensors is None:
             raise SceneError(f"The scene {scene.name!r} has no [sensors] section (the encoders to "
                              "estimate from).")
-        if scene.simulation is None:
+        if args.record is not None:   # a recorded file: the section's estimators and priors
+            scene = replace(scene, estimation=EstimationSpec())
+        elif scene.simulation is None:
             raise SceneError(f"The scene {scene.name!r} has no [estimation] section and no [simulation] "
                              "run to record: add [estimation] (scenario = \"brake\", the startup-then-brake "
                              "record on the scene's wheel forces, as in the shipped 'estimate' design).")
         scene = replace(scene, estimation=EstimationSpec(scenario="simulation"))
     objects = build_scene(scene)
+    record = None if args.record is None else read_record_csv(args.record, sensors=objects.estimation.sensors)
     with claim_output_dir(_out_dir(args, scene)) as out:
-        study = estimate_scene(objects)
+        study = estimate_scene(objects) if record is None else estimate_record(objects, record)
         shortfalls = estimation_shortfalls(objects, study)
         plots_too = scene.report is None or scene.report.plots
         written = write_tree(out, estimation_files(study, scene.name, plots_too=plots_too))
+        if save is not None:
+            written.append(atomic_write_text(save, record_csv_text(study.record)))
     if args.json:
         data = estimation_to_dict(study)
         data.pop("series")
@@ -382,6 +395,13 @@ def _folder(text: str) -> str:
     return text
 
 
+def _file(text: str) -> str:
+    """A file path: not empty."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"must name a file, got {text!r}")
+    return text
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with its errors on one line (exit 2), like every other user error."""
 
@@ -436,6 +456,11 @@ def _parser() -> argparse.ArgumentParser:
                        "simulate the scene's [estimation] record (default: startup then brake) and "
                        "score every estimator against the truth; writes estimate.json and estimate.png")
     estimate.add_argument("--out", metavar="DIR", type=_folder, help=out_help)
+    estimate.add_argument("--record", metavar="FILE.csv", type=_file,
+                          help="estimate from a recorded log (CSV: toolkit.model.record_io) instead of "
+                               "a simulated record: estimates, NIS and the monitor's verdict, no truth")
+    estimate.add_argument("--save-record", metavar="FILE.csv", type=_file,
+                          help="also write the simulated record in the same CSV format")
     sweep = command("sweep", _cmd_sweep, "run the scene's [sweep]: many seeded runs of one of the paper's "
                     "experiments, summary statistics, one table row per run")
     sweep.add_argument("--runs", type=_bounded("sweep --runs"), help="number of runs (default: the scene's)")

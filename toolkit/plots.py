@@ -459,13 +459,18 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
 #: Line styles of the estimators (truth black; finite differences thin and pale).
 _ESTIMATOR_STYLE = {"central_difference": dict(color="C7", lw=0.7, label="central finite difference"),
                     "wheel_difference": dict(color="C8", lw=0.7, label="wheel finite difference"),
-                    "kalman": dict(color="C0", lw=1.2, label="Kalman filter"),
+                    "foaw_end": dict(color="C5", lw=0.8, label="FOAW end-fit"),
+                    "foaw_best": dict(color="C6", lw=0.8, label="FOAW best-fit"),
+                    "alpha_beta": dict(color="C9", lw=0.8, label="alpha-beta tracker"),
+                    "kalman": dict(color="C0", lw=1.2, label="Kalman filter (default)"),
+                    "kalman_nominal": dict(color="C1", lw=1.0, label="Kalman filter, nominal model"),
                     "rts": dict(color="C3", lw=1.0, ls="--", label="RTS smoother"),
                     "unscented": dict(color="C2", lw=1.0, label="unscented filter")}
 
 
 def plot_estimation(study: Any, axes: Any = None, *, title: str | None = None):
-    """Truth, finite differences, filter and smoother over time (top) and their errors (bottom).
+    """The estimators' speeds over time (top) and their errors against the truth (bottom); for
+    a recorded file (no truth), their differences from the default Kalman filter's estimate.
 
     Parameters
     ----------
@@ -482,7 +487,12 @@ def plot_estimation(study: Any, axes: Any = None, *, title: str | None = None):
     top, bottom = axes if axes is not None else _figure(2, (7.0, 6.0))
     record = study.record
     t, truth = record.times, record.truth_speed
-    top.plot(t, truth, color="k", lw=1.6, label="truth V", zorder=_Z_EXACT)
+    against = "error"
+    if truth is None:            # a recorded file: differences from the default filter (or the first)
+        reference = next((r for r in study.results if r.method == "kalman"), study.results[0])
+        truth, against = reference.speed, f"difference from {reference.method}"
+    else:
+        top.plot(t, truth, color="k", lw=1.6, label="truth V", zorder=_Z_EXACT)
     for result in study.results:
         style = dict(_ESTIMATOR_STYLE.get(result.method, dict(lw=1.0, label=result.method)))
         rms = f" (RMS {result.rms_error * 1e3:.3g} mm/s)" if result.rms_error is not None else ""
@@ -490,7 +500,7 @@ def plot_estimation(study: Any, axes: Any = None, *, title: str | None = None):
         top.plot(t, result.speed, **style)
         bottom.plot(t, (result.speed - truth) * 1e3, **{k: v for k, v in style.items() if k != "label"})
     top.set_ylabel("body speed (m/s)")
-    bottom.set_ylabel("error (mm/s)")
+    bottom.set_ylabel(f"{against} (mm/s)")
     bottom.set_xlabel("time t (s)")
     scale = [abs(r.speed - truth).max() for r in study.results if r.method in ("kalman", "rts", "unscented")]
     if scale:

@@ -11,6 +11,7 @@ recorded through the sensor law.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -21,7 +22,7 @@ from ..model.sensors import EncoderRecord, Sensors, record_simulation
 from ..model.truth import TrueWorld, WorldTruth, realize
 from ..estimation import EstimatorModel, ModelPrior
 
-__all__ = ["BrakeScenario", "carousel_brake_scenario"]
+__all__ = ["BrakeScenario", "carousel_brake_scenario", "record_world"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +60,42 @@ class BrakeScenario:
     nominal: Plant | None = None
 
 
+def record_world(world: TrueWorld, t_end: float, *, seed: int, v0: float = 0.0,
+                 **positions: Any) -> tuple[Any, EncoderRecord]:
+    """Simulate a true world exactly from ``v0`` (m/s) over ``t_end`` (s) and record it
+    through its encoders.
+
+    The motors run towards the plant's commands plus the world's wander (one offset per
+    sample, :meth:`~toolkit.model.truth.TrueWorld.wander`); the record logs the commands
+    sent. ``seed`` seeds the encoders' own draws (``numpy.random.default_rng(seed)``);
+    ``positions`` are :func:`~toolkit.model.sensors.record_simulation`'s
+    ``central_position`` and ``contact_positions``.
+
+    Returns
+    -------
+    (SimulationResult, EncoderRecord)
+    """
+    from ..simulation import simulate
+
+    plant = world.plant
+    stamps = sample_times(t_end, world.sensors.rate)
+    wander = world.wander(stamps.size)
+
+    def sent(times: np.ndarray) -> np.ndarray:
+        if plant.commands is None:
+            return np.tile(plant.contacts.speeds, (times.size, 1))
+        return np.asarray([plant.commands(t) for t in times])
+
+    simulated = plant
+    if wander is not None:        # switched at each sample: the command plus the wander
+        simulated = replace(plant, commands=PiecewiseConstant(stamps[1:], sent(stamps) + wander))
+    result = simulate(simulated, t_end, v0=v0)
+    record = record_simulation(result, simulated, world.sensors, rng=np.random.default_rng(seed), **positions)
+    if wander is not None:        # the commands sent, not the speeds the wandering motors ran at
+        record = replace(record, commands=sent(record.times), initial_commands=plant.initial_speeds())
+    return result, record
+
+
 def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: float = 5.0,
                             cruise: float = 0.2, brake: float = -0.1, spread: float = 0.05,
                             lag: float = 0.0075, grid_phase: int | None = None,
@@ -90,8 +127,6 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
         ``missed_count_prob``, ``count_noise``, ``jitter`` of the nominal :class:`Sensors`
         (declared, so the estimators are told them).
     """
-    from ..simulation import simulate
-
     owner = "carousel_brake_scenario"
     prior = ModelPrior() if prior is None else prior
     if not isinstance(prior, ModelPrior):
@@ -107,24 +142,12 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
     sensors = CAROUSEL.sensors(n, **noise)
     world = realize(nominal, sensors, truth, seed)
     plant = world.plant
-    stamps = sample_times(t_end, sensors.rate)
-    wander = world.wander(stamps.size)
-    simulated = plant
-    if wander is not None:
-        # The motors run at the command plus their wander, switched at each sample.
-        rows = np.asarray([commands(t) for t in stamps]) + wander
-        simulated = replace(plant, commands=PiecewiseConstant(stamps[1:], rows))
-    result = simulate(simulated, t_end)
     positions: dict = {}
     if grid_phase is not None:
         draw = np.random.default_rng(as_int(grid_phase, "grid_phase", "carousel_brake_scenario", low=0))
         positions = {"central_position": draw.uniform(0.0, sensors.central.distance_per_count),
                      "contact_positions": draw.uniform(0.0, sensors.wheel.distance_per_count, n)}
-    record = record_simulation(result, simulated, world.sensors, rng=np.random.default_rng(seed), **positions)
-    if wander is not None:
-        # The record logs the commands sent, not the speeds the wandering motors ran at.
-        record = replace(record, commands=np.asarray([commands(t) for t in record.times]),
-                         initial_commands=nominal.initial_speeds())
+    result, record = record_world(world, t_end, seed=seed, **positions)
     # The estimators know the nominal scene: its forces, lag and drag (none).
     model = EstimatorModel(forces, mass, sensors, motor_lag=lag, friction_uncertainty=0.0,
                            speed_limits=(-v_max, v_max))

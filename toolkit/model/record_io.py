@@ -34,7 +34,7 @@ import numpy as np
 from ..errors import ParameterError, ParameterTypeError, SceneFileNotFoundError, parameter_message
 from .sensors import EncoderRecord, Sensors
 
-__all__ = ["write_record_csv", "read_record_csv", "RECORD_MAGIC"]
+__all__ = ["write_record_csv", "read_record_csv", "record_csv_text", "RECORD_MAGIC"]
 
 #: The first line of every record file (its version).
 RECORD_MAGIC = "# active-contacts encoder record 1"
@@ -57,10 +57,15 @@ def write_record_csv(record: EncoderRecord, path: Any) -> Path:
     The truth columns are written when the record has the true speed, position and contact
     speeds (a simulated record); ``force_N`` when it has a force.
     """
-    owner = "write_record_csv"
+    path = Path(path)
+    path.write_text(record_csv_text(record, "write_record_csv"), encoding="utf-8")
+    return path
+
+
+def record_csv_text(record: EncoderRecord, owner: str = "record_csv_text") -> str:
+    """The CSV text :func:`write_record_csv` writes (for a caller that writes files its own way)."""
     if not isinstance(record, EncoderRecord):
         raise ParameterTypeError(parameter_message("record", owner, "be an EncoderRecord", record))
-    path = Path(path)
     n = record.n_wheels
     truth = (record.truth_speed is not None and record.truth_position is not None
              and record.truth_contact_speeds is not None)
@@ -82,8 +87,7 @@ def write_record_csv(record: EncoderRecord, path: Any) -> Path:
             row += [repr(float(record.truth_speed[k])), repr(float(record.truth_position[k]))]
             row += [repr(float(v)) for v in record.truth_contact_speeds[k]]
         lines.append(",".join(row))
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return path
+    return "\n".join(lines) + "\n"
 
 
 class _Reader:

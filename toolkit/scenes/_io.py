@@ -26,13 +26,13 @@ from pathlib import Path
 from ..errors import OutputError
 
 __all__ = ["OUTPUT_NAMES", "OutputError", "atomic_write_bytes", "atomic_write_text", "check_output_dir",
-           "claim_output_dir", "write_tree"]
+           "check_output_file", "claim_output_dir", "write_tree"]
 
 #: Every file name the toolkit writes into an output folder. A folder that holds anything
 #: else is not the toolkit's and is never replaced.
 OUTPUT_NAMES = frozenset({"result.json", "force_curve.png", "simulation.png", "schedule.png",
                           "schedule.csv", "schedule.json", "precision.json", "precision.png",
-                          "estimation.png", "closed_loop.png", "estimate.json", "estimate.png",
+                          "estimation.png", "closed_loop.png", "estimate.json", "estimate.png", "estimate.csv",
                           "results.csv", "sweep.json", "sweep.png", "planar.json", "planar.png", "planar_precision.png"})
 
 
@@ -68,6 +68,21 @@ def check_output_dir(path: str | os.PathLike[str]) -> Path:
         parent = parent.parent
     if not parent.is_dir():
         raise OutputError(f"cannot write the output: {str(parent)!r} (a parent of {shown}) is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"cannot write the output: the folder {str(parent)!r} is not writable")
+    return target
+
+
+def check_output_file(path: str | os.PathLike[str]) -> Path:
+    """Refuse, before any work, an output file that :func:`atomic_write_bytes` could not write:
+    an existing folder (or a non-regular file), a parent that is not a writable folder."""
+    target = Path(path)
+    shown = repr(str(target))
+    if os.path.lexists(target) and not target.is_file():
+        raise OutputError(f"cannot write the output: {shown} exists and is not a regular file")
+    parent = target.absolute().parent
+    if not parent.is_dir():
+        raise OutputError(f"cannot write the output: the folder {str(parent)!r} of {shown} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write the output: the folder {str(parent)!r} is not writable")
     return target

@@ -98,6 +98,11 @@ class EstimationObjects:
         sensors, the motor lag (s), the drag (N s/m) and ``friction_spread``.
     estimators : dict of str to Estimator
         One per ``methods`` entry, in order.
+    truth : WorldTruth
+        How the simulated world departs from the scene (``[estimation.truth]``; the
+        estimators are not told).
+    prior : ModelPrior
+        What the estimators are told beyond the scene (``[estimation.model]``).
     plant : Plant
         The plant the record is simulated on: the brake scenario's (true friction: the
         declared forces with the drawn spread, and its commands), or the scene's own for
@@ -114,6 +119,8 @@ class EstimationObjects:
     plant: Plant
     duration: float
     v0: float
+    truth: Any = None
+    prior: Any = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,6 +138,8 @@ class ControlObjects:
     rate : float, Hz
     budget : Budget or None
         Guards of each plant step.
+    truth : WorldTruth
+        How the loop's world departs from the scene (``[control.truth]``).
     """
 
     controller: Any
@@ -138,6 +147,7 @@ class ControlObjects:
     estimator: Any
     rate: float
     budget: Budget | None
+    truth: Any = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -351,6 +361,12 @@ def _check_sensing(scene: Scene) -> None:
     if control.cross_check and control.jitter != 0.0:
         raise _fail("control.cross_check", "be false when the encoders jitter (python-control's "
                     "discrete-time systems read at k dt)", control.cross_check)
+    truth = control.truth or {}
+    for key, why in (("jitter", "python-control's discrete-time systems read at k dt"),
+                     ("contact_drift", "python-control's plant block runs the commands as sent")):
+        if control.cross_check and truth.get(key, 0.0) != 0.0:
+            raise _fail("control.cross_check", f"be false when control.truth.{key} is set ({why})",
+                        control.cross_check)
     reads = control.sensors if control.sensors is not None else sensors is not None
     if reads:
         missing = _missing_encoders(sensors)
@@ -369,6 +385,12 @@ def _check_sensing(scene: Scene) -> None:
             if getattr(control, key) != 0.0:
                 raise _fail(f"control.{key}", "be left out of an ideal loop (no sensors read)",
                             getattr(control, key))
+        if control.model:
+            raise _fail("control.model", "be left out of an ideal loop (no estimator is told anything)",
+                        control.model)
+        for key in ("read_noise", "missed_count_prob", "jitter"):
+            if truth.get(key, 0.0) != 0.0:
+                raise _fail(f"control.truth.{key}", "be left out of an ideal loop (no sensors read)", truth[key])
 
 
 def output_numbers(scene: Scene, estimation: EstimationObjects | None = None,
@@ -626,18 +648,31 @@ def _model(plant: Plant, sensors: Sensors, friction_spread: float = 0.0) -> Any:
                               speed_limits=motors.speed_limits if motors is not None else (-math.inf, math.inf))
 
 
-def _estimator(name: str, model: Any, section: str, covariance: Any = None) -> Any:
-    """The estimator ``name`` on ``model`` (``initial_covariance`` for the filters)."""
-    from ..estimation import (CentralDifference, KalmanEstimator, RTSSmoother, UnscentedEstimator,
-                             WheelDifference)
+def _estimator(name: str, model: Any, section: str, prior: Any, covariance: Any = None) -> Any:
+    """The estimator ``name`` (:func:`toolkit.estimation.build_estimator`) on the nominal
+    ``model`` and the ``prior`` of ``[section.model]`` (``initial_covariance`` for the filters)."""
+    from ..estimation import build_estimator
 
-    if name == "central_difference":
-        return CentralDifference(model.sensors)
-    if name == "wheel_difference":
-        return WheelDifference(model.sensors, model.forces)
-    make = {"kalman": KalmanEstimator, "rts": RTSSmoother, "ukf": UnscentedEstimator}[name]
     with _scene_keys(section, {"initial_covariance": f"{section}.initial_covariance"}):
-        return make(model, initial_covariance=covariance)
+        return build_estimator(name, model, prior=prior, initial_covariance=covariance)
+
+
+def _knowledge(section: str, spec: Any, sensors: Sensors | None) -> tuple[Any, Any]:
+    """The ``truth`` (:class:`~toolkit.model.truth.WorldTruth`) and the ``model``
+    (:class:`~toolkit.estimation.ModelPrior`) sub-tables of ``[section]``, each value checked
+    by its constructor under its scene key (the true encoders too, against ``sensors``)."""
+    from ..estimation import ModelPrior
+    from ..model.truth import WorldTruth
+
+    truth_table, model_table = spec.truth or {}, spec.model or {}
+    keys = {**_same_keys(f"{section}.truth", tuple(truth_table)), "count_noise": f"{section}.truth.read_noise"}
+    with _scene_keys(section, keys):
+        truth = WorldTruth(**truth_table)
+        if sensors is not None:
+            truth.sensors(sensors)            # the true encoders (their jitter bound, ...)
+    with _scene_keys(section, _same_keys(f"{section}.model", tuple(model_table))):
+        prior = ModelPrior(**model_table)
+    return truth, prior
 
 
 def _estimation(scene: Scene, objects: SceneObjects) -> EstimationObjects | None:
@@ -648,6 +683,10 @@ def _estimation(scene: Scene, objects: SceneObjects) -> EstimationObjects | None
     sensors = _noisy_sensors(objects, "estimation", spec)
     if spec.scenario == "brake":
         duration = spec.record_duration
+        if spec.friction_spread > 0 and (spec.truth or {}).get("friction_spread", 0.0) > 0:
+            raise _fail("estimation.truth.friction_spread", "be left out when estimation.friction_spread "
+                        "draws the wheels (declared to the estimators); give one of the two",
+                        spec.truth["friction_spread"])
         if spec.brake_time > duration:
             raise _fail("estimation.brake_time", f"be <= estimation.duration ({duration:g} s)", spec.brake_time)
         n = plant.n
@@ -667,9 +706,10 @@ def _estimation(scene: Scene, objects: SceneObjects) -> EstimationObjects | None
         duration, record_plant, v0 = scene.simulation.t_end, plant, scene.simulation.v0
     _check_rate(sensors.rate, duration, "sensors.rate", "estimation record")
     model = _model(plant, sensors, spec.friction_spread)
+    truth, prior = _knowledge("estimation", spec, sensors)
     covariance = None if spec.initial_covariance is None else np.array(spec.initial_covariance)
-    estimators = {name: _estimator(name, model, "estimation", covariance) for name in spec.methods}
-    return EstimationObjects(sensors, model, estimators, record_plant, duration, v0)
+    estimators = {name: _estimator(name, model, "estimation", prior, covariance) for name in spec.methods}
+    return EstimationObjects(sensors, model, estimators, record_plant, duration, v0, truth, prior)
 
 
 def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
@@ -693,7 +733,9 @@ def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
     sensors = estimator = None
     if reads:
         sensors = _noisy_sensors(objects, "control", spec)
-        estimator = _estimator(spec.estimator or "kalman", _model(plant, sensors), "control")
+    truth, prior = _knowledge("control", spec, sensors)
+    if reads:
+        estimator = _estimator(spec.estimator or "kalman", _model(plant, sensors), "control", prior)
         rate, key = sensors.rate, "sensors.rate"
     else:
         rate, key = (50.0 if spec.rate is None else spec.rate), "control.rate"
@@ -708,5 +750,5 @@ def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
     if spec.budget is not None:
         with _scene_keys("control", _same_keys("control.budget", tuple(spec.budget))):
             budget = Budget(**spec.budget)
-    return ControlObjects(controller, sensors, estimator, rate, budget)
+    return ControlObjects(controller, sensors, estimator, rate, budget, truth)
 

@@ -111,21 +111,43 @@ def estimation_to_dict(study: Any) -> dict[str, Any]:
     (s, the one-time cost paid before any estimator was timed), with the sample times, the
     truth and each estimator's speeds under ``series``."""
     return {"estimators": study.rows(), "duration": study.duration, "samples": study.record.n_samples,
-            "compile_time": study.compile_time, "simulation_status": study.simulation.status,
+            "compile_time": study.compile_time,
+            "simulation_status": None if study.simulation is None else study.simulation.status,
             "series": {"times": study.record.times, "truth": study.record.truth_speed,
                        **{r.method: r.speed for r in study.results}}}
 
 
+def estimation_csv(study: Any) -> str:
+    """The estimates as CSV text: ``time_s``, then per estimator its speed and standard
+    deviation (m/s) and, for the filters, the NIS of the central reading (``nan`` where there
+    is no innovation: the first sample); one row per sample."""
+    n = study.record.n_samples
+    columns: list[tuple[str, Any]] = [("time_s", study.record.times)]
+    for r in study.results:
+        columns += [(f"{r.method}_speed_m_s", r.speed), (f"{r.method}_std_m_s", np.sqrt(r.variance))]
+        if r.nis is not None:        # the innovations start at the second sample
+            columns.append((f"{r.method}_nis", np.concatenate((np.full(n - r.nis.size, np.nan), r.nis))))
+    lines = [",".join(name for name, _ in columns)]
+    lines += [",".join(repr(float(column[k])) for _, column in columns) for k in range(study.record.n_samples)]
+    return "\n".join(lines) + "\n"
+
+
 def estimation_lines(study: Any) -> list[str]:
     """A table of the estimators' scores, one line each."""
-    lines = [f"estimation over {study.duration:g} s ({study.record.n_samples} samples):",
+    source = ("simulated" if study.simulation is not None else "recorded file"
+              + (", no truth" if study.record.truth_speed is None else ", with the truth it carries"))
+    lines = [f"estimation over {study.duration:g} s ({study.record.n_samples} samples, {source}):",
              f"  {'estimator':20} {'rms (mm/s)':>10} {'max (mm/s)':>10} {'NEES mean':>10} "
-             f"{'95% band':>14} {'wall (ms)':>9} {'x real time':>11}"]
+             f"{'in band':>7} {'NIS mean':>8} {'wall (ms)':>9} {'x real time':>11}"]
+
+    def shown(value: Any, scale: float = 1.0, form: str = ".3g") -> str:
+        return "-" if value is None else format(value * scale, form)
+
     for row in study.rows():
-        nees = "" if row["nees_mean"] is None else f"{row['nees_mean']:.3g}"
-        band = "" if row["nees_band"] is None else f"[{row['nees_band'][0]:.3g}, {row['nees_band'][1]:.3g}]"
-        lines.append(f"  {row['name']:20} {row['rms'] * 1e3:10.3g} {row['max_error'] * 1e3:10.3g} "
-                     f"{nees:>10} {band:>14} {row['wall_time'] * 1e3:9.3g} {row['real_time_ratio']:11.4g}")
+        lines.append(f"  {row['name']:20} {shown(row['rms'], 1e3):>10} {shown(row['max_error'], 1e3):>10} "
+                     f"{shown(row['nees_mean']):>10} {shown(row['nees_in_band'], form='.2f'):>7} "
+                     f"{shown(row['nis_mean']):>8} {row['wall_time'] * 1e3:9.3g} {row['real_time_ratio']:11.4g}")
+    lines += [f"  {row['name']}: {row['monitor']}" for row in study.rows() if row["monitor"] is not None]
     lines.append(f"  ({compile_line(study.compile_time)})")
     return lines
 
@@ -146,8 +168,10 @@ def control_lines(study: Any) -> list[str]:
 
 
 def estimation_files(study: Any, name: str, *, plots_too: bool = True) -> dict[str, bytes]:
-    """``estimate.json`` and (``plots_too``) ``estimate.png``, rendered in memory."""
-    payload = {"estimate.json": to_json({"scene": name, **estimation_to_dict(study)}).encode()}
+    """``estimate.json``, ``estimate.csv`` (:func:`estimation_csv`) and (``plots_too``)
+    ``estimate.png``, rendered in memory."""
+    payload = {"estimate.json": to_json({"scene": name, **estimation_to_dict(study)}).encode(),
+               "estimate.csv": estimation_csv(study).encode()}
     if plots_too:
         payload["estimate.png"] = plots.render_png(plots.plot_estimation, study, title=name)
     return payload

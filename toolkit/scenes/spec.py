@@ -94,6 +94,8 @@ import tomli_w
 
 from ..errors import suggestion
 from ..errors import SceneError, SceneFileNotFoundError
+from ..estimation import ESTIMATOR_NAMES, ModelPrior
+from ..model.truth import WorldTruth
 from ..simulation import Budget
 from .limits import MAX_SAMPLES, scene_value_error
 
@@ -526,10 +528,11 @@ class SimulationSpec:
         )
 
 
-#: Estimators an ``[estimation]`` section may name (``methods``), in report order.
-ESTIMATION_METHODS = ("central_difference", "wheel_difference", "kalman", "rts", "ukf")
+#: Estimators an ``[estimation]`` section may name (``methods``), in report order: the
+#: registry's (:data:`toolkit.estimation.ESTIMATOR_NAMES`).
+ESTIMATION_METHODS = ESTIMATOR_NAMES
 #: Estimators a ``[control]`` loop may read (the smoother needs the future: offline only).
-LOOP_ESTIMATORS = ("kalman", "central_difference", "wheel_difference", "ukf")
+LOOP_ESTIMATORS = tuple(name for name in ESTIMATOR_NAMES if name != "rts")
 #: Controllers a ``[control]`` section may name, with the keys each takes.
 CONTROLLERS = {"viscosity": ("slope", "reference", "band"),
                "speed_hold": ("reference", "slope", "kp", "ki"),
@@ -541,6 +544,20 @@ _CONTROLLER_REQUIRED = {"viscosity": ("slope",), "speed_hold": ("reference", "sl
 SCENARIOS = {"brake": ("duration", "brake_time", "cruise", "brake", "spread", "friction_spread"),
              "simulation": ()}
 _NOISE_KEYS = ("missed_count_prob", "count_noise", "jitter")
+#: Sub-tables of ``[estimation]`` and ``[control]``: ``truth`` (how the simulated world departs
+#: from the scene, :class:`~toolkit.model.truth.WorldTruth`) and ``model`` (what the estimators
+#: are told beyond the scene, :class:`~toolkit.estimation.ModelPrior`), key for key.
+TRUTH_KEYS = tuple(item.name for item in fields(WorldTruth))
+MODEL_KEYS = tuple(item.name for item in fields(ModelPrior))
+_PAIRS = ("drag_range", "lag_range")
+
+
+def _knowledge(where: str, value: Any, keys: tuple[str, ...]) -> dict[str, Any]:
+    """A ``truth`` or ``model`` sub-table: known keys, numbers (pairs for the ranges)."""
+    table = _table(where, value)
+    _check_keys(where, table, keys)
+    return {key: (_numbers(f"{where}.{key}", item) if key in _PAIRS else _number(f"{where}.{key}", item))
+            for key, item in table.items()}
 
 
 def _names(where: str, value: Any, choices: tuple[str, ...]) -> tuple[str, ...]:
@@ -580,8 +597,9 @@ class EstimationSpec:
     """``[estimation]``: estimate the body speed from simulated encoder counts (needs
     ``[sensors]`` with both encoders and ``[body]``).
 
-    ``methods`` (names from :data:`ESTIMATION_METHODS`; default the first four, ``"ukf"`` is
-    slower); ``scenario``: ``"brake"`` (default: the contacts at ``cruise + linspace(-spread,
+    ``methods`` (names from :data:`ESTIMATION_METHODS`; default all but ``"kalman_nominal"`` and
+    ``"ukf"``: the practitioner's baselines, the default Kalman filter and the smoother);
+    ``scenario``: ``"brake"`` (default: the contacts at ``cruise + linspace(-spread,
     spread, n)`` m/s from rest, then at ``brake + ...`` from ``brake_time`` s, over
     ``duration`` s; defaults 0.2, 0.05, -0.1, 5, 10) or ``"simulation"`` (the scene's own
     ``[simulation]``, exact, recorded over its ``t_end``); ``seed`` (integer, the sensors' and
@@ -591,10 +609,15 @@ class EstimationSpec:
     ``speed_std`` (m/s, > 0, default 1e-4: the std of the filters' prior on the start speed,
     which the scenario knows, rest or ``simulation.v0``); ``initial_covariance`` (2 x 2,
     symmetric positive definite: m^2, m^2/s, (m/s)^2; the filters' whole prior on (position,
-    speed), replacing ``speed_std``).
+    speed), replacing ``speed_std``). The keys above are *declared*: the estimators are told
+    them. Two sub-tables keep truth and belief apart: ``truth`` (:data:`TRUTH_KEYS`, how the
+    simulated world departs from the scene without the estimators being told, drawn from
+    ``seed``: :class:`~toolkit.model.truth.WorldTruth`) and ``model`` (:data:`MODEL_KEYS`, the
+    estimators' prior knowledge beyond the scene: :class:`~toolkit.estimation.ModelPrior`).
     """
 
-    methods: tuple[str, ...] = ("central_difference", "wheel_difference", "kalman", "rts")
+    methods: tuple[str, ...] = ("central_difference", "wheel_difference", "foaw_end", "foaw_best", "alpha_beta",
+                                "kalman", "rts")
     scenario: str = "brake"
     duration: float | None = None
     brake_time: float = 5.0
@@ -608,9 +631,11 @@ class EstimationSpec:
     jitter: float = 0.0
     speed_std: float = 1e-4
     initial_covariance: tuple[tuple[float, ...], ...] | None = None
+    truth: dict[str, Any] | None = None
+    model: dict[str, Any] | None = None
 
     KEYS = ("methods", "scenario", "duration", "brake_time", "cruise", "brake", "spread", "seed",
-            "friction_spread", *_NOISE_KEYS, "speed_std", "initial_covariance")
+            "friction_spread", *_NOISE_KEYS, "speed_std", "initial_covariance", "truth", "model")
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> EstimationSpec:
@@ -637,6 +662,8 @@ class EstimationSpec:
             speed_std=_number("estimation.speed_std", get("speed_std", 1e-4)),
             initial_covariance=(_matrix("estimation.initial_covariance", table["initial_covariance"])
                                 if "initial_covariance" in table else None),
+            truth=_knowledge("estimation.truth", table["truth"], TRUTH_KEYS) if "truth" in table else None,
+            model=_knowledge("estimation.model", table["model"], MODEL_KEYS) if "model" in table else None,
         )
 
     @property
@@ -660,7 +687,9 @@ class ControlSpec:
     ``estimator`` (one of :data:`LOOP_ESTIMATORS`, default ``"kalman"``), ``rate`` (Hz, the
     ideal loop's; with sensors theirs), ``seed`` (integer), ``missed_count_prob``,
     ``count_noise`` (counts), ``jitter`` (s), ``budget`` (``{wall_time, max_steps,
-    max_event_rate, max_samples}`` of each plant step: s, count, 1/s, count), ``cross_check`` (true: also
+    max_event_rate, max_samples}`` of each plant step: s, count, 1/s, count), ``truth`` and
+    ``model`` (sub-tables as in :class:`EstimationSpec`: the loop runs on the true world, its
+    estimator is told the scene and the model only), ``cross_check`` (true: also
     simulate the loop as a python-control interconnection, :mod:`toolkit.loop.interop`, and
     report the largest difference).
     """
@@ -678,9 +707,11 @@ class ControlSpec:
     jitter: float = 0.0
     budget: dict[str, Any] | None = None
     cross_check: bool = False
+    truth: dict[str, Any] | None = None
+    model: dict[str, Any] | None = None
 
     COMMON = ("controller", "duration", "v0", "sensors", "estimator", "rate", "seed", *_NOISE_KEYS,
-              "budget", "cross_check")
+              "budget", "cross_check", "truth", "model")
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> ControlSpec:
@@ -706,6 +737,8 @@ class ControlSpec:
             **{key: _number(f"control.{key}", get(key, 0.0)) for key in _NOISE_KEYS},
             budget=budget,
             cross_check=_flag("control.cross_check", get("cross_check", False)),
+            truth=_knowledge("control.truth", table["truth"], TRUTH_KEYS) if "truth" in table else None,
+            model=_knowledge("control.model", table["model"], MODEL_KEYS) if "model" in table else None,
         )
 
 

@@ -57,10 +57,12 @@ from .._compiled import warm
 from ..allocation import (AllocationResult, AllocationStatus, EquilibriumSpeed, FrictionFraction,
                          allocate, build_problem)
 from ..errors import ParameterError, SceneError
-from ..model import ContactSet, Plant
+from ..model import ContactSet, Plant, sample_count
 from .build import SceneObjects, build_scene
 from .spec import Scene
 from ..schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
+from ..analysis.scenarios import record_world
+from ..model.truth import realize
 from ..shortfall import Shortfall
 from ..simulation import SimulationResult, SimulationStatus, simulate
 
@@ -72,7 +74,7 @@ CROSS_CHECK_TOLERANCE = 1e-9
 __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve", "run_study",
            "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
            "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
-           "estimate_scene", "control_scene", "estimation_shortfalls", "control_shortfalls",
+           "estimate_scene", "estimate_record", "control_scene", "estimation_shortfalls", "control_shortfalls",
            "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls", "planar_scene"]
 
 
@@ -413,24 +415,29 @@ class EstimationStudy:
     Attributes
     ----------
     record : EncoderRecord
-        The counts, commands and truth (body speed and position, contact speeds).
+        The counts, commands and, when simulated, the truth (body speed and position,
+        contact speeds).
     results : tuple of EstimationResult
-        One per method, in the scene's order, scored against the truth.
-    simulation : SimulationResult
-        The exact run that was recorded.
-    plant : Plant
-        The plant simulated.
+        One per method, in the scene's order, scored against the truth when there is one.
+    simulation : SimulationResult or None
+        The exact run that was recorded (None for a recorded file).
+    plant : Plant or None
+        The plant simulated: the true world's (None for a recorded file).
     compile_time : float, s
         The one-time cost paid before the estimators were timed (the kernels compiled and
         each estimator run once over the record, untimed: the policy of
         :mod:`toolkit._compiled`); in no estimator's ``wall_time``.
+    monitors : tuple of (str or None)
+        Per result, the consistency monitor's verdict (``"consistent"``, or when and why the
+        estimator left its nominal model); None for estimators without a monitor.
     """
 
     record: Any
     results: tuple[Any, ...]
-    simulation: SimulationResult
+    simulation: SimulationResult | None
     plant: Any
     compile_time: float = 0.0
+    monitors: tuple[str | None, ...] = ()
 
     @property
     def duration(self) -> float:
@@ -438,12 +445,17 @@ class EstimationStudy:
         return self.record.duration
 
     def rows(self) -> list[dict[str, Any]]:
-        """Per estimator: ``name``, ``rms``, ``max_error`` (m/s), ``nees_mean`` (None for the
-        finite differences), its 95 % ``nees_band``, ``wall_time`` (s) and
-        ``real_time_ratio``."""
+        """Per estimator: ``name``, ``rms``, ``max_error`` (m/s), ``rms_phases`` (m/s per
+        phase: startup, cruise, brake, braked), ``nees_mean`` (None without a covariance or
+        the truth), its 95 % ``nees_band``, ``nees_in_band`` (the share of samples whose NEES
+        lies in the 95 % chi-square(2) interval), ``nis_mean``, ``monitor`` (the consistency
+        monitor's verdict), ``wall_time`` (s) and ``real_time_ratio``."""
+        monitors = self.monitors or (None,) * len(self.results)
         return [{"name": r.method, "rms": r.rms_error, "max_error": r.max_error,
-                 "nees_mean": r.nees_mean, "nees_band": r.nees_band, "wall_time": r.wall_time,
-                 "real_time_ratio": r.real_time_ratio} for r in self.results]
+                 "rms_phases": None if r.rms_phases is None else dict(r.rms_phases),
+                 "nees_mean": r.nees_mean, "nees_band": r.nees_band, "nees_in_band": r.nees_in_band,
+                 "nis_mean": r.nis_mean, "monitor": monitor, "wall_time": r.wall_time,
+                 "real_time_ratio": r.real_time_ratio} for r, monitor in zip(self.results, monitors)]
 
 
 def estimate_scene(scene: Scene | SceneObjects, simulation: SimulationResult | None = None
@@ -469,23 +481,64 @@ def estimate_scene(scene: Scene | SceneObjects, simulation: SimulationResult | N
     if spec is None or objects is None:
         raise SceneError(f"The scene {built.scene.name!r} has no [estimation] section.")
     plant = objects.plant
-    if spec.scenario == "brake":
-        run = simulate(plant, objects.duration)
-    else:
+    if spec.scenario == "simulation" and objects.truth.is_nominal:      # the scene's own run
         run = simulation if simulation is not None else _simulation(built, built.contacts)
-    record = record_simulation(run, plant, objects.sensors, rng=np.random.default_rng(spec.seed))
+        record = record_simulation(run, plant, objects.sensors, rng=np.random.default_rng(spec.seed))
+    else:     # the true world ([estimation.truth]; the scene itself when it says nothing)
+        world = realize(plant, objects.sensors, objects.truth, spec.seed)
+        run, record = record_world(world, objects.duration, seed=spec.seed, v0=objects.v0)
+        plant = world.plant
+    return _run_estimators(objects, spec, record, run, plant)
+
+
+def estimate_record(scene: Scene | SceneObjects, record: Any) -> EstimationStudy:
+    """Run the scene's ``[estimation]`` estimators over a recorded file's ``record`` (no truth:
+    estimates, NIS and the monitor's verdict; no simulation).
+
+    Parameters
+    ----------
+    scene : Scene or SceneObjects
+        Needs ``[estimation]`` (the estimators, the model and the prior).
+    record : EncoderRecord
+        From :func:`toolkit.model.record_io.read_record_csv`; its channels must match the
+        scene's contacts.
+    """
+    built = _built(scene)
+    spec, objects = built.scene.estimation, built.estimation
+    if spec is None or objects is None:
+        raise SceneError(f"The scene {built.scene.name!r} has no [estimation] section.")
+    if record.wheel_counts.shape[1] != built.contacts.n:
+        raise SceneError(f"The record has {record.wheel_counts.shape[1]} wheel channels; the scene "
+                         f"{built.scene.name!r} has {built.contacts.n} contacts.")
+    return _run_estimators(objects, spec, record, None, None)
+
+
+def _run_estimators(objects: Any, spec: Any, record: Any, run: SimulationResult | None,
+                    plant: Any) -> EstimationStudy:
+    """Every estimator over ``record``, each timed on compiled code (warmed first, untimed)."""
     compile_time = warm(None, "core", "lines")     # every wall time below: compiled code
-    results = []
+    results, monitors = [], []
     for estimator in objects.estimators.values():
         compile_time += warm(lambda: estimator.warm_up(record))
         results.append(estimator.run(record, speed=objects.v0, speed_std=spec.speed_std))
-    return EstimationStudy(record, tuple(results), run, plant, compile_time)
+        monitors.append(_verdict(estimator))
+    return EstimationStudy(record, tuple(results), run, plant, compile_time, tuple(monitors))
+
+
+def _verdict(estimator: Any) -> str | None:
+    """What an estimator's consistency monitor concluded over its last run (None: no monitor)."""
+    if not hasattr(estimator, "tripped"):
+        return None
+    if estimator.tripped is None:
+        return "consistent: the nominal model held throughout"
+    time_, reason = estimator.tripped
+    return f"left the nominal model at t = {time_:.3f} s ({reason})"
 
 
 def estimation_shortfalls(scene: Scene | SceneObjects, study: EstimationStudy) -> list[Shortfall]:
     """A recorded run that stopped before its end (the time not recorded, s)."""
     run = study.simulation
-    if run.status is SimulationStatus.SUCCESS:
+    if run is None or run.status is SimulationStatus.SUCCESS:        # a recorded file, or a full run
         return []
     spec = _spec(scene)
     duration = spec.estimation.record_duration if spec.estimation.scenario == "brake" else spec.simulation.t_end
@@ -560,8 +613,17 @@ def control_scene(scene: Scene | SceneObjects, schedule: ScheduleResult | None =
             schedule, _ = design_scene_schedule(built)
         controller = OpenLoop(schedule)
     rate = None if objects.sensors is not None else objects.rate
-    arguments = dict(sensors=objects.sensors, estimator=objects.estimator, v0=spec.v0, seed=spec.seed,
+    # The loop runs on the true world ([control.truth]); its estimator knows the scene only.
+    truth, sensors = objects.truth, objects.sensors
+    wander = None
+    if not truth.is_nominal:
+        plant = truth.plant(plant, spec.seed)
+        sensors = None if sensors is None else truth.sensors(sensors)
+        wander = truth.wander(sample_count(spec.duration, objects.rate), plant.n, 1.0 / objects.rate, spec.seed)
+    arguments = dict(sensors=sensors, estimator=objects.estimator, v0=spec.v0, seed=spec.seed,
                      budget=objects.budget)
+    if wander is not None:
+        arguments["wander"] = wander
     # The loop's wall time is of compiled code: the kernels loaded and the loop run once first,
     # untimed (toolkit._compiled.warm: a kernel compiles at its first call, wherever it comes).
     compile_time = warm(lambda: simulate_closed_loop(plant, controller, spec.duration, rate=rate,

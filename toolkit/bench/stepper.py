@@ -34,7 +34,7 @@ import numpy as np
 from toolkit.simulation import warm_up
 from toolkit.model import ContactSet, Motors, PiecewiseConstant, Plant
 from toolkit.model.carousel import CAROUSEL, carousel_startup_plant
-from toolkit.simulation import ExactState, _stepper, advance, simulate
+from toolkit.simulation import ExactState, advance, simulate
 
 _PERIOD = 1.0 / CAROUSEL.rate          # s
 _TARGET = 15e-6                        # s per advance step with lagging motors (issue 21)
@@ -86,20 +86,16 @@ def main(argv: list[str] | None = None) -> int:
             step = advance(plant, state, commands[k], (k + 1) * _PERIOD)
             state = step.state
             events += len(step.events)
-            quiet += step._quiet
+            quiet += step.shortcut
         passes.append((time.perf_counter() - start) / args.steps)
     per_step = min(passes)
 
     # The same steps with the full engine on every one (the no-event shortcut off).
-    _stepper._QUIET = False
-    try:
-        state = initial
-        start = time.perf_counter()
-        for k in range(args.steps):
-            state = advance(plant, state, commands[k], (k + 1) * _PERIOD).state
-        per_engine = (time.perf_counter() - start) / args.steps
-    finally:
-        _stepper._QUIET = True
+    state = initial
+    start = time.perf_counter()
+    for k in range(args.steps):
+        state = advance(plant, state, commands[k], (k + 1) * _PERIOD, shortcut=False).state
+    per_engine = (time.perf_counter() - start) / args.steps
 
     # Baseline: simulate from scratch per period (a plant per command, motors restarted
     # settled: simulate cannot take unsettled motors, so this is its cheapest equivalent).

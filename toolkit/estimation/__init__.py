@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from ._base import EstimationResult, Estimator, chi2_band
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
-from ._prior import ModelPrior
+from ..model.truth import ModelPrior
 from .adaptive import ADAPTING, FALLBACK, NOMINAL, AdaptiveKalman, KalmanEstimator, WheelSpeedBank
 from .identification import LagIdentifier
 from .monitor import ConsistencyMonitor, NoiseMatcher

@@ -66,7 +66,7 @@ from ..model.sensors import EncoderRecord, EncoderSample, play
 from ._base import EstimationResult, Estimator, check_covariance, score, warm_record
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel
-from ._prior import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
+from ..model.truth import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
 from .identification import LagIdentifier
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
 from .window import AdaptiveWindow

@@ -11,7 +11,7 @@ from typing import Any
 
 from ..errors import check_option
 from ._input import EstimatorModel
-from ._prior import ModelPrior
+from ..model.truth import ModelPrior
 
 __all__ = ["ESTIMATOR_NAMES", "build_estimator"]
 

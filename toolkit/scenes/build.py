@@ -335,8 +335,25 @@ def _missing_encoders(sensors: Any) -> list[str]:
             if getattr(sensors, key) is None]
 
 
+def _check_names(scene: Scene) -> None:
+    """The estimators a scene names exist (:data:`toolkit.estimation.ESTIMATOR_NAMES`; a loop
+    reads any but the smoother, which needs the future)."""
+    from ..estimation import ESTIMATOR_NAMES
+
+    named = [(f"estimation.methods[{i}]", name, ESTIMATOR_NAMES)
+             for i, name in enumerate(scene.estimation.methods if scene.estimation is not None else ())]
+    if scene.control is not None and scene.control.estimator is not None:
+        loop = tuple(name for name in ESTIMATOR_NAMES if name != "rts")
+        named.append(("control.estimator", scene.control.estimator, loop))
+    for where, name, choices in named:
+        if name not in choices:
+            raise SceneError(f"The {where!r} value in the scene must be one of {list(choices)}. "
+                             f"Got {name!r} instead.{suggestion(name, choices)}")
+
+
 def _check_sensing(scene: Scene) -> None:
     """An estimator or a controller on the sensors it needs; options that need sensors."""
+    _check_names(scene)
     sensors, estimation = scene.sensors, scene.estimation
     if estimation is not None:
         missing = _missing_encoders(sensors)

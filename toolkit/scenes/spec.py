@@ -39,7 +39,7 @@ experiment's parameters in ``[sweep]``, in SI units, documented on its class in
 :mod:`toolkit.experiments`.
 
 ``[estimation]`` (needs ``[body]`` and both encoders in ``[sensors]``), units:
-``methods`` names from :data:`ESTIMATION_METHODS` (default all but ``"ukf"``);
+``methods`` names from :data:`toolkit.estimation.ESTIMATOR_NAMES` (default all but ``"ukf"``);
 ``duration``, ``brake_time`` (s); ``cruise``, ``brake``, ``spread`` (m/s: the contacts at
 ``cruise + linspace(-spread, spread, n)`` from rest, at ``brake + ...`` from
 ``brake_time``); ``friction_spread`` (relative std of the true ``f_i``); ``seed``
@@ -49,7 +49,7 @@ experiment's parameters in ``[sweep]``, in SI units, documented on its class in
 ``slope`` (N s/m), ``reference`` (m/s), ``band`` (m/s), ``kp`` (1), ``ki`` (1/s),
 ``fraction`` (mu/mu0), ``start`` (s), ``hold`` (m/s), ``duration`` (s), ``v0`` (m/s),
 ``sensors`` (true/false; default: whether ``[sensors]`` exists), ``estimator`` (one of
-:data:`LOOP_ESTIMATORS`), ``rate`` (Hz, ideal loop), ``seed``, the noise keys as above,
+:data:`toolkit.estimation.ESTIMATOR_NAMES` but ``"rts"``), ``rate`` (Hz, ideal loop), ``seed``, the noise keys as above,
 ``budget = {wall_time (s), max_steps, max_event_rate (1/s), max_samples}`` per plant step,
 ``cross_check`` (true/false: also simulate the loop with python-control). See
 :class:`EstimationSpec` and :class:`ControlSpec`. An estimator or a closed loop reading
@@ -94,15 +94,13 @@ import tomli_w
 
 from ..errors import suggestion
 from ..errors import SceneError, SceneFileNotFoundError
-from ..estimation import ESTIMATOR_NAMES, ModelPrior
-from ..model.truth import WorldTruth
+from ..model.truth import ModelPrior, WorldTruth
 from ..simulation import Budget
 from .limits import MAX_SAMPLES, scene_value_error
 
 __all__ = [
     "Scene", "ContactsSpec", "BodySpec", "MotorsSpec", "SensorsSpec", "TargetSpec", "ScheduleSpec",
-    "SimulationSpec", "EstimationSpec", "ControlSpec", "ReportSpec", "SweepSpec", "ESTIMATION_METHODS",
-    "LOOP_ESTIMATORS", "CONTROLLERS", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
+    "SimulationSpec", "EstimationSpec", "ControlSpec", "ReportSpec", "SweepSpec", "CONTROLLERS", "load_scene", "loads_scene", "dumps_scene", "MAX_SCENE_BYTES",
     "MAX_SAMPLES", "PlanarSpec",
 ]
 
@@ -528,11 +526,7 @@ class SimulationSpec:
         )
 
 
-#: Estimators an ``[estimation]`` section may name (``methods``), in report order: the
-#: registry's (:data:`toolkit.estimation.ESTIMATOR_NAMES`).
-ESTIMATION_METHODS = ESTIMATOR_NAMES
-#: Estimators a ``[control]`` loop may read (the smoother needs the future: offline only).
-LOOP_ESTIMATORS = tuple(name for name in ESTIMATOR_NAMES if name != "rts")
+
 #: Controllers a ``[control]`` section may name, with the keys each takes.
 CONTROLLERS = {"viscosity": ("slope", "reference", "band"),
                "speed_hold": ("reference", "slope", "kp", "ki"),
@@ -560,15 +554,11 @@ def _knowledge(where: str, value: Any, keys: tuple[str, ...]) -> dict[str, Any]:
             for key, item in table.items()}
 
 
-def _names(where: str, value: Any, choices: tuple[str, ...]) -> tuple[str, ...]:
-    """A non-empty list of distinct names from ``choices`` (unknown ones with a suggestion)."""
+def _names(where: str, value: Any) -> tuple[str, ...]:
+    """A non-empty list of distinct names (which names exist is the build's rule)."""
     if not isinstance(value, list) or not value:
-        raise _fail(where, f"be a non-empty list of names from {list(choices)}", value)
+        raise _fail(where, "be a non-empty list of names", value)
     names = tuple(_text(f"{where}[{i}]", item) for i, item in enumerate(value))
-    for i, item in enumerate(names):
-        if item not in choices:
-            raise SceneError(f"The '{where}[{i}]' value in the scene must be one of {list(choices)}. "
-                             f"Got {item!r} instead.{suggestion(item, choices)}")
     if len(set(names)) != len(names):
         raise _fail(where, "name each method once", list(names))
     return names
@@ -597,7 +587,7 @@ class EstimationSpec:
     """``[estimation]``: estimate the body speed from simulated encoder counts (needs
     ``[sensors]`` with both encoders and ``[body]``).
 
-    ``methods`` (names from :data:`ESTIMATION_METHODS`; default all but ``"kalman_nominal"`` and
+    ``methods`` (names from :data:`toolkit.estimation.ESTIMATOR_NAMES`; default all but ``"kalman_nominal"`` and
     ``"ukf"``: the practitioner's baselines, the default Kalman filter and the smoother);
     ``scenario``: ``"brake"`` (default: the contacts at ``cruise + linspace(-spread,
     spread, n)`` m/s from rest, then at ``brake + ...`` from ``brake_time`` s, over
@@ -648,7 +638,7 @@ class EstimationSpec:
                                      f"scenario = {scenario!r} does not take it.")
         get = table.get
         return cls(
-            methods=(_names("estimation.methods", table["methods"], ESTIMATION_METHODS)
+            methods=(_names("estimation.methods", table["methods"])
                      if "methods" in table else cls.methods),
             scenario=scenario,
             duration=_number("estimation.duration", table["duration"]) if "duration" in table else None,
@@ -684,7 +674,7 @@ class ControlSpec:
     ``[schedule]``. Common: ``duration`` (s, default 10), ``v0`` (m/s, default 0),
     ``sensors`` (true: read the ``[sensors]`` encoders through ``estimator``; false: the
     ideal loop on the true speed; default: true when the scene has ``[sensors]``),
-    ``estimator`` (one of :data:`LOOP_ESTIMATORS`, default ``"kalman"``), ``rate`` (Hz, the
+    ``estimator`` (any name of :data:`toolkit.estimation.ESTIMATOR_NAMES` but ``"rts"``, default ``"kalman"``), ``rate`` (Hz, the
     ideal loop's; with sensors theirs), ``seed`` (integer), ``missed_count_prob``,
     ``count_noise`` (counts), ``jitter`` (s), ``budget`` (``{wall_time, max_steps,
     max_event_rate, max_samples}`` of each plant step: s, count, 1/s, count), ``truth`` and
@@ -730,8 +720,7 @@ class ControlSpec:
             duration=_number("control.duration", get("duration", 10.0)),
             v0=_number("control.v0", get("v0", 0.0)),
             sensors=_flag("control.sensors", table["sensors"]) if "sensors" in table else None,
-            estimator=(_choice("control.estimator", table["estimator"], LOOP_ESTIMATORS)
-                       if "estimator" in table else None),
+            estimator=_text("control.estimator", table["estimator"]) if "estimator" in table else None,
             rate=_number("control.rate", table["rate"]) if "rate" in table else None,
             seed=_integer("control.seed", get("seed", 0)),
             **{key: _number(f"control.{key}", get(key, 0.0)) for key in _NOISE_KEYS},

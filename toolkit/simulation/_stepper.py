@@ -138,6 +138,8 @@ class ExactStep:
     status : SimulationStatus
     message : str
         ``status.value`` plus specifics.
+    shortcut : bool
+        The certified no-event shortcut gave the step (see :func:`advance`'s ``shortcut``).
     """
 
     state: ExactState
@@ -146,7 +148,7 @@ class ExactStep:
     events: tuple[Event, ...]
     status: SimulationStatus
     message: str
-    _quiet: bool = field(default=False, repr=False)   # the certified no-event shortcut ran
+    shortcut: bool = field(default=False, repr=False)
 
     @property
     def success(self) -> bool:
@@ -161,12 +163,12 @@ class ExactStep:
         step = object.__new__(cls)
         step.__dict__.update(state=state, body_displacement=body_displacement,
                              contact_displacements=contact_displacements, events=events,
-                             status=status, message=message, _quiet=quiet)
+                             status=status, message=message, shortcut=quiet)
         return step
 
 
 def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
-            external: float = 0.0, budget: Budget | None = None) -> ExactStep:
+            external: float = 0.0, budget: Budget | None = None, shortcut: bool = True) -> ExactStep:
     """Continue an exact simulation from ``state`` to ``t1`` under one held command.
 
     Parameters
@@ -182,6 +184,9 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
         End of the step, ``> state.t``.
     external : float, N
         External force, constant over the step.
+    shortcut : bool
+        Take the certified no-event shortcut where it applies (default); False runs the full
+        engine on every step (the same result: benchmarks and tests compare the two).
     budget : Budget, optional
         Limits of the step (default ``Budget()``): the same guards as ``simulate``.
 
@@ -231,7 +236,7 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
                 "state", "advance", f"hold {n} contact speeds", speeds.shape))
         dyn = _dynamic_plant(plant)
         hint, releasing = state._pending
-        try_quiet = (_QUIET and dyn.quiet and hint is None and releasing == 0.0
+        try_quiet = (_QUIET and shortcut is not False and dyn.quiet and hint is None and releasing == 0.0
                      and budget.wall_time >= _QUIET_WALL_TIME)
         rec = _Recorder(budget, 2 * n + 2, dyn.mu)
         out = np.empty((2, n))

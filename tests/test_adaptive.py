@@ -92,8 +92,7 @@ def test_the_count_cell_test_is_quiet_in_a_matched_world_and_quick_in_a_wrong_on
 
     for seed in range(10):
         sc = carousel_brake_scenario(seed=seed, grid_phase=seed)
-        nominal = NominalKalman(sc.model)
-        nominal.filter(sc.record, speed_std=1e-4)
+        nominal = NominalKalman(sc.model).filter(sc.record, speed_std=1e-4)
         assert nominal.cell_probabilities.min() > 1e3 * CELL_ALARM, seed
         wrong = carousel_brake_scenario(seed=seed, grid_phase=seed, truth=WorldTruth(friction_spread=0.4))
         est = KalmanEstimator(wrong.model)

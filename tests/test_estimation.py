@@ -201,14 +201,14 @@ def test_kalman_is_consistent_over_grid_phases():
 
 def test_exact_holds_only_with_ideal_encoders_and_steady_motors(scenario):
     model = scenario.model
-    assert NominalKalman(model).holds_exact
-    assert not NominalKalman(model, exact_holds=False).holds_exact
-    assert not UnscentedEstimator(model).holds_exact
-    assert not NominalKalman(dataclasses.replace(model, contact_drift=1e-4)).holds_exact
-    assert not NominalKalman(dataclasses.replace(model, friction_uncertainty=0.05)).holds_exact
+    assert NominalKalman(model).exact_holds
+    assert not NominalKalman(model, exact_holds=False).exact_holds
+    assert not UnscentedEstimator(model).exact_holds
+    assert not NominalKalman(dataclasses.replace(model, contact_drift=1e-4)).exact_holds
+    assert not NominalKalman(dataclasses.replace(model, friction_uncertainty=0.05)).exact_holds
     for noise in ({"count_noise": 0.3}, {"jitter": 1e-4}, {"missed_count_prob": 0.01}):
         sensors = dataclasses.replace(model.sensors, **noise)
-        assert not NominalKalman(dataclasses.replace(model, sensors=sensors)).holds_exact
+        assert not NominalKalman(dataclasses.replace(model, sensors=sensors)).exact_holds
     with pytest.raises(ParameterTypeError, match="exact_holds"):
         NominalKalman(model, exact_holds=1)
 

@@ -32,14 +32,14 @@ from .identification import LagIdentifier
 from .monitor import ConsistencyMonitor, NoiseMatcher
 from .alpha_beta import AlphaBetaTracker, kalata_gains
 from .finite_difference import CentralDifference, WheelDifference
-from .kalman import NominalKalman, RTSSmoother, steady_state_gain
+from .kalman import FilterPass, NominalKalman, RTSSmoother, steady_state_gain
 
 from .unscented import UnscentedEstimator
 from .window import AdaptiveWindow
 from .registry import ESTIMATOR_NAMES, build_estimator
 from ._base import PHASES, phase_masks
 
-__all__ = ["Estimator", "EstimationResult", "EstimatorModel", "ModelPrior", "chi2_band", "contact_speed_estimates",
+__all__ = ["Estimator", "EstimationResult", "EstimatorModel", "ModelPrior", "chi2_band", "contact_speed_estimates", "FilterPass",
            "ContactSpeedTracker",
            "CentralDifference", "WheelDifference", "KalmanEstimator", "NominalKalman", "RTSSmoother",
            "steady_state_gain", "UnscentedEstimator", "AdaptiveWindow", "AlphaBetaTracker", "kalata_gains",

@@ -707,7 +707,7 @@ class EstimatorModel:
 
 
 def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model: EstimatorModel,
-                            *, first: int = 0, initial: Any = None
+                            *, initial: Any = None
                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contact speeds at the samples from wheel counts and commands (vectorized).
 
@@ -717,9 +717,6 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     commands : array_like of shape (k, n), m/s
     times : array_like of shape (k,), s
     model : EstimatorModel
-    first : int
-        Unused (kept for compatibility; a loop uses :class:`ContactSpeedTracker`, the same
-        formulas one row at a time).
     initial : array_like of shape (n,), m/s, optional
         The command the motors had settled at before row 0
         (:attr:`EncoderRecord.initial_commands <toolkit.model.sensors.EncoderRecord>`). When
@@ -750,7 +747,7 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     if c0 is not None and k:
         changed[0] = bool(np.any(u[0] != c0))
     # Last change strictly before row j (changes at j act after t_j), -inf-like when none.
-    marks = np.where(changed, idx, -10**9 if first == 0 else -10**9)
+    marks = np.where(changed, idx, -10**9)
     last_change = np.maximum.accumulate(np.concatenate(([-10**9], marks[:-1])))
     settle = model.settle
     start = np.maximum(last_change + settle, idx - model.max_window)

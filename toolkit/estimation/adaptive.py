@@ -943,9 +943,10 @@ class KalmanEstimator(Estimator):
         self._check_record(record)
         started = time.perf_counter()
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
-        X, P, _, _, nis, _ = self.nominal.filter(record, speed=speed, speed_std=speed_std)
-        failures = self.nominal.hold_failures.tolist()
-        cells = self.nominal.cell_probabilities.tolist()
+        nominal = self.nominal.filter(record, speed=speed, speed_std=speed_std)
+        X, P, nis = nominal.states, nominal.covariances, nominal.nis
+        failures = nominal.hold_failures.tolist()
+        cells = nominal.cell_probabilities.tolist()
         K = record.n_samples
         trip = None
         for k in range(K):

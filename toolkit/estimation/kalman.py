@@ -62,7 +62,7 @@ where the Gaussian filter has the body reach the equilibrium set after the wheel
 became exact, lasts while the contacts stay steady, and fails at a reading no line allows
 (the state then restarts from the reading and a one-period difference). It needs ideal
 encoders, ``contact_drift = 0``, no drag and no friction spread
-(:attr:`NominalKalman.holds_exact`). On
+(:attr:`NominalKalman.exact_holds`). On
 the acceptance record the NEES mean is then 1.77 (1.64 in the first second, 2.44
 cruising, 1.56 around the brake, 1.22 braked); over random grid phases the filter passes
 Bar-Shalom's Monte Carlo test (the mean NEES over 30 records inside its 95 % band at 96-98 %
@@ -113,6 +113,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -124,7 +125,7 @@ from ._base import EstimationResult, Estimator, check_covariance, score
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 
-__all__ = ["NominalKalman", "RTSSmoother", "steady_state_gain", "measurement_variance"]
+__all__ = ["FilterPass", "NominalKalman", "RTSSmoother", "steady_state_gain", "measurement_variance"]
 
 
 def _side(speed: float, bounds: Any) -> int | None:
@@ -179,6 +180,44 @@ def _make_filter(model: EstimatorModel) -> Any:
     return kf
 
 
+@dataclass(frozen=True, eq=False)
+class FilterPass:
+    """What :meth:`NominalKalman.filter` returns: the filter's pass over a record of ``k``
+    samples (row ``j``: sample ``j``; the input, transition and process noise of row ``j``
+    are of the period ending at sample ``j``).
+
+    Attributes
+    ----------
+    states : ndarray of shape (k, 2)
+        Filtered ``(X, V)``: m, m/s.
+    covariances : ndarray of shape (k, 2, 2)
+        Their covariances (m^2, m^2/s, (m/s)^2).
+    inputs : ndarray of shape (k, 2)
+        The known input ``u`` of each step (m, m/s).
+    transitions : ndarray of shape (k, 2, 2)
+        The flow's slopes ``F`` of each step (linearized at the estimate).
+    process_noises : ndarray of shape (k, 2, 2)
+        ``Q`` of each step.
+    nis : ndarray of shape (k,)
+        Normalized innovation squared of each reading (NaN at sample 0).
+    hold_failures : ndarray of shape (k,), bool
+        The reading left every line of an exact hold (the hold failed).
+    cell_probabilities : ndarray of shape (k,)
+        The probability of the reading's count cell under the prediction.
+    wall_time : float, s
+    """
+
+    states: np.ndarray
+    covariances: np.ndarray
+    inputs: np.ndarray
+    transitions: np.ndarray
+    process_noises: np.ndarray
+    nis: np.ndarray
+    hold_failures: np.ndarray
+    cell_probabilities: np.ndarray
+    wall_time: float
+
+
 class NominalKalman(Estimator):
     """Kalman filter of ``(X, V)`` with the contact force as known input (see the module).
 
@@ -191,8 +230,12 @@ class NominalKalman(Estimator):
     exact_holds : bool
         While the body rides a settled contact, take the exact posterior of the counts
         (:mod:`toolkit.estimation._hold`) instead of the white-noise update (default; used
-        only with ideal encoders, ``contact_drift = 0``, no drag and no friction spread, see
-        :attr:`holds_exact`).
+        only with ideal encoders, ``contact_drift = 0``, no drag and no friction spread).
+
+    Attributes
+    ----------
+    exact_holds : bool
+        Whether the exact holds are in effect: asked for, and the model allows them.
     """
 
     name = "kalman_nominal"
@@ -212,7 +255,7 @@ class NominalKalman(Estimator):
         #: missed counts or jitter), motors that hold their speeds, no drag, and friction
         #: the model knows (with an uncertain spread the filter cannot tell that the body
         #: stuck: it may still creep towards the weighted median).
-        self.holds_exact = (exact_holds and sensors.count_noise == 0.0 and sensors.jitter == 0.0
+        self.exact_holds = (exact_holds and sensors.count_noise == 0.0 and sensors.jitter == 0.0
                             and sensors.missed_count_prob == 0.0 and model.contact_drift == 0.0
                             and model.damping == 0.0 and model.friction_uncertainty == 0.0)
         self.initial_covariance = (None if initial_covariance is None else check_covariance(
@@ -257,7 +300,7 @@ class NominalKalman(Estimator):
         self._edge, self._edge_var = None, math.inf
         self._increment = self.model.increment
         self._layer = HoldLayer(self.model)
-        self._lines = self._layer.lines if self.holds_exact else None
+        self._lines = self._layer.lines if self.exact_holds else None
         self._anchor = (math.nan, 0)          # (time, central count) of the last sample
         self.holding = False                   # the last step was an exact hold
         self.hold_failed = False               # the last step's reading left every line of a hold
@@ -465,9 +508,9 @@ class NominalKalman(Estimator):
 
     # -- offline --------------------------------------------------------------------------
     def filter(self, record: EncoderRecord, *, speed: float = 0.0, speed_std: float | None = None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """Run over a record: states (k, 2), covariances (k, 2, 2), inputs (k, 2) (row k:
-        the period ending at sample k), process noises (k, 2, 2), NIS (k,), wall time (s)."""
+               ) -> FilterPass:
+        """Run over a record (initial speed ``speed``, m/s, of std ``speed_std``): the
+        filter's pass, states and covariances with what made them."""
         self._check_record(record)
         started = time.perf_counter()
         model = self.model
@@ -516,20 +559,17 @@ class NominalKalman(Estimator):
             Fs.append(self.last_F)
             Qs.append(self.last_Q)
             nis.append(self.last_nis)
-        X, P, U, Q = np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Qs)
         self._pending = (track[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1], force_l[-1])
-        self.transitions = np.array(Fs)
-        #: Per sample: the reading left every line of an exact hold (the hold failed).
-        self.hold_failures = np.array(failed)
-        #: Per sample: the probability of its count cell under the prediction.
-        self.cell_probabilities = np.array(cells)
-        return X, P, U, Q, np.array(nis), time.perf_counter() - started
+        return FilterPass(np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Fs),
+                          np.array(Qs), np.array(nis), np.array(failed), np.array(cells),
+                          time.perf_counter() - started)
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
-        X, P, _, _, nis, wall = self.filter(record, speed=speed, speed_std=speed_std)
-        return score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0],
-                     covariance=P, nis=nis[1:])
+        run = self.filter(record, speed=speed, speed_std=speed_std)
+        X, P = run.states, run.covariances
+        return score(record, self.name, X[:, 1], P[:, 1, 1], run.wall_time, position=X[:, 0],
+                     covariance=P, nis=run.nis[1:])
 
 
 class RTSSmoother(Estimator):
@@ -564,17 +604,18 @@ class RTSSmoother(Estimator):
         # filterpy is imported here, not at module level: toolkit imports must not load it.
         from filterpy.kalman import KalmanFilter
 
-        X, P, U, Qs, _, _ = self.forward.filter(record, speed=speed, speed_std=speed_std)
+        forward = self.forward.filter(record, speed=speed, speed_std=speed_std)
+        X, P = forward.states, forward.covariances
         started = time.perf_counter()
         K = X.shape[0]
         Xa = np.concatenate((X, np.ones((K, 1))), axis=1)
         Pa = np.zeros((K, 3, 3))
         Pa[:, :2, :2] = P
         Fa = np.broadcast_to(np.eye(3), (K, 3, 3)).copy()
-        Fa[:, :2, :2] = self.forward.transitions
-        Fa[:, :2, 2] = U
+        Fa[:, :2, :2] = forward.transitions
+        Fa[:, :2, 2] = forward.inputs
         Qa = np.zeros((K, 3, 3))
-        Qa[:, :2, :2] = Qs
+        Qa[:, :2, :2] = forward.process_noises
         xs, ps, _, _ = KalmanFilter(dim_x=3, dim_z=1).rts_smoother(Xa, Pa, Fa, Qa, inv=np.linalg.pinv)
         wall = time.perf_counter() - started
         return score(record, self.name, xs[:, 1], ps[:, 1, 1], wall, position=xs[:, 0],

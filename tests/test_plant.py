@@ -129,6 +129,28 @@ def test_motor_rate_lag_rate_limit_and_ideal():
     np.testing.assert_array_equal(ramp.motor_rate(0.0, v), [3.0, -3.0, 0.0])
 
 
+@pytest.mark.parametrize("lag", [1e-3, 7.5e-3, 0.5, 20.0])
+def test_lag_memory_and_settling_time_are_the_motor_law_solved(lag):
+    # The share of the start speed left is unsaturated_response's slope in v0 (the law is
+    # affine in v0: the difference of two responses, exact to rounding, rtol 1e-12 for the
+    # difference's cancellation); its integral is the response's area against a trapezoid
+    # rule on 20001 points (error h^2/12 max|v''| s: rtol 1e-8 at these grids).
+    from toolkit.model import lag_memory, lag_settling_time, unsaturated_response
+
+    s = np.linspace(0.0, 5.0 * lag, 20001)
+    start, command = np.array([0.3]), np.array([-0.2])
+    response = unsaturated_response(start, command, s[:, None], lag, np.inf)[:, 0]
+    shares = np.array([lag_memory(t, lag)[0] for t in s])
+    np.testing.assert_allclose(shares * (start[0] - command[0]) + command[0], response, rtol=1e-12, atol=1e-15)
+    area = np.concatenate(([0.0], np.cumsum(0.5 * (shares[1:] + shares[:-1]) * np.diff(s))))
+    np.testing.assert_allclose([lag_memory(t, lag)[1] for t in s[::1000]], area[::1000], rtol=1e-8, atol=1e-15 * lag)
+    # Settling: the remaining travel gap * (the share's integral from s to inf) = travel.
+    gap, travel = 0.5, 1e-3 * lag
+    t = lag_settling_time(gap, lag, travel)
+    np.testing.assert_allclose(gap * (lag - lag_memory(t, lag)[1]), travel, rtol=1e-12)
+    assert lag_settling_time(gap, lag, 2.0 * gap * lag) == 0.0    # already closer than that
+
+
 # -- contact forces -------------------------------------------------------------------------
 def test_contact_forces_sign_with_tie_convention():
     cs = ContactSet([-1.0, 0.0, 2.0], [0.5, 1.0, 2.0])

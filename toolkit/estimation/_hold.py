@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from .._compiled import kernels
-from ..model.motors import MotorPiece
+from ..model.motors import MotorPiece, lag_settling_time
 from ._input import EstimatorModel
 
 #: Vertices a polygon may hold (a run of counts of one line allows at most a quadrilateral;
@@ -185,9 +185,9 @@ class WheelLines:
         lag, q, play = self._lag, self._q, self._play
         ready = t_c
         gap = np.abs(start - target)
-        if lag > 0.0 and gap.max() * lag > TRANSIENT * q:
-            # The lag law's remaining travel |start - target| lag exp(-s / lag) <= TRANSIENT q.
-            ready = t_c + lag * math.log(gap.max() * lag / (TRANSIENT * q))
+        if lag > 0.0:
+            # The lag law's remaining travel under TRANSIENT counts.
+            ready = t_c + lag_settling_time(float(gap.max()), lag, TRANSIENT * q)
         turning = (start * target <= 0.0) & (target != 0.0)
         if play > 0.0 and turning.any() and lag <= 0.0:
             # Without a lag a motor turns at once and runs at its command: the play takes

@@ -75,7 +75,7 @@ from ..errors import as_float, as_float_array, as_int, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.contacts import ContactSet
 from ..model.friction import contact_forces
-from ..model.motors import MotorPiece, Motors, unsaturated_response
+from ..model.motors import MotorPiece, Motors, lag_memory, unsaturated_response
 from ..model.plant import Plant
 from ..model.sensors import Sensors
 
@@ -468,7 +468,7 @@ class EstimatorModel:
         lagging = tau > 0 and not np.array_equal(start, target)
 
         def w(t: float) -> float:
-            return math.exp(-t / tau) if lagging else 1.0
+            return lag_memory(t, tau)[0] if lagging else 1.0
 
         def w_area(t0: float, t1: float) -> float:
             return tau * (w(t0) - w(t1)) if lagging else t1 - t0
@@ -615,8 +615,8 @@ class EstimatorModel:
         v0 = float(start[j])
         dV = float(end[j]) - v0
         dx = float(piece.displacement(h)[0]) - v0 * h
-        decay = math.exp(-h / tau)
-        gv, gx = decay - 1.0, tau * (1.0 - decay) - h     # d(dV)/dv_j(0), d(dx)/dv_j(0)
+        decay, area = lag_memory(h, tau)
+        gv, gx = decay - 1.0, area - h                    # d(dV)/dv_j(0), d(dx)/dv_j(0)
         var_v = contact_std * contact_std
         Q = self._held_noise + var_v * np.array([[gx * gx, gx * gv], [gx * gv, gv * gv]])
         return dx, dV, Q, None, None, True

@@ -25,7 +25,8 @@ from __future__ import annotations
 from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase, unequal_loads
 from .friction import (FRICTION_LAWS, STRIBECK_PEAK, STRIBECK_SPEED, compliant_breakpoints,
                        compliant_zero_set, contact_forces)
-from .motors import MotorPiece, Motors, implicit_step, motor_rate, reach, unsaturated_response
+from .motors import (MotorPiece, Motors, implicit_step, lag_memory, lag_settling_time, motor_rate, reach,
+                     unsaturated_response)
 from .parameters import PARAMETERS, Origin, Parameter, parameter
 from .plant import Plant
 from .sensors import Encoder, EncoderRecord, EncoderSample, Sensors, SensorState, measure, play, record_simulation
@@ -35,7 +36,8 @@ __all__ = [
     "ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads",
     "FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",
     "compliant_breakpoints", "compliant_zero_set",
-    "Motors", "motor_rate", "MotorPiece", "unsaturated_response", "implicit_step", "reach",
+    "Motors", "motor_rate", "MotorPiece", "unsaturated_response", "lag_memory", "lag_settling_time",
+    "implicit_step", "reach",
     "PiecewiseConstant", "sample_count", "sample_times", "Plant", "Encoder", "PARAMETERS", "Parameter", "Origin",
     "parameter",
     "Sensors", "SensorState", "EncoderRecord", "EncoderSample", "measure", "play", "record_simulation",

@@ -14,6 +14,9 @@ law solved, for the solvers that need it in closed form:
 - :func:`unsaturated_response`: the exponential (or ramp) alone, exact while the motor stays
   off its rate limit; written over an array namespace for the schedule designer's casadi
   model;
+- :func:`lag_memory` and :func:`lag_settling_time`: what a lagging motor keeps of its start
+  speed after ``s`` seconds (and its integral), and when its remaining travel falls under a
+  distance, for the estimators' error propagation and the schedule and braking analyses;
 - :func:`implicit_step`: one backward-Euler step, solved exactly (Moreau-Jean stepping);
 - :func:`reach`: the fastest motion towards a speed limit under any admissible command (the
   comparison bound of the schedule certificate).
@@ -34,7 +37,8 @@ from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ._xp import ops
 
-__all__ = ["Motors", "motor_rate", "MotorPiece", "unsaturated_response", "implicit_step", "reach"]
+__all__ = ["Motors", "motor_rate", "MotorPiece", "unsaturated_response", "lag_memory",
+           "lag_settling_time", "implicit_step", "reach"]
 
 
 @dataclass(frozen=True)
@@ -184,6 +188,38 @@ def unsaturated_response(start: Any, command: Any, s: Any, lag: float, rate: flo
     if math.isfinite(rate):
         return start + o.fmin(o.fmax(command - start, -rate * s), rate * s)
     return command + 0.0 * s
+
+
+def lag_memory(s: float, lag: float) -> tuple[float, float]:
+    """The share of a lagging motor's start speed left after ``s`` seconds off its rate limit,
+    ``exp(-s / tau)`` (:func:`unsaturated_response` is ``u + (v0 - u)`` times it: its slope
+    in ``v0``), and that share's integral over ``[0, s]``, ``tau (1 - exp(-s / tau))`` (s).
+
+    Parameters
+    ----------
+    s : float, s
+    lag : float, s
+        ``tau > 0``.
+    """
+    decay = math.exp(-s / lag)
+    return decay, -lag * math.expm1(-s / lag)
+
+
+def lag_settling_time(gap: float, lag: float, travel: float) -> float:
+    """Seconds after a command change at which a lagging motor that started ``gap`` (m/s)
+    from its command has less than ``travel`` (m) left to go: the remaining travel of
+    :func:`unsaturated_response` is ``gap tau exp(-s / tau)``; 0 when it starts below.
+
+    Parameters
+    ----------
+    gap : float, m/s
+    lag : float, s
+        ``tau > 0``.
+    travel : float, m
+        Positive.
+    """
+    remaining = gap * lag
+    return lag * math.log(remaining / travel) if remaining > travel else 0.0
 
 
 @dataclass(frozen=True)

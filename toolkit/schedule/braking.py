@@ -14,7 +14,7 @@ from scipy.optimize import brentq
 
 from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
-from ..model import ContactSet, Motors, Plant
+from ..model import ContactSet, Motors, Plant, lag_memory
 
 __all__ = ["braking_time"]
 
@@ -32,7 +32,7 @@ def _first_crossing(A: float, c: float, a: float, tau: float) -> float:
         return tau * math.log(A / c)
 
     def gap(x: float) -> float:
-        return A * math.exp(-x) - c - b * x
+        return A * lag_memory(x, 1.0)[0] - c - b * x       # (the motor law in units of tau)
 
     if b > 0:
         hi = math.log(A / c) + 1.0                 # gap(hi) < 0: A e^{-x} < c there
@@ -143,7 +143,7 @@ def braking_time(plant: Plant, v0: float, target_speed: float, *, command: float
     while not np.all(crossed):
         accel = float(f[~crossed].sum() - f[crossed].sum()) / plant.mass
         j = int(np.flatnonzero(~crossed)[0])           # lowest contact still above the body
-        s = _first_crossing(amplitude[j] * math.exp(-s_total / tau), V - lo, accel, tau)
+        s = _first_crossing(amplitude[j] * lag_memory(s_total, tau)[0], V - lo, accel, tau)
         if accel < 0 and V + accel * s <= goal:        # the body gets there first
             return t + (goal - V) / accel
         if not math.isfinite(s):

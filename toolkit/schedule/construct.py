@@ -34,7 +34,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..model.motors import reach, unsaturated_response
+from ..model.motors import lag_memory, reach, unsaturated_response
 
 #: Shifts of the follow target, in units of the period's reference change (plus -kappa).
 _SHIFTS = (0.0, -0.5, 0.5, 1.0, 2.0)
@@ -116,9 +116,9 @@ def _steady_shift(tau: float, period: float) -> float:
     if tau <= 0:
         return 0.5                                       # a jump: centre the constant on the ramp
     X = period / tau
-    d = math.exp(-X)
+    d = lag_memory(X, 1.0)[0]                            # (the motor law in units of tau)
     x = math.log(X / (1.0 - d)) if X > 1.0 - d else 0.0
-    return 0.5 * max(0.0, (1.0 - math.exp(-x)) / (1.0 - d) - x / X)
+    return 0.5 * max(0.0, (1.0 - lag_memory(x, 1.0)[0]) / (1.0 - d) - x / X)
 
 
 def construct(*, forces: np.ndarray, mass: float, damping: float,

@@ -94,6 +94,30 @@ def test_bad_planar_sections_are_refused(text, message):
         build_scene(loads_scene(text))
 
 
+def test_precision_on_a_planar_scene_is_its_work_precision_report(tmp_path, capsys):
+    # 'active-contacts precision' on the disc prints and writes the planar report; its errors
+    # are the library's own (toolkit.planar.precision_report with the scene's settings: a
+    # second call, bit for bit, since the runs are deterministic; only wall times differ).
+    from toolkit.planar import precision_report
+
+    assert main(["precision", str(DISC), "--json", "--out", str(tmp_path / "p")]) == 0
+    data = json.loads(capsys.readouterr().out)
+    objects = build_scene(load_scene(DISC)).planar
+    settings = objects.spec.precision
+    direct = precision_report(objects.plant, objects.spec.t_end, v0=objects.v0, omega0=objects.omega0,
+                              steps=tuple(settings["steps"]), resolutions=tuple(settings["resolutions"]),
+                              epsilons=tuple(settings["epsilons"]))
+    assert [(r["method"], r["setting"], r["max_error"]) for r in data["rows"]] == \
+        [(r.method, r.setting, r.max_error) for r in direct.rows]
+    assert sorted(p.name for p in (tmp_path / "p").iterdir()) == ["precision.json", "precision.png"]
+    # A leg set has no closed form to measure against: refused in one line (exit 2).
+    legs = tmp_path / "tripod.toml"
+    legs.write_text(LEGS)
+    assert main(["precision", str(legs)]) == 2
+    err = capsys.readouterr().err
+    assert "closed form" in err and len(err.strip().splitlines()) == 1
+
+
 def test_other_commands_refuse_a_planar_scene(capsys):
     assert main(["curve", str(DISC), "--json"]) == 2
     err = capsys.readouterr().err

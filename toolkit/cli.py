@@ -36,11 +36,11 @@ from .scenes.build import SceneObjects, build_scene, planar_scene_error, sweep_s
 from .scenes.limits import FLAGS, LIMITS
 from .scenes.report import (compile_line, schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
                             study_to_dict, sweep_lines, sweep_to_dict, to_json, write_planar,
-                            write_precision, write_schedule, write_study, write_sweep)
+                            write_planar_precision, write_precision, write_schedule, write_study, write_sweep)
 from .scenes.spec import Scene, load_scene
 from .scenes.study import (allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
-                           planar_scene, request_shortfalls, run_study, schedule_shortfalls, sweep_scene,
-                           sweep_shortfalls)
+                           planar_precision, planar_scene, request_shortfalls, run_study, schedule_shortfalls,
+                           sweep_scene, sweep_shortfalls)
 from .shortfall import Shortfall
 
 __all__ = ["main", "EXIT_CODES"]
@@ -70,7 +70,7 @@ def _parsed(args: argparse.Namespace, section: str | None = None, purpose: str =
     scene = load_scene(args.scene)
     if scene.sweep is not None and args.command not in ("run", "sweep"):
         raise sweep_scene_error(scene, args.command)
-    if scene.planar is not None and args.command != "run":
+    if scene.planar is not None and args.command not in ("run", "precision"):
         raise planar_scene_error(scene, args.command)
     if section is not None and getattr(scene, section) is None:
         raise SceneError(f"The scene {scene.name!r} has no [{section}] section {purpose}.")
@@ -189,7 +189,13 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
 
 
 def _cmd_precision(args: argparse.Namespace) -> int:
-    objects = _scene(args, "simulation", "(t_end, v0) to compare methods on")
+    scene = _parsed(args)
+    if scene.planar is not None:
+        return _planar_precision(args, build_scene(scene))
+    if scene.simulation is None:
+        raise SceneError(f"The scene {scene.name!r} has no [simulation] section (t_end, v0) to compare "
+                         "methods on.")
+    objects = build_scene(scene)
     spec = objects.scene.simulation
     with claim_output_dir(args.out) as out:
         report = precision_report(objects.plant, spec.t_end, v0=spec.v0, repeats=args.repeats)
@@ -212,6 +218,26 @@ def _cmd_precision(args: argparse.Namespace) -> int:
         if written:
             print(f"wrote {', '.join(str(p) for p in written)}")
     return _finish(precision_shortfalls(report))
+
+
+def _planar_precision(args: argparse.Namespace, objects: SceneObjects) -> int:
+    """``precision`` on a planar scene: its work-precision report against the exact run."""
+    with claim_output_dir(args.out) as out:
+        report = planar_precision(objects)
+        written = write_planar_precision(report, out, title=objects.scene.name) if out is not None else []
+    if args.json:
+        _print_json(report.to_dict())
+    else:
+        ref = report.reference
+        print(f"reference: {ref.method} ({ref.setting}) {ref.wall_time:.2e} s")
+        print(f"{'method':8} {'setting':30} {'max_error':>10} {'stop_error':>10} {'wall_time':>10} "
+              f"{'steps':>7}  status")
+        for row in report.rows:
+            print(f"{row.method:8} {row.setting:30} {row.max_error:10.2e} {row.stop_error:10.2e} "
+                  f"{row.wall_time:10.2e} {row.steps:7d}  {row.status}")
+        if written:
+            print(f"wrote {', '.join(str(p) for p in written)}")
+    return EXIT_OK
 
 
 # -- estimate (issue 9): every estimator of the scene over one simulated encoder record -------

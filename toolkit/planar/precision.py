@@ -89,7 +89,16 @@ def precision_report(plant: PlanarPlant, t_end: float, *, v0: Any = 0.0, omega0:
         raise ParameterError(parameter_message("resolutions", "precision_report",
                                                f"have one entry per step ({len(steps)})", list(resolutions)))
     times = np.linspace(0.0, t_end, points)
-    reference = simulate_planar(plant, t_end, v0=v0, omega0=omega0, method="exact", t_eval=times)
+    try:
+        reference = simulate_planar(plant, t_end, v0=v0, omega0=omega0, method="exact", t_eval=times)
+    except ParameterError as error:
+        if error.parameter != "method":
+            raise
+        raise ParameterError(parameter_message(
+            "plant", "precision_report", "have a closed form for the exact reference (contacts and "
+            "motion on one line through the centre of mass, or a passive uniform disc or ring "
+            "centred on it, without outside force or drag)",
+            f"a plant on {type(plant.contacts).__name__}")) from None
     L = _arm(plant)
     rows = []
     runs = [("moreau", {"step": h}, None if resolutions is None else resolutions[k])

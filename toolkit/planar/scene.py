@@ -25,7 +25,7 @@ from .precision import PlanarPrecisionReport, precision_report
 from .regions import DiscRegion, RingRegion, terminal_ratio
 from .simulation import PlanarPlant, PlanarSimulationResult, simulate_planar
 
-__all__ = ["PlanarSceneObjects", "PlanarStudyResult", "build_planar", "run_planar", "PUBLISHED"]
+__all__ = ["PlanarSceneObjects", "PlanarStudyResult", "build_planar", "run_planar", "scene_precision", "PUBLISHED"]
 
 #: Published terminal ratios ``v / (R omega)`` of passive bodies sliding and spinning to rest.
 PUBLISHED = {
@@ -186,6 +186,18 @@ class PlanarStudyResult:
         return out
 
 
+def scene_precision(objects: PlanarSceneObjects) -> PlanarPrecisionReport:
+    """The scene's work-precision report (:func:`~toolkit.planar.precision.precision_report`)
+    with its ``[planar.precision]`` settings, or the defaults (Moreau-Jean steps 4, 2 and 1 ms at
+    the plant's resolution, the regularized law at 1e-2 m/s) when it declares none."""
+    spec, settings = objects.spec, objects.spec.precision or {}
+    resolutions = settings.get("resolutions")
+    return precision_report(objects.plant, spec.t_end, v0=objects.v0, omega0=objects.omega0,
+                            steps=tuple(settings.get("steps", (4e-3, 2e-3, 1e-3))),
+                            resolutions=None if resolutions is None else tuple(int(r) for r in resolutions),
+                            epsilons=tuple(settings.get("epsilons", (1e-2,))))
+
+
 def run_planar(objects: PlanarSceneObjects) -> PlanarStudyResult:
     """Run a planar scene: simulation, terminal ratio, equilibrium, work-precision rows."""
     spec = objects.spec
@@ -213,11 +225,5 @@ def run_planar(objects: PlanarSceneObjects) -> PlanarStudyResult:
     equilibrium = None
     if spec.body == "legs":
         equilibrium = plant.contacts.equilibrium()
-    report = None
-    if spec.precision is not None:
-        steps = tuple(spec.precision.get("steps", (4e-3, 2e-3, 1e-3)))
-        resolutions = spec.precision.get("resolutions")
-        report = precision_report(plant, spec.t_end, v0=objects.v0, omega0=objects.omega0, steps=steps,
-                                  resolutions=None if resolutions is None else tuple(int(r) for r in resolutions),
-                                  epsilons=tuple(spec.precision.get("epsilons", (1e-2,))))
+    report = scene_precision(objects) if spec.precision is not None else None
     return PlanarStudyResult(objects, sim, ratio, closed, published, equilibrium, report, tuple(shortfalls))

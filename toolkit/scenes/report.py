@@ -24,7 +24,7 @@ from .study import StudyResult
 __all__ = ["study_summary", "study_to_dict", "study_files", "write_study", "to_json", "schedule_csv",
            "schedule_check", "schedule_lines", "shortfall_dicts", "shortfall_line", "write_precision",
            "write_schedule", "estimation_to_dict", "estimation_lines", "estimation_files", "control_lines",
-           "write_planar"]
+           "write_planar", "write_planar_precision"]
 
 
 def _clean(value: Any) -> Any:
@@ -344,6 +344,15 @@ def write_planar(result: Any, out_dir: str | Path, *, plots_too: bool = True,
     if plots_too and result.precision is not None:
         payload["planar_precision.png"] = plots.figure_png(plot_planar_precision(result.precision, title=title))
     return write_tree(out_dir, payload)
+
+
+def write_planar_precision(report: Any, out_dir: str | Path, *, title: str | None = None) -> list[Path]:
+    """Write a planar work-precision report as ``precision.json`` and ``precision.png`` (what
+    :func:`write_precision` writes for a 1-D scene) into ``out_dir``, replacing it as a whole."""
+    from ..planar.plots import plot_planar_precision
+
+    return write_tree(out_dir, {"precision.json": to_json(report.to_dict()).encode(),
+                                "precision.png": plots.figure_png(plot_planar_precision(report, title=title))})
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -75,7 +75,8 @@ __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve
            "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
            "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
            "estimate_scene", "estimate_record", "control_scene", "estimation_shortfalls", "control_shortfalls",
-           "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls", "planar_scene"]
+           "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls", "planar_scene",
+           "planar_precision"]
 
 
 @dataclass(frozen=True)
@@ -744,10 +745,29 @@ def planar_scene(scene: Scene | SceneObjects) -> Any:
     """
     from ..planar.scene import run_planar   # the planar package loads with a planar scene only
 
+    return run_planar(_planar(scene))
+
+
+def planar_precision(scene: Scene | SceneObjects) -> Any:
+    """A planar scene's work-precision report (:func:`toolkit.planar.scene.scene_precision`:
+    its ``[planar.precision]`` settings or the defaults), what ``active-contacts precision``
+    runs on a planar scene. Returns a :class:`toolkit.planar.PlanarPrecisionReport`.
+
+    Raises
+    ------
+    SceneError
+        The scene has no ``[planar]``.
+    """
+    from ..planar.scene import scene_precision
+
+    return scene_precision(_planar(scene))
+
+
+def _planar(scene: Scene | SceneObjects) -> Any:
     objects = _built(scene)
     if objects.planar is None:
         raise SceneError(f"The scene {objects.scene.name!r} has no [planar] section to run.")
-    return run_planar(objects.planar)
+    return objects.planar
 
 
 # -- sweeps -------------------------------------------------------------------------------------

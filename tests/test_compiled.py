@@ -627,3 +627,92 @@ def test_read_only_install_caches_in_the_user_cache_directory(tmp_path):
     assert float(first.stdout) == pytest.approx(-np.expm1(-1.0) / 2.0, rel=2 * EPS, abs=0)
     assert first.stdout == second.stdout
     assert cached, "no numba cache index written to the user cache directory"
+
+
+# -- the one weighted median ---------------------------------------------------------------------
+def _median_by_hand(speeds, forces, outside=0.0):
+    """Second method: sort, add up the magnitudes in exact rational arithmetic, and read the
+    first speed whose cumulative magnitude reaches half the total (lo) and the first that
+    passes it (hi); the outside force is one more contact at sign(F) inf."""
+    from fractions import Fraction
+
+    pairs = [(float(v), Fraction(float(f))) for v, f in zip(speeds, forces) if f > 0]
+    if outside != 0.0:
+        pairs.append((math.copysign(math.inf, outside), Fraction(abs(float(outside)))))
+    pairs.sort(key=lambda p: p[0])
+    half = sum(f for _, f in pairs) / 2
+    acc, lo = Fraction(0), None
+    for v, f in pairs:
+        acc += f
+        if lo is None and acc >= half:
+            lo = v
+        if acc > half:
+            return lo, v
+    raise AssertionError("unreachable: the cumulative sum ends at the total")
+
+
+@pytest.mark.parametrize("scale", [1e-3, 0.37, 1.0, 41.0, 1e3])
+def test_weighted_median_is_the_sorted_cumulative_sum(rng, scale):
+    # Unequal weights at several scales (N), speeds with shared values (rounded to 0.1 m/s),
+    # lifted contacts (f = 0) and outside forces: the kernel equals the exact-arithmetic
+    # median exactly (it picks speeds, so no tolerance), unless a plateau lies within the tie
+    # tolerance 4 (K + 1) eps F_tot of zero, which random unequal weights never give.
+    from toolkit.model import weighted_median
+
+    for _ in range(60):
+        n = int(rng.integers(1, 14))
+        forces = scale * rng.uniform(0.05, 1.0, n)
+        forces[rng.random(n) < 0.15] = 0.0
+        forces[0] = max(forces[0], 0.05 * scale)
+        speeds = np.round(rng.normal(0.0, 1.0, (4, n)), 1)
+        outside = scale * rng.choice([0.0, 0.2, -0.45, 3.0 * n, -3.0 * n], 4)
+        lo, hi = weighted_median(speeds, forces, outside)
+        for r in range(4):
+            assert (lo[r], hi[r]) == _median_by_hand(speeds[r], forces, outside[r])
+            if outside[r] == 0.0:
+                assert ContactSet(speeds[r], forces).equilibrium() == (lo[r], hi[r])
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+def test_weighted_median_ties_are_zero_force_bands(scale):
+    from toolkit.model import weighted_median
+
+    # Closed forms. Even equal weights: the band [v_(N/2), v_(N/2+1)] of the sorted speeds.
+    speeds = np.array([3.0, -1.0, 0.5, 2.0, -4.0, 1.0])
+    lo, hi = weighted_median(speeds, np.full(6, scale))
+    assert (lo, hi) == (0.5, 1.0)
+    # Odd equal weights: the middle speed, a point.
+    assert weighted_median(speeds[:5], np.full(5, scale)) == (0.5, 0.5)
+    # 0.1 + 0.2 against 0.3 cancels to within the prefix sums' rounding (5.6e-17 relative):
+    # the tie tolerance makes it a band, as ContactSet.equilibrium says.
+    forces = scale * np.array([0.1, 0.2, 0.3])
+    assert weighted_median([-1.0, -1.0, 1.0], forces) == (-1.0, 1.0)
+    assert ContactSet([-1.0, -1.0, 1.0], forces).equilibrium() == (-1.0, 1.0)
+    # The outside force as a contact at sign(F) inf: F = F_tot exactly balances the contacts
+    # (a band up to +inf), more than F_tot drives the median to +-inf.
+    one = np.array([[2.0, 5.0]])
+    assert weighted_median(one, [scale, scale], 2.0 * scale) == ([5.0], [np.inf])
+    assert weighted_median(one, [scale, scale], -2.5 * scale) == ([-np.inf], [-np.inf])
+    # A force of the size of one contact moves the median by one contact: [5, 5] under +1.
+    assert weighted_median(one, [scale, scale], 1.0 * scale) == ([5.0], [5.0])
+    # No weight at all: the slowest speed twice.
+    assert weighted_median([4.0, -2.0], [0.0, 0.0]) == (-2.0, -2.0)
+
+
+def test_weighted_median_keeps_the_leading_axes_and_refuses_bad_input():
+    from toolkit.errors import ParameterError
+    from toolkit.model import weighted_median
+
+    speeds = np.arange(24.0).reshape(2, 3, 4)
+    lo, hi = weighted_median(speeds, [1.0, 1.0, 1.0, 2.0])
+    assert lo.shape == hi.shape == (2, 3)
+    np.testing.assert_array_equal(lo, speeds[..., 2])      # 1 + 1 + 1 >= 5 / 2 at the third
+    np.testing.assert_array_equal(hi, speeds[..., 2])
+    with pytest.raises(ParameterError, match="'forces'"):
+        weighted_median(speeds, [1.0, -1.0, 1.0, 1.0])
+    with pytest.raises(ParameterError, match="'forces'"):
+        weighted_median(speeds, [1.0, 1.0])
+    with pytest.raises(ParameterError, match="'speeds'"):
+        weighted_median([np.nan, 1.0], [1.0, 1.0])
+    with pytest.raises(ParameterError, match="'outside'"):
+        weighted_median(speeds, np.ones(4), np.ones(5))

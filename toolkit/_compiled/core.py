@@ -89,7 +89,8 @@ KERNELS = {
     "net_force": _INLINE, "coulomb_force": {}, "lowest_contact": {}, "push_segment": _INLINE,
     "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {},
     "dense_values": {}, "segment_value": _INLINE, "displacement": {}, "samples": {},
-    "quiet_piece": {}, "sorted_landscape": {}, "batch_scene": {}, "batch": {"parallel": True},
+    "quiet_piece": {}, "sorted_landscape": {}, "staircase_median": {}, "median_edges": {},
+    "batch_scene": {}, "batch": {"parallel": True},
     "ordered_within": {},
     # The event roots of the dynamic-motor engine: IEEE division (inf, NaN) as NumPy's.
     "event_value": _IEEE, "event_slope": _IEEE, "event_inflection": _IEEE,
@@ -2172,6 +2173,60 @@ def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.n
         acc += above[k]
         above[k] = acc
     return K
+
+
+def staircase_median(levels: np.ndarray, below: np.ndarray, above: np.ndarray, K: int,
+                     tol: float) -> tuple[float, float]:
+    """The weighted median ``(lo, hi)`` (m/s) of a staircase as :class:`ContactSet` holds it
+    (``K >= 1`` distinct ``levels`` ascending, prefix sums ``below`` from below and ``above``
+    from above): the set ``{V : 0 in F(V)}``. A plateau ``above[k] - below[k]`` within
+    ``tol`` (:attr:`ContactSet.tie_tolerance`) is a zero-force band ``[levels[k-1],
+    levels[k]]``; otherwise the force jumps over zero at one level ``(v, v)``. The one
+    weighted median of the toolkit (docs/physics.md section 3)."""
+    for k in range(1, K):
+        if abs(above[k] - below[k]) <= tol:
+            return levels[k - 1], levels[k]
+    for k in range(K):
+        if above[k + 1] - below[k + 1] < -tol:
+            return levels[k], levels[k]
+    return levels[K - 1], levels[K - 1]             # (not reached: plateau K is -F_tot)
+
+
+def median_edges(speeds: np.ndarray, forces: np.ndarray, outside: np.ndarray,
+                 out: np.ndarray) -> None:
+    """``out[r] = (lo, hi)``: the weighted median of each row of ``speeds`` (R, n) (m/s)
+    with magnitudes ``forces`` (n,) (N), plus an outside force ``outside[r]`` (N) as a contact
+    of magnitude ``|F|`` at ``sign(F) inf`` (a zero force changes nothing); ``+-inf`` edges
+    when ``|F|`` exceeds the contacts' total. The staircase is built as :class:`ContactSet`
+    builds it (:func:`sorted_landscape`) and read by :func:`staircase_median` with the
+    tie tolerance ``4 (K + 1) eps F_tot``. A row without any positive magnitude gives its
+    slowest speed twice."""
+    R = speeds.shape[0]
+    n = speeds.shape[1]
+    row_s = np.empty((1, n + 1))
+    row_f = np.empty((1, n + 1))
+    order = np.empty(n + 1, dtype=np.int64)
+    first = np.empty(n + 1, dtype=np.int64)
+    land = np.empty((3, n + 2))
+    for r in range(R):
+        slowest = INF
+        for i in range(n):
+            row_s[0, i] = speeds[r, i]
+            row_f[0, i] = forces[i]
+            if speeds[r, i] < slowest:
+                slowest = speeds[r, i]
+        F = outside[r]
+        row_s[0, n] = INF if F >= 0.0 else -INF
+        row_f[0, n] = abs(F)
+        K = sorted_landscape(row_s, row_f, 0, order, land, first)
+        if K == 0:
+            out[r, 0] = slowest
+            out[r, 1] = slowest
+            continue
+        tol = 4.0 * (K + 1) * EPS * land[1, K]
+        lo, hi = staircase_median(land[0], land[1], land[2], K, tol)
+        out[r, 0] = lo
+        out[r, 1] = hi
 
 
 def batch_scene(speeds: np.ndarray, forces: np.ndarray, s: int, m: float, c: float, E: float,

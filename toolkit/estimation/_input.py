@@ -73,7 +73,8 @@ import numpy as np
 
 from ..errors import as_float, as_float_array, as_int, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
-from ..model.contacts import ContactSet
+from .._compiled import kernels
+from ..model.contacts import ContactSet, weighted_median
 from ..model.friction import contact_forces
 from ..model.motors import MotorPiece, Motors, lag_memory, unsaturated_response
 from ..model.plant import Plant
@@ -127,7 +128,6 @@ class EstimatorModel:
     _friction_var: float = field(init=False, repr=False)
     _held_noise: np.ndarray = field(init=False, repr=False)
     _reach: float = field(init=False, repr=False)
-    _forces_list: list = field(init=False, repr=False)
     _follow: float = field(init=False, repr=False)
     _plants: tuple = field(init=False, repr=False)
     _friction_noise: np.ndarray = field(init=False, repr=False)
@@ -139,7 +139,6 @@ class EstimatorModel:
         forces = as_float_array(self.forces, "forces", owner)
         check_nonnegative(forces, "forces", owner)
         object.__setattr__(self, "forces", forces)
-        object.__setattr__(self, "_forces_list", forces.tolist())
         object.__setattr__(self, "mass", as_float(self.mass, "mass", owner, low=0.0, low_open=True))
         if not isinstance(self.sensors, Sensors):
             raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors", self.sensors))
@@ -654,56 +653,28 @@ class EstimatorModel:
                                 *end, lo0, hi0))
 
     def _edges(self, speeds: np.ndarray, force: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        forces = np.broadcast_to(self.forces, speeds.shape)
-        if force is not None:
-            # The outside force as a contact of magnitude |F| at sign(F) inf (out of reach;
-            # a zero force: a contact of no weight, which changes nothing).
-            speeds = np.column_stack((speeds, np.where(force >= 0.0, np.inf, -np.inf)))
-            forces = np.column_stack((forces, np.abs(force)))
-        order = np.argsort(speeds, axis=1)
-        s = np.take_along_axis(speeds, order, axis=1)
-        W = np.cumsum(np.take_along_axis(forces, order, axis=1), axis=1)
-        half = 0.5 * W[:, -1:]
-        tol = 1e-12 * half
-        j1 = np.argmax(W >= half - tol, axis=1)
-        j2 = np.argmax(W > half + tol, axis=1)
-        rows = np.arange(speeds.shape[0])
-        return s[rows, j1], s[rows, j2]
+        # The weighted median (toolkit.model.weighted_median), the outside force as a
+        # contact of magnitude |F| at sign(F) inf.
+        return weighted_median(speeds, self.forces, force)
 
     def bounds_row(self, track: np.ndarray, force: float = 0.0) -> list[float]:
         """:meth:`bounds` of one sample, ``track`` of shape (2, n), with the period's
         outside force ``force`` (N) (the same numbers)."""
-        # Plain floats: ten contacts cost less than the numpy calls. The motor law is
-        # monotone in time, so the extremes over the period lie at its start or end.
-        first = track[0].tolist()
+        # The motor law is monotone in time, so the extremes over the period lie at its start
+        # or end. The edges: the one weighted-median kernel (toolkit.model.weighted_median's),
+        # called directly, per sample, without that function's checks.
         held = track[0] is track[1] or bool(np.array_equal(track[0], track[1]))
-        last = first if held else self.end_speeds(track).tolist()
-        lo, hi = self._edges_row(last, force)
-        lo0, hi0 = (lo, hi) if held else self._edges_row(first, force)
-        return [min(min(first), min(last)), max(max(first), max(last)), lo, hi, lo0, hi0]
-
-    def _edges_row(self, speeds: list, force: float = 0.0) -> tuple[float, float]:
-        pairs = sorted(zip(speeds, self._forces_list))
-        if force != 0.0:
-            # The outside force as a contact of magnitude |F| at sign(F) inf (see _edges).
-            pairs.append((math.copysign(math.inf, force), abs(force)))
-            pairs.sort()
-        total = 0.0
-        for _, f in pairs:
-            total += f
-        half = 0.5 * total
-        tol = 1e-12 * half
-        acc, lo, hi = 0.0, None, None
-        for s, f in pairs:
-            acc += f
-            if lo is None and acc >= half - tol:
-                lo = s
-            if acc > half + tol:
-                hi = s
-                break
-        if hi is None:                  # every magnitude zero (bounds: the first speed)
-            hi = pairs[0][0]
-        return lo, hi
+        rows = np.empty((1 if held else 2, self.n))
+        rows[0] = track[0] if held else self.end_speeds(track)
+        if not held:
+            rows[1] = track[0]
+        out = np.empty((rows.shape[0], 2))
+        kernels("core", 3 * rows.size).median_edges(rows, self.forces, np.full(rows.shape[0], float(force)),
+                                                    out)
+        lo, hi = float(out[0, 0]), float(out[0, 1])
+        lo0, hi0 = (lo, hi) if held else (float(out[1, 0]), float(out[1, 1]))
+        first, last = rows[-1], rows[0]
+        return [float(min(first.min(), last.min())), float(max(first.max(), last.max())), lo, hi, lo0, hi0]
 
 
 def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model: EstimatorModel,

@@ -22,7 +22,8 @@ Every solver, estimator and controller calls these; none re-derives them.
 
 from __future__ import annotations
 
-from .contacts import ContactDistribution, ContactModel, ContactSet, Staircase, unequal_loads
+from .contacts import (ContactDistribution, ContactModel, ContactSet, Staircase, unequal_loads,
+                       weighted_median)
 from .friction import (FRICTION_LAWS, STRIBECK_PEAK, STRIBECK_SPEED, compliant_breakpoints,
                        compliant_zero_set, contact_forces)
 from .motors import (MotorPiece, Motors, implicit_step, lag_memory, lag_settling_time, motor_rate, reach,
@@ -33,7 +34,7 @@ from .sensors import Encoder, EncoderRecord, EncoderSample, Sensors, SensorState
 from .signals import PiecewiseConstant, sample_count, sample_times
 
 __all__ = [
-    "ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads",
+    "ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads", "weighted_median",
     "FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",
     "compliant_breakpoints", "compliant_zero_set",
     "Motors", "motor_rate", "MotorPiece", "unsaturated_response", "lag_memory", "lag_settling_time",

@@ -14,6 +14,10 @@ Two models share one interface (:class:`ContactModel`):
 - :class:`ContactDistribution`: a continuous density of contact speed over a contact patch,
   from a ``scipy.stats`` distribution or a tabulated histogram.
 
+:func:`weighted_median` is the equilibrium of many sets of speeds at once (with an outside
+force); it and :meth:`ContactSet.equilibrium` run the toolkit's one weighted median, the
+kernel :func:`toolkit._compiled.core.staircase_median`, with one tie tolerance.
+
 Evaluation. :meth:`ContactSet.force` on many speeds is the kernel
 :func:`toolkit._compiled.core.coulomb_force` over these prefix sums (one source, compiled by
 numba once a process has run enough through it); the same prefix sums, snapped by
@@ -40,7 +44,8 @@ from .._compiled import kernels
 from ..errors import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
-__all__ = ["ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads"]
+__all__ = ["ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads",
+           "weighted_median"]
 
 _EPS = np.finfo(float).eps
 
@@ -326,15 +331,10 @@ class ContactSet:
             zero-force band (even equal-weight sets: ``[v_(N/2), v_(N/2+1)]``), inside
             which the net force is exactly zero and the body coasts.
         """
-        plateaus = self._snap(self._above - self._below)     # plateaus[k]: below levels[k]
-        zero = np.flatnonzero(plateaus == 0.0)
-        if zero.size:
-            k = int(zero[0])                                  # 0 < k < K since F_tot > 0
-            return float(self._levels[k - 1]), float(self._levels[k])
-        # Otherwise F jumps over zero at exactly one level: plateau before > 0 > plateau after.
-        k = int(np.flatnonzero(plateaus[1:] < 0.0)[0])
-        point = float(self._levels[k])
-        return point, point
+        # The one weighted median (toolkit._compiled.core.staircase_median) on this staircase.
+        lo, hi = kernels("core", self._levels.size).staircase_median(
+            self._levels, self._below, self._above, self._levels.size, self.tie_tolerance)
+        return float(lo), float(hi)
 
     def zero_force_band(self) -> tuple[float, float] | None:
         """The open band where ``F == 0`` exactly, as ``(lo, hi)``, or ``None`` if there is none."""
@@ -448,6 +448,59 @@ class ContactDistribution:
         share = (0.5 - cum[j]) / (cum[j + 1] - cum[j])
         point = float(edges[j] + share * (edges[j + 1] - edges[j]))
         return point, point
+
+
+def weighted_median(speeds: Any, forces: Any, outside: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    """The weighted median of contact speeds, ``{V : -F in F_c(V)}``, as ``(lo, hi)``.
+
+    The equilibrium set of :meth:`ContactSet.equilibrium` (the same staircase, the same tie
+    tolerance ``4 (K + 1) eps F_tot``; docs/physics.md section 3) for many sets of speeds at
+    once, optionally under an outside force ``F``, which enters as one more contact of
+    magnitude ``|F|`` at ``sign(F) inf``.
+
+    Parameters
+    ----------
+    speeds : array_like of shape (..., n), m/s
+        Contact speeds; each row along the last axis is one set. ``+-inf`` allowed.
+    forces : array_like of shape (n,), N
+        Friction magnitudes ``f_i >= 0`` (the weights), shared by every row.
+    outside : float or array_like of shape (...), N, optional
+        Outside force on the body for each row (default none).
+
+    Returns
+    -------
+    lo, hi : ndarray of shape (...), m/s
+        ``lo == hi`` for a point, ``lo < hi`` for a zero-force band; ``+-inf`` when ``|F|``
+        exceeds the total friction (``|F| = F_tot``: a band to ``+-inf``). A row whose
+        magnitudes (outside force included) are all zero gives its slowest speed twice.
+    """
+    owner = "weighted_median"
+    v = np.asarray(speeds, dtype=float)
+    if v.ndim == 0:
+        raise ParameterError(parameter_message("speeds", owner, "have at least one axis (..., n)", speeds))
+    if np.isnan(v).any():
+        raise ParameterError(parameter_message("speeds", owner, "hold no NaN", "an array with NaN"))
+    f = as_float_array(forces, "forces", owner)
+    check_nonnegative(f, "forces", owner)
+    if f.shape != v.shape[-1:]:
+        raise ParameterError(parameter_message(
+            "forces", owner, f"have one magnitude per contact ({v.shape[-1]})", f"shape {f.shape}"))
+    lead = v.shape[:-1]
+    if outside is None:
+        F = np.zeros(lead)
+    else:
+        try:
+            F = np.broadcast_to(np.asarray(outside, dtype=float), lead)
+        except ValueError:
+            raise ParameterError(parameter_message(
+                "outside", owner, f"broadcast to the rows' shape {lead}", np.shape(outside))) from None
+        if not np.all(np.isfinite(F)):
+            raise ParameterError(parameter_message("outside", owner, "be finite", outside))
+    rows = np.ascontiguousarray(v.reshape(-1, v.shape[-1]))
+    out = np.empty((rows.shape[0], 2))
+    kernels("core", rows.size + rows.shape[0]).median_edges(
+        rows, np.ascontiguousarray(f), np.ascontiguousarray(np.reshape(F, -1), dtype=float), out)
+    return out[:, 0].reshape(lead), out[:, 1].reshape(lead)
 
 
 def unequal_loads(mean: Any, spread: float, size: int, rng: np.random.Generator | None = None, *,

@@ -89,7 +89,8 @@ KERNELS = {
     "net_force": _INLINE, "coulomb_force": {}, "lowest_contact": {}, "push_segment": _INLINE,
     "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {},
     "dense_values": {}, "segment_value": _INLINE, "displacement": {}, "samples": {},
-    "quiet_piece": {}, "sorted_landscape": {}, "staircase_median": {}, "median_edges": {},
+    "quiet_piece": {}, "sorted_landscape": {}, "staircase_median": {}, "median_row": {},
+    "median_edges": {}, "period_bounds": {}, "window_line": {},
     "batch_scene": {}, "batch": {"parallel": True},
     "ordered_within": {},
     # The event roots of the dynamic-motor engine: IEEE division (inf, NaN) as NumPy's.
@@ -2192,41 +2193,107 @@ def staircase_median(levels: np.ndarray, below: np.ndarray, above: np.ndarray, K
     return levels[K - 1], levels[K - 1]             # (not reached: plateau K is -F_tot)
 
 
+def median_row(speeds: np.ndarray, forces: np.ndarray, F: float, row_s: np.ndarray,
+               row_f: np.ndarray, order: np.ndarray, first: np.ndarray,
+               land: np.ndarray) -> tuple[float, float]:
+    """The weighted median ``(lo, hi)`` of one set of ``speeds`` (n,) (m/s) with magnitudes
+    ``forces`` (n,) (N) and an outside force ``F`` (N) as a contact of magnitude ``|F|`` at
+    ``sign(F) inf`` (a zero force changes nothing): the staircase built as
+    :class:`ContactSet` builds it (:func:`sorted_landscape`) and read by
+    :func:`staircase_median` with the tie tolerance ``4 (K + 1) eps F_tot``. Without any
+    positive magnitude, the slowest speed twice. ``row_s``, ``row_f`` (1, n + 1), ``order``,
+    ``first`` (n + 1,) and ``land`` (3, n + 2) are scratch."""
+    n = speeds.shape[0]
+    slowest = INF
+    for i in range(n):
+        row_s[0, i] = speeds[i]
+        row_f[0, i] = forces[i]
+        if speeds[i] < slowest:
+            slowest = speeds[i]
+    row_s[0, n] = INF if F >= 0.0 else -INF
+    row_f[0, n] = abs(F)
+    K = sorted_landscape(row_s, row_f, 0, order, land, first)
+    if K == 0:
+        return slowest, slowest
+    return staircase_median(land[0], land[1], land[2], K, 4.0 * (K + 1) * EPS * land[1, K])
+
+
 def median_edges(speeds: np.ndarray, forces: np.ndarray, outside: np.ndarray,
                  out: np.ndarray) -> None:
-    """``out[r] = (lo, hi)``: the weighted median of each row of ``speeds`` (R, n) (m/s)
-    with magnitudes ``forces`` (n,) (N), plus an outside force ``outside[r]`` (N) as a contact
-    of magnitude ``|F|`` at ``sign(F) inf`` (a zero force changes nothing); ``+-inf`` edges
-    when ``|F|`` exceeds the contacts' total. The staircase is built as :class:`ContactSet`
-    builds it (:func:`sorted_landscape`) and read by :func:`staircase_median` with the
-    tie tolerance ``4 (K + 1) eps F_tot``. A row without any positive magnitude gives its
-    slowest speed twice."""
-    R = speeds.shape[0]
+    """``out[r] = (lo, hi)``: :func:`median_row` of each row of ``speeds`` (R, n) (m/s) with
+    magnitudes ``forces`` (n,) (N) and the outside force ``outside[r]`` (N); ``+-inf`` edges
+    when ``|F|`` exceeds the contacts' total."""
     n = speeds.shape[1]
     row_s = np.empty((1, n + 1))
     row_f = np.empty((1, n + 1))
     order = np.empty(n + 1, dtype=np.int64)
     first = np.empty(n + 1, dtype=np.int64)
     land = np.empty((3, n + 2))
-    for r in range(R):
-        slowest = INF
-        for i in range(n):
-            row_s[0, i] = speeds[r, i]
-            row_f[0, i] = forces[i]
-            if speeds[r, i] < slowest:
-                slowest = speeds[r, i]
-        F = outside[r]
-        row_s[0, n] = INF if F >= 0.0 else -INF
-        row_f[0, n] = abs(F)
-        K = sorted_landscape(row_s, row_f, 0, order, land, first)
-        if K == 0:
-            out[r, 0] = slowest
-            out[r, 1] = slowest
-            continue
-        tol = 4.0 * (K + 1) * EPS * land[1, K]
-        lo, hi = staircase_median(land[0], land[1], land[2], K, tol)
+    for r in range(speeds.shape[0]):
+        lo, hi = median_row(speeds[r], forces, outside[r], row_s, row_f, order, first, land)
         out[r, 0] = lo
         out[r, 1] = hi
+
+
+def period_bounds(start: np.ndarray, end: np.ndarray, forces: np.ndarray, F: float,
+                  out: np.ndarray) -> None:
+    """What decides an estimator's input over one period, into ``out`` (6,), m/s: the
+    slowest and fastest contact speed over it (the motor law is monotone in time: at its
+    ``start`` or ``end``, (n,) each), the weighted median ``(lo, hi)`` of the ``end`` speeds
+    and that of the ``start`` speeds (the same numbers when they are equal), with the
+    outside force ``F`` (N) as in :func:`median_row`."""
+    n = start.shape[0]
+    low = INF
+    high = -INF
+    held = True
+    for i in range(n):
+        a = start[i]
+        b = end[i]
+        if a != b:
+            held = False
+        low = min(low, min(a, b))
+        high = max(high, max(a, b))
+    row_s = np.empty((1, n + 1))
+    row_f = np.empty((1, n + 1))
+    order = np.empty(n + 1, dtype=np.int64)
+    first = np.empty(n + 1, dtype=np.int64)
+    land = np.empty((3, n + 2))
+    lo, hi = median_row(end, forces, F, row_s, row_f, order, first, land)
+    out[0] = low
+    out[1] = high
+    out[2] = lo
+    out[3] = hi
+    if not held:
+        lo, hi = median_row(start, forces, F, row_s, row_f, order, first, land)
+    out[4] = lo
+    out[5] = hi
+
+
+def window_line(times: np.ndarray, counts: np.ndarray, a: int, b: int, q: float,
+                speeds: np.ndarray) -> float:
+    """The least-squares slope of each wheel's readings ``a..b`` (rows of ``times`` (T,), s,
+    and ``counts`` (T, n)), times ``q`` (m per count), into ``speeds`` (n,), m/s; returns
+    ``S = sum (t - mean t)^2`` (s^2). Times and counts relative to the window's first reading
+    (no cancellation of large stamps or counts however long the run)."""
+    m = b - a + 1
+    t0 = times[a]
+    total = 0.0
+    for k in range(a, b + 1):
+        total += times[k] - t0
+    mean = total / m
+    S = 0.0
+    for k in range(a, b + 1):
+        d = (times[k] - t0) - mean
+        S += d * d
+    n = counts.shape[1]
+    scale = q / S
+    for i in range(n):
+        c0 = counts[a, i]
+        acc = 0.0
+        for k in range(a, b + 1):
+            acc += ((times[k] - t0) - mean) * (counts[k, i] - c0)
+        speeds[i] = acc * scale
+    return S
 
 
 def batch_scene(speeds: np.ndarray, forces: np.ndarray, s: int, m: float, c: float, E: float,

@@ -659,22 +659,16 @@ class EstimatorModel:
 
     def bounds_row(self, track: np.ndarray, force: float = 0.0) -> list[float]:
         """:meth:`bounds` of one sample, ``track`` of shape (2, n), with the period's
-        outside force ``force`` (N) (the same numbers)."""
-        # The motor law is monotone in time, so the extremes over the period lie at its start
-        # or end. The edges: the one weighted-median kernel (toolkit.model.weighted_median's),
-        # called directly, per sample, without that function's checks.
-        held = track[0] is track[1] or bool(np.array_equal(track[0], track[1]))
-        rows = np.empty((1 if held else 2, self.n))
-        rows[0] = track[0] if held else self.end_speeds(track)
-        if not held:
-            rows[1] = track[0]
-        out = np.empty((rows.shape[0], 2))
-        kernels("core", 3 * rows.size).median_edges(rows, self.forces, np.full(rows.shape[0], float(force)),
-                                                    out)
-        lo, hi = float(out[0, 0]), float(out[0, 1])
-        lo0, hi0 = (lo, hi) if held else (float(out[1, 0]), float(out[1, 1]))
-        first, last = rows[-1], rows[0]
-        return [float(min(first.min(), last.min())), float(max(first.max(), last.max())), lo, hi, lo0, hi0]
+        outside force ``force`` (N) (the same numbers), as 6 floats."""
+        start = track[0]
+        # A held track (start = target; the bytes compared: cheap, and any equal pair they
+        # miss, such as -0.0 and 0.0, ends where it starts under the motor law anyway).
+        end = start if track[1] is start or track[1].tobytes() == start.tobytes() else self.end_speeds(track)
+        out = np.empty(6)
+        # One kernel call: the extremes and the edges, the one weighted median
+        # (toolkit.model.weighted_median's kernel) without that function's checks.
+        kernels("core", 6 * self.n).period_bounds(start, end, self.forces, float(force), out)
+        return out.tolist()
 
 
 def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model: EstimatorModel,
@@ -886,22 +880,21 @@ class ContactSpeedTracker:
         start = min(max(lc + self._settle, j - model.max_window, 0), j)
         ok = start < j
         if ok:
-            # The least-squares line through the window's readings (contact_speed_estimates'
-            # formula; its sums in another order: equal to rounding).
-            # Times and counts relative to the window's first reading: no cancellation of
-            # large stamps or counts however long the run.
+            # The least-squares line through the window's readings: contact_speed_estimates'
+            # formula and order of sums, in one kernel call (toolkit._compiled.core.window_line).
             a = start - self._base
-            tb, wb = self._tb[a:col + 1], self._wb[a:col + 1]
-            t_rel = tb - tb[0]
-            tt = t_rel - t_rel.sum() / (j - start + 1)
-            S = float(tt @ tt)
-            speeds = (tt @ (wb - wb[0])) * (q / S)
+            speeds = np.empty(model.n)
+            S = kernels("core", 2 * model.n * (j - start + 1)).window_line(self._tb, self._wb, a, col, q,
+                                                                         speeds)
             variance = float(model.reading_variance(float(np.abs(speeds).max()))) / S
             self.white_variance = variance
             self.window_length = j - start + 1
             if self._residuals:
                 m = j - start + 1
                 if m >= 4 and (m < 8 or m % self.RESIDUALS_EVERY == 0):
+                    tb, wb = self._tb[a:col + 1], self._wb[a:col + 1]
+                    t_rel = tb - tb[0]
+                    tt = t_rel - t_rel.sum() / m
                     centred = wb - wb.mean(axis=0)
                     along = tt @ centred
                     rss = np.einsum("ij,ij->j", centred, centred) - along * along / S
@@ -931,8 +924,7 @@ class ContactSpeedTracker:
             self._change = (t, u, before)
         # EstimatorModel.period_track for this row: from the speeds towards the command
         # (not steady) or the speeds held (steady); without a lag the command at once.
-        if steady:
-            track = np.stack((speeds, speeds))
-        else:
-            track = np.stack((speeds if self._lag > 0 else u, u))
+        track = np.empty((2, model.n))
+        track[0] = speeds if steady or self._lag > 0 else u
+        track[1] = speeds if steady else u
         return speeds, float(variance), steady, track

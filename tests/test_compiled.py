@@ -716,3 +716,40 @@ def test_weighted_median_keeps_the_leading_axes_and_refuses_bad_input():
         weighted_median([np.nan, 1.0], [1.0, 1.0])
     with pytest.raises(ParameterError, match="'outside'"):
         weighted_median(speeds, np.ones(4), np.ones(5))
+
+
+# -- the Kalman filter's step --------------------------------------------------------------------
+@pytest.mark.parametrize("scale", [1e-6, 1e-3, 1.0, 1e2])
+def test_kalman_step_is_filterpy_predict_then_update(rng, scale):
+    # Second method: filterpy's KalmanFilter.predict() then update(z) (the reference the
+    # estimator's hot path replaced). Same formulas, products summed in index order where
+    # filterpy's BLAS may fuse them: equal to a few rounding errors of the largest entry
+    # (atol 1e-13 of it: 2x2 products of ~10 operations, each 1.1e-16 relative; the Joseph
+    # form's off-diagonal terms may cancel, hence absolute, not relative).
+    from filterpy.kalman import KalmanFilter
+
+    for _ in range(50):
+        h = rng.uniform(1e-3, 0.1)
+        F = np.array([[1.0, h], [0.0, 1.0]]) if rng.random() < 0.5 else rng.normal(size=(2, 2))
+        L = rng.normal(size=(2, 2)) * scale
+        P = L @ L.T + 1e-3 * scale**2 * np.eye(2)
+        M = rng.normal(size=(2, 2)) * scale * rng.uniform(0.01, 1.0)
+        Q = M @ M.T
+        R = float(rng.uniform(0.01, 2.0) * scale**2)
+        x = rng.normal(size=(2, 1)) * scale
+        z = float(rng.normal() * scale)
+        kf = KalmanFilter(dim_x=2, dim_z=1)
+        kf.x, kf.P, kf.F, kf.Q = x.copy(), P.copy(), F, Q
+        kf.H = np.array([[1.0, 0.0]])
+        kf.R = np.array([[R]])
+        kf.predict()
+        prior_x, prior_P = kf.x.copy(), kf.P.copy()
+        kf.update(z)
+        x_out, P_out, prior = np.empty((2, 1)), np.empty((2, 2)), np.empty(3)
+        nis = _compiled.load("core").kalman_step(x, P, F, Q, R, z, x_out, P_out, prior)
+        big = max(np.abs(prior_P).max(), np.abs(kf.P).max())
+        np.testing.assert_allclose(prior, [prior_x[0, 0], prior_x[1, 0], prior_P[0, 0]], rtol=0,
+                                   atol=1e-13 * max(np.abs(prior_x).max(), big))
+        np.testing.assert_allclose(x_out, kf.x, rtol=0, atol=1e-13 * np.abs(kf.x).max() + 1e-13 * scale)
+        np.testing.assert_allclose(P_out, kf.P, rtol=0, atol=1e-13 * big)
+        np.testing.assert_allclose(nis, kf.y.item() ** 2 * kf.SI.item(), rtol=1e-12)

@@ -91,6 +91,7 @@ KERNELS = {
     "dense_values": {}, "segment_value": _INLINE, "displacement": {}, "samples": {},
     "quiet_piece": {}, "sorted_landscape": {}, "staircase_median": {}, "median_row": {},
     "median_edges": {}, "period_bounds": {}, "window_line": {},
+    "kalman_step": {},
     "batch_scene": {}, "batch": {"parallel": True},
     "ordered_within": {},
     # The event roots of the dynamic-motor engine: IEEE division (inf, NaN) as NumPy's.
@@ -2294,6 +2295,51 @@ def window_line(times: np.ndarray, counts: np.ndarray, a: int, b: int, q: float,
             acc += ((times[k] - t0) - mean) * (counts[k, i] - c0)
         speeds[i] = acc * scale
     return S
+
+
+def kalman_step(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray, R: float, z: float,
+                x_out: np.ndarray, P_out: np.ndarray, prior: np.ndarray) -> float:
+    """One predict and update of a two-state Kalman filter with a scalar reading of the
+    first state (``H = [1, 0]``), filterpy's ``KalmanFilter.predict()`` then ``update(z)``
+    with the same formulas (the Joseph form of the covariance update): ``x`` (2, 1), ``P``,
+    ``F``, ``Q`` (2, 2), ``R`` (m^2) and the reading ``z`` (m) in; the posterior into
+    ``x_out`` (2, 1) and ``P_out`` (2, 2), the prior ``(x0, x1, P00)`` into ``prior`` (3,).
+    Returns the NIS ``y^2 / S``. The matrix products summed in index order (filterpy's BLAS
+    may fuse or reorder them: equal to rounding)."""
+    # Predict: x = F x, P = F P F^T + Q.
+    a0 = F[0, 0] * x[0, 0] + F[0, 1] * x[1, 0]
+    a1 = F[1, 0] * x[0, 0] + F[1, 1] * x[1, 0]
+    FP00 = F[0, 0] * P[0, 0] + F[0, 1] * P[1, 0]
+    FP01 = F[0, 0] * P[0, 1] + F[0, 1] * P[1, 1]
+    FP10 = F[1, 0] * P[0, 0] + F[1, 1] * P[1, 0]
+    FP11 = F[1, 0] * P[0, 1] + F[1, 1] * P[1, 1]
+    p00 = (FP00 * F[0, 0] + FP01 * F[0, 1]) + Q[0, 0]
+    p01 = (FP00 * F[1, 0] + FP01 * F[1, 1]) + Q[0, 1]
+    p10 = (FP10 * F[0, 0] + FP11 * F[0, 1]) + Q[1, 0]
+    p11 = (FP10 * F[1, 0] + FP11 * F[1, 1]) + Q[1, 1]
+    prior[0] = a0
+    prior[1] = a1
+    prior[2] = p00
+    # Update with H = [1, 0]: y = z - x0, S = P00 + R, K = P H^T / S.
+    y = z - a0
+    S = p00 + R
+    SI = 1.0 / S
+    k0 = p00 * SI
+    k1 = p10 * SI
+    x_out[0, 0] = a0 + k0 * y
+    x_out[1, 0] = a1 + k1 * y
+    # Joseph form: (I - K H) P (I - K H)^T + K R K^T, with I - K H = [[1 - k0, 0], [-k1, 1]].
+    i00 = 1.0 - k0
+    i10 = -k1
+    A00 = i00 * p00
+    A01 = i00 * p01
+    A10 = i10 * p00 + p10
+    A11 = i10 * p01 + p11
+    P_out[0, 0] = A00 * i00 + (k0 * R) * k0
+    P_out[0, 1] = (A00 * i10 + A01) + (k0 * R) * k1
+    P_out[1, 0] = A10 * i00 + (k1 * R) * k0
+    P_out[1, 1] = (A10 * i10 + A11) + (k1 * R) * k1
+    return y * y * SI
 
 
 def batch_scene(speeds: np.ndarray, forces: np.ndarray, s: int, m: float, c: float, E: float,

@@ -118,6 +118,7 @@ from typing import Any
 
 import numpy as np
 
+from .._compiled import kernels
 from ..errors import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
@@ -395,9 +396,20 @@ class NominalKalman(Estimator):
             x[0, 0] = x.item(0) + dx - self._h * dV
             x[1, 0] = V + dV
             kf.Q = Q
-            kf.predict()
             self.last_input = (dx, dV)
             self.last_F = self._F
+            # filterpy's predict() and update(z) in one kernel call (the same formulas;
+            # tested equal to filterpy to rounding), into fresh arrays: filterpy rebinds x and
+            # P at every step and callers keep references to the old ones.
+            x_out, P_out, prior = np.empty((2, 1)), np.empty((2, 2)), np.empty(3)
+            nis = kernels("core", 40).kalman_step(x, kf.P, self._F, Q, R, z, x_out, P_out, prior)
+            kf.x, kf.P = x_out, P_out
+            self.last_cell = self._cell_probability(count, prior.item(0), prior.item(2), prior.item(1))
+            self.last_Q = Q
+            self.last_nis = nis
+            if inc is not None:
+                kf.update(inc[0], R=inc[1], H=self._H_speed)
+            return
         else:
             # The flow linearized at V (events in the period, or drag): x+ = F x + u with
             # F = [[1, dX+/dV], [0, dV+/dV]] and u what makes F x + u the flow at V.

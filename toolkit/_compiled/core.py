@@ -2271,10 +2271,10 @@ def period_bounds(start: np.ndarray, end: np.ndarray, forces: np.ndarray, F: flo
 
 
 def window_line(times: np.ndarray, counts: np.ndarray, a: int, b: int, q: float,
-                speeds: np.ndarray) -> float:
+                speeds: np.ndarray) -> tuple[float, float]:
     """The least-squares slope of each wheel's readings ``a..b`` (rows of ``times`` (T,), s,
     and ``counts`` (T, n)), times ``q`` (m per count), into ``speeds`` (n,), m/s; returns
-    ``S = sum (t - mean t)^2`` (s^2). Times and counts relative to the window's first reading
+    ``S = sum (t - mean t)^2`` (s^2) and the largest ``|speed|`` (m/s). Times and counts relative to the window's first reading
     (no cancellation of large stamps or counts however long the run)."""
     m = b - a + 1
     t0 = times[a]
@@ -2288,13 +2288,15 @@ def window_line(times: np.ndarray, counts: np.ndarray, a: int, b: int, q: float,
         S += d * d
     n = counts.shape[1]
     scale = q / S
+    peak = 0.0
     for i in range(n):
         c0 = counts[a, i]
         acc = 0.0
         for k in range(a, b + 1):
             acc += ((times[k] - t0) - mean) * (counts[k, i] - c0)
         speeds[i] = acc * scale
-    return S
+        peak = max(peak, abs(speeds[i]))
+    return S, peak
 
 
 def kalman_step(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray, R: float, z: float,

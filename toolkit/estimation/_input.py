@@ -884,9 +884,9 @@ class ContactSpeedTracker:
             # formula and order of sums, in one kernel call (toolkit._compiled.core.window_line).
             a = start - self._base
             speeds = np.empty(model.n)
-            S = kernels("core", 2 * model.n * (j - start + 1)).window_line(self._tb, self._wb, a, col, q,
-                                                                         speeds)
-            variance = float(model.reading_variance(float(np.abs(speeds).max()))) / S
+            S, peak = kernels("core", 2 * model.n * (j - start + 1)).window_line(self._tb, self._wb, a, col,
+                                                                               q, speeds)
+            variance = float(model.reading_variance(peak)) / S
             self.white_variance = variance
             self.window_length = j - start + 1
             if self._residuals:

@@ -136,7 +136,8 @@ class WheelLines:
         now on (ints, shape (n,); None when nothing was repaired)."""
         wheels = np.array(wheels, dtype=float)
         self._repair = repair
-        self._motion = None if track is None else np.sign(track[0])
+        # The motion's direction only where the repair reads it (the loop's per-sample cost).
+        self._motion = None if track is None or not repair else np.sign(track[0])
         self.repaired = None
         self.deaths = 0
         last, self._last = self._last, (t, wheels)
@@ -163,8 +164,8 @@ class WheelLines:
             self._restart(np.ones(self.counts.size, dtype=bool), t0, w0)
         self._extend(t, wheels)
         dead = self.counts <= 0
-        self.deaths = int(dead.sum())
-        if dead.any():
+        self.deaths = int(np.count_nonzero(dead))
+        if self.deaths:
             # No line (or no room) for these readings: a new window from this row.
             self._restart(dead, t, wheels)
         return self.repaired
@@ -216,11 +217,12 @@ class WheelLines:
         return ready
 
     def _extend(self, t: float, wheels: np.ndarray) -> None:
-        before = self.counts.copy()
+        repair = getattr(self, "_repair", False) and self._motion is not None
+        before = self.counts.copy() if repair else None
         kernels("lines", 30 * self.counts.size).extend_lines(
             self.polys, self.counts, t, self.starts, wheels, self._first, self._q, self._tol,
             self._scratch, self._out)
-        if getattr(self, "_repair", False) and self._motion is not None:
+        if repair:
             # Only lines that held for REPAIR_AFTER readings: a count missed by an encoder
             # that otherwise reads exactly, not noise that breaks lines within a few samples.
             dead = ((self.counts == 0) & (before > 0) & (self._motion != 0)

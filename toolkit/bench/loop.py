@@ -14,11 +14,11 @@ their ratio and whether the two trajectories are the same; the split of one comp
 into the estimator (``observe`` + ``commanded``, timed) and the rest; and the same loop on the
 true speed (no sensors, no filter: one kernel call) against its Python loop.
 
-Targets: issue 9, the whole loop under 0.5 s for 60 s; issue 21, under 0.1 s, which needs
-the filter compiled too (issue 18's estimator, a later round): until then the bench holds
-everything but the estimator to 0.1 s and prints the whole loop's status. Exit status 1
-when the 0.5 s target or the 0.1 s target of the loop without its estimator is missed
-(for 60 s).
+Targets: issue 9, the whole loop under 0.5 s for 60 s; issue 21, under 0.1 s (the
+estimator's hot per-sample arithmetic in kernels: the wheels' lines, the period's bounds,
+the Kalman step). Exit status 1 when the 0.5 s target or the 0.1 s target of the loop
+without its estimator is missed (for 60 s); the whole loop's 0.1 s is printed, not enforced
+(timing on a shared machine).
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{rest * scale:.3f} s per 60 s ({'met' if rest_ok else 'SHORT'}: < {_LOOP} s)")
         print(f"  whole loop per 60 s {best * scale:.3f} s: issue 9 < {_WHOLE} s "
               f"{'met' if whole_ok else 'SHORT'}; issue 21 < {_LOOP} s "
-              f"{'met' if best * scale < _LOOP else 'SHORT (the estimator is not compiled yet)'}"
+              f"{'met' if best * scale < _LOOP else 'SHORT'}"
               f"; KF RMS {kf_rms * 1e3:.3f} mm/s vs central difference {fd_rms * 1e3:.3f} mm/s "
               f"({fd_rms / kf_rms:.1f}x)")
 

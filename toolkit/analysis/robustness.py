@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import as_float, as_int
 from ..errors import ParameterError, parameter_message
-from ..model.truth import WorldTruth
+from ..model.truth import ModelPrior, WorldTruth
 from .scenarios import carousel_brake_scenario
 
 __all__ = ["RobustnessCase", "ROBUSTNESS_CASES", "BASELINES", "RobustnessTable", "robustness_table",
@@ -41,17 +41,20 @@ class RobustnessCase:
     truth : WorldTruth
     lag : float, s
         The scene's (nominal) motor lag the estimators are told.
+    prior : ModelPrior or None
+        What the estimators are told beyond the scene (default ``ModelPrior()``).
     """
 
     name: str
     truth: WorldTruth
     lag: float = 0.0075
+    prior: ModelPrior | None = None
 
     def scenario(self, seed: int, t_end: float = 10.0) -> Any:
         """The brake scenario recorded in this world (seed and grid phase ``seed``), braked at
         half of ``t_end`` (s)."""
         return carousel_brake_scenario(seed=seed, grid_phase=seed, lag=self.lag, truth=self.truth, t_end=t_end,
-                                       brake_time=0.5 * t_end)
+                                       brake_time=0.5 * t_end, prior=self.prior)
 
 
 def _cases() -> dict[str, RobustnessCase]:
@@ -69,7 +72,11 @@ def _cases() -> dict[str, RobustnessCase]:
              RobustnessCase("read noise 0.5", WorldTruth(read_noise=0.5)),
              RobustnessCase("missed 1e-3", WorldTruth(missed_count_prob=1e-3)),
              RobustnessCase("jitter 0.5 ms", WorldTruth(jitter=5e-4)),
-             RobustnessCase("all at once", every)]
+             RobustnessCase("all at once", every),
+             # The same two worlds with the missed-count rate told (ModelPrior.missed_count_prob).
+             RobustnessCase("missed 1e-3, told", WorldTruth(missed_count_prob=1e-3),
+                            prior=ModelPrior(missed_count_prob=1e-3)),
+             RobustnessCase("all at once, missed told", every, prior=ModelPrior(missed_count_prob=1e-3))]
     return {case.name: case for case in cases}
 
 

@@ -800,6 +800,42 @@ class AdaptiveKalman(Estimator):
 CELL_ALARM = 1e-6
 
 
+def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray, speed: np.ndarray,
+                 missed_count_prob: float, distance_per_count: float) -> tuple[np.ndarray, np.ndarray]:
+    """The body's position from the counts' position under missed counts (docs/physics.md
+    section 10): each count transition is lost with probability ``p``, shifting the count
+    against the motion for good, so the counts' position is off the truth by an offset ``b``
+    no central reading can see. Given ``n`` counts read while moving, the transitions lost
+    number negative-binomially, mean ``n p / (1 - p)``, variance ``n p / (1 - p)^2``; ``n``
+    is taken from the estimated speed (distance / ``q``, not the counts, which read noise
+    would inflate). ``b`` is unobservable and independent of the filter's errors, so the
+    position is shifted by its mean and its variance added to ``P[0, 0]``.
+
+    Parameters
+    ----------
+    times : ndarray of shape (k,), s
+    position : ndarray of shape (k,), m
+        The filter's position (what the counts tell).
+    covariance : ndarray of shape (k, 2, 2)
+        Of ``(X, V)``.
+    speed : ndarray of shape (k,), m/s
+    missed_count_prob : float
+    distance_per_count : float, m
+
+    Returns
+    -------
+    position : ndarray of shape (k,), m
+    covariance : ndarray of shape (k, 2, 2)
+    """
+    p, q = missed_count_prob, distance_per_count
+    steps = 0.5 * (speed[1:] + speed[:-1]) * np.diff(times) / q          # counts crossed (signed)
+    signed = np.concatenate(([0.0], np.cumsum(steps)))
+    crossed = np.concatenate(([0.0], np.cumsum(np.abs(steps))))
+    P = np.array(covariance, dtype=float)
+    P[:, 0, 0] += crossed * p / (1.0 - p) ** 2 * q * q
+    return position + signed * p / (1.0 - p) * q, P
+
+
 def _failure(hold_failed: bool, cell: float) -> str:
     """The nominal filter's hard failures at one sample, as the monitor's reason."""
     if hold_failed:
@@ -968,6 +1004,10 @@ class KalmanEstimator(Estimator):
                     X[k], P[k] = adaptive.out_x[:2], adaptive.out_P[:2, :2]
                     verdicts[k] = FALLBACK if adaptive.fallback else ADAPTING
         self.verdicts = verdicts.tolist()
+        p = max(self.prior.missed_count_prob, self.model.sensors.missed_count_prob)
+        if p > 0.0:
+            X = X.copy()
+            X[:, 0], P = count_offset(record.times, X[:, 0], P, X[:, 1], p, self.model.sensors.central.distance_per_count)
         wall = time.perf_counter() - started
         return score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0], covariance=P,
                      nis=nis[1:])

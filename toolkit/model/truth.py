@@ -243,15 +243,22 @@ class ModelPrior:
     contact_drift : float or None, m/s per sqrt(s)
         Prior intensity of the motors' speed wander (a random walk about the command);
         ``None``: :data:`DEFAULT_DRIFT`; the filter adapts it from the wheel counts.
+    missed_count_prob : float
+        The central encoder misses each count transition with this probability, in
+        ``[0, 0.5]`` (default 0: not expected); the default ``kalman`` then reports the
+        position with the count offset's mean and variance (docs/physics.md section 10).
     """
 
     friction_spread: float = 0.3
     drag_range: tuple[float, float] | None = None
     lag_range: tuple[float, float] | None = None
     contact_drift: float | None = None
+    missed_count_prob: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "ModelPrior"
+        object.__setattr__(self, "missed_count_prob", as_float(self.missed_count_prob, "missed_count_prob", owner,
+                                                               low=0.0, high=0.5))
         object.__setattr__(self, "friction_spread", as_float(self.friction_spread, "friction_spread", owner,
                                                              low=0.0, high=10.0))
         object.__setattr__(self, "drag_range", _range(self.drag_range, "drag_range", owner))

@@ -10,6 +10,9 @@ from pathlib import Path
 import pytest
 
 from toolkit.scenes._io import claim_output_dir
+from toolkit.errors import SceneError
+from toolkit.scenes.build import build_scene
+from toolkit.scenes.spec import load_scene, loads_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 CAROUSEL = str(ROOT / "designs" / "carousel.toml")
@@ -41,8 +44,13 @@ BASE = ('[contacts]\nspeeds = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 
 
 def test_curve_points_flag_is_bounded_like_its_scene_key():
-    # report.curve_points <= 1e7 in a scene; the flag has the same bound (toolkit.scenes.limits).
-    _refused(_cli("curve", CAROUSEL, "--points", "100000000", "--json"), "--points", "<= 10000000")
+    # report.curve_points <= MAX_CURVE_POINTS (its two series within the 64 MiB output limit,
+    # 1118481) in a scene; the flag has the same bound (toolkit.scenes.limits), both refused
+    # before any work: the issue's 1e8 and the former cap 1e7 (481 MB printed).
+    for points in ("100000000", "10000000", "1118482"):
+        _refused(_cli("curve", CAROUSEL, "--points", points, "--json"), "--points", "<= 1118481")
+    with pytest.raises(SceneError, match="curve_points"):
+        build_scene(loads_scene("[contacts]\nspeeds = [0.1, 0.2]\n[report]\ncurve_points = 1118482\n"))
 
 
 @pytest.mark.parametrize("flag", [["sweep", str(ROOT / "designs" / "median_law.toml"), "--runs", "100000001"],
@@ -96,3 +104,31 @@ def test_every_command_refuses_a_sweep_scene_with_one_message(command):
 
 def test_sweep_refuses_a_scene_without_a_sweep():
     _refused(_cli("sweep", CAROUSEL), "has no [sweep] section")
+
+
+def test_sweep_tables_past_their_limit_are_refused_before_any_work(tmp_path, monkeypatch, capsys):
+    # The estimate (bytes per run of a 16-run probe) against the table a sweep writes: within
+    # 10 % for 3000 runs (the rows' lengths vary with their digits; measured 1e6 runs: 88
+    # bytes per run estimated, 81.7 written).
+    import toolkit.scenes.limits as limits
+    from toolkit.cli import main
+    from toolkit.scenes.study import check_sweep_table
+
+    design = ROOT / "designs" / "median_law.toml"
+    estimate = check_sweep_table(build_scene(load_scene(design)), runs=3000)
+    assert main(["sweep", str(design), "--runs", "3000", "--out", str(tmp_path / "ok")]) == 0
+    written = (tmp_path / "ok" / "results.csv").stat().st_size
+    assert abs(estimate / written - 1) <= 0.10, (estimate, written)
+    # A limit below the table: refused in one line before anything is written (exit 2).
+    capsys.readouterr()
+    monkeypatch.setattr(limits, "MAX_TABLE_BYTES", written // 2)
+    assert main(["sweep", str(design), "--runs", "3000", "--out", str(tmp_path / "no")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "results.csv" in err and "at most about" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "no").exists()
+
+
+def test_an_unknown_simulation_method_is_named_by_its_scene_key():
+    text = "[contacts]\nspeeds = [0.1, 0.2]\n[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\nmethod = 'radua'\n"
+    with pytest.raises(SceneError, match=r"'simulation.method' value in the scene must be one of .*'radua'.*'radau'"):
+        build_scene(loads_scene(text))

@@ -137,3 +137,35 @@ def test_one_dimensional_use_never_imports_the_planar_package():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
                          check=True, cwd=ROOT)
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+
+
+def test_disc_shape_series_continues_the_closed_forms_and_has_their_limits():
+    # For k = |W| / (R |omega|) >= 2 the shape functions are the closed forms' series in 1/k^2
+    # (40 terms, error < 1e-24 at k = 2): at k = 2 and 3 the closed forms lose at most k^4 eps
+    # (about 2e-14) to cancellation, hence atol 5e-14 there; far out F -> 1 and k T -> 1/4
+    # (the fast-sliding disc), to rounding.
+    from toolkit.planar.regions import _disc_shape
+
+    e = 2.0 * (1 - 1e-15)
+    below, above = _disc_shape(np.array([e, 2.0, 3.0 - 1e-13, 3.0]))
+    assert abs(below[0] - below[1]) <= 5e-14 and abs(above[0] - above[1]) <= 5e-14
+    assert abs(below[2] - below[3]) <= 5e-14 and abs(above[2] - above[3]) <= 5e-14
+    F, T = _disc_shape(np.array([1e4, 1e8]))
+    np.testing.assert_allclose(F, 1.0, rtol=0, atol=1e-8)        # 1 - F ~ (1/8) / k^2
+    np.testing.assert_allclose(T * np.array([1e4, 1e8]), 0.25, rtol=1e-8)
+
+
+def test_a_fast_puck_and_a_tiny_step_end_within_their_budgets():
+    # A puck at 100 m/s took 260 s before the series (the closed forms' noise at k = 88 held
+    # DOP853 at rtol 1e-13); now it stops at t_end, still sliding: its speed fell by the
+    # kinetic deceleration mu g F with F = 1 to 1e-4 at this k, so atol 2e-3 m/s over 1.5 s.
+    plant = PlanarPlant(DiscRegion(0.038, 0.2 * 0.17 * 9.81), 0.17, 0.17 * 0.038 ** 2 / 2)
+    fast = simulate_planar(plant, 1.5, v0=[100.0, 0.0], omega0=30.0)
+    assert fast.success and fast.stop_time is None and fast.terminal_ratio is None
+    assert abs(np.hypot(*fast.velocity[-1]) - (100.0 - 0.2 * 9.81 * 1.5)) <= 2e-3
+    # A step of 1e-12 s over 1.5 s (1.5e12 steps) builds only the budget's grid and stops there.
+    tiny = simulate_planar(plant, 1.5, v0=[2.0, 0.0], omega0=30.0, method="moreau", step=1e-12,
+                           budget=tk.Budget(max_steps=200))
+    assert not tiny.success and tiny.t[-1] <= 200 * 1e-12 * (1 + 1e-9)
+    with pytest.raises(ParameterError, match="'v0'"):
+        simulate_planar(plant, 1.5, v0=[1e300, 0.0], omega0=30.0)

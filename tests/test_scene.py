@@ -105,7 +105,7 @@ def test_missing_sections_mean_no_stage():
         (MINIMAL + '[body]\nmass = 1.0\n[schedule]\nkind = "braking"\nspeed = 0.0\nperiod = 0\n',
          "'schedule.period' value in the scene must be > 0"),
         ("[contacts]\nrandom = { n = 100000000000, low = 0.0, high = 1.0 }\n", "<= 10000000"),
-        (MINIMAL + "[report]\ncurve_points = 100000000000\n", "<= 10000000"),
+        (MINIMAL + "[report]\ncurve_points = 100000000000\n", "<= 1118481"),
         (MINIMAL + '[target]\nkind = "viscosity"\nslope = 1.0\ncenter = 0.0\nband = [0.1, 0.2, 0.3]\n',
          "In [target]: The 'band' parameter"),
         (MINIMAL + '[target]\nkind = "force_curve"\nspeeds = [0.2, 0.1]\nforces = [1.0, 0.0]\n', "In [target]:"),

@@ -38,7 +38,7 @@ from .scenes.report import (compile_line, schedule_check, schedule_lines, shortf
                             study_to_dict, sweep_lines, sweep_to_dict, to_json, write_planar,
                             write_planar_precision, write_precision, write_schedule, write_study, write_sweep)
 from .scenes.spec import Scene, load_scene
-from .scenes.study import (allocate_scene, allocation_shortfalls, design_scene_schedule, force_curve,
+from .scenes.study import (allocate_scene, check_sweep_table, allocation_shortfalls, design_scene_schedule, force_curve,
                            planar_precision, planar_scene, request_shortfalls, run_study, schedule_shortfalls,
                            sweep_scene, sweep_shortfalls)
 from .shortfall import Shortfall
@@ -294,6 +294,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     objects = _scene(args, "sweep", "to run")
     scene = objects.scene
+    if args.out is not None:
+        check_sweep_table(objects, runs=args.runs, seed=args.seed)
     with claim_output_dir(args.out) as out:
         result = sweep_scene(objects, runs=args.runs, seed=args.seed, scheduler=args.scheduler,
                              workers=args.workers, progress=sys.stderr.isatty())

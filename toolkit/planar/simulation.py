@@ -213,6 +213,10 @@ def _result(t, pos, heading, vel, omega, status, method, setting, message, steps
                                   wall_time=time.perf_counter() - started, **extra)
 
 
+#: Largest body or rim speed a planar run starts from, m/s (squares and products stay finite).
+MAX_SPEED = 1e100
+
+
 def _as_vector(value: Any, name: str) -> np.ndarray:
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value == 0:
         return np.zeros(2)
@@ -271,6 +275,15 @@ def simulate_planar(plant: PlanarPlant, t_end: float, *, v0: Any = 0.0, omega0: 
         raise ParameterTypeError(parameter_message("budget", owner, "be a Budget", budget))
     state = _State(_as_vector(v0, "v0"), as_float(omega0, "omega0", owner),
                    _as_vector(position, "position"), as_float(heading, "heading", owner))
+    # The methods square speeds and multiply them by the magnitudes: keep that finite.
+    if float(np.hypot(*state.V)) > MAX_SPEED:
+        raise ParameterError(parameter_message("v0", owner, f"have a magnitude <= {MAX_SPEED:g} m/s "
+                                               "(its squares must stay finite)", state.V.tolist()))
+    arm = plant.contacts_at(0.0).arm
+    if abs(state.omega) * max(arm, 1.0) > MAX_SPEED:
+        raise ParameterError(parameter_message(
+            "omega0", owner, f"give rim speeds <= {MAX_SPEED:g} m/s (|omega0| times the contacts' "
+            f"largest distance {arm:g} m, at least 1 m)", state.omega))
     times = None
     if t_eval is not None:
         times = as_float_array(t_eval, "t_eval", owner)
@@ -409,14 +422,21 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
         def low(tau, y):
             return y[1] + 80.0                           # w = w0 e^-80: far below rounding
         low.terminal = True
+
+        def late(tau, y):
+            return y[2] - t_end                          # t(tau) reaches t_end: still moving
+        late.terminal = True
         sol = solve_ivp(rhs, (0.0, 1e9), [v0 / w0, 0.0, 0.0, 0.0, 0.0], method="DOP853",
-                        rtol=1e-13, atol=1e-15, dense_output=True, events=low)
+                        rtol=1e-13, atol=1e-15, dense_output=True, events=(low, late))
         steps = int(sol.nfev)
         tau_end = float(sol.t[-1])
         y_end = sol.y[:, -1]
-        F_end, T_end = shape(np.array(y_end[0]))
-        w_end = w0 * math.exp(y_end[1])
-        stop = float(y_end[2] + w_end / (b * float(T_end)))
+        if sol.t_events[1].size:                         # no stop within the run
+            stop = math.inf
+        else:
+            F_end, T_end = shape(np.array(y_end[0]))
+            w_end = w0 * math.exp(y_end[1])
+            stop = float(y_end[2] + w_end / (b * float(T_end)))
         tau_t = (sol, tau_end)
     grid = np.asarray(times, dtype=float) if times is not None else None
     if grid is None:
@@ -446,10 +466,11 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
         v[moving], w[moving], dist[moving], turn[moving] = y[0] * wt, wt, y[3], y[4]
         y_end = sol.sol(tau_end)
         dist[~moving], turn[~moving] = y_end[3], y_end[4]
-        ratio = float(y_end[0])
-        message = (f"passive axisymmetric region: reduced ODE of the closed-form force and torque "
-                   f"(DOP853, rtol 1e-13); stops at t = {stop:.12g} s with v / (R omega) -> "
-                   f"{ratio:.12g}")
+        ratio = float(y_end[0]) if math.isfinite(stop) else None
+        message = ("passive axisymmetric region: reduced ODE of the closed-form force and torque "
+                   "(DOP853, rtol 1e-13); " + (f"stops at t = {stop:.12g} s with v / (R omega) -> "
+                                               f"{ratio:.12g}" if ratio is not None else
+                                               f"still moving at t_end = {t_end:g} s"))
         setting = "reduced ODE, DOP853 rtol=1e-13"
     else:
         tg = np.minimum(grid, stop)
@@ -473,9 +494,12 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
 
 
 # -- Moreau-Jean ---------------------------------------------------------------------------------
-def _grid(t_end: float, step: float, times: np.ndarray | None) -> np.ndarray:
+def _grid(t_end: float, step: float, times: np.ndarray | None, max_steps: int) -> np.ndarray:
     count = max(1, int(math.ceil(t_end / step - 1e-9)))
-    grid = np.linspace(0.0, t_end, count + 1)
+    if count > max_steps:           # the budget stops the run there: the rest is never built
+        grid = np.arange(max_steps + 1) * (t_end / count)
+    else:
+        grid = np.linspace(0.0, t_end, count + 1)
     if times is not None:
         grid = np.unique(np.concatenate((grid, times)))
     return grid
@@ -486,7 +510,7 @@ def _moreau(plant: PlanarPlant, t_end: float, s: _State, times: np.ndarray | Non
     started = time.perf_counter()
     h_nominal = t_end / 1000 if step is None else as_float(step, "step", "simulate", low=0.0, low_open=True)
     tol = as_float(tol, "tol", "simulate", low=0.0, low_open=True)
-    grid = _grid(t_end, h_nominal, times)
+    grid = _grid(t_end, h_nominal, times, budget.max_steps)
     if grid.size - 1 > budget.max_steps:
         grid = grid[:budget.max_steps + 1]
     M = np.array([plant.mass, plant.mass, plant.inertia])
@@ -539,7 +563,8 @@ def _moreau(plant: PlanarPlant, t_end: float, s: _State, times: np.ndarray | Non
                 rec_x.append(x.copy())
             k_done = grid.size - 1
             break
-    if status is SimulationStatus.SUCCESS and k_done < grid.size - 1:
+    if status is SimulationStatus.SUCCESS and (k_done < grid.size - 1 or grid[-1] < t_end):
+        # (the steps left, or a grid the budget cut before t_end)
         status = SimulationStatus.MAX_STEPS
     Qr, Xr = np.array(rec_q), np.array(rec_x)
     setting = f"step={h_nominal:g}"

@@ -336,12 +336,16 @@ def _missing_encoders(sensors: Any) -> list[str]:
 
 
 def _check_names(scene: Scene) -> None:
-    """The estimators a scene names exist (:data:`toolkit.estimation.ESTIMATOR_NAMES`; a loop
-    reads any but the smoother, which needs the future)."""
+    """The simulation method and the estimators a scene names exist
+    (:data:`toolkit.simulation.METHODS`, :data:`toolkit.estimation.ESTIMATOR_NAMES`; a loop
+    reads any estimator but the smoother, which needs the future)."""
     from ..estimation import ESTIMATOR_NAMES
+    from ..simulation import METHODS as SIMULATION_METHODS
 
     named = [(f"estimation.methods[{i}]", name, ESTIMATOR_NAMES)
              for i, name in enumerate(scene.estimation.methods if scene.estimation is not None else ())]
+    if scene.simulation is not None:
+        named.append(("simulation.method", scene.simulation.method, SIMULATION_METHODS))
     if scene.control is not None and scene.control.estimator is not None:
         loop = tuple(name for name in ESTIMATOR_NAMES if name != "rts")
         named.append(("control.estimator", scene.control.estimator, loop))

@@ -16,7 +16,7 @@ from ..errors import SceneError
 from ..sweeps import MAX_RUNS
 
 __all__ = ["Limit", "LIMITS", "FLAGS", "MAX_SAMPLES", "MAX_RUN_SAMPLES", "MAX_OUTPUT_BYTES",
-           "BYTES_PER_NUMBER", "scene_value_error"]
+           "BYTES_PER_NUMBER", "MAX_CURVE_POINTS", "MAX_TABLE_BYTES", "scene_value_error"]
 
 #: Largest generated array a scene may ask for (random contacts, curve samples): 1e7.
 MAX_SAMPLES = 10_000_000
@@ -24,9 +24,14 @@ MAX_SAMPLES = 10_000_000
 MAX_RUN_SAMPLES = 10_000_000
 #: Largest output file a run may write (``result.json``, ``estimate.json``), bytes: 64 MiB.
 MAX_OUTPUT_BYTES = 64 << 20
+#: Largest sweep table (``results.csv``, one row per run) a sweep may write, bytes: 512 MiB.
+MAX_TABLE_BYTES = 512 << 20
 #: Bytes one number of a series takes in the JSON outputs (17 significant digits, the
 #: indentation of a list item, the comma and newline): the estimate of an output's size.
 BYTES_PER_NUMBER = 30
+#: Most samples of a sampled force-speed curve: its two series (speeds, forces) within
+#: :data:`MAX_OUTPUT_BYTES` (1118481).
+MAX_CURVE_POINTS = MAX_OUTPUT_BYTES // (2 * BYTES_PER_NUMBER)
 
 
 @dataclass(frozen=True)
@@ -122,7 +127,7 @@ LIMITS: dict[str, Limit] = {
     "estimation.speed_std": _POSITIVE,
     "control.duration": _POSITIVE,
     "control.seed": _SEED,
-    "report.curve_points": Limit(low=2, high=MAX_SAMPLES, integer=True, flag="curve --points"),
+    "report.curve_points": Limit(low=2, high=MAX_CURVE_POINTS, integer=True, flag="curve --points"),
     "sweep.runs": Limit(low=1, high=MAX_RUNS, integer=True, flag="sweep --runs"),
     "sweep.seed": Limit(low=0, integer=True, flag="sweep --seed"),
     "sweep.chunk_size": Limit(low=1, integer=True),

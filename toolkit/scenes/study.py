@@ -76,7 +76,7 @@ __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve
            "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
            "estimate_scene", "estimate_record", "control_scene", "estimation_shortfalls", "control_shortfalls",
            "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls", "planar_scene",
-           "planar_precision"]
+           "planar_precision", "check_sweep_table"]
 
 
 @dataclass(frozen=True)
@@ -795,6 +795,47 @@ def sweep_scene(scene: Scene | SceneObjects, *, runs: int | None = None, seed: i
     return sweep(objects.sweep, spec.runs if runs is None else runs,
                  seed=spec.seed if seed is None else seed, scheduler=scheduler, workers=workers,
                  chunk_size=spec.chunk_size, progress=progress)
+
+
+#: Runs of the probe that measures a sweep table's bytes per run (:func:`check_sweep_table`).
+TABLE_PROBE_RUNS = 16
+
+
+def check_sweep_table(scene: Scene | SceneObjects, *, runs: int | None = None,
+                      seed: int | None = None) -> int:
+    """Refuse, before the sweep, a ``results.csv`` larger than
+    :data:`~toolkit.scenes.limits.MAX_TABLE_BYTES`: its size is estimated from the bytes per
+    run of the first :data:`TABLE_PROBE_RUNS` runs (the table's own CSV form; the run index
+    counted at its full width). Returns the estimate (bytes).
+
+    Raises
+    ------
+    SceneError
+        The estimate exceeds the limit (the message gives the most runs that fit).
+    """
+    from ..sweeps import sweep
+    from .limits import MAX_TABLE_BYTES
+
+    objects = _built(scene)
+    spec = objects.scene.sweep
+    if spec is None:
+        raise SceneError(f"The scene {objects.scene.name!r} has no [sweep] section to run.")
+    total = spec.runs if runs is None else runs
+    probe = min(total, TABLE_PROBE_RUNS)
+    table = sweep(objects.sweep, probe, seed=spec.seed if seed is None else seed,
+                  chunk_size=spec.chunk_size).table
+    text = table.to_csv(index=False, float_format="%.17g")
+    header = len(text.split("\n", 1)[0]) + 1
+    per_run = (len(text) - header) / probe + len(str(total)) - len(str(probe))
+    size = int(header + per_run * total)
+    if size > MAX_TABLE_BYTES:
+        fit = int((MAX_TABLE_BYTES - header) // per_run)
+        raise SceneError(
+            f"The sweep of {objects.scene.name!r} with {total} runs would write a results.csv of about "
+            f"{size / 2**20:.0f} MiB ({per_run:.0f} bytes per run, measured on its first {probe} runs); "
+            f"tables are limited to {MAX_TABLE_BYTES >> 20} MiB. Run at most about {fit} runs, or leave "
+            "out --out for the summary alone.")
+    return size
 
 
 def sweep_shortfalls(result: Any) -> list[Shortfall]:

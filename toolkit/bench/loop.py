@@ -33,6 +33,7 @@ import toolkit.loop.closed_loop as closed_loop
 from toolkit import CentralDifference, ContactSet, Plant, Sensors
 from toolkit.controllers import SpeedHold, VirtualViscosity
 from toolkit.estimation import EstimatorModel, KalmanEstimator
+from toolkit.model import sample_count
 from toolkit.model.carousel import CAROUSEL
 from toolkit.simulation import warm_up
 
@@ -91,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     sensors = CAROUSEL.sensors(10)
     model = EstimatorModel(plant.contacts.forces, plant.mass, sensors, motor_lag=CAROUSEL.motor_lag,
                            speed_limits=plant.motors.speed_limits)
-    samples = int(round(args.seconds * sensors.rate)) + 1
+    samples = sample_count(args.seconds, sensors.rate)
     scale = 60.0 / args.seconds
     status = 0
     for name, controller in (("speed_hold", SpeedHold(0.2, 50.0)),

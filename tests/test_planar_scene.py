@@ -88,6 +88,9 @@ def test_a_legs_scene_runs_and_reports_its_equilibrium(tmp_path):
      r"remove \[contacts\]"),
     ("[planar]\nbody = 'disc'\nmass = -1.0\nradius = 0.1\nmu = 0.2\n", "'planar.mass' value in the scene must be > 0"),
     ("[planar]\nbody = 'disc'\nmass = 1.0\nradius = 0.1\nmu = 0.2\nmethod = 'smooth'\n", "'epsilon'"),
+    ("[planar]\nbody = 'disc'\nmass = 1.0\nradius = 0.1\nmu = 0.2\nv0 = [2.0]\n", r"2-vector.*scene key 'planar.v0'"),
+    ("[planar]\nbody = 'disc'\nmass = 1.0\nradius = 0.1\nmu = 0.2\nomega0 = 1e200\n",
+     r"rim speeds <= 1e\+100.*scene key 'planar.omega0'"),
 ])
 def test_bad_planar_sections_are_refused(text, message):
     with pytest.raises(SceneError, match=message):

@@ -91,3 +91,13 @@ def test_encoders_that_disagree_with_the_file_are_refused(scenario, tmp_path):
     with pytest.raises(SceneFileNotFoundError):
         read_record_csv(tmp_path / "missing.csv")
     assert RECORD_MAGIC.startswith("#")
+
+
+def test_a_folder_or_a_missing_file_is_named_for_what_it_is(tmp_path):
+    from toolkit.errors import SceneFileNotFoundError
+    from toolkit.model.record_io import read_record_csv
+
+    with pytest.raises(SceneFileNotFoundError, match="is a folder, not a CSV file"):
+        read_record_csv(tmp_path)
+    with pytest.raises(SceneFileNotFoundError, match="does not exist"):
+        read_record_csv(tmp_path / "none.csv")

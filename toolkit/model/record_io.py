@@ -138,6 +138,8 @@ def read_record_csv(path: Any, sensors: Sensors | None = None) -> EncoderRecord:
     path = Path(path)
     if sensors is not None and not isinstance(sensors, Sensors):
         raise ParameterTypeError(parameter_message("sensors", owner, "be a Sensors or None", sensors))
+    if path.is_dir():
+        raise SceneFileNotFoundError(f"The record file {str(path)!r} is a folder, not a CSV file.")
     if not path.is_file():
         raise SceneFileNotFoundError(f"The record file {str(path)!r} does not exist.")
     reader = _Reader(path)

@@ -23,7 +23,7 @@ from .contacts import PlanarContactSet
 from .equilibrium import PlanarEquilibrium
 from .precision import PlanarPrecisionReport, precision_report
 from .regions import DiscRegion, RingRegion, terminal_ratio
-from .simulation import PlanarPlant, PlanarSimulationResult, simulate_planar
+from .simulation import PlanarPlant, PlanarSimulationResult, check_start, simulate_planar
 
 __all__ = ["PlanarSceneObjects", "PlanarStudyResult", "build_planar", "run_planar", "scene_precision", "PUBLISHED"]
 
@@ -89,7 +89,8 @@ def build_planar(spec: Any) -> PlanarSceneObjects:
         options["step"] = spec.step
     if spec.method == "smooth":
         options["epsilon"] = spec.epsilon
-    return PlanarSceneObjects(spec, plant, np.asarray(spec.v0, dtype=float), float(spec.omega0), options)
+    v0, omega0 = check_start(plant, spec.v0, spec.omega0)
+    return PlanarSceneObjects(spec, plant, v0, omega0, options)
 
 
 @dataclass(frozen=True, eq=False)

@@ -36,7 +36,7 @@ from .contacts import PlanarContactSet
 from .equilibrium import twist_problem
 from .regions import CurveRegion, DiscRegion, Quadrature, RingRegion, _disc_shape, _ring_shape
 
-__all__ = ["PlanarPlant", "PlanarSimulationResult", "PLANAR_METHODS", "simulate_planar"]
+__all__ = ["PlanarPlant", "PlanarSimulationResult", "PLANAR_METHODS", "simulate_planar", "check_start", "MAX_SPEED"]
 
 #: Methods of :func:`simulate_planar`.
 PLANAR_METHODS = ("exact", "moreau", "smooth")
@@ -217,6 +217,22 @@ def _result(t, pos, heading, vel, omega, status, method, setting, message, steps
 MAX_SPEED = 1e100
 
 
+def check_start(plant: PlanarPlant, v0: Any, omega0: Any) -> tuple[np.ndarray, float]:
+    """The start twist of a run on ``plant``: ``v0`` (2,), m/s, and ``omega0``, rad/s, checked
+    (finite; body and rim speeds at most :data:`MAX_SPEED`: the methods square speeds and
+    multiply them by the magnitudes, which must stay finite)."""
+    V, omega = _as_vector(v0, "v0"), as_float(omega0, "omega0", "simulate")
+    if float(np.hypot(*V)) > MAX_SPEED:
+        raise ParameterError(parameter_message("v0", "simulate", f"have a magnitude <= {MAX_SPEED:g} m/s "
+                                               "(its squares must stay finite)", V.tolist()))
+    arm = plant.contacts_at(0.0).arm
+    if abs(omega) * max(arm, 1.0) > MAX_SPEED:
+        raise ParameterError(parameter_message(
+            "omega0", "simulate", f"give rim speeds <= {MAX_SPEED:g} m/s (|omega0| times the contacts' "
+            f"largest distance {arm:g} m, at least 1 m)", omega))
+    return V, omega
+
+
 def _as_vector(value: Any, name: str) -> np.ndarray:
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value == 0:
         return np.zeros(2)
@@ -273,17 +289,8 @@ def simulate_planar(plant: PlanarPlant, t_end: float, *, v0: Any = 0.0, omega0: 
     budget = Budget() if budget is None else budget
     if not isinstance(budget, Budget):
         raise ParameterTypeError(parameter_message("budget", owner, "be a Budget", budget))
-    state = _State(_as_vector(v0, "v0"), as_float(omega0, "omega0", owner),
-                   _as_vector(position, "position"), as_float(heading, "heading", owner))
-    # The methods square speeds and multiply them by the magnitudes: keep that finite.
-    if float(np.hypot(*state.V)) > MAX_SPEED:
-        raise ParameterError(parameter_message("v0", owner, f"have a magnitude <= {MAX_SPEED:g} m/s "
-                                               "(its squares must stay finite)", state.V.tolist()))
-    arm = plant.contacts_at(0.0).arm
-    if abs(state.omega) * max(arm, 1.0) > MAX_SPEED:
-        raise ParameterError(parameter_message(
-            "omega0", owner, f"give rim speeds <= {MAX_SPEED:g} m/s (|omega0| times the contacts' "
-            f"largest distance {arm:g} m, at least 1 m)", state.omega))
+    V, omega = check_start(plant, v0, omega0)
+    state = _State(V, omega, _as_vector(position, "position"), as_float(heading, "heading", owner))
     times = None
     if t_eval is not None:
         times = as_float_array(t_eval, "t_eval", owner)

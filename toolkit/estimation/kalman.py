@@ -390,26 +390,19 @@ class NominalKalman(Estimator):
             inc = (bounds[self._edge], 1.0 / (1.0 / var_v - 1.0 / self._edge_var))
             self._edge_var = var_v
         if slopes is None:
-            # Hot path (>= 1000x real time): no B u product (B is None): F x + u = F (x +
-            # F^-1 u) with F^-1 u = (dx - h dV, dV), added in place; Q and R are set in place
-            # and H is passed, so filterpy skips its scalar checks and the reshape of z.
+            # Hot path (>= 1000x real time): F x + u = F (x + F^-1 u) with F^-1 u = (dx - h dV,
+            # dV), added in place; then filterpy's predict() and update(z) in one kernel call
+            # (the same formulas, tested equal to filterpy to rounding) into fresh arrays:
+            # filterpy rebinds x and P at every step and callers keep references to the old ones.
             x[0, 0] = x.item(0) + dx - self._h * dV
             x[1, 0] = V + dV
             kf.Q = Q
             self.last_input = (dx, dV)
             self.last_F = self._F
-            # filterpy's predict() and update(z) in one kernel call (the same formulas;
-            # tested equal to filterpy to rounding), into fresh arrays: filterpy rebinds x and
-            # P at every step and callers keep references to the old ones.
             x_out, P_out, prior = np.empty((2, 1)), np.empty((2, 2)), np.empty(3)
             nis = kernels("core", 40).kalman_step(x, kf.P, self._F, Q, R, z, x_out, P_out, prior)
             kf.x, kf.P = x_out, P_out
             self.last_cell = self._cell_probability(count, prior.item(0), prior.item(2), prior.item(1))
-            self.last_Q = Q
-            self.last_nis = nis
-            if inc is not None:
-                kf.update(inc[0], R=inc[1], H=self._H_speed)
-            return
         else:
             # The flow linearized at V (events in the period, or drag): x+ = F x + u with
             # F = [[1, dX+/dV], [0, dV+/dV]] and u what makes F x + u the flow at V.
@@ -419,12 +412,13 @@ class NominalKalman(Estimator):
             kf.predict(u=np.array([[u[0]], [u[1]]]), B=self._I2, F=F, Q=Q)
             self.last_input = u
             self.last_F = F
-        self.last_cell = self._cell_probability(count, kf.x.item(0), kf.P.item(0), kf.x.item(1))
-        # z as a float: filterpy's y = z - H x is the same (1, 1) array, and its deepcopy(z)
-        # of a float is free (of an array it is not).
-        kf.update(z, H=self._H)
+            self.last_cell = self._cell_probability(count, kf.x.item(0), kf.P.item(0), kf.x.item(1))
+            # z as a float: filterpy's y = z - H x is the same (1, 1) array, and its deepcopy(z)
+            # of a float is free (of an array it is not).
+            kf.update(z, H=self._H)
+            nis = kf.y.item() ** 2 * kf.SI.item()
         self.last_Q = Q
-        self.last_nis = kf.y.item() ** 2 * kf.SI.item()
+        self.last_nis = nis
         if inc is not None:
             kf.update(inc[0], R=inc[1], H=self._H_speed)
 

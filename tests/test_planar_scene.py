@@ -91,6 +91,10 @@ def test_a_legs_scene_runs_and_reports_its_equilibrium(tmp_path):
     ("[planar]\nbody = 'disc'\nmass = 1.0\nradius = 0.1\nmu = 0.2\nv0 = [2.0]\n", r"2-vector.*scene key 'planar.v0'"),
     ("[planar]\nbody = 'disc'\nmass = 1.0\nradius = 0.1\nmu = 0.2\nomega0 = 1e200\n",
      r"rim speeds <= 1e\+100.*scene key 'planar.omega0'"),
+    # Legs off a line have no closed form: 'exact' refused when built, by its scene key.
+    ("[planar]\nbody = 'legs'\nmass = 1.0\ninertia = 0.01\npositions = [[0.1, 0.0], [-0.1, 0.0], [0.0, 0.1]]\n"
+     "velocities = [[0.1, 0.0], [0.0, 0.1], [0.0, 0.0]]\nforces = [1.0, 2.0, 1.5]\nmethod = 'exact'\n",
+     r"be 'exact' only for a plant with a closed form.*scene key 'planar.method'"),
 ])
 def test_bad_planar_sections_are_refused(text, message):
     with pytest.raises(SceneError, match=message):

@@ -23,7 +23,7 @@ from .contacts import PlanarContactSet
 from .equilibrium import PlanarEquilibrium
 from .precision import PlanarPrecisionReport, precision_report
 from .regions import DiscRegion, RingRegion, terminal_ratio
-from .simulation import PlanarPlant, PlanarSimulationResult, check_start, simulate_planar
+from .simulation import PlanarPlant, PlanarSimulationResult, check_method, check_start, simulate_planar
 
 __all__ = ["PlanarSceneObjects", "PlanarStudyResult", "build_planar", "run_planar", "scene_precision", "PUBLISHED"]
 
@@ -90,6 +90,7 @@ def build_planar(spec: Any) -> PlanarSceneObjects:
     if spec.method == "smooth":
         options["epsilon"] = spec.epsilon
     v0, omega0 = check_start(plant, spec.v0, spec.omega0)
+    check_method(plant, spec.method, v0, omega0)
     return PlanarSceneObjects(spec, plant, v0, omega0, options)
 
 

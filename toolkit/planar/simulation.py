@@ -36,7 +36,7 @@ from .contacts import PlanarContactSet
 from .equilibrium import twist_problem
 from .regions import CurveRegion, DiscRegion, Quadrature, RingRegion, _disc_shape, _ring_shape
 
-__all__ = ["PlanarPlant", "PlanarSimulationResult", "PLANAR_METHODS", "simulate_planar", "check_start", "MAX_SPEED"]
+__all__ = ["PlanarPlant", "PlanarSimulationResult", "PLANAR_METHODS", "simulate_planar", "check_start", "check_method", "MAX_SPEED"]
 
 #: Methods of :func:`simulate_planar`.
 PLANAR_METHODS = ("exact", "moreau", "smooth")
@@ -340,14 +340,35 @@ def _exact(plant: PlanarPlant, t_end: float, s: _State, times: np.ndarray | None
     line = _line_case(plant, s)
     if line is not None:
         return _exact_line(plant, t_end, s, times, budget, *line)
-    c = plant.contacts
-    if isinstance(c, (DiscRegion, RingRegion)) and plant.unforced and not np.any(c.centre):
+    if _axisymmetric(plant):
         return _exact_axisymmetric(plant, t_end, s, times, budget)
-    raise ParameterError(parameter_message(
+    raise _no_closed_form()
+
+
+def _axisymmetric(plant: PlanarPlant) -> bool:
+    """A passive uniform disc or ring centred on the centre of mass (the second closed form)."""
+    c = plant.contacts
+    return isinstance(c, (DiscRegion, RingRegion)) and plant.unforced and not np.any(c.centre)
+
+
+def _no_closed_form() -> ParameterError:
+    return ParameterError(parameter_message(
         "method", "simulate", "be 'exact' only for a plant with a closed form (contacts and "
         "motion on one line through the centre of mass, or a passive uniform disc or ring "
         "centred on it, without outside force or drag); use method='moreau' (time stepping "
         "with certified steps)", "exact"))
+
+
+def check_method(plant: PlanarPlant, method: str, v0: Any = 0.0, omega0: float = 0.0,
+                 heading: float = 0.0) -> None:
+    """Refuse ``method`` for a run of ``plant`` from ``(v0, omega0)`` before any work, as
+    :func:`simulate_planar` would (``"exact"`` needs one of the two closed forms)."""
+    check_option(method, "method", "simulate", PLANAR_METHODS)
+    if method == "exact":
+        V, omega = check_start(plant, v0, omega0)
+        state = _State(V, omega, np.zeros(2), as_float(heading, "heading", "simulate"))
+        if _line_case(plant, state) is None and not _axisymmetric(plant):
+            raise _no_closed_form()
 
 
 def _exact_line(plant, t_end, s, times, budget, red, world) -> PlanarSimulationResult:

@@ -618,7 +618,7 @@ def _planar(scene: Scene) -> Any:
             "inner_radius": "planar.inner_radius", "force": ("planar.mu", "planar.mass", "planar.gravity"),
             "positions": "planar.positions", "velocities": "planar.velocities", "forces": "planar.forces",
             "resolution": "planar.resolution", "rings": "planar.resolution", "arcs": "planar.resolution",
-            "v0": "planar.v0", "omega0": "planar.omega0"}
+            "v0": "planar.v0", "omega0": "planar.omega0", "method": "planar.method"}
     with _scene_keys("planar", keys):
         return build_planar(scene.planar)
 

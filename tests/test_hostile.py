@@ -3,6 +3,7 @@ traceback, nothing written; none is silently clipped or replaced."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -71,6 +72,17 @@ def test_jitter_beyond_what_the_sensor_law_models_is_refused_not_clipped(tmp_pat
 def test_an_empty_out_is_refused_not_replaced_by_the_default(tmp_path):
     _refused(_cli("run", CAROUSEL, "--out", "", cwd=tmp_path), "--out", "must name a folder")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+def test_an_out_on_a_file_system_that_makes_nothing_is_refused_before_work(tmp_path):
+    # /proc makes no folder or file even for a superuser (os.access may still say writable):
+    # refused in one line naming the folder, and no temporary name leaks into the message.
+    for args in (("run", CAROUSEL, "--out", "/proc/ac-out"),
+                 ("estimate", str(ROOT / "designs" / "estimate.toml"), "--save-record", "/proc/ac.csv")):
+        done = _cli(*args, cwd=tmp_path)
+        _refused(done, "cannot write the output", "'/proc'")
+        assert ".new" not in done.stderr and ".tmp" not in done.stderr
 
 
 def test_estimate_never_substitutes_another_scenario(tmp_path):

@@ -70,7 +70,18 @@ def check_output_dir(path: str | os.PathLike[str]) -> Path:
         raise OutputError(f"cannot write the output: {str(parent)!r} (a parent of {shown}) is not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write the output: the folder {str(parent)!r} is not writable")
+    _probe(parent)
     return target
+
+
+def _probe(parent: Path) -> None:
+    """Make and remove a folder in ``parent``, as the writers do first: a file system such as
+    /proc refuses it even where :func:`os.access` says writable (a superuser)."""
+    try:
+        os.rmdir(tempfile.mkdtemp(dir=parent, prefix=".active-contacts.", suffix=".probe"))
+    except OSError as error:
+        raise OutputError(f"cannot write the output: nothing can be made in the folder {str(parent)!r} "
+                          f"({error.strerror})") from None
 
 
 def check_output_file(path: str | os.PathLike[str]) -> Path:
@@ -85,6 +96,7 @@ def check_output_file(path: str | os.PathLike[str]) -> Path:
         raise OutputError(f"cannot write the output: the folder {str(parent)!r} of {shown} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write the output: the folder {str(parent)!r} is not writable")
+    _probe(parent)
     return target
 
 

@@ -228,3 +228,10 @@ def test_bad_input_is_refused_with_the_rule():
         PlanarContactSet([[0, 0]], [[0, 0]]).wrench(1.0)
     with pytest.raises(ParameterTypeError):
         PlanarContactSet([[0, 0]], [[0, 0]]).wrench("fast")
+    # Each twist part is named for its own fault.
+    with pytest.raises(ParameterError, match="'omega' parameter of PlanarContactSet.wrench must be finite"):
+        PlanarContactSet([[0, 0]], [[0, 0]]).wrench([0.0, 0.0], float("nan"))
+    with pytest.raises(ParameterError, match="'V' parameter of PlanarContactSet.wrench must be finite"):
+        PlanarContactSet([[0, 0]], [[0, 0]]).wrench([float("inf"), 0.0], 0.0)
+    with pytest.raises(ParameterTypeError, match="'omega' parameter"):
+        PlanarContactSet([[0, 0]], [[0, 0]]).wrench([0.0, 0.0], "spin")

@@ -89,6 +89,22 @@ def test_rigid_velocities_are_their_own_equilibrium(rng):
     assert np.all(eq.stuck) and eq.dissipation <= 64 * EPS * contacts.total_force and eq.unique
 
 
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+def test_contacts_all_at_one_point_are_known_not_to_fix_the_twist(scale):
+    # Stuck contacts at one point r fix only V + omega J r: every twist (V - omega J r, omega)
+    # sticks them all too (Phi = 0 along that line), so uniqueness is known false, not unknown.
+    r = np.array([[0.3, -0.2]] * 3)
+    v = np.array([[0.1, 0.05]] * 3) * scale
+    contacts = PlanarContactSet(r, v, [1.0, 2.5, 0.7])
+    eq = contacts.equilibrium()
+    assert np.all(eq.stuck) and eq.unique is False
+    # The point itself moves at the contacts' speed (atol: rounding of the twist, eps * scale).
+    point = eq.velocity + eq.omega * np.array([-r[0, 1], r[0, 0]])
+    np.testing.assert_allclose(point, v[0], rtol=0, atol=64 * EPS * scale)
+    # Legs at distinct points that all stick fix it: unique (the earlier test's case).
+    assert PlanarContactSet([[0.1, 0], [-0.1, 0], [0, 0.1]], [[0.0, 0.0]] * 3, [1.0, 1.0, 1.0]).equilibrium().unique
+
+
 # -- the exact 1-D reduction --------------------------------------------------------------------
 @pytest.mark.parametrize("scale", [1e-3, 1.0, 1e4])
 @pytest.mark.parametrize("n", [1, 2, 3, 8, 11, 100])

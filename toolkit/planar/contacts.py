@@ -101,20 +101,20 @@ def limit_factors(anisotropy: Any, n: int, owner: str) -> tuple[np.ndarray, np.n
 
 def _as_twists(V: Any, omega: Any, owner: str) -> tuple[np.ndarray, np.ndarray]:
     """Broadcast body velocities (..., 2) and angular velocities (...) to one batch shape."""
-    if V is None or isinstance(V, (str, bytes)) or np.iscomplexobj(V):
-        raise ParameterTypeError(parameter_message("V", owner, "be real numbers (m/s)", V))
-    try:
-        vel = np.asarray(V, dtype=float)
-        rate = np.asarray(omega, dtype=float)
-    except (TypeError, ValueError):
-        raise ParameterTypeError(parameter_message(
-            "V", owner, "be real numbers (m/s) with 'omega' real numbers (rad/s)", V)) from None
+    arrays = []
+    for name, value, unit in (("V", V, "m/s"), ("omega", omega, "rad/s")):
+        if value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value):
+            raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value))
+        try:
+            arrays.append(np.asarray(value, dtype=float))
+        except (TypeError, ValueError):
+            raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value)) from None
+        if not np.all(np.isfinite(arrays[-1])):
+            raise ParameterError(parameter_message(name, owner, "be finite", "a NaN or inf entry"))
+    vel, rate = arrays
     if vel.ndim == 0 or vel.shape[-1] != 2:
         raise ParameterError(parameter_message(
             "V", owner, "have a last axis of length 2 (vx, vy)", f"an array of shape {vel.shape}"))
-    if not (np.all(np.isfinite(vel)) and np.all(np.isfinite(rate))):
-        raise ParameterError(parameter_message(
-            "V", owner, "be finite, with 'omega' finite", "a NaN or inf entry"))
     try:
         shape = np.broadcast_shapes(vel.shape[:-1], rate.shape)
     except ValueError:

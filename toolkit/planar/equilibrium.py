@@ -322,9 +322,10 @@ def _unique(prob: NormSum, sol: Solution) -> bool | None:
     slide = ~sol.stuck & (rho > 0)
     if not np.any(slide):
         # Every contact sticks (Phi = 0): another minimizer would make them all stick too,
-        # so the twist is unique when the stuck contacts fix it (B of full column rank).
+        # so the twist is unique exactly when the stuck contacts fix it (B of full column
+        # rank); otherwise every twist along B's null space is a minimizer too (known False).
         flat = prob.B.reshape(-1, prob.d)
-        return bool(np.linalg.matrix_rank(flat) == prob.d) or None
+        return bool(np.linalg.matrix_rank(flat) == prob.d)
     u = z[slide] / rho[slide, None]
     perp = np.stack((-u[:, 1], u[:, 0]), axis=1)                 # I - u u^T = perp perp^T
     rows = np.einsum("ni,nij->nj", perp, prob.B[slide]) * np.sqrt(prob.f[slide] / rho[slide])[:, None]

@@ -143,6 +143,10 @@ class EstimationResult:
     nees_in_band : float or None
         Fraction of the samples whose NEES lies in the two-sided 95 % interval of one
         chi-square(2) (:func:`nees_band`); ``None`` without a covariance or the truth.
+    missed_count_prob, missed_count_std : float or None
+        The encoders' missed-count rate (per count transition) the position was reported
+        under and its std at the record's end: the told rate (std 0) or the identified one
+        (``kalman``: docs/physics.md section 10); ``None`` for estimators that do not use it.
     """
 
     method: str
@@ -162,6 +166,8 @@ class EstimationResult:
     nis_band: tuple[float, float] | None = None
     rms_phases: dict[str, float | None] | None = None
     nees_in_band: float | None = None
+    missed_count_prob: float | None = None
+    missed_count_std: float | None = None
 
     @property
     def real_time_ratio(self) -> float:

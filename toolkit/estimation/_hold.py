@@ -123,6 +123,13 @@ class WheelLines:
         self._ready_at: float | None = -math.inf
         self._held: np.ndarray | None = None     # the speeds of the last steady period, m/s
         self._last: tuple[float, np.ndarray] | None = None
+        self._motion: np.ndarray | None = None   # the contacts' directions at this row
+        self._repair = False
+        self._spared = 0                         # dead lines told apart as missed counts
+        #: Per row: lines that broke (missed counts told apart excluded); transitions read
+        #: where a lost one would have been repaired (with ``repair``).
+        self.deaths = 0
+        self.exposure = 0.0
 
     def push(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool,
              repair: bool = False) -> np.ndarray | None:
@@ -133,13 +140,19 @@ class WheelLines:
         reading one count further along its motion (``sign`` of its speed) does not is taken
         to have missed a count (the counter lost a transition for good): its line goes on
         with the repaired reading. Returns the counts added to each wheel's reading from
-        now on (ints, shape (n,); None when nothing was repaired)."""
+        now on (ints, shape (n,); None when nothing was repaired).
+
+        Without ``repair`` such a wheel's window restarts, but :attr:`deaths` does not count
+        it (a missed count is no sign that the encoders read other than exactly: the filter's
+        test of that must not wait for the repairs it gates). With ``repair``,
+        :attr:`exposure` is the transitions read where a lost one would have been repaired
+        (:meth:`_seen`)."""
         wheels = np.array(wheels, dtype=float)
         self._repair = repair
-        # The motion's direction only where the repair reads it (the loop's per-sample cost).
-        self._motion = None if track is None or not repair else np.sign(track[0])
+        self._motion = None if track is None else np.sign(track[0])
         self.repaired = None
-        self.deaths = 0
+        self.deaths = self._spared = 0
+        self.exposure = 0.0
         last, self._last = self._last, (t, wheels)
         if track is None:
             return
@@ -162,13 +175,36 @@ class WheelLines:
                 return
             self.active = True
             self._restart(np.ones(self.counts.size, dtype=bool), t0, w0)
+        seen = self._seen(t, wheels) if repair else None
         self._extend(t, wheels)
         dead = self.counts <= 0
-        self.deaths = int(np.count_nonzero(dead))
-        if self.deaths:
+        if seen is not None:
+            # The transitions read where a lost one would have been repaired (the repaired
+            # readings' steps: the true transitions), for the rate's identification.
+            self.exposure = float(np.abs(wheels - last[1])[seen & ~dead].sum())
+        self.deaths = int(np.count_nonzero(dead)) - self._spared
+        if dead.any():
             # No line (or no room) for these readings: a new window from this row.
             self._restart(dead, t, wheels)
         return self.repaired
+
+    def _seen(self, t: float, wheels: np.ndarray) -> np.ndarray:
+        """Per wheel, before its line takes the reading at ``t``: a reading one count short of
+        this one (against the motion) would be repaired in :meth:`_extend` (the line has held
+        :data:`REPAIR_AFTER` readings and reaches :data:`REPAIR_GAP` counts past that
+        reading's cell, :func:`_behind`). Whether a transition is lost is drawn apart from
+        all of this, so the repairs over the transitions read where this holds count the
+        rate without bias (:class:`~toolkit.estimation.MissedCountRate`)."""
+        n, counts, q, motion = self.counts.size, self.counts, self._q, self._motion
+        tau = t - self.starts
+        reach = self.polys[:, :, 0] + tau[:, None] * self.polys[:, :, 1]      # (n, CAPACITY)
+        held = np.arange(CAPACITY)[None, :] < counts[:, None]
+        low = np.where(held, reach, np.inf).min(axis=1)
+        high = np.where(held, reach, -np.inf).max(axis=1)
+        short = (wheels - motion - self._first) * q                            # the short cell
+        gap = np.where(motion > 0, low - (short + q), short - high)
+        return ((counts > 0) & (motion != 0) & (tau >= REPAIR_AFTER * self._period)
+                & (gap >= REPAIR_GAP * q)) if n else np.zeros(0, dtype=bool)
 
     def _restart(self, which: np.ndarray, t: float, wheels: np.ndarray) -> None:
         """New windows for the wheels ``which`` (bool mask) from the row at ``t`` (s)."""
@@ -217,7 +253,7 @@ class WheelLines:
         return ready
 
     def _extend(self, t: float, wheels: np.ndarray) -> None:
-        repair = getattr(self, "_repair", False) and self._motion is not None
+        repair = self._motion is not None
         before = self.counts.copy() if repair else None
         kernels("lines", 30 * self.counts.size).extend_lines(
             self.polys, self.counts, t, self.starts, wheels, self._first, self._q, self._tol,
@@ -241,7 +277,10 @@ class WheelLines:
                     self.polys, counts, t, self.starts, wheels + shift, self._first, self._q, self._tol,
                     self._scratch, self._out)
                 fixed = dead & (counts > 0)
-                if fixed.any():
+                if not self._repair:
+                    # Told apart, not repaired: the window restarts (its rows are rebuilt).
+                    self._spared = int(np.count_nonzero(fixed))
+                elif fixed.any():
                     self.counts[fixed] = counts[fixed]
                     wheels[fixed] += shift[fixed]
                     self.repaired = np.where(fixed, shift, 0.0).astype(np.int64)
@@ -361,6 +400,11 @@ class HoldLayer:
         self._h = model.sensors.period
         self._hold = Hold(self._q, model.n)
         self.holding = False
+        #: Whether a central count lost at the last :meth:`step` would have been repaired (a
+        #: hold that goes on, with ``repair``, whose lines reach :data:`REPAIR_GAP` counts past
+        #: the cell one count short), and the transitions read there (0 elsewhere).
+        self.exposure = 0
+        self.seen = False
 
     def wheels(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool,
                repair: bool = False) -> np.ndarray | None:
@@ -376,6 +420,8 @@ class HoldLayer:
     def stop(self) -> None:
         """End a hold (the contacts or the outside force changed, or the filter says so)."""
         self.holding = False
+        self.exposure = 0
+        self.seen = False
 
     def step(self, t: float, count: int, anchor: tuple[float, int], speeds: np.ndarray, var_v: float,
              x: tuple[float, float], P: np.ndarray, start: bool, repair: bool = False) -> HoldStep | None:
@@ -405,6 +451,12 @@ class HoldLayer:
             None when no hold runs at this sample (the filter's Gaussian update follows).
         """
         hold, q, h = self._hold, self._q, self._h
+        self.exposure = 0
+        self.seen = False
+        direction = 1 if x[1] > 0.0 else -1
+        # A loss at this reading would show (and be repaired): the hold goes on and its lines
+        # reach past the cell one count short (the repair's own test, on that reading).
+        seen = self.holding and repair and x[1] != 0.0 and hold.behind(t, count - direction, direction)
         if not self.holding:
             if not start:
                 return None
@@ -427,5 +479,8 @@ class HoldLayer:
             restart = (q * q / 12.0) * np.array([[1.0, 1.0 / dt], [1.0 / dt, 2.0 / (dt * dt)]])
             return HoldStep(True, np.array([z, (count - anchor[1]) * q / dt]), restart, nis)
         self.holding = True
+        if seen:
+            self.seen = True
+            self.exposure = abs(count + repaired - anchor[1])
         X, V, pxx, pxv, pvv = state
         return HoldStep(False, np.array([X, V]), np.array([[pxx, pxv], [pxv, pvv]]), nis, repaired)

@@ -38,6 +38,9 @@ docs/physics.md section 10):
   where the encoders read exactly, each wheel's exact set of lines.
 - *Motor lag* identified from the wheels after each command change
   (:class:`~toolkit.estimation.identification.LagIdentifier`).
+- *The missed-count rate* (not told) identified from the wheels' repaired counts over the
+  transitions where a loss would show (:class:`~toolkit.estimation.MissedCountRate`): the
+  default reports the position with the count offset it implies (:func:`count_offset`).
 - *Noise*: read noise and jitter matched from the central innovations and from the wheels'
   residuals (:class:`~toolkit.estimation.monitor.NoiseMatcher`).
 - *The exact holds* (:class:`~toolkit.estimation._hold.HoldLayer`) as the optional layer of
@@ -50,6 +53,7 @@ docs/physics.md section 10):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections import deque
@@ -67,7 +71,7 @@ from ._base import EstimationResult, Estimator, check_covariance, score, warm_re
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel
 from ..model.truth import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
-from .identification import LagIdentifier
+from .identification import LagIdentifier, MissedCountRate
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
 from .window import AdaptiveWindow
 
@@ -342,13 +346,15 @@ class AdaptiveKalman(Estimator):
         """What the filter has identified: ``friction`` (the magnitudes' estimates, N, shape
         (n,)) and their std, ``drag`` (N s/m) and its std, ``lag`` (s; None before a change
         was seen through) and its std, ``wander`` (the motors', m/s per sqrt(s)), ``read_noise``
-        (counts) and ``jitter`` (s) from the wheels."""
+        (counts) and ``jitter`` (s) from the wheels, ``missed_count_prob`` (the rate's
+        posterior mean per count transition) and its std."""
         n, x, P = self.n, self.x, self.P
         f = self.model.forces
         return {"friction": f * (1.0 + x[2:2 + n]), "friction_std": f * np.sqrt(np.diag(P)[2:2 + n]),
                 "drag": float(self.model.damping + x[2 + n]), "drag_std": float(math.sqrt(P[2 + n, 2 + n])),
                 "lag": self._lag_id.lag, "lag_std": self._lag_id.lag_std, "wander": self._bank.drift,
-                "read_noise": math.sqrt(self._wheel_noise[0]), "jitter": math.sqrt(self._wheel_noise[1])}
+                "read_noise": math.sqrt(self._wheel_noise[0]), "jitter": math.sqrt(self._wheel_noise[1]),
+                "missed_count_prob": self.missed_rate.mean, "missed_count_std": math.sqrt(self.missed_rate.variance)}
 
     def prime(self, samples: list[EncoderSample], commands: list[Any], initial: Any = None) -> None:
         """Learn the encoders' read noise and jitter from the wheels over ``samples`` (with
@@ -409,6 +415,10 @@ class AdaptiveKalman(Estimator):
         self._wheel_noise = self._primed or (0.0, 0.0)
         self._layer = HoldLayer(self.model)
         self._lines = self._layer.lines
+        #: The missed-count rate's posterior; per observed sample its mean and variance, and
+        #: whether a central count lost there would have been repaired (:class:`HoldLayer`).
+        self.missed_rate = MissedCountRate()
+        self.missed_history: list[tuple[float, float]] = []
         self._moments, self._empty = np.zeros(5), np.zeros((1, 2))
         self.monitor.reset()
         self._foaw.reset(speed=speed)
@@ -715,6 +725,8 @@ class AdaptiveKalman(Estimator):
         if repaired is not None:
             self._wheel_offset = self._wheel_offset + repaired
             wheels = wheels + repaired
+        lost = 0 if repaired is None else int(np.abs(repaired).sum())
+        central = self._central_offset
         self._deaths.append(self._lines.deaths if self._lines.active else 0)
         if self._first:
             q = self.q
@@ -731,6 +743,11 @@ class AdaptiveKalman(Estimator):
         else:
             anchor, self._anchor = self._anchor, (sample.time, c)
             self._step(c, sample.time, anchor, *pending)
+        # The missed-count rate from the repairs (wheels' and, in holds, the central count's)
+        # over the transitions where a loss would have shown.
+        layer, rate = self._layer, self.missed_rate
+        rate.push(lost + abs(self._central_offset - central), self._lines.exposure + layer.exposure)
+        self.missed_history.append((rate.mean, rate.variance, layer.seen))
         self._observed = (sample.time, wheels)
         self._foaw.push(sample.time, c)
         self._act()
@@ -800,8 +817,14 @@ class AdaptiveKalman(Estimator):
 CELL_ALARM = 1e-6
 
 
+#: :func:`count_offset` reports the counts' position unchanged where no count was lost with
+#: at least this probability (the level of the NEES band, :func:`~toolkit.estimation._base.nees_band`).
+NO_LOSS = 0.95
+
+
 def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray, speed: np.ndarray,
-                 missed_count_prob: float, distance_per_count: float) -> tuple[np.ndarray, np.ndarray]:
+                 missed_count_prob: Any, distance_per_count: float, missed_count_var: Any = 0.0,
+                 seen: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The body's position from the counts' position under missed counts (docs/physics.md
     section 10): each count transition is lost with probability ``p``, shifting the count
     against the motion for good, so the counts' position is off the truth by an offset ``b``
@@ -809,7 +832,14 @@ def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray
     number negative-binomially, mean ``n p / (1 - p)``, variance ``n p / (1 - p)^2``; ``n``
     is taken from the estimated speed (distance / ``q``, not the counts, which read noise
     would inflate). ``b`` is unobservable and independent of the filter's errors, so the
-    position is shifted by its mean and its variance added to ``P[0, 0]``.
+    position is shifted by its mean and its variance added to ``P[0, 0]``. A rate known only
+    as a posterior (mean ``p``, variance ``s^2``: :class:`~toolkit.estimation.MissedCountRate`)
+    adds the spread of the offset's mean, ``(N_signed q)^2 s^2 / (1 - p)^4`` (the law of total
+    variance, the mean's slope in ``p`` being ``1 / (1 - p)^2``). Counts crossed into a
+    sample where a lost one would have been seen and repaired (an exact hold's: ``seen``) add
+    nothing. ``b`` is a whole number of counts: where it is 0 with probability at least
+    :data:`NO_LOSS` (its credible set at the NEES band's level is {0}) the position is the
+    counts' (a Gaussian of variance ``n p`` would misstate an error that is almost surely 0).
 
     Parameters
     ----------
@@ -819,8 +849,13 @@ def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray
     covariance : ndarray of shape (k, 2, 2)
         Of ``(X, V)``.
     speed : ndarray of shape (k,), m/s
-    missed_count_prob : float
+    missed_count_prob : float or ndarray of shape (k,)
+        The rate (per sample: what was known of it then).
     distance_per_count : float, m
+    missed_count_var : float or ndarray of shape (k,)
+        The rate's variance (0: known).
+    seen : ndarray of shape (k,) of bool, optional
+        Samples whose losses were repaired (default: none).
 
     Returns
     -------
@@ -829,11 +864,23 @@ def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray
     """
     p, q = missed_count_prob, distance_per_count
     steps = 0.5 * (speed[1:] + speed[:-1]) * np.diff(times) / q          # counts crossed (signed)
+    if seen is not None:
+        steps = np.where(seen[1:], 0.0, steps)
     signed = np.concatenate(([0.0], np.cumsum(steps)))
     crossed = np.concatenate(([0.0], np.cumsum(np.abs(steps))))
+    var = missed_count_var
+    # The chance that no count was lost: (1 - p)^n for a known rate; the Gamma-Poisson
+    # predictive (b / (b + n))^a for a Gamma(a, b) posterior (a = p^2 / s^2, b = p / s^2).
+    p_arr, var_arr = np.broadcast_arrays(np.asarray(p, dtype=float), np.asarray(var, dtype=float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_none = np.where(var_arr > 0.0, -(p_arr * p_arr / var_arr) * np.log1p(crossed * var_arr / p_arr),
+                            crossed * np.log1p(-p_arr))
+    lost = np.nan_to_num(log_none, nan=0.0) < math.log(NO_LOSS)
     P = np.array(covariance, dtype=float)
-    P[:, 0, 0] += crossed * p / (1.0 - p) ** 2 * q * q
-    return position + signed * p / (1.0 - p) * q, P
+    P[:, 0, 0] += np.where(lost, crossed * p / (1.0 - p) ** 2 * q * q, 0.0)
+    if np.any(var_arr > 0.0):
+        P[:, 0, 0] += np.where(lost, (signed * q) ** 2 * var / (1.0 - p) ** 4, 0.0)
+    return position + np.where(lost, signed * p / (1.0 - p) * q, 0.0), P
 
 
 def _failure(hold_failed: bool, cell: float) -> str:
@@ -1004,10 +1051,21 @@ class KalmanEstimator(Estimator):
                     X[k], P[k] = adaptive.out_x[:2], adaptive.out_P[:2, :2]
                     verdicts[k] = FALLBACK if adaptive.fallback else ADAPTING
         self.verdicts = verdicts.tolist()
-        p = max(self.prior.missed_count_prob, self.model.sensors.missed_count_prob)
-        if p > 0.0:
+        p, var, seen = max(self.prior.missed_count_prob, self.model.sensors.missed_count_prob), 0.0, None
+        if self.adaptive is not None:
+            # The adaptive filter ran from the start: where its holds would have repaired a
+            # lost central count; not told, the rate it identified by each sample. While the
+            # nominal model holds throughout, nothing contradicted it (not told: no offset).
+            rate, rate_var, seen = np.array(self.adaptive.missed_history).T
+            seen = seen > 0.0
+            if p == 0.0:
+                p, var = rate, rate_var
+        if np.any(p > 0.0):
             X = X.copy()
-            X[:, 0], P = count_offset(record.times, X[:, 0], P, X[:, 1], p, self.model.sensors.central.distance_per_count)
+            X[:, 0], P = count_offset(record.times, X[:, 0], P, X[:, 1], p,
+                                      self.model.sensors.central.distance_per_count, var, seen)
         wall = time.perf_counter() - started
-        return score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0], covariance=P,
-                     nis=nis[1:])
+        result = score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0], covariance=P,
+                       nis=nis[1:])
+        rate = (float(np.atleast_1d(p)[-1]), math.sqrt(float(np.atleast_1d(var)[-1])))
+        return dataclasses.replace(result, missed_count_prob=rate[0], missed_count_std=rate[1])

@@ -28,7 +28,7 @@ from .plant import Plant
 from .sensors import Sensors
 
 __all__ = ["WorldTruth", "TrueWorld", "realize", "seed_streams", "ModelPrior", "DEFAULT_DRAG", "DEFAULT_LAG",
-           "DEFAULT_DRIFT"]
+           "DEFAULT_DRIFT", "DEFAULT_MISSED"]
 
 #: Sub-streams of one seed (``numpy.random.default_rng([seed, stream])``): the wheels' friction
 #: draw (the stream scenes used before, so a scene's draw is unchanged) and the motors' wander.
@@ -274,3 +274,6 @@ DEFAULT_DRAG = 2.0
 DEFAULT_LAG = 0.05
 #: Default prior intensity of the motors' wander, m/s per sqrt(s).
 DEFAULT_DRIFT = 1e-4
+#: Default prior mean of the encoders' missed-count rate when it is not told (per count
+#: transition; the prior's std is sqrt(2) times it: :class:`toolkit.estimation.MissedCountRate`).
+DEFAULT_MISSED = 1e-3

@@ -266,6 +266,12 @@ def test_estimate_cli_json_has_the_documented_keys(tmp_path, capsys):
     # NEES in band: a share of samples, for the estimators with a covariance only.
     assert 0.0 <= data["estimators"][kalman]["nees_in_band"] <= 1.0
     assert data["estimators"][names.index("central_difference")]["nees_in_band"] is None
+    # The missed-count rate the kalman position was reported under: the shipped scene's
+    # encoders are ideal and the nominal model holds, so none (0, std 0); the baselines
+    # do not use it (null).
+    assert data["estimators"][kalman]["missed_count_prob"] == 0.0
+    assert data["estimators"][kalman]["missed_count_std"] == 0.0
+    assert data["estimators"][names.index("foaw_end")]["missed_count_prob"] is None
     saved = json.loads((tmp_path / "estimate.json").read_text())
     assert saved["estimators"][kalman]["rms"] == data["estimators"][kalman]["rms"]
     assert (tmp_path / "estimate.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -450,12 +450,15 @@ class EstimationStudy:
         phase: startup, cruise, brake, braked), ``nees_mean`` (None without a covariance or
         the truth), its 95 % ``nees_band``, ``nees_in_band`` (the share of samples whose NEES
         lies in the 95 % chi-square(2) interval), ``nis_mean``, ``monitor`` (the consistency
-        monitor's verdict), ``wall_time`` (s) and ``real_time_ratio``."""
+        monitor's verdict), ``missed_count_prob`` and ``missed_count_std`` (the encoders'
+        missed-count rate the position was reported under, told or identified; None where an
+        estimator does not use it), ``wall_time`` (s) and ``real_time_ratio``."""
         monitors = self.monitors or (None,) * len(self.results)
         return [{"name": r.method, "rms": r.rms_error, "max_error": r.max_error,
                  "rms_phases": None if r.rms_phases is None else dict(r.rms_phases),
                  "nees_mean": r.nees_mean, "nees_band": r.nees_band, "nees_in_band": r.nees_in_band,
-                 "nis_mean": r.nis_mean, "monitor": monitor, "wall_time": r.wall_time,
+                 "nis_mean": r.nis_mean, "monitor": monitor, "missed_count_prob": r.missed_count_prob,
+                 "missed_count_std": r.missed_count_std, "wall_time": r.wall_time,
                  "real_time_ratio": r.real_time_ratio} for r, monitor in zip(self.results, monitors)]
 
 

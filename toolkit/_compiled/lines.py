@@ -13,6 +13,8 @@ counts (no noise model, no white approximation of the quantization's sawtooth).
   its two half-planes; a vertex within ``tol`` of a boundary counts as on it, so rounding
   adds no sliver vertices).
 - :func:`extend_lines`: many polygons (one per wheel) clipped by one reading each.
+- :func:`reach_gaps`: how far each polygon's lines reach past the cell one count short of a
+  reading (against the motion): where a missed count would leave every line.
 - :func:`ride_moments`: the body's line riding an unknown wheel: the evidence-weighted
   mixture of :func:`line_moments` over the wheels.
 - :func:`line_moments`: mean and covariance of ``(x0, v)`` uniform over a polygon and
@@ -34,7 +36,7 @@ import numpy as np
 
 _INLINE = {"inline": "always"}
 
-KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "slice_x": _INLINE,
+KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach_gaps": {}, "slice_x": _INLINE,
            "line_moments": {}, "area": _INLINE, "ride_moments": {}}
 
 # 3-point Gauss-Legendre on [-1, 1]: exact for polynomials of degree <= 5.
@@ -107,6 +109,32 @@ def extend_lines(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.nda
         for r in range(max(m, 0)):
             polys[i, r, 0] = out[r, 0]
             polys[i, r, 1] = out[r, 1]
+
+
+def reach_gaps(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.ndarray,
+               readings: np.ndarray, first: np.ndarray, q: float, motion: np.ndarray,
+               out: np.ndarray) -> None:
+    """For each polygon ``i`` with ``counts[i] > 0`` and ``motion[i] != 0``: the distance
+    (m) from the cell one count short of ``readings[i]`` (against ``motion[i]``'s sign) to
+    the nearest position ``x + tau v`` its lines reach at ``t`` (``tau = t - starts[i]``;
+    positions less ``first[i] q``): ``min(x + tau v) - (readings[i] - first[i]) q`` moving
+    up, ``(readings[i] + 1 - first[i]) q - max(x + tau v)`` moving down; ``-inf`` for the
+    others. Into ``out`` (shape (n,))."""
+    for i in range(polys.shape[0]):
+        n = counts[i]
+        if n <= 0 or motion[i] == 0.0:
+            out[i] = -math.inf
+            continue
+        tau = t - starts[i]
+        low, high = math.inf, -math.inf
+        for r in range(n):
+            x = polys[i, r, 0] + tau * polys[i, r, 1]
+            low = min(low, x)
+            high = max(high, x)
+        if motion[i] > 0.0:
+            out[i] = low - (readings[i] - first[i]) * q
+        else:
+            out[i] = (readings[i] + 1.0 - first[i]) * q - high
 
 
 def slice_x(poly: np.ndarray, n: int, v: float) -> tuple[float, float]:

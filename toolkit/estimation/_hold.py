@@ -103,10 +103,14 @@ class WheelLines:
     Parameters
     ----------
     model : EstimatorModel
+    tell_missed : bool
+        Tell a missed count apart from a broken line even where it is not repaired (see
+        :meth:`push`; the adaptive filter's test of its encoders needs it).
     """
 
-    def __init__(self, model: EstimatorModel) -> None:
+    def __init__(self, model: EstimatorModel, tell_missed: bool = False) -> None:
         n = model.n
+        self.tell_missed = bool(tell_missed)
         self._q = model.sensors.wheel.distance_per_count
         self._play = model.sensors.wheel.backlash
         self._lag = model.motor_lag
@@ -126,6 +130,7 @@ class WheelLines:
         self._motion: np.ndarray | None = None   # the contacts' directions at this row
         self._repair = False
         self._spared = 0                         # dead lines told apart as missed counts
+        self._gaps = np.empty(n)
         #: Per row: lines that broke (missed counts told apart excluded); transitions read
         #: where a lost one would have been repaired (with ``repair``).
         self.deaths = 0
@@ -142,14 +147,15 @@ class WheelLines:
         with the repaired reading. Returns the counts added to each wheel's reading from
         now on (ints, shape (n,); None when nothing was repaired).
 
-        Without ``repair`` such a wheel's window restarts, but :attr:`deaths` does not count
-        it (a missed count is no sign that the encoders read other than exactly: the filter's
+        Without ``repair`` such a wheel's window restarts, but with :attr:`tell_missed`
+        :attr:`deaths` does not count it (a missed count is no sign that the encoders read other than exactly: the filter's
         test of that must not wait for the repairs it gates). With ``repair``,
         :attr:`exposure` is the transitions read where a lost one would have been repaired
         (:meth:`_seen`)."""
         wheels = np.array(wheels, dtype=float)
         self._repair = repair
-        self._motion = None if track is None else np.sign(track[0])
+        # The motion's direction only where the repair (or telling a loss apart) reads it.
+        self._motion = None if track is None or not (repair or self.tell_missed) else np.sign(track[0])
         self.repaired = None
         self.deaths = self._spared = 0
         self.exposure = 0.0
@@ -183,7 +189,7 @@ class WheelLines:
             # readings' steps: the true transitions), for the rate's identification.
             self.exposure = float(np.abs(wheels - last[1])[seen & ~dead].sum())
         self.deaths = int(np.count_nonzero(dead)) - self._spared
-        if dead.any():
+        if self.deaths + self._spared:
             # No line (or no room) for these readings: a new window from this row.
             self._restart(dead, t, wheels)
         return self.repaired
@@ -195,16 +201,10 @@ class WheelLines:
         reading's cell, :func:`_behind`). Whether a transition is lost is drawn apart from
         all of this, so the repairs over the transitions read where this holds count the
         rate without bias (:class:`~toolkit.estimation.MissedCountRate`)."""
-        n, counts, q, motion = self.counts.size, self.counts, self._q, self._motion
-        tau = t - self.starts
-        reach = self.polys[:, :, 0] + tau[:, None] * self.polys[:, :, 1]      # (n, CAPACITY)
-        held = np.arange(CAPACITY)[None, :] < counts[:, None]
-        low = np.where(held, reach, np.inf).min(axis=1)
-        high = np.where(held, reach, -np.inf).max(axis=1)
-        short = (wheels - motion - self._first) * q                            # the short cell
-        gap = np.where(motion > 0, low - (short + q), short - high)
-        return ((counts > 0) & (motion != 0) & (tau >= REPAIR_AFTER * self._period)
-                & (gap >= REPAIR_GAP * q)) if n else np.zeros(0, dtype=bool)
+        gaps = self._gaps
+        kernels("lines", 10 * self.counts.size).reach_gaps(self.polys, self.counts, t, self.starts, wheels,
+                                                           self._first, self._q, self._motion, gaps)
+        return (gaps >= REPAIR_GAP * self._q) & (t - self.starts >= REPAIR_AFTER * self._period)
 
     def _restart(self, which: np.ndarray, t: float, wheels: np.ndarray) -> None:
         """New windows for the wheels ``which`` (bool mask) from the row at ``t`` (s)."""
@@ -258,7 +258,7 @@ class WheelLines:
         kernels("lines", 30 * self.counts.size).extend_lines(
             self.polys, self.counts, t, self.starts, wheels, self._first, self._q, self._tol,
             self._scratch, self._out)
-        if repair:
+        if repair and self.counts.min() <= 0:
             # Only lines that held for REPAIR_AFTER readings: a count missed by an encoder
             # that otherwise reads exactly, not noise that breaks lines within a few samples.
             dead = ((self.counts == 0) & (before > 0) & (self._motion != 0)
@@ -392,10 +392,12 @@ class HoldLayer:
     Parameters
     ----------
     model : EstimatorModel
+    tell_missed : bool
+        Of the wheels' lines (:class:`WheelLines`).
     """
 
-    def __init__(self, model: EstimatorModel) -> None:
-        self.lines = WheelLines(model)
+    def __init__(self, model: EstimatorModel, tell_missed: bool = False) -> None:
+        self.lines = WheelLines(model, tell_missed)
         self._q = model.sensors.central.distance_per_count
         self._h = model.sensors.period
         self._hold = Hold(self._q, model.n)
@@ -453,10 +455,10 @@ class HoldLayer:
         hold, q, h = self._hold, self._q, self._h
         self.exposure = 0
         self.seen = False
-        direction = 1 if x[1] > 0.0 else -1
         # A loss at this reading would show (and be repaired): the hold goes on and its lines
         # reach past the cell one count short (the repair's own test, on that reading).
-        seen = self.holding and repair and x[1] != 0.0 and hold.behind(t, count - direction, direction)
+        seen = repair and self.holding and x[1] != 0.0 and hold.behind(
+            t, count - (1 if x[1] > 0.0 else -1), 1.0 if x[1] > 0.0 else -1.0)
         if not self.holding:
             if not start:
                 return None

@@ -413,7 +413,7 @@ class AdaptiveKalman(Estimator):
         self._held: np.ndarray | None = None
         self._noise = NoiseMatcher(100)
         self._wheel_noise = self._primed or (0.0, 0.0)
-        self._layer = HoldLayer(self.model)
+        self._layer = HoldLayer(self.model, tell_missed=True)
         self._lines = self._layer.lines
         #: The missed-count rate's posterior; per observed sample its mean and variance, and
         #: whether a central count lost there would have been repaired (:class:`HoldLayer`).

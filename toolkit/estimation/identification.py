@@ -187,8 +187,10 @@ class MissedCountRate:
 
     def push(self, repairs: int, exposure: float) -> None:
         """One sample's repairs and its exposure (transitions where a loss would show)."""
-        self.repairs += int(repairs)
-        self.exposure += float(exposure)
+        if repairs:
+            self.repairs += int(repairs)
+        if exposure:
+            self.exposure += float(exposure)
 
     @property
     def shape(self) -> float:

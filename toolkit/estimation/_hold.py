@@ -104,8 +104,8 @@ class WheelLines:
     ----------
     model : EstimatorModel
     tell_missed : bool
-        Tell a missed count apart from a broken line even where it is not repaired (see
-        :meth:`push`; the adaptive filter's test of its encoders needs it).
+        Tell a missed count apart from a broken line even where it is not repaired, and
+        measure the exposure there too (see :meth:`push`: the missed-count rate's evidence).
     """
 
     def __init__(self, model: EstimatorModel, tell_missed: bool = False) -> None:
@@ -129,11 +129,10 @@ class WheelLines:
         self._last: tuple[float, np.ndarray] | None = None
         self._motion: np.ndarray | None = None   # the contacts' directions at this row
         self._repair = False
-        self._spared = 0                         # dead lines told apart as missed counts
         self._gaps = np.empty(n)
-        #: Per row: lines that broke (missed counts told apart excluded); transitions read
-        #: where a lost one would have been repaired (with ``repair``).
-        self.deaths = 0
+        #: Per row: lines that broke; of those, the missed counts told apart (not repaired);
+        #: the transitions read where a lost one would have been told apart.
+        self.deaths = self.spared = 0
         self.exposure = 0.0
 
     def push(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool,
@@ -147,17 +146,16 @@ class WheelLines:
         with the repaired reading. Returns the counts added to each wheel's reading from
         now on (ints, shape (n,); None when nothing was repaired).
 
-        Without ``repair`` such a wheel's window restarts, but with :attr:`tell_missed`
-        :attr:`deaths` does not count it (a missed count is no sign that the encoders read other than exactly: the filter's
-        test of that must not wait for the repairs it gates). With ``repair``,
-        :attr:`exposure` is the transitions read where a lost one would have been repaired
+        Without ``repair`` such a wheel's window restarts (a death); with :attr:`tell_missed`
+        it is counted in :attr:`spared`. With ``repair`` or :attr:`tell_missed`,
+        :attr:`exposure` is the transitions read where a lost one would have been told apart
         (:meth:`_seen`)."""
         wheels = np.array(wheels, dtype=float)
         self._repair = repair
         # The motion's direction only where the repair (or telling a loss apart) reads it.
         self._motion = None if track is None or not (repair or self.tell_missed) else np.sign(track[0])
         self.repaired = None
-        self.deaths = self._spared = 0
+        self.deaths = self.spared = 0
         self.exposure = 0.0
         last, self._last = self._last, (t, wheels)
         if track is None:
@@ -181,15 +179,18 @@ class WheelLines:
                 return
             self.active = True
             self._restart(np.ones(self.counts.size, dtype=bool), t0, w0)
-        seen = self._seen(t, wheels) if repair else None
-        self._extend(t, wheels)
+        seen = self._seen(t, wheels) if self._motion is not None else None
+        self._extend(t, wheels, seen is not None)
         dead = self.counts <= 0
-        if seen is not None:
+        if seen is not None and seen.any():
             # The transitions read where a lost one would have been repaired (the repaired
             # readings' steps: the true transitions), for the rate's identification.
             self.exposure = float(np.abs(wheels - last[1])[seen & ~dead].sum())
-        self.deaths = int(np.count_nonzero(dead)) - self._spared
-        if self.deaths + self._spared:
+            if self.spared:
+                # Told apart, not repaired: their true transitions are one more.
+                self.exposure += float(np.abs(wheels + self._motion - last[1])[self._told].sum())
+        self.deaths = int(np.count_nonzero(dead))
+        if self.deaths:
             # No line (or no room) for these readings: a new window from this row.
             self._restart(dead, t, wheels)
         return self.repaired
@@ -201,10 +202,14 @@ class WheelLines:
         reading's cell, :func:`_behind`). Whether a transition is lost is drawn apart from
         all of this, so the repairs over the transitions read where this holds count the
         rate without bias (:class:`~toolkit.estimation.MissedCountRate`)."""
-        gaps = self._gaps
+        gaps, q = self._gaps, self._q
         kernels("lines", 10 * self.counts.size).reach_gaps(self.polys, self.counts, t, self.starts, wheels,
-                                                           self._first, self._q, self._motion, gaps)
-        return (gaps >= REPAIR_GAP * self._q) & (t - self.starts >= REPAIR_AFTER * self._period)
+                                                           self._first, q, self._motion, gaps)
+        aged = t - self.starts >= REPAIR_AFTER * self._period
+        # And whether this reading itself, should it leave its line, would be repaired: the
+        # reach past its own cell is a count less than past the short one.
+        self._repairable = aged & (gaps >= (1.0 + REPAIR_GAP) * q)
+        return aged & (gaps >= REPAIR_GAP * q)
 
     def _restart(self, which: np.ndarray, t: float, wheels: np.ndarray) -> None:
         """New windows for the wheels ``which`` (bool mask) from the row at ``t`` (s)."""
@@ -252,8 +257,11 @@ class WheelLines:
             ready = max(ready, t_c + hi)
         return ready
 
-    def _extend(self, t: float, wheels: np.ndarray) -> None:
-        repair = self._motion is not None
+    def _extend(self, t: float, wheels: np.ndarray, gapped: bool = False) -> None:
+        """Clip each live line by its reading; where one dies, the repair (or telling a loss
+        apart) of :meth:`push` (``gapped``: :meth:`_seen` has measured this row's reach; a
+        restart's clip, which no line fails, passes False)."""
+        repair = gapped
         before = self.counts.copy() if repair else None
         kernels("lines", 30 * self.counts.size).extend_lines(
             self.polys, self.counts, t, self.starts, wheels, self._first, self._q, self._tol,
@@ -261,13 +269,9 @@ class WheelLines:
         if repair and self.counts.min() <= 0:
             # Only lines that held for REPAIR_AFTER readings: a count missed by an encoder
             # that otherwise reads exactly, not noise that breaks lines within a few samples.
-            dead = ((self.counts == 0) & (before > 0) & (self._motion != 0)
-                    & (t - self.starts >= REPAIR_AFTER * self._period))
-            for i in np.flatnonzero(dead):
-                # A missed count leaves the reading a whole count behind the line's range;
-                # a line that only bends (a wandering motor) misses it by a sliver.
-                dead[i] = _behind(self.polys[i], int(before[i]), t - self.starts[i],
-                                  (wheels[i] - self._first[i]) * self._q, self._q, self._motion[i])
+            # A missed count leaves the reading a whole count behind the line's range; a line
+            # that only bends (a wandering motor) misses it by a sliver.
+            dead = (self.counts == 0) & self._repairable       # the tests, from _seen
             if dead.any():
                 # A failed clip leaves the polygon's rows untouched: retry the dead wheels
                 # with their reading one count along the motion.
@@ -279,7 +283,8 @@ class WheelLines:
                 fixed = dead & (counts > 0)
                 if not self._repair:
                     # Told apart, not repaired: the window restarts (its rows are rebuilt).
-                    self._spared = int(np.count_nonzero(fixed))
+                    self.spared = int(np.count_nonzero(fixed))
+                    self._told = fixed
                 elif fixed.any():
                     self.counts[fixed] = counts[fixed]
                     wheels[fixed] += shift[fixed]

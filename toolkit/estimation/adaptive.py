@@ -433,6 +433,7 @@ class AdaptiveKalman(Estimator):
         self._wheel_offset = np.zeros(n, dtype=np.int64)
         self._repairs = False
         self._deaths: deque[int] = deque(maxlen=self.IDEAL_WINDOW)
+        self._told_apart: deque[int] = deque(maxlen=self.IDEAL_WINDOW)
         self._nis_history: deque[float] = deque(maxlen=self.IDEAL_WINDOW)
         self._first = True
         self.last_nis = math.nan
@@ -668,16 +669,19 @@ class AdaptiveKalman(Estimator):
         self.x, self.P = imm.x.ravel().copy(), imm.P.copy()
         self.last_nis = float(self.mu @ np.array([(kf.y.item() ** 2) / kf.S.item() for kf in imm.filters]))
 
-    def _ideal(self) -> bool:
+    def _ideal(self, told_apart: bool = False) -> bool:
         """The encoders look ideal (they only quantize, and may miss a count): over the last
         :attr:`IDEAL_WINDOW` samples the wheels' exact lines broke (a reading no line of the
         window allows, missed counts repaired) on at most :attr:`LINE_BREAKS` of the wheel
         readings, and the central innovations' 90th percentile NIS is within twice that of
         chi-square(1) (2.71): rare outliers (a missed count) pass; read noise, jitter or a
-        wandering motor, which break lines within a few readings, do not."""
+        wandering motor, which break lines within a few readings, do not. ``told_apart``:
+        the lines broken by a missed count told apart but not repaired do not count (the
+        missed-count rate's evidence, :meth:`observe`)."""
         if len(self._nis_history) < self.IDEAL_WINDOW:
             return False
-        if sum(self._deaths) > self.LINE_BREAKS * self.n * len(self._deaths):
+        deaths = sum(self._deaths) - (sum(self._told_apart) if told_apart else 0)
+        if deaths > self.LINE_BREAKS * self.n * len(self._deaths):
             return False
         nis = np.fromiter(self._nis_history, float, len(self._nis_history))
         return float(np.partition(nis, 44)[44]) <= 2.0 * 2.706       # the 45th of 50
@@ -720,14 +724,24 @@ class AdaptiveKalman(Estimator):
         c = sample.central_count + self._central_offset
         wheels = np.asarray(sample.wheel_counts) + self._wheel_offset
         pending = self._pending
+        repairing, lines = self._repairs, self._lines
         repaired = self._layer.wheels(sample.time, wheels, None if pending is None else pending[0],
-                                      True if pending is None else pending[2], repair=self._repairs)
+                                      True if pending is None else pending[2], repair=repairing)
         if repaired is not None:
             self._wheel_offset = self._wheel_offset + repaired
             wheels = wheels + repaired
-        lost = 0 if repaired is None else int(np.abs(repaired).sum())
+        # The missed-count rate's evidence from the wheels: the repairs, or where the filter
+        # does not repair (its encoders' test counts a missed count as a break), the losses
+        # told apart while the encoders look ideal but for them (decided on the samples
+        # before: no noise that breaks lines), over the exposure.
+        lost, exposure = 0, lines.exposure
+        if repairing:
+            lost = 0 if repaired is None else int(np.abs(repaired).sum())
+        elif exposure or lines.spared:
+            lost, exposure = (lines.spared, exposure) if self._ideal(told_apart=True) else (0, 0.0)
         central = self._central_offset
-        self._deaths.append(self._lines.deaths if self._lines.active else 0)
+        self._deaths.append(lines.deaths if lines.active else 0)
+        self._told_apart.append(lines.spared if lines.active else 0)
         if self._first:
             q = self.q
             self.xs[:, 0] = (c + 0.5) * q
@@ -746,7 +760,7 @@ class AdaptiveKalman(Estimator):
         # The missed-count rate from the repairs (wheels' and, in holds, the central count's)
         # over the transitions where a loss would have shown.
         layer, rate = self._layer, self.missed_rate
-        rate.push(lost + abs(self._central_offset - central), self._lines.exposure + layer.exposure)
+        rate.push(lost + abs(self._central_offset - central), exposure + layer.exposure)
         self.missed_history.append((rate.mean, rate.variance, layer.seen))
         self._observed = (sample.time, wheels)
         self._foaw.push(sample.time, c)

@@ -341,8 +341,8 @@ def test_the_missed_count_rate_is_identified_from_the_repairs(p):
     # wheels and the sensor law's missed counts at p, seeds 0-3 pooled: the repairs over the
     # exposure (the transitions where a loss would have been repaired) estimate p. Repairs
     # are Poisson(p E), so the pooled rate k / E errs by sqrt(p / E) (about 6 % of p at
-    # 1e-3, E ~ 3e5); tolerance 4 of those (measured: -0.1, 0.4 and 0.6 of them at 3e-4,
-    # 1e-3, 2e-3). Two losses in one wheel's period are not repaired (a bias of at most
+    # 1e-3, E ~ 3e5); tolerance 4 of those (measured: -0.1, 0.8 and 0.7 of them at 3e-4,
+    # 1e-3, 2e-3; repairs over every transition gave 0.56-0.75e-3 for 1e-3). Two losses in one wheel's period are not repaired (a bias of at most
     # -m p, m ~ 38 transitions per wheel and period, not resolved here). With ideal encoders
     # nothing is repaired (k = 0).
     repairs, exposure = 0, 0.0
@@ -366,8 +366,8 @@ def test_the_untold_missed_count_rate_makes_the_position_consistent(monkeypatch)
     # Missed counts 1e-3 (the robustness case), seeds 0-9, the rate not told: the default
     # identifies it (each record's posterior mean within 4 of its own std of the truth) and
     # reports the position with the count offset it implies; its NEES in band is >= 0.8
-    # (issue 18's line; measured median 0.83, told 0.82). Without the offset the same
-    # filter's is far below (measured median 0.14).
+    # (issue 18's line; measured median 0.827, told 0.824). Without the offset the same
+    # filter's is far below (measured median 0.14 over these ten seeds).
     import dataclasses
 
     import toolkit.estimation.adaptive as adaptive

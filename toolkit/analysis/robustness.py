@@ -118,9 +118,12 @@ class RobustnessTable:
     estimators : tuple of str
     scores : dict of (case, estimator) to dict
         ``rms`` (m/s), ``startup`` / ``cruise`` / ``brake`` / ``braked`` (m/s), ``nees_in_band``
-        (None without a covariance), ``us_per_sample``: medians over the seeds.
-    raw : dict of (case, estimator) to ndarray of shape (seeds, 7)
-        The per-seed values (rms, the four phases, nees_in_band, us_per_sample).
+        (None without a covariance), ``us_per_sample``, ``missed_count_prob`` and
+        ``missed_count_std`` (the rate the position was reported under, told or identified;
+        None for estimators without it): medians over the seeds.
+    raw : dict of (case, estimator) to ndarray of shape (seeds, 9)
+        The per-seed values (rms, the four phases, nees_in_band, us_per_sample,
+        missed_count_prob, missed_count_std).
     """
 
     seeds: int
@@ -153,7 +156,8 @@ class RobustnessTable:
         for (case, name), score in self.scores.items():
             row = {"case": case, "estimator": name, "rms_mm_s": score["rms"] * 1e3}
             row.update({f"{p}_mm_s": score[p] * 1e3 for p in _PHASES})
-            row.update(nees_in_band=score["nees_in_band"], us_per_sample=score["us_per_sample"])
+            row.update(nees_in_band=score["nees_in_band"], us_per_sample=score["us_per_sample"],
+                       missed_count_prob=score["missed_count_prob"])
             rows.append(row)
         return pd.DataFrame(rows)
 
@@ -200,7 +204,9 @@ def robustness_table(cases: Any = None, seeds: int = 10, t_end: float = 10.0,
                 raw.setdefault((case.name, name), []).append(
                     [result.rms_error] + [math.nan if phases[p] is None else phases[p] for p in _PHASES]
                     + [math.nan if result.nees_in_band is None else result.nees_in_band,
-                       result.wall_time / sc.record.n_samples * 1e6])
+                       result.wall_time / sc.record.n_samples * 1e6,
+                       math.nan if result.missed_count_prob is None else result.missed_count_prob,
+                       math.nan if result.missed_count_std is None else result.missed_count_std])
     arrays = {key: np.array(rows) for key, rows in raw.items()}
     scores = {}
     for key, table in arrays.items():
@@ -209,6 +215,8 @@ def robustness_table(cases: Any = None, seeds: int = 10, t_end: float = 10.0,
         score.update({p: float(med[1 + i]) for i, p in enumerate(_PHASES)})
         score["nees_in_band"] = None if np.isnan(med[5]) else float(med[5])
         score["us_per_sample"] = float(med[6])
+        score["missed_count_prob"] = None if np.isnan(med[7]) else float(med[7])
+        score["missed_count_std"] = None if np.isnan(med[8]) else float(med[8])
         scores[key] = score
     return RobustnessTable(seeds, tuple(c.name for c in chosen), names, scores, arrays)
 

@@ -130,6 +130,7 @@ class WheelLines:
         self._motion: np.ndarray | None = None   # the contacts' directions at this row
         self._repair = False
         self._gaps = np.empty(n)
+        self._repairable = self._told = np.zeros(n, dtype=bool)
         #: Per row: lines that broke; of those, the missed counts told apart (not repaired);
         #: the transitions read where a lost one would have been told apart.
         self.deaths = self.spared = 0

@@ -418,7 +418,7 @@ class AdaptiveKalman(Estimator):
         #: The missed-count rate's posterior; per observed sample its mean and variance, and
         #: whether a central count lost there would have been repaired (:class:`HoldLayer`).
         self.missed_rate = MissedCountRate()
-        self.missed_history: list[tuple[float, float]] = []
+        self.missed_history: list[tuple[float, float, bool]] = []
         self._moments, self._empty = np.zeros(5), np.zeros((1, 2))
         self.monitor.reset()
         self._foaw.reset(speed=speed)

@@ -180,6 +180,77 @@ def test_in_loop_sweep_meets_the_targets_on_a_small_sweep():
     assert check.met
 
 
+def _same_check(a, b):
+    """Every per-run array of two ViscosityChecks bitwise equal (a run is computed whole by one
+    process with the same code and the same seed: nothing may differ, not even by rounding)."""
+    for d in a.problem.definitions:
+        for name in ("tau", "tau_true", "tau_predicted", "correction"):
+            assert np.array_equal(getattr(a, name)[d], getattr(b, name)[d], equal_nan=True), (name, d)
+    for name in ("slope", "v0", "settled_predicted", "stop_time", "window", "commanded"):
+        assert np.array_equal(getattr(a.design, name), getattr(b.design, name)), name
+    assert [s.entropy for s in a.design.seeds] == [s.entropy for s in b.design.seeds]
+    assert [tuple(s.spawn_key) for s in a.design.seeds] == [tuple(s.spawn_key) for s in b.design.seeds]
+    assert np.array_equal(a.settled, b.settled, equal_nan=True) and np.array_equal(a.ok, b.ok)
+    assert a.message == b.message and a.status is b.status
+
+
+@pytest.mark.parametrize("n, mass, runs, seed", [(10, 0.7, 23, 3), (9, 1.0, 17, 11), (8, 2.5, 9, 5)])
+def test_in_loop_sweep_over_forked_workers_equals_one_process(n, mass, runs, seed):
+    # The sweep's runs shared among 2 and 3 forked processes give every run's numbers exactly
+    # (rtol = atol = 0) as one process does; odd and even n, run counts that do not divide.
+    apparatus = Apparatus.carousel(n=n, mass=mass)
+    problem = ViscosityProblem(apparatus, "loop", runs=runs, seed=seed)
+    one = viscosity_check(problem, workers=1)
+    for workers in (2, 3):
+        _same_check(one, viscosity_check(problem, workers=workers))
+    assert one.ok.all()
+
+
+def test_forked_sweep_after_a_parallel_batch_kernel():
+    # The ideal sweep's batch kernel runs on threads (prange) first; a forked in-loop sweep in
+    # the same process afterwards must still finish and equal the one-process sweep (rtol = 0).
+    viscosity_check(ViscosityProblem(CAROUSEL, "ideal", runs=64, seed=2))
+    problem = ViscosityProblem(CAROUSEL, "loop", runs=12, seed=2)
+    _same_check(viscosity_check(problem, workers=1), viscosity_check(problem, workers=2))
+
+
+@pytest.mark.parametrize("seed", [0, 9])
+def test_sweep_runs_equal_their_closed_loop_with_the_virtual_viscosity(seed):
+    # The sweep replays each run's staircase as allocated in the plan; binding the run's
+    # VirtualViscosity inside CarryThen (the controller as a user writes it) and running
+    # simulate_closed_loop gives the same samples bitwise (rtol = atol = 0: the same table in
+    # the same kernel), so the same tau under each definition.
+    from toolkit.controllers import VirtualViscosity
+    from toolkit.predictions.viscosity import _simulate_startups, measure_time_constants
+
+    apparatus = Apparatus.carousel(n=9, mass=1.3)
+    problem = ViscosityProblem(apparatus, "loop", runs=6, seed=seed)
+    design = plan_runs(problem)
+    records, failures = _simulate_startups(problem, design, False)
+    assert not failures
+    for r in range(design.runs):
+        v0 = float(design.v0[r])
+        controller = CarryThen(VirtualViscosity(float(design.slope[r])), problem.pre_roll, v0)
+        run = simulate_closed_loop(apparatus.run_plant(v0, "loop"), controller,
+                                   problem.pre_roll + float(design.stop_time[r]) + problem.tail,
+                                   v0=v0, sensors=apparatus.sensors, seed=design.seeds[r])
+        first = int(np.searchsorted(run.times, problem.pre_roll - 1e-9))
+        times, estimate, speed = records[r]
+        assert np.array_equal(times, run.times[first:] - run.times[first])
+        assert np.array_equal(estimate, run.estimate[first:]) and np.array_equal(speed, run.speed[first:])
+        alone = measure_time_constants(problem, [(times, run.estimate[first:], run.speed[first:])])
+        swept = measure_time_constants(problem, [records[r]])
+        for d in problem.definitions:
+            assert alone["tau"][d][0] == swept["tau"][d][0] and alone["tau_true"][d][0] == swept["tau_true"][d][0]
+
+
+def test_viscosity_check_refuses_bad_workers():
+    for bad in (0, -1, 1.5, "2"):
+        with pytest.raises((ParameterError, TypeError)) as info:
+            viscosity_check(ViscosityProblem(CAROUSEL, "loop", runs=2), workers=bad)
+        assert "'workers' parameter of viscosity_check" in str(info.value)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("n", [10, 20, 100])
 def test_full_sweeps_of_490_runs(n):

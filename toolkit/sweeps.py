@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 
 from ._compiled import warm
+from ._forked import stop
 from .errors import as_float, as_int, suggestion
 from .errors import ParameterError, ParameterTypeError, parameter_message
 
@@ -440,13 +441,7 @@ def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers
                 feed(busy[ready], ready)
     finally:
         for process, connection in pool:
-            if process.is_alive() and connection in busy:
-                process.terminate()
-            process.join(timeout=5)
-            if process.is_alive():
-                process.kill()
-                process.join()
-            connection.close()
+            stop(process, connection, busy=connection in busy)
 
 
 def _run_dask(experiment: Any, seed: int, bounds: list[tuple[int, int]], scheduler: Any,

@@ -47,15 +47,17 @@ import math
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
-from ..controllers import VirtualViscosity
+from .._compiled import ensure_compiled
+from .._forked import fork_map, idle_cores
+from ..controllers import OpenLoop, VirtualViscosity
 from ..errors import ParameterError, ParameterTypeError, as_float, as_int, check_option, parameter_message
 from ..loop.closed_loop import LOOP_RATE, simulate_closed_loop
-from ..model import ContactSet, sample_count
+from ..model import ContactSet, PiecewiseConstant, sample_count
 from ..simulation import SimulationStatus, sampled_batch
 from ._measure import TIME_CONSTANTS, proportional_fit, startup_time_constant
 from .apparatus import Apparatus, CarryThen
@@ -67,6 +69,7 @@ __all__ = ["ViscosityProblem", "ViscosityDesign", "ViscosityFit", "ViscosityChec
 
 #: The groups of starts fitted apart: inside the spread (``p >= 0``) and below it.
 START_GROUPS = ("inside", "outside")
+_NO_SWITCH = np.empty(0)            # (a PiecewiseConstant's switching times: none, a constant)
 #: Spacings between the default starts and the equilibrium set, at least (for ``n >= 10``).
 EQUILIBRIUM_MARGIN = 3.0
 
@@ -223,6 +226,9 @@ class ViscosityDesign:
         The ideal model's time from the start to the resting speed.
     window : s
         From the staircase's switch-on to the record's last sample: what is fitted.
+    commanded : ndarray of shape (runs, n), m/s
+        The contact speeds each run's :class:`~toolkit.controllers.VirtualViscosity` commands
+        (its allocation, solved once here).
     """
 
     slope: np.ndarray
@@ -235,6 +241,7 @@ class ViscosityDesign:
     settled_predicted: np.ndarray
     stop_time: np.ndarray
     window: np.ndarray
+    commanded: np.ndarray
 
     @property
     def runs(self) -> int:
@@ -256,29 +263,42 @@ def draw_design(problem: ViscosityProblem) -> dict[str, Any]:
             "v0": x0 * spacing, "inside": position >= 0.0, "seeds": sensor_seeds.spawn(p.runs)}
 
 
-def _commanded(problem: ViscosityProblem, slope: float, v0: float) -> ContactSet:
-    """The contacts the run's controller commands (the allocator's staircase)."""
+def _commanded(problem: ViscosityProblem, slope: float, v0: float,
+               speeds: np.ndarray | None = None) -> ContactSet:
+    """The contacts the run's controller commands (the allocator's staircase; ``speeds``:
+    the one already allocated, m/s)."""
     a = problem.apparatus
     plant = a.run_plant(v0, problem.mode)
-    return ContactSet(VirtualViscosity(float(slope), 0.0).speeds(plant), plant.contacts.forces)
+    if speeds is None:
+        speeds = VirtualViscosity(float(slope), 0.0).speeds(plant)
+    return ContactSet(speeds, plant.contacts.forces)
 
 
 def plan_runs(problem: ViscosityProblem) -> ViscosityDesign:
     """:func:`draw_design` and, per run, the ideal model's resting speed, the time to reach it
     and the fitted window (switch-on to the record's last sample at the sample rate)."""
+    return _plan(problem, draw_design(problem), np.arange(problem.runs))
+
+
+def _plan(problem: ViscosityProblem, drawn: dict[str, Any], rows: np.ndarray) -> ViscosityDesign:
+    """:func:`plan_runs` of the runs ``rows`` (indices into the draw ``drawn``), in that order."""
     p, m = problem, problem.apparatus.mass
-    d = draw_design(problem)
-    stop = np.empty(p.runs)
-    t_stop = np.empty(p.runs)
-    for r in range(p.runs):
+    d = {key: value[rows] for key, value in drawn.items() if key != "seeds"}
+    seeds = [drawn["seeds"][r] for r in rows]
+    runs = rows.size
+    stop = np.empty(runs)
+    t_stop = np.empty(runs)
+    commanded = np.empty((runs, p.apparatus.n))
+    for r in range(runs):
         contacts = _commanded(p, d["slope"][r], d["v0"][r])
+        commanded[r] = contacts.speeds
         stop[r] = resting_speed(contacts, d["v0"][r])
         t_stop[r] = travel_time(contacts, m, d["v0"][r], stop[r])
     period = 1.0 / p.rate
     switch = np.ceil(p.pre_roll / period - 1e-9) * period          # the first sample from pre_roll on
     last = np.array([sample_count(p.pre_roll + t + p.tail, p.rate) - 1 for t in t_stop]) / p.rate
     return ViscosityDesign(d["slope"], d["spacing"], d["v0"], d["position"], d["start"], d["inside"],
-                           d["seeds"], stop, t_stop, last - switch)
+                           seeds, stop, t_stop, last - switch, commanded)
 
 
 def _progress(total: int, progress: bool, desc: str) -> Any:
@@ -289,46 +309,92 @@ def _progress(total: int, progress: bool, desc: str) -> Any:
                 dynamic_ncols=True)
 
 
-def _simulate_startups(problem: ViscosityProblem, design: ViscosityDesign,
-                       progress: bool) -> tuple[list[Any], list[str]]:
-    """Run every closed-loop startup. Returns per run ``(times, estimate, speed)`` from the
-    staircase's switch-on (times from 0, s; speeds m/s), or ``None`` for a run that did not
-    finish, and the failure messages.
+def _simulate_startups(problem: ViscosityProblem, design: ViscosityDesign, progress: bool,
+                       index: np.ndarray | None = None) -> tuple[list[Any], list[str]]:
+    """Run every closed-loop startup of ``design``. Returns per run ``(times, estimate, speed)``
+    from the staircase's switch-on (times from 0, s; speeds m/s), or ``None`` for a run that
+    did not finish, and the failure messages (naming each run by ``index``, its number in the
+    sweep; default its row).
 
     In the loop (encoders and the Kalman filter) each run is one closed loop
     (:func:`simulate_closed_loop`: compiled, the filter called per sample); ideal, every run
     at once (:func:`toolkit.simulation.sampled_batch`, in parallel over the cores: each run
     equals its :func:`simulate_closed_loop` at the default 50 Hz, the same kernel; tested)."""
     a, p = problem.apparatus, problem
+    runs = design.runs
+    index = np.arange(runs) if index is None else index
     records: list[Any] = []
     failures: list[str] = []
-    plants = [a.run_plant(design.v0[r], p.mode) for r in range(p.runs)]
-    controllers = [CarryThen(VirtualViscosity(float(design.slope[r]), 0.0), p.pre_roll,
-                             float(design.v0[r])) for r in range(p.runs)]
-    lengths = [p.pre_roll + float(design.stop_time[r]) + p.tail for r in range(p.runs)]
-    bar = _progress(p.runs, progress, f"viscosity ({p.mode})")
+    plants = [a.run_plant(design.v0[r], p.mode) for r in range(runs)]
+    # Each run's VirtualViscosity(slope) after the carry: its law is the constant staircase it
+    # allocates when bound, which the plan already allocated (design.commanded): replayed
+    # as is (the same table, tested equal to binding the VirtualViscosity again).
+    controllers = [CarryThen(OpenLoop(PiecewiseConstant(_NO_SWITCH, design.commanded[r][None, :])),
+                             p.pre_roll, float(design.v0[r])) for r in range(runs)]
+    lengths = [p.pre_roll + float(design.stop_time[r]) + p.tail for r in range(runs)]
+    bar = _progress(runs, progress, f"viscosity ({p.mode})")
     try:
         if p.mode == "loop":
-            runs = []
-            for r in range(p.runs):
+            outcomes = []
+            for r in range(runs):
                 run = simulate_closed_loop(plants[r], controllers[r], lengths[r], v0=float(design.v0[r]),
                                            sensors=a.sensors, seed=design.seeds[r])
                 bar.update(1)
                 failed = None if run.status is SimulationStatus.SUCCESS else run.message
-                runs.append((run.times, run.estimate, run.speed, failed))
+                outcomes.append((run.times, run.estimate, run.speed, failed))
         else:
-            runs = _together(plants, controllers, lengths, design.v0)
-            bar.update(p.runs)
+            outcomes = _together(plants, controllers, lengths, design.v0)
+            bar.update(runs)
     finally:
         bar.close()
-    for r, (times, estimate, speed, failed) in enumerate(runs):
+    for r, (times, estimate, speed, failed) in enumerate(outcomes):
         if failed is not None:
-            failures.append(f"run {r}: {failed}")
+            failures.append(f"run {index[r]}: {failed}")
             records.append(None)
             continue
         first = int(np.searchsorted(times, p.pre_roll - 1e-9))
         records.append((times[first:] - times[first], estimate[first:], speed[first:]))
     return records, failures
+
+
+def _sweep_rows(problem: ViscosityProblem, drawn: dict[str, Any], rows: np.ndarray,
+                progress: bool) -> tuple[ViscosityDesign, dict[str, Any], dict[str, np.ndarray], list[str]]:
+    """Everything :func:`viscosity_check` does run by run, for the runs ``rows`` of the draw
+    ``drawn``: their plan, closed loops, measured and predicted time constants, failures."""
+    design = _plan(problem, drawn, rows)
+    records, failures = _simulate_startups(problem, design, progress, rows)
+    return design, measure_time_constants(problem, records), predict_time_constants(problem, design), failures
+
+
+def _concatenated(parts: list[Any]) -> Any:
+    """Arrays, lists, dicts of them and designs of the parts, joined run after run."""
+    first = parts[0]
+    if isinstance(first, np.ndarray):
+        return np.concatenate(parts)
+    if isinstance(first, list):
+        return [x for part in parts for x in part]
+    if isinstance(first, dict):
+        return {key: _concatenated([part[key] for part in parts]) for key in first}
+    return type(first)(*(_concatenated([getattr(part, f.name) for part in parts]) for f in fields(first)))
+
+
+def _sweep(problem: ViscosityProblem, progress: bool, workers: int | None
+           ) -> tuple[ViscosityDesign, dict[str, Any], dict[str, np.ndarray], list[str]]:
+    """:func:`_sweep_rows` of every run: in the loop over ``workers`` processes (forked,
+    :func:`toolkit._forked.fork_map`; default the idle cores), each an equal share of the
+    runs; ideal in this process (its batch kernel already runs over the cores). Each run is
+    computed whole by one process: the results do not depend on ``workers`` (tested)."""
+    drawn = draw_design(problem)
+    count = 1 if problem.mode != "loop" else (idle_cores() if workers is None else workers)
+    count = max(1, min(count, problem.runs))
+    if count == 1:
+        return _sweep_rows(problem, drawn, np.arange(problem.runs), progress)
+    # Every child inherits the compiled kernels (otherwise each would compile or load them).
+    ensure_compiled("core", "lines")
+    shares = np.array_split(np.arange(problem.runs), count)
+    parts = fork_map(lambda rows: _sweep_rows(problem, drawn, rows, progress and rows is shares[0]),
+                     shares)
+    return tuple(_concatenated([part[i] for part in parts]) for i in range(4))  # type: ignore[return-value]
 
 
 def _together(plants: list[Any], controllers: list[Any], lengths: list[float],
@@ -388,8 +454,8 @@ def predict_time_constants(problem: ViscosityProblem, design: ViscosityDesign) -
     out: dict[str, np.ndarray] = {}
     for d in p.definitions:
         if d == "crossing_63":
-            out[d] = np.array([viscosity_correction(_commanded(p, k, v0), m, v0, k)
-                               for k, v0 in zip(design.slope, design.v0)])
+            out[d] = np.array([viscosity_correction(_commanded(p, k, v0, speeds), m, v0, k)
+                               for k, v0, speeds in zip(design.slope, design.v0, design.commanded)])
         else:
             out[d] = np.asarray(least_squares_correction(p.apparatus.n, design.start,
                                                          design.window * design.slope / m), dtype=float)
@@ -619,7 +685,8 @@ def _verdict(problem: ViscosityProblem, fits: tuple[ViscosityFit, ...],
     return CheckStatus.MET, "; ".join(said)
 
 
-def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool = False) -> ViscosityCheck:
+def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool = False,
+                    workers: int | None = None) -> ViscosityCheck:
     """Run the viscosity sweep and compare each definition's time constants with the ideal model.
 
     Parameters
@@ -628,6 +695,10 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
         Default: ``ViscosityProblem()`` (the carousel, 490 runs, in the loop).
     progress : bool
         Show a progress bar (tqdm) on stderr.
+    workers : int, optional
+        Processes the in-loop runs are shared among (forked; ``>= 1``); default: the cores
+        the load average leaves idle. The results do not depend on it; ideal runs always run
+        in one batch kernel over the cores.
 
     Returns
     -------
@@ -637,14 +708,13 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
         problem = ViscosityProblem()
     if not isinstance(problem, ViscosityProblem):
         raise ParameterTypeError(parameter_message("problem", "viscosity_check", "be a ViscosityProblem", problem))
+    if workers is not None:
+        workers = as_int(workers, "workers", "viscosity_check", low=1)
     started = time.perf_counter()
-    design = plan_runs(problem)
-    records, failures = _simulate_startups(problem, design, progress)
-    measured = measure_time_constants(problem, records)
-    correction = predict_time_constants(problem, design)
+    design, measured, correction, failures = _sweep(problem, progress, workers)
     m = problem.apparatus.mass
     tau_predicted = {d: correction[d] * m / design.slope for d in problem.definitions}
-    ok = np.array([record is not None for record in records], dtype=bool)
+    ok = np.isfinite(measured["window"])
     # The prediction is fitted over the planned window: a record of another length is not comparable.
     period = 1.0 / problem.rate
     off = ok & ~(np.abs(measured["window"] - design.window) <= 1e-6 * period)

@@ -367,6 +367,40 @@ def test_compiled_motor_piece_is_the_motor_law(rng, lag, rate):
                                    atol=4 * EPS * distance_scale)
 
 
+@pytest.mark.parametrize("lag, play, n", [(0.0075, 2e-4, 10), (0.03, 1e-3, 3), (0.002, 5e-5, 25)])
+def test_play_take_up_time_is_the_bisection_on_the_motor_law(rng, lag, play, n):
+    # core.play_take_up_time (the holds' wait for the gearbox play after a reversal) against a
+    # second method: the same bracket and bisection in Python on MotorPiece.displacement (the
+    # motor law as written). They agree to atol 1e-12 s: the bisection ends on an interval of
+    # bracket / 2^50 (< 1e-15 s here) and the two displacements differ by at most 4 eps
+    # (test above), which moves the root by 4 eps * 0.2 m / (0.01 m/s) < 1e-13 s. Checked on the
+    # law itself too: at the time found every motor has travelled the play since it turned
+    # (to 4 eps of the distances), 1 us earlier one has not.
+    module = _compiled.load("core")
+    v0 = rng.uniform(0.01, 0.35, n) * rng.choice([-1.0, 1.0], n)
+    u = -np.sign(v0) * rng.uniform(0.01, 0.35, n)         # every motor reverses
+    turn = lag * np.log((u - v0) / u)
+    step = play / float(np.abs(u).min()) + lag
+    found = module.play_take_up_time(v0, u, lag, turn, play, step)
+    piece = MotorPiece.build(0.0, v0, u, lag, math.inf)
+    at_turn = np.array([piece.displacement(float(s))[i] for i, s in enumerate(turn)])
+
+    def taken_up(s):
+        return bool(np.all((s >= turn) & (np.abs(piece.displacement(s) - at_turn) >= play)))
+
+    lo = float(turn.max())
+    hi = lo + step
+    while not taken_up(hi):
+        hi += step
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if taken_up(mid) else (mid, hi)
+    assert found == pytest.approx(hi, rel=0.0, abs=1e-12)
+    travelled = np.abs(piece.displacement(found) - at_turn)
+    assert np.all(found >= turn) and np.all(travelled >= play * (1 - 4 * EPS))
+    assert not taken_up(found - 1e-6)
+
+
 def test_pairwise_sum_is_numpys_sum(rng):
     # The engine's sums are NumPy's own doubles (np.add.reduce on a contiguous float64 array:
     # blocks of 8 partial sums, halved above 128 terms): compared exactly, at every length

@@ -103,6 +103,7 @@ KERNELS = {
     # The dynamic-motor engine: the motor law's closed form and the rounds of the engine.
     "motor_build": _IEEE, "motor_speed": {"inline": "always", "error_model": "numpy"},
     "motor_coefficients": _IEEE, "motor_displacement": _IEEE, "pairwise_sum": _IEEE, "pairwise_block": _INLINE,
+    "play_taken_up": _IEEE, "play_take_up_time": _IEEE,
     "filippov": _IEEE, "compliant_round": _IEEE, "dynamic_run": _IEEE,
     "advance_dynamic": _IEEE, "advance_outputs": _IEEE,
     # Sampled loops: the sensor law's and the laws' compiled forms, one loop, many loops.
@@ -1278,6 +1279,48 @@ def motor_displacement(motor: np.ndarray, tau: float, s: float, out: np.ndarray)
                                  + (motor[M_AFTER, i] - ui) * (tau * -math.expm1(-rest / tau)))
         else:
             out[i] = distance + motor[M_AFTER, i] * rest
+
+
+def play_taken_up(motor: np.ndarray, tau: float, turn: np.ndarray, at_turn: np.ndarray,
+                  play: float, s: float, out: np.ndarray) -> bool:
+    """Whether, at offset ``s`` (s) of the piece ``motor`` (:func:`motor_build`), every motor
+    has turned (``s >= turn``) and travelled at least ``play`` (m) from where it turned
+    (its displacement there ``at_turn``, m); ``out`` (n,) is scratch."""
+    motor_displacement(motor, tau, s, out)
+    for i in range(out.size):
+        if not (s >= turn[i] and abs(out[i] - at_turn[i]) >= play):
+            return False
+    return True
+
+
+def play_take_up_time(start: np.ndarray, u: np.ndarray, tau: float, turn: np.ndarray,
+                      play: float, step: float) -> float:
+    """The offset (s) from a command change at which every motor that turns (speeds ``start``
+    to commands ``u``, lag ``tau``, no rate limit; each turning at offset ``turn``) has
+    travelled ``play`` (m) from where it turned, on the motor law's displacement
+    (:func:`motor_displacement`): bracketed from ``max(turn)`` by steps of ``step`` (s), then
+    50 bisections; the upper end."""
+    n = start.size
+    motor = np.empty((5, n))
+    motor_build(start, u, tau, INF, motor)
+    out = np.empty(n)
+    at_turn = np.empty(n)
+    for i in range(n):
+        motor_displacement(motor, tau, turn[i], out)
+        at_turn[i] = out[i]
+    lo = turn[0]
+    for i in range(1, n):
+        lo = max(lo, turn[i])
+    hi = lo + step
+    while not play_taken_up(motor, tau, turn, at_turn, play, hi, out):
+        hi += step
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        if play_taken_up(motor, tau, turn, at_turn, play, mid, out):
+            hi = mid
+        else:
+            lo = mid
+    return hi
 
 
 # -- dynamic motors: the engine -----------------------------------------------------------------

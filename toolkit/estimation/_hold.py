@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from .._compiled import kernels
-from ..model.motors import MotorPiece, lag_settling_time
+from ..model.motors import lag_settling_time
 from ._input import EstimatorModel
 
 #: Vertices a polygon may hold (a run of counts of one line allows at most a quadrilateral;
@@ -239,22 +239,13 @@ class WheelLines:
         elif play > 0.0 and turning.any():
             # A motor that turns (or starts from rest) passes no motion through the play until
             # it has travelled the play from where it turned: bisect the time at which every
-            # turning motor has, on the motor law's own displacement (MotorPiece).
-            piece = MotorPiece.build(0.0, start[turning], target[turning], lag, math.inf)
+            # turning motor has, on the motor law's own displacement (core.play_take_up_time
+            # on core.motor_displacement, MotorPiece.displacement's closed form compiled).
             v0, u = start[turning], target[turning]
             turn = lag * np.log((u - v0) / u)
-            at_turn = np.array([piece.displacement(float(s_i))[i] for i, s_i in enumerate(turn)])
-
-            def taken_up(s: float) -> bool:
-                return bool(np.all((s >= turn) & (np.abs(piece.displacement(s) - at_turn) >= play)))
-
-            lo = float(turn.max())
-            hi = lo + play / float(np.abs(u).min()) + lag
-            while not taken_up(hi):
-                hi += play / float(np.abs(u).min()) + lag
-            for _ in range(50):
-                mid = 0.5 * (lo + hi)
-                lo, hi = (lo, mid) if taken_up(mid) else (mid, hi)
+            step = play / float(np.abs(u).min()) + lag
+            hi = kernels("core", 60 * (12 + u.size)).play_take_up_time(
+                np.ascontiguousarray(v0), np.ascontiguousarray(u), lag, turn, play, step)
             ready = max(ready, t_c + hi)
         return ready
 

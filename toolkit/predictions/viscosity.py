@@ -69,6 +69,8 @@ __all__ = ["ViscosityProblem", "ViscosityDesign", "ViscosityFit", "ViscosityChec
 
 #: The groups of starts fitted apart: inside the spread (``p >= 0``) and below it.
 START_GROUPS = ("inside", "outside")
+#: Fewest in-loop runs per forked process :func:`viscosity_check` uses by default.
+RUNS_PER_PROCESS = 8
 _NO_SWITCH = np.empty(0)            # (a PiecewiseConstant's switching times: none, a constant)
 #: Spacings between the default starts and the equilibrium set, at least (for ``n >= 10``).
 EQUILIBRIUM_MARGIN = 3.0
@@ -381,11 +383,15 @@ def _concatenated(parts: list[Any]) -> Any:
 def _sweep(problem: ViscosityProblem, progress: bool, workers: int | None
            ) -> tuple[ViscosityDesign, dict[str, Any], dict[str, np.ndarray], list[str]]:
     """:func:`_sweep_rows` of every run: in the loop over ``workers`` processes (forked,
-    :func:`toolkit._forked.fork_map`; default the idle cores), each an equal share of the
+    :func:`toolkit._forked.fork_map`; default the idle cores, at most one per
+    :data:`RUNS_PER_PROCESS` runs), each an equal share of the
     runs; ideal in this process (its batch kernel already runs over the cores). Each run is
     computed whole by one process: the results do not depend on ``workers`` (tested)."""
     drawn = draw_design(problem)
-    count = 1 if problem.mode != "loop" else (idle_cores() if workers is None else workers)
+    if problem.mode != "loop":
+        count = 1
+    else:   # (by default at least RUNS_PER_PROCESS runs each: a fork costs about what they do)
+        count = min(idle_cores(), problem.runs // RUNS_PER_PROCESS) if workers is None else workers
     count = max(1, min(count, problem.runs))
     if count == 1:
         return _sweep_rows(problem, drawn, np.arange(problem.runs), progress)
@@ -697,8 +703,8 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
         Show a progress bar (tqdm) on stderr.
     workers : int, optional
         Processes the in-loop runs are shared among (forked; ``>= 1``); default: the cores
-        the load average leaves idle. The results do not depend on it; ideal runs always run
-        in one batch kernel over the cores.
+        the load average leaves idle, at most one per :data:`RUNS_PER_PROCESS` runs. The
+        results do not depend on it; ideal runs always run in one batch kernel over the cores.
 
     Returns
     -------

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -28,7 +29,22 @@ def idle_cores() -> int:
     return max(1, min(allowed, threads(PARALLEL_AFTER)))
 
 
-def _child(fn: Callable[[Any], Any], item: Any, connection: Any) -> None:
+def _die_with(parent: int) -> None:
+    """Have the kernel send this process SIGTERM when its parent dies (Linux's
+    ``PR_SET_PDEATHSIG``; elsewhere nothing), and end now if ``parent`` has already gone: a
+    parent killed outright (no clean-up of its own) leaves no child working on."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):                                # (not Linux)
+        pass
+    if os.getppid() != parent:
+        os._exit(1)
+
+
+def _child(fn: Callable[[Any], Any], item: Any, connection: Any, parent: int) -> None:
+    _die_with(parent)
     try:
         connection.send((fn(item), None))
     except BaseException as error:                  # (reported to the parent, raised there)
@@ -45,8 +61,9 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any]) -> list[Any]:
     forked child (all at once: one item per core). ``fn`` and the items are inherited, not
     pickled; each result comes back pickled through a pipe. An exception in a child is raised
     here; any exception here (an interrupt included) terminates the children and waits for
-    them before it propagates: no process is left behind. Without ``fork`` (not POSIX) the
-    items run here, one after the other."""
+    them before it propagates, and a child whose parent dies outright is sent SIGTERM (Linux):
+    no process is left behind. Without ``fork`` (not POSIX) the items run here, one after the
+    other."""
     if len(items) <= 1 or "fork" not in multiprocessing.get_all_start_methods():
         return [fn(item) for item in items]
     context = multiprocessing.get_context("fork")
@@ -55,7 +72,7 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any]) -> list[Any]:
     try:
         for item in items[1:]:
             connection, end = context.Pipe(duplex=False)
-            process = context.Process(target=_child, args=(fn, item, end), daemon=True)
+            process = context.Process(target=_child, args=(fn, item, end, os.getpid()), daemon=True)
             process.start()
             end.close()
             children.append((process, connection))

@@ -2,7 +2,8 @@
 process pool, on a Dask cluster) exits 130 within 5 s, leaves no process of its own behind and
 writes nothing.
 
-Each test runs ``active-contacts sweep`` in a process group of its own (as a shell runs a
+The last test does the same to a script whose viscosity sweep runs on forked workers
+(:func:`toolkit._forked.fork_map`). Each other test runs ``active-contacts sweep`` in a process group of its own (as a shell runs a
 command), waits until the sweep is running, signals it as a terminal or a supervisor would,
 and then looks at the group in ``/proc``.
 """
@@ -144,3 +145,40 @@ def test_interrupted_dask_sweep_cancels_its_chunks(tmp_path):
         while count() and time.monotonic() < deadline:
             time.sleep(0.1)
         assert count() == 0
+
+
+#: A script running a forked in-loop viscosity sweep (toolkit._forked.fork_map).
+_FORKED_SWEEP = """
+from toolkit.predictions import Apparatus, ViscosityProblem, viscosity_check
+print("started", flush=True)
+viscosity_check(ViscosityProblem(Apparatus.carousel(), "loop", 20000), workers=2)
+"""
+
+
+@pytest.mark.parametrize("sig, whole_group", [(signal.SIGINT, True), (signal.SIGTERM, False)],
+                         ids=["ctrl-c", "kill-parent"])
+def test_an_interrupted_forked_sweep_leaves_no_process(sig, whole_group):
+    # A 20000-run in-loop sweep on 2 forked processes (minutes of work), signalled once both
+    # work: Ctrl-C (the whole group) or a kill of the parent alone (no clean-up of its own:
+    # the child is ended by the kernel's parent-death signal). Within 5 s (the issue's bound
+    # for interrupts) no process of the group is left.
+    process = subprocess.Popen([sys.executable, "-c", _FORKED_SWEEP], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True,
+                               env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        assert process.stdout.readline().strip() == "started"
+        deadline = time.monotonic() + 120
+        while len(_group(process.pid)) < 2 and time.monotonic() < deadline and process.poll() is None:
+            time.sleep(0.05)
+        assert len(_group(process.pid)) >= 2, "the forked worker did not start"
+        time.sleep(1.0)
+        (os.killpg if whole_group else os.kill)(process.pid, sig)
+        sent = time.monotonic()
+        while _group(process.pid) and time.monotonic() - sent < 5.0:
+            time.sleep(0.05)
+        assert not _group(process.pid), f"left after 5 s: {_group(process.pid)}"
+        assert process.wait(timeout=5) != 0
+    finally:
+        if _group(process.pid):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()

@@ -2,10 +2,10 @@
 process pool, on a Dask cluster) exits 130 within 5 s, leaves no process of its own behind and
 writes nothing.
 
-The last test does the same to a script whose viscosity sweep runs on forked workers
-(:func:`toolkit._forked.fork_map`). Each other test runs ``active-contacts sweep`` in a process group of its own (as a shell runs a
-command), waits until the sweep is running, signals it as a terminal or a supervisor would,
-and then looks at the group in ``/proc``.
+Each test runs ``active-contacts sweep`` (the last one: a script whose viscosity sweep runs on
+forked workers, :func:`toolkit._forked.fork_map`) in a process group of its own (as a shell
+runs a command), waits until the sweep is running, signals it as a terminal or a supervisor
+would, and then looks at the group in ``/proc``.
 """
 
 from __future__ import annotations

@@ -226,7 +226,7 @@ def test_sweep_runs_equal_their_closed_loop_with_the_virtual_viscosity(seed):
     apparatus = Apparatus.carousel(n=9, mass=1.3)
     problem = ViscosityProblem(apparatus, "loop", runs=6, seed=seed)
     design = plan_runs(problem)
-    records, failures = _simulate_startups(problem, design, False)
+    records, failures = _simulate_startups(problem, design)
     assert not failures
     for r in range(design.runs):
         v0 = float(design.v0[r])

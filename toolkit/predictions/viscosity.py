@@ -311,12 +311,12 @@ def _progress(total: int, progress: bool, desc: str) -> Any:
                 dynamic_ncols=True)
 
 
-def _simulate_startups(problem: ViscosityProblem, design: ViscosityDesign, progress: bool,
+def _simulate_startups(problem: ViscosityProblem, design: ViscosityDesign, bar: Any = None,
                        index: np.ndarray | None = None) -> tuple[list[Any], list[str]]:
     """Run every closed-loop startup of ``design``. Returns per run ``(times, estimate, speed)``
     from the staircase's switch-on (times from 0, s; speeds m/s), or ``None`` for a run that
     did not finish, and the failure messages (naming each run by ``index``, its number in the
-    sweep; default its row).
+    sweep; default its row). ``bar``: a progress bar to advance run by run (tqdm's ``update``).
 
     In the loop (encoders and the Kalman filter) each run is one closed loop
     (:func:`simulate_closed_loop`: compiled, the filter called per sample); ideal, every run
@@ -334,21 +334,18 @@ def _simulate_startups(problem: ViscosityProblem, design: ViscosityDesign, progr
     controllers = [CarryThen(OpenLoop(PiecewiseConstant(_NO_SWITCH, design.commanded[r][None, :])),
                              p.pre_roll, float(design.v0[r])) for r in range(runs)]
     lengths = [p.pre_roll + float(design.stop_time[r]) + p.tail for r in range(runs)]
-    bar = _progress(runs, progress, f"viscosity ({p.mode})")
-    try:
-        if p.mode == "loop":
-            outcomes = []
-            for r in range(runs):
-                run = simulate_closed_loop(plants[r], controllers[r], lengths[r], v0=float(design.v0[r]),
-                                           sensors=a.sensors, seed=design.seeds[r])
-                bar.update(1)
-                failed = None if run.status is SimulationStatus.SUCCESS else run.message
-                outcomes.append((run.times, run.estimate, run.speed, failed))
-        else:
-            outcomes = _together(plants, controllers, lengths, design.v0)
-            bar.update(runs)
-    finally:
-        bar.close()
+    update = bar.update if bar is not None else (lambda count: None)
+    if p.mode == "loop":
+        outcomes = []
+        for r in range(runs):
+            run = simulate_closed_loop(plants[r], controllers[r], lengths[r], v0=float(design.v0[r]),
+                                       sensors=a.sensors, seed=design.seeds[r])
+            update(1)
+            failed = None if run.status is SimulationStatus.SUCCESS else run.message
+            outcomes.append((run.times, run.estimate, run.speed, failed))
+    else:
+        outcomes = _together(plants, controllers, lengths, design.v0)
+        update(runs)
     for r, (times, estimate, speed, failed) in enumerate(outcomes):
         if failed is not None:
             failures.append(f"run {index[r]}: {failed}")
@@ -360,11 +357,11 @@ def _simulate_startups(problem: ViscosityProblem, design: ViscosityDesign, progr
 
 
 def _sweep_rows(problem: ViscosityProblem, drawn: dict[str, Any], rows: np.ndarray,
-                progress: bool) -> tuple[ViscosityDesign, dict[str, Any], dict[str, np.ndarray], list[str]]:
+                bar: Any = None) -> tuple[ViscosityDesign, dict[str, Any], dict[str, np.ndarray], list[str]]:
     """Everything :func:`viscosity_check` does run by run, for the runs ``rows`` of the draw
     ``drawn``: their plan, closed loops, measured and predicted time constants, failures."""
     design = _plan(problem, drawn, rows)
-    records, failures = _simulate_startups(problem, design, progress, rows)
+    records, failures = _simulate_startups(problem, design, bar, rows)
     return design, measure_time_constants(problem, records), predict_time_constants(problem, design), failures
 
 
@@ -393,13 +390,19 @@ def _sweep(problem: ViscosityProblem, progress: bool, workers: int | None
     else:   # (by default at least RUNS_PER_PROCESS runs each: a fork costs about what they do)
         count = min(idle_cores(), problem.runs // RUNS_PER_PROCESS) if workers is None else workers
     count = max(1, min(count, problem.runs))
-    if count == 1:
-        return _sweep_rows(problem, drawn, np.arange(problem.runs), progress)
-    # Every child inherits the compiled kernels (otherwise each would compile or load them).
-    ensure_compiled("core", "lines")
-    shares = np.array_split(np.arange(problem.runs), count)
-    parts = fork_map(lambda rows: _sweep_rows(problem, drawn, rows, progress and rows is shares[0]),
-                     shares)
+    bar = _progress(problem.runs, progress, f"viscosity ({problem.mode})")
+    try:
+        if count == 1:
+            return _sweep_rows(problem, drawn, np.arange(problem.runs), bar)
+        # Every child inherits the compiled kernels (otherwise each would compile or load them).
+        ensure_compiled("core", "lines")
+        shares = np.array_split(np.arange(problem.runs), count)
+        # (The bar follows this process's share, then counts the others' when they are back.)
+        parts = fork_map(lambda rows: _sweep_rows(problem, drawn, rows, bar if rows is shares[0] else None),
+                         shares)
+        bar.update(problem.runs - shares[0].size)
+    finally:
+        bar.close()
     return tuple(_concatenated([part[i] for part in parts]) for i in range(4))  # type: ignore[return-value]
 
 

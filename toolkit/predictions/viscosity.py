@@ -23,6 +23,10 @@ The work is split so that each part can change alone:
 - :func:`fit_viscosity`: ``1 / tau`` against ``k / m`` through the origin, per definition
   and per group of starts.
 
+Everything before the fit is done run by run, so the in-loop runs are shared among forked
+processes (:func:`toolkit._forked.fork_map`, each run whole in one process: the same numbers
+whatever the split); the ideal runs go through one batch kernel that already uses the cores.
+
 Sweep design (seeded, reproducible): ``runs`` draws of the spacing ``s`` uniform in
 ``spacing`` (default ``0.2 / n`` to ``0.6 / n`` m/s: a total spread ``n s`` of 0.2-0.6 m/s,
 ``k / m`` = 6.7-20 1/s on the carousel whatever ``n``) and of the start's position above the

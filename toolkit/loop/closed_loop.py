@@ -42,7 +42,7 @@ from ..model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors,
 from ..simulation import (Budget, ExactState, SampledLaw, SampledRun, SimulationStatus, advance,
                           refuse_backlash, sampled_supported)
 
-__all__ = ["ClosedLoopResult", "simulate_closed_loop", "MAX_SAMPLES", "LOOP_RATE"]
+__all__ = ["ClosedLoopResult", "simulate_closed_loop", "nominal_model", "MAX_SAMPLES", "LOOP_RATE"]
 
 #: Most samples one closed-loop run may take (the arrays it keeps grow with them).
 MAX_SAMPLES = 10_000_000
@@ -233,6 +233,20 @@ def _run_python(plant: Plant, law: ControlLaw, times: np.ndarray, sensors: Senso
             message, last)
 
 
+def nominal_model(plant: Plant, sensors: Sensors) -> Any:
+    """The :class:`~toolkit.estimation.EstimatorModel` of the default estimator of
+    :func:`simulate_closed_loop` (a :class:`~toolkit.estimation.KalmanEstimator` on it): the
+    plant's nominal friction magnitudes, mass, drag, motor lag and speed limits, read by
+    ``sensors``. It holds nothing of the contact speeds, so plants that differ only in those
+    share it."""
+    from ..estimation import EstimatorModel
+
+    motors = plant.motors
+    return EstimatorModel(plant.contacts.forces, plant.mass, sensors,
+                          motor_lag=motors.lag if motors is not None else 0.0, damping=plant.damping,
+                          speed_limits=motors.speed_limits if motors is not None else (-math.inf, math.inf))
+
+
 def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
                          sensors: Sensors | None = None, estimator: Any = None,
                          rate: float | None = None, v0: float = 0.0, seed: Any = None,
@@ -252,7 +266,8 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
         Encoders read at each sample; ``None``: the controller sees the true speed.
     estimator : Estimator, optional
         Turns the counts into a speed estimate (needs ``sensors``); default with sensors: a
-        :class:`~toolkit.estimation.KalmanEstimator` on the plant's nominal parameters.
+        :class:`~toolkit.estimation.KalmanEstimator` on the plant's nominal parameters
+        (:func:`nominal_model`).
     rate : float, Hz, optional
         Sample rate without sensors (default 50 Hz); with sensors their rate is used.
     v0 : float, m/s
@@ -283,12 +298,8 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     period = 1.0 / rate
     law: ControlLaw = controller.bind(plant, period)
     if sensors is not None and estimator is None:
-        from ..estimation import EstimatorModel, KalmanEstimator   # filterpy: only with sensors
-        motors = plant.motors
-        estimator = KalmanEstimator(EstimatorModel(
-            plant.contacts.forces, plant.mass, sensors,
-            motor_lag=motors.lag if motors is not None else 0.0, damping=plant.damping,
-            speed_limits=motors.speed_limits if motors is not None else (-math.inf, math.inf)))
+        from ..estimation import KalmanEstimator   # filterpy: only with sensors
+        estimator = KalmanEstimator(nominal_model(plant, sensors))
     times = sample_times(t_end, rate)
     initial = plant.initial_speeds()
     if sensors is not None:

@@ -60,7 +60,7 @@ from .._compiled import ensure_compiled
 from .._forked import fork_map, idle_cores
 from ..controllers import OpenLoop, VirtualViscosity
 from ..errors import ParameterError, ParameterTypeError, as_float, as_int, check_option, parameter_message
-from ..loop.closed_loop import LOOP_RATE, simulate_closed_loop
+from ..loop.closed_loop import LOOP_RATE, nominal_model, simulate_closed_loop
 from ..model import ContactSet, PiecewiseConstant, sample_count
 from ..simulation import SimulationStatus, sampled_batch
 from ._measure import TIME_CONSTANTS, proportional_fit, startup_time_constant
@@ -340,10 +340,16 @@ def _simulate_startups(problem: ViscosityProblem, design: ViscosityDesign, bar: 
     lengths = [p.pre_roll + float(design.stop_time[r]) + p.tail for r in range(runs)]
     update = bar.update if bar is not None else (lambda count: None)
     if p.mode == "loop":
+        from ..estimation import KalmanEstimator   # filterpy: only in the loop
+
+        # simulate_closed_loop's default estimator, a fresh one per run; its model built once
+        # (the runs' plants differ only in their contact speeds, which it does not hold).
+        model = nominal_model(plants[0], a.sensors) if runs else None
         outcomes = []
         for r in range(runs):
             run = simulate_closed_loop(plants[r], controllers[r], lengths[r], v0=float(design.v0[r]),
-                                       sensors=a.sensors, seed=design.seeds[r])
+                                       sensors=a.sensors, estimator=KalmanEstimator(model),
+                                       seed=design.seeds[r])
             update(1)
             failed = None if run.status is SimulationStatus.SUCCESS else run.message
             outcomes.append((run.times, run.estimate, run.speed, failed))

@@ -13,6 +13,7 @@ that makes the recent innovations consistent (Mehra, IEEE Trans. AC 17(5), 1972:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -46,6 +47,15 @@ class MonitorVerdict:
     reason: str = ""
 
 
+@functools.lru_cache(maxsize=64)
+def _chi2_quantile(level: float, dof: int) -> float:
+    """The ``level`` quantile of chi^2 with ``dof`` degrees of freedom (scipy's ``chi2.ppf``),
+    kept: every filter of a Monte Carlo study asks for the same few."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(level, dof))
+
+
 class ConsistencyMonitor:
     """The windowed NIS test (see the module).
 
@@ -59,12 +69,10 @@ class ConsistencyMonitor:
     """
 
     def __init__(self, window: int = 10, false_alarm: float = 1e-4) -> None:
-        from scipy.stats import chi2
-
         owner = "ConsistencyMonitor"
         self.window = as_int(window, "window", owner, low=1)
         self.false_alarm = as_float(false_alarm, "false_alarm", owner, low=0.0, high=1.0, low_open=True)
-        self.threshold = float(chi2.ppf(1.0 - self.false_alarm, self.window))
+        self.threshold = _chi2_quantile(1.0 - self.false_alarm, self.window)
         self.reset()
 
     def reset(self) -> None:

@@ -152,6 +152,18 @@ def test_default_starts_lie_inside_the_spread_away_from_the_equilibrium(n):
     assert abs(np.sum(design.start < 0) - 100) <= 28
 
 
+@pytest.mark.parametrize("n,mass,seed", [(7, 0.7, 11), (7, 1.0, 5), (6, 2.5, 1), (9, 0.7, 2)])
+def test_staircases_with_a_crossing_one_ulp_from_a_sample_are_planned(n, mass, seed):
+    # These designs once failed: the force curve's crossing of +-F_tot, interpolated between two
+    # samples one rounding step apart, landed past the second and the curve was refused as
+    # unsorted. Each run's staircase must now be planned: n finite speeds within the motors'
+    # limits, its equilibrium (weighted median) at the run's planned v0 to rounding.
+    apparatus = Apparatus.carousel(n=n, mass=mass)
+    design = plan_runs(ViscosityProblem(apparatus, "ideal", runs=17, seed=seed))
+    assert design.commanded.shape == (17, n) and np.all(np.isfinite(design.commanded))
+    assert np.all(np.abs(design.commanded) <= apparatus.speed_limit * (1 + 1e-12))
+
+
 def test_starts_outside_the_spread_are_fitted_apart():
     # Starts from one spacing below to one above the lowest contact: the runs below (p < 0)
     # form their own fits, never pooled with the starts inside, and are not judged.

@@ -81,7 +81,8 @@ def _insert_crossings(xs: np.ndarray, ys: np.ndarray, level: float
     if cross.size == 0:
         return xs, ys
     share = d0[cross] / (d0[cross] - d1[cross])
-    new_x = xs[cross] + share * (xs[cross + 1] - xs[cross])
+    # Kept within its interval: the interpolation may round one ulp past an end.
+    new_x = np.clip(xs[cross] + share * (xs[cross + 1] - xs[cross]), xs[cross], xs[cross + 1])
     return (np.insert(xs, cross + 1, new_x), np.insert(ys, cross + 1, np.full(cross.size, level)))
 
 

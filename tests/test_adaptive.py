@@ -409,3 +409,39 @@ def test_a_bad_missed_count_rate_prior_names_itself(kwargs, name):
 def test_a_bad_missed_count_prior_names_itself(value):
     with pytest.raises(ParameterError, match="missed_count_prob"):
         ModelPrior(missed_count_prob=value)
+
+
+@pytest.mark.parametrize("change", ["forces", "lag", "drift", "all", "none"])
+def test_an_adjusted_model_is_the_model_built_anew(change):
+    # EstimatorModel.adjusted shares the parts that depend on none of the changed values: its
+    # derived fields and its known input (the exact flow, its linearization and force gains)
+    # equal those of the model constructed from scratch, to the bit (the same operations).
+    sensors = CAROUSEL.sensors(4)
+    base = EstimatorModel(np.array([0.9, 1.0, 1.1, 1.2]), 2.5, sensors, motor_lag=0.0075, damping=0.3,
+                          contact_drift=1e-4, speed_limits=(-0.35, 0.35))
+    forces = base.forces * np.array([1.03, 0.97, 1.0, 1.1]) if change in ("forces", "all") else base.forces
+    lag = 0.02 if change in ("lag", "all") else base.motor_lag
+    drift = 3e-3 if change in ("drift", "all") else base.contact_drift
+    got = base.adjusted(forces, lag, drift)
+    want = EstimatorModel(forces, 2.5, sensors, motor_lag=lag, damping=0.3, contact_drift=drift,
+                          speed_limits=(-0.35, 0.35))
+    for name in ("forces", "motor_lag", "contact_drift", "settle", "_reach", "_follow", "_held_noise",
+                 "_friction_noise", "speed_limits"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+    assert got._motors == want._motors and (got._between is None) == (want._between is None)
+    track = np.array([[0.1, 0.12, 0.15, 0.2], [0.1, 0.14, 0.15, 0.25]])
+    for V in (0.05, 0.13, 0.3):
+        g1, g2 = np.zeros((2, 5)), np.zeros((2, 5))
+        a = got.increment(V, track, 1e-4, 1e-4, False, None, 0.0, g1)
+        b = want.increment(V, track, 1e-4, 1e-4, False, None, 0.0, g2)
+        assert a[:2] == b[:2] and a[3:] == b[3:]
+        np.testing.assert_array_equal(a[2], b[2])
+        np.testing.assert_array_equal(g1, g2)
+    # The base model is left as it was; bad values are refused by name.
+    assert base.motor_lag == 0.0075 and base.contact_drift == 1e-4
+    with pytest.raises(ParameterError, match="'forces' parameter of EstimatorModel.adjusted"):
+        base.adjusted(np.ones(3), lag, drift)
+    with pytest.raises(ParameterError, match="'motor_lag' parameter of EstimatorModel.adjusted"):
+        base.adjusted(forces, -1.0, drift)
+    with pytest.raises(ParameterError, match="'forces' parameter of EstimatorModel.adjusted"):
+        base.adjusted(-forces, lag, drift)

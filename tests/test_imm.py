@@ -261,3 +261,51 @@ def test_play_loaded_is_the_play_operators_fixed_point():
     np.testing.assert_array_equal(loaded, [1.0, 0.0, 1.0, 0.0, 1.0, 0.0])
     assert missing == 3
     assert K.play_loaded(shift, start, end, o, 0.0, loaded) == 0 and loaded.all()
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1e-2, 1.0])
+def test_bank_push_is_its_three_kernels_in_one(scale):
+    # Every play loaded: bank_push is play_loaded, bank_step (law error (0.3 (end - start))^2,
+    # the law's displacement cx) and bank_moments in one call, the encoders' side moved to
+    # the best hypothesis's position plus its shift: the same operations in the same order,
+    # so equal to the bit (several scales, unequal hypothesis weights and wheel noises).
+    rng = np.random.default_rng(11)
+    H, n, h, half = 6, 4, 0.02, 4e-4 * scale
+    drifts = np.array([0.0, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3])
+    Q = np.array([[d * d * h ** 3 / 3, d * d * h * h / 2, d * d * h] for d in drifts])
+    x = rng.normal(size=(H, n, 2)) * [scale, 1e-3]
+    x[:, :, 1] = np.abs(x[:, :, 1])
+    P = np.abs(rng.normal(size=(H, n, 3))) * 1e-8 * scale
+    logw = rng.normal(size=H) * 2.0
+    best = int(np.argmax(logw))
+    y = x[best, :, 0] - half                   # engaged behind contacts moving forwards
+    start, end = np.full(n, 0.1) + 0.01 * np.arange(n), np.full(n, 0.12)
+    cx, gx = h * end, np.full(n, h)
+    z = x[best, :, 0] + rng.normal(size=n) * 1e-4 * scale
+    noise = 1e-9 * scale * scale * (1.0 + np.arange(n))
+    ref = [a.copy() for a in (x, P, logw, y)]
+    shift, loaded, o, var = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    drift = K.bank_push(x, P, Q, start, end, cx, gx, 0.3, y, z, noise, logw, 0.99, half, drifts, shift, loaded,
+                        o, var)
+    xr, Pr, lr, yr = ref
+    sr, ldr, o_r, vr = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    sr[:] = yr - xr[best, :, 0]
+    assert K.play_loaded(sr, start, end, xr[best, :, 1].copy(), half, ldr) == 0
+    K.bank_step(xr, Pr, Q, cx, gx, (0.3 * (end - start)) ** 2, sr, ldr, z, noise, lr, 0.99)
+    drift_r = K.bank_moments(xr, Pr, lr, drifts, o_r, vr)
+    for got, want in ((x, xr), (P, Pr), (logw, lr), (y, xr[best, :, 0] + sr), (o, o_r), (var, vr), (shift, sr)):
+        np.testing.assert_array_equal(got, want)
+    assert drift == drift_r and loaded.all()
+    # One wheel reversing over the period walks its play: -1, nothing changed but shift and
+    # loaded.
+    end2 = end.copy()
+    end2[2] = -0.05
+    x[:, :, 1] = 1e-3                          # (the update moved the offsets: small again)
+    before = [a.copy() for a in (x, P, logw, y)]
+    y[:] = x[int(np.argmax(logw)), :, 0] - half
+    before[3] = y.copy()
+    assert K.bank_push(x, P, Q, start, end2, cx, gx, 0.3, y, z, noise, logw, 0.99, half, drifts, shift, loaded,
+                       o, var) == -1.0
+    for got, want in zip((x, P, logw, y), before):
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(loaded, [1.0, 1.0, 0.0, 1.0])

@@ -24,6 +24,8 @@ modes' states in arrays and calls these per sample.
 - :func:`predicted_first`: the modes' mixture prediction of the first state (its mean and
   variance) and the second's mean, before the update.
 - :func:`play_loaded`: which wheels keep their gearbox play loaded over a period.
+- :func:`bank_push`: one sample of the wheels' filters where every play stays loaded
+  (:func:`play_loaded`, :func:`bank_step`, :func:`bank_moments` in one call).
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import math
 import numpy as np
 
 KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {},
-           "bank_moments": {}, "play_loaded": {}, "sign_of": {},
+           "bank_moments": {}, "bank_push": {}, "play_loaded": {}, "sign_of": {},
            "predicted_first": {}}
 
 
@@ -251,6 +253,34 @@ def play_loaded(shift, start, end, o, half, loaded):  # noqa: ANN001, ANN201 (nu
         if not ok:
             missing += 1
     return missing
+
+
+def bank_push(x, P, Q, start, end, cx, gx, law, y, z, noise, logw, forget, half, drifts, shift, loaded, o, var):  # noqa: ANN001, ANN201
+    """:class:`WheelSpeedBank`'s sample where every encoder stays engaged (:func:`play_loaded`
+    of the most likely hypothesis ``best``, ``shift = y - x[best, :, 0]``, written in
+    ``shift`` and ``loaded``): :func:`bank_step` with the law's displacement ``cx`` and its
+    error ``(law (end - start))^2``, the encoders' side ``y <- x[best, :, 0] + shift`` and
+    :func:`bank_moments` (``o``, ``var``); returns the wander intensity. Where some encoder
+    walks its play, returns -1 having changed nothing but ``shift`` and ``loaded`` (the
+    caller follows the play operator along the period)."""
+    H, n = x.shape[0], x.shape[1]
+    best = 0
+    for h in range(1, H):
+        if logw[h] > logw[best]:
+            best = h
+    for i in range(n):
+        shift[i] = y[i] - x[best, i, 0]
+        o[i] = x[best, i, 1]
+    if play_loaded(shift, start, end, o, half, loaded) > 0:
+        return -1.0
+    qv = np.empty(n)
+    for i in range(n):
+        d = law * (end[i] - start[i])
+        qv[i] = d * d
+    bank_step(x, P, Q, cx, gx, qv, shift, loaded, z, noise, logw, forget)
+    for i in range(n):
+        y[i] = x[best, i, 0] + shift[i]
+    return bank_moments(x, P, logw, drifts, o, var)
 
 
 def cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R, xs, Ps, mu, x, P, nis):  # noqa: ANN001, ANN201

@@ -148,6 +148,32 @@ class EstimatorModel:
         for name in ("motor_lag", "damping", "friction_uncertainty", "contact_drift"):
             object.__setattr__(self, name, as_float(getattr(self, name), name, owner, low=0.0))
         object.__setattr__(self, "max_window", as_int(self.max_window, "max_window", owner, low=1))
+        self._derive(None)
+
+    def adjusted(self, forces: Any, motor_lag: float, contact_drift: float) -> EstimatorModel:
+        """This model with the friction magnitudes ``forces`` (N, shape (n,)), the motor lag
+        (s) and the contacts' drift (m/s per sqrt(s)) replaced, each checked as the
+        constructor checks it; equal to constructing it anew, but the parts that depend on
+        none of the changed values are shared (an adaptive filter rebuilds its model at its
+        estimates every few samples)."""
+        owner = "EstimatorModel.adjusted"
+        forces = as_float_array(forces, "forces", owner)
+        check_nonnegative(forces, "forces", owner)
+        if forces.size != self.n:
+            raise ParameterError(parameter_message("forces", owner, f"have length n = {self.n}", forces.size))
+        new = object.__new__(EstimatorModel)
+        new.__dict__.update(self.__dict__)
+        object.__setattr__(new, "forces", forces)
+        object.__setattr__(new, "motor_lag", as_float(motor_lag, "motor_lag", owner, low=0.0))
+        object.__setattr__(new, "contact_drift", as_float(contact_drift, "contact_drift", owner, low=0.0))
+        new._derive(self)
+        return new
+
+    def _derive(self, previous: EstimatorModel | None) -> None:
+        """The derived fields from the checked ones; the motors and the plants of
+        ``previous`` (a model of the same sensors, mass, drag and speed limits) are shared
+        where its lag, or its lag and magnitudes, are this one's."""
+        forces = self.forces
         # 4 lags for the motors plus one sample for the gearbox play, in whole samples.
         object.__setattr__(self, "_settle", 1 + math.ceil(4.0 * self.motor_lag * self.sensors.rate))
         object.__setattr__(self, "_friction_var", self.friction_uncertainty**2 * float(np.dot(forces, forces)))
@@ -168,15 +194,21 @@ class EstimatorModel:
         # The plant whose exact flow is the known input: held contacts (ideal motors take
         # the command at once) and, with a lag, the same contacts behind lagging motors;
         # both clip commands to the speed limits.
-        motors = Motors(lag=self.motor_lag, speed_limits=self.speed_limits)
+        same_lag = previous is not None and previous.motor_lag == self.motor_lag
+        motors = previous._motors if same_lag else Motors(lag=self.motor_lag, speed_limits=self.speed_limits)
         object.__setattr__(self, "speed_limits", motors.speed_limits)
         object.__setattr__(self, "_motors", motors)
-        contacts = ContactSet(np.zeros(forces.size), forces)
-        held = Plant(contacts, self.mass, damping=self.damping,
-                     motors=Motors(lag=0.0, speed_limits=motors.speed_limits))
-        lagging = (Plant(contacts, self.mass, damping=self.damping, motors=motors)
-                   if self.motor_lag > 0 else held)
-        object.__setattr__(self, "_plants", (held, lagging))
+        if same_lag and np.array_equal(previous.forces, forces):
+            plants = previous._plants
+        else:
+            contacts = ContactSet(np.zeros(forces.size), forces)
+            held = Plant(contacts, self.mass, damping=self.damping,
+                         motors=(previous._plants[0].motors if previous is not None
+                                 else Motors(lag=0.0, speed_limits=motors.speed_limits)))
+            lagging = (Plant(contacts, self.mass, damping=self.damping, motors=motors)
+                       if self.motor_lag > 0 else held)
+            plants = (held, lagging)
+        object.__setattr__(self, "_plants", plants)
         # The friction spread's force error, held over the period: (sigma_F / m)^2 g g^T with
         # g = (h^2 / 2, h).
         g = np.array([0.5 * h * h, h])

@@ -186,44 +186,49 @@ class WheelSpeedBank:
         u = np.asarray(command, dtype=float)
         start = self._nominal
         s = self._substeps
-        if lag > 0.0 and not np.array_equal(start, u):
+        if lag > 0.0 and (start != u).any():
             piece = MotorPiece.build(0.0, start, u, lag, math.inf)
             moved = piece.displacement(s[:, None])                     # (substeps, n)
             end = piece.speeds_at(h)
+            cx = moved[-1]
         else:
             # Settled motors hold the command; ideal ones take it at once (the motor law
             # without a lag).
             end = unsaturated_response(start, u, h, 0.0, math.inf)
-            moved = s[:, None] * end
+            moved = None                                               # (s[:, None] * end)
+            cx = h * end                                               # (s[-1] = h exactly)
         self._nominal = end
         # The encoder sees the contact through the play (the sensor law's play operator) along
         # the most likely path over the period: where it ends engaged it reads the contact
         # shifted by the play's half width; where it stands in the play it reads nothing new.
-        best = int(np.argmax(self._log_weights))
-        x, o = self._x[best, :, 0], self._x[best, :, 1]
-        half = 0.5 * self.play
-        shift = self._y - x
         # Engaged behind a contact that keeps moving the same way over the whole period: the
-        # play stays loaded (the operator's fixed point); only the others walk its path.
+        # play stays loaded (the operator's fixed point); where every wheel's does, one kernel
+        # call; else only the others walk its path.
         K = kernels("imm", 20 * self._Q.shape[0] * self.n)
-        loaded = self._loaded
-        walking = K.play_loaded(shift, start, end, o, half, loaded)
+        noise = np.asarray(noise, dtype=float)
+        shift, loaded, o, var = np.empty(self.n), self._loaded, np.empty(self.n), np.empty(self.n)
+        drift = K.bank_push(self._x, self._P, self._Q, start, end, cx, self._h_all, self.LAW_ERROR, self._y, z,
+                            noise, self._log_weights, self.FORGET, 0.5 * self.play, self._drifts, shift, loaded,
+                            o, var)
+        if drift >= 0.0:
+            self._drift = drift
+            return end + o, var
+        if moved is None:
+            moved = s[:, None] * end
+        best = int(np.argmax(self._log_weights))
+        x, ob = self._x[best, :, 0], self._x[best, :, 1]          # (views: updated below)
+        half = 0.5 * self.play
         seen = loaded.copy()
-        if walking:
-            walk = loaded == 0.0
-            path = x[walk] + moved[:, walk] + s[:, None] * o[walk]
-            y = play(path, self.play, self._y[walk])[-1]
-            shift[walk] = y - path[-1]
-            seen[walk] = np.abs(np.abs(shift[walk]) - half) <= 1e-9 * max(half, 1e-12)
+        walk = loaded == 0.0
+        path = x[walk] + moved[:, walk] + s[:, None] * ob[walk]
+        y = play(path, self.play, self._y[walk])[-1]
+        shift[walk] = y - path[-1]
+        seen[walk] = np.abs(np.abs(shift[walk]) - half) <= 1e-9 * max(half, 1e-12)
         law_error = (self.LAW_ERROR * (end - start)) ** 2
-        K.bank_step(self._x, self._P, self._Q, moved[-1], self._h_all, law_error, shift, seen, z,
-                    np.asarray(noise, dtype=float), self._log_weights, self.FORGET)
-        if walking:
-            self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift,
-                               np.where(loaded > 0.0, self._y, x + moved[-1] + h * o + shift))
-        else:
-            self._y = self._x[best, :, 0] + shift
-        o, var = np.empty(self.n), np.empty(self.n)
+        K.bank_step(self._x, self._P, self._Q, cx, self._h_all, law_error, shift, seen, z, noise,
+                    self._log_weights, self.FORGET)
+        self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift,
+                           np.where(loaded > 0.0, self._y, x + moved[-1] + h * ob + shift))
         self._drift = K.bank_moments(self._x, self._P, self._log_weights, self._drifts, o, var)
         return end + o, var
 
@@ -325,9 +330,13 @@ class AdaptiveKalman(Estimator):
         if (self._built is None or np.max(np.abs(e - self._built)) > self.REBUILD or lag != self._built_lag
                 or not self._built_drift / 1.5 <= drift <= 1.5 * self._built_drift):
             m = self.model
-            self._hat = EstimatorModel(m.forces * np.maximum(1.0 + e, 1e-3), m.mass, m.sensors, motor_lag=lag,
-                                       damping=m.damping, max_window=m.max_window, speed_limits=m.speed_limits,
-                                       contact_drift=drift)
+            forces = m.forces * np.maximum(1.0 + e, 1e-3)
+            if self._hat is None:
+                self._hat = EstimatorModel(forces, m.mass, m.sensors, motor_lag=lag, damping=m.damping,
+                                           max_window=m.max_window, speed_limits=m.speed_limits,
+                                           contact_drift=drift)
+            else:
+                self._hat = self._hat.adjusted(forces, lag, drift)
             self._built = e.copy()
             self._built_drift = max(drift, 1e-12)
             self._built_lag = lag

@@ -309,3 +309,53 @@ def test_bank_push_is_its_three_kernels_in_one(scale):
     for got, want in zip((x, P, logw, y), before):
         np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(loaded, [1.0, 1.0, 0.0, 1.0])
+
+
+@pytest.mark.parametrize("h", [1e-3, 0.02, 0.5])
+def test_held_and_walk_predictions_are_their_transitions(h):
+    # The stuck mode on a held contact and the free-form mode: the kernels' means and
+    # covariances F P F^T + Q (through predict_rows) against the dense transition written out
+    # (the identity but for rows 0 and 1) and the white-noise acceleration model's Q
+    # (1e-12 relative: sums of a few products), over unequal contact speeds and three
+    # periods; the nearest contact is the first of equals.
+    rng = np.random.default_rng(12)
+    d = 7
+    x = rng.normal(size=d)
+    x[1] = 0.12
+    start = np.array([0.3, 0.1, 0.14, 0.1])
+    var = np.array([1e-6, 4e-6, 2e-6, 9e-6])
+    drift2 = (3e-4) ** 2
+    mean, row0, row1, Q = np.empty(d), np.empty(d), np.empty(d), np.empty((2, 2))
+    assert K.predict_held(x, start, start, var, -1, h, h ** 3, drift2, mean, row0, row1, Q) == 1
+    F = np.eye(d)
+    F[0], F[1] = 0.0, 0.0
+    F[0, 0] = 1.0
+    np.testing.assert_array_equal(row0, F[0])
+    np.testing.assert_array_equal(row1, F[1])
+    expected = x.copy()
+    expected[0], expected[1] = x[0] + 0.1 * h, 0.1
+    np.testing.assert_allclose(mean, expected, rtol=1e-15)
+    walk = np.array([[h ** 3 / 3, h * h / 2], [h * h / 2, h]])
+    Q_held = var[1] * np.array([[h * h, h], [h, 1.0]]) + drift2 * walk
+    np.testing.assert_allclose(Q, Q_held, rtol=1e-12)
+    P = _spd(rng, d, 1e-2)
+    out = np.empty((d, d))
+    K.predict_rows(P, row0, row1, Q, 0.0, out)
+    Qd = np.zeros((d, d))
+    Qd[:2, :2] = Q_held
+    np.testing.assert_allclose(out, F @ P @ F.T + Qd, rtol=1e-12, atol=1e-14 * np.abs(P).max())
+    # Contact 2 given, moving: nothing written, -1 - k returned.
+    target = start.copy()
+    target[2] = 0.2
+    mean[:] = 7.0
+    assert K.predict_held(x, start, target, var, 2, h, h ** 3, drift2, mean, row0, row1, Q) == -3
+    assert (mean == 7.0).all()
+    # The free-form mode: constant speed, random walk of intensity s2.
+    s2 = (2e-3) ** 2
+    K.predict_walk(x, h, np.array([h ** 3 / 3.0, h * h / 2.0, h]), s2, mean, row0, row1, Q)
+    F = np.eye(d)
+    F[0, 1] = h
+    np.testing.assert_array_equal(row0, F[0])
+    np.testing.assert_array_equal(row1, F[1])
+    np.testing.assert_allclose(mean, F @ x, rtol=1e-15)
+    np.testing.assert_allclose(Q, s2 * walk, rtol=1e-15)

@@ -16,6 +16,10 @@ modes' states in arrays and calls these per sample.
 - :func:`cycle`: after :func:`mix` and the modes' predicted means (nonlinear, computed by
   the caller from the mixed states), the rest of one IMM step: each mode's
   :func:`predict_rows` and :func:`update_first`, the mode probabilities, :func:`combine`.
+- :func:`measure_cycle`: :func:`predicted_first`, the measurement noise from its speed and
+  :func:`cycle` in one call (the adaptive filter's update per sample).
+- :func:`predict_held`, :func:`predict_walk`: the stuck mode's prediction while its contact
+  holds its speed, and the free-form mode's (mean, transition rows, process noise in place).
 - :func:`bank_step`: the wheels' filters (every hypothesis and wheel at once): predict over
   the period (the motor law's affine transition, and a random walk), update with the
   readings, add each hypothesis's log-likelihood.
@@ -34,7 +38,7 @@ import math
 
 import numpy as np
 
-KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {},
+KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {}, "measure_cycle": {}, "predict_held": {}, "held_noise": {}, "predict_walk": {},
            "bank_moments": {}, "bank_push": {}, "play_loaded": {}, "sign_of": {},
            "predicted_first": {}}
 
@@ -301,3 +305,80 @@ def cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R, xs, Ps, mu, x, P, ni
     for j in range(m):
         mu[j] /= total
     combine(mu, xs, Ps, x, P)
+
+
+def measure_cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R0, noise, xs, Ps, mu, x, P, nis):  # noqa: ANN001, ANN201
+    """:func:`predicted_first`, the measurement noise and :func:`cycle` in one call. The
+    noise is ``R0`` plus the larger of two models of the extra noise at the predicted speed
+    ``V`` (``noise`` = ``(a, b, c, d)``: ``a + b V^2`` matched from the innovations, ``c + d
+    V^2`` from the wheels' residuals). Returns ``(x0, var, V, nis_mean)``: the mixture's
+    predicted first state, its variance (without ``R0``), its predicted second state and the
+    mode-weighted NIS of the update (``sum_j mu_j nis_j``)."""
+    x0, var, speed = predicted_first(cbar, means, rows0, Ps0, Qs)
+    matched = noise[0] + noise[1] * speed * speed
+    wheel = noise[2] + noise[3] * speed * speed
+    cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R0 + max(matched, wheel), xs, Ps, mu, x, P, nis)
+    total = 0.0
+    for j in range(mu.shape[0]):
+        total += mu[j] * nis[j]
+    return x0, var, speed, total
+
+
+def predict_held(x, start, target, var, k, h, h3, drift2, mean, row0, row1, Q):  # noqa: ANN001, ANN201
+    """The stuck mode's prediction while contact ``k`` holds its speed: the body rides it
+    (``k < 0``: the contact nearest the speed ``x[1]``, the first of equals). Writes the
+    mean (``X + v_k h``, ``v_k``), the transition's rows 0 and 1 (``row0`` = (1, 0, ..),
+    ``row1`` = 0: the speed is the contact's whatever the body's was) and ``Q``: the contact's
+    error ``var[k]`` carried over the period plus its wander ``drift2`` (squared intensity;
+    ``h3 = h^3``). Returns ``k``, or ``-1 - k`` having written nothing when
+    the contact moves (``start[k] != target[k]``: the caller follows the motor law)."""
+    if k < 0:
+        k = 0
+        best = abs(start[0] - x[1])
+        for i in range(1, start.shape[0]):
+            gap = abs(start[i] - x[1])
+            if gap < best:
+                best = gap
+                k = i
+    v = start[k]
+    if v != target[k]:
+        return -1 - k
+    d = x.shape[0]
+    for a in range(d):
+        mean[a] = x[a]
+        row0[a] = 0.0
+        row1[a] = 0.0
+    mean[0] = x[0] + v * h
+    mean[1] = v
+    row0[0] = 1.0
+    held_noise(var[k], h, h3, drift2, Q)
+    return k
+
+
+def held_noise(var, h, h3, drift2, Q):  # noqa: ANN001, ANN201
+    """The stuck mode's process noise of ``(X, V)`` (:func:`predict_held`), in ``Q``: the
+    contact's error ``var`` ((m/s)^2) held over the period, plus the white-noise acceleration
+    model's ``drift2 [[h^3 / 3, h^2 / 2], [h^2 / 2, h]]`` (``h3 = h^3``)."""
+    Q[0, 0] = var * h * h + drift2 * h3 / 3.0
+    Q[0, 1] = var * h + drift2 * h * h / 2.0
+    Q[1, 0] = Q[0, 1]
+    Q[1, 1] = var + drift2 * h
+
+
+def predict_walk(x, h, walk, s2, mean, row0, row1, Q):  # noqa: ANN001, ANN201
+    """The free-form mode's prediction: the speed a random walk of squared intensity ``s2``
+    (``walk = (h^3 / 3, h^2 / 2, h)``): mean ``(X + h V, V)``, rows ``(1, h, 0 ..)`` and ``(0,
+    1, 0 ..)``, ``Q = s2 walk`` (in place)."""
+    d = x.shape[0]
+    for a in range(d):
+        mean[a] = x[a]
+        row0[a] = 0.0
+        row1[a] = 0.0
+    mean[0] = x[0] + h * x[1]
+    row0[0] = 1.0
+    row0[1] = h
+    row1[1] = 1.0
+    Q[0, 0] = s2 * walk[0]
+    Q[0, 1] = s2 * walk[1]
+    Q[1, 0] = s2 * walk[1]
+    Q[1, 1] = s2 * walk[2]

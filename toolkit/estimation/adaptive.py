@@ -401,10 +401,12 @@ class AdaptiveKalman(Estimator):
         self.out_x, self.out_P = self.x, self.P
         self._xs0, self._Ps0 = np.empty_like(self.xs), np.empty_like(self.Ps)
         self._cbar = np.empty(3)
-        self._row0, self._row1 = np.zeros(d), np.zeros(d)
-        self._Q2 = np.zeros((2, 2))
+        h = self.h
+        self._h3 = h ** 3
+        self._walk = np.array([h ** 3 / 3.0, h * h / 2.0, h])
         self._means, self._rows0, self._rows1 = np.empty((3, d)), np.empty((3, d)), np.empty((3, d))
         self._noises, self._nis = np.empty((3, 2, 2)), np.empty(3)
+        self._noise_models = np.empty(4)
         self._built: np.ndarray | None = None
         self._built_drift = 1e-12
         self._built_lag = self.model.motor_lag
@@ -462,9 +464,10 @@ class AdaptiveKalman(Estimator):
             filters.append(kf)
         return IMMEstimator(filters, self.mu.copy(), self.M)
 
-    # -- the modes' transitions (each fills row0, row1, Q2 and returns the predicted mean) ----
-    def _predict_free(self, x: np.ndarray, P: np.ndarray, track: np.ndarray, var: np.ndarray, steady: bool,
-                      force: float) -> np.ndarray:
+    # -- the modes' transitions (each writes mode j's predicted mean, its transition's rows 0 and 1
+    # and its process noise of (X, V) into means[j], rows0[j], rows1[j], noises[j]) -----------
+    def _predict_free(self, j: int, x: np.ndarray, P: np.ndarray, track: np.ndarray, var: np.ndarray,
+                      steady: bool, force: float) -> None:
         """The free mode: the flow at the estimated parameters, or the stuck mode's motion
         where that flow keeps the body on a contact."""
         n, h = self.n, self.h
@@ -475,33 +478,33 @@ class AdaptiveKalman(Estimator):
                 and abs(V - track[0, k]) <= 2.0 * math.sqrt(max(P[1, 1], 0.0) + var[k]) + 1e-9):
             # Stuck at the last step on contact k, which still holds it (the set-valued
             # friction at the estimated magnitudes): the stuck mode's motion, no flow needed.
-            return self._predict_stuck(x, track, var, k)
+            self._predict_stuck(j, x, track, var, k)
+            return
         hat = self._model_at(theta)
         delta = theta.copy()
         delta[:n] -= self._built                       # what the built model does not hold yet
         gains = self._gains
-        var_v = float(var[int(np.argmin(np.abs(track[0] - V)))])
+        var_v = float(var[int(np.abs(track[0] - V).argmin())])
         dx, dV, Q, slopes, _, on_set = hat.increment(V, track, math.sqrt(var_v), math.sqrt(max(P[1, 1], 0.0)),
                                                      steady, None, force, gains)
         JX, J = slopes if slopes is not None else (h, 1.0)
         correction = gains @ delta
-        x_new = x.copy()
-        x_new[0] = x[0] + h * V + dx + correction[0]
-        x_new[1] = V + dV + correction[1]
-        gap = np.abs(hat.end_speeds(track) - x_new[1])
-        k = int(np.argmin(gap))
+        V_new = V + dV + correction[1]
+        gap = np.abs(hat.end_speeds(track) - V_new)
+        k = int(gap.argmin())
         self._stuck_on = k if (on_set and gap[k] <= 1e-9) else None
         if self._stuck_on is not None:
             # The flow ends with the body on a contact's speed: the stuck mode's motion.
-            return self._predict_stuck(x, track, var, k)
-        row0, row1 = self._row0, self._row1
-        row0[:] = 0.0
-        row1[:] = 0.0
-        row0[0], row0[1], row1[1] = 1.0, JX, J
+            self._predict_stuck(j, x, track, var, k)
+            return
+        mean, row0, row1 = self._means[j], self._rows0[j], self._rows1[j]
+        mean[:] = x
+        mean[0] = x[0] + h * V + dx + correction[0]
+        mean[1] = V_new
+        row0[0], row0[1], row1[0], row1[1] = 1.0, JX, 0.0, J
         row0[2:] = gains[0]
         row1[2:] = gains[1]
-        self._Q2[:] = Q
-        return x_new
+        self._noises[j] = Q
 
     def _sticks(self, theta: np.ndarray, speeds: np.ndarray, k: int, force: float) -> bool:
         """A body at contact ``k``'s speed stays on it at the magnitudes ``f (1 + e)``: the
@@ -512,48 +515,36 @@ class AdaptiveKalman(Estimator):
         G = float(contact_forces(speeds - v, forces).sum()) + force - (self.model.damping + theta[self.n]) * v
         return abs(G) <= forces[k]
 
-    def _predict_stuck(self, x: np.ndarray, track: np.ndarray, var: np.ndarray, k: int | None = None
-                       ) -> np.ndarray:
+    def _predict_stuck(self, j: int, x: np.ndarray, track: np.ndarray, var: np.ndarray, k: int | None = None
+                       ) -> None:
         """The stuck mode: the body rides contact ``k`` (the nearest to its speed): its speed is
         the contact's (the motor law in a transient), its position moves with it; the
-        contact's estimate errs by ``var[k]`` and wanders (the bank's intensity)."""
+        contact's estimate errs by ``var[k]`` and wanders (the bank's intensity). While the
+        contact holds its speed, the compiled :func:`toolkit._compiled.imm.predict_held`."""
         h = self.h
-        if k is None:
-            k = int(np.argmin(np.abs(track[0] - x[1])))
-        start, target = float(track[0, k]), float(track[1, k])
-        x_new = x.copy()
-        if start == target:
-            x_new[0] = x[0] + start * h
-            x_new[1] = start
-        else:
-            piece = MotorPiece.build(0.0, track[0, k:k + 1], track[1, k:k + 1], self.lag, math.inf)
-            x_new[0] = x[0] + float(piece.displacement(h)[0])
-            x_new[1] = float(piece.speeds_at(h)[0])
-        row0, row1 = self._row0, self._row1
+        drift = self._bank.drift ** 2
+        mean, row0, row1, Q = self._means[j], self._rows0[j], self._rows1[j], self._noises[j]
+        k = kernels("imm").predict_held(x, track[0], track[1], var, -1 if k is None else k, h, self._h3, drift,
+                                        mean, row0, row1, Q)
+        if k >= 0:
+            return
+        k = -1 - k
+        piece = MotorPiece.build(0.0, track[0, k:k + 1], track[1, k:k + 1], self.lag, math.inf)
+        mean[:] = x
+        mean[0] = x[0] + float(piece.displacement(h)[0])
+        mean[1] = float(piece.speeds_at(h)[0])
         row0[:] = 0.0
         row1[:] = 0.0
         row0[0] = 1.0
-        drift = self._bank.drift ** 2
-        Q = self._Q2
-        Q[0, 0] = var[k] * h * h + drift * h ** 3 / 3.0
-        Q[0, 1] = Q[1, 0] = var[k] * h + drift * h * h / 2.0
-        Q[1, 1] = var[k] + drift * h
-        return x_new
+        kernels("imm").held_noise(float(var[k]), h, self._h3, drift, Q)
 
-    def _predict_freeform(self, x: np.ndarray, steady: bool) -> np.ndarray:
+    def _predict_freeform(self, j: int, x: np.ndarray, steady: bool) -> None:
         """The free-form mode: the speed a random walk (the motors' wander where the contacts
         hold their speeds; while they move, at least the force the prior's friction spread
-        leaves unknown, held over a period)."""
-        h = self.h
-        x_new = x.copy()
-        x_new[0] = x[0] + h * x[1]
-        row0, row1 = self._row0, self._row1
-        row0[:] = 0.0
-        row1[:] = 0.0
-        row0[0], row0[1], row1[1] = 1.0, h, 1.0
+        leaves unknown, held over a period); :func:`toolkit._compiled.imm.predict_walk`."""
         s2 = (self._bank.drift if steady else max(self._bank.drift, self._moving_rate)) ** 2
-        self._Q2[:] = s2 * np.array([[h ** 3 / 3.0, h * h / 2.0], [h * h / 2.0, h]])
-        return x_new
+        kernels("imm").predict_walk(x, self.h, self._walk, s2, self._means[j], self._rows0[j], self._rows1[j],
+                                    self._noises[j])
 
     # -- one sample -----------------------------------------------------------------------------
     def _contact_speeds(self, track: np.ndarray, var_v: np.ndarray, steady: bool
@@ -624,36 +615,38 @@ class AdaptiveKalman(Estimator):
         xs0, Ps0, cbar = self._xs0, self._Ps0, self._cbar
         K.mix(self.mu, self.M, self.xs, self.Ps, xs0, Ps0, cbar)
         means, rows0, rows1, noises = self._means, self._rows0, self._rows1, self._noises
-        large = float(np.max(np.abs(track[1] - track[0]))) > self.LARGE_STEP
+        large = float(np.abs(track[1] - track[0]).max()) > self.LARGE_STEP
         for j in range(3):
             if j == self.FREE or (j == self.FREEFORM and large):
                 # In a large transient (the contacts sweep past the body) the free-form mode
                 # follows the flow, which knows the motor law; elsewhere it is the model-free
                 # alternative (a random walk of the speed).
-                means[j] = self._predict_free(xs0[j], Ps0[j], track, var, steady, force)
+                self._predict_free(j, xs0[j], Ps0[j], track, var, steady, force)
             elif j == self.STUCK:
-                means[j] = self._predict_stuck(xs0[j], track, var)
+                self._predict_stuck(j, xs0[j], track, var)
             else:
-                means[j] = self._predict_freeform(xs0[j], steady)
-            rows0[j], rows1[j], noises[j] = self._row0, self._row1, self._Q2
+                self._predict_freeform(j, xs0[j], steady)
         # The measurement noise: the quantization's plus what covariance matching finds in
         # the innovations against the modes' combined prediction, or in the wheels' residuals
         # (read noise, jitter: the same electronics read all encoders at the same instants).
         # The mixture's predicted X (its variance: (A P0 A^T)[0, 0] + Q[0, 0] with row 0 of A,
         # per mode, and the modes' spread) and V.
-        x_pred, predicted, speed = K.predicted_first(cbar, means, rows0, Ps0, noises)
         q = self.q
-        wheel = q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed
-        R = R0 + max(self._noise.extra(speed), wheel)
+        if self.reference:
+            x_pred, predicted, speed = K.predicted_first(cbar, means, rows0, Ps0, noises)
+            wheel = q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed
+            R = R0 + max(self._noise.extra(speed), wheel)
+            self._modes_reference(z, R, means, list(zip(rows0.copy(), rows1.copy())), noises.copy())
+        else:
+            x, P = self.x, self.P = np.empty(self.d), np.empty((self.d, self.d))
+            noise = self._noise_models
+            noise[0], noise[1], noise[2], noise[3] = self._noise.a, self._noise.b, q * q * self._wheel_noise[0], \
+                self._wheel_noise[1]
+            x_pred, predicted, speed, self.last_nis = K.measure_cycle(
+                Ps0, means, rows0, rows1, noises, self.forgetting * self.h, cbar, z, R0, noise, self.xs, self.Ps,
+                self.mu, x, P, self._nis)
         self._noise.push(z - x_pred, predicted, R0, speed)
         self._nis_history.append((z - x_pred) ** 2 / (predicted + R0))
-        if self.reference:
-            self._modes_reference(z, R, means, list(zip(rows0.copy(), rows1.copy())), noises.copy())
-            return
-        self.x, self.P = np.empty(self.d), np.empty((self.d, self.d))
-        K.cycle(Ps0, means, rows0, rows1, noises, self.forgetting * self.h, cbar, z, R, self.xs, self.Ps,
-                self.mu, self.x, self.P, self._nis)
-        self.last_nis = float(self.mu @ self._nis)
 
     def _modes_reference(self, z: float, R: float, means: list, rows: list, noises: list) -> None:
         """The same cycle on filterpy's IMMEstimator: each filter's transition ``F`` (the

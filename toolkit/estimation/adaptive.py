@@ -807,7 +807,7 @@ class AdaptiveKalman(Estimator):
             else:
                 var, speeds = var_b, banked
         self._held = u
-        track = np.stack((speeds, speeds if steady else u))
+        track = np.array((speeds, speeds if steady else u))
         self._pending = (track, var, steady, force)
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,

@@ -167,7 +167,9 @@ class NoiseMatcher:
     REFIT = 5
 
     def reset(self) -> None:
-        self._rows: deque[tuple[float, float]] = deque(maxlen=self.window)
+        # The last `window` rows (excess, speed^2), a ring: row k at k % window. Until it is
+        # full the rows stand in order; once trimmed (20 rows or more) they are sorted anyway.
+        self._rows = np.empty((self.window, 2))
         self._count = 0
         self.a = 0.0
         self.b = 0.0
@@ -175,11 +177,14 @@ class NoiseMatcher:
     def push(self, innovation: float, predicted: float, base: float, speed: float) -> None:
         """Take one update's innovation (m), ``H P H^T`` and ``R0`` (m^2) and speed (m/s);
         refit ``a`` (m^2) and ``b`` (s^2) every :data:`REFIT` updates."""
-        self._rows.append((innovation * innovation - predicted - base, speed * speed))
+        row = self._rows[self._count % self.window]
+        row[0] = innovation * innovation - predicted - base
+        row[1] = speed * speed
         self._count += 1
-        if self._count % self.REFIT and len(self._rows) >= 20:
+        kept = min(self._count, self.window)
+        if self._count % self.REFIT and kept >= 20:
             return
-        rows = np.array(self._rows)
+        rows = self._rows[:kept]
         if rows.shape[0] >= 20:
             # Trimmed: the largest 5 % of the excesses left out (rare outliers, such as a
             # missed count, are not noise of every reading).

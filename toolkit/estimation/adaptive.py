@@ -559,7 +559,7 @@ class AdaptiveKalman(Estimator):
         track = track.copy()
         line_moments = kernels("lines", 50 * self.n).line_moments
         # The contacts the body may meet within the period: the three nearest its speed.
-        for k in np.argsort(np.abs(track[0] - self.x[1]))[:3].tolist():
+        for k in np.abs(track[0] - self.x[1]).argsort()[:3].tolist():
             if lines.counts[k] >= 3 and line_moments(lines.polys[k], int(lines.counts[k]), self._empty, 0,
                                                      self._moments) > 0.0:
                 v, w = float(self._moments[1]), float(self._moments[4])
@@ -781,7 +781,10 @@ class AdaptiveKalman(Estimator):
             q_w = self.model.sensors.wheel.distance_per_count
             a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
             self._wheel_noise = (a / (q_w * q_w), b)
-        u = self.model.clip(np.asarray(command, dtype=float))
+        u = np.asarray(command, dtype=float)
+        low, high = self.model.speed_limits
+        if not (low <= u.min() and u.max() <= high):      # (inside the limits: nothing to clip)
+            u = self.model.clip(u)
         if self._held is None:
             # The first sample: the motors run at their initial speeds (or the first command).
             initial = u if self._initial is None else self._initial

@@ -93,7 +93,7 @@ class LagIdentifier:
         u = np.asarray(command, dtype=float)
         last = self._last
         before = self._initial if last is None else last[2]
-        if before is not None and np.any(u != before):
+        if before is not None and (u != before).any():
             # A change at this sample (the command acts from t on): finish the open one first.
             self._finish()
             self._change = {"t": t, "x": x.copy(), "v0": before.copy(), "u": u.copy(), "rows": []}

@@ -359,3 +359,69 @@ def test_held_and_walk_predictions_are_their_transitions(h):
     np.testing.assert_array_equal(row1, F[1])
     np.testing.assert_allclose(mean, F @ x, rtol=1e-15)
     np.testing.assert_allclose(Q, s2 * walk, rtol=1e-15)
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1.0, 1e3])
+def test_measure_cycle_equals_filterpy_with_the_matched_noise(scale):
+    # The adaptive filter's update per sample: the mixture's predicted first state (its
+    # variance and the predicted speed V), the measurement noise R0 + max(a + b V^2, c + d V^2)
+    # (matched from the innovations, and from the wheels), and the IMM step, against
+    # filterpy's IMMEstimator with that R (its predict(u) / update(z)), at three scales of the
+    # state (positions, speeds and covariances scaled together; unequal mode probabilities and
+    # an unequal row-stochastic M). Tolerance 1e-13 relative (1e-13 of the largest entry
+    # absolute): the same products summed in another order (numpy's dense F P F^T and Joseph
+    # form against the kernels' sparse loops), measured at most 1e-15 (a few rounding units).
+    rng = np.random.default_rng(13)
+    m, d = 3, 8
+    filters = _filters(rng, m, d)
+    for f in filters:
+        f.x *= scale
+        f.P *= scale * scale
+    mu = np.array([0.6, 0.3, 0.1])
+    M = np.array([[0.96, 0.03, 0.01], [0.02, 0.97, 0.01], [0.01, 0.01, 0.98]])
+    xs = np.array([f.x.copy() for f in filters])
+    Ps = np.array([f.P.copy() for f in filters])
+    xs0, Ps0, cbar = np.empty_like(xs), np.empty_like(Ps), np.empty(m)
+    K.mix(mu, M, xs, Ps, xs0, Ps0, cbar)
+    rows0, rows1 = rng.normal(size=(m, d)), rng.normal(size=(m, d))
+    rows0[:, 0] = 1.0
+    rows0[2, 2:] = 0.0
+    means = rng.normal(size=(m, d)) * scale
+    Qs = np.array([_spd(rng, 2, 0.1 * scale) for _ in range(m)])
+    qtheta, R0 = 1e-4 * scale * scale, 0.05 * scale * scale
+    noise = np.array([0.01 * scale * scale, 0.3, 0.02 * scale * scale, 0.1])
+    z = float(means[0, 0] + 0.3 * scale)
+    # The noise from the mixture's predicted speed, as filterpy's user computes it.
+    V = float(cbar @ means[:, 1])
+    R = R0 + max(noise[0] + noise[1] * V * V, noise[2] + noise[3] * V * V)
+    F_all = []
+    for j, f in enumerate(filters):
+        F = np.eye(d)
+        F[0], F[1] = rows0[j], rows1[j]
+        f.F = F
+        f.Q = np.eye(d) * qtheta
+        f.Q[:2, :2] = Qs[j]
+        f.B = (means[j] - F @ xs0[j])[:, None]
+        f.R = np.array([[R]])
+        F_all.append(F)
+    imm = filterpy.IMMEstimator(filters, mu.copy(), M)
+    imm.predict(u=np.array([1.0]))
+    x0_ref = float(imm.cbar @ np.array([f.x[0] for f in filters]))
+    var_ref = float(sum(imm.cbar[j] * (filters[j].P[0, 0] + (filters[j].x[0] - x0_ref) ** 2) for j in range(m)))
+    imm.update(np.array([z]))
+    nis_ref = float(imm.mu @ np.array([f.y.item() ** 2 / f.S.item() for f in filters]))
+    xs_out, Ps_out, mu_out, x, P, nis = (np.empty_like(xs), np.empty_like(Ps), np.empty(m), np.empty(d),
+                                         np.empty((d, d)), np.empty(m))
+    x0, var, speed, nis_mean = K.measure_cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R0, noise,
+                                               xs_out, Ps_out, mu_out, x, P, nis)
+    rtol = 1e-13
+    assert speed == pytest.approx(V, rel=1e-14)
+    assert x0 == pytest.approx(x0_ref, rel=rtol)
+    assert var == pytest.approx(var_ref, rel=rtol)
+    assert nis_mean == pytest.approx(nis_ref, rel=rtol)
+    np.testing.assert_allclose(mu_out, imm.mu, rtol=rtol)
+    for j, f in enumerate(filters):
+        np.testing.assert_allclose(xs_out[j], f.x, rtol=rtol, atol=rtol * np.abs(f.x).max())
+        np.testing.assert_allclose(Ps_out[j], f.P, rtol=rtol, atol=rtol * np.abs(f.P).max())
+    np.testing.assert_allclose(x, imm.x, rtol=rtol, atol=rtol * np.abs(imm.x).max())
+    np.testing.assert_allclose(P, imm.P, rtol=rtol, atol=rtol * np.abs(imm.P).max())

@@ -268,3 +268,27 @@ def test_line_posterior_is_calibrated_over_its_prior(K):
         d = e - mom[:2]
         nees.append(d @ np.linalg.solve(C, d))
     assert abs(np.mean(nees) - 2.0) < 0.3
+
+
+def test_sharper_lines_take_the_lines_speed_where_it_is_sharper():
+    # Three wheels, their polygons: a parallelogram whose speed is uniform on [-s, s] (mean 0,
+    # variance s^2 / 3, closed form above, scaled) at three widths, listed out of order; a
+    # wheel with fewer than three readings and one not listed keep their speeds. Where
+    # s^2 / 3 < var[k] the contact's start and target become 0 and var[k] s^2 / 3 (1e-13
+    # relative: exact quadrature, rounding).
+    polys = np.zeros((5, CAP, 2))
+    counts = np.zeros(5, dtype=np.int64)
+    for k, s in ((0, 1e-3), (1, 1e-2), (2, 1e-4), (3, 1e-4), (4, 1e-4)):
+        p, n = polygon([(-s, -s), (s, -s), (s, s), (-s, s)])
+        out, m = clip(p, n, 1.0, 0.5, -0.3 * s, 0.4 * s)
+        polys[k], counts[k] = out, m
+    counts[3] = 2                                        # too few readings
+    track = np.array([[0.1, 0.2, 0.3, 0.4, 0.5], [0.1, 0.25, 0.3, 0.4, 0.5]])
+    var = np.array([1e-6, 1e-6, 1e-6, 1e-12, 1e-12])
+    moments = np.zeros(5)
+    L.sharper_lines(polys, counts, np.array([2, 0, 1, 3]), np.zeros((1, 2)), moments, track, var)
+    # Wheel 0: 1e-6 / 3 < 1e-6, taken; wheel 1: 1e-4 / 3 > 1e-6, kept; wheel 2: 1e-8 / 3,
+    # taken; wheel 3: two readings, kept; wheel 4: not listed, kept.
+    np.testing.assert_allclose(track, [[0.0, 0.2, 0.0, 0.4, 0.5], [0.0, 0.25, 0.0, 0.4, 0.5]], rtol=0,
+                               atol=1e-15)
+    np.testing.assert_allclose(var, [1e-6 / 3, 1e-6, 1e-8 / 3, 1e-12, 1e-12], rtol=1e-13)

@@ -17,6 +17,8 @@ counts (no noise model, no white approximation of the quantization's sawtooth).
   reading (against the motion): where a missed count would leave every line.
 - :func:`ride_moments`: the body's line riding an unknown wheel: the evidence-weighted
   mixture of :func:`line_moments` over the wheels.
+- :func:`sharper_lines`: contacts' speeds (and their variances) replaced by their wheels'
+  exact lines where those are sharper (the adaptive filter's settled contacts).
 - :func:`line_moments`: mean and covariance of ``(x0, v)`` uniform over a polygon and
   weighted by the ``x``-width of a second polygon at the same ``v`` (the wheel a body rides:
   the joint uniform law over both lines' intercepts, with the shared speed). Exact: between
@@ -37,7 +39,7 @@ import numpy as np
 _INLINE = {"inline": "always"}
 
 KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach_gaps": {}, "slice_x": _INLINE,
-           "line_moments": {}, "area": _INLINE, "ride_moments": {}}
+           "line_moments": {}, "area": _INLINE, "ride_moments": {}, "sharper_lines": {}}
 
 # 3-point Gauss-Legendre on [-1, 1]: exact for polynomials of degree <= 5.
 _GL_X = np.array([-math.sqrt(0.6), 0.0, math.sqrt(0.6)])
@@ -324,3 +326,20 @@ def ride_moments(pc: np.ndarray, nc: int, polys: np.ndarray, counts: np.ndarray,
     out[3] = vxv
     out[4] = vvv
     return total
+
+
+def sharper_lines(polys, counts, which, empty, out, track, var):  # noqa: ANN001, ANN201 (numba kernel)
+    """For each wheel ``k`` of ``which`` (in order) whose window holds three readings or more
+    and whose polygon ``polys[k]`` (``counts[k]`` vertices) has a positive area: the speed's
+    uniform posterior over it (:func:`line_moments`, into ``out``); where its variance is below
+    ``var[k]``, the contact's ``track[:, k]`` (start and target, m/s) becomes its mean and
+    ``var[k]`` its variance (in place). ``empty`` a ``(1, 2)`` array (no second polygon)."""
+    for a in range(which.shape[0]):
+        k = which[a]
+        if counts[k] >= 3 and line_moments(polys[k], counts[k], empty, 0, out) > 0.0:
+            v = out[1]
+            w = out[4]
+            if w < var[k]:
+                track[0, k] = v
+                track[1, k] = v
+                var[k] = w

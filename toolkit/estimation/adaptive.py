@@ -557,15 +557,10 @@ class AdaptiveKalman(Estimator):
         if not (steady and lines.active and self._repairs):
             return track, var
         track = track.copy()
-        line_moments = kernels("lines", 50 * self.n).line_moments
         # The contacts the body may meet within the period: the three nearest its speed.
-        for k in np.abs(track[0] - self.x[1]).argsort()[:3].tolist():
-            if lines.counts[k] >= 3 and line_moments(lines.polys[k], int(lines.counts[k]), self._empty, 0,
-                                                     self._moments) > 0.0:
-                v, w = float(self._moments[1]), float(self._moments[4])
-                if w < var[k]:
-                    track[:, k] = v
-                    var[k] = w
+        kernels("lines", 150 * self.n).sharper_lines(lines.polys, lines.counts,
+                                                     np.abs(track[0] - self.x[1]).argsort()[:3], self._empty,
+                                                     self._moments, track, var)
         return track, var
 
     def _step(self, c: int, t: float, anchor: tuple[float, int], track: np.ndarray, var_v: np.ndarray,

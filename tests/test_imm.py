@@ -7,6 +7,7 @@ plain 2-state Kalman filter. ``make test`` runs this file compiled and again as 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -32,6 +33,44 @@ def _filters(rng: np.random.Generator, m: int, d: int) -> list:
         kf.H[0, 0] = 1.0
         out.append(kf)
     return out
+
+
+def _mixed_modes(rng: np.random.Generator, d: int, mu: np.ndarray, M: np.ndarray, scale: float = 1.0) -> tuple:
+    """Three random modes (states and covariances scaled by ``scale``), mixed by the kernel,
+    and random transition rows (row 0 starting with 1), predicted means and process noises."""
+    m = mu.size
+    filters = _filters(rng, m, d)
+    for f in filters:
+        f.x *= scale
+        f.P *= scale * scale
+    xs = np.array([f.x.copy() for f in filters])
+    Ps = np.array([f.P.copy() for f in filters])
+    xs0, Ps0, cbar = np.empty_like(xs), np.empty_like(Ps), np.empty(m)
+    K.mix(mu, M, xs, Ps, xs0, Ps0, cbar)
+    rows0, rows1 = rng.normal(size=(m, d)), rng.normal(size=(m, d))
+    rows0[:, 0] = 1.0
+    means = rng.normal(size=(m, d)) * scale
+    Qs = np.array([_spd(rng, 2, 0.1 * scale) for _ in range(m)])
+    return filters, xs, Ps, xs0, Ps0, cbar, rows0, rows1, means, Qs
+
+
+def _filterpy_predicted(filters: list, mu: np.ndarray, M: np.ndarray, xs0: np.ndarray, rows0: np.ndarray,
+                        rows1: np.ndarray, means: np.ndarray, Qs: np.ndarray, qtheta: float, R: float) -> Any:
+    """filterpy's IMMEstimator over ``filters`` after its predict: each filter's transition
+    (the identity but for rows 0 and 1), process noise, measurement noise ``R`` and the input
+    that makes ``F x0 + B u`` the mode's predicted mean from its mixed state ``x0``."""
+    d = xs0.shape[1]
+    for j, f in enumerate(filters):
+        F = np.eye(d)
+        F[0], F[1] = rows0[j], rows1[j]
+        f.F = F
+        f.Q = np.eye(d) * qtheta
+        f.Q[:2, :2] = Qs[j]
+        f.B = (means[j] - F @ xs0[j])[:, None]
+        f.R = np.array([[R]])
+    imm = filterpy.IMMEstimator(filters, mu.copy(), M)
+    imm.predict(u=np.array([1.0]))
+    return imm
 
 
 def test_mixing_and_combination_equal_filterpy_imm():
@@ -113,28 +152,11 @@ def test_cycle_equals_filterpy_predict_and_update():
     # combination, against IMMEstimator.predict(u) / update(z) (1e-10 relative).
     rng = np.random.default_rng(5)
     m, d = 3, 6
-    filters = _filters(rng, m, d)
     mu = np.array([0.5, 0.3, 0.2])
     M = np.array([[0.97, 0.02, 0.01], [0.02, 0.97, 0.01], [0.01, 0.01, 0.98]])
-    xs = np.array([f.x.copy() for f in filters])
-    Ps = np.array([f.P.copy() for f in filters])
-    xs0, Ps0, cbar = np.empty_like(xs), np.empty_like(Ps), np.empty(m)
-    K.mix(mu, M, xs, Ps, xs0, Ps0, cbar)
-    rows0, rows1 = rng.normal(size=(m, d)), rng.normal(size=(m, d))
-    rows0[:, 0] = 1.0
-    means = rng.normal(size=(m, d))
-    Qs = np.array([_spd(rng, 2, 0.1) for _ in range(m)])
+    filters, xs, Ps, xs0, Ps0, cbar, rows0, rows1, means, Qs = _mixed_modes(rng, d, mu, M)
     qtheta, z, R = 1e-4, 0.4, 0.25
-    for j, f in enumerate(filters):
-        F = np.eye(d)
-        F[0], F[1] = rows0[j], rows1[j]
-        f.F = F
-        f.Q = np.eye(d) * qtheta
-        f.Q[:2, :2] = Qs[j]
-        f.B = (means[j] - F @ xs0[j])[:, None]
-        f.R = np.array([[R]])
-    imm = filterpy.IMMEstimator(filters, mu.copy(), M)
-    imm.predict(u=np.array([1.0]))
+    imm = _filterpy_predicted(filters, mu, M, xs0, rows0, rows1, means, Qs, qtheta, R)
     imm.update(np.array([z]))
     xs_out, Ps_out, mu_out, x, P, nis = (np.empty_like(xs), np.empty_like(Ps), np.empty(m), np.empty(d),
                                          np.empty((d, d)), np.empty(m))
@@ -373,39 +395,17 @@ def test_measure_cycle_equals_filterpy_with_the_matched_noise(scale):
     # form against the kernels' sparse loops), measured at most 1e-15 (a few rounding units).
     rng = np.random.default_rng(13)
     m, d = 3, 8
-    filters = _filters(rng, m, d)
-    for f in filters:
-        f.x *= scale
-        f.P *= scale * scale
     mu = np.array([0.6, 0.3, 0.1])
     M = np.array([[0.96, 0.03, 0.01], [0.02, 0.97, 0.01], [0.01, 0.01, 0.98]])
-    xs = np.array([f.x.copy() for f in filters])
-    Ps = np.array([f.P.copy() for f in filters])
-    xs0, Ps0, cbar = np.empty_like(xs), np.empty_like(Ps), np.empty(m)
-    K.mix(mu, M, xs, Ps, xs0, Ps0, cbar)
-    rows0, rows1 = rng.normal(size=(m, d)), rng.normal(size=(m, d))
-    rows0[:, 0] = 1.0
+    filters, xs, Ps, xs0, Ps0, cbar, rows0, rows1, means, Qs = _mixed_modes(rng, d, mu, M, scale)
     rows0[2, 2:] = 0.0
-    means = rng.normal(size=(m, d)) * scale
-    Qs = np.array([_spd(rng, 2, 0.1 * scale) for _ in range(m)])
     qtheta, R0 = 1e-4 * scale * scale, 0.05 * scale * scale
     noise = np.array([0.01 * scale * scale, 0.3, 0.02 * scale * scale, 0.1])
     z = float(means[0, 0] + 0.3 * scale)
     # The noise from the mixture's predicted speed, as filterpy's user computes it.
     V = float(cbar @ means[:, 1])
     R = R0 + max(noise[0] + noise[1] * V * V, noise[2] + noise[3] * V * V)
-    F_all = []
-    for j, f in enumerate(filters):
-        F = np.eye(d)
-        F[0], F[1] = rows0[j], rows1[j]
-        f.F = F
-        f.Q = np.eye(d) * qtheta
-        f.Q[:2, :2] = Qs[j]
-        f.B = (means[j] - F @ xs0[j])[:, None]
-        f.R = np.array([[R]])
-        F_all.append(F)
-    imm = filterpy.IMMEstimator(filters, mu.copy(), M)
-    imm.predict(u=np.array([1.0]))
+    imm = _filterpy_predicted(filters, mu, M, xs0, rows0, rows1, means, Qs, qtheta, R)
     x0_ref = float(imm.cbar @ np.array([f.x[0] for f in filters]))
     var_ref = float(sum(imm.cbar[j] * (filters[j].P[0, 0] + (filters[j].x[0] - x0_ref) ** 2) for j in range(m)))
     imm.update(np.array([z]))

@@ -24,8 +24,9 @@ docs/physics.md section 10):
   that region's signs ``s_i``; while it rides contact ``k`` nothing (stiction absorbs it).
   The filter's covariance carries the rest at the prior.
 - *The body's modes* as an interacting multiple model (filterpy's ``IMMEstimator``
-  arithmetic, compiled in :mod:`toolkit._compiled.imm`; ``reference=True`` runs filterpy's
-  own objects, and the tests find the two equal): *free* (the flow decides: sliding,
+  arithmetic, compiled in :mod:`toolkit._compiled.imm`: the mixing, the stuck and free-form
+  modes' predictions, and the update with its matched noise, one call each; ``reference=True``
+  runs filterpy's own objects, and the tests find the two equal): *free* (the flow decides: sliding,
   coasting in a zero-force band or creeping across it, sticking where the estimated
   friction holds the body), *stuck* (the body rides the contact nearest its speed, whatever
   the estimated friction says: a marginal stiction is undecided until the counts decide)
@@ -109,7 +110,9 @@ class WheelSpeedBank:
     wander is the motors', shared), with a fading memory :data:`FORGET`; each reading's noise
     is what its wheel's window residuals show (:attr:`ContactSpeedTracker.reading_variance`);
     the law's own error adds :data:`LAW_ERROR` of each speed change it predicts. The
-    arithmetic is the compiled :func:`toolkit._compiled.imm.bank_step`.
+    arithmetic is compiled: :func:`toolkit._compiled.imm.bank_push` (one call per sample
+    while every play stays loaded), else :func:`~toolkit._compiled.imm.bank_step` after the
+    play operator.
     """
 
     #: Hypotheses of the wander's intensity, m/s per sqrt(s).

@@ -578,7 +578,7 @@ class AdaptiveKalman(Estimator):
         # estimate, and a reading a count short of every line is a missed count, repaired.
         out = None
         if steady and self._layer.ready:
-            k = int(np.argmin(np.abs(track[0] - prior_x[1])))
+            k = int(np.abs(track[0] - prior_x[1]).argmin())
             physical = self._mu_prev[0] + self._mu_prev[1]
             stuck = (self._mu_prev[1] + (self._mu_prev[0] if self._stuck_on is not None else 0.0)) / max(
                 physical, 1e-300)

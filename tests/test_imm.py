@@ -287,10 +287,11 @@ def test_play_loaded_is_the_play_operators_fixed_point():
 
 @pytest.mark.parametrize("scale", [1e-4, 1e-2, 1.0])
 def test_bank_push_is_its_three_kernels_in_one(scale):
-    # Every play loaded: bank_push is play_loaded, bank_step (law error (0.3 (end - start))^2,
-    # the law's displacement cx) and bank_moments in one call, the encoders' side moved to
-    # the best hypothesis's position plus its shift: the same operations in the same order,
-    # so equal to the bit (several scales, unequal hypothesis weights and wheel noises).
+    # Every play loaded: bank_push is play_loaded, bank_step (the readings (counts + 0.5) q,
+    # law error (0.3 (end - start))^2, the law's displacement cx) and bank_moments in one
+    # call, the encoders' side moved to the best hypothesis's position plus its shift, the
+    # speeds the law's end speeds plus the offsets: the same operations in the same order, so
+    # equal to the bit (several scales, unequal hypothesis weights and wheel noises).
     rng = np.random.default_rng(11)
     H, n, h, half = 6, 4, 0.02, 4e-4 * scale
     drifts = np.array([0.0, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3])
@@ -303,19 +304,22 @@ def test_bank_push_is_its_three_kernels_in_one(scale):
     y = x[best, :, 0] - half                   # engaged behind contacts moving forwards
     start, end = np.full(n, 0.1) + 0.01 * np.arange(n), np.full(n, 0.12)
     cx, gx = h * end, np.full(n, h)
-    z = x[best, :, 0] + rng.normal(size=n) * 1e-4 * scale
+    q = 1e-5 * scale                           # the wheels' count (m): readings in counts
+    wheels = np.floor((x[best, :, 0] + rng.normal(size=n) * 1e-4 * scale) / q).astype(np.int64)
+    z = (wheels + 0.5) * q
     noise = 1e-9 * scale * scale * (1.0 + np.arange(n))
     ref = [a.copy() for a in (x, P, logw, y)]
-    shift, loaded, o, var = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    drift = K.bank_push(x, P, Q, start, end, cx, gx, 0.3, y, z, noise, logw, 0.99, half, drifts, shift, loaded,
-                        o, var)
+    shift, loaded, speeds, var = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    drift = K.bank_push(x, P, Q, start, end, cx, gx, 0.3, y, wheels, q, noise, logw, 0.99, half, drifts, shift,
+                        loaded, speeds, var)
     xr, Pr, lr, yr = ref
     sr, ldr, o_r, vr = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     sr[:] = yr - xr[best, :, 0]
     assert K.play_loaded(sr, start, end, xr[best, :, 1].copy(), half, ldr) == 0
     K.bank_step(xr, Pr, Q, cx, gx, (0.3 * (end - start)) ** 2, sr, ldr, z, noise, lr, 0.99)
     drift_r = K.bank_moments(xr, Pr, lr, drifts, o_r, vr)
-    for got, want in ((x, xr), (P, Pr), (logw, lr), (y, xr[best, :, 0] + sr), (o, o_r), (var, vr), (shift, sr)):
+    for got, want in ((x, xr), (P, Pr), (logw, lr), (y, xr[best, :, 0] + sr), (speeds, end + o_r), (var, vr),
+                      (shift, sr)):
         np.testing.assert_array_equal(got, want)
     assert drift == drift_r and loaded.all()
     # One wheel reversing over the period walks its play: -1, nothing changed but shift and
@@ -326,8 +330,8 @@ def test_bank_push_is_its_three_kernels_in_one(scale):
     before = [a.copy() for a in (x, P, logw, y)]
     y[:] = x[int(np.argmax(logw)), :, 0] - half
     before[3] = y.copy()
-    assert K.bank_push(x, P, Q, start, end2, cx, gx, 0.3, y, z, noise, logw, 0.99, half, drifts, shift, loaded,
-                       o, var) == -1.0
+    assert K.bank_push(x, P, Q, start, end2, cx, gx, 0.3, y, wheels, q, noise, logw, 0.99, half, drifts, shift,
+                       loaded, speeds, var) == -1.0
     for got, want in zip((x, P, logw, y), before):
         np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(loaded, [1.0, 1.0, 0.0, 1.0])

@@ -259,32 +259,41 @@ def play_loaded(shift, start, end, o, half, loaded):  # noqa: ANN001, ANN201 (nu
     return missing
 
 
-def bank_push(x, P, Q, start, end, cx, gx, law, y, z, noise, logw, forget, half, drifts, shift, loaded, o, var):  # noqa: ANN001, ANN201
+def bank_push(x, P, Q, start, end, cx, gx, law, y, wheels, q, noise, logw, forget, half, drifts, shift, loaded,
+              speeds, var):  # noqa: ANN001, ANN201 (numba kernel)
     """:class:`WheelSpeedBank`'s sample where every encoder stays engaged (:func:`play_loaded`
     of the most likely hypothesis ``best``, ``shift = y - x[best, :, 0]``, written in
-    ``shift`` and ``loaded``): :func:`bank_step` with the law's displacement ``cx`` and its
-    error ``(law (end - start))^2``, the encoders' side ``y <- x[best, :, 0] + shift`` and
-    :func:`bank_moments` (``o``, ``var``); returns the wander intensity. Where some encoder
-    walks its play, returns -1 having changed nothing but ``shift`` and ``loaded`` (the
-    caller follows the play operator along the period)."""
+    ``shift`` and ``loaded``): :func:`bank_step` with the readings ``z = (wheels + 0.5) q``
+    (counts to m, the cell's middle), the law's displacement ``cx`` and its error ``(law (end
+    - start))^2``, the encoders' side ``y <- x[best, :, 0] + shift`` and :func:`bank_moments`;
+    writes the contacts' speeds ``end + o`` (the law's end speeds plus the offsets' mixture
+    mean) in ``speeds`` and their variances in ``var``, and returns the wander intensity.
+    Where some encoder walks its play, returns -1 having changed nothing but ``shift`` and
+    ``loaded`` (the caller follows the play operator along the period)."""
     H, n = x.shape[0], x.shape[1]
     best = 0
     for h in range(1, H):
         if logw[h] > logw[best]:
             best = h
+    o = np.empty(n)
     for i in range(n):
         shift[i] = y[i] - x[best, i, 0]
         o[i] = x[best, i, 1]
     if play_loaded(shift, start, end, o, half, loaded) > 0:
         return -1.0
     qv = np.empty(n)
+    z = np.empty(n)
     for i in range(n):
         d = law * (end[i] - start[i])
         qv[i] = d * d
+        z[i] = (wheels[i] + 0.5) * q
     bank_step(x, P, Q, cx, gx, qv, shift, loaded, z, noise, logw, forget)
     for i in range(n):
         y[i] = x[best, i, 0] + shift[i]
-    return bank_moments(x, P, logw, drifts, o, var)
+    drift = bank_moments(x, P, logw, drifts, o, var)
+    for i in range(n):
+        speeds[i] = end[i] + o[i]
+    return drift
 
 
 def cycle(Ps0, means, rows0, rows1, Qs, qtheta, cbar, z, R, xs, Ps, mu, x, P, nis):  # noqa: ANN001, ANN201

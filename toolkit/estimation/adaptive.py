@@ -185,7 +185,6 @@ class WheelSpeedBank:
         with the motors' ``lag`` (s) and each reading's noise variance (m^2); the contacts'
         speeds (m/s) and their variances ((m/s)^2) at the readings."""
         h = self.h
-        z = (np.asarray(wheels, dtype=float) + 0.5) * self.q
         u = np.asarray(command, dtype=float)
         start = self._nominal
         s = self._substeps
@@ -209,13 +208,15 @@ class WheelSpeedBank:
         # call; else only the others walk its path.
         K = kernels("imm", 20 * self._Q.shape[0] * self.n)
         noise = np.asarray(noise, dtype=float)
-        shift, loaded, o, var = np.empty(self.n), self._loaded, np.empty(self.n), np.empty(self.n)
-        drift = K.bank_push(self._x, self._P, self._Q, start, end, cx, self._h_all, self.LAW_ERROR, self._y, z,
-                            noise, self._log_weights, self.FORGET, 0.5 * self.play, self._drifts, shift, loaded,
-                            o, var)
+        wheels = np.asarray(wheels)
+        shift, loaded, speeds, var = np.empty(self.n), self._loaded, np.empty(self.n), np.empty(self.n)
+        drift = K.bank_push(self._x, self._P, self._Q, start, end, cx, self._h_all, self.LAW_ERROR, self._y,
+                            wheels, self.q, noise, self._log_weights, self.FORGET, 0.5 * self.play, self._drifts,
+                            shift, loaded, speeds, var)
         if drift >= 0.0:
             self._drift = drift
-            return end + o, var
+            return speeds, var
+        z = (np.asarray(wheels, dtype=float) + 0.5) * self.q
         if moved is None:
             moved = s[:, None] * end
         best = int(np.argmax(self._log_weights))
@@ -232,6 +233,7 @@ class WheelSpeedBank:
                     self._log_weights, self.FORGET)
         self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift,
                            np.where(loaded > 0.0, self._y, x + moved[-1] + h * ob + shift))
+        o = np.empty(self.n)
         self._drift = K.bank_moments(self._x, self._P, self._log_weights, self._drifts, o, var)
         return end + o, var
 

@@ -160,6 +160,17 @@ def test_reach_gaps_equal_the_vertices_positions():
         x = polys[i, :counts[i], 0] + (t - starts[i]) * polys[i, :counts[i], 1]
         gap = x.min() - (readings[i] - first[i]) * q if motion[i] > 0 else (readings[i] + 1 - first[i]) * q - x.max()
         np.testing.assert_allclose(out[i], gap, rtol=1e-15, atol=1e-15)
+    # reach_seen: the same gaps, and per wheel old enough (t - start >= age) whether its gap
+    # reaches each threshold: NumPy's masks, exactly (comparisons of the same numbers).
+    gaps, seen, repairable = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+    age, seen_gap, repair_gap = 0.15, -0.5, -0.1
+    L.reach_seen(polys, counts, t, starts, readings, first, q, motion, age, seen_gap, repair_gap, gaps, seen,
+                 repairable)
+    np.testing.assert_array_equal(gaps, out)
+    aged = t - starts >= age
+    np.testing.assert_array_equal(seen, aged & (out >= seen_gap))
+    np.testing.assert_array_equal(repairable, aged & (out >= repair_gap))
+    assert seen.any() and not seen.all() and repairable.any() and not (seen == repairable).all()
 
 
 def test_a_tolerance_adds_no_sliver_vertices():

@@ -14,7 +14,8 @@ counts (no noise model, no white approximation of the quantization's sawtooth).
   adds no sliver vertices).
 - :func:`extend_lines`: many polygons (one per wheel) clipped by one reading each.
 - :func:`reach_gaps`: how far each polygon's lines reach past the cell one count short of a
-  reading (against the motion): where a missed count would leave every line.
+  reading (against the motion): where a missed count would leave every line;
+  :func:`reach_seen` with the thresholds that decide it.
 - :func:`ride_moments`: the body's line riding an unknown wheel: the evidence-weighted
   mixture of :func:`line_moments` over the wheels.
 - :func:`sharper_lines`: contacts' speeds (and their variances) replaced by their wheels'
@@ -38,7 +39,7 @@ import numpy as np
 
 _INLINE = {"inline": "always"}
 
-KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach_gaps": {}, "slice_x": _INLINE,
+KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach_gaps": {}, "reach_seen": {}, "slice_x": _INLINE,
            "line_moments": {}, "area": _INLINE, "ride_moments": {}, "sharper_lines": {}}
 
 # 3-point Gauss-Legendre on [-1, 1]: exact for polynomials of degree <= 5.
@@ -137,6 +138,19 @@ def reach_gaps(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.ndarr
             out[i] = low - (readings[i] - first[i]) * q
         else:
             out[i] = (readings[i] + 1.0 - first[i]) * q - high
+
+
+def reach_seen(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.ndarray, readings: np.ndarray,
+               first: np.ndarray, q: float, motion: np.ndarray, age: float, seen_gap: float, repair_gap: float,
+               gaps: np.ndarray, seen: np.ndarray, repairable: np.ndarray) -> None:
+    """:func:`reach_gaps` into ``gaps``, then per polygon whose window is at least ``age``
+    old at ``t`` (``t - starts[i] >= age``): ``seen[i]`` where its gap is at least
+    ``seen_gap``, ``repairable[i]`` where at least ``repair_gap`` (False for the younger)."""
+    reach_gaps(polys, counts, t, starts, readings, first, q, motion, gaps)
+    for i in range(polys.shape[0]):
+        aged = t - starts[i] >= age
+        seen[i] = aged and gaps[i] >= seen_gap
+        repairable[i] = aged and gaps[i] >= repair_gap
 
 
 def slice_x(poly: np.ndarray, n: int, v: float) -> tuple[float, float]:

@@ -203,14 +203,14 @@ class WheelLines:
         reading's cell, :func:`_behind`). Whether a transition is lost is drawn apart from
         all of this, so the repairs over the transitions read where this holds count the
         rate without bias (:class:`~toolkit.estimation.MissedCountRate`)."""
-        gaps, q = self._gaps, self._q
-        kernels("lines", 10 * self.counts.size).reach_gaps(self.polys, self.counts, t, self.starts, wheels,
-                                                           self._first, q, self._motion, gaps)
-        aged = t - self.starts >= REPAIR_AFTER * self._period
+        q, n = self._q, self.counts.size
         # And whether this reading itself, should it leave its line, would be repaired: the
         # reach past its own cell is a count less than past the short one.
-        self._repairable = aged & (gaps >= (1.0 + REPAIR_GAP) * q)
-        return aged & (gaps >= REPAIR_GAP * q)
+        seen, self._repairable = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        kernels("lines", 10 * n).reach_seen(self.polys, self.counts, t, self.starts, wheels, self._first, q,
+                                            self._motion, REPAIR_AFTER * self._period, REPAIR_GAP * q,
+                                            (1.0 + REPAIR_GAP) * q, self._gaps, seen, self._repairable)
+        return seen
 
     def _restart(self, which: np.ndarray, t: float, wheels: np.ndarray) -> None:
         """New windows for the wheels ``which`` (bool mask) from the row at ``t`` (s)."""

@@ -171,6 +171,12 @@ def test_reach_gaps_equal_the_vertices_positions():
     np.testing.assert_array_equal(seen, aged & (out >= seen_gap))
     np.testing.assert_array_equal(repairable, aged & (out >= repair_gap))
     assert seen.any() and not seen.all() and repairable.any() and not (seen == repairable).all()
+    # seen_steps: the steps read on the seen wheels whose lines live, |reading - last| summed
+    # (whole counts: exact in any order).
+    last = readings + rng.integers(-2, 3, n)
+    steps = L.seen_steps(readings, last, seen, counts)
+    assert steps == float(np.abs(readings - last)[seen & (counts > 0)].sum())
+    assert L.seen_steps(readings, last, np.zeros(n, dtype=bool), counts) == 0.0
 
 
 def test_a_tolerance_adds_no_sliver_vertices():

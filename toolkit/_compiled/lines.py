@@ -15,7 +15,8 @@ counts (no noise model, no white approximation of the quantization's sawtooth).
 - :func:`extend_lines`: many polygons (one per wheel) clipped by one reading each.
 - :func:`reach_gaps`: how far each polygon's lines reach past the cell one count short of a
   reading (against the motion): where a missed count would leave every line;
-  :func:`reach_seen` with the thresholds that decide it.
+  :func:`reach_seen` with the thresholds that decide it; :func:`seen_steps` the steps read
+  there.
 - :func:`ride_moments`: the body's line riding an unknown wheel: the evidence-weighted
   mixture of :func:`line_moments` over the wheels.
 - :func:`sharper_lines`: contacts' speeds (and their variances) replaced by their wheels'
@@ -39,7 +40,7 @@ import numpy as np
 
 _INLINE = {"inline": "always"}
 
-KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach_gaps": {}, "reach_seen": {}, "slice_x": _INLINE,
+KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach_gaps": {}, "reach_seen": {}, "seen_steps": {}, "slice_x": _INLINE,
            "line_moments": {}, "area": _INLINE, "ride_moments": {}, "sharper_lines": {}}
 
 # 3-point Gauss-Legendre on [-1, 1]: exact for polynomials of degree <= 5.
@@ -151,6 +152,16 @@ def reach_seen(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.ndarr
         aged = t - starts[i] >= age
         seen[i] = aged and gaps[i] >= seen_gap
         repairable[i] = aged and gaps[i] >= repair_gap
+
+
+def seen_steps(readings: np.ndarray, last: np.ndarray, seen: np.ndarray, counts: np.ndarray) -> float:
+    """``sum |readings[i] - last[i]|`` over the wheels ``seen`` whose line lives (``counts[i]
+    > 0``): the transitions read there (counts)."""
+    total = 0.0
+    for i in range(readings.shape[0]):
+        if seen[i] and counts[i] > 0:
+            total += abs(readings[i] - last[i])
+    return total
 
 
 def slice_x(poly: np.ndarray, n: int, v: float) -> tuple[float, float]:

@@ -183,11 +183,11 @@ class WheelLines:
         seen = self._seen(t, wheels) if self._motion is not None else None
         self._extend(t, wheels, seen is not None)
         dead = self.counts <= 0
-        if seen is not None and seen.any():
+        if seen is not None:
             # The transitions read where a lost one would have been repaired (the repaired
             # readings' steps: the true transitions), for the rate's identification.
-            self.exposure = float(np.abs(wheels - last[1])[seen & ~dead].sum())
-            if self.spared:
+            self.exposure = kernels("lines", self.counts.size).seen_steps(wheels, last[1], seen, self.counts)
+            if self.spared and seen.any():
                 # Told apart, not repaired: their true transitions are one more.
                 self.exposure += float(np.abs(wheels + self._motion - last[1])[self._told].sum())
         self.deaths = int(np.count_nonzero(dead))

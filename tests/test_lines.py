@@ -177,6 +177,18 @@ def test_reach_gaps_equal_the_vertices_positions():
     steps = L.seen_steps(readings, last, seen, counts)
     assert steps == float(np.abs(readings - last)[seen & (counts > 0)].sum())
     assert L.seen_steps(readings, last, np.zeros(n, dtype=bool), counts) == 0.0
+    # behind, one polygon: its strip [lo, lo + q) at least gap counts behind every position
+    # its lines reach, moving up or down: NumPy's extremes, exactly (the same sums).
+    verdicts = set()
+    for i in (0, 1, 2, 4):
+        x = polys[i, :counts[i], 0] + (t - starts[i]) * polys[i, :counts[i], 1]
+        for lo in (-3.0, -0.5, 0.0, 2.0):
+            for direction in (1.0, -1.0):
+                want = (x.min() - (lo + q) >= 0.25 * q) if direction > 0 else (lo - x.max() >= 0.25 * q)
+                got = L.behind(polys[i], int(counts[i]), t - starts[i], lo, q, direction, 0.25)
+                assert bool(got) == bool(want)
+                verdicts.add(bool(want))
+    assert verdicts == {True, False}
 
 
 def test_a_tolerance_adds_no_sliver_vertices():

@@ -16,7 +16,7 @@ counts (no noise model, no white approximation of the quantization's sawtooth).
 - :func:`reach_gaps`: how far each polygon's lines reach past the cell one count short of a
   reading (against the motion): where a missed count would leave every line;
   :func:`reach_seen` with the thresholds that decide it; :func:`seen_steps` the steps read
-  there.
+  there; :func:`behind` for one polygon (:func:`reach`: its lowest and highest position).
 - :func:`ride_moments`: the body's line riding an unknown wheel: the evidence-weighted
   mixture of :func:`line_moments` over the wheels.
 - :func:`sharper_lines`: contacts' speeds (and their variances) replaced by their wheels'
@@ -40,7 +40,8 @@ import numpy as np
 
 _INLINE = {"inline": "always"}
 
-KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach_gaps": {}, "reach_seen": {}, "seen_steps": {}, "slice_x": _INLINE,
+KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach": _INLINE, "reach_gaps": {}, "reach_seen": {}, "seen_steps": {},
+           "behind": {}, "slice_x": _INLINE,
            "line_moments": {}, "area": _INLINE, "ride_moments": {}, "sharper_lines": {}}
 
 # 3-point Gauss-Legendre on [-1, 1]: exact for polynomials of degree <= 5.
@@ -129,16 +130,31 @@ def reach_gaps(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.ndarr
         if n <= 0 or motion[i] == 0.0:
             out[i] = -math.inf
             continue
-        tau = t - starts[i]
-        low, high = math.inf, -math.inf
-        for r in range(n):
-            x = polys[i, r, 0] + tau * polys[i, r, 1]
-            low = min(low, x)
-            high = max(high, x)
+        low, high = reach(polys[i], n, t - starts[i])
         if motion[i] > 0.0:
             out[i] = low - (readings[i] - first[i]) * q
         else:
             out[i] = (readings[i] + 1.0 - first[i]) * q - high
+
+
+def reach(poly: np.ndarray, n: int, tau: float) -> tuple[float, float]:
+    """The lowest and highest position ``x + tau v`` the polygon's lines reach at ``tau`` (a
+    convex polygon's extremes are at its vertices)."""
+    low, high = math.inf, -math.inf
+    for r in range(n):
+        x = poly[r, 0] + tau * poly[r, 1]
+        low = min(low, x)
+        high = max(high, x)
+    return low, high
+
+
+def behind(poly: np.ndarray, n: int, tau: float, lo: float, q: float, direction: float, gap: float) -> bool:
+    """The strip ``[lo, lo + q)`` lies at least ``gap`` counts behind (against
+    ``direction``) every position the polygon's lines reach at ``tau`` (:func:`reach`)."""
+    low, high = reach(poly, n, tau)
+    if direction > 0:
+        return low - (lo + q) >= gap * q
+    return lo - high >= gap * q
 
 
 def reach_seen(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.ndarray, readings: np.ndarray,

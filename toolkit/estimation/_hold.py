@@ -83,10 +83,7 @@ _BOX = (1.0e3, 1.0e3)
 def _behind(poly: np.ndarray, n: int, tau: float, lo: float, q: float, direction: float) -> bool:
     """The reading's strip ``[lo, lo + q)`` lies at least :data:`REPAIR_GAP` counts behind
     (against ``direction``) every position ``x + tau v`` the polygon's lines reach at ``tau``."""
-    positions = poly[:n, 0] + tau * poly[:n, 1]
-    if direction > 0:
-        return bool(positions.min() - (lo + q) >= REPAIR_GAP * q)
-    return bool(lo - positions.max() >= REPAIR_GAP * q)
+    return bool(kernels("lines", n).behind(poly, n, tau, lo, q, direction, REPAIR_GAP))
 
 
 def _box(poly: np.ndarray) -> None:

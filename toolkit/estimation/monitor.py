@@ -168,7 +168,9 @@ class NoiseMatcher:
 
     def reset(self) -> None:
         # The last `window` rows (excess, speed^2), a ring: row k at k % window. Until it is
-        # full the rows stand in order; once trimmed (20 rows or more) they are sorted anyway.
+        # full the rows stand in order; once trimmed (20 rows or more) they are sorted anyway
+        # (a window under 20 that has wrapped fits them in ring order: the same least squares
+        # but for the rounding of its sums).
         self._rows = np.empty((self.window, 2))
         self._count = 0
         self.a = 0.0

@@ -445,3 +445,38 @@ def test_an_adjusted_model_is_the_model_built_anew(change):
         base.adjusted(forces, -1.0, drift)
     with pytest.raises(ParameterError, match="'forces' parameter of EstimatorModel.adjusted"):
         base.adjusted(-forces, lag, drift)
+
+
+@pytest.mark.parametrize("window", [100, 30, 10])
+def test_noise_matcher_fits_the_last_window_of_rows(window):
+    # The matcher's ring of rows against the definition, refit every REFIT updates: the
+    # trimmed (largest 5 % of the excesses left out, from 20 rows on) nonnegative least
+    # squares of excess ~ a + b V^2 over the last `window` updates (fit_noise on a list kept
+    # by hand). Rows in order, or sorted once trimmed: the same sums, equal to the bit; a
+    # window under 20 that wrapped sums them in ring order (1e-9 relative: rounding, grown by
+    # the normal equations' cancellation, n sxx - sx^2; measured 1.3e-12).
+    # Excess a + b V^2 with a = 2e-10 m^2, b = (3e-4 s)^2 plus noise, speeds 0.05-0.3 m/s.
+    from collections import deque
+
+    from toolkit.estimation.monitor import NoiseMatcher, fit_noise
+
+    rng = np.random.default_rng(21)
+    matcher = NoiseMatcher(window)
+    rows: deque = deque(maxlen=window)
+    for k in range(1, 260):
+        speed = rng.uniform(0.05, 0.3)
+        predicted, base = 1e-10, 8e-11
+        innovation = rng.normal() * np.sqrt(predicted + base + 2e-10 + 9e-8 * speed * speed)
+        matcher.push(innovation, predicted, base, speed)
+        rows.append((innovation * innovation - predicted - base, speed * speed))
+        if k % NoiseMatcher.REFIT == 0 or len(rows) < 20:
+            table = np.array(rows)
+            if table.shape[0] >= 20:
+                table = table[np.argsort(table[:, 0])[:table.shape[0] - table.shape[0] // 20]]
+            a, b = fit_noise(table[:, 0], table[:, 1])
+            if window >= 20 or k <= window:
+                assert (matcher.a, matcher.b) == (a, b)
+            else:
+                assert matcher.a == pytest.approx(a, rel=1e-9, abs=1e-30)
+                assert matcher.b == pytest.approx(b, rel=1e-9, abs=1e-30)
+    assert matcher.b > 0.0

@@ -391,6 +391,7 @@ def _cmd_predict(args: argparse.Namespace) -> int:
             print("the scene has no [sensors]: only the ideal checks ran")
         if apparatus.n % 2:
             print(f"friction fraction: left out ({apparatus.n} contacts; the split needs an even number)")
+        print(compile_line(result.compile_time))
     return _finish([Shortfall("prediction", line, math.nan, "") for line in result.shortfalls()])
 
 

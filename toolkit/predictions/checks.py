@@ -6,13 +6,18 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import as_int
-from ..errors import ParameterTypeError, parameter_message
+from .._compiled import warm
+from ..errors import ParameterTypeError, as_int, parameter_message
 from .apparatus import Apparatus
 from .friction import FrictionFractionCheck, FrictionFractionProblem, friction_fraction_check
 from .viscosity import ViscosityCheck, ViscosityProblem, viscosity_check
 
 __all__ = ["PredictionChecks", "prediction_checks"]
+
+#: Runs of the untimed sweeps before the clock starts (they load what the full sweeps use).
+WARM_RUNS = 4
+#: The kernel modules the checks run (the plant's and the default estimator's).
+KERNELS = ("core", "lines", "window", "imm")
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,6 +31,10 @@ class PredictionChecks:
     friction, friction_ideal : FrictionFractionCheck
         Likewise; both ``None`` for an odd number of contacts (the split cancels in pairs).
     wall_time : float, s
+        The checks, after the one-time cost.
+    compile_time : float, s
+        The one-time cost before the clock started: kernels compiled or loaded, each check run
+        once on a few runs (the timing policy of :mod:`toolkit._compiled`).
     """
 
     viscosity: ViscosityCheck | None
@@ -33,6 +42,7 @@ class PredictionChecks:
     friction: FrictionFractionCheck | None
     friction_ideal: FrictionFractionCheck | None
     wall_time: float
+    compile_time: float = 0.0
 
     def checks(self) -> list[tuple[str, Any]]:
         """``(label, check)`` for every check that ran."""
@@ -79,7 +89,8 @@ class PredictionChecks:
                                 "message": self.friction_ideal.message,
                                 "brake_force": self.friction_ideal.brake_force}}
         return {"viscosity": viscosity, "friction_fraction": friction, "friction_fraction_status": status,
-                "met": self.met, "shortfalls": self.shortfalls(), "wall_time": self.wall_time}
+                "met": self.met, "shortfalls": self.shortfalls(), "wall_time": self.wall_time,
+                "compile_time": self.compile_time}
 
 
 def prediction_checks(apparatus: Apparatus | None = None, *, runs: int = 490, seed: int = 0,
@@ -101,8 +112,11 @@ def prediction_checks(apparatus: Apparatus | None = None, *, runs: int = 490, se
     if not isinstance(apparatus, Apparatus):
         raise ParameterTypeError(parameter_message("apparatus", "prediction_checks", "be an Apparatus", apparatus))
     runs = as_int(runs, "runs", "prediction_checks", low=2)
-    started = time.perf_counter()
     loop = apparatus.sensors is not None
+    # Every wall time below is of compiled code: the sweeps once on a few runs, untimed.
+    compile_time = warm(lambda: [viscosity_check(ViscosityProblem(apparatus, mode, WARM_RUNS, seed=seed), workers=1)
+                                 for mode in ("ideal", "loop")[:1 + loop]], *KERNELS)
+    started = time.perf_counter()
     vis_ideal = viscosity_check(ViscosityProblem(apparatus, "ideal", runs, seed=seed), progress=progress)
     vis_loop = (viscosity_check(ViscosityProblem(apparatus, "loop", runs, seed=seed), progress=progress)
                 if loop else None)
@@ -111,4 +125,4 @@ def prediction_checks(apparatus: Apparatus | None = None, *, runs: int = 490, se
                 if even else None)
     fr_loop = (friction_fraction_check(FrictionFractionProblem(apparatus, "loop", seed=seed), progress=progress)
                if loop and even else None)
-    return PredictionChecks(vis_loop, vis_ideal, fr_loop, fr_ideal, time.perf_counter() - started)
+    return PredictionChecks(vis_loop, vis_ideal, fr_loop, fr_ideal, time.perf_counter() - started, compile_time)

@@ -171,12 +171,15 @@ def test_reach_gaps_equal_the_vertices_positions():
     np.testing.assert_array_equal(seen, aged & (out >= seen_gap))
     np.testing.assert_array_equal(repairable, aged & (out >= repair_gap))
     assert seen.any() and not seen.all() and repairable.any() and not (seen == repairable).all()
-    # seen_steps: the steps read on the seen wheels whose lines live, |reading - last| summed
-    # (whole counts: exact in any order).
+    # seen_steps: the steps read on the seen wheels whose lines live, |reading - last| summed,
+    # the live others' added to unseen (whole counts: exact in any order).
     last = readings + rng.integers(-2, 3, n)
-    steps = L.seen_steps(readings, last, seen, counts)
+    unseen = np.arange(n, dtype=float)
+    steps = L.seen_steps(readings, last, seen, counts, unseen)
     assert steps == float(np.abs(readings - last)[seen & (counts > 0)].sum())
-    assert L.seen_steps(readings, last, np.zeros(n, dtype=bool), counts) == 0.0
+    np.testing.assert_array_equal(unseen, np.arange(n) + np.where(~seen & (counts > 0), np.abs(readings - last), 0))
+    assert (~seen & (counts > 0)).any() and (unseen != np.arange(n)).any()
+    assert L.seen_steps(readings, last, np.zeros(n, dtype=bool), counts, unseen) == 0.0
     # behind, one polygon: its strip [lo, lo + q) at least gap counts behind every position
     # its lines reach, moving up or down: NumPy's extremes, exactly (the same sums).
     verdicts = set()

@@ -16,7 +16,7 @@ counts (no noise model, no white approximation of the quantization's sawtooth).
 - :func:`reach_gaps`: how far each polygon's lines reach past the cell one count short of a
   reading (against the motion): where a missed count would leave every line;
   :func:`reach_seen` with the thresholds that decide it; :func:`seen_steps` the steps read
-  there; :func:`behind` for one polygon (:func:`reach`: its lowest and highest position).
+  there (and those read elsewhere, where a loss would be absorbed); :func:`behind` for one polygon (:func:`reach`: its lowest and highest position).
 - :func:`ride_moments`: the body's line riding an unknown wheel: the evidence-weighted
   mixture of :func:`line_moments` over the wheels.
 - :func:`sharper_lines`: contacts' speeds (and their variances) replaced by their wheels'
@@ -170,13 +170,19 @@ def reach_seen(polys: np.ndarray, counts: np.ndarray, t: float, starts: np.ndarr
         repairable[i] = aged and gaps[i] >= repair_gap
 
 
-def seen_steps(readings: np.ndarray, last: np.ndarray, seen: np.ndarray, counts: np.ndarray) -> float:
+def seen_steps(readings: np.ndarray, last: np.ndarray, seen: np.ndarray, counts: np.ndarray,
+               unseen: np.ndarray) -> float:
     """``sum |readings[i] - last[i]|`` over the wheels ``seen`` whose line lives (``counts[i]
-    > 0``): the transitions read there (counts)."""
+    > 0``): the transitions read there (counts); the live wheels' others are added to
+    ``unseen[i]`` (in place: where a loss would have been absorbed)."""
     total = 0.0
     for i in range(readings.shape[0]):
-        if seen[i] and counts[i] > 0:
-            total += abs(readings[i] - last[i])
+        if counts[i] > 0:
+            step = abs(readings[i] - last[i])
+            if seen[i]:
+                total += step
+            else:
+                unseen[i] += step
     return total
 
 

@@ -108,7 +108,7 @@ class WheelLines:
     def __init__(self, model: EstimatorModel, tell_missed: bool = False) -> None:
         n = model.n
         self.tell_missed = bool(tell_missed)
-        self._q = model.sensors.wheel.distance_per_count
+        self._q = self.wheel_count = model.sensors.wheel.distance_per_count
         self._play = model.sensors.wheel.backlash
         self._lag = model.motor_lag
         self._period = model.sensors.period
@@ -132,6 +132,10 @@ class WheelLines:
         #: the transitions read where a lost one would have been told apart.
         self.deaths = self.spared = 0
         self.exposure = 0.0
+        #: Per wheel: the transitions read since its window started where a lost one would not
+        #: have been repaired (:meth:`_seen` false): a loss there is absorbed (measured with
+        #: ``repair`` or :attr:`tell_missed`, else 0).
+        self.unseen = np.zeros(n)
 
     def push(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool,
              repair: bool = False) -> np.ndarray | None:
@@ -183,7 +187,8 @@ class WheelLines:
         if seen is not None:
             # The transitions read where a lost one would have been repaired (the repaired
             # readings' steps: the true transitions), for the rate's identification.
-            self.exposure = kernels("lines", self.counts.size).seen_steps(wheels, last[1], seen, self.counts)
+            self.exposure = kernels("lines", self.counts.size).seen_steps(wheels, last[1], seen, self.counts,
+                                                                              self.unseen)
             if self.spared and seen.any():
                 # Told apart, not repaired: their true transitions are one more.
                 self.exposure += float(np.abs(wheels + self._motion - last[1])[self._told].sum())
@@ -214,6 +219,7 @@ class WheelLines:
         for i in np.flatnonzero(which):
             _box(self.polys[i])
         self.counts[which] = 4
+        self.unseen[which] = 0.0
         self.starts[which] = t
         self._first[which] = wheels[which]
         self._extend(t, wheels)
@@ -401,12 +407,21 @@ class HoldLayer:
         #: the cell one count short), and the transitions read there (0 elsewhere).
         self.exposure = 0
         self.seen = False
+        #: The central transitions read since the hold started where a lost one would not have
+        #: been repaired: a loss there is absorbed.
+        self.unseen = 0.0
+        self.started = math.nan
 
     def wheels(self, t: float, wheels: Any, track: np.ndarray | None, steady: bool,
                repair: bool = False) -> np.ndarray | None:
         """Push one sample's wheel counts with the period ending at it (:meth:`WheelLines.push`;
         with ``repair`` the counts it adds to missed wheels, else None)."""
         return self.lines.push(t, wheels, track, steady, repair)
+
+    @property
+    def evidence(self) -> np.ndarray:
+        """Of the hold: each wheel's posterior weight of being the one the body rides."""
+        return self._hold.evidence
 
     @property
     def ready(self) -> bool:
@@ -458,6 +473,8 @@ class HoldLayer:
                 return None
             d2 = (speeds - x[1]) ** 2 / (P[1, 1] + var_v)
             hold.start(anchor[0], anchor[1], np.maximum(np.exp(-0.5 * (d2 - d2.min())), 1e-300))
+            self.unseen = 0.0
+            self.started = anchor[0]
         z = (count + 0.5) * q
         innovation = z - (x[0] + h * x[1])
         nis = innovation * innovation / (P[0, 0] + 2.0 * h * P[0, 1] + h * h * P[1, 1] + q * q / 12.0)
@@ -478,5 +495,7 @@ class HoldLayer:
         if seen:
             self.seen = True
             self.exposure = abs(count + repaired - anchor[1])
+        else:
+            self.unseen += abs(count + repaired - anchor[1])
         X, V, pxx, pxv, pvv = state
         return HoldStep(False, np.array([X, V]), np.array([[pxx, pxv], [pxv, pvv]]), nis, repaired)

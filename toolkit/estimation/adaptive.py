@@ -552,28 +552,48 @@ class AdaptiveKalman(Estimator):
                                     self._noises[j])
 
     # -- one sample -----------------------------------------------------------------------------
-    def _contact_speeds(self, track: np.ndarray, var_v: np.ndarray, steady: bool
+    def _contact_speeds(self, t: float, track: np.ndarray, var_v: np.ndarray, steady: bool
                         ) -> tuple[np.ndarray, np.ndarray]:
         """The period's track with each settled contact at its wheel's exact line where the
         encoders look ideal and that line is sharper: the speed's uniform posterior over the
-        polygon of lines the wheel's counts allow since its window started."""
+        polygon of lines the wheel's counts allow since its window started, its variance with
+        the chance of a missed count the line absorbed (:func:`absorbed_variance`)."""
         var = np.array(var_v, dtype=float)
         lines = self._lines
         if not (steady and lines.active and self._repairs):
             return track, var
+        p, p_var = self._missed_rate()
+        given_var = var.copy() if p > 0.0 else var
         track = track.copy()
         # The contacts the body may meet within the period: the three nearest its speed.
         kernels("lines", 150 * self.n).sharper_lines(lines.polys, lines.counts,
                                                      np.abs(track[0] - self.x[1]).argsort()[:3], self._empty,
                                                      self._moments, track, var)
+        if p > 0.0:
+            # A loss the line absorbed: its speed's variance gains that chance times the bias
+            # (the contact's window absorbed it as well: the line stays where it was sharper).
+            for k in np.flatnonzero(var != given_var).tolist():
+                var[k] += absorbed_variance(p, p_var, float(lines.unseen[k]), lines.wheel_count,
+                                            t - float(lines.starts[k]))
         return track, var
+
+    def _missed_rate(self) -> tuple[float, float]:
+        """The missed-count rate and its variance for :func:`absorbed_variance`: the told one
+        (known); else the posterior's (:class:`~toolkit.estimation.MissedCountRate`) once a
+        loss has been repaired, 0 before (the prior alone is no evidence that the encoders
+        miss counts at all: an ideal world's lines stay as they are)."""
+        told = max(self.prior.missed_count_prob, self.model.sensors.missed_count_prob)
+        if told > 0.0:
+            return told, 0.0
+        rate = self.missed_rate
+        return (rate.mean, rate.variance) if rate.repairs else (0.0, 0.0)
 
     def _step(self, c: int, t: float, anchor: tuple[float, int], track: np.ndarray, var_v: np.ndarray,
               steady: bool, force: float) -> None:
         """Predict (the modes), the optional layer (an exact hold), update (the modes)."""
         q = self.q
         self._repairs = ideal = self._ideal()
-        track, var = self._contact_speeds(track, var_v, steady)
+        track, var = self._contact_speeds(t, track, var_v, steady)
         prior_x, prior_P = (float(self.x[0]), float(self.x[1])), self.P[:2, :2].copy()
         # The layer needs only the last posterior: where the modes say the body rides a
         # settled contact and the encoders look ideal, the exact hold's posterior is the
@@ -607,6 +627,17 @@ class AdaptiveKalman(Estimator):
             self.P[:2, :] = 0.0
             self.P[:, :2] = 0.0
             self.P[:2, :2] = out.covariance
+            # A missed count the hold's central line or its wheel's absorbed (the wheels
+            # weighted by the hold's evidence).
+            p, p_var = self._missed_rate()
+            if p > 0.0:
+                lines, layer = self._lines, self._layer
+                evidence = layer.evidence
+                total, added = float(evidence.sum()), 0.0
+                for i in np.flatnonzero(evidence > 0.0).tolist():
+                    added += float(evidence[i]) / total * absorbed_variance(
+                        p, p_var, float(lines.unseen[i]), lines.wheel_count, t - float(lines.starts[i]))
+                self.P[1, 1] += added + absorbed_variance(p, p_var, layer.unseen, self.q, t - layer.started)
         self._mu_prev = self.mu
 
     def _modes(self, z: float, R0: float, track: np.ndarray, var: np.ndarray, steady: bool, force: float) -> None:
@@ -839,6 +870,46 @@ CELL_ALARM = 1e-6
 #: :func:`count_offset` reports the counts' position unchanged where no count was lost with
 #: at least this probability (the level of the NEES band, :func:`~toolkit.estimation._base.nees_band`).
 NO_LOSS = 0.95
+_LOG_NO_LOSS = math.log(NO_LOSS)
+
+
+def absorbed_variance(missed_count_prob: float, missed_count_var: float, unseen: float,
+                      distance_per_count: float, span: float) -> float:
+    """The speed variance an exact line gains from a missed count it absorbed (docs/physics.md
+    section 10): a loss among the ``unseen`` transitions its window read where a lost one would
+    not have been repaired leaves the line's later readings one count low, a speed bias of one
+    count over the line's ``span``, ``q / T``. It happened with probability ``1 - (1 - p)^n``
+    (a known rate; the Gamma-Poisson predictive ``1 - (b / (b + n))^a`` for a posterior of mean
+    ``p`` and variance ``s^2``, ``a = p^2 / s^2``, ``b = p / s^2``), so the line's speed is
+    off by ``q / T`` with that probability: its variance about the line gains that
+    probability times ``(q / T)^2``. 0 where no loss happened with probability at least
+    :data:`NO_LOSS` (as in :func:`count_offset`: a bias that is almost surely 0), or where
+    ``T <= 0`` or ``p <= 0``.
+
+    Parameters
+    ----------
+    missed_count_prob : float
+        The rate ``p`` (per transition).
+    missed_count_var : float
+        Its variance (0: known).
+    unseen : float
+        Transitions read where a loss would have been absorbed (counts).
+    distance_per_count : float, m
+    span : float, s
+        The line's time span.
+
+    Returns
+    -------
+    float, (m/s)^2
+    """
+    p, var = missed_count_prob, missed_count_var
+    if not (p > 0.0 and span > 0.0 and unseen > 0.0):
+        return 0.0
+    log_none = -(p * p / var) * math.log1p(unseen * var / p) if var > 0.0 else unseen * math.log1p(-p)
+    if log_none >= _LOG_NO_LOSS:
+        return 0.0
+    bias = distance_per_count / span
+    return -math.expm1(log_none) * bias * bias
 
 
 def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray, speed: np.ndarray,

@@ -873,6 +873,17 @@ NO_LOSS = 0.95
 _LOG_NO_LOSS = math.log(NO_LOSS)
 
 
+def log_no_loss(missed_count_prob: float, missed_count_var: float, transitions: float) -> float:
+    """The log-probability that none of ``transitions`` count transitions was lost (docs/physics.md
+    section 10): ``n log(1 - p)`` for a known rate ``p``; the Gamma-Poisson predictive
+    ``a log(b / (b + n))`` for a posterior of mean ``p`` and variance ``s^2 > 0`` (``a = p^2 /
+    s^2``, ``b = p / s^2``). 0 for ``p <= 0`` or ``n <= 0``."""
+    p, var, n = missed_count_prob, missed_count_var, transitions
+    if not (p > 0.0 and n > 0.0):
+        return 0.0
+    return -(p * p / var) * math.log1p(n * var / p) if var > 0.0 else n * math.log1p(-p)
+
+
 def absorbed_variance(missed_count_prob: float, missed_count_var: float, unseen: float,
                       distance_per_count: float, span: float) -> float:
     """The speed variance an exact line gains from a missed count it absorbed (docs/physics.md
@@ -905,7 +916,7 @@ def absorbed_variance(missed_count_prob: float, missed_count_var: float, unseen:
     p, var = missed_count_prob, missed_count_var
     if not (p > 0.0 and span > 0.0 and unseen > 0.0):
         return 0.0
-    log_none = -(p * p / var) * math.log1p(unseen * var / p) if var > 0.0 else unseen * math.log1p(-p)
+    log_none = log_no_loss(p, var, unseen)
     if log_none >= _LOG_NO_LOSS:
         return 0.0
     bias = distance_per_count / span
@@ -959,13 +970,11 @@ def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray
     signed = np.concatenate(([0.0], np.cumsum(steps)))
     crossed = np.concatenate(([0.0], np.cumsum(np.abs(steps))))
     var = missed_count_var
-    # The chance that no count was lost: (1 - p)^n for a known rate; the Gamma-Poisson
-    # predictive (b / (b + n))^a for a Gamma(a, b) posterior (a = p^2 / s^2, b = p / s^2).
-    p_arr, var_arr = np.broadcast_arrays(np.asarray(p, dtype=float), np.asarray(var, dtype=float))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        log_none = np.where(var_arr > 0.0, -(p_arr * p_arr / var_arr) * np.log1p(crossed * var_arr / p_arr),
-                            crossed * np.log1p(-p_arr))
-    lost = np.nan_to_num(log_none, nan=0.0) < math.log(NO_LOSS)
+    # The chance that no count was lost by each sample (log_no_loss, per sample's rate).
+    p_arr, var_arr, n_arr = np.broadcast_arrays(np.asarray(p, dtype=float), np.asarray(var, dtype=float), crossed)
+    log_none = np.fromiter(map(log_no_loss, p_arr.tolist(), var_arr.tolist(), n_arr.tolist()),
+                           dtype=float, count=n_arr.size)
+    lost = log_none < _LOG_NO_LOSS
     P = np.array(covariance, dtype=float)
     P[:, 0, 0] += np.where(lost, crossed * p / (1.0 - p) ** 2 * q * q, 0.0)
     if np.any(var_arr > 0.0):

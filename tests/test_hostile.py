@@ -144,3 +144,23 @@ def test_an_unknown_simulation_method_is_named_by_its_scene_key():
     text = "[contacts]\nspeeds = [0.1, 0.2]\n[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\nmethod = 'radua'\n"
     with pytest.raises(SceneError, match=r"'simulation.method' value in the scene must be one of .*'radua'.*'radau'"):
         build_scene(loads_scene(text))
+
+
+def test_json_output_of_a_mixed_integer_allocation_is_json_only(tmp_path):
+    # Unequal magnitudes go to the MILP (HiGHS), whose native banner printed on stdout before
+    # any option applied and broke '--json'. stdout must parse whole; the speeds realize the
+    # target: the weighted median of the allocation is the requested 0.05 m/s (forces 1, 2,
+    # 1.5, 0.5 N: the median contact, at rtol 1e-9 of the speed for the solver's tolerance).
+    import json
+
+    import numpy as np
+
+    from toolkit import ContactSet
+
+    text = ("[contacts]\nspeeds = [-0.3, -0.1, 0.1, 0.3]\nforces = [1.0, 2.0, 1.5, 0.5]\n[body]\nmass = 1.0\n"
+            "[motors]\nspeed_limit = 0.35\n[target]\nkind = 'equilibrium_speed'\nspeed = 0.05\n")
+    done = _cli("allocate", _scene(tmp_path, text), "--json")
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    lo, hi = ContactSet(np.array(data["speeds"]), [1.0, 2.0, 1.5, 0.5]).equilibrium()
+    assert lo <= 0.05 * (1 + 1e-9) and hi >= 0.05 * (1 - 1e-9)

@@ -33,8 +33,12 @@ constraint is void (a plateau outside the band costs nothing) or uses the band's
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -81,13 +85,40 @@ def _highs_options(problem: AllocationProblem, deadline: float) -> dict[str, Any
             "mip_feasibility_tolerance": _TOLERANCE, "random_seed": 0}
 
 
+@contextmanager
+def _native_stdout_silenced() -> Iterator[None]:
+    """File descriptor 1 pointed at the null device for the block: HiGHS prints its banner
+    from native code when constructed, before any option applies, which would corrupt a
+    command's ``--json`` output on stdout. C's buffers are flushed before it is restored."""
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:                      # no descriptor 1 (a closed stdout): nothing to guard
+        yield
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        yield
+    finally:
+        try:
+            import ctypes
+
+            ctypes.CDLL(None).fflush(None)
+        except (OSError, AttributeError):
+            pass
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
+
+
 def _solve(objective: Any, constraints: list[Any], options: dict[str, Any]
            ) -> tuple[str, float, float, dict[str, Any]]:
     import cvxpy as cp  # cvxpy loads only when the MILP method runs
 
     prob = cp.Problem(cp.Minimize(objective), constraints)
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _native_stdout_silenced():
             # cvxpy warns "inaccurate" when HiGHS stops at its time limit; the status says it.
             warnings.simplefilter("ignore", UserWarning)
             prob.solve(solver=cp.HIGHS, **options)

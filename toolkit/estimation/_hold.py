@@ -256,12 +256,11 @@ class WheelLines:
         """Clip each live line by its reading; where one dies, the repair (or telling a loss
         apart) of :meth:`push` (``gapped``: :meth:`_seen` has measured this row's reach; a
         restart's clip, which no line fails, passes False)."""
-        repair = gapped
-        before = self.counts.copy() if repair else None
+        before = self.counts.copy() if gapped else None
         kernels("lines", 30 * self.counts.size).extend_lines(
             self.polys, self.counts, t, self.starts, wheels, self._first, self._q, self._tol,
             self._scratch, self._out)
-        if repair and self.counts.min() <= 0:
+        if gapped and self.counts.min() <= 0:
             # Only lines that held for REPAIR_AFTER readings: a count missed by an encoder
             # that otherwise reads exactly, not noise that breaks lines within a few samples.
             # A missed count leaves the reading a whole count behind the line's range; a line

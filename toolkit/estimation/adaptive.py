@@ -582,7 +582,7 @@ class AdaptiveKalman(Estimator):
         (known); else the posterior's (:class:`~toolkit.estimation.MissedCountRate`) once a
         loss has been repaired, 0 before (the prior alone is no evidence that the encoders
         miss counts at all: an ideal world's lines stay as they are)."""
-        told = max(self.prior.missed_count_prob, self.model.sensors.missed_count_prob)
+        told = told_missed_rate(self.model, self.prior)
         if told > 0.0:
             return told, 0.0
         rate = self.missed_rate
@@ -873,6 +873,12 @@ NO_LOSS = 0.95
 _LOG_NO_LOSS = math.log(NO_LOSS)
 
 
+def told_missed_rate(model: EstimatorModel, prior: ModelPrior) -> float:
+    """The missed-count rate the estimator is told (per transition): the prior's or the
+    scene's declared sensors', the larger; 0 when neither tells one."""
+    return max(prior.missed_count_prob, model.sensors.missed_count_prob)
+
+
 def log_no_loss(missed_count_prob: float, missed_count_var: float, transitions: float) -> float:
     """The log-probability that none of ``transitions`` count transitions was lost (docs/physics.md
     section 10): ``n log(1 - p)`` for a known rate ``p``; the Gamma-Poisson predictive
@@ -1150,7 +1156,7 @@ class KalmanEstimator(Estimator):
                     X[k], P[k] = adaptive.out_x[:2], adaptive.out_P[:2, :2]
                     verdicts[k] = FALLBACK if adaptive.fallback else ADAPTING
         self.verdicts = verdicts.tolist()
-        p, var, seen = max(self.prior.missed_count_prob, self.model.sensors.missed_count_prob), 0.0, None
+        p, var, seen = told_missed_rate(self.model, self.prior), 0.0, None
         if self.adaptive is not None:
             # The adaptive filter ran from the start: where its holds would have repaired a
             # lost central count; not told, the rate it identified by each sample. While the

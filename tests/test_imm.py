@@ -429,3 +429,92 @@ def test_measure_cycle_equals_filterpy_with_the_matched_noise(scale):
         np.testing.assert_allclose(Ps_out[j], f.P, rtol=rtol, atol=rtol * np.abs(f.P).max())
     np.testing.assert_allclose(x, imm.x, rtol=rtol, atol=rtol * np.abs(imm.x).max())
     np.testing.assert_allclose(P, imm.P, rtol=rtol, atol=rtol * np.abs(imm.P).max())
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1.0])
+def test_ride_step_is_the_gaussian_likelihood_of_a_level_that_walks(scale):
+    # The check's level filters (one per rate p of a grid) against the closed form: readings
+    # y_1..y_n of a level d that walks by steps of variance p j_k (k >= 2) under white noise
+    # R, the level's prior N(y_1, R) (a flat prior updated by y_1). Given y_1, y_k - y_1 =
+    # W_k + e_k - e_1, so y_2..y_n ~ N(y_1, R (I + 1 1^T) + min-matrix of the cumulative
+    # p j); scipy's multivariate normal log-density. rtol 1e-10: n = 12 sums of rounding.
+    from scipy.stats import multivariate_normal
+
+    rng = np.random.default_rng(5)
+    n, R = 12, 0.3 * scale * scale
+    grid = np.array([1e-9, 1e-4, 3e-3, 0.5, 4.0])
+    jumps = rng.uniform(0.2, 2.0, n) * scale * scale
+    y = rng.normal(size=n) * scale + 7.0 * scale
+    level, var, loglik = np.full(grid.size, y[0]), np.full(grid.size, R), np.zeros(grid.size)
+    for k in range(1, n):
+        K.ride_step(level, var, grid, y[k], R, jumps[k], loglik)
+    for g, p in enumerate(grid):
+        walk = np.cumsum(p * jumps[1:])
+        cov = R * (np.eye(n - 1) + 1.0) + np.minimum.outer(walk, walk)
+        expected = multivariate_normal(np.full(n - 1, y[0]), cov).logpdf(y[1:])
+        np.testing.assert_allclose(loglik[g], expected, rtol=1e-10)
+    # Where the walk is negligible (p j = 1e-9 of R per step) the level is a constant's least
+    # squares: the readings' mean, variance R / n (rtol 1e-6: the walk adds about n p j / R, 1.3e-7).
+    np.testing.assert_allclose([level[0], var[0]], [y.mean(), R / n], rtol=1e-6)
+
+
+@pytest.mark.parametrize(("shape", "events", "exposure"), [(0.5, 3, 2e3), (3.0, 12, 1e4), (0.5, 2000, 2e6),
+                                                          (1.0, 40, 4e4)])
+def test_rate_moments_are_the_gamma_posteriors(shape, events, exposure):
+    # The check's log-likelihood of Poisson evidence (events lost over exposure transitions,
+    # k log p - E p) times the Gamma(shape, rate) prior is Gamma(shape + k, rate + E): mean
+    # a / b, variance a / b^2, here truncated to the grid [1e-10, 1e-2] (scipy's regularized
+    # incomplete gamma: E[p^m] on [lo, hi] = Gamma(a + m) / (Gamma(a) b^m) times the ratio of
+    # its masses there). Broad posteriors (trapezoid sums in log p, 20 a decade): rtol 1e-8
+    # (the sums' error for a log-width above the spacing is below 1e-8). The sharp one (2000
+    # events: log-width 0.022 against a spacing of 0.115): the Gamma through the three points
+    # about its peak, untruncated (the grid's ends are 30 widths away), exact up to the
+    # rounding of log-likelihoods near -1e4 (rtol 1e-8).
+    from scipy.special import gammainc
+
+    from toolkit.estimation import MissedCountRate
+
+    grid, log_grid = MissedCountRate.GRID, MissedCountRate.LOG_GRID
+    rate = shape / 1e-3
+    out = np.empty(2)
+    K.rate_moments(grid, log_grid, events * log_grid - exposure * grid, shape, rate, out)
+    a, b = shape + events, rate + exposure
+    lo, hi = grid[0], grid[-1]
+
+    def mass(s: float) -> float:
+        return gammainc(s, b * hi) - gammainc(s, b * lo)
+
+    mean = a / b * mass(a + 1) / mass(a)
+    second = a * (a + 1) / b ** 2 * mass(a + 2) / mass(a)
+    # Where the posterior reaches the grid's top the sums' last interval errs by about the
+    # integrand there (p^(a + 1) e^(-b p), relative to its peak; 3e-6 for the first case):
+    # tolerance ten times that, at least 1e-8.
+    edge = math.exp((a + 1) * math.log(hi / (a / b)) - b * hi + a)
+    np.testing.assert_allclose(out, [mean, second - mean * mean], rtol=max(1e-8, 10.0 * edge))
+
+
+def test_ride_push_opens_only_on_a_level_difference_with_read_noise():
+    # The check's window (RideCheck's rules, imm.ride_push): a difference that stays level
+    # under read noise opens it at the window's last reading and is checked on every reading
+    # after; one that moves at 11 mm/s (a contact the body does not ride) or one read with the
+    # quantizations' noise alone (no read noise) never is.
+    from toolkit.estimation import MissedCountRate, RideCheck
+
+    qc, qw, h, n = 2.04e-4, 7.87e-5, 0.02, RideCheck.WINDOW
+    rng = np.random.default_rng(2)
+
+    def checked(slope: float, noise: float) -> list[int]:
+        state, ring = np.zeros(8), np.zeros(n)
+        G = MissedCountRate.GRID
+        level, var, loglik = np.empty(G.size), np.empty(G.size), np.zeros(G.size)
+        out = []
+        for k in range(80):
+            y = slope * k * h + noise * (qc * rng.normal() - qw * rng.normal())
+            out.append(K.ride_push(state, ring, level, var, G, loglik, y, 0.2 * h, qc, qw, h, RideCheck.SLOPE,
+                                   RideCheck.NOISE_OVER, 1e-3))
+        return out
+
+    level = checked(0.0, 0.6)
+    assert level[:n] == [0] * n and all(level[n:]), level
+    assert not any(checked(0.011, 0.6))
+    assert not any(checked(0.0, 0.0))

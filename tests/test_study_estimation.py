@@ -345,6 +345,7 @@ def test_estimation_truth_is_the_scenarios_true_world_and_the_estimators_are_not
     ("\n[estimation.truth]\ndrag = -1.0\n", "estimation.truth.drag", "must be >= 0"),
     ("\n[estimation.truth]\ndrgg = 1.0\n", "[estimation.truth]", "Did you mean 'drag'?"),
     ("\n[estimation.model]\ndrag_range = [2.0, 1.0]\n", "estimation.model.drag_range", "low <= high"),
+    ("\n[estimation.model]\nmissed_count_mean = 0.05\n", "estimation.model.missed_count_mean", "<= 0.01"),
     ("\n[estimation.truth]\njitter = 1.0\n", "estimation.truth.jitter", "'jitter' parameter of Sensors"),
     ("\n[estimation.truth]\nfriction_spread = 0.1\n", "estimation.truth.friction_spread", "give one of the two"),
 ])

@@ -28,6 +28,9 @@ modes' states in arrays and calls these per sample.
 - :func:`predicted_first`: the modes' mixture prediction of the first state (its mean and
   variance) and the second's mean, before the update.
 - :func:`play_loaded`: which wheels keep their gearbox play loaded over a period.
+- :func:`ride_push`, :func:`ride_step`, :func:`read_variance`, :func:`rate_moments`: the
+  missed-count rate's evidence from the body's counts against the wheel it rides (its window,
+  the level filters over a grid of rates, its read noise), and the posterior's moments.
 - :func:`bank_push`: one sample of the wheels' filters where every play stays loaded
   (:func:`play_loaded`, :func:`bank_step`, :func:`bank_moments` in one call).
 """
@@ -40,7 +43,8 @@ import numpy as np
 
 KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {}, "measure_cycle": {}, "predict_held": {}, "held_noise": {}, "predict_walk": {},
            "bank_moments": {}, "bank_push": {}, "play_loaded": {}, "sign_of": {},
-           "predicted_first": {}}
+           "predicted_first": {}, "ride_step": {}, "ride_push": {}, "read_variance": {},
+           "rate_moments": {}}
 
 
 def mix(mu, M, xs, Ps, xs0, Ps0, cbar):  # noqa: ANN001, ANN201 (numba kernel)
@@ -391,3 +395,122 @@ def predict_walk(x, h, walk, s2, mean, row0, row1, Q):  # noqa: ANN001, ANN201
     Q[0, 1] = s2 * walk[1]
     Q[1, 0] = s2 * walk[1]
     Q[1, 1] = s2 * walk[2]
+
+
+def ride_step(level, var, grid, y, R, jumps, loglik):  # noqa: ANN001, ANN201 (numba kernel)
+    """One sample of the ridden wheel's check (:class:`toolkit.estimation.RideCheck`), for
+    every missed-count rate ``grid[g]``: the difference ``y`` (m) of the body's and the ridden
+    wheel's positions read as counts is a level ``N(level[g], var[g])`` seen through white
+    noise of variance ``R`` (m^2); over the period the losses move the level by a step of
+    mean 0 and variance ``p jumps`` (``jumps``: the transitions times their squared counts,
+    m^2). The Kalman update of the level (in place), and ``loglik[g]`` gains the log of the
+    reading's Gaussian density."""
+    half_log_2pi = 0.5 * math.log(2.0 * math.pi)
+    for g in range(grid.size):
+        P = var[g] + grid[g] * jumps
+        F = P + R
+        v = y - level[g]
+        loglik[g] -= 0.5 * (v * v / F + math.log(F)) + half_log_2pi
+        level[g] += P / F * v
+        var[g] = P * R / F
+
+
+def ride_push(state, ring, level, var, grid, loglik, y, travel, qc, qw, h, slope, noise_over, rate_mean):  # noqa: ANN001, ANN201, E501 (numba kernel)
+    """One sample of the ridden wheel's check on the contact it has ridden since ``state[0] =
+    0`` (:class:`toolkit.estimation.RideCheck`, whose docstring states the rules): ``y`` the
+    difference of the positions read (m), ``travel`` the period's (m), ``qc``, ``qw`` the
+    counts (m), ``h`` the period (s). ``state``: the readings since the ride began, the
+    window's sums of the readings and of the readings times their index in ``ring`` (the
+    last ``ring.size``), the sums over every ride of the squared steps, of the
+    quantizations' share of them and of the travel, the steps, whether the check is open.
+    Returns 1 where :func:`ride_step` added the sample's log-likelihoods, else 0."""
+    n = ring.size
+    count = int(state[0])
+    if count > 0:
+        a = travel / qc % 1.0
+        b = travel / qw % 1.0
+        d = y - ring[(count - 1) % n]
+        state[3] += d * d
+        state[4] += qc * qc * a * (1.0 - a) + qw * qw * b * (1.0 - b)
+        state[5] += travel
+        state[6] += 1.0
+    if count < n:
+        ring[count] = y
+        state[2] += count * y
+        state[1] += y
+        state[0] = count + 1
+        if count + 1 < n:
+            return 0
+    else:
+        slot = count % n
+        state[2] += (n - 1) * y - (state[1] - ring[slot])
+        state[1] += y - ring[slot]
+        ring[slot] = y
+        state[0] = count + 1
+    R = read_variance(state, qc, qw, rate_mean)
+    S = n * (n * n - 1) / 12.0
+    fit = (state[2] - 0.5 * (n - 1) * state[1]) / (h * S)
+    if R < noise_over * (qc * qc + qw * qw) / 12.0 or abs(fit) > slope + 4.0 * math.sqrt(R / S) / h:
+        state[7] = 0.0
+        return 0
+    if state[7] == 0.0:
+        state[7] = 1.0
+        level[:] = y
+        var[:] = R
+        return 0
+    ride_step(level, var, grid, y, R, travel * (qc + qw), loglik)
+    return 1
+
+
+def read_variance(state, qc, qw, rate_mean):  # noqa: ANN001, ANN201 (numba kernel)
+    """The check's read noise variance (m^2) from its sums (:func:`ride_push`): the two
+    quantizations' ``(qc^2 + qw^2) / 12`` plus half the mean squared step less the
+    quantizations' and the losses' share (at ``rate_mean``), at least 0."""
+    floor = (qc * qc + qw * qw) / 12.0
+    if state[6] == 0.0:
+        return floor
+    losses = rate_mean * state[5] * (qc + qw)
+    return max(0.5 * (state[3] - state[4] - losses) / state[6], 0.0) + floor
+
+
+def rate_moments(grid, log_grid, loglik, shape, rate, out):  # noqa: ANN001, ANN201 (numba kernel)
+    """Mean and variance (``out[0]``, ``out[1]``) of the missed-count rate whose posterior is
+    the Gamma density ``p^(shape - 1) exp(-rate p)`` times ``exp(loglik)`` on ``grid`` (rates
+    evenly spaced in ``log p``, ``log_grid`` their logarithms): trapezoid sums in ``u = log
+    p`` of the density times ``p``. Where the posterior is narrower than the grid's spacing
+    (its log density's curvature in ``u`` above ``1 / du^2``, where the sums lose accuracy)
+    the density ``exp(c + a u - b e^u)`` through the three points about its peak instead: a
+    Gamma density in ``p``, mean ``a / b``, variance ``a / b^2`` (exact where the posterior is
+    Gamma, as with repairs alone)."""
+    G = grid.size
+    du = log_grid[1] - log_grid[0]
+    top = -math.inf
+    peak = 0
+    for g in range(G):
+        value = shape * log_grid[g] - rate * grid[g] + loglik[g]
+        if value > top:
+            top = value
+            peak = g
+    if 0 < peak < G - 1:
+        lo = shape * log_grid[peak - 1] - rate * grid[peak - 1] + loglik[peak - 1]
+        hi = shape * log_grid[peak + 1] - rate * grid[peak + 1] + loglik[peak + 1]
+        bend = hi - 2.0 * top + lo
+        if -bend > 1.0:
+            # l(u) = c + a u - b e^u through the three points: the second difference gives b,
+            # the first a.
+            b = -bend / (grid[peak] * (2.0 * math.cosh(du) - 2.0))
+            a = (hi - top + b * grid[peak] * (math.exp(du) - 1.0)) / du
+            out[0] = a / b
+            out[1] = a / (b * b)
+            return
+    s0 = s1 = s2 = 0.0
+    for g in range(G):
+        w = math.exp(shape * log_grid[g] - rate * grid[g] + loglik[g] - top)
+        if g == 0 or g == G - 1:
+            w *= 0.5
+        s0 += w
+        s1 += w * grid[g]
+        s2 += w * grid[g] * grid[g]
+    mean = s1 / s0
+    out[0] = mean
+    out[1] = max(s2 / s0 - mean * mean, 0.0)

@@ -76,7 +76,10 @@ def _cases() -> dict[str, RobustnessCase]:
              # The same two worlds with the missed-count rate told (ModelPrior.missed_count_prob).
              RobustnessCase("missed 1e-3, told", WorldTruth(missed_count_prob=1e-3),
                             prior=ModelPrior(missed_count_prob=1e-3)),
-             RobustnessCase("all at once, missed told", every, prior=ModelPrior(missed_count_prob=1e-3))]
+             RobustnessCase("all at once, missed told", every, prior=ModelPrior(missed_count_prob=1e-3)),
+             # Not told, with the rate's prior mean ten times below and above the truth.
+             RobustnessCase("all at once, prior 1e-4", every, prior=ModelPrior(missed_count_mean=1e-4)),
+             RobustnessCase("all at once, prior 1e-2", every, prior=ModelPrior(missed_count_mean=1e-2))]
     return {case.name: case for case in cases}
 
 

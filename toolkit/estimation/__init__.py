@@ -28,7 +28,7 @@ from ._base import EstimationResult, Estimator, chi2_band
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 from ..model.truth import ModelPrior
 from .adaptive import ADAPTING, FALLBACK, NOMINAL, AdaptiveKalman, KalmanEstimator, WheelSpeedBank
-from .identification import LagIdentifier, MissedCountRate
+from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher
 from .alpha_beta import AlphaBetaTracker, kalata_gains
 from .finite_difference import CentralDifference, WheelDifference
@@ -43,5 +43,5 @@ __all__ = ["Estimator", "EstimationResult", "EstimatorModel", "ModelPrior", "chi
            "ContactSpeedTracker",
            "CentralDifference", "WheelDifference", "KalmanEstimator", "NominalKalman", "RTSSmoother",
            "steady_state_gain", "UnscentedEstimator", "AdaptiveWindow", "AlphaBetaTracker", "kalata_gains",
-           "AdaptiveKalman", "WheelSpeedBank", "LagIdentifier", "MissedCountRate", "ConsistencyMonitor", "NoiseMatcher",
+           "AdaptiveKalman", "WheelSpeedBank", "LagIdentifier", "MissedCountRate", "RideCheck", "ConsistencyMonitor", "NoiseMatcher",
            "NOMINAL", "ADAPTING", "FALLBACK", "ESTIMATOR_NAMES", "build_estimator", "PHASES", "phase_masks"]

@@ -72,7 +72,7 @@ from ._base import EstimationResult, Estimator, check_covariance, score, warm_re
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel
 from ..model.truth import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
-from .identification import LagIdentifier, MissedCountRate
+from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
 from .window import AdaptiveWindow
 
@@ -433,8 +433,9 @@ class AdaptiveKalman(Estimator):
         self._lines = self._layer.lines
         #: The missed-count rate's posterior; per observed sample its mean and variance, and
         #: whether a central count lost there would have been repaired (:class:`HoldLayer`).
-        self.missed_rate = MissedCountRate()
+        self.missed_rate = MissedCountRate(self.prior.missed_count_mean)
         self.missed_history: list[tuple[float, float, bool]] = []
+        self._ride = RideCheck(self.q, sensors.wheel.distance_per_count, self.missed_rate, self.h)
         self._moments, self._empty = np.zeros(5), np.zeros((1, 2))
         self.monitor.reset()
         self._foaw.reset(speed=speed)
@@ -601,11 +602,8 @@ class AdaptiveKalman(Estimator):
         out = None
         if steady and self._layer.ready:
             k = int(np.abs(track[0] - prior_x[1]).argmin())
-            physical = self._mu_prev[0] + self._mu_prev[1]
-            stuck = (self._mu_prev[1] + (self._mu_prev[0] if self._stuck_on is not None else 0.0)) / max(
-                physical, 1e-300)
             out = self._layer.step(t, c, anchor, track[0], float(var[k]), prior_x, prior_P,
-                                   stuck >= self.HOLD_START and ideal, repair=ideal)
+                                   self._stuck_share(self._mu_prev) >= self.HOLD_START and ideal, repair=ideal)
             if out is not None and out.repaired:
                 self._central_offset += out.repaired
                 c += out.repaired
@@ -639,6 +637,11 @@ class AdaptiveKalman(Estimator):
                         p, p_var, float(lines.unseen[i]), lines.wheel_count, t - float(lines.starts[i]))
                 self.P[1, 1] += added + absorbed_variance(p, p_var, layer.unseen, self.q, t - layer.started)
         self._mu_prev = self.mu
+
+    def _stuck_share(self, mu: np.ndarray) -> float:
+        """The probability that the body rides a contact, among the physical modes (the free
+        mode counts where its flow left the body on a contact)."""
+        return (mu[1] + (mu[0] if self._stuck_on is not None else 0.0)) / max(mu[0] + mu[1], 1e-300)
 
     def _modes(self, z: float, R0: float, track: np.ndarray, var: np.ndarray, steady: bool, force: float) -> None:
         """The IMM cycle: mix, each mode's prediction, the measurement noise, update, combine."""
@@ -767,11 +770,12 @@ class AdaptiveKalman(Estimator):
         # does not repair (its encoders' test counts a missed count as a break), the losses
         # told apart while the encoders look ideal but for them (decided on the samples
         # before: no noise that breaks lines), over the exposure.
-        lost, exposure = 0, lines.exposure
+        lost, exposure, lined = 0, lines.exposure, repairing
         if repairing:
             lost = 0 if repaired is None else int(np.abs(repaired).sum())
         elif exposure or lines.spared:
-            lost, exposure = (lines.spared, exposure) if self._ideal(told_apart=True) else (0, 0.0)
+            lined = self._ideal(told_apart=True)
+            lost, exposure = (lines.spared, exposure) if lined else (0, 0.0)
         central = self._central_offset
         self._deaths.append(lines.deaths if lines.active else 0)
         self._told_apart.append(lines.spared if lines.active else 0)
@@ -790,6 +794,14 @@ class AdaptiveKalman(Estimator):
         else:
             anchor, self._anchor = self._anchor, (sample.time, c)
             self._step(c, sample.time, anchor, *pending)
+            if lined:
+                self._ride.stop()
+            else:
+                # No line shows a loss: the body's counts against the wheel it rides do.
+                track, steady = pending[0], pending[2]
+                k = int(np.abs(track[0] - self.x[1]).argmin()) if steady else -1
+                ridden = k if k >= 0 and self._stuck_share(self.mu) >= self.HOLD_START else None
+                self._ride.push(c + self._central_offset - central, int(wheels[k]), ridden, float(track[0, k]))
         # The missed-count rate from the repairs (wheels' and, in holds, the central count's)
         # over the transitions where a loss would have shown.
         layer, rate = self._layer, self.missed_rate

@@ -26,6 +26,19 @@ probability ``p`` whatever the line's state, so the repairs over the exposure ar
 section 10). Dividing by every transition instead (most lie in transients, young windows,
 filters not yet trusting their encoders, or cells where a loss would not show) gives a
 fraction of the rate (0.43e-3 for 1e-3 over four brake records; 1.02e-3 over the exposure).
+
+:class:`RideCheck`: the same rate where no line lasts long enough to show a loss (read noise):
+while the body rides a contact, the difference of its position and that wheel's, both read as
+counts, is a level (the gearbox play, the grids' phases) that moves only when a count is lost,
+down by the body's count or up by the wheel's (against the motion), seen through the reads'
+noise; motion, the motors' wander and jitter (one read instant for all encoders) cancel. Over
+a period the body's ``n_c = d / q_c`` transitions and the wheel's ``n_w = d / q_w`` (``d`` the
+travel) move the level by a step of mean ``p (n_w q_w - n_c q_c) = 0`` and variance ``p (n_c
+q_c^2 + n_w q_w^2) = p d (q_c + q_w)``: a random walk whose intensity is proportional to ``p``.
+A bank of level filters over a grid of rates (:func:`toolkit._compiled.imm.ride_step`) gives
+each rate's Gaussian likelihood of the readings, a quasi-likelihood with the steps' true
+first two moments (consistent for ``p``; the steps are whole counts, not Gaussian);
+:class:`MissedCountRate` multiplies it into its posterior (docs/physics.md section 10).
 """
 
 from __future__ import annotations
@@ -35,11 +48,12 @@ from typing import Any
 
 import numpy as np
 
+from .._compiled import kernels
 from ..errors import as_float
 from ..model.motors import MotorPiece
-from ..model.truth import DEFAULT_MISSED
+from ..model.truth import DEFAULT_MISSED, MAX_MISSED_MEAN
 
-__all__ = ["LagIdentifier", "MissedCountRate"]
+__all__ = ["LagIdentifier", "MissedCountRate", "RideCheck"]
 
 
 class LagIdentifier:
@@ -154,13 +168,17 @@ class LagIdentifier:
 
 
 class MissedCountRate:
-    """The missed-count rate's posterior from repairs over the transitions they could see.
+    """The missed-count rate's posterior from repairs over the transitions they could see, and
+    from the ridden wheel's check.
 
     A Gamma posterior (shape ``a``, rate ``b``, 1 / transition) on ``p``: the prior
     ``Gamma(shape, shape / mean)`` (default: Jeffreys' shape 1/2, the rate's prior mean
     :data:`~toolkit.model.truth.DEFAULT_MISSED`, its std ``sqrt(2)`` times that), then per
     sample ``a += repairs``, ``b += exposure``. Its mean and variance are ``a / b`` and ``a /
-    b^2``; with no repair over ``E`` transitions the mean falls as ``1 / (2 E)``.
+    b^2``; with no repair over ``E`` transitions the mean falls as ``1 / (2 E)``. Once the
+    ridden wheel's check has read a sample (:class:`RideCheck`), its log-likelihood
+    :attr:`loglik` on :attr:`GRID` multiplies that density, and the moments are sums over the
+    grid (:func:`toolkit._compiled.imm.rate_moments`).
 
     Parameters
     ----------
@@ -175,22 +193,43 @@ class MissedCountRate:
         Repairs seen.
     exposure : float
         Count transitions read where a missed one would have been repaired.
+    loglik : ndarray of shape (161,)
+        The ridden wheel's check's log-likelihood of each rate of :attr:`GRID`.
+    checked : int
+        Samples the check has read.
     """
+
+    #: The rates the check weighs, per transition: 20 a decade from 1e-10 to
+    #: :data:`~toolkit.model.truth.MAX_MISSED_MEAN` (1e-2: above it two losses in one period of
+    #: a carousel's wheel are likely, which the check leaves out).
+    GRID = np.geomspace(1e-10, MAX_MISSED_MEAN, 161)
+    LOG_GRID = np.log(GRID)
 
     def __init__(self, mean: float | None = None, shape: float = 0.5) -> None:
         owner = "MissedCountRate"
         mean = DEFAULT_MISSED if mean is None else mean
-        self.prior_mean = as_float(mean, "mean", owner, low=0.0, high=1.0, low_open=True)
+        self.prior_mean = as_float(mean, "mean", owner, low=0.0, high=MAX_MISSED_MEAN, low_open=True)
         self.prior_shape = as_float(shape, "shape", owner, low=0.0, low_open=True)
         self.repairs = 0
         self.exposure = 0.0
+        self.loglik = np.zeros(self.GRID.size)
+        self.checked = 0
+        self._moments = np.empty(2)
+        self._stale = True
 
     def push(self, repairs: int, exposure: float) -> None:
         """One sample's repairs and its exposure (transitions where a loss would show)."""
         if repairs:
             self.repairs += int(repairs)
+            self._stale = True
         if exposure:
             self.exposure += float(exposure)
+            self._stale = True
+
+    def checked_sample(self) -> None:
+        """The check added one sample's log-likelihood to :attr:`loglik`."""
+        self.checked += 1
+        self._stale = True
 
     @property
     def shape(self) -> float:
@@ -201,12 +240,95 @@ class MissedCountRate:
         """The posterior's rate parameter (transitions)."""
         return self.prior_shape / self.prior_mean + self.exposure
 
+    def _moment(self, which: int) -> float:
+        if self._stale:
+            if self.checked:
+                kernels("imm", 4 * self.GRID.size).rate_moments(self.GRID, self.LOG_GRID, self.loglik, self.shape, self.rate,
+                                                                 self._moments)
+            else:
+                self._moments[0] = self.shape / self.rate
+                self._moments[1] = self.shape / self.rate ** 2
+            self._stale = False
+        return float(self._moments[which])
+
     @property
     def mean(self) -> float:
         """The posterior mean of ``p``."""
-        return self.shape / self.rate
+        return self._moment(0)
 
     @property
     def variance(self) -> float:
         """The posterior variance of ``p``."""
-        return self.shape / self.rate ** 2
+        return self._moment(1)
+
+
+class RideCheck:
+    """The missed-count rate's evidence from the body's counts against the wheel it rides (see
+    the module).
+
+    Push every sample with the contact the body rides (or None); the check opens on a contact
+    once the difference of the two positions has stayed level over :attr:`WINDOW` samples (its
+    least-squares slope within :attr:`SLOPE` plus four of its standard deviations), and then
+    adds each sample's log-likelihood of every rate to ``rate.loglik`` until the ride ends or
+    the difference leaves level. The reads' noise variance is the difference's own
+    (:attr:`read_variance`: the quantizations' and what the steps show beyond them and the
+    losses). The check reads only where the read noise is at least the quantizations'
+    (:attr:`NOISE_OVER`): a quantization sawtooth alone passes for losses in the white model,
+    and the exact lines see the losses there instead (docs/physics.md section 10).
+
+    Parameters
+    ----------
+    central_count, wheel_count : float, m
+        Distance per count of the body's encoder and of a wheel's (at the contact).
+    rate : MissedCountRate
+        Receives the evidence.
+    period : float, s
+        The sample period.
+    """
+
+    #: Samples over which a ride's difference must stay level before (and while) it counts.
+    WINDOW = 25
+    #: Slope of the difference (m/s) a ride allows besides its noise: a contact the body does
+    #: not ride moves away from it at the contacts' spacing (11 mm/s on the carousel's brake).
+    SLOPE = 2e-3
+    #: The reads' noise variance over the quantizations' below which the check does not read.
+    NOISE_OVER = 2.0
+
+    def __init__(self, central_count: float, wheel_count: float, rate: MissedCountRate, period: float) -> None:
+        self.qc, self.qw, self.rate, self.h = central_count, wheel_count, rate, period
+        self._ring = np.zeros(self.WINDOW)
+        # The ride's readings, the window's two sums, the sums over every ride of the squared
+        # steps, the quantizations' share and the travel, the steps, open (imm.ride_push).
+        self._state = np.zeros(8)
+        self._level = np.empty(rate.GRID.size)
+        self._var = np.empty(rate.GRID.size)
+        self._on: int | None = None
+
+    def stop(self) -> None:
+        """No ride now: the next ride starts its window afresh."""
+        self._on = None
+        self._state[0] = self._state[1] = self._state[2] = self._state[7] = 0.0
+
+    @property
+    def read_variance(self) -> float:
+        """The variance ``R`` of the difference's reads, m^2: the quantizations' ``(q_c^2 +
+        q_w^2) / 12`` plus half the mean square of its steps over every ride less the
+        quantizations' share (``alpha (1 - alpha)`` counts^2 a step, ``alpha`` the fraction
+        of a count travelled per period) and the losses' at the rate's mean."""
+        return float(kernels("imm").read_variance(self._state, self.qc, self.qw, self.rate.mean))
+
+    def push(self, central: int, wheel: int, ridden: int | None, speed: float) -> None:
+        """One sample: the body's count, the ridden wheel's count, which contact it rides
+        (None: none) and that contact's speed (m/s)."""
+        if ridden is None or speed == 0.0:
+            if self._on is not None:
+                self.stop()
+            return
+        if ridden != self._on:
+            self.stop()
+            self._on = ridden
+        if kernels("imm", 10 * self._level.size).ride_push(
+                self._state, self._ring, self._level, self._var, self.rate.GRID, self.rate.loglik,
+                central * self.qc - wheel * self.qw, abs(speed) * self.h, self.qc, self.qw, self.h, self.SLOPE,
+                self.NOISE_OVER, self.rate.mean):
+            self.rate.checked_sample()

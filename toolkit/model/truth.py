@@ -28,7 +28,7 @@ from .plant import Plant
 from .sensors import Sensors
 
 __all__ = ["WorldTruth", "TrueWorld", "realize", "seed_streams", "ModelPrior", "DEFAULT_DRAG", "DEFAULT_LAG",
-           "DEFAULT_DRIFT", "DEFAULT_MISSED"]
+           "DEFAULT_DRIFT", "DEFAULT_MISSED", "MAX_MISSED_MEAN"]
 
 #: Sub-streams of one seed (``numpy.random.default_rng([seed, stream])``): the wheels' friction
 #: draw (the stream scenes used before, so a scene's draw is unchanged) and the motors' wander.
@@ -247,6 +247,10 @@ class ModelPrior:
         The central encoder misses each count transition with this probability, in
         ``[0, 0.5]`` (default 0: not expected); the default ``kalman`` then reports the
         position with the count offset's mean and variance (docs/physics.md section 10).
+    missed_count_mean : float or None
+        Not told the rate (``missed_count_prob`` 0), the prior mean of the rate the default
+        ``kalman`` identifies online, in ``(0, 0.01]`` (its prior std is ``sqrt(2)`` times it:
+        :class:`toolkit.estimation.MissedCountRate`); ``None``: :data:`DEFAULT_MISSED`.
     """
 
     friction_spread: float = 0.3
@@ -254,9 +258,13 @@ class ModelPrior:
     lag_range: tuple[float, float] | None = None
     contact_drift: float | None = None
     missed_count_prob: float = 0.0
+    missed_count_mean: float | None = None
 
     def __post_init__(self) -> None:
         owner = "ModelPrior"
+        if self.missed_count_mean is not None:
+            object.__setattr__(self, "missed_count_mean", as_float(
+                self.missed_count_mean, "missed_count_mean", owner, low=0.0, high=MAX_MISSED_MEAN, low_open=True))
         object.__setattr__(self, "missed_count_prob", as_float(self.missed_count_prob, "missed_count_prob", owner,
                                                                low=0.0, high=0.5))
         object.__setattr__(self, "friction_spread", as_float(self.friction_spread, "friction_spread", owner,
@@ -277,3 +285,6 @@ DEFAULT_DRIFT = 1e-4
 #: Default prior mean of the encoders' missed-count rate when it is not told (per count
 #: transition; the prior's std is sqrt(2) times it: :class:`toolkit.estimation.MissedCountRate`).
 DEFAULT_MISSED = 1e-3
+#: Largest prior mean of an untold missed-count rate: the top of the grid of rates the ridden
+#: wheel's check weighs (:class:`toolkit.estimation.MissedCountRate`).
+MAX_MISSED_MEAN = 1e-2

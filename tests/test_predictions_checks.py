@@ -418,7 +418,12 @@ def test_cli_predict_exit_codes(tmp_path, capsys):
                        '[motors]\nspeed_limit = 0.35\n')
     assert main(["predict", str(unequal)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "equal friction magnitude" in err[0]
+    assert len(err) == 1 and "equal friction magnitude" in err[0] and "scene key 'contacts.forces'" in err[0]
+    unbounded = tmp_path / "unbounded.toml"
+    unbounded.write_text('[contacts]\nspeeds = [0.0, 0.1]\nforces = 0.2\n[body]\nmass = 1.0\n')
+    assert main(["predict", str(unbounded)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "finite symmetric speed limits" in err[0] and "'motors.speed_limit'" in err[0]
 
 
 def test_cli_predict_with_contacts(capsys):

@@ -364,8 +364,7 @@ def _cmd_predict(args: argparse.Namespace) -> int:
     if args.scene is None:
         apparatus = Apparatus.carousel()
     else:
-        objects = _scene(args)
-        apparatus = Apparatus(objects.plant_on(None), objects.sensors)
+        apparatus = _scene(args).apparatus()
     if args.contacts is not None:
         apparatus = apparatus.with_contacts(args.contacts)
     progress = not args.json and sys.stderr.isatty()

@@ -217,6 +217,25 @@ class SceneObjects:
             return self.plant
         return replace(self.plant, contacts=contacts)
 
+    def apparatus(self) -> Any:
+        """The scene's plant and encoders as the paper's predictions' apparatus
+        (:class:`toolkit.predictions.Apparatus`).
+
+        Raises
+        ------
+        SceneError
+            The scene has no ``[body]``, or breaks the apparatus's rules, named by the scene key
+            that sets what it breaks (``contacts.forces``: one equal magnitude; else
+            ``motors.speed_limit``: finite symmetric limits).
+        """
+        from ..predictions import Apparatus
+
+        plant = self.plant_on(None)
+        forces = plant.contacts.forces
+        key = "contacts.forces" if (np.ptp(forces) > 0 or forces[0] <= 0) else "motors.speed_limit"
+        with _scene_keys(key.split(".")[0], {"plant": key}):
+            return Apparatus(plant, self.sensors)
+
 
 def sweep_scene_error(scene: Scene, command: str) -> SceneError:
     """The one refusal of a sweep scene by a command that needs contacts of its own."""

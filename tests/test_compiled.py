@@ -414,6 +414,57 @@ def test_pairwise_sum_is_numpys_sum(rng):
     assert module.pairwise_sum(values, 100, 250) == float(np.add.reduce(values[100:350]))
 
 
+def _numpy_staircase(speeds: np.ndarray, forces: np.ndarray) -> tuple[np.ndarray, float]:
+    """The staircase by NumPy's unique, bincount and cumsum (ContactSet's way without the
+    kernel): rows levels + inf, below, above; and F_tot as np.sum of the steps."""
+    active = forces > 0
+    levels, inverse = np.unique(speeds[active], return_inverse=True)
+    steps = np.bincount(inverse, weights=forces[active], minlength=levels.size)
+    K = levels.size
+    table = np.empty((3, K + 1))
+    table[0, :K], table[0, K] = levels, np.inf
+    table[1, 0] = 0.0
+    np.cumsum(steps, out=table[1, 1:])
+    table[2, :K], table[2, K] = np.cumsum(steps[::-1])[::-1], 0.0
+    return table, float(np.sum(steps))
+
+
+@pytest.mark.parametrize("n", [1, 3, 7, 8, 9, 10, 17, 64])
+def test_contact_table_is_numpys_staircase(rng, n):
+    # core.contact_table (what ContactSet builds once the kernels are machine code) against
+    # NumPy's unique / bincount / cumsum / sum: exactly equal (the same doubles, the sign of
+    # a zero level included), on ties, lifted contacts and magnitudes over six decades
+    # (where the order of the additions shows in the last bit), below and above the 8 terms
+    # where np.sum starts its partial sums.
+    _compiled.load("core")                       # (ContactSet takes the kernel once compiled)
+    for trial in range(200):
+        if trial % 2:
+            speeds = rng.choice([-0.2, -0.1, 0.0, 0.1, 0.3], n)
+        else:
+            speeds = rng.standard_normal(n)
+        forces = 10.0 ** rng.uniform(-3, 3, n) * (rng.random(n) < 0.8)
+        forces[rng.integers(n)] = 1.5
+        land = np.empty((3, n + 1))
+        K, total = core.contact_table(speeds.reshape(1, n), forces.reshape(1, n), np.empty(n, dtype=np.int64),
+                                      land, np.empty(n + 1, dtype=np.int64))
+        table, total_np = _numpy_staircase(speeds, forces)
+        assert K == table.shape[1] - 1
+        assert np.array_equal(land[1:, :K + 1], table[1:]) and np.array_equal(land[0, :K], table[0, :K])
+        assert np.array_equal(np.signbit(land[0, :K]), np.signbit(table[0, :K]))
+        assert total == total_np
+        # ContactSet holds the same staircase whichever way built it.
+        contacts = ContactSet(speeds, forces)
+        assert np.array_equal(contacts._table, table) and contacts.total_force == total_np
+    # Both signed zeros among the touching contacts: left to NumPy (whose sort may take the
+    # level from either), and ContactSet still builds its staircase.
+    speeds, forces = np.array([0.0, 0.2, -0.0]), np.array([1.0, 2.0, 3.0])
+    K, _ = core.contact_table(speeds.reshape(1, 3), forces.reshape(1, 3), np.empty(3, dtype=np.int64),
+                              np.empty((3, 4)), np.empty(4, dtype=np.int64))
+    assert K == -1
+    table, total_np = _numpy_staircase(speeds, forces)
+    assert np.array_equal(ContactSet(speeds, forces)._table, table)
+
+
 def test_filippov_acceleration_solves_the_inclusion(rng):
     # core.filippov returns the body's acceleration a among tied contacts moving at rates
     # `slopes`: 0 in G + sum_j w_j Sign(slope_j - a) - m a. Identity check: when the body

@@ -89,7 +89,8 @@ KERNELS = {
     "net_force": _INLINE, "coulomb_force": {}, "lowest_contact": {}, "push_segment": _INLINE,
     "push_event": _INLINE, "budget_code": _INLINE, "ideal_piece": {}, "ideal_run": {},
     "dense_values": {}, "segment_value": _INLINE, "displacement": {}, "samples": {},
-    "quiet_piece": {}, "sorted_landscape": {}, "staircase_median": {}, "median_row": {},
+    "quiet_piece": {}, "sorted_landscape": {}, "sorted_steps": _INLINE,
+    "staircase_sums": _INLINE, "contact_table": {}, "staircase_median": {}, "median_row": {},
     "median_edges": {}, "period_bounds": {}, "window_line": {},
     "kalman_step": {},
     "batch_scene": {}, "batch": {"parallel": True},
@@ -2184,7 +2185,35 @@ def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.n
     speeds of the touching contacts ascending, the magnitude at each summed in index order,
     prefix sums from below and from above), and ``first``: the lowest contact index at each
     level; ``order`` (n,) is scratch. Returns ``K``."""
-    xs, below, above = land[0], land[1], land[2]
+    K = sorted_steps(speeds, forces, s, order, land, first)
+    staircase_sums(land, K)
+    return K
+
+
+def contact_table(speeds: np.ndarray, forces: np.ndarray, order: np.ndarray, land: np.ndarray,
+                  first: np.ndarray) -> tuple[int, float]:
+    """:class:`ContactSet`'s staircase of one set (``speeds``, ``forces`` of shape (1, n)) into
+    ``land`` (3, n + 1) as :func:`sorted_landscape`, and the sum of its steps as NumPy sums
+    them (:func:`pairwise_sum`: the set's ``F_tot``). Returns ``(K, F_tot)``; ``(-1, 0)``
+    where touching contacts sit at both ``0.0`` and ``-0.0`` (equal speeds whose level NumPy's
+    sort may take from either: the caller's NumPy way decides)."""
+    zeros = 0
+    for i in range(speeds.shape[1]):
+        if forces[0, i] > 0 and speeds[0, i] == 0.0:
+            zeros |= 2 if math.copysign(1.0, speeds[0, i]) < 0 else 1
+    if zeros == 3:
+        return -1, 0.0
+    K = sorted_steps(speeds, forces, 0, order, land, first)
+    total = pairwise_sum(land[2], 0, K)
+    staircase_sums(land, K)
+    return K, total
+
+
+def sorted_steps(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.ndarray,
+                 land: np.ndarray, first: np.ndarray) -> int:
+    """:func:`sorted_landscape`'s levels into ``land[0]`` and the magnitude at each (its
+    steps, summed in index order) into ``land[2]``, ``first`` as there. Returns ``K``."""
+    xs, above = land[0], land[2]
     n = speeds.shape[1]
     m = 0
     for i in range(n):                     # insertion sort of the touching contacts (stable)
@@ -2209,6 +2238,13 @@ def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.n
             K += 1
         else:
             above[K - 1] += forces[s, i]
+    return K
+
+
+def staircase_sums(land: np.ndarray, K: int) -> None:
+    """The prefix sums of the steps ``land[2, :K]`` (:func:`sorted_steps`) from below into
+    ``land[1, :K + 1]`` and from above into ``land[2, :K + 1]`` (``np.cumsum``'s order)."""
+    below, above = land[1], land[2]
     below[0] = 0.0
     for k in range(K):                     # np.cumsum of the steps
         below[k + 1] = below[k] + above[k]
@@ -2217,7 +2253,6 @@ def sorted_landscape(speeds: np.ndarray, forces: np.ndarray, s: int, order: np.n
     for k in range(K - 1, -1, -1):         # np.cumsum of the reversed steps
         acc += above[k]
         above[k] = acc
-    return K
 
 
 def staircase_median(levels: np.ndarray, below: np.ndarray, above: np.ndarray, K: int,

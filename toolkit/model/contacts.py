@@ -40,7 +40,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from .._compiled import kernels
+from .._compiled import compiled, kernels
 from ..errors import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 
@@ -48,6 +48,8 @@ __all__ = ["ContactModel", "ContactSet", "ContactDistribution", "Staircase", "un
            "weighted_median"]
 
 _EPS = np.finfo(float).eps
+#: Largest set whose staircase the compiled kernel sorts (by insertion; NumPy's sort above).
+_SMALL = 64
 
 
 @runtime_checkable
@@ -170,30 +172,45 @@ class ContactSet:
         """Store checked, read-only ``speeds`` and ``forces`` and build the staircase."""
         object.__setattr__(self, "speeds", speeds)
         object.__setattr__(self, "forces", forces)
-        active = forces > 0
-        if not np.any(active):
+        # below[k] = magnitude strictly below levels[k]; above[k] = magnitude at or above it.
+        # One table, rows (levels + an inf pad, below, above): the exact simulator's kernel
+        # takes the staircase as this one array (toolkit._compiled.core.ideal_piece). Once the
+        # kernels are machine code, the kernel that builds it for many scenes builds it here
+        # too (the same doubles, tested; a plant's flow builds one per step).
+        core = compiled("core")
+        if core is not None and speeds.ndim == 1 and speeds.size <= _SMALL:
+            n = speeds.size
+            land = np.empty((3, n + 1))
+            K, total = core.contact_table(speeds.reshape(1, n), forces.reshape(1, n), np.empty(n, dtype=np.int64),
+                                          land, np.empty(n + 1, dtype=np.int64))
+        else:
+            K = -1
+        if K == 0 or (K < 0 and not np.any(forces > 0)):
             raise ParameterError(parameter_message(
                 "forces", "ContactSet", "have a positive sum (some contact must touch)",
                 forces.tolist() if forces.size <= 8 else "all zeros"))
-        levels, inverse = np.unique(speeds[active], return_inverse=True)
-        steps = np.bincount(inverse, weights=forces[active], minlength=levels.size)
-        # below[k] = magnitude strictly below levels[k]; above[k] = magnitude at or above it.
-        # One table, rows (levels + an inf pad, below, above): the exact simulator's kernel
-        # takes the staircase as this one array (toolkit._compiled.core.ideal_piece).
-        K = levels.size
-        table = np.empty((3, K + 1))
-        table[0, :K] = levels
-        table[0, K] = np.inf
-        table[1, 0] = 0.0
-        np.cumsum(steps, out=table[1, 1:])
-        table[2, :K] = np.cumsum(steps[::-1])[::-1]
-        table[2, K] = 0.0
+        if K > 0:
+            table = land[:, :K + 1].copy()
+            table[0, K] = np.inf
+        else:
+            active = forces > 0
+            levels, inverse = np.unique(speeds[active], return_inverse=True)
+            steps = np.bincount(inverse, weights=forces[active], minlength=levels.size)
+            K = levels.size
+            table = np.empty((3, K + 1))
+            table[0, :K] = levels
+            table[0, K] = np.inf
+            table[1, 0] = 0.0
+            np.cumsum(steps, out=table[1, 1:])
+            table[2, :K] = np.cumsum(steps[::-1])[::-1]
+            table[2, K] = 0.0
+            total = float(np.sum(steps))
         table.setflags(write=False)
         object.__setattr__(self, "_table", table)
         object.__setattr__(self, "_levels", table[0, :K])
         object.__setattr__(self, "_below", table[1])
         object.__setattr__(self, "_above", table[2])
-        object.__setattr__(self, "_total", float(np.sum(steps)))
+        object.__setattr__(self, "_total", float(total))
         # F_tot as the prefix sums add it up (may differ from _total in the last bit).
         object.__setattr__(self, "_prefix_total", float(table[1, K]))
 

@@ -3,11 +3,13 @@ traceback, nothing written; none is silently clipped or replaced."""
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from toolkit.scenes._io import claim_output_dir
@@ -164,3 +166,29 @@ def test_json_output_of_a_mixed_integer_allocation_is_json_only(tmp_path):
     data = json.loads(done.stdout)
     lo, hi = ContactSet(np.array(data["speeds"]), [1.0, 2.0, 1.5, 0.5]).equilibrium()
     assert lo <= 0.05 * (1 + 1e-9) and hi >= 0.05 * (1 - 1e-9)
+
+
+@pytest.mark.parametrize("value, error, match", [
+    (np.array([0.1, np.nan]), "ParameterError", "be finite"),
+    (np.array([[0.1, 0.2]]), "ParameterError", "be 1-dimensional"),
+    (np.empty(0), "ParameterError", "not be empty"),
+    ([0.1, math.inf], "ParameterError", "be finite"),
+    (np.array([True, False]), "ParameterTypeError", "real numbers"),
+    (np.array([1 + 2j]), "ParameterTypeError", "real numbers"),
+    ("0.1", "ParameterTypeError", "array of numbers"),
+])
+def test_float_arrays_and_other_values_are_checked_alike(value, error, match):
+    # as_float_array takes a float64 array straight to the shape and finiteness checks (the
+    # type checks cannot fail on it): the same refusals as for any other value, and a
+    # read-only copy (never the caller's array) when it passes.
+    from toolkit import errors
+
+    with pytest.raises(getattr(errors, error), match=match):
+        errors.as_float_array(value, "x", "Y")
+    given = np.array([0.1, -2.0])
+    checked = errors.as_float_array(given, "x", "Y")
+    assert checked is not given and not checked.flags.writeable and np.array_equal(checked, given)
+    assert errors.as_float(np.float64(0.5), "x", "Y") == 0.5 and errors.as_float(2, "x", "Y") == 2.0
+    for bad in (math.nan, math.inf, True, "1"):
+        with pytest.raises((errors.ParameterError, errors.ParameterTypeError)):
+            errors.as_float(bad, "x", "Y")

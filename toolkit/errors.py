@@ -12,6 +12,7 @@ parameter's name (``error.parameter``). No check uses ``assert``.
 from __future__ import annotations
 
 import difflib
+import math
 import numbers
 from collections.abc import Iterable
 from typing import Any
@@ -142,23 +143,26 @@ def _first_bad(values: np.ndarray, bad: np.ndarray) -> Any:
 def as_float_array(value: Any, name: str, owner: str, *, ndim: int = 1,
                    allow_empty: bool = False, finite: bool = True) -> np.ndarray:
     """Convert to a read-only float64 array, refusing wrong types, shapes and NaN/inf."""
-    if isinstance(value, (str, bytes)) or value is None:
-        raise ParameterTypeError(parameter_message(name, owner, "be an array of numbers", value))
-    if ndim == 1 and isinstance(value, numbers.Real) and not isinstance(value, bool):
-        value = [value]
-    if np.asarray(value).dtype == bool or np.iscomplexobj(value):
-        raise ParameterTypeError(parameter_message(name, owner, "be an array of real numbers", value))
-    try:
-        array = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ParameterTypeError(
-            parameter_message(name, owner, "be an array of numbers", value)) from None
+    if type(value) is np.ndarray and value.dtype == np.float64:
+        array = value.copy()                # (a float array: the type checks below pass)
+    else:
+        if isinstance(value, (str, bytes)) or value is None:
+            raise ParameterTypeError(parameter_message(name, owner, "be an array of numbers", value))
+        if ndim == 1 and isinstance(value, numbers.Real) and not isinstance(value, bool):
+            value = [value]
+        if np.asarray(value).dtype == bool or np.iscomplexobj(value):
+            raise ParameterTypeError(parameter_message(name, owner, "be an array of real numbers", value))
+        try:
+            array = np.array(value, dtype=float)
+        except (TypeError, ValueError):
+            raise ParameterTypeError(
+                parameter_message(name, owner, "be an array of numbers", value)) from None
     if array.ndim != ndim:
         raise ParameterError(parameter_message(
             name, owner, f"be {ndim}-dimensional", f"an array of shape {array.shape}"))
     if not allow_empty and array.size == 0:
         raise ParameterError(parameter_message(name, owner, "not be empty", value))
-    if finite and not np.all(np.isfinite(array)):
+    if finite and not np.isfinite(array).all():
         raise ParameterError(parameter_message(
             name, owner, "be finite (no NaN or inf)", _first_bad(array, ~np.isfinite(array))))
     array.setflags(write=False)
@@ -169,11 +173,11 @@ def as_float(value: Any, name: str, owner: str, *, low: float | None = None,
              high: float | None = None, low_open: bool = False,
              finite: bool = True) -> float:
     """Convert a scalar to float, refusing bools, strings, NaN and values out of range."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    if type(value) is not float and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
         if not (isinstance(value, np.ndarray) and value.ndim == 0):
             raise ParameterTypeError(parameter_message(name, owner, "be a real number", value))
     result = float(value)
-    if np.isnan(result) or (finite and not np.isfinite(result)):
+    if math.isnan(result) or (finite and not math.isfinite(result)):
         raise ParameterError(parameter_message(name, owner, "be finite", value))
     if low is not None:
         if low_open and not result > low:

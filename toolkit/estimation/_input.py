@@ -202,11 +202,17 @@ class EstimatorModel:
             plants = previous._plants
         else:
             contacts = ContactSet(np.zeros(forces.size), forces)
-            held = Plant(contacts, self.mass, damping=self.damping,
-                         motors=(previous._plants[0].motors if previous is not None
-                                 else Motors(lag=0.0, speed_limits=motors.speed_limits)))
-            lagging = (Plant(contacts, self.mass, damping=self.damping, motors=motors)
-                       if self.motor_lag > 0 else held)
+            if previous is None:
+                held = Plant(contacts, self.mass, damping=self.damping,
+                             motors=Motors(lag=0.0, speed_limits=motors.speed_limits))
+            else:
+                held = previous._plants[0].with_contacts(contacts)
+            if self.motor_lag <= 0:
+                lagging = held
+            elif same_lag and previous._plants[1] is not previous._plants[0]:
+                lagging = previous._plants[1].with_contacts(contacts)
+            else:
+                lagging = Plant(contacts, self.mass, damping=self.damping, motors=motors)
             plants = (held, lagging)
         object.__setattr__(self, "_plants", plants)
         # The friction spread's force error, held over the period: (sigma_F / m)^2 g g^T with

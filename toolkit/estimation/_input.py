@@ -468,7 +468,7 @@ class EstimatorModel:
         from ..simulation import ExactState, advance
 
         start, target = track[0], track[1]
-        held = bool(np.array_equal(start, target))
+        held = bool((start == target).all())           # (the rows of one track: one shape)
         plant = self._plants[0 if held else 1]
         state = ExactState(0.0, float(V), start)
         step = advance(plant, state, target, self.sensors.period, external=float(force))

@@ -285,6 +285,5 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
         rec.detail = f"the body speed left the floating-point range (V = {V:g} m/s)"
     events = rec.events()
     detail = rec.detail if status is not _SUCCESS else f"{len(events)} events"
-    return ExactStep(ExactState._trusted(float(t), float(V), speeds_end, stuck, pending),
-                     body, travelled, events, status,
-                     status_message(status, detail))
+    return ExactStep._trusted(ExactState._trusted(float(t), float(V), speeds_end, stuck, pending),
+                              body, travelled, events, status, status_message(status, detail), False)

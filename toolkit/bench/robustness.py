@@ -12,8 +12,9 @@ under (told, or identified online); then issue 18's lines (met / SHORT) per case
 
 Then the costs, with the kernels compiled beforehand (``KalmanEstimator.warm_up``): the
 default on the shipped scene's record (its real-time ratio, target >= 1000x; best of 20), and
-the adaptive filter stepped over the mismatch records with every adaptive part active (us
-per 50 Hz sample, target <= 100; best of 3 per record, median over the cases); and the closed
+the adaptive filter stepped over each mismatch record with every adaptive part active (us
+per 50 Hz sample, best of 3 per record, printed per case; target <= 100 in every case, the line
+held against the largest); and the closed
 loops on 20 % unequal wheels (speed hold, virtual viscosity: the in-loop estimate's RMS after
 the first second against central differencing's, target >= 10x, median over ``M`` seeds).
 The load average is printed beside the timings (the machine may be shared). Exit status 0
@@ -93,10 +94,12 @@ def _costs(ideal, cases) -> int:
           f"{ideal.record.duration:g} s record, {ratio:.0f}x real time (target >= 1000x; load average "
           f"{os.getloadavg()[0]:.2f})")
     print(f"  {'met  ' if rms <= 0.03e-3 else 'SHORT'} nominal scene: kalman RMS {rms * 1e3:.4f} mm/s (target <= 0.03)")
-    costs = []
-    for name in (cases or ROBUSTNESS_CASES):
-        if name == "nominal":
-            continue
+    costs = {}
+    names = [name for name in (cases or ROBUSTNESS_CASES) if name != "nominal"]
+    if not names:
+        return status
+    print("  adaptive filter stepped, every adaptive part active, us per 50 Hz sample (best of 3):")
+    for name in names:
         sc = ROBUSTNESS_CASES[name].scenario(0)
         adaptive = AdaptiveKalman(sc.model, sc.prior)
         walls = []
@@ -106,10 +109,11 @@ def _costs(ideal, cases) -> int:
             for k in range(sc.record.n_samples):
                 adaptive.step(sc.record.sample(k))
             walls.append(time.perf_counter() - start)
-        costs.append(min(walls) / sc.record.n_samples * 1e6)
-    cost = float(np.median(costs))
-    met = cost <= 100.0
-    print(f"  {'met  ' if met else 'SHORT'} adaptive filter stepped, every adaptive part active: median "
-          f"{cost:.0f} us per sample over the mismatch cases (range {min(costs):.0f}-{max(costs):.0f}; "
-          f"target <= 100; load average {os.getloadavg()[0]:.2f})")
+        costs[name] = min(walls) / sc.record.n_samples * 1e6
+        print(f"    {name:28s} {costs[name]:6.1f}")
+    worst = max(costs, key=costs.get)
+    met = costs[worst] <= 100.0
+    print(f"  {'met  ' if met else 'SHORT'} adaptive filter stepped, every adaptive part active: at most "
+          f"{costs[worst]:.0f} us per sample ({worst}; median {np.median(list(costs.values())):.0f} over the "
+          f"{len(costs)} mismatch cases; target <= 100 in every case; load average {os.getloadavg()[0]:.2f})")
     return status | (0 if met else 1)

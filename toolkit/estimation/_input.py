@@ -133,6 +133,7 @@ class EstimatorModel:
     _friction_noise: np.ndarray = field(init=False, repr=False)
     _between: Any = field(init=False, repr=False)
     _read_noise: float = field(init=False, repr=False)
+    _period_moments: tuple = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         owner = "EstimatorModel"
@@ -183,7 +184,13 @@ class EstimatorModel:
         # period the speed of a body that follows it changes by the white-noise
         # acceleration model's drift^2 [[h^3 / 3, h^2 / 2], [h^2 / 2, h]].
         h = self.sensors.period
-        held = self.contact_drift**2 * np.array([[h**3 / 3.0, h * h / 2.0], [h * h / 2.0, h]])
+        if previous is None:
+            # What depends on the period alone (shared by every adjusted model).
+            g = np.array([0.5 * h * h, h])
+            object.__setattr__(self, "_period_moments", (
+                np.array([[h**3 / 3.0, h * h / 2.0], [h * h / 2.0, h]]), np.outer(g, g)))
+        walk, gg = self._period_moments
+        held = self.contact_drift**2 * walk
         held.setflags(write=False)
         object.__setattr__(self, "_held_noise", held)
         # Largest move of the equilibrium set's edges over a period that a body on it
@@ -198,7 +205,7 @@ class EstimatorModel:
         motors = previous._motors if same_lag else Motors(lag=self.motor_lag, speed_limits=self.speed_limits)
         object.__setattr__(self, "speed_limits", motors.speed_limits)
         object.__setattr__(self, "_motors", motors)
-        if same_lag and np.array_equal(previous.forces, forces):
+        if same_lag and bool((previous.forces == forces).all()):       # (one length: n)
             plants = previous._plants
         else:
             contacts = ContactSet(np.zeros(forces.size), forces)
@@ -217,13 +224,12 @@ class EstimatorModel:
         object.__setattr__(self, "_plants", plants)
         # The friction spread's force error, held over the period: (sigma_F / m)^2 g g^T with
         # g = (h^2 / 2, h).
-        g = np.array([0.5 * h * h, h])
-        spread = np.outer(g, g) * (self._friction_var / self.mass**2)
+        spread = gg * (self._friction_var / self.mass**2)
         spread.setflags(write=False)
         object.__setattr__(self, "_friction_noise", spread)
         # The between-contacts shortcut: for unequal magnitudes (an adaptive filter's model at
         # its estimates), where bodies creep across bands the nominal equal ones hold exactly.
-        object.__setattr__(self, "_between", self._quiet_between if np.ptp(forces) > 0 else None)
+        object.__setattr__(self, "_between", self._quiet_between if forces.max() > forces.min() else None)
         object.__setattr__(self, "_read_noise", self.sensors.read_noise_variance)
 
     @property

@@ -202,7 +202,7 @@ def as_int(value: Any, name: str, owner: str, *, low: int | None = None) -> int:
 
 def check_nonnegative(array: np.ndarray, name: str, owner: str) -> None:
     """Refuse any negative entry."""
-    if np.any(array < 0):
+    if (array < 0).any():
         raise ParameterError(parameter_message(name, owner, "be >= 0", _first_bad(array, array < 0)))
 
 

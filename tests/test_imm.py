@@ -518,3 +518,32 @@ def test_ride_push_opens_only_on_a_level_difference_with_read_noise():
     assert level[:n] == [0] * n and all(level[n:]), level
     assert not any(checked(0.011, 0.6))
     assert not any(checked(0.0, 0.0))
+
+
+@pytest.mark.parametrize("width", [0.03, 0.06, 0.1])
+def test_rate_moments_of_a_sharp_posterior_that_is_not_gamma(width):
+    # A check's likelihood that is lognormal in p times the default Gamma prior. Log-widths
+    # 0.03 and 0.06 (below 0.7 of the grid's spacing of 0.115): the three points about the peak
+    # fit a Gamma that is not the posterior; 0.1: the trapezoid sums. Against the posterior's
+    # moments by adaptive quadrature (scipy.integrate.quad over log p): the mean within 2e-3,
+    # the std within 5e-2 (measured: mean 1.2e-3 and 1.1e-4, std 1.5e-2 and 1.7e-2 for the
+    # fit; the sums' error at 0.1 is below 1e-6).
+    from scipy.integrate import quad
+
+    from toolkit.estimation import MissedCountRate
+
+    grid, log_grid = MissedCountRate.GRID, MissedCountRate.LOG_GRID
+    shape, rate, centre = 0.5, 500.0, math.log(1.3e-3)
+
+    def log_post(u: float) -> float:
+        return shape * u - rate * math.exp(u) - 0.5 * ((u - centre) / width) ** 2
+
+    top = log_post(centre)
+    span = (centre - 12 * width, centre + 12 * width)
+    m = [quad(lambda u, k=k: math.exp(log_post(u) - top + k * u), *span, epsabs=0, epsrel=1e-12)[0]
+         for k in range(3)]
+    mean, std = m[1] / m[0], math.sqrt(m[2] / m[0] - (m[1] / m[0]) ** 2)
+    out = np.empty(2)
+    K.rate_moments(grid, log_grid, -0.5 * ((log_grid - centre) / width) ** 2, shape, rate, out)
+    assert abs(out[0] / mean - 1.0) <= 2e-3, (out[0], mean)
+    assert abs(math.sqrt(out[1]) / std - 1.0) <= 5e-2, (math.sqrt(out[1]), std)

@@ -364,10 +364,12 @@ def test_friction_fraction_with_drag_falls_short():
 
 def test_apparatus_refuses_what_the_experiments_do_not_cover():
     unequal = Plant(ContactSet([0.0] * 10, [0.2] * 9 + [0.3]), 1.0, motors=Motors(speed_limits=(-0.35, 0.35)))
-    with pytest.raises(ParameterError, match="'plant' parameter of Apparatus must have contacts of one equal"):
+    with pytest.raises(ParameterError, match="'plant.contacts.forces' parameter of Apparatus must be one equal") as error:
         Apparatus(unequal)
+    assert error.value.parameter == "plant.contacts.forces"
     lopsided = Plant(ContactSet([0.0] * 10, [0.2] * 10), 1.0, motors=Motors(speed_limits=(-0.3, 0.35)))
-    with pytest.raises(ParameterError, match="finite symmetric speed limits"):
+    with pytest.raises(ParameterError, match="'plant.motors.speed_limits' parameter of Apparatus must be finite and "
+                                             "symmetric"):
         Apparatus(lopsided)
     with pytest.raises(ParameterError, match="'sensors' parameter of Apparatus"):
         Apparatus(CAROUSEL.plant, HARDWARE.sensors(8))
@@ -418,12 +420,12 @@ def test_cli_predict_exit_codes(tmp_path, capsys):
                        '[motors]\nspeed_limit = 0.35\n')
     assert main(["predict", str(unequal)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "equal friction magnitude" in err[0] and "scene key 'contacts.forces'" in err[0]
+    assert len(err) == 1 and "one equal friction magnitude" in err[0] and "scene key 'contacts.forces'" in err[0]
     unbounded = tmp_path / "unbounded.toml"
     unbounded.write_text('[contacts]\nspeeds = [0.0, 0.1]\nforces = 0.2\n[body]\nmass = 1.0\n')
     assert main(["predict", str(unbounded)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "finite symmetric speed limits" in err[0] and "'motors.speed_limit'" in err[0]
+    assert len(err) == 1 and "finite and symmetric" in err[0] and "scene key 'motors.speed_limit'" in err[0]
 
 
 def test_cli_predict_with_contacts(capsys):

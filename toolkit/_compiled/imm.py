@@ -421,19 +421,13 @@ def ride_push(state, ring, level, var, grid, loglik, y, travel, qc, qw, h, slope
     difference of the positions read (m), ``travel`` the period's (m), ``qc``, ``qw`` the
     counts (m), ``h`` the period (s). ``state``: the readings since the ride began, the
     window's sums of the readings and of the readings times their index in ``ring`` (the
-    last ``ring.size``), the sums over every ride of the squared steps, of the
-    quantizations' share of them and of the travel, the steps, whether the check is open.
-    Returns 1 where :func:`ride_step` added the sample's log-likelihoods, else 0."""
+    last ``ring.size``), the sums of the squared steps, of the quantizations' share of them
+    and of the travel over the steps that end a level window (every ride's), those steps,
+    whether the check is open. Returns 1 where :func:`ride_step` added the sample's
+    log-likelihoods, else 0."""
     n = ring.size
     count = int(state[0])
-    if count > 0:
-        a = travel / qc % 1.0
-        b = travel / qw % 1.0
-        d = y - ring[(count - 1) % n]
-        state[3] += d * d
-        state[4] += qc * qc * a * (1.0 - a) + qw * qw * b * (1.0 - b)
-        state[5] += travel
-        state[6] += 1.0
+    step = y - ring[(count - 1) % n] if count > 0 else 0.0
     if count < n:
         ring[count] = y
         state[2] += count * y
@@ -450,7 +444,18 @@ def ride_push(state, ring, level, var, grid, loglik, y, travel, qc, qw, h, slope
     R = read_variance(state, qc, qw, rate_mean)
     S = n * (n * n - 1) / 12.0
     fit = (state[2] - 0.5 * (n - 1) * state[1]) / (h * S)
-    if R < noise_over * (qc * qc + qw * qw) / 12.0 or abs(fit) > slope + 4.0 * math.sqrt(R / S) / h:
+    if not abs(fit) <= slope + 4.0 * math.sqrt(R / S) / h:
+        # Not level (another contact, a slip, a play taken up): neither read nor measured.
+        state[7] = 0.0
+        return 0
+    a = travel / qc % 1.0
+    b = travel / qw % 1.0
+    state[3] += step * step
+    state[4] += qc * qc * a * (1.0 - a) + qw * qw * b * (1.0 - b)
+    state[5] += travel
+    state[6] += 1.0
+    R = read_variance(state, qc, qw, rate_mean)
+    if R < noise_over * (qc * qc + qw * qw) / 12.0:
         state[7] = 0.0
         return 0
     if state[7] == 0.0:
@@ -477,11 +482,13 @@ def rate_moments(grid, log_grid, loglik, shape, rate, out):  # noqa: ANN001, ANN
     """Mean and variance (``out[0]``, ``out[1]``) of the missed-count rate whose posterior is
     the Gamma density ``p^(shape - 1) exp(-rate p)`` times ``exp(loglik)`` on ``grid`` (rates
     evenly spaced in ``log p``, ``log_grid`` their logarithms): trapezoid sums in ``u = log
-    p`` of the density times ``p``. Where the posterior is narrower than the grid's spacing
-    (its log density's curvature in ``u`` above ``1 / du^2``, where the sums lose accuracy)
+    p`` of the density times ``p``. Where the posterior is narrower than 0.7 of the grid's
+    spacing (its log density's curvature in ``u`` above ``2 / du^2``; there the sums' error
+    of a Gaussian, ``2 exp(-2 pi^2 sigma^2 / du^2)``, passes 1e-4)
     the density ``exp(c + a u - b e^u)`` through the three points about its peak instead: a
     Gamma density in ``p``, mean ``a / b``, variance ``a / b^2`` (exact where the posterior is
-    Gamma, as with repairs alone)."""
+    Gamma, as with repairs alone). Where the peak is the grid's top (the mass lies above it)
+    or not finite, the Gamma ``(shape, rate)`` alone."""
     G = grid.size
     du = log_grid[1] - log_grid[0]
     top = -math.inf
@@ -491,11 +498,17 @@ def rate_moments(grid, log_grid, loglik, shape, rate, out):  # noqa: ANN001, ANN
         if value > top:
             top = value
             peak = g
-    if 0 < peak < G - 1:
+    if peak == G - 1 or not math.isfinite(top):
+        # The posterior's mass lies above the grid (or the likelihood is not finite): the
+        # check says nothing there, the Gamma alone.
+        out[0] = shape / rate
+        out[1] = shape / (rate * rate)
+        return
+    if peak > 0:
         lo = shape * log_grid[peak - 1] - rate * grid[peak - 1] + loglik[peak - 1]
         hi = shape * log_grid[peak + 1] - rate * grid[peak + 1] + loglik[peak + 1]
         bend = hi - 2.0 * top + lo
-        if -bend > 1.0:
+        if -bend > 2.0:
             # l(u) = c + a u - b e^u through the three points: the second difference gives b,
             # the first a.
             b = -bend / (grid[peak] * (2.0 * math.cosh(du) - 2.0))
@@ -511,6 +524,10 @@ def rate_moments(grid, log_grid, loglik, shape, rate, out):  # noqa: ANN001, ANN
         s0 += w
         s1 += w * grid[g]
         s2 += w * grid[g] * grid[g]
+    if not (s0 > 0.0 and math.isfinite(s0) and math.isfinite(s2)):
+        out[0] = shape / rate
+        out[1] = shape / (rate * rate)
+        return
     mean = s1 / s0
     out[0] = mean
     out[1] = max(s2 / s0 - mean * mean, 0.0)

@@ -327,8 +327,8 @@ class AdaptiveKalman(Estimator):
 
     def _model_at(self, theta: np.ndarray) -> EstimatorModel:
         """The model at the estimated magnitudes ``f (1 + e)``, the identified lag and the
-        motors' wander (rebuilt when a magnitude moved by more than 1e-3 relative, the lag
-        changed or the wander by more than half; the rest is the linear correction)."""
+        motors' wander (rebuilt when a magnitude moved by more than :attr:`REBUILD` relative,
+        the lag changed or the wander by more than half; the rest is the linear correction)."""
         e = theta[:self.n]
         drift = max(self._bank.drift, self.model.contact_drift)
         lag = self.lag
@@ -435,7 +435,8 @@ class AdaptiveKalman(Estimator):
         #: whether a central count lost there would have been repaired (:class:`HoldLayer`).
         self.missed_rate = MissedCountRate(self.prior.missed_count_mean)
         self.missed_history: list[tuple[float, float, bool]] = []
-        self._ride = RideCheck(self.q, sensors.wheel.distance_per_count, self.missed_rate, self.h)
+        self._ride = RideCheck(self.q, sensors.wheel.distance_per_count, self.missed_rate, self.h,
+                               sensors.backlash)
         self._moments, self._empty = np.zeros(5), np.zeros((1, 2))
         self.monitor.reset()
         self._foaw.reset(speed=speed)
@@ -794,7 +795,8 @@ class AdaptiveKalman(Estimator):
         else:
             anchor, self._anchor = self._anchor, (sample.time, c)
             self._step(c, sample.time, anchor, *pending)
-            if lined:
+            if lined or self._layer.exposure:
+                # The lines or a hold count this sample's evidence.
                 self._ride.stop()
             else:
                 # No line shows a loss: the body's counts against the wheel it rides do.

@@ -37,7 +37,7 @@ travel) move the level by a step of mean ``p (n_w q_w - n_c q_c) = 0`` and varia
 q_c^2 + n_w q_w^2) = p d (q_c + q_w)``: a random walk whose intensity is proportional to ``p``.
 A bank of level filters over a grid of rates (:func:`toolkit._compiled.imm.ride_step`) gives
 each rate's Gaussian likelihood of the readings, a quasi-likelihood with the steps' true
-first two moments (consistent for ``p``; the steps are whole counts, not Gaussian);
+first two moments (the steps are whole counts and the quantization a sawtooth, not white);
 :class:`MissedCountRate` multiplies it into its posterior (docs/physics.md section 10).
 """
 
@@ -200,8 +200,8 @@ class MissedCountRate:
     """
 
     #: The rates the check weighs, per transition: 20 a decade from 1e-10 to
-    #: :data:`~toolkit.model.truth.MAX_MISSED_MEAN` (1e-2: above it two losses in one period of
-    #: a carousel's wheel are likely, which the check leaves out).
+    #: :data:`~toolkit.model.truth.MAX_MISSED_MEAN` (1e-2, far above what an encoder that works
+    #: misses); a posterior whose mass lies above it is the Gamma alone.
     GRID = np.geomspace(1e-10, MAX_MISSED_MEAN, 161)
     LOG_GRID = np.log(GRID)
 
@@ -266,15 +266,17 @@ class RideCheck:
     """The missed-count rate's evidence from the body's counts against the wheel it rides (see
     the module).
 
-    Push every sample with the contact the body rides (or None); the check opens on a contact
-    once the difference of the two positions has stayed level over :attr:`WINDOW` samples (its
-    least-squares slope within :attr:`SLOPE` plus four of its standard deviations), and then
-    adds each sample's log-likelihood of every rate to ``rate.loglik`` until the ride ends or
-    the difference leaves level. The reads' noise variance is the difference's own
-    (:attr:`read_variance`: the quantizations' and what the steps show beyond them and the
-    losses). The check reads only where the read noise is at least the quantizations'
-    (:attr:`NOISE_OVER`): a quantization sawtooth alone passes for losses in the white model,
-    and the exact lines see the losses there instead (docs/physics.md section 10).
+    Push every sample with the contact the body rides (or None); a ride begins once that
+    contact has moved one way by the gearbox play (the play operator passes no motion before:
+    a reversal shifts the difference by the whole play), and ends when it stops, reverses or
+    another contact is ridden. The check opens once the difference of the two positions has
+    stayed level over :attr:`WINDOW` samples (its least-squares slope within :attr:`SLOPE` plus
+    four of its standard deviations), and then adds each sample's log-likelihood of every rate
+    to ``rate.loglik`` until the ride ends or the difference leaves level. The reads' noise
+    variance is the difference's own, measured on the steps that end a level window
+    (:attr:`read_variance`). The check reads only where the read noise is at least the
+    quantizations' (:attr:`NOISE_OVER`): a quantization sawtooth alone passes for losses in the
+    white model, and the exact lines see the losses there instead (docs/physics.md section 10).
 
     Parameters
     ----------
@@ -284,6 +286,8 @@ class RideCheck:
         Receives the evidence.
     period : float, s
         The sample period.
+    backlash : float, m
+        The wheels' gearbox play.
     """
 
     #: Samples over which a ride's difference must stay level before (and while) it counts.
@@ -294,25 +298,31 @@ class RideCheck:
     #: The reads' noise variance over the quantizations' below which the check does not read.
     NOISE_OVER = 2.0
 
-    def __init__(self, central_count: float, wheel_count: float, rate: MissedCountRate, period: float) -> None:
+    def __init__(self, central_count: float, wheel_count: float, rate: MissedCountRate, period: float,
+                 backlash: float = 0.0) -> None:
         self.qc, self.qw, self.rate, self.h = central_count, wheel_count, rate, period
+        self.backlash = backlash
         self._ring = np.zeros(self.WINDOW)
-        # The ride's readings, the window's two sums, the sums over every ride of the squared
-        # steps, the quantizations' share and the travel, the steps, open (imm.ride_push).
+        # The ride's readings, the window's two sums, the sums over the steps that end a level
+        # window of the squared steps, the quantizations' share and the travel, those steps,
+        # open (imm.ride_push).
         self._state = np.zeros(8)
         self._level = np.empty(rate.GRID.size)
         self._var = np.empty(rate.GRID.size)
         self._on: int | None = None
+        self._sign = 0.0
+        self._moved = 0.0
 
     def stop(self) -> None:
-        """No ride now: the next ride starts its window afresh."""
+        """No ride now: the next ride starts afresh."""
         self._on = None
+        self._sign = self._moved = 0.0
         self._state[0] = self._state[1] = self._state[2] = self._state[7] = 0.0
 
     @property
     def read_variance(self) -> float:
         """The variance ``R`` of the difference's reads, m^2: the quantizations' ``(q_c^2 +
-        q_w^2) / 12`` plus half the mean square of its steps over every ride less the
+        q_w^2) / 12`` plus half the mean square of its steps that end a level window less the
         quantizations' share (``alpha (1 - alpha)`` counts^2 a step, ``alpha`` the fraction
         of a count travelled per period) and the losses' at the rate's mean."""
         return float(kernels("imm").read_variance(self._state, self.qc, self.qw, self.rate.mean))
@@ -320,15 +330,21 @@ class RideCheck:
     def push(self, central: int, wheel: int, ridden: int | None, speed: float) -> None:
         """One sample: the body's count, the ridden wheel's count, which contact it rides
         (None: none) and that contact's speed (m/s)."""
-        if ridden is None or speed == 0.0:
+        sign = 1.0 if speed > 0.0 else -1.0 if speed < 0.0 else 0.0
+        if ridden is None or sign == 0.0 or not math.isfinite(speed):
             if self._on is not None:
                 self.stop()
             return
-        if ridden != self._on:
+        if ridden != self._on or sign != self._sign:
             self.stop()
-            self._on = ridden
+            self._on, self._sign = ridden, sign
+        travel = abs(speed) * self.h
+        if self._moved < self.backlash:
+            # The play is being taken up: the wheel's encoder does not follow yet.
+            self._moved += travel
+            return
         if kernels("imm", 10 * self._level.size).ride_push(
                 self._state, self._ring, self._level, self._var, self.rate.GRID, self.rate.loglik,
-                central * self.qc - wheel * self.qw, abs(speed) * self.h, self.qc, self.qw, self.h, self.SLOPE,
+                central * self.qc - wheel * self.qw, travel, self.qc, self.qw, self.h, self.SLOPE,
                 self.NOISE_OVER, self.rate.mean):
             self.rate.checked_sample()

@@ -66,13 +66,13 @@ class Apparatus:
         forces = plant.contacts.forces
         if not np.all(forces == forces[0]) or forces[0] <= 0:
             raise ParameterError(parameter_message(
-                "plant", owner, "have contacts of one equal friction magnitude > 0 (the paper's "
-                "equal load)", f"forces {forces.tolist()}"))
+                "plant.contacts.forces", owner, "be one equal friction magnitude > 0 (the paper's "
+                "equal load)", forces.tolist()))
         lo, hi = (plant.motors.speed_limits if plant.motors is not None else (-np.inf, np.inf))
         if not (np.isfinite(hi) and hi > 0 and lo == -hi):
             raise ParameterError(parameter_message(
-                "plant", owner, "have motors with finite symmetric speed limits (-v_max, v_max)",
-                f"speed_limits ({lo}, {hi})"))
+                "plant.motors.speed_limits", owner, "be finite and symmetric (-v_max, v_max)",
+                (lo, hi)))
         if self.sensors is not None:
             Sensors.checked(self.sensors, plant.n, owner)
 

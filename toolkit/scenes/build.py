@@ -225,16 +225,14 @@ class SceneObjects:
         ------
         SceneError
             The scene has no ``[body]``, or breaks the apparatus's rules, named by the scene key
-            that sets what it breaks (``contacts.forces``: one equal magnitude; else
+            that sets what it breaks (``contacts.forces``: one equal magnitude;
             ``motors.speed_limit``: finite symmetric limits).
         """
         from ..predictions import Apparatus
 
-        plant = self.plant_on(None)
-        forces = plant.contacts.forces
-        key = "contacts.forces" if (np.ptp(forces) > 0 or forces[0] <= 0) else "motors.speed_limit"
-        with _scene_keys(key.split(".")[0], {"plant": key}):
-            return Apparatus(plant, self.sensors)
+        keys = {"plant.contacts.forces": "contacts.forces", "plant.motors.speed_limits": "motors.speed_limit"}
+        with _scene_keys("contacts", keys):
+            return Apparatus(self.plant_on(None), self.sensors)
 
 
 def sweep_scene_error(scene: Scene, command: str) -> SceneError:

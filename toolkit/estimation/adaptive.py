@@ -40,8 +40,10 @@ docs/physics.md section 10):
 - *Motor lag* identified from the wheels after each command change
   (:class:`~toolkit.estimation.identification.LagIdentifier`).
 - *The missed-count rate* (not told) identified from the wheels' repaired counts over the
-  transitions where a loss would show (:class:`~toolkit.estimation.MissedCountRate`): the
-  default reports the position with the count offset it implies (:func:`count_offset`).
+  transitions where a loss would show (:class:`~toolkit.estimation.MissedCountRate`) and,
+  where read noise hides losses from the lines, from the body's counts against the wheel it
+  rides (:class:`~toolkit.estimation.RideCheck`): the default reports the position with the
+  count offset it implies (:func:`count_offset`).
 - *Noise*: read noise and jitter matched from the central innovations and from the wheels'
   residuals (:class:`~toolkit.estimation.monitor.NoiseMatcher`).
 - *The exact holds* (:class:`~toolkit.estimation._hold.HoldLayer`) as the optional layer of
@@ -639,6 +641,17 @@ class AdaptiveKalman(Estimator):
                 self.P[1, 1] += added + absorbed_variance(p, p_var, layer.unseen, self.q, t - layer.started)
         self._mu_prev = self.mu
 
+    def _check_ride(self, c: int, wheels: np.ndarray, track: np.ndarray, steady: bool) -> None:
+        """No line shows a loss: the body's count ``c`` against the wheel it rides does
+        (:class:`~toolkit.estimation.identification.RideCheck`): the contact nearest the
+        estimated speed where the modes say the body rides one and the contacts hold their
+        speeds."""
+        if not steady or self._stuck_share(self.mu) < self.HOLD_START:
+            self._ride.push(c, 0, None, 0.0)
+            return
+        k = int(np.abs(track[0] - self.x[1]).argmin())
+        self._ride.push(c, int(wheels[k]), k, float(track[0, k]))
+
     def _stuck_share(self, mu: np.ndarray) -> float:
         """The probability that the body rides a contact, among the physical modes (the free
         mode counts where its flow left the body on a contact)."""
@@ -799,11 +812,7 @@ class AdaptiveKalman(Estimator):
                 # The lines or a hold count this sample's evidence.
                 self._ride.stop()
             else:
-                # No line shows a loss: the body's counts against the wheel it rides do.
-                track, steady = pending[0], pending[2]
-                k = int(np.abs(track[0] - self.x[1]).argmin()) if steady else -1
-                ridden = k if k >= 0 and self._stuck_share(self.mu) >= self.HOLD_START else None
-                self._ride.push(c + self._central_offset - central, int(wheels[k]), ridden, float(track[0, k]))
+                self._check_ride(c + self._central_offset - central, wheels, pending[0], pending[2])
         # The missed-count rate from the repairs (wheels' and, in holds, the central count's)
         # over the transitions where a loss would have shown.
         layer, rate = self._layer, self.missed_rate

@@ -647,7 +647,7 @@ class AdaptiveKalman(Estimator):
         estimated speed where the modes say the body rides one and the contacts hold their
         speeds."""
         if not steady or self._stuck_share(self.mu) < self.HOLD_START:
-            self._ride.push(c, 0, None, 0.0)
+            self._ride.stop()
             return
         k = int(np.abs(track[0] - self.x[1]).argmin())
         self._ride.push(c, int(wheels[k]), k, float(track[0, k]))

@@ -243,8 +243,8 @@ class MissedCountRate:
     def _moment(self, which: int) -> float:
         if self._stale:
             if self.checked:
-                kernels("imm", 4 * self.GRID.size).rate_moments(self.GRID, self.LOG_GRID, self.loglik, self.shape, self.rate,
-                                                                 self._moments)
+                kernels("imm", 4 * self.GRID.size).rate_moments(self.GRID, self.LOG_GRID, self.loglik, self.shape,
+                                                                 self.rate, self._moments)
             else:
                 self._moments[0] = self.shape / self.rate
                 self._moments[1] = self.shape / self.rate ** 2

@@ -504,16 +504,23 @@ def test_linearization_equals_finite_differences_of_the_flow():
         force = rng.uniform(-3.0, 3.0) if trial % 5 == 0 else 0.0
         V = rng.uniform(-0.3, 0.3)
         step = model.flow(V, track, force)
-        dx, dV, Q, slopes, _, _ = model._linearized(V, track, force, step, 1e-4)
+        response = np.empty(2)
+        dx, dV, Q, slopes, _, _ = model._linearized(V, track, force, step, 1e-4, response)
         if slopes is None:
             continue
         d = 1e-7
 
-        def end(v, tr=track):
-            s = model.flow(v, tr, force)
+        def end(v, tr=track, F=force):
+            s = model.flow(v, tr, F)
             return np.array([s.body_displacement, s.state.V])
 
         np.testing.assert_allclose(slopes, (end(V + d) - end(V - d)) / (2 * d), rtol=1e-4, atol=1e-6)
+        # The response to an outside force (force_gains), by differences of 1e-7 F_tot: the
+        # flow is piecewise linear in it without drag (rounding ~ 1e-16 0.006 m / 1e-6 N);
+        # atol far below its scales, h^2 / 2m = 4e-5 m/N and h / m = 4e-3 s/kg.
+        dF = 1e-7 * float(model.forces.sum())
+        np.testing.assert_allclose(response, (end(V, F=force + dF) - end(V, F=force - dF)) / (2 * dF),
+                                   rtol=1e-4, atol=1e-10)
         held = np.array_equal(start, target)
         gains = []
         for i in range(n):
@@ -557,12 +564,15 @@ def test_linearization_through_sticks_and_releases_equals_finite_differences():
         if {"cross", "release"} <= set(kinds):
             continue
 
-        def end(v, tr=track):
-            s = model.flow(v, tr, force)
+        def end(v, tr=track, F=force):
+            s = model.flow(v, tr, F)
             return np.array([s.body_displacement, s.state.V])
 
         ahead, behind = (end(V + d) - end(V)) / d, (end(V) - end(V - d)) / d
         gains, smooth = [], np.allclose(ahead, behind, rtol=1e-3, atol=1e-6)
+        dF = 1e-7 * float(model.forces.sum())
+        pushed, pulled = (end(V, F=force + dF) - end(V)) / dF, (end(V) - end(V, F=force - dF)) / dF
+        smooth &= np.allclose(pushed, pulled, rtol=1e-3, atol=1e-9)
         for i in range(n):
             e = np.zeros(n)
             e[i] = d
@@ -573,9 +583,13 @@ def test_linearization_through_sticks_and_releases_equals_finite_differences():
             gains.append(0.5 * (up + down))
         if not smooth:
             continue
-        dx, dV, Q, slopes, _, _ = model._linearized(V, track, force, step, 1e-4)
+        response = np.empty(2)
+        dx, dV, Q, slopes, _, _ = model._linearized(V, track, force, step, 1e-4, response)
         np.testing.assert_allclose((model.sensors.period, 1.0) if slopes is None else slopes,
                                    0.5 * (ahead + behind), rtol=1e-3, atol=1e-6)
+        # The force response through sticks and releases (force_gains); one-sided
+        # differences, so the tolerance of the slopes' (truncation ~ dF).
+        np.testing.assert_allclose(response, 0.5 * (pushed + pulled), rtol=1e-3, atol=1e-9)
         G = np.array(gains)
         np.testing.assert_allclose(Q, model._friction_noise + 1e-8 * G.T @ G
                                    + (model._held_noise if step.state.stuck is not None else 0.0),
@@ -597,6 +611,44 @@ def test_filter_after_an_arrival_forgets_the_old_speed_error():
     assert kf.kf.P_prior[1, 1] == pytest.approx(4e-6, rel=1e-12)
     # F x + u is the flow at the estimate: (0 + 3.75e-4, 0.03).
     assert kf.last_input == pytest.approx((3.75e-4, 0.03), rel=0, abs=1e-15)
+
+
+def test_between_contacts_shortcut_is_the_flow_where_it_applies():
+    # Unequal magnitudes (an adaptive filter's model), held contacts, bodies scattered near
+    # the contact speeds at two scales (m = 1 and 20 kg, f ~ 0.3 and 3 N): where the
+    # shortcut answers (the body falls short of the next contact in its direction), the
+    # exact flow (second method) has no event and the same increments to rounding (1e-15
+    # of the speeds), slopes, noise and force gains; where the flow has an event it
+    # declines. Both answers occur.
+    rng = np.random.default_rng(3)
+    answered = declined = 0
+    for scale, mass in ((0.3, 1.0), (3.0, 20.0)):
+        n = 7
+        sensors = CAROUSEL.sensors(n_wheels=n)
+        model = EstimatorModel(scale * rng.uniform(0.5, 1.5, n), mass, sensors)
+        for _ in range(150):
+            speeds = np.sort(rng.uniform(-0.2, 0.2, n))
+            track = np.stack((speeds, speeds))
+            V = float(rng.choice(speeds)) + float(rng.choice([-1.0, 1.0])) * 10.0 ** rng.uniform(-7, -2)
+            force = float(rng.uniform(-1.0, 1.0)) * scale if rng.random() < 0.3 else 0.0
+            quiet = model._quiet_between(V, speeds, force)
+            step = model.flow(V, track, force)
+            if quiet is None:
+                declined += 1
+                continue
+            answered += 1
+            assert not step.events and step.state.stuck is None
+            assert quiet == pytest.approx(step.state.V - V, rel=1e-12, abs=1e-15)
+            g1, g2 = np.zeros((2, n + 1)), np.zeros((2, n + 1))
+            a = model.increment(V, track, 1e-4, 1e-4, True, None, force, g1)
+            b = model._linearized(V, track, force, step, 1e-4)
+            model.force_gains(V, track, force, g2, b, step)
+            assert a[1] == pytest.approx(b[1], rel=1e-12, abs=1e-15)
+            assert a[0] == pytest.approx(b[0], rel=1e-9, abs=1e-17)
+            assert a[3] is None and b[3] is None and a[4] is None and not a[5]
+            np.testing.assert_array_equal(a[2], b[2])
+            np.testing.assert_array_equal(g1, g2)
+    assert answered > 50 and declined > 50
 
 
 def test_increment_carries_a_body_on_a_slowly_moving_set():

@@ -73,6 +73,7 @@ import numpy as np
 
 from ..errors import as_float, as_float_array, as_int, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
+from .._compiled import core as _core
 from .._compiled import kernels
 from ..model.contacts import ContactSet, weighted_median
 from ..model.friction import contact_forces
@@ -81,6 +82,11 @@ from ..model.plant import Plant
 from ..model.sensors import Sensors
 
 __all__ = ["EstimatorModel", "contact_speed_estimates", "ContactSpeedTracker"]
+
+#: Relative margin (of ``max(1, |V|)``, m/s) by which a body must fall short of the next
+#: contact speed for the between-contacts shortcut: far above the rounding of ``F h / m`` and
+#: of the speeds' differences (1e-16 relative), far below any speed the filter resolves.
+QUIET_MARGIN = 1e-12
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,7 +135,8 @@ class EstimatorModel:
     _held_noise: np.ndarray = field(init=False, repr=False)
     _reach: float = field(init=False, repr=False)
     _follow: float = field(init=False, repr=False)
-    _plants: tuple = field(init=False, repr=False)
+    _plants: tuple | None = field(init=False, repr=False)
+    _template: tuple = field(init=False, repr=False)
     _friction_noise: np.ndarray = field(init=False, repr=False)
     _between: Any = field(init=False, repr=False)
     _read_noise: float = field(init=False, repr=False)
@@ -200,27 +207,20 @@ class EstimatorModel:
                            if positive.size else 0.0)
         # The plant whose exact flow is the known input: held contacts (ideal motors take
         # the command at once) and, with a lag, the same contacts behind lagging motors;
-        # both clip commands to the speed limits.
+        # both clip commands to the speed limits. An adjusted model builds them at its first
+        # flow (:meth:`_plant`): most of an adaptive filter's periods take a shortcut.
         same_lag = previous is not None and previous.motor_lag == self.motor_lag
         motors = previous._motors if same_lag else Motors(lag=self.motor_lag, speed_limits=self.speed_limits)
         object.__setattr__(self, "speed_limits", motors.speed_limits)
         object.__setattr__(self, "_motors", motors)
-        if same_lag and bool((previous.forces == forces).all()):       # (one length: n)
-            plants = previous._plants
+        if previous is None:
+            # Built now; adjusted models copy them (Plant.with_contacts).
+            plants = template = self._plant_pair(None)
         else:
-            contacts = ContactSet(np.zeros(forces.size), forces)
-            if previous is None:
-                held = Plant(contacts, self.mass, damping=self.damping,
-                             motors=Motors(lag=0.0, speed_limits=motors.speed_limits))
-            else:
-                held = previous._plants[0].with_contacts(contacts)
-            if self.motor_lag <= 0:
-                lagging = held
-            elif same_lag and previous._plants[1] is not previous._plants[0]:
-                lagging = previous._plants[1].with_contacts(contacts)
-            else:
-                lagging = Plant(contacts, self.mass, damping=self.damping, motors=motors)
-            plants = (held, lagging)
+            template = previous._template
+            same = same_lag and previous._plants is not None and bool((previous.forces == forces).all())
+            plants = previous._plants if same else None                 # (one length: n)
+        object.__setattr__(self, "_template", template)
         object.__setattr__(self, "_plants", plants)
         # The friction spread's force error, held over the period: (sigma_F / m)^2 g g^T with
         # g = (h^2 / 2, h).
@@ -231,6 +231,30 @@ class EstimatorModel:
         # its estimates), where bodies creep across bands the nominal equal ones hold exactly.
         object.__setattr__(self, "_between", self._quiet_between if forces.max() > forces.min() else None)
         object.__setattr__(self, "_read_noise", self.sensors.read_noise_variance)
+
+    def _plant_pair(self, template: tuple | None) -> tuple:
+        """The held and the lagging plant at this model's magnitudes, from ``template`` (the
+        plants of a model of the same mass, drag and speed limits) or from scratch."""
+        contacts = ContactSet(np.zeros(self.n), self.forces)
+        motors = self._motors
+        if template is None:
+            held = Plant(contacts, self.mass, damping=self.damping,
+                         motors=Motors(lag=0.0, speed_limits=motors.speed_limits))
+        else:
+            held = template[0].with_contacts(contacts)
+        if self.motor_lag <= 0:
+            return held, held
+        if template is not None and template[1] is not template[0] and template[1].motors == motors:
+            return held, template[1].with_contacts(contacts)
+        return held, Plant(contacts, self.mass, damping=self.damping, motors=motors)
+
+    def _plant(self, held: bool) -> Plant:
+        """The plant of :meth:`flow`: held contacts, or contacts behind the lagging motors."""
+        plants = self._plants
+        if plants is None:
+            plants = self._plant_pair(self._template)
+            object.__setattr__(self, "_plants", plants)
+        return plants[0 if held else 1]
 
     @property
     def n(self) -> int:
@@ -337,7 +361,9 @@ class EstimatorModel:
         0``, the settled contacts' noise); a body farther from every contact speed of the
         period than both ``w`` (below) and the period's largest speed change ``(F_tot + |F|)
         h / m`` feels the whole friction one way (``dV = (+-F_tot + F) h / m``, ``dx = dV h /
-        2``, no crossing). With moving contacts (a command change) a body
+        2``, no crossing); with unequal magnitudes and held contacts, one that does not reach
+        the next contact speed in its direction within the period feels its region's constant
+        force (:meth:`_quiet_between`). With moving contacts (a command change) a body
         within ``w = 2 sqrt(speed_std^2 + contact_std^2)`` of the set at the start of the
         period whose edges move by at most ``2 min f_i h / m`` over the period (the speed the
         smallest stiction step can give it, docs/physics.md section 4) stays inside it, or follows
@@ -370,23 +396,26 @@ class EstimatorModel:
                     self._coast_gains(V, track[0], True, gains)
                 return 0.5 * dV * self.sensors.period, dV, self._friction_noise, None, None, False
             if steady and self._between is not None:
-                quiet = self._between(V, track[0], force, w)
+                quiet = self._between(V, track[0], force)
                 if quiet is not None:
                     if gains is not None:
                         self._coast_gains(V, track[0], True, gains)
                     return 0.5 * quiet * self.sensors.period, quiet, self._friction_noise, None, None, False
         step = self.flow(V, track, force)
-        out = self._linearized(V, track, force, step, contact_std)
-        if gains is not None:
-            self.force_gains(V, track, force, gains, out, step)
+        if gains is None:
+            return self._linearized(V, track, force, step, contact_std)
+        response = np.empty(2)
+        out = self._linearized(V, track, force, step, contact_std, response)
+        self.force_gains(V, track, force, gains, out, step, response)
         return out
 
-    def _quiet_between(self, V: float, speeds: np.ndarray, force: float, w: float) -> float | None:
-        """A body between two held contact speeds that cannot reach either within the period
-        (the region's net force, the friction law's, carries it less far than the nearer
-        neighbour in its direction, less ``w``, and the other neighbour is farther than
-        ``w``): ``dV = F h / m`` with ``F`` the region's constant force (as the whole-friction
-        shortcut, for any region). None otherwise (the flow decides)."""
+    def _quiet_between(self, V: float, speeds: np.ndarray, force: float) -> float | None:
+        """A body between two held contact speeds that does not reach the next one in its
+        direction within the period (the region's net force, the friction law's, carries it
+        less far, by more than the rounding :data:`QUIET_MARGIN`): ``dV = F h / m`` with ``F``
+        the region's constant force (as the whole-friction shortcut, for any region), to
+        rounding what the exact flow gives (no event: the flow's slopes and gains are the
+        free body's). None otherwise (the flow decides)."""
         below, above = -math.inf, math.inf
         for v in speeds.tolist():
             if v < V:
@@ -396,10 +425,8 @@ class EstimatorModel:
             else:
                 return None                          # on a contact speed: stick or pass
         dV = (float(contact_forces(speeds - V, self.forces).sum()) + force) * self.sensors.period / self.mass
-        if dV >= 0.0:
-            ok = above - V > dV + w and V - below > w
-        else:
-            ok = V - below > -dV + w and above - V > w
+        margin = QUIET_MARGIN * max(1.0, abs(V))
+        ok = above - V > dV + margin if dV >= 0.0 else V - below > margin - dV
         return dV if ok else None
 
     def _coast_gains(self, V: float, speeds: np.ndarray, free: bool, gains: np.ndarray) -> None:
@@ -416,17 +443,18 @@ class EstimatorModel:
         gains[0] = gains[1] * (0.5 * h)
 
     def force_gains(self, V: float, track: np.ndarray, force: float, gains: np.ndarray,
-                    out: tuple | None = None, step: Any = None) -> np.ndarray:
+                    out: tuple | None = None, step: Any = None, response: np.ndarray | None = None
+                    ) -> np.ndarray:
         """First-order sensitivity of the period's end ``(X+, V+)`` to the force errors, into
         ``gains`` (2, n + 1): columns ``i < n`` a relative error ``e_i`` of ``f_i``, column
         ``n`` an error of the drag (N s/m).
 
         The end state's response ``g_F`` to an extra outside force held over the period is
-        the exact flow's, by a central difference of 1e-7 ``F_tot`` (so crossings, sticking
-        and release are the simulator's: a body that ends stuck feels none); each force error
-        acts through it with the contact's sign relative to the body averaged over the
-        period (the signs flip at the step's crossings), ``f_i s_i``, and the drag's
-        ``-V`` averaged over the start and end speeds.
+        the exact flow's, linearized along its events (:meth:`_linearized`'s ``response``,
+        given or computed here: crossings, sticking and release are the simulator's; a body
+        that ends stuck feels none); each force error acts through it with the contact's sign
+        relative to the body averaged over the period (the signs flip at the step's
+        crossings), ``f_i s_i``, and the drag's ``-V`` averaged over the start and end speeds.
         """
         h, n = self.sensors.period, self.n
         if step is not None and not step.events and self.damping == 0.0:
@@ -434,21 +462,19 @@ class EstimatorModel:
             # is the free body's (or none, stuck all along): the closed form.
             self._coast_gains(V, track[0], step.state.stuck is None, gains)
             return gains
-        if out is None:
-            out = self.increment(V, track, 0.0, 0.0, False, None, force)
-        delta = 1e-7 * float(self.forces.sum())
-        up = self.flow(V, track, force + delta)
-        down = self.flow(V, track, force - delta)
-        g_x = (up.body_displacement - down.body_displacement) / (2.0 * delta)
-        g_v = (up.state.V - down.state.V) / (2.0 * delta)
+        if step is None:
+            step = self.flow(V, track, force)
+        if out is None or response is None:
+            response = np.empty(2)
+            out = self._linearized(V, track, force, step, 0.0, response)
+        g_x, g_v = float(response[0]), float(response[1])
         # The contacts' signs relative to the body, averaged over the period: each crossing
         # flips the signs of the contacts at the body's speed at that instant.
         start, target = track[0], track[1]
         sign = np.sign(start - V)
         average = np.zeros(n)
         t_prev = 0.0
-        events = step.events if step is not None else self.flow(V, track, force).events
-        for event in events:
+        for event in step.events:
             if event.kind != "cross":
                 continue
             average += sign * (event.time - t_prev)
@@ -475,14 +501,15 @@ class EstimatorModel:
 
         start, target = track[0], track[1]
         held = bool((start == target).all())           # (the rows of one track: one shape)
-        plant = self._plants[0 if held else 1]
+        plant = self._plant(held)
         state = ExactState(0.0, float(V), start)
         step = advance(plant, state, target, self.sensors.period, external=float(force))
         if not step.success:
             raise RuntimeError(f"the estimator's flow failed over one period: {step.message}")
         return step
 
-    def _linearized(self, V: float, track: np.ndarray, force: float, step: Any, contact_std: float
+    def _linearized(self, V: float, track: np.ndarray, force: float, step: Any, contact_std: float,
+                    response: np.ndarray | None = None
                     ) -> tuple[float, float, np.ndarray, tuple[float, float] | None, float | None, bool]:
         """Increments, process noise and slopes of one exact step (see the module docstring).
 
@@ -492,6 +519,14 @@ class EstimatorModel:
         is its gain, so ``Q = var_v sum_i g_i g_i^T``). A contact crossed while the body is
         stuck on another changes nothing until the body is released; a release recomputes the
         force from the contact law, the released contacts on the side they pull to.
+
+        ``response`` (shape (2,)), when given, is filled with ``d(X+, V+)/dF`` (m/N, s/kg) of
+        an extra outside force ``F`` held over the period: each free stretch of length ``dt``
+        adds ``expm1_ratio(k, dt) / m`` to ``dV/dF`` (decaying it by the drag's ``exp(-k
+        dt)``, ``k = c / m``) and the integral to ``dX/dF``; a crossing scales it as it
+        scales ``J`` (the crossing time moves, the acceleration changes there); sticking
+        zeroes it (the stiction absorbs the force); a release restarts it from 0 (the body
+        leaves the contact's speed).
         """
         f, m, c, h = self.forces, self.mass, self.damping, self.sensors.period
         start, target = track[0], track[1]
@@ -504,8 +539,9 @@ class EstimatorModel:
         var_v = contact_std * contact_std
         events = step.events
         if not events and c == 0.0:
-            Q = self._friction_noise
-            return dx, dV, Q, None, None, on_set
+            if response is not None:        # free all period, or stuck all along: none
+                response[:] = (0.0, 0.0) if on_set else (0.5 * h * h / m, h / m)
+            return dx, dV, self._friction_noise, None, None, on_set
         # An error d of a contact's estimated start speed is d w(t) at time t: w = 1 when
         # the contacts are held, exp(-t / tau) along the motor law in a transient.
         lagging = tau > 0 and not np.array_equal(start, target)
@@ -517,21 +553,31 @@ class EstimatorModel:
             return tau * (w(t0) - w(t1)) if lagging else t1 - t0
 
         stuck = False
-
-        def span(dt: float) -> tuple[float, float]:
-            """Integral over dt and end value of exp(-k t) (1 while stuck: the body then
-            moves with the contact, whatever the drag)."""
-            if k == 0.0 or stuck:
-                return dt, 1.0
-            decay = math.exp(-k * dt)
-            return -math.expm1(-k * dt) / k, decay
-
         # Net force of the contacts and the outside force on the current segment.
         F_seg = float(contact_forces(start - V, f).sum()) + force
         J, JX, t_prev = 1.0, 0.0, 0.0
         gains: dict[int, list[float]] = {}       # contact -> [X gain, V gain] of its error
+        sX, sV = 0.0, 0.0                        # the response to an outside force
         arrival = None
         stick_at, group = 0.0, np.zeros(f.size, dtype=bool)
+
+        def stretch(dt: float) -> None:
+            """Carry J, the contacts' gains and the force response over ``dt`` without an
+            event: the drag decays them by exp(-k t) (not while stuck: the body then moves
+            with the contact, whatever the drag)."""
+            nonlocal J, JX, sX, sV
+            if k == 0.0 or stuck:
+                area, decay = dt, 1.0
+            else:
+                area, decay = _core.expm1_ratio(k, dt), math.exp(-k * dt)
+            JX += J * area
+            J *= decay
+            for g in gains.values():
+                g[0] += g[1] * area
+                g[1] *= decay
+            if not stuck:
+                sX += sV * area + _core.expm1_ratio_integral(k, dt) / m
+                sV = sV * decay + area / m
 
         def add(contacts: np.ndarray, share: float) -> None:
             """Add ``share`` (the V gain of the group's common error) to each contact of the
@@ -548,12 +594,7 @@ class EstimatorModel:
 
         held_rates = np.zeros(f.size)
         for event in events:
-            area, decay = span(event.time - t_prev)
-            JX += J * area
-            J *= decay
-            for g in gains.values():
-                g[0] += g[1] * area
-                g[1] *= decay
+            stretch(event.time - t_prev)
             t_prev = s = event.time
             Ve = event.speed
             if lagging:
@@ -576,12 +617,13 @@ class EstimatorModel:
                 a_after = (F_seg - c * Ve) / m
                 factor = (a_after - slope) / (a_before - slope)
                 J *= factor
+                sV *= factor
                 for g in gains.values():
                     g[1] *= factor
                 add(at, (1.0 - factor) * w(s))
             elif event.kind == "stick":
                 # From here V is the contact's speed: it errs as the contact's estimate does.
-                J = 0.0
+                J = sV = 0.0
                 for g in gains.values():
                     g[1] = 0.0
                 # The body follows the contact(s) at its speed that move with the stuck-on
@@ -607,12 +649,9 @@ class EstimatorModel:
                 f_group = float(f[group].sum())
                 F_seg += f_group if (F_seg + f_group - c * Ve) / m <= slope else -f_group
                 group = np.zeros(f.size, dtype=bool)
-        area, decay = span(h - t_prev)
-        JX += J * area
-        J *= decay
-        for g in gains.values():
-            g[0] += g[1] * area
-            g[1] *= decay
+        stretch(h - t_prev)
+        if response is not None:
+            response[:] = (sX, sV)
         if stuck:
             for i in np.flatnonzero(group):
                 g = gains.setdefault(int(i), [0.0, 0.0])

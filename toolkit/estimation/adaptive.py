@@ -281,6 +281,8 @@ class AdaptiveKalman(Estimator):
     #: Relative move of an estimated friction magnitude that rebuilds the flow's model (below
     #: it the sensitivities carry the change, linearly).
     REBUILD = 1e-2
+    #: Models at estimated magnitudes kept for reuse (:meth:`_model_at`).
+    MODELS = 4
 
     def __init__(self, model: EstimatorModel, prior: ModelPrior | None = None, *,
                  forgetting: float = 1e-4, switching: float = 0.02, reference: bool = False) -> None:
@@ -329,25 +331,36 @@ class AdaptiveKalman(Estimator):
 
     def _model_at(self, theta: np.ndarray) -> EstimatorModel:
         """The model at the estimated magnitudes ``f (1 + e)``, the identified lag and the
-        motors' wander (rebuilt when a magnitude moved by more than :attr:`REBUILD` relative,
-        the lag changed or the wander by more than half; the rest is the linear correction)."""
+        motors' wander: the nearest of the last :attr:`MODELS` built ones whose magnitudes lie
+        within :attr:`REBUILD` relative, at this lag and within a factor 1.5 of this wander
+        (the rest is the linear correction); else one rebuilt here, in place of the oldest.
+        Its magnitudes' errors are :attr:`_built` (the free mode's mixed estimates may cycle
+        among a few values: a quantized reading's pattern repeats)."""
         e = theta[:self.n]
         drift = max(self._bank.drift, self.model.contact_drift)
         lag = self.lag
-        if (self._built is None or np.max(np.abs(e - self._built)) > self.REBUILD or lag != self._built_lag
-                or not self._built_drift / 1.5 <= drift <= 1.5 * self._built_drift):
+        gap = np.abs(self._built_e - e).max(axis=1)
+        i = int(gap.argmin())
+        fits = (gap[i] <= self.REBUILD and lag == self._built_lag[i]
+                and self._built_drift[i] / 1.5 <= drift <= 1.5 * self._built_drift[i])
+        if not fits:
+            i = self._oldest
+            self._oldest = (i + 1) % self.MODELS
             m = self.model
             forces = m.forces * np.maximum(1.0 + e, 1e-3)
-            if self._hat is None:
-                self._hat = EstimatorModel(forces, m.mass, m.sensors, motor_lag=lag, damping=m.damping,
-                                           max_window=m.max_window, speed_limits=m.speed_limits,
-                                           contact_drift=drift)
+            last = self._models[self._newest]
+            if last is None:
+                hat = EstimatorModel(forces, m.mass, m.sensors, motor_lag=lag, damping=m.damping,
+                                     max_window=m.max_window, speed_limits=m.speed_limits, contact_drift=drift)
             else:
-                self._hat = self._hat.adjusted(forces, lag, drift)
-            self._built = e.copy()
-            self._built_drift = max(drift, 1e-12)
-            self._built_lag = lag
-        return self._hat
+                hat = last.adjusted(forces, lag, drift)
+            self._models[i] = hat
+            self._newest = i
+            self._built_e[i] = e
+            self._built_drift[i] = max(drift, 1e-12)
+            self._built_lag[i] = lag
+        self._built = self._built_e[i]
+        return self._models[i]
 
     @property
     def lag(self) -> float:
@@ -414,10 +427,14 @@ class AdaptiveKalman(Estimator):
         self._means, self._rows0, self._rows1 = np.empty((3, d)), np.empty((3, d)), np.empty((3, d))
         self._noises, self._nis = np.empty((3, 2, 2)), np.empty(3)
         self._noise_models = np.empty(4)
-        self._built: np.ndarray | None = None
-        self._built_drift = 1e-12
-        self._built_lag = self.model.motor_lag
-        self._hat: EstimatorModel | None = None
+        # The models built at estimated magnitudes (_model_at): their magnitudes' errors (inf:
+        # none yet), wander, lag; the next to replace and the last built.
+        self._models: list[EstimatorModel | None] = [None] * self.MODELS
+        self._built_e = np.full((self.MODELS, n), np.inf)
+        self._built_drift = [1e-12] * self.MODELS
+        self._built_lag = [self.model.motor_lag] * self.MODELS
+        self._built = self._built_e[0]
+        self._oldest = self._newest = 0
         self._gains = np.zeros((2, n + 1))
         self._stuck_on: int | None = None
         self._mu_prev = self.mu

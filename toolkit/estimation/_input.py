@@ -165,6 +165,13 @@ class EstimatorModel:
         none of the changed values are shared (an adaptive filter rebuilds its model at its
         estimates every few samples)."""
         owner = "EstimatorModel.adjusted"
+        if forces is self.forces and motor_lag == self.motor_lag:
+            # The wander alone: only the held contacts' noise depends on it.
+            new = object.__new__(EstimatorModel)
+            new.__dict__.update(self.__dict__)
+            object.__setattr__(new, "contact_drift", as_float(contact_drift, "contact_drift", owner, low=0.0))
+            new._wander()
+            return new
         forces = as_float_array(forces, "forces", owner)
         check_nonnegative(forces, "forces", owner)
         if forces.size != self.n:
@@ -196,10 +203,7 @@ class EstimatorModel:
             g = np.array([0.5 * h * h, h])
             object.__setattr__(self, "_period_moments", (
                 np.array([[h**3 / 3.0, h * h / 2.0], [h * h / 2.0, h]]), np.outer(g, g)))
-        walk, gg = self._period_moments
-        held = self.contact_drift**2 * walk
-        held.setflags(write=False)
-        object.__setattr__(self, "_held_noise", held)
+        self._wander()
         # Largest move of the equilibrium set's edges over a period that a body on it
         # follows: the smallest step of the staircase, 2 min f_i > 0, for the period.
         positive = forces[forces > 0]
@@ -224,13 +228,19 @@ class EstimatorModel:
         object.__setattr__(self, "_plants", plants)
         # The friction spread's force error, held over the period: (sigma_F / m)^2 g g^T with
         # g = (h^2 / 2, h).
-        spread = gg * (self._friction_var / self.mass**2)
+        spread = self._period_moments[1] * (self._friction_var / self.mass**2)
         spread.setflags(write=False)
         object.__setattr__(self, "_friction_noise", spread)
         # The between-contacts shortcut: for unequal magnitudes (an adaptive filter's model at
         # its estimates), where bodies creep across bands the nominal equal ones hold exactly.
         object.__setattr__(self, "_between", self._quiet_between if forces.max() > forces.min() else None)
         object.__setattr__(self, "_read_noise", self.sensors.read_noise_variance)
+
+    def _wander(self) -> None:
+        """The held contacts' noise from ``contact_drift`` (the white-noise acceleration model)."""
+        held = self.contact_drift**2 * self._period_moments[0]
+        held.setflags(write=False)
+        object.__setattr__(self, "_held_noise", held)
 
     def _plant_pair(self, template: tuple | None) -> tuple:
         """The held and the lagging plant at this model's magnitudes, from ``template`` (the

@@ -332,18 +332,17 @@ class AdaptiveKalman(Estimator):
     def _model_at(self, theta: np.ndarray) -> EstimatorModel:
         """The model at the estimated magnitudes ``f (1 + e)``, the identified lag and the
         motors' wander: the nearest of the last :attr:`MODELS` built ones whose magnitudes lie
-        within :attr:`REBUILD` relative, at this lag and within a factor 1.5 of this wander
-        (the rest is the linear correction); else one rebuilt here, in place of the oldest.
-        Its magnitudes' errors are :attr:`_built` (the free mode's mixed estimates may cycle
-        among a few values: a quantized reading's pattern repeats)."""
+        within :attr:`REBUILD` relative (the rest is the linear correction), brought to this
+        lag and wander where they differ (by more than a factor 1.5 for the wander); else one
+        rebuilt here, in place of the oldest. Its magnitudes' errors are :attr:`_built` (the
+        free mode's mixed estimates may cycle among a few values: a quantized reading's
+        pattern repeats)."""
         e = theta[:self.n]
         drift = max(self._bank.drift, self.model.contact_drift)
         lag = self.lag
         gap = np.abs(self._built_e - e).max(axis=1)
         i = int(gap.argmin())
-        fits = (gap[i] <= self.REBUILD and lag == self._built_lag[i]
-                and self._built_drift[i] / 1.5 <= drift <= 1.5 * self._built_drift[i])
-        if not fits:
+        if gap[i] > self.REBUILD:
             i = self._oldest
             self._oldest = (i + 1) % self.MODELS
             m = self.model
@@ -354,13 +353,18 @@ class AdaptiveKalman(Estimator):
                                      max_window=m.max_window, speed_limits=m.speed_limits, contact_drift=drift)
             else:
                 hat = last.adjusted(forces, lag, drift)
-            self._models[i] = hat
-            self._newest = i
             self._built_e[i] = e
-            self._built_drift[i] = max(drift, 1e-12)
-            self._built_lag[i] = lag
+        elif lag != self._built_lag[i] or not self._built_drift[i] / 1.5 <= drift <= 1.5 * self._built_drift[i]:
+            hat = self._models[i].adjusted(self._models[i].forces, lag, drift)
+        else:
+            self._built = self._built_e[i]
+            return self._models[i]
+        self._models[i] = hat
+        self._newest = i
+        self._built_drift[i] = max(drift, 1e-12)
+        self._built_lag[i] = lag
         self._built = self._built_e[i]
-        return self._models[i]
+        return hat
 
     @property
     def lag(self) -> float:

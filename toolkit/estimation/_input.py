@@ -899,6 +899,10 @@ class ContactSpeedTracker:
         The last row's variance (the white quantization's, or the transient's).
     window_length : int
         Readings in the last row's window (0 in a transient).
+    command : ndarray of shape (n,), m/s
+        The last row's command, clipped to the speed limits (the motor law's clip).
+    changed : bool
+        The last row's command differs from the row's before.
     """
 
     #: With ``residuals``: windows of eight readings or more refit the residual variance
@@ -917,6 +921,8 @@ class ContactSpeedTracker:
         self._keep = model.max_window + 1
         self._initial = None if initial is None else np.array(initial, dtype=float)
         self._prev: np.ndarray | None = self._initial
+        self.command: np.ndarray | None = None
+        self.changed = False
         # Times and counts of the last rows (row j at column j - _base), compacted when full.
         self._cap = 4 * self._keep
         self._tb = np.empty(self._cap)
@@ -968,7 +974,8 @@ class ContactSpeedTracker:
         self._wb[col] = w
         prev = self._prev
         changed = prev is not None and bool((u != prev).any())
-        self._prev = u
+        self._prev = self.command = u
+        self.changed = changed
         lc = self._last_change
         start = min(max(lc + self._settle, j - model.max_window, 0), j)
         ok = start < j

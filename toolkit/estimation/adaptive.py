@@ -520,7 +520,7 @@ class AdaptiveKalman(Estimator):
         JX, J = slopes if slopes is not None else (h, 1.0)
         correction = gains @ delta
         V_new = V + dV + correction[1]
-        gap = np.abs(hat.end_speeds(track) - V_new)
+        gap = np.abs((track[1] if steady else hat.end_speeds(track)) - V_new)   # (held: they end as they start)
         k = int(gap.argmin())
         self._stuck_on = k if (on_set and gap[k] <= 1e-9) else None
         if self._stuck_on is not None:
@@ -684,7 +684,7 @@ class AdaptiveKalman(Estimator):
         xs0, Ps0, cbar = self._xs0, self._Ps0, self._cbar
         K.mix(self.mu, self.M, self.xs, self.Ps, xs0, Ps0, cbar)
         means, rows0, rows1, noises = self._means, self._rows0, self._rows1, self._noises
-        large = float(np.abs(track[1] - track[0]).max()) > self.LARGE_STEP
+        large = not steady and float(np.abs(track[1] - track[0]).max()) > self.LARGE_STEP
         for j in range(3):
             if j == self.FREE or (j == self.FREEFORM and large):
                 # In a large transient (the contacts sweep past the body) the free-form mode
@@ -856,10 +856,7 @@ class AdaptiveKalman(Estimator):
             q_w = self.model.sensors.wheel.distance_per_count
             a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
             self._wheel_noise = (a / (q_w * q_w), b)
-        u = np.asarray(command, dtype=float)
-        low, high = self.model.speed_limits
-        if not (low <= u.min() and u.max() <= high):      # (inside the limits: nothing to clip)
-            u = self.model.clip(u)
+        u = tracker.command                                 # (clipped to the speed limits)
         if self._held is None:
             # The first sample: the motors run at their initial speeds (or the first command).
             initial = u if self._initial is None else self._initial
@@ -873,7 +870,7 @@ class AdaptiveKalman(Estimator):
             # identified: the law's path is not trusted there; the window estimates (the motor
             # law from the change, then the settled lines) stand in until the windows hold
             # five readings, when the bank restarts from them.
-            if self._lag_id.lag is None and self._lag_range[0] != self._lag_range[1]:
+            if tracker.changed and self._lag_id.lag is None and self._lag_range[0] != self._lag_range[1]:
                 held = self._held
                 self._large |= (np.abs(u - held) > self.LARGE_STEP) | (np.sign(u) != np.sign(held))
             if self._large.any():

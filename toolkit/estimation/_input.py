@@ -191,7 +191,8 @@ class EstimatorModel:
         forces = self.forces
         # 4 lags for the motors plus one sample for the gearbox play, in whole samples.
         object.__setattr__(self, "_settle", 1 + math.ceil(4.0 * self.motor_lag * self.sensors.rate))
-        object.__setattr__(self, "_friction_var", self.friction_uncertainty**2 * float(np.dot(forces, forces)))
+        object.__setattr__(self, "_friction_var", self.friction_uncertainty**2 * float(np.dot(forces, forces))
+                           if self.friction_uncertainty > 0.0 else 0.0)
         # Largest speed change over a period: the whole friction, one way.
         object.__setattr__(self, "_reach", float(forces.sum()) * self.sensors.period / self.mass)
         # A settled contact's speed as a random walk of intensity contact_drift: over a
@@ -199,16 +200,17 @@ class EstimatorModel:
         # acceleration model's drift^2 [[h^3 / 3, h^2 / 2], [h^2 / 2, h]].
         h = self.sensors.period
         if previous is None:
-            # What depends on the period alone (shared by every adjusted model).
+            # What depends on the period and the sensors alone (shared by every adjusted model).
             g = np.array([0.5 * h * h, h])
             object.__setattr__(self, "_period_moments", (
                 np.array([[h**3 / 3.0, h * h / 2.0], [h * h / 2.0, h]]), np.outer(g, g)))
-        self._wander()
+            object.__setattr__(self, "_read_noise", self.sensors.read_noise_variance)
+        if previous is None or previous.contact_drift != self.contact_drift:
+            self._wander()
         # Largest move of the equilibrium set's edges over a period that a body on it
         # follows: the smallest step of the staircase, 2 min f_i > 0, for the period.
-        positive = forces[forces > 0]
-        object.__setattr__(self, "_follow", 2.0 * float(positive.min()) * self.sensors.period / self.mass
-                           if positive.size else 0.0)
+        smallest = float(np.min(forces, where=forces > 0, initial=math.inf))
+        object.__setattr__(self, "_follow", 2.0 * smallest * h / self.mass if smallest < math.inf else 0.0)
         # The plant whose exact flow is the known input: held contacts (ideal motors take
         # the command at once) and, with a lag, the same contacts behind lagging motors;
         # both clip commands to the speed limits. An adjusted model builds them at its first
@@ -228,13 +230,13 @@ class EstimatorModel:
         object.__setattr__(self, "_plants", plants)
         # The friction spread's force error, held over the period: (sigma_F / m)^2 g g^T with
         # g = (h^2 / 2, h).
-        spread = self._period_moments[1] * (self._friction_var / self.mass**2)
-        spread.setflags(write=False)
-        object.__setattr__(self, "_friction_noise", spread)
+        if previous is None or previous._friction_var != self._friction_var:
+            spread = self._period_moments[1] * (self._friction_var / self.mass**2)
+            spread.setflags(write=False)
+            object.__setattr__(self, "_friction_noise", spread)
         # The between-contacts shortcut: for unequal magnitudes (an adaptive filter's model at
         # its estimates), where bodies creep across bands the nominal equal ones hold exactly.
         object.__setattr__(self, "_between", self._quiet_between if forces.max() > forces.min() else None)
-        object.__setattr__(self, "_read_noise", self.sensors.read_noise_variance)
 
     def _wander(self) -> None:
         """The held contacts' noise from ``contact_drift`` (the white-noise acceleration model)."""

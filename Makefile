@@ -29,7 +29,7 @@ demo: $(STAMP)
 # exactness tests of the engines they run (the exact method, advance).
 KERNEL_TESTS := tests/test_compiled.py tests/test_lines.py tests/test_planar_kernels.py \
 	tests/test_simulation_exact.py tests/test_simulation_stepper.py \
-	tests/test_baselines.py tests/test_imm.py
+	tests/test_baselines.py tests/test_imm.py tests/test_linearize_kernel.py
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q $(KERNEL_TESTS)

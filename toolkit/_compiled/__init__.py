@@ -2,7 +2,7 @@
 
 The kernel modules of this package, :mod:`.core` (the exact method's event loops for ideal and
 for lagging motors, dense evaluator, no-event certificate, batch path, sampled closed loops,
-and the Coulomb force on many speeds), :mod:`.lines` (the quantized lines of the estimators'
+the Coulomb force on many speeds, the estimators' linearization of one step), :mod:`.lines` (the quantized lines of the estimators'
 holds) and :mod:`.planar` (the planar contacts' forces), are plain Python functions over arrays and scalars. They import nothing
 heavy, so the rest of the toolkit may import them freely (a process that never runs a kernel
 never loads numba). :func:`load` returns one compiled: the first time, it replaces every

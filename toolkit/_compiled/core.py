@@ -28,6 +28,10 @@ callers keep validation, result assembly and I/O; the kernels do the loops.
   loop (the no-event certificate, else the engine) with its exact displacements.
 - :func:`batch`: many constant-speed scenes, each through :func:`ideal_piece` (so each
   equals the single run), in parallel over scenes (``prange``).
+- :func:`linearize_step`: the estimators' linearization of one exact step along its events
+  (``toolkit.estimation.EstimatorModel``: slopes, the contacts' noise, the response to an
+  outside force), the contacts' forces as the engine's per-contact signs and the motors' as
+  :func:`motor_coefficients`.
 
 How the laws stay written once. The friction law is evaluated here from the prefix sums that
 :class:`toolkit.model.ContactSet` builds (``net force = magnitude above - magnitude below``,
@@ -92,7 +96,8 @@ KERNELS = {
     "quiet_piece": {}, "sorted_landscape": {}, "sorted_steps": _INLINE,
     "staircase_sums": _INLINE, "contact_table": {}, "staircase_median": {}, "median_row": {},
     "median_edges": {}, "period_bounds": {}, "window_line": {},
-    "kalman_step": {},
+    "kalman_step": {}, "linearize_step": {}, "gathered_sum": _INLINE, "contains": _INLINE,
+    "stuck_stretch": {},
     "batch_scene": {}, "batch": {"parallel": True},
     "ordered_within": {},
     # The event roots of the dynamic-motor engine: IEEE division (inf, NaN) as NumPy's.
@@ -2481,3 +2486,211 @@ def batch(speeds: np.ndarray, forces: np.ndarray, mass: np.ndarray, damping: np.
             V[s], events[s], stuck[s], codes[s], V_probe[s] = batch_scene(
                 speeds, forces, s, mass[s], damping[s], external[s], v0[s], t_end, probe,
                 order, land, first, fstate, istate, seg, ev)
+
+
+def gathered_sum(values: np.ndarray, mask: np.ndarray, scratch: np.ndarray) -> tuple[float, int]:
+    """``values[mask].sum()`` as NumPy sums the gathered array (:func:`pairwise_sum`), and the
+    number of terms."""
+    k = 0
+    for i in range(values.size):
+        if mask[i]:
+            scratch[k] = values[i]
+            k += 1
+    return pairwise_sum(scratch, 0, k), k
+
+
+def linearize_step(ev: np.ndarray, nev: int, V: float, start: np.ndarray, target: np.ndarray,
+                   lagging: bool, tau: float, f: np.ndarray, m: float, c: float, h: float, E: float,
+                   var_v: float, noise: np.ndarray, motor: np.ndarray, work: np.ndarray,
+                   masks: np.ndarray, order: np.ndarray, average: np.ndarray, out: np.ndarray) -> None:
+    """The linearization of one exact step of held or lagging contacts (the estimators' known
+    input: ``EstimatorModel._linearized`` and ``force_gains`` state the rules), from its events
+    ``ev[:nev]`` (rows ``(t, kind, contact, V)``): into ``out`` ``(dX+/dV, dV+/dV, Q_xx, Q_xv,
+    Q_vv, arrival (NaN: none), dX+/dF, dV+/dF)`` with ``Q`` accumulated on ``noise`` (3,) and
+    the contacts' gains summed in the order they first take part; into ``average`` (n,) each
+    contact's sign relative to the body averaged over the period. Scratch: ``motor`` (5, n),
+    ``work`` (7, n), ``masks`` (3, n) bool, ``order`` (n,) int. Sums are NumPy's
+    (:func:`pairwise_sum`); speeds along the motor law are :func:`motor_coefficients`'."""
+    n = f.size
+    speeds, rates, gx, gv, tmp, q_ramp, sgn = work[0], work[1], work[2], work[3], work[4], work[5], work[6]
+    at, group, flip = masks[0], masks[1], masks[2]
+    k = c / m
+    if lagging:
+        motor_build(start, target, tau, INF, motor)
+    for i in range(n):
+        gx[i] = 0.0
+        gv[i] = 0.0
+        group[i] = False
+        tmp[i] = f[i] * sign(start[i] - V)
+        sgn[i] = sign(start[i] - V)
+        average[i] = 0.0
+    touched = 0                              # contacts with a gain, in the order they got one
+    F_seg = pairwise_sum(tmp, 0, n) + E
+    J, JX, sX, sV = 1.0, 0.0, 0.0, 0.0
+    arrival = math.nan
+    stuck = False
+    stick_at = 0.0
+    t_prev = 0.0
+    t_sign = 0.0
+    for r in range(nev + 1):
+        s = ev[r, 0] if r < nev else h
+        dt = s - t_prev
+        # A stretch without events: the drag decays J, the gains and the force response by
+        # exp(-k t) (not while stuck: the body then moves with the contact).
+        if k == 0.0 or stuck:
+            area, decay = dt, 1.0
+        else:
+            area, decay = expm1_ratio(k, dt), math.exp(-k * dt)
+        JX += J * area
+        J *= decay
+        for j in range(touched):
+            i = order[j]
+            gx[i] += gv[i] * area
+            gv[i] *= decay
+        if not stuck:
+            sX += sV * area + expm1_ratio_integral(k, dt) / m
+            sV = sV * decay + area / m
+        t_prev = s
+        if r == nev:
+            break
+        kind = int(ev[r, 1])
+        contact = int(ev[r, 2])
+        Ve = ev[r, 3]
+        if lagging:
+            motor_coefficients(motor, tau, s, speeds, q_ramp, rates)
+        else:
+            for i in range(n):
+                speeds[i] = target[i]
+                rates[i] = 0.0
+        tol = 1e-12 * max(1.0, abs(Ve))
+        for i in range(n):
+            at[i] = abs(speeds[i] - Ve) <= tol
+        if contact >= 0:
+            at[contact] = True
+        if kind == CROSS:
+            # The force response's signs flip at every crossing (force_gains).
+            wide = 1e-9 * max(1.0, abs(Ve))
+            for i in range(n):
+                average[i] += sgn[i] * (s - t_sign)
+                flip[i] = abs(speeds[i] - Ve) <= wide
+            if contact >= 0:
+                flip[contact] = True
+            for i in range(n):
+                if flip[i]:
+                    sgn[i] = -sgn[i]
+            t_sign = s
+            if stuck:
+                continue                     # the stiction force absorbs it until a release
+            for i in range(n):
+                at[i] = at[i] and not group[i]
+            f_at, _ = gathered_sum(f, at, tmp)
+            total_rate, count = gathered_sum(rates, at, tmp)
+            slope = total_rate / count if count > 0 else math.nan
+            a_before = (F_seg - c * Ve) / m
+            side = 1.0 if a_before - slope > 0.0 else -1.0
+            F_seg -= 2.0 * f_at * side
+            a_after = (F_seg - c * Ve) / m
+            factor = (a_after - slope) / (a_before - slope)
+            J *= factor
+            sV *= factor
+            for j in range(touched):
+                gv[order[j]] *= factor
+            # The crossed contacts' common error, split by force (a group at one speed).
+            share = (1.0 - factor) * (math.exp(-s / tau) if lagging else 1.0)
+            members = 0
+            for i in range(n):
+                if at[i]:
+                    members += 1
+            for i in range(n):
+                if at[i]:
+                    if not contains(order, touched, i):
+                        order[touched] = i
+                        touched += 1
+                    if members == 1:
+                        gv[i] += share
+                    else:
+                        gv[i] += share * (f[i] / f_at if f_at > 0 else 1.0 / members)
+        elif kind == STICK:
+            # From here V is the contact's speed: it errs as the contact's estimate does.
+            J = 0.0
+            sV = 0.0
+            for j in range(touched):
+                gv[order[j]] = 0.0
+            jj = contact
+            if jj < 0:
+                jj = 0
+                for i in range(n):
+                    if at[i]:
+                        jj = i
+                        break
+            # The body follows the contact(s) at its speed that move with the stuck-on one.
+            rj = rates[jj]
+            wide = 1e-9 * max(1.0, abs(rj))
+            for i in range(n):
+                group[i] = at[i] and abs(rates[i] - rj) <= wide
+            arrival, stuck, stick_at = var_v, True, s
+        elif kind == RELEASE:
+            arrival, stuck = math.nan, False
+            touched = stuck_stretch(f, group, tmp, order, touched, gx, gv, stick_at, s, lagging, tau)
+            f_group, count = gathered_sum(f, group, tmp)
+            # The force just after: the contact law off the group; the group pulls ahead when
+            # the body, pulled by it, still lags its acceleration, else behind; other contacts
+            # at this speed count from the side they arrive from.
+            total_rate, count = gathered_sum(rates, group, tmp)
+            slope = total_rate / count if count > 0 else math.nan
+            for i in range(n):
+                tmp[i] = 0.0 if at[i] else f[i] * sign(speeds[i] - Ve)
+            F_seg = pairwise_sum(tmp, 0, n) + E
+            k2 = 0
+            for i in range(n):
+                if at[i] and not group[i]:
+                    tmp[k2] = f[i] * (1.0 if slope - rates[i] > 0.0 else -1.0)
+                    k2 += 1
+            F_seg += pairwise_sum(tmp, 0, k2)
+            F_seg += f_group if (F_seg + f_group - c * Ve) / m <= slope else -f_group
+            for i in range(n):
+                group[i] = False
+    for i in range(n):
+        average[i] = (average[i] + sgn[i] * (h - t_sign)) / h
+    out[6], out[7] = sX, sV
+    if stuck:
+        touched = stuck_stretch(f, group, tmp, order, touched, gx, gv, stick_at, h, lagging, tau)
+        w_end = math.exp(-h / tau) if lagging else 1.0
+        arrival = var_v * w_end ** 2
+    q00, q01, q11 = noise[0], noise[1], noise[2]
+    for j in range(touched):
+        i = order[j]
+        q00 += gx[i] * gx[i] * var_v
+        q01 += gx[i] * gv[i] * var_v
+        q11 += gv[i] * gv[i] * var_v
+    out[0], out[1], out[2], out[3], out[4], out[5] = JX, J, q00, q01, q11, arrival
+
+
+def stuck_stretch(f: np.ndarray, group: np.ndarray, scratch: np.ndarray, order: np.ndarray, touched: int,
+                  gx: np.ndarray, gv: np.ndarray, t0: float, t1: float, lagging: bool, tau: float) -> int:
+    """What a stretch stuck on the contacts ``group`` from ``t0`` to ``t1`` (s) leaves of their
+    speed errors in ``X`` and ``V`` (:func:`linearize_step`): each member's share of the
+    group's force times the error's integral and end value (``exp(-t / tau)`` along lagging
+    motors, 1 held); returns the count of contacts in ``order``."""
+    f_group, _ = gathered_sum(f, group, scratch)
+    w1 = math.exp(-t1 / tau) if lagging else 1.0
+    for i in range(f.size):
+        if group[i]:
+            if not contains(order, touched, i):
+                order[touched] = i
+                touched += 1
+            share = f[i] / f_group
+            if lagging:
+                gx[i] += share * (tau * (math.exp(-t0 / tau) - w1))
+            else:
+                gx[i] += share * (t1 - t0)
+            gv[i] += share * w1
+    return touched
+
+
+def contains(order: np.ndarray, count: int, i: int) -> bool:
+    """Contact ``i`` is among the first ``count`` entries of ``order``."""
+    for j in range(count):
+        if order[j] == i:
+            return True
+    return False

@@ -83,6 +83,9 @@ from ..model.sensors import Sensors
 
 __all__ = ["EstimatorModel", "contact_speed_estimates", "ContactSpeedTracker"]
 
+#: The kernels' event codes by :class:`~toolkit.simulation.Event` kind.
+_KIND_CODES = {"cross": _core.CROSS, "stick": _core.STICK, "release": _core.RELEASE}
+
 #: Relative margin (of ``max(1, |V|)``, m/s) by which a body must fall short of the next
 #: contact speed for the between-contacts shortcut: far above the rounding of ``F h / m`` and
 #: of the speeds' differences (1e-16 relative), far below any speed the filter resolves.
@@ -320,12 +323,6 @@ class EstimatorModel:
         return unsaturated_response(track[..., 0, :], track[..., 1, :], self.sensors.period,
                                     self.motor_lag, math.inf)
 
-    def end_speeds_at(self, track: np.ndarray, s: float) -> np.ndarray:
-        """Contact speeds ``s`` seconds into the period of ``track`` (the motor law), m/s."""
-        if self.motor_lag <= 0.0:
-            return track[1]
-        return unsaturated_response(track[0], track[1], s, self.motor_lag, math.inf)
-
     def increment(self, V: float, track: np.ndarray, contact_std: float, speed_std: float,
                   steady: bool, bounds: Any = None, force: float = 0.0, gains: np.ndarray | None = None
                   ) -> tuple[float, float, np.ndarray, tuple[float, float] | None, float | None, bool]:
@@ -416,9 +413,9 @@ class EstimatorModel:
         step = self.flow(V, track, force)
         if gains is None:
             return self._linearized(V, track, force, step, contact_std)
-        response = np.empty(2)
-        out = self._linearized(V, track, force, step, contact_std, response)
-        self.force_gains(V, track, force, gains, out, step, response)
+        response, signs = np.empty(2), np.empty(self.n)
+        out = self._linearized(V, track, force, step, contact_std, response, signs)
+        self.force_gains(V, track, force, gains, out, step, response, signs)
         return out
 
     def _quiet_between(self, V: float, speeds: np.ndarray, force: float) -> float | None:
@@ -455,8 +452,8 @@ class EstimatorModel:
         gains[0] = gains[1] * (0.5 * h)
 
     def force_gains(self, V: float, track: np.ndarray, force: float, gains: np.ndarray,
-                    out: tuple | None = None, step: Any = None, response: np.ndarray | None = None
-                    ) -> np.ndarray:
+                    out: tuple | None = None, step: Any = None, response: np.ndarray | None = None,
+                    signs: np.ndarray | None = None) -> np.ndarray:
         """First-order sensitivity of the period's end ``(X+, V+)`` to the force errors, into
         ``gains`` (2, n + 1): columns ``i < n`` a relative error ``e_i`` of ``f_i``, column
         ``n`` an error of the drag (N s/m).
@@ -465,10 +462,10 @@ class EstimatorModel:
         the exact flow's, linearized along its events (:meth:`_linearized`'s ``response``,
         given or computed here: crossings, sticking and release are the simulator's; a body
         that ends stuck feels none); each force error acts through it with the contact's sign
-        relative to the body averaged over the period (the signs flip at the step's
+        relative to the body averaged over the period (``signs``: they flip at the step's
         crossings), ``f_i s_i``, and the drag's ``-V`` averaged over the start and end speeds.
         """
-        h, n = self.sensors.period, self.n
+        n = self.n
         if step is not None and not step.events and self.damping == 0.0:
             # No event in the period: the signs hold throughout and the response to a force
             # is the free body's (or none, stuck all along): the closed form.
@@ -476,29 +473,12 @@ class EstimatorModel:
             return gains
         if step is None:
             step = self.flow(V, track, force)
-        if out is None or response is None:
-            response = np.empty(2)
-            out = self._linearized(V, track, force, step, 0.0, response)
+        if out is None or response is None or signs is None:
+            response, signs = np.empty(2), np.empty(n)
+            out = self._linearized(V, track, force, step, 0.0, response, signs)
         g_x, g_v = float(response[0]), float(response[1])
-        # The contacts' signs relative to the body, averaged over the period: each crossing
-        # flips the signs of the contacts at the body's speed at that instant.
-        start, target = track[0], track[1]
-        sign = np.sign(start - V)
-        average = np.zeros(n)
-        t_prev = 0.0
-        for event in step.events:
-            if event.kind != "cross":
-                continue
-            average += sign * (event.time - t_prev)
-            t_prev = event.time
-            speeds = self.end_speeds_at(track, event.time)
-            at = np.abs(speeds - event.speed) <= 1e-9 * max(1.0, abs(event.speed))
-            if event.contact is not None:
-                at[event.contact] = True
-            sign = np.where(at, -sign, sign)
-        average = (average + sign * (h - t_prev)) / h
-        gains[0, :n] = self.forces * average * g_x
-        gains[1, :n] = self.forces * average * g_v
+        gains[0, :n] = self.forces * signs * g_x
+        gains[1, :n] = self.forces * signs * g_v
         V_mean = V + 0.5 * out[1]
         gains[0, n] = -V_mean * g_x
         gains[1, n] = -V_mean * g_v
@@ -521,16 +501,17 @@ class EstimatorModel:
         return step
 
     def _linearized(self, V: float, track: np.ndarray, force: float, step: Any, contact_std: float,
-                    response: np.ndarray | None = None
+                    response: np.ndarray | None = None, signs: np.ndarray | None = None
                     ) -> tuple[float, float, np.ndarray, tuple[float, float] | None, float | None, bool]:
         """Increments, process noise and slopes of one exact step (see the module docstring).
 
-        Walks the step's events in order, keeping the net force of the current segment,
-        ``dV/dV0`` (``J``) and, per contact, the gain of its start-speed error on ``(X, V)``
-        (a contact's error enters once per event it takes part in; the sum over its events
-        is its gain, so ``Q = var_v sum_i g_i g_i^T``). A contact crossed while the body is
-        stuck on another changes nothing until the body is released; a release recomputes the
-        force from the contact law, the released contacts on the side they pull to.
+        Walks the step's events in order (:func:`toolkit._compiled.core.linearize_step`),
+        keeping the net force of the current segment, ``dV/dV0`` (``J``) and, per contact,
+        the gain of its start-speed error on ``(X, V)`` (a contact's error enters once per
+        event it takes part in; the sum over its events is its gain, so ``Q = var_v sum_i g_i
+        g_i^T``). A contact crossed while the body is stuck on another changes nothing until
+        the body is released; a release recomputes the force from the contact law, the
+        released contacts on the side they pull to.
 
         ``response`` (shape (2,)), when given, is filled with ``d(X+, V+)/dF`` (m/N, s/kg) of
         an extra outside force ``F`` held over the period: each free stretch of length ``dt``
@@ -538,148 +519,50 @@ class EstimatorModel:
         dt)``, ``k = c / m``) and the integral to ``dX/dF``; a crossing scales it as it
         scales ``J`` (the crossing time moves, the acceleration changes there); sticking
         zeroes it (the stiction absorbs the force); a release restarts it from 0 (the body
-        leaves the contact's speed).
+        leaves the contact's speed). ``signs`` (shape (n,)), when given, is filled with each
+        contact's sign relative to the body averaged over the period (it flips at the step's
+        crossings of that contact).
         """
-        f, m, c, h = self.forces, self.mass, self.damping, self.sensors.period
-        start, target = track[0], track[1]
-        tau = self.motor_lag
-        k = c / m
+        h, m = self.sensors.period, self.mass
         V1 = step.state.V
         dV = V1 - V
         dx = step.body_displacement - V * h
         on_set = step.state.stuck is not None
-        var_v = contact_std * contact_std
-        events = step.events
-        if not events and c == 0.0:
+        if not step.events and self.damping == 0.0:
             if response is not None:        # free all period, or stuck all along: none
                 response[:] = (0.0, 0.0) if on_set else (0.5 * h * h / m, h / m)
+            if signs is not None:
+                signs[:] = np.sign(track[0] - V)
             return dx, dV, self._friction_noise, None, None, on_set
-        # An error d of a contact's estimated start speed is d w(t) at time t: w = 1 when
-        # the contacts are held, exp(-t / tau) along the motor law in a transient.
-        lagging = tau > 0 and not np.array_equal(start, target)
-
-        def w(t: float) -> float:
-            return lag_memory(t, tau)[0] if lagging else 1.0
-
-        def w_area(t0: float, t1: float) -> float:
-            return tau * (w(t0) - w(t1)) if lagging else t1 - t0
-
-        stuck = False
-        # Net force of the contacts and the outside force on the current segment.
-        F_seg = float(contact_forces(start - V, f).sum()) + force
-        J, JX, t_prev = 1.0, 0.0, 0.0
-        gains: dict[int, list[float]] = {}       # contact -> [X gain, V gain] of its error
-        sX, sV = 0.0, 0.0                        # the response to an outside force
-        arrival = None
-        stick_at, group = 0.0, np.zeros(f.size, dtype=bool)
-
-        def stretch(dt: float) -> None:
-            """Carry J, the contacts' gains and the force response over ``dt`` without an
-            event: the drag decays them by exp(-k t) (not while stuck: the body then moves
-            with the contact, whatever the drag)."""
-            nonlocal J, JX, sX, sV
-            if k == 0.0 or stuck:
-                area, decay = dt, 1.0
-            else:
-                area, decay = _core.expm1_ratio(k, dt), math.exp(-k * dt)
-            JX += J * area
-            J *= decay
-            for g in gains.values():
-                g[0] += g[1] * area
-                g[1] *= decay
-            if not stuck:
-                sX += sV * area + _core.expm1_ratio_integral(k, dt) / m
-                sV = sV * decay + area / m
-
-        def add(contacts: np.ndarray, share: float) -> None:
-            """Add ``share`` (the V gain of the group's common error) to each contact of the
-            group in proportion to its force (a group at one speed splits as its members)."""
-            members = np.flatnonzero(contacts).tolist()
-            if len(members) == 1:
-                g = gains.setdefault(members[0], [0.0, 0.0])
-                g[1] += share
-                return
-            total = float(f[contacts].sum())
-            for i in members:
-                g = gains.setdefault(i, [0.0, 0.0])
-                g[1] += share * (float(f[i]) / total if total > 0 else 1.0 / len(members))
-
-        held_rates = np.zeros(f.size)
-        for event in events:
-            stretch(event.time - t_prev)
-            t_prev = s = event.time
-            Ve = event.speed
-            if lagging:
-                speeds = unsaturated_response(start, target, s, tau, math.inf)
-                rates = (target - speeds) / tau                         # dv_i/dt
-            else:
-                speeds, rates = target, held_rates
-            at = np.abs(speeds - Ve) <= 1e-12 * max(1.0, abs(Ve))
-            if event.contact is not None:
-                at[event.contact] = True
-            if event.kind == "cross":
-                if stuck:
-                    continue            # the stiction force absorbs it until a release
-                at &= ~group
-                f_at = float(f[at].sum())
-                slope = float(np.mean(rates[at]))
-                a_before = (F_seg - c * Ve) / m
-                side = 1.0 if a_before - slope > 0.0 else -1.0
-                F_seg -= 2.0 * f_at * side
-                a_after = (F_seg - c * Ve) / m
-                factor = (a_after - slope) / (a_before - slope)
-                J *= factor
-                sV *= factor
-                for g in gains.values():
-                    g[1] *= factor
-                add(at, (1.0 - factor) * w(s))
-            elif event.kind == "stick":
-                # From here V is the contact's speed: it errs as the contact's estimate does.
-                J = sV = 0.0
-                for g in gains.values():
-                    g[1] = 0.0
-                # The body follows the contact(s) at its speed that move with the stuck-on
-                # one (not one that merely passes at this instant).
-                j = event.contact if event.contact is not None else int(np.argmax(at))
-                follow = at & (np.abs(rates - rates[j]) <= 1e-9 * max(1.0, abs(rates[j])))
-                arrival, stuck, stick_at, group = var_v, True, s, follow
-            elif event.kind == "release":
-                arrival, stuck = None, False     # it left the contact: no arrival at the end
-                for i in np.flatnonzero(group):  # what the stuck stretch left in V and X
-                    g = gains.setdefault(int(i), [0.0, 0.0])
-                    share = float(f[i]) / float(f[group].sum())
-                    g[0] += share * w_area(stick_at, s)
-                    g[1] += share * w(s)
-                # The force just after: the contact law off the group; the group pulls ahead
-                # (+1) when the body, pulled by it, still lags its acceleration, else behind;
-                # other contacts at this speed count from the side they arrive from.
-                slope = float(np.mean(rates[group]))
-                others = at & ~group
-                slips = np.where(at, 0.0, speeds - Ve)
-                F_seg = float(contact_forces(slips, f).sum()) + force
-                F_seg += float(np.sum(f[others] * np.where(slope - rates[others] > 0.0, 1.0, -1.0)))
-                f_group = float(f[group].sum())
-                F_seg += f_group if (F_seg + f_group - c * Ve) / m <= slope else -f_group
-                group = np.zeros(f.size, dtype=bool)
-        stretch(h - t_prev)
-        if response is not None:
-            response[:] = (sX, sV)
-        if stuck:
-            for i in np.flatnonzero(group):
-                g = gains.setdefault(int(i), [0.0, 0.0])
-                share = float(f[i]) / float(f[group].sum())
-                g[0] += share * w_area(stick_at, h)
-                g[1] += share * w(h)
-            arrival = var_v * w(h) ** 2
-        Q = self._friction_noise.copy()
-        for gx, gv in gains.values():
-            Q[0, 0] += gx * gx * var_v
-            Q[0, 1] += gx * gv * var_v
-            Q[1, 1] += gv * gv * var_v
-        Q[1, 0] = Q[0, 1]
+        out, average = self._walk(V, track, force, step, contact_std * contact_std)
+        Q = np.array([[out[2], out[3]], [out[3], out[4]]])
         if on_set:
             Q += self._held_noise
-        return dx, dV, Q, (JX, J), arrival, on_set
+        if response is not None:
+            response[:] = out[6:8]
+        if signs is not None:
+            signs[:] = average
+        return dx, dV, Q, (float(out[0]), float(out[1])), None if math.isnan(out[5]) else float(out[5]), on_set
+
+    def _walk(self, V: float, track: np.ndarray, force: float, step: Any, var_v: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`toolkit._compiled.core.linearize_step` over ``step``'s events: its ``out``
+        (slopes, ``Q`` without the held noise, arrival, force response) and the contacts'
+        average signs."""
+        start, target = track[0], track[1]
+        n = self.n
+        events = step.events
+        ev = np.array([(e.time, _KIND_CODES.get(e.kind, -1), -1 if e.contact is None else e.contact, e.speed)
+                       for e in events]) if events else np.empty((0, 4))
+        lagging = self.motor_lag > 0 and not np.array_equal(start, target)
+        noise = self._friction_noise
+        out, average = np.empty(8), np.empty(n)
+        kernels("core", 20 * n * (len(events) + 1)).linearize_step(
+            ev, len(events), float(V), start, target, lagging, self.motor_lag, self.forces, self.mass,
+            self.damping, self.sensors.period, float(force), var_v,
+            np.array([noise[0, 0], noise[0, 1], noise[1, 1]]), np.empty((5, n)), np.empty((7, n)),
+            np.empty((3, n), dtype=bool), np.empty(n, dtype=np.int64), average, out)
+        return out, average
 
     def _carried(self, V: float, track: np.ndarray, b: Any, contact_std: float, force: float
                  ) -> tuple[float, float, np.ndarray, tuple[float, float] | None, float | None, bool]:

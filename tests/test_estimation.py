@@ -503,9 +503,9 @@ def test_linearization_equals_finite_differences_of_the_flow():
         track = np.stack((start, target))
         force = rng.uniform(-3.0, 3.0) if trial % 5 == 0 else 0.0
         V = rng.uniform(-0.3, 0.3)
-        step = model.flow(V, track, force)
         response = np.empty(2)
-        dx, dV, Q, slopes, _, _ = model._linearized(V, track, force, step, 1e-4, response)
+        dx, dV, Q, slopes, _, _ = model._linearized(V, track, force, model.period(V, track, force), 1e-4,
+                                                    response)
         if slopes is None:
             continue
         d = 1e-7
@@ -580,8 +580,9 @@ def test_between_contacts_shortcut_is_the_flow_where_it_applies():
             assert quiet == pytest.approx(step.state.V - V, rel=1e-12, abs=1e-15)
             g1, g2 = np.zeros((2, n + 1)), np.zeros((2, n + 1))
             a = model.increment(V, track, 1e-4, 1e-4, True, None, force, g1)
-            b = model._linearized(V, track, force, step, 1e-4)
-            model.force_gains(V, track, force, g2, b, step)
+            period = model.period(V, track, force)
+            b = model._linearized(V, track, force, period, 1e-4)
+            model.force_gains(V, track, force, g2, b, period)
             assert a[1] == pytest.approx(b[1], rel=1e-12, abs=1e-15)
             assert a[0] == pytest.approx(b[0], rel=1e-9, abs=1e-17)
             assert a[3] is None and b[3] is None and a[4] is None and not a[5]
@@ -711,14 +712,14 @@ def test_increment_with_an_outside_force_closed_form():
     model, track = _three_contacts([0.3, 0.4, 0.5])
     bounds = model.bounds_row(track, 0.5)
     for out in (model.increment(0.0, track, 1e-3, 1e-3, True, bounds, 0.5),
-                model._linearized(0.0, track, 0.5, model.flow(0.0, track, 0.5), 1e-3)):
+                model._linearized(0.0, track, 0.5, model.period(0.0, track, 0.5), 1e-3)):
         dx, dV, Q, slopes, arrival, on_set = out
         assert dV == pytest.approx(0.07, rel=0, abs=1e-15)
         assert dx == pytest.approx(7e-4, rel=0, abs=1e-17)
         assert not Q.any() and slopes is None and arrival is None and not on_set
     # A force against the contacts: F = -5 N, a = 3 - 5 = -2 m/s^2: dV = -0.04 m/s.
     for out in (model.increment(0.0, track, 1e-3, 1e-3, True, force=-5.0),
-                model._linearized(0.0, track, -5.0, model.flow(0.0, track, -5.0), 1e-3)):
+                model._linearized(0.0, track, -5.0, model.period(0.0, track, -5.0), 1e-3)):
         assert out[1] == pytest.approx(-0.04, rel=0, abs=1e-15)
         assert out[0] == pytest.approx(-4e-4, rel=0, abs=1e-17)
 

@@ -61,7 +61,8 @@ def test_linearization_through_sticks_and_releases_equals_finite_differences():
         if not smooth:
             continue
         response, signs = np.empty(2), np.empty(n)
-        dx, dV, Q, slopes, _, _ = model._linearized(V, track, force, step, 1e-4, response, signs)
+        dx, dV, Q, slopes, _, _ = model._linearized(V, track, force, model.period(V, track, force), 1e-4,
+                                                    response, signs)
         np.testing.assert_allclose((model.sensors.period, 1.0) if slopes is None else slopes,
                                    0.5 * (ahead + behind), rtol=1e-3, atol=1e-6)
         # The force response through sticks and releases (force_gains); one-sided
@@ -80,3 +81,32 @@ def test_linearization_through_sticks_and_releases_equals_finite_differences():
                                    rtol=2e-3, atol=1e-14)
         seen[kinds] = seen.get(kinds, 0) + 1
     assert seen.get(("release", "stick"), 0) >= 3 and seen.get(("cross", "stick"), 0) >= 10
+
+
+def test_a_held_period_is_the_flow_of_advance():
+    # EstimatorModel.period runs the engine directly for held contacts (batch_scene: no plant
+    # built); the flow through advance is the second way. The same engine on the same
+    # staircase: equal to the bit (end speed, displacement, stuck contact, every event), for
+    # 10 unequal contacts at two scales, outside forces, bodies on and near contact speeds,
+    # and contacts beyond the speed limits (clipped by the motor law in both).
+    rng = np.random.default_rng(5)
+    n = 10
+    sensors = CAROUSEL.sensors(n_wheels=n)
+    kinds = set()
+    for trial in range(200):
+        scale, mass = ((0.3, 1.0), (3.0, 20.0))[trial % 2]
+        model = EstimatorModel(scale * rng.uniform(0.5, 1.5, n), mass, sensors, damping=(0.0, 0.4)[trial % 3 == 0],
+                               speed_limits=(-0.35, 0.35))
+        speeds = rng.uniform(-0.4, 0.4, n)
+        track = np.stack((speeds, speeds))
+        V = float(rng.choice(np.clip(speeds, -0.35, 0.35))) + float(rng.choice([0.0, 1e-6, -1e-3, 2e-2]))
+        force = float(rng.uniform(-1.0, 1.0)) * scale if trial % 4 == 0 else 0.0
+        got, want = model.period(V, track, force), model.flow(V, track, force)
+        assert got.V == want.state.V and got.displacement == want.body_displacement
+        assert got.stuck == (-1 if want.state.stuck is None else want.state.stuck)
+        assert len(got.events) == len(want.events)
+        for row, event in zip(got.events, want.events):
+            assert tuple(row) == (event.time, {"cross": 0, "stick": 1, "release": 2}[event.kind],
+                                  -1 if event.contact is None else event.contact, event.speed)
+            kinds.add(event.kind)
+    assert kinds == {"cross", "stick"}

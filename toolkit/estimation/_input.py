@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -85,6 +85,19 @@ __all__ = ["EstimatorModel", "contact_speed_estimates", "ContactSpeedTracker"]
 
 #: The kernels' event codes by :class:`~toolkit.simulation.Event` kind.
 _KIND_CODES = {"cross": _core.CROSS, "stick": _core.STICK, "release": _core.RELEASE}
+
+class Period(NamedTuple):
+    """One sample period of the exact flow as the estimators linearize it."""
+
+    #: Body speed at the end, m/s.
+    V: float
+    #: Body displacement over the period, m.
+    displacement: float
+    #: The contact the body ends stuck on (-1: none).
+    stuck: int
+    #: Events, rows ``(t, kind, contact, V)`` (s, the kernels' codes, -1 for none, m/s).
+    events: np.ndarray
+
 
 #: Relative margin (of ``max(1, |V|)``, m/s) by which a body must fall short of the next
 #: contact speed for the between-contacts shortcut: far above the rounding of ``F h / m`` and
@@ -410,7 +423,7 @@ class EstimatorModel:
                     if gains is not None:
                         self._coast_gains(V, track[0], True, gains)
                     return 0.5 * quiet * self.sensors.period, quiet, self._friction_noise, None, None, False
-        step = self.flow(V, track, force)
+        step = self.period(V, track, force)
         if gains is None:
             return self._linearized(V, track, force, step, contact_std)
         response, signs = np.empty(2), np.empty(self.n)
@@ -466,13 +479,13 @@ class EstimatorModel:
         crossings), ``f_i s_i``, and the drag's ``-V`` averaged over the start and end speeds.
         """
         n = self.n
-        if step is not None and not step.events and self.damping == 0.0:
+        if step is not None and not len(step.events) and self.damping == 0.0:
             # No event in the period: the signs hold throughout and the response to a force
             # is the free body's (or none, stuck all along): the closed form.
-            self._coast_gains(V, track[0], step.state.stuck is None, gains)
+            self._coast_gains(V, track[0], step.stuck < 0, gains)
             return gains
         if step is None:
-            step = self.flow(V, track, force)
+            step = self.period(V, track, force)
         if out is None or response is None or signs is None:
             response, signs = np.empty(2), np.empty(n)
             out = self._linearized(V, track, force, step, 0.0, response, signs)
@@ -500,12 +513,41 @@ class EstimatorModel:
             raise RuntimeError(f"the estimator's flow failed over one period: {step.message}")
         return step
 
-    def _linearized(self, V: float, track: np.ndarray, force: float, step: Any, contact_std: float,
+    def period(self, V: float, track: np.ndarray, force: float = 0.0) -> Period:
+        """:meth:`flow` as the linearization reads it (a :class:`Period`). Held contacts run the
+        exact engine directly at this model's magnitudes, no plant built
+        (:func:`toolkit._compiled.core.batch_scene`: the staircase, then the very loop of
+        :func:`~toolkit.simulation.advance`, the same doubles); moving ones take :meth:`flow`."""
+        start, target = track[0], track[1]
+        if self.motor_lag > 0.0 and not bool((start == target).all()):
+            step = self.flow(V, track, force)
+            ev = np.array([(e.time, _KIND_CODES.get(e.kind, -1), -1 if e.contact is None else e.contact, e.speed)
+                           for e in step.events]) if step.events else np.empty((0, 4))
+            stuck = step.state.stuck
+            return Period(step.state.V, step.body_displacement, -1 if stuck is None else stuck, ev)
+        low, high = self.speed_limits
+        u = target if low <= float(target.min()) and float(target.max()) <= high else self.clip(target)
+        n = self.n
+        rows = 4 * n + 16                     # a period has at most 2 n + 2 rounds of two rows each
+        fstate, istate = np.zeros(_core.N_FSTATE), np.zeros(_core.N_ISTATE, dtype=np.int64)
+        seg, ev = np.empty((rows, 7)), np.empty((rows, 4))
+        K = kernels("core", 40 * n)
+        V1, nev, _, code, _ = K.batch_scene(
+            np.ascontiguousarray(u).reshape(1, n), self.forces.reshape(1, n), 0, self.mass, self.damping,
+            float(force), float(V), self.sensors.period, -1.0, np.empty(n, dtype=np.int64),
+            np.empty((3, n + 1)), np.empty(n, dtype=np.int64), fstate, istate, seg, ev)
+        if code != _core.DONE:
+            raise RuntimeError(f"the estimator's flow failed over one period (kernel code {code})")
+        body = K.displacement(seg, int(istate[_core.I_NSEG]), 0.0, self.sensors.period)
+        return Period(float(V1), float(body), int(istate[_core.I_STUCK]), ev[:nev])
+
+    def _linearized(self, V: float, track: np.ndarray, force: float, step: Period, contact_std: float,
                     response: np.ndarray | None = None, signs: np.ndarray | None = None
                     ) -> tuple[float, float, np.ndarray, tuple[float, float] | None, float | None, bool]:
         """Increments, process noise and slopes of one exact step (see the module docstring).
 
-        Walks the step's events in order (:func:`toolkit._compiled.core.linearize_step`),
+        Walks the events of ``step`` (:meth:`period`) in order
+        (:func:`toolkit._compiled.core.linearize_step`),
         keeping the net force of the current segment, ``dV/dV0`` (``J``) and, per contact,
         the gain of its start-speed error on ``(X, V)`` (a contact's error enters once per
         event it takes part in; the sum over its events is its gain, so ``Q = var_v sum_i g_i
@@ -524,11 +566,10 @@ class EstimatorModel:
         crossings of that contact).
         """
         h, m = self.sensors.period, self.mass
-        V1 = step.state.V
-        dV = V1 - V
-        dx = step.body_displacement - V * h
-        on_set = step.state.stuck is not None
-        if not step.events and self.damping == 0.0:
+        dV = step.V - V
+        dx = step.displacement - V * h
+        on_set = step.stuck >= 0
+        if not len(step.events) and self.damping == 0.0:
             if response is not None:        # free all period, or stuck all along: none
                 response[:] = (0.0, 0.0) if on_set else (0.5 * h * h / m, h / m)
             if signs is not None:
@@ -544,21 +585,19 @@ class EstimatorModel:
             signs[:] = average
         return dx, dV, Q, (float(out[0]), float(out[1])), None if math.isnan(out[5]) else float(out[5]), on_set
 
-    def _walk(self, V: float, track: np.ndarray, force: float, step: Any, var_v: float
+    def _walk(self, V: float, track: np.ndarray, force: float, step: Period, var_v: float
               ) -> tuple[np.ndarray, np.ndarray]:
         """:func:`toolkit._compiled.core.linearize_step` over ``step``'s events: its ``out``
         (slopes, ``Q`` without the held noise, arrival, force response) and the contacts'
         average signs."""
         start, target = track[0], track[1]
         n = self.n
-        events = step.events
-        ev = np.array([(e.time, _KIND_CODES.get(e.kind, -1), -1 if e.contact is None else e.contact, e.speed)
-                       for e in events]) if events else np.empty((0, 4))
+        ev = step.events
         lagging = self.motor_lag > 0 and not np.array_equal(start, target)
         noise = self._friction_noise
         out, average = np.empty(8), np.empty(n)
-        kernels("core", 20 * n * (len(events) + 1)).linearize_step(
-            ev, len(events), float(V), start, target, lagging, self.motor_lag, self.forces, self.mass,
+        kernels("core", 20 * n * (len(ev) + 1)).linearize_step(
+            ev, len(ev), float(V), start, target, lagging, self.motor_lag, self.forces, self.mass,
             self.damping, self.sensors.period, float(force), var_v,
             np.array([noise[0, 0], noise[0, 1], noise[1, 1]]), np.empty((5, n)), np.empty((7, n)),
             np.empty((3, n), dtype=bool), np.empty(n, dtype=np.int64), average, out)
@@ -586,7 +625,7 @@ class EstimatorModel:
         # it would stick on it within the period (dV+/dV = 0), which the flow gives.
         candidates = np.flatnonzero((end == edge) & (np.abs(start - V) <= 1e-12 * max(1.0, abs(V))))
         if candidates.size != 1 or tau == 0.0:
-            return self._linearized(V, track, force, self.flow(V, track, force), contact_std)
+            return self._linearized(V, track, force, self.period(V, track, force), contact_std)
         j = int(candidates[0])
         piece = MotorPiece.build(0.0, start[j:j + 1], target[j:j + 1], tau, math.inf)
         v0 = float(start[j])

@@ -897,7 +897,7 @@ class ContactSpeedTracker:
         self._tb[col] = t
         self._wb[col] = w
         prev = self._prev
-        changed = prev is not None and bool((u != prev).any())
+        changed = prev is not None and u.tolist() != prev.tolist()       # (lists: cheaper on a few contacts)
         self._prev = self.command = u
         self.changed = changed
         lc = self._last_change

@@ -190,7 +190,7 @@ class WheelSpeedBank:
         u = np.asarray(command, dtype=float)
         start = self._nominal
         s = self._substeps
-        if lag > 0.0 and (start != u).any():
+        if lag > 0.0 and start.tolist() != u.tolist():            # (lists: cheaper on a few contacts)
             piece = MotorPiece.build(0.0, start, u, lag, math.inf)
             moved = piece.displacement(s[:, None])                     # (substeps, n)
             end = piece.speeds_at(h)
@@ -269,6 +269,9 @@ class AdaptiveKalman(Estimator):
     HOLD_START = 0.9
     #: Samples over which the encoders must look ideal for the exact lines (:meth:`_ideal`).
     IDEAL_WINDOW = 50
+    #: Twice chi-square(1)'s 90th percentile (2.706): the edge of the central innovations'
+    #: NIS that the 90th percentile of the window must keep within (:meth:`_ideal`).
+    NIS_EDGE = 2.0 * 2.706
     #: Largest share of wheel readings that may break their lines in that window.
     LINE_BREAKS = 0.03
     #: Largest widening of the covariances per failing sample (a factor).
@@ -476,6 +479,7 @@ class AdaptiveKalman(Estimator):
         self._deaths: deque[int] = deque(maxlen=self.IDEAL_WINDOW)
         self._told_apart: deque[int] = deque(maxlen=self.IDEAL_WINDOW)
         self._nis_history: deque[float] = deque(maxlen=self.IDEAL_WINDOW)
+        self._nis_over = 0                   # of those, above twice chi-square(1)'s 90 % (or NaN)
         self._first = True
         self.last_nis = math.nan
         self.imm = self._reference_imm() if self.reference else None
@@ -715,7 +719,12 @@ class AdaptiveKalman(Estimator):
                 Ps0, means, rows0, rows1, noises, self.forgetting * self.h, cbar, z, R0, noise, self.xs, self.Ps,
                 self.mu, x, P, self._nis)
         self._noise.push(z - x_pred, predicted, R0, speed)
-        self._nis_history.append((z - x_pred) ** 2 / (predicted + R0))
+        history, nis = self._nis_history, (z - x_pred) ** 2 / (predicted + R0)
+        if len(history) == history.maxlen and not history[0] <= self.NIS_EDGE:
+            self._nis_over -= 1
+        history.append(nis)
+        if not nis <= self.NIS_EDGE:
+            self._nis_over += 1
 
     def _modes_reference(self, z: float, R: float, means: list, rows: list, noises: list) -> None:
         """The same cycle on filterpy's IMMEstimator: each filter's transition ``F`` (the
@@ -754,8 +763,8 @@ class AdaptiveKalman(Estimator):
         deaths = sum(self._deaths) - (sum(self._told_apart) if told_apart else 0)
         if deaths > self.LINE_BREAKS * self.n * len(self._deaths):
             return False
-        nis = np.fromiter(self._nis_history, float, len(self._nis_history))
-        return float(np.partition(nis, 44)[44]) <= 2.0 * 2.706       # the 45th of 50
+        # The 45th of 50 within the edge: at most 5 above it.
+        return self._nis_over <= self.IDEAL_WINDOW // 10
 
     def _act(self) -> None:
         """The consistency monitor's verdict on this sample, and what the filter does: while
@@ -863,6 +872,7 @@ class AdaptiveKalman(Estimator):
             var = np.full(self.n, tracker.white_variance)
             self._bank.start(wheels, initial, var)
             self._large = np.zeros(self.n, dtype=bool)
+            self._any_large = False
             speeds = initial
         else:
             banked, var_b = self._bank.push(wheels, self._held, self.lag, tracker.reading_variance)
@@ -873,10 +883,12 @@ class AdaptiveKalman(Estimator):
             if tracker.changed and self._lag_id.lag is None and self._lag_range[0] != self._lag_range[1]:
                 held = self._held
                 self._large |= (np.abs(u - held) > self.LARGE_STEP) | (np.sign(u) != np.sign(held))
-            if self._large.any():
+                self._any_large = bool(self._large.any())
+            if self._any_large:
                 back = self._large & steady & (tracker.window_length >= 5)
                 self._bank.restart(back, wheels, speeds, tracker.contact_variance)
                 self._large &= ~back
+                self._any_large = bool(self._large.any())
                 var = np.where(self._large, tracker.contact_variance, var_b)
                 speeds = np.where(self._large | back, speeds, banked)
             else:

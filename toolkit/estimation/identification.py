@@ -107,7 +107,7 @@ class LagIdentifier:
         u = np.asarray(command, dtype=float)
         last = self._last
         before = self._initial if last is None else last[2]
-        if before is not None and (u != before).any():
+        if before is not None and u.tolist() != before.tolist():    # (lists: cheaper on a few contacts)
             # A change at this sample (the command acts from t on): finish the open one first.
             self._finish()
             self._change = {"t": t, "x": x.copy(), "v0": before.copy(), "u": u.copy(), "rows": []}

@@ -138,7 +138,7 @@ def fit_noise(excess: np.ndarray, speed2: np.ndarray) -> tuple[float, float]:
         fits = [(max(se / n, 0.0), 0.0)]
         if sxx > 0.0:
             fits.append((0.0, max(sxe / sxx, 0.0)))
-        a, b = min(fits, key=lambda ab: float(np.sum((e - ab[0] - ab[1] * x) ** 2)))
+        a, b = fits[0] if len(fits) == 1 else min(fits, key=lambda ab: float(np.sum((e - ab[0] - ab[1] * x) ** 2)))
     return float(a), float(b)
 
 

@@ -78,6 +78,8 @@ REPAIR_GAP = 0.25
 #: Half sides of the starting box (m of intercept, m/s of speed): any line; the first two
 #: readings cut it to one count and ``2 q / h``.
 _BOX = (1.0e3, 1.0e3)
+#: Its corners, counter-clockwise (the polygons' first four rows).
+_CORNERS = np.array(((-_BOX[0], -_BOX[1]), (_BOX[0], -_BOX[1]), (_BOX[0], _BOX[1]), (-_BOX[0], _BOX[1])))
 
 
 def _behind(poly: np.ndarray, n: int, tau: float, lo: float, q: float, direction: float) -> bool:
@@ -85,10 +87,6 @@ def _behind(poly: np.ndarray, n: int, tau: float, lo: float, q: float, direction
     (against ``direction``) every position ``x + tau v`` the polygon's lines reach at ``tau``."""
     return bool(kernels("lines", n).behind(poly, n, tau, lo, q, direction, REPAIR_GAP))
 
-
-def _box(poly: np.ndarray) -> None:
-    bx, bv = _BOX
-    poly[:4] = ((-bx, -bv), (bx, -bv), (bx, bv), (-bx, bv))
 
 
 class WheelLines:
@@ -216,8 +214,7 @@ class WheelLines:
 
     def _restart(self, which: np.ndarray, t: float, wheels: np.ndarray) -> None:
         """New windows for the wheels ``which`` (bool mask) from the row at ``t`` (s)."""
-        for i in np.flatnonzero(which):
-            _box(self.polys[i])
+        self.polys[which, :4] = _CORNERS
         self.counts[which] = 4
         self.unseen[which] = 0.0
         self.starts[which] = t
@@ -313,7 +310,7 @@ class Hold:
         self.c_a = count
         self._prior = prior
         poly = self._polys[0]
-        _box(poly)
+        poly[:4] = _CORNERS
         # The anchor's own reading: X_a in [c_a q, (c_a + 1) q), i.e. x in [0, q).
         self._n = kernels("lines", 1).clip_strip(poly, 4, 1.0, 0.0, 0.0, self._q, self._tol,
                                                  self._scratch, self._polys[1])

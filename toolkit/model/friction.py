@@ -65,10 +65,11 @@ def contact_forces(slip: Any, forces: Any, *, law: str = "sign", epsilon: float 
     -------
     ndarray of shape (..., n), N (or a casadi expression of shape (n, 1))
     """
-    check_option(law, "friction", owner, FRICTION_LAWS)
+    if law != "sign":                       # (the default needs no check: per-sample callers)
+        check_option(law, "friction", owner, FRICTION_LAWS)
     o = ops(xp)
     forces = np.asarray(forces, dtype=float)
-    f = o.const(forces)
+    f = forces if xp is np else o.const(forces)
     if compliance > 0:
         # k f_i = 0 only where f_i = 0: divide by 1 there (the force is 0 anyway).
         scale = o.const(np.where(forces > 0, compliance * forces, 1.0))

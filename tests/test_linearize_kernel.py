@@ -9,8 +9,10 @@ and the random scenes without events in or out of reach."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from toolkit.analysis.scenarios import CAROUSEL
+from toolkit.errors import ParameterError
 from toolkit.estimation import EstimatorModel
 
 
@@ -110,3 +112,20 @@ def test_a_held_period_is_the_flow_of_advance():
                                   -1 if event.contact is None else event.contact, event.speed)
             kinds.add(event.kind)
     assert kinds == {"cross", "stick"}
+
+
+def test_a_held_period_refuses_what_advance_refuses():
+    # The direct engine run carried a NaN contact speed to a finite end speed, clipped an
+    # infinite one to the speed limit and ran NaN or infinite body speeds and forces, where
+    # advance (model.flow, the second way) refuses each with a ParameterError.
+    n = 3
+    model = EstimatorModel(np.array([1.0, 0.5, 0.8]), 1.0, CAROUSEL.sensors(n_wheels=n),
+                           speed_limits=(-0.35, 0.35))
+    for speeds, V, force in (([np.nan, -0.1, 0.1], 0.0, 0.0), ([np.inf, -0.1, 0.1], 0.0, 0.0),
+                             ([0.0, -0.1, 0.1], np.nan, 0.0), ([0.0, -0.1, 0.1], np.inf, 0.0),
+                             ([0.0, -0.1, 0.1], 0.0, np.nan)):
+        track = np.array([speeds, speeds])
+        with pytest.raises(ParameterError):
+            model.flow(V, track, force)
+        with pytest.raises(ParameterError, match="EstimatorModel.period must be finite"):
+            model.period(V, track, force)

@@ -526,7 +526,13 @@ class EstimatorModel:
             stuck = step.state.stuck
             return Period(step.state.V, step.body_displacement, -1 if stuck is None else stuck, ev)
         low, high = self.speed_limits
-        u = target if low <= float(target.min()) and float(target.max()) <= high else self.clip(target)
+        slowest, fastest = float(target.min()), float(target.max())
+        if not (math.isfinite(slowest) and math.isfinite(fastest) and math.isfinite(V) and math.isfinite(force)):
+            # (as advance refuses them: the engine would carry NaN, or clip an infinite speed)
+            name, value = (("track", track) if not (math.isfinite(slowest) and math.isfinite(fastest))
+                           else ("V", V) if not math.isfinite(V) else ("force", force))
+            raise ParameterError(parameter_message(name, "EstimatorModel.period", "be finite", value))
+        u = target if low <= slowest and fastest <= high else self.clip(target)
         n = self.n
         rows = 4 * n + 16                     # a period has at most 2 n + 2 rounds of two rows each
         fstate, istate = np.zeros(_core.N_FSTATE), np.zeros(_core.N_ISTATE, dtype=np.int64)

@@ -591,6 +591,22 @@ def test_between_contacts_shortcut_is_the_flow_where_it_applies():
     assert answered > 50 and declined > 50
 
 
+def test_between_contacts_shortcut_leaves_speeds_beyond_the_limits_to_the_flow():
+    # A motor at its limit whose estimate overshoots it (0.3501 against 0.35 m/s): the flow
+    # clips that contact to the limit, the shortcut would not; it declines and the increment
+    # is the flow's (a review measured -0.0060000 against the flow's -0.0060435 m/s).
+    sensors = CAROUSEL.sensors(n_wheels=3)
+    model = EstimatorModel(np.array([1.0, 0.5, 0.8]), 1.0, sensors, speed_limits=(-0.35, 0.35))
+    speeds = np.array([0.3501, 0.1, -0.1])
+    track = np.stack((speeds, speeds))
+    V = 0.35005
+    assert model._quiet_between(V, speeds, 0.0) is None
+    step = model.flow(V, track, 0.0)
+    assert model.increment(V, track, 1e-4, 1e-4, True)[1] == pytest.approx(step.state.V - V, rel=1e-12)
+    inside = np.array([0.3499, 0.1, -0.1])          # (inside: answered, net force -0.3 N at 0.2 m/s)
+    assert model._quiet_between(0.2, inside, 0.0) == pytest.approx(-0.3 * sensors.period, rel=1e-12)
+
+
 def test_increment_carries_a_body_on_a_slowly_moving_set():
     # Two 1 N contacts on m = 1 kg behind a 7.5 ms lag, commands moved by +1 mm/s (a motor
     # transient: not steady): the zero band [0.1, 0.2] moves up by 1 mm/s (1 - exp(-h /

@@ -2588,6 +2588,18 @@ def linearize_step(ev: np.ndarray, nev: int, V: float, start: np.ndarray, target
             slope = total_rate / count if count > 0 else math.nan
             a_before = (F_seg - c * Ve) / m
             side = 1.0 if a_before - slope > 0.0 else -1.0
+            if s == 0.0:
+                # Contacts the body starts on (no force in the start's sum: sign 0) it leaves
+                # at once: before the crossing they push as from behind the body (the
+                # one-sided limit, + f side), after it they are behind it.
+                f_on = 0.0
+                for i in range(n):
+                    if at[i] and start[i] - V == 0.0:
+                        f_on += f[i]
+                        sgn[i] = -side
+                if f_on > 0.0:
+                    F_seg += f_on * side
+                    a_before = (F_seg - c * Ve) / m
             F_seg -= 2.0 * f_at * side
             a_after = (F_seg - c * Ve) / m
             factor = (a_after - slope) / (a_before - slope)
@@ -2632,7 +2644,7 @@ def linearize_step(ev: np.ndarray, nev: int, V: float, start: np.ndarray, target
         elif kind == RELEASE:
             arrival, stuck = math.nan, False
             touched = stuck_stretch(f, group, tmp, order, touched, gx, gv, stick_at, s, lagging, tau)
-            f_group, count = gathered_sum(f, group, tmp)
+            f_group, _ = gathered_sum(f, group, tmp)
             # The force just after: the contact law off the group; the group pulls ahead when
             # the body, pulled by it, still lags its acceleration, else behind; other contacts
             # at this speed count from the side they arrive from.
@@ -2671,7 +2683,8 @@ def stuck_stretch(f: np.ndarray, group: np.ndarray, scratch: np.ndarray, order: 
     """What a stretch stuck on the contacts ``group`` from ``t0`` to ``t1`` (s) leaves of their
     speed errors in ``X`` and ``V`` (:func:`linearize_step`): each member's share of the
     group's force times the error's integral and end value (``exp(-t / tau)`` along lagging
-    motors, 1 held); returns the count of contacts in ``order``."""
+    motors, 1 held); ``scratch`` (n,) for the group's sum; returns the count of contacts in
+    ``order``."""
     f_group, _ = gathered_sum(f, group, scratch)
     w1 = math.exp(-t1 / tau) if lagging else 1.0
     for i in range(f.size):

@@ -86,6 +86,7 @@ __all__ = ["EstimatorModel", "contact_speed_estimates", "ContactSpeedTracker"]
 #: The kernels' event codes by :class:`~toolkit.simulation.Event` kind.
 _KIND_CODES = {"cross": _core.CROSS, "stick": _core.STICK, "release": _core.RELEASE}
 
+
 class Period(NamedTuple):
     """One sample period of the exact flow as the estimators linearize it."""
 
@@ -99,7 +100,7 @@ class Period(NamedTuple):
     events: np.ndarray
 
 
-#: Relative margin (of ``max(1, |V|)``, m/s) by which a body must fall short of the next
+#: Relative margin (of ``max(1, |V|, |dV|)``, m/s) by which a body must fall short of the next
 #: contact speed for the between-contacts shortcut: far above the rounding of ``F h / m`` and
 #: of the speeds' differences (1e-16 relative), far below any speed the filter resolves.
 QUIET_MARGIN = 1e-12
@@ -437,8 +438,10 @@ class EstimatorModel:
         less far, by more than the rounding :data:`QUIET_MARGIN`): ``dV = F h / m`` with ``F``
         the region's constant force (as the whole-friction shortcut, for any region), to
         rounding what the exact flow gives (no event: the flow's slopes and gains are the
-        free body's). None otherwise (the flow decides)."""
+        free body's). None otherwise (the flow decides), and where a speed lies beyond the
+        speed limits (the flow clips it; an estimate of a motor at its limit may overshoot)."""
         below, above = -math.inf, math.inf
+        low, high = self.speed_limits
         for v in speeds.tolist():
             if v < V:
                 below = max(below, v)
@@ -446,8 +449,10 @@ class EstimatorModel:
                 above = min(above, v)
             else:
                 return None                          # on a contact speed: stick or pass
+            if not low <= v <= high:
+                return None
         dV = (float(contact_forces(speeds - V, self.forces).sum()) + force) * self.sensors.period / self.mass
-        margin = QUIET_MARGIN * max(1.0, abs(V))
+        margin = QUIET_MARGIN * max(1.0, abs(V), abs(dV))
         ok = above - V > dV + margin if dV >= 0.0 else V - below > margin - dV
         return dV if ok else None
 

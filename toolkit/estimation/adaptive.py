@@ -345,7 +345,7 @@ class AdaptiveKalman(Estimator):
         lag = self.lag
         gap = np.abs(self._built_e - e).max(axis=1)
         i = int(gap.argmin())
-        if gap[i] > self.REBUILD:
+        if not gap[i] <= self.REBUILD:                 # (NaN: built, and refused by name)
             i = self._oldest
             self._oldest = (i + 1) % self.MODELS
             m = self.model

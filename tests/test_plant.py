@@ -93,29 +93,6 @@ def test_plant_refuses_bad_input():
         Plant(cs, 1.0, commands=[[0, 1]])
 
 
-def test_with_contacts_is_the_plant_built_anew_and_checks_the_scales():
-    # Plant.with_contacts (an adaptive filter's rebuilt plant) against the constructor: every
-    # field equal (the same objects for what it shares), the flow the same to the bit; the
-    # scales it depends on are checked again, and a set of another size is refused.
-    from toolkit.simulation import ExactState, advance
-
-    motors = Motors(lag=0.02, speed_limits=(-1.0, 1.0))
-    plant = Plant(ContactSet([0.0, 0.0, 0.0], [1.0, 2.0, 0.5]), 1.3, damping=0.7, motors=motors)
-    contacts = ContactSet([0.0, 0.0, 0.0], [0.9, 2.4, 0.3])
-    moved, built = plant.with_contacts(contacts), Plant(contacts, 1.3, damping=0.7, motors=motors)
-    assert moved.contacts is contacts and plant.contacts is not contacts
-    for name in ("mass", "damping", "external_force", "motors", "commands", "_limits"):
-        assert getattr(moved, name) == getattr(built, name), name
-    state = ExactState(0.0, 0.05, np.array([0.1, -0.2, 0.3]))
-    a = advance(moved, state, np.array([0.2, -0.1, 0.0]), 0.02)
-    b = advance(built, state, np.array([0.2, -0.1, 0.0]), 0.02)
-    assert a.state.V == b.state.V and a.body_displacement == b.body_displacement
-    with pytest.raises(ParameterError, match="mass"):
-        Plant(ContactSet([0.0], [1.0]), 1e-300).with_contacts(ContactSet([0.0], [1e300]))
-    with pytest.raises(ParameterTypeError, match="contacts"):
-        plant.with_contacts(ContactSet([0.0, 0.0], [1.0, 1.0]))
-
-
 def test_command_clipping_and_schedule():
     cs = ContactSet([-0.5, 0.1, 0.5])
     plant = Plant(cs, 1.0, motors=Motors(speed_limits=(-0.35, 0.35)),

@@ -2521,8 +2521,8 @@ def linearize_step(ev: np.ndarray, nev: int, V: float, start: np.ndarray, target
         gx[i] = 0.0
         gv[i] = 0.0
         group[i] = False
-        tmp[i] = f[i] * sign(start[i] - V)
         sgn[i] = sign(start[i] - V)
+        tmp[i] = f[i] * sgn[i]
         average[i] = 0.0
     touched = 0                              # contacts with a gain, in the order they got one
     F_seg = pairwise_sum(tmp, 0, n) + E
@@ -2609,19 +2609,15 @@ def linearize_step(ev: np.ndarray, nev: int, V: float, start: np.ndarray, target
                 gv[order[j]] *= factor
             # The crossed contacts' common error, split by force (a group at one speed).
             share = (1.0 - factor) * (math.exp(-s / tau) if lagging else 1.0)
-            members = 0
-            for i in range(n):
-                if at[i]:
-                    members += 1
             for i in range(n):
                 if at[i]:
                     if not contains(order, touched, i):
                         order[touched] = i
                         touched += 1
-                    if members == 1:
+                    if count == 1:
                         gv[i] += share
                     else:
-                        gv[i] += share * (f[i] / f_at if f_at > 0 else 1.0 / members)
+                        gv[i] += share * (f[i] / f_at if f_at > 0 else 1.0 / count)
         elif kind == STICK:
             # From here V is the contact's speed: it errs as the contact's estimate does.
             J = 0.0

@@ -88,7 +88,6 @@ def _behind(poly: np.ndarray, n: int, tau: float, lo: float, q: float, direction
     return bool(kernels("lines", n).behind(poly, n, tau, lo, q, direction, REPAIR_GAP))
 
 
-
 class WheelLines:
     """Each wheel's polygon of lines since its window started.
 

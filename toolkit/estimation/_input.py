@@ -153,7 +153,6 @@ class EstimatorModel:
     _reach: float = field(init=False, repr=False)
     _follow: float = field(init=False, repr=False)
     _plants: tuple | None = field(init=False, repr=False)
-    _template: tuple = field(init=False, repr=False)
     _friction_noise: np.ndarray = field(init=False, repr=False)
     _between: Any = field(init=False, repr=False)
     _read_noise: float = field(init=False, repr=False)
@@ -230,21 +229,14 @@ class EstimatorModel:
         object.__setattr__(self, "_follow", 2.0 * smallest * h / self.mass if smallest < math.inf else 0.0)
         # The plant whose exact flow is the known input: held contacts (ideal motors take
         # the command at once) and, with a lag, the same contacts behind lagging motors;
-        # both clip commands to the speed limits. An adjusted model builds them at its first
-        # flow (:meth:`_plant`): most of an adaptive filter's periods take a shortcut.
+        # both clip commands to the speed limits. Built at the first flow (:meth:`_plant`):
+        # held periods run the engine without them (:meth:`period`).
         same_lag = previous is not None and previous.motor_lag == self.motor_lag
         motors = previous._motors if same_lag else Motors(lag=self.motor_lag, speed_limits=self.speed_limits)
         object.__setattr__(self, "speed_limits", motors.speed_limits)
         object.__setattr__(self, "_motors", motors)
-        if previous is None:
-            # Built now; adjusted models copy them (Plant.with_contacts).
-            plants = template = self._plant_pair(None)
-        else:
-            template = previous._template
-            same = same_lag and previous._plants is not None and bool((previous.forces == forces).all())
-            plants = previous._plants if same else None                 # (one length: n)
-        object.__setattr__(self, "_template", template)
-        object.__setattr__(self, "_plants", plants)
+        same = same_lag and previous._plants is not None and bool((previous.forces == forces).all())
+        object.__setattr__(self, "_plants", previous._plants if same else None)   # (one length: n)
         # The friction spread's force error, held over the period: (sigma_F / m)^2 g g^T with
         # g = (h^2 / 2, h).
         if previous is None or previous._friction_var != self._friction_var:
@@ -261,27 +253,17 @@ class EstimatorModel:
         held.setflags(write=False)
         object.__setattr__(self, "_held_noise", held)
 
-    def _plant_pair(self, template: tuple | None) -> tuple:
-        """The held and the lagging plant at this model's magnitudes, from ``template`` (the
-        plants of a model of the same mass, drag and speed limits) or from scratch."""
-        contacts = ContactSet(np.zeros(self.n), self.forces)
-        motors = self._motors
-        if template is None:
-            held = Plant(contacts, self.mass, damping=self.damping,
-                         motors=Motors(lag=0.0, speed_limits=motors.speed_limits))
-        else:
-            held = template[0].with_contacts(contacts)
-        if self.motor_lag <= 0:
-            return held, held
-        if template is not None and template[1] is not template[0] and template[1].motors == motors:
-            return held, template[1].with_contacts(contacts)
-        return held, Plant(contacts, self.mass, damping=self.damping, motors=motors)
-
     def _plant(self, held: bool) -> Plant:
-        """The plant of :meth:`flow`: held contacts, or contacts behind the lagging motors."""
+        """The plant of :meth:`flow`: held contacts, or contacts behind the lagging motors
+        (built at the first flow)."""
         plants = self._plants
         if plants is None:
-            plants = self._plant_pair(self._template)
+            contacts = ContactSet(np.zeros(self.n), self.forces)
+            motors = self._motors
+            ideal = Plant(contacts, self.mass, damping=self.damping,
+                          motors=Motors(lag=0.0, speed_limits=motors.speed_limits))
+            plants = (ideal, Plant(contacts, self.mass, damping=self.damping, motors=motors)
+                      if self.motor_lag > 0 else ideal)
             object.__setattr__(self, "_plants", plants)
         return plants[0 if held else 1]
 

@@ -872,7 +872,6 @@ class AdaptiveKalman(Estimator):
             var = np.full(self.n, tracker.white_variance)
             self._bank.start(wheels, initial, var)
             self._large = np.zeros(self.n, dtype=bool)
-            self._any_large = False
             speeds = initial
         else:
             banked, var_b = self._bank.push(wheels, self._held, self.lag, tracker.reading_variance)
@@ -883,12 +882,10 @@ class AdaptiveKalman(Estimator):
             if tracker.changed and self._lag_id.lag is None and self._lag_range[0] != self._lag_range[1]:
                 held = self._held
                 self._large |= (np.abs(u - held) > self.LARGE_STEP) | (np.sign(u) != np.sign(held))
-                self._any_large = bool(self._large.any())
-            if self._any_large:
+            if self._large.any():
                 back = self._large & steady & (tracker.window_length >= 5)
                 self._bank.restart(back, wheels, speeds, tracker.contact_variance)
                 self._large &= ~back
-                self._any_large = bool(self._large.any())
                 var = np.where(self._large, tracker.contact_variance, var_b)
                 speeds = np.where(self._large | back, speeds, banked)
             else:

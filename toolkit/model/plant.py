@@ -144,19 +144,6 @@ class Plant:
                         f"(n = {self.n}, max|v| = {scale:g} m/s, k = {k:g} (m/s)/N); use lag=0 "
                         f"for instantaneous motors", lag))
 
-    def with_contacts(self, contacts: ContactSet) -> Plant:
-        """The same plant on other contacts (a :class:`ContactSet` of the same count), as
-        constructing it anew: only the scales, which depend on them, are checked again (an
-        adaptive estimator rebuilds its plant at its estimated magnitudes every few samples)."""
-        if not isinstance(contacts, ContactSet) or contacts.n != self.n:
-            raise ParameterTypeError(parameter_message(
-                "contacts", "Plant.with_contacts", f"be a ContactSet of {self.n} contacts", contacts))
-        new = object.__new__(Plant)
-        new.__dict__.update(self.__dict__)
-        object.__setattr__(new, "contacts", contacts)
-        new._check_scales()
-        return new
-
     # -- properties ---------------------------------------------------------------------------
     @property
     def n(self) -> int:

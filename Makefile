@@ -1,5 +1,5 @@
 # Two commands set everything up on a fresh machine with python3 and make:
-#   make demo   creates .venv, installs the toolkit, runs designs/carousel.toml
+#   make demo   creates .venv, installs the toolkit, compiles its kernels, runs designs/carousel.toml
 #   make test   creates or updates .venv, runs the whole test suite
 #   make test-min  creates or updates .venv-min with the tested minimum versions
 #                  (constraints/minimum.txt = the lower bounds in pyproject.toml), runs the suite
@@ -21,7 +21,10 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
+# The kernels are compiled once, here, with a progress bar (active-contacts warm); every
+# design's first run then starts warm.
 demo: $(STAMP)
+	$(BIN)/active-contacts warm
 	$(BIN)/active-contacts run designs/carousel.toml --out out/carousel
 
 # The kernel tests run twice: compiled (as every test), and as plain Python under numba's

@@ -24,9 +24,22 @@ import pytest  # noqa: E402
 os.environ.setdefault("ACTIVE_CONTACTS_COMPILE", "eager")
 
 
+_KERNELS: dict[str, float] = {}
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _compiled_kernels():
-    """Compile (or load from numba's cache) the kernels once, before any test times a call."""
+    """Compile (or load from numba's cache) the kernels once, before the first test; the
+    suite's summary says what that cost (:func:`pytest_terminal_summary`)."""
+    from toolkit import _compiled
     from toolkit.simulation._warmup import warm_up
 
-    warm_up()
+    _KERNELS["wall"] = warm_up()
+    _KERNELS["compiling"] = _compiled.compile_seconds()
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _KERNELS:
+        terminalreporter.write_line(
+            f"kernels: compiled or loaded from numba's cache once, in {_KERNELS['wall']:.1f} s "
+            f"({_KERNELS['compiling']:.1f} s of it compiling) before the first test")

@@ -4,7 +4,6 @@ and refusals (toolkit/allocation/__init__.py, _problem.py, _evaluate.py, _quanti
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -185,22 +184,14 @@ def test_quantile_agrees_with_the_milp_on_equal_magnitudes() -> None:
     assert milp.bound == pytest.approx(quant.bound, rel=0, abs=1e-7)
 
 
-def test_quantile_timing_targets() -> None:
-    # Issue 4: < 1 ms for N = 10 and < 100 ms for N = 1e5 (best of a few runs; the
-    # benchmark `python -m toolkit.bench allocate` prints the ratios to a baseline).
-    for n, limit in ((10, 1e-3), (100_000, 0.1)):
+def test_quantile_viscosity_error_at_two_sizes() -> None:
+    # The quantile method's error on a viscosity over N equal contacts is one contact's force
+    # (the staircase's step), at N = 10 and 1e5 (its speed: python -m toolkit.bench allocate).
+    for n in (10, 100_000):
         contacts = ContactSet(np.zeros(n))
         target = Viscosity(n / V_MAX, 0.0, V_MAX)
-        best = np.inf
-        for _ in range(5):
-            start = time.perf_counter()
-            result = allocate(target, contacts, method="quantile")
-            best = min(best, time.perf_counter() - start)
+        result = allocate(target, contacts, method="quantile")
         assert result.error_sup == pytest.approx(1.0, rel=1e-9, abs=0)
-        # 5x slack: the tests run on a shared 2-core CI machine next to other jobs, where a
-        # best-of-5 can be several times the quiet figure. The target itself is checked
-        # (no slack) by `python -m toolkit.bench allocate`, which exits 1 when missed.
-        assert best < limit * 5, f"N={n}: {best:.4g} s"
 
 
 # -- the paper's configurations ----------------------------------------------------------------

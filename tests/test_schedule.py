@@ -553,3 +553,26 @@ def test_huge_horizons_are_refused_before_allocating():
     # Just above the cap (100100 periods) is refused too; the check precedes any work.
     with pytest.raises(ParameterError, match="controller periods"):
         design_schedule(plant, Braking(0.0), horizon=100_000 * PERIOD * 1.001)
+
+
+def test_a_schedule_whose_exact_check_a_budget_stopped_is_a_shortfall_never_a_pass():
+    # The design verifies the brake schedule (status VERIFIED or OPTIMAL); its exact check
+    # stopped by a wall-clock guard (1e-9 s: it fires at the first look at the clock) leaves
+    # the schedule unchecked: a shortfall, whatever the design said.
+    from dataclasses import replace
+
+    from toolkit.scenes.build import build_scene
+    from toolkit.scenes.designs import load_design
+    from toolkit.scenes.study import design_scene_schedule, schedule_shortfalls
+    from toolkit.simulation import Budget, SimulationStatus
+
+    objects = build_scene(load_design("brake_schedule"))
+    result, check = design_scene_schedule(objects)
+    assert check.success and result.success
+    assert schedule_shortfalls(objects, result, check) == []
+    plant = replace(objects.plant_on(None), commands=result.as_commands())
+    stopped = simulate(plant, float(result.times[-1]), v0=objects.scene.schedule.v0, t_eval=result.times,
+                       budget=Budget(wall_time=1e-9))
+    assert stopped.status is SimulationStatus.WALL_TIME
+    found = schedule_shortfalls(objects, result, stopped)
+    assert [s.stage for s in found] == ["schedule"] and found[0].what.startswith("unchecked"), found

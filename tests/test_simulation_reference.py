@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
@@ -233,14 +232,13 @@ def test_piecewise_external_force(method: str) -> None:
 
 # -- budgets ------------------------------------------------------------------------------------
 def test_sign_rk45_returns_budget_status_instead_of_hanging(rng: np.random.Generator) -> None:
-    # RK45 on sign() chatters around the median of 11 contacts: it must stop at its budget.
+    # RK45 on sign() chatters around the median of 11 contacts: it must stop at its step
+    # budget (deterministic; the wall clock is only a guard that never decides here).
     plant = _random_plant(rng)
-    start = time.perf_counter()
-    result = simulate(plant, 5.0, method="rk45", friction="sign", budget=Budget(wall_time=0.5))
-    elapsed = time.perf_counter() - start
-    assert result.status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS)
+    result = simulate(plant, 5.0, method="rk45", friction="sign",
+                      budget=Budget(wall_time=600.0, max_steps=20_000))
+    assert result.status is SimulationStatus.MAX_STEPS, result.message
     assert result.t_final < 5.0
-    assert elapsed < 0.5 + 0.5                           # budget + one step + result assembly
     assert np.all(np.isfinite(result.V))
     assert result.message.startswith(result.status.value)
 
@@ -353,12 +351,12 @@ def test_overflowing_plant_fails_with_a_status(method: str, options: dict) -> No
     # overflows a double (max ~1.8e308) during the run. Every method must stop with FAILED
     # (not raise, not run on until the wall-clock budget: LSODA used to).
     plant = Plant(ContactSet([0.1]), mass=1e-8, external_force=1e300)
-    result = simulate(plant, 2.0, method=method, budget=Budget(wall_time=1.0), **options)
+    result = simulate(plant, 2.0, method=method, budget=Budget(wall_time=600.0, max_steps=100_000),
+                      **options)
     if method == "lsoda":
         # LSODA shrinks its step until t + h == t and never reaches the overflow: it stalls,
-        # and the budget stops it with its own status, within the budget.
-        assert result.status in (SimulationStatus.FAILED, SimulationStatus.WALL_TIME), result.message
-        assert result.wall_time <= 1.0 + 0.5
+        # and the step budget stops it with its own status (the wall clock is only a guard).
+        assert result.status in (SimulationStatus.FAILED, SimulationStatus.MAX_STEPS), result.message
     else:
         assert result.status is SimulationStatus.FAILED, result.message
         assert result.message.startswith(result.status.value)

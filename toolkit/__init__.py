@@ -7,57 +7,65 @@ that need them.
 
 from __future__ import annotations
 
-from .allocation import (
-    AllocationResult,
-    AllocationStatus,
-    EquilibriumSpeed,
-    ForceCurve,
-    FrictionFraction,
-    Projection,
-    Viscosity,
-    allocate,
-    evaluate_errors,
-)
-from .model import ContactDistribution, ContactModel, ContactSet, Encoder, Motors, PiecewiseConstant, Plant, Staircase
-from .errors import (
-    OutputError,
-    ParameterError,
-    ParameterTypeError,
-    SceneError,
-    SceneFileNotFoundError,
-    SolverError,
-    ToolkitError,
-)
-from .plots import (plot_force_curve, plot_mean_median, plot_median_law, plot_outliers, plot_precision,
-                    plot_ratio_histogram, plot_schedule, plot_simulation, plot_summary_comparison, plot_sweep,
-                    plot_viscosity_check, plot_friction_fraction_check)
-from .scenes.spec import MAX_SCENE_BYTES, Scene, dumps_scene, load_scene
-from .scenes.build import Clip, SceneObjects, build_scene
-from .scenes.designs import copy_designs, design_names, load_design
-from .schedule import Braking, ScheduleResult, ScheduleStatus, SpeedTrajectory, braking_time, design_schedule
-from .model.carousel import CAROUSEL, CarouselHardware, carousel_startup_plant
-from .model.parameters import PARAMETERS, Origin, Parameter, parameter
-from .analysis.precision import PrecisionReport, PrecisionRow, precision_report
-from .loop.closed_loop import ClosedLoopResult, simulate_closed_loop
-from .controllers import ForceDrive, FrictionBrake, OpenLoop, SpeedHold, VirtualViscosity
-from .simulation import (BatchResult, Budget, Event, ExactState, ExactStep, SimulationResult,
-                         SimulationStatus, advance, simulate, simulate_batch)
-from .analysis.stability import StabilityCase, StabilityReport, stability_suite
-from .shortfall import Shortfall
-from .scenes.study import CurveSamples, CurveStep, StudyResult, force_curve, run_study
-from . import sweeps
-from .sweeps import SweepResult, sweep
-from .experiments import MeanMedian, MedianLaw, Outliers, ResidualFriction
+import importlib
+from typing import Any
 
-# sensors and estimation (filterpy is imported only where a filter is built)
-from .model.sensors import EncoderRecord, EncoderSample, Sensors, measure, record_simulation
-from .estimation import (CentralDifference, EstimationResult, Estimator, EstimatorModel, KalmanEstimator,
-                         RTSSmoother, UnscentedEstimator, WheelDifference, chi2_band, AdaptiveKalman, AdaptiveWindow,
-                         AlphaBetaTracker, ModelPrior, NominalKalman, build_estimator)
-from .analysis.scenarios import BrakeScenario, carousel_brake_scenario
-from .analysis.robustness import ROBUSTNESS_CASES, loop_robustness, robustness_table
-from .model.truth import TrueWorld, WorldTruth, realize
-from .model.record_io import read_record_csv, write_record_csv
+#: The public API: each name and the module it comes from, imported at its first use, so
+#: that ``import toolkit`` (and the command line's start) loads only what is used.
+_EXPORTS: dict[str, str] = {
+    "AllocationResult": ".allocation", "AllocationStatus": ".allocation", "EquilibriumSpeed": ".allocation",
+    "ForceCurve": ".allocation", "FrictionFraction": ".allocation", "Projection": ".allocation",
+    "Viscosity": ".allocation", "allocate": ".allocation", "evaluate_errors": ".allocation",
+    "ContactDistribution": ".model", "ContactModel": ".model", "ContactSet": ".model", "Encoder": ".model",
+    "Motors": ".model", "PiecewiseConstant": ".model", "Plant": ".model", "Staircase": ".model",
+    "OutputError": ".errors", "ParameterError": ".errors", "ParameterTypeError": ".errors",
+    "SceneError": ".errors", "SceneFileNotFoundError": ".errors", "SolverError": ".errors",
+    "ToolkitError": ".errors",
+    "plot_force_curve": ".plots", "plot_mean_median": ".plots", "plot_median_law": ".plots",
+    "plot_outliers": ".plots", "plot_precision": ".plots", "plot_ratio_histogram": ".plots",
+    "plot_schedule": ".plots", "plot_simulation": ".plots", "plot_summary_comparison": ".plots",
+    "plot_sweep": ".plots", "plot_viscosity_check": ".plots", "plot_friction_fraction_check": ".plots",
+    "MAX_SCENE_BYTES": ".scenes.spec", "Scene": ".scenes.spec", "dumps_scene": ".scenes.spec",
+    "load_scene": ".scenes.spec",
+    "Clip": ".scenes.build", "SceneObjects": ".scenes.build", "build_scene": ".scenes.build",
+    "copy_designs": ".scenes.designs", "design_names": ".scenes.designs", "load_design": ".scenes.designs",
+    "Braking": ".schedule", "ScheduleResult": ".schedule", "ScheduleStatus": ".schedule",
+    "SpeedTrajectory": ".schedule", "braking_time": ".schedule", "design_schedule": ".schedule",
+    "CAROUSEL": ".model.carousel", "CarouselHardware": ".model.carousel",
+    "carousel_startup_plant": ".model.carousel",
+    "PARAMETERS": ".model.parameters", "Origin": ".model.parameters", "Parameter": ".model.parameters",
+    "parameter": ".model.parameters",
+    "PrecisionReport": ".analysis.precision", "PrecisionRow": ".analysis.precision",
+    "precision_report": ".analysis.precision",
+    "ClosedLoopResult": ".loop.closed_loop", "simulate_closed_loop": ".loop.closed_loop",
+    "ForceDrive": ".controllers", "FrictionBrake": ".controllers", "OpenLoop": ".controllers",
+    "SpeedHold": ".controllers", "VirtualViscosity": ".controllers",
+    "BatchResult": ".simulation", "Budget": ".simulation", "Event": ".simulation",
+    "ExactState": ".simulation", "ExactStep": ".simulation", "SimulationResult": ".simulation",
+    "SimulationStatus": ".simulation", "advance": ".simulation", "simulate": ".simulation",
+    "simulate_batch": ".simulation",
+    "StabilityCase": ".analysis.stability", "StabilityReport": ".analysis.stability",
+    "stability_suite": ".analysis.stability",
+    "Shortfall": ".shortfall",
+    "CurveSamples": ".scenes.study", "CurveStep": ".scenes.study", "StudyResult": ".scenes.study",
+    "force_curve": ".scenes.study", "run_study": ".scenes.study",
+    "SweepResult": ".sweeps", "sweep": ".sweeps",
+    "MeanMedian": ".experiments", "MedianLaw": ".experiments", "Outliers": ".experiments",
+    "ResidualFriction": ".experiments",
+    "EncoderRecord": ".model.sensors", "EncoderSample": ".model.sensors", "Sensors": ".model.sensors",
+    "measure": ".model.sensors", "record_simulation": ".model.sensors",
+    "CentralDifference": ".estimation", "EstimationResult": ".estimation", "Estimator": ".estimation",
+    "EstimatorModel": ".estimation", "KalmanEstimator": ".estimation", "RTSSmoother": ".estimation",
+    "UnscentedEstimator": ".estimation", "WheelDifference": ".estimation", "chi2_band": ".estimation",
+    "AdaptiveKalman": ".estimation", "AdaptiveWindow": ".estimation", "AlphaBetaTracker": ".estimation",
+    "ModelPrior": ".estimation", "NominalKalman": ".estimation", "build_estimator": ".estimation",
+    "BrakeScenario": ".analysis.scenarios", "carousel_brake_scenario": ".analysis.scenarios",
+    "ROBUSTNESS_CASES": ".analysis.robustness", "loop_robustness": ".analysis.robustness",
+    "robustness_table": ".analysis.robustness",
+    "TrueWorld": ".model.truth", "WorldTruth": ".model.truth", "realize": ".model.truth",
+    "read_record_csv": ".model.record_io", "write_record_csv": ".model.record_io",
+}
+_SUBMODULES = ("sweeps",)
 
 __version__ = "0.1.0"
 
@@ -104,3 +112,19 @@ __all__ = [
     "OutputError", "ToolkitError",
     "__version__",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name (or the ``sweeps`` module) at its first use (PEP 562)."""
+    if name in _SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -10,8 +10,9 @@ code is in :data:`EXIT_CODES` (also shown by ``--help``):
    nothing written;
 3. the run finished but missed the request (a simulation stopped before ``t_end``, a
    projected or unreachable allocation target, speeds clipped to the motor limits, an
-   unreachable or unverified schedule): the outputs are written and one line on stderr
-   says what was missed and by how much (``StudyResult.shortfalls``);
+   unreachable, unverified or unchecked schedule, a budget's wall-clock guard that fired,
+   a stability case that guard left unjudged): the outputs are written and one line on
+   stderr says what was missed and by how much (``StudyResult.shortfalls``);
 130. interrupted.
 
 ``--json`` prints machine-readable output on stdout. Outputs are all or nothing: the output
@@ -21,27 +22,20 @@ folder is checked before any work and replaced as a whole at the end.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
 import signal
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import __version__
-from .analysis.precision import exact_speedup, precision_report, precision_shortfalls
-from .analysis.stability import stability_suite
-from .errors import SceneError, ToolkitError
-from .scenes._io import claim_output_dir
-from .scenes.build import SceneObjects, build_scene, planar_scene_error, sweep_scene_error
-from .scenes.limits import FLAGS, LIMITS
-from .scenes.report import (compile_line, schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
-                            study_to_dict, sweep_lines, sweep_to_dict, to_json, write_planar,
-                            write_planar_precision, write_precision, write_schedule, write_study, write_sweep)
-from .scenes.spec import Scene, load_scene
-from .scenes.study import (allocate_scene, check_sweep_table, allocation_shortfalls, design_scene_schedule, force_curve,
-                           planar_precision, planar_scene, request_shortfalls, run_study, schedule_shortfalls,
-                           sweep_scene, sweep_shortfalls)
-from .shortfall import Shortfall
+
+if TYPE_CHECKING:
+    from .scenes.build import SceneObjects
+    from .scenes.spec import Scene
+    from .shortfall import Shortfall
 
 __all__ = ["main", "EXIT_CODES"]
 
@@ -54,19 +48,23 @@ EXIT_CODES = {
     EXIT_USAGE: "user error (bad arguments or scene, unreadable scene file, unwritable output; "
                 "with --strict, a request known to fall short): one line on stderr, nothing written",
     EXIT_SHORTFALL: "finished but missed the request (simulation stopped early, target projected or "
-                    "unreachable, speeds clipped to the limits, schedule unreachable or unverified): "
-                    "outputs written, one 'shortfall:' line on stderr",
+                    "unreachable, speeds clipped to the limits, schedule unreachable, unverified or "
+                    "unchecked, a wall-clock guard fired): outputs written, one 'shortfall:' line on stderr",
     EXIT_INTERRUPTED: "interrupted",
 }
 
 
 def _print_json(data: Any) -> None:
+    from .scenes.report import to_json
     sys.stdout.write(to_json(data))
 
 
 def _parsed(args: argparse.Namespace, section: str | None = None, purpose: str = "") -> Scene:
     """Load the SCENE argument (form only); refuse a sweep scene where the command needs
     contacts of its own, and, with ``section``, a scene that does not declare it."""
+    from .errors import SceneError
+    from .scenes.build import planar_scene_error, sweep_scene_error
+    from .scenes.spec import load_scene
     scene = load_scene(args.scene)
     if scene.sweep is not None and args.command not in ("run", "sweep"):
         raise sweep_scene_error(scene, args.command)
@@ -79,6 +77,7 @@ def _parsed(args: argparse.Namespace, section: str | None = None, purpose: str =
 
 def _scene(args: argparse.Namespace, section: str | None = None, purpose: str = "") -> SceneObjects:
     """:func:`_parsed`, then built: every value checked (exit 2 on a bad one)."""
+    from .scenes.build import build_scene
     return build_scene(_parsed(args, section, purpose))
 
 
@@ -90,6 +89,8 @@ def _out_dir(args: argparse.Namespace, scene: Scene) -> Path:
 def _known_shortfalls(objects: SceneObjects, args: argparse.Namespace,
                       stages: tuple[str, ...]) -> list[Shortfall]:
     """The shortfalls of ``stages`` known before any work; with ``--strict`` a refusal (exit 2)."""
+    from .errors import SceneError
+    from .scenes.study import request_shortfalls
     known = [s for s in request_shortfalls(objects) if s.stage in stages]
     if args.strict and known:
         raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
@@ -98,6 +99,7 @@ def _known_shortfalls(objects: SceneObjects, args: argparse.Namespace,
 
 def _finish(shortfalls: Sequence[Shortfall]) -> int:
     """Exit 0, or 3 with one line on stderr naming every shortfall."""
+    from .scenes.report import shortfall_line
     if not shortfalls:
         return EXIT_OK
     print(f"active-contacts: {shortfall_line(shortfalls)}", file=sys.stderr)
@@ -105,6 +107,9 @@ def _finish(shortfalls: Sequence[Shortfall]) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from .scenes._io import claim_output_dir
+    from .scenes.report import study_summary, study_to_dict, write_study
+    from .scenes.study import run_study
     objects = _scene(args)
     if objects.sweep is not None:          # a sweep scene's one stage
         args.runs = args.seed = args.scheduler = args.workers = None
@@ -125,6 +130,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run_planar(args: argparse.Namespace, objects: SceneObjects) -> int:
+    from .scenes._io import claim_output_dir
+    from .scenes.report import write_planar
+    from .scenes.study import planar_scene
     scene = objects.scene
     with claim_output_dir(_out_dir(args, scene)) as out:
         result = planar_scene(objects)
@@ -140,6 +148,7 @@ def _run_planar(args: argparse.Namespace, objects: SceneObjects) -> int:
 
 
 def _cmd_curve(args: argparse.Namespace) -> int:
+    from .scenes.study import force_curve
     curve = force_curve(_scene(args).contacts, args.points)
     if args.json:
         _print_json(curve.to_dict())
@@ -154,6 +163,8 @@ def _cmd_curve(args: argparse.Namespace) -> int:
 
 
 def _cmd_allocate(args: argparse.Namespace) -> int:
+    from .scenes.report import shortfall_dicts
+    from .scenes.study import allocate_scene, allocation_shortfalls
     objects = _scene(args, "target", "to allocate")
     known = _known_shortfalls(objects, args, ("scene", "allocation"))
     result = allocate_scene(objects, strict=args.strict)
@@ -171,6 +182,9 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
+    from .scenes._io import claim_output_dir
+    from .scenes.report import schedule_check, schedule_lines, shortfall_dicts, write_schedule
+    from .scenes.study import design_scene_schedule, schedule_shortfalls
     objects = _scene(args, "schedule", "to design")
     known = _known_shortfalls(objects, args, ("scene", "schedule"))
     with claim_output_dir(_out_dir(args, objects.scene)) as out:
@@ -189,6 +203,11 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
 
 
 def _cmd_precision(args: argparse.Namespace) -> int:
+    from .analysis.precision import exact_speedup, precision_report, precision_shortfalls
+    from .errors import SceneError
+    from .scenes._io import claim_output_dir
+    from .scenes.build import build_scene
+    from .scenes.report import compile_line, write_precision
     scene = _parsed(args)
     if scene.planar is not None:
         return _planar_precision(args, build_scene(scene))
@@ -222,6 +241,9 @@ def _cmd_precision(args: argparse.Namespace) -> int:
 
 def _planar_precision(args: argparse.Namespace, objects: SceneObjects) -> int:
     """``precision`` on a planar scene: its work-precision report against the exact run."""
+    from .scenes._io import claim_output_dir
+    from .scenes.report import write_planar_precision
+    from .scenes.study import planar_precision
     with claim_output_dir(args.out) as out:
         report = planar_precision(objects)
         written = write_planar_precision(report, out, title=objects.scene.name) if out is not None else []
@@ -243,6 +265,10 @@ def _planar_precision(args: argparse.Namespace, objects: SceneObjects) -> int:
 # -- estimate (issue 9): every estimator of the scene over one simulated encoder record -------
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
+    from .errors import SceneError
+    from .scenes._io import claim_output_dir
+    from .scenes.build import build_scene
+    from .scenes.report import shortfall_dicts
     from dataclasses import replace
 
     from .scenes._io import write_tree
@@ -292,6 +318,9 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .scenes._io import claim_output_dir
+    from .scenes.report import sweep_lines, sweep_to_dict, write_sweep
+    from .scenes.study import check_sweep_table, sweep_scene, sweep_shortfalls
     objects = _scene(args, "sweep", "to run")
     scene = objects.scene
     if args.out is not None:
@@ -337,28 +366,70 @@ def _cmd_designs(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_warm(args: argparse.Namespace) -> int:
+    """Run every shipped design once, outputs discarded, so that every kernel they use is
+    compiled and cached: after this, every design's first run starts warm."""
+    import io
+    import tempfile
+    import time
+
+    from tqdm import tqdm
+
+    from . import _compiled
+    from .scenes.designs import design_names, design_text
+
+    names = design_names()
+    started, compiled_before = time.perf_counter(), _compiled.compile_seconds()
+    with tempfile.TemporaryDirectory(prefix="active-contacts-warm-") as folder:
+        for name in tqdm(names, desc="warming", unit=" designs", file=sys.stderr, leave=False,
+                         disable=args.json or not sys.stderr.isatty()):
+            scene = Path(folder) / f"{name}.toml"
+            scene.write_text(design_text(name), encoding="utf-8")
+            run = argparse.Namespace(command="run", scene=str(scene), out=str(Path(folder) / "out" / name),
+                                     json=False, strict=False)
+            with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+                _cmd_run(run)            # (a design's own shortfalls do not matter here)
+    compile_time = _compiled.compile_seconds() - compiled_before
+    wall = time.perf_counter() - started
+    if args.json:
+        _print_json({"designs": list(names), "compile_time": compile_time, "wall_time": wall})
+    else:
+        print(f"{len(names)} shipped designs run once in {wall:.1f} s, {compile_time:.1f} s of it compiling "
+              "kernels: they are cached, and every design's first run starts warm")
+    return EXIT_OK
+
+
 def _flags(row: Any) -> str:
     names = [name for name in ("chattering", "step_collapse", "creep", "stalled") if getattr(row, name)]
     return f" [{', '.join(names)}]" if names else ""
 
 
 def _cmd_stability(args: argparse.Namespace) -> int:
+    from .analysis.stability import case_label, stability_suite
+    from .shortfall import Shortfall
     report = stability_suite(quick=args.quick)
     if args.json:
         _print_json(report.to_dict())
     else:
         print(f"{'case':34} {'method':8} {'finished':>8} {'finite':>6} {'events':>8} {'wall_time':>10}  ok")
         for case in report.cases:
+            verdict = case.ok if case.judged else "unjudged (wall-clock guard)"
             print(f"{case.name:34} {case.method:8} {case.finished!s:>8} {case.finite!s:>6} "
-                  f"{case.events:8d} {case.wall_time:10.2e}  {case.ok}")
-        print("all cases ok" if report.all_ok else "SOME CASES FAILED")
-    return EXIT_OK if report.all_ok else EXIT_FAILED
+                  f"{case.events:8d} {case.wall_time:10.2e}  {verdict}")
+        print("all cases ok" if report.all_ok else "SOME CASES FAILED" if report.failed
+              else "SOME CASES UNJUDGED")
+    if report.failed:
+        print("active-contacts: stability: failed: "
+              + "; ".join(f"{case_label(c)}: {c.message}" for c in report.failed), file=sys.stderr)
+        return EXIT_FAILED
+    return _finish([Shortfall("stability", f"unjudged: the wall-clock guard stopped {case_label(c)} "
+                              f"({c.message})", math.nan, "") for c in report.unjudged])
 
 
 # -- predict: the paper's viscosity and friction-fraction predictions checked in the loop ----
 def _cmd_predict(args: argparse.Namespace) -> int:
-    import math
-
+    from .scenes.report import compile_line
+    from .shortfall import Shortfall
     from .predictions import Apparatus, prediction_checks
 
     if args.scene is None:
@@ -402,6 +473,7 @@ def _seconds(value: float | None) -> str:
 def _bounded(name: str) -> Callable[[str], int]:
     """An integer flag with the bounds of its scene key (:data:`~toolkit.scenes.limits.LIMITS`)
     or of its own entry in :data:`~toolkit.scenes.limits.FLAGS`."""
+    from .scenes.limits import FLAGS, LIMITS
     limit = FLAGS.get(name) or next(lim for lim in LIMITS.values() if lim.flag == name)
 
     def convert(text: str) -> int:
@@ -438,6 +510,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _parser() -> argparse.ArgumentParser:
+    from .scenes.limits import LIMITS
     parser = _Parser(
         prog="active-contacts",
         description="Design, simulate and analyse friction created by active contacts.",
@@ -505,6 +578,8 @@ def _parser() -> argparse.ArgumentParser:
                       "--copy DIR writes them into DIR for editing", scene=False)
     designs.add_argument("--copy", metavar="DIR", help="write every shipped design into this folder "
                          "(created if needed; refused if a file of the same name is there)")
+    command("warm", _cmd_warm, "compile and cache every kernel the shipped designs use (each design "
+            "run once, outputs discarded), so that no later run waits for a compile", scene=False)
     stability = command("stability", _cmd_stability,
                         "stability suite over stiff and extreme cases (exit 1 if a case fails)", scene=False)
     stability.add_argument("--quick", action="store_true", help="the smaller, faster set of cases")
@@ -525,24 +600,71 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``active-contacts`` console script; returns the exit code."""
-    parser = _parser()
-    args = parser.parse_args(argv)
+    """Entry point of the ``active-contacts`` console script; returns the exit code.
+
+    Everything past the standard library is imported in here, under the same handlers as the
+    work: a Ctrl-C at any moment (while numpy loads, while workers start, while outputs are
+    written) ends with one line and exit 130, never a traceback."""
     previous = _terminate_as_interrupt()
     try:
-        return args.handler(args)
-    except ToolkitError as error:
-        print(f"active-contacts: error: {error}", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as error:  # found only while writing: a full disk, a folder removed meanwhile
-        print(f"active-contacts: error: cannot write the output: {error}", file=sys.stderr)
-        return EXIT_USAGE
+        args = _parser().parse_args(argv)
+        from .errors import ToolkitError
+
+        try:
+            with _compiles_announced():
+                return args.handler(args)
+        except ToolkitError as error:
+            print(f"active-contacts: error: {error}", file=sys.stderr)
+            return EXIT_USAGE
+        except OSError as error:  # found only while writing: a full disk, a folder removed meanwhile
+            print(f"active-contacts: error: cannot write the output: {error}", file=sys.stderr)
+            return EXIT_USAGE
     except KeyboardInterrupt:
         print("active-contacts: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+@contextlib.contextmanager
+def _compiles_announced() -> Iterator[None]:
+    """Say on stderr when kernels compile (a first run on an empty cache): one line before the
+    first compile, a progress bar over the kernels where stderr is a terminal, and the time
+    they took at the end of the command. Never on stdout; loading from the cache says nothing."""
+    from . import _compiled
+
+    state: dict[str, Any] = {"bar": None, "count": 0, "seconds": 0.0}
+    stream = sys.stderr              # (bound now: a command may redirect its own stderr)
+
+    def listener(event: str, kernel: str, seconds: float) -> None:
+        if event == "start":
+            if state["count"] == 0 and state["bar"] is None:
+                note = _compiled.cache_note()
+                print("active-contacts: compiling kernels (first run only: cached for the next runs"
+                      + (f"; {note}" if note else "") + ")", file=stream, flush=True)
+                if stream.isatty():
+                    from tqdm import tqdm
+
+                    state["bar"] = tqdm(desc="compiling", unit=" kernels", file=stream, leave=False)
+            if state["bar"] is not None:
+                state["bar"].set_postfix_str(kernel, refresh=True)
+            return
+        state["count"] += 1
+        state["seconds"] += seconds
+        if state["bar"] is not None:
+            state["bar"].update(1)
+
+    previous = _compiled.on_compile(listener)
+    try:
+        yield
+    finally:
+        _compiled.on_compile(previous)
+        if state["bar"] is not None:
+            state["bar"].close()
+        if state["count"]:
+            print(f"active-contacts: compiled {state['count']} kernels in {state['seconds']:.1f} s "
+                  "(not charged to any budget)", file=stream, flush=True)
 
 
 def _terminate_as_interrupt() -> Any:

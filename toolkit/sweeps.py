@@ -372,6 +372,24 @@ def _terminate_interrupts() -> Iterator[None]:
         signal.signal(signal.SIGTERM, before)
 
 
+@contextlib.contextmanager
+def _interrupts_held() -> Iterator[None]:
+    """While a worker starts: the new interpreter is born ignoring SIGINT (an ignored signal
+    stays ignored through exec), so a Ctrl-C reaching the whole process group never raises in
+    a worker, not even while it imports (the parent stops the workers); the parent holds the
+    signal back meanwhile (blocked, not lost) and receives it when the block ends."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, handler)
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+
+
 def _pool_worker(connection: Any) -> None:
     """A pool worker: chunks ``(j, experiment, seed, a, b)`` in, ``(j, columns, error)`` out,
     until ``None``. Ctrl-C in a terminal reaches every process of its group; the parent stops
@@ -404,6 +422,10 @@ def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers
     that dies on its own is reported, not waited for.
     """
     context = multiprocessing.get_context("spawn")
+    # multiprocessing's resource tracker unblocks SIGINT as it starts, which would drop one
+    # held back while a worker starts: it starts first, outside the hold.
+    from multiprocessing import resource_tracker
+    resource_tracker.ensure_running()
     tasks = iter(enumerate(bounds))
     pool: list[tuple[Any, Any]] = []
     busy: dict[Any, Any] = {}                          # connection -> its worker process
@@ -422,7 +444,8 @@ def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers
         for _ in range(workers):
             connection, child = context.Pipe()
             process = context.Process(target=_pool_worker, args=(child,), daemon=True)
-            process.start()
+            with _interrupts_held():
+                process.start()
             child.close()
             pool.append((process, connection))
             feed(process, connection)

@@ -64,8 +64,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["COMPILE_AFTER", "MODULES", "charge", "compiled", "ensure_compiled", "kernels",
-           "load", "loaded", "parallel", "threads", "warm"]
+__all__ = ["COMPILE_AFTER", "MODULES", "budget_clock", "charge", "compile_seconds", "compiled",
+           "cache_note", "ensure_compiled", "kernels", "load", "loaded", "on_compile", "parallel", "threads", "warm"]
 
 _LOADED: dict[str, Any] = {}          # name -> the compiled module (or its _Interpreted)
 
@@ -234,8 +234,76 @@ def loaded() -> tuple[str, ...]:
     return tuple(_LOADED)
 
 
+# -- compile time: counted, reported to a listener, never charged to a budget ---------------
+
+#: Compiles in this process: seconds of finished top-level compiles, nesting depth, start of
+#: the open one (``perf_counter``), kernels compiled, and the listener (:func:`on_compile`).
+_COMPILING: dict[str, Any] = {"seconds": 0.0, "depth": 0, "since": 0.0, "kernels": 0, "listener": None,
+                              "installed": False}
+
+
+def compile_seconds() -> float:
+    """Seconds this process has spent compiling kernels so far (numba's own compile events;
+    loading machine code from the cache is not compiling)."""
+    open_part = time.perf_counter() - _COMPILING["since"] if _COMPILING["depth"] else 0.0
+    return _COMPILING["seconds"] + open_part
+
+
+def budget_clock() -> float:
+    """The clock every wall-clock budget reads, s: ``time.perf_counter()`` less the time spent
+    compiling kernels, so that a one-time compile is never charged to any budget (it stands
+    still while one runs)."""
+    state = _COMPILING
+    return (state["since"] if state["depth"] else time.perf_counter()) - state["seconds"]
+
+
+def on_compile(listener: Callable[[str, str, float], None] | None) -> Callable[[str, str, float], None] | None:
+    """Call ``listener(event, kernel, seconds)`` around every top-level kernel compile of this
+    process: ``("start", name, 0.0)`` before numba compiles ``name``, ``("end", name,
+    seconds)`` after; None stops. Returns the previous listener. Loading machine code from the
+    cache calls nothing."""
+    previous = _COMPILING["listener"]
+    _COMPILING["listener"] = listener
+    return previous
+
+
+def _install_compile_events(numba: ModuleType) -> None:
+    """Listen to numba's ``numba:compile`` events (once per process): nested compiles (a kernel
+    compiling the kernels it calls) count once, in the outermost."""
+    if _COMPILING["installed"]:
+        return
+    from numba.core import event
+
+    class _Listener(event.Listener):          # numba's event API (numba.core.event)
+        def on_start(self, ev: Any) -> None:
+            if _COMPILING["depth"] == 0:
+                _COMPILING["since"] = time.perf_counter()
+                _tell("start", ev, 0.0)
+            _COMPILING["depth"] += 1
+
+        def on_end(self, ev: Any) -> None:
+            _COMPILING["depth"] -= 1
+            if _COMPILING["depth"] == 0:
+                seconds = time.perf_counter() - _COMPILING["since"]
+                _COMPILING["seconds"] += seconds
+                _COMPILING["kernels"] += 1
+                _tell("end", ev, seconds)
+
+    event.register("numba:compile", _Listener())
+    _COMPILING["installed"] = True
+
+
+def _tell(kind: str, ev: Any, seconds: float) -> None:
+    listener = _COMPILING["listener"]
+    if listener is not None:
+        function = getattr(ev.data.get("dispatcher"), "py_func", None)
+        listener(kind, getattr(function, "__name__", "kernel"), seconds)
+
+
 def _compile(module: ModuleType) -> None:
     import numba
+
+    _install_compile_events(numba)
 
     if hasattr(module, "prange"):
         module.prange = numba.prange                          # a parallel loop when compiled
@@ -243,6 +311,24 @@ def _compile(module: ModuleType) -> None:
         function = getattr(module, fname)
         try:
             compiled = numba.njit(cache=True, **options)(function)
+            _CACHE.setdefault(module.__name__, getattr(compiled._cache, "_cache_path", None))
         except RuntimeError:        # no writable cache directory anywhere: compile per process
             compiled = numba.njit(cache=False, **options)(function)
+            _CACHE.setdefault(module.__name__, None)
         setattr(module, fname, compiled)
+
+
+_CACHE: dict[str, str | None] = {}       # kernel module -> the folder numba caches it in
+
+
+def cache_note() -> str | None:
+    """Where the compiled kernels are cached when that is not beside their source (a read-only
+    install: numba's user-wide cache folder, or none at all), in words; None when beside it."""
+    here = os.path.join(os.path.dirname(__file__), "__pycache__")
+    folders = {path for path in _CACHE.values()}
+    if None in folders:
+        return "no cache folder is writable: every process compiles the kernels again"
+    elsewhere = sorted(path for path in folders if os.path.realpath(path) != os.path.realpath(here))
+    if not elsewhere or os.environ.get("NUMBA_CACHE_DIR"):
+        return None
+    return f"the package folder is not writable: kernels cached in {elsewhere[0]}"

@@ -3,15 +3,17 @@
 :func:`stability_suite` runs a fixed list of cases (odd and even N, coincident speeds,
 N = 1 and N = 1e5, masses from 1e-6 to 1e6 kg, speeds exactly at the motor limits, smoothing
 widths down to 1e-9, horizons up to 1e4 s, a contact speed oscillating around the body's
-speed, mirrored sign conventions), each under its own budget, and reports for each whether it
-finished, whether every value is finite, how many events it produced against a stated bound,
-and whether its final state is right (:class:`StabilityCase` says what "right" means).
+speed, mirrored sign conventions), each under its own step budget, and reports for each whether
+it finished, whether every value is finite, how many events it produced against a stated bound,
+and whether its final state is right (:class:`StabilityCase` says what "right" means). Verdicts
+come from step, event and sample budgets only: a wall-clock guard that fires leaves its case
+unjudged (never passed, never failed).
 
 The ``"horizon 1e9 s"`` cases (full suite only, not ``quick``) run every method (exact, moreau, rk45, lsoda, radau, bdf,
-casadi with CVODES and IDAS) to ``t_end = 1e9`` s under a 0.5 s wall-clock budget and a
-``max_samples`` memory cap: a method that can finish must end in the equilibrium set, one
-that cannot (a fixed step of 1 ms needs 1e12 steps; ``sign`` friction makes explicit solvers
-chatter) must return a budget status with a finite partial result, and either way the record
+casadi with CVODES and IDAS) to ``t_end = 1e9`` s under a step budget and a ``max_samples``
+memory cap: a method that can finish must end in the equilibrium set, one that cannot (a fixed
+step of 1 ms needs 1e12 steps; ``sign`` friction makes explicit solvers chatter) must return
+the step-budget status with a finite partial result, and either way the record
 must respect the memory cap (the subprocess test ``tests/test_memory_bounds.py`` runs the
 same horizon under a 1 GiB address-space limit).
 
@@ -29,7 +31,7 @@ import numpy as np
 from ..model import ContactSet, Motors, PiecewiseConstant, Plant
 from ..simulation import Budget, SimulationResult, SimulationStatus, simulate
 
-__all__ = ["StabilityCase", "StabilityReport", "stability_suite", "EXACT_TOLERANCE",
+__all__ = ["StabilityCase", "StabilityReport", "case_label", "stability_suite", "EXACT_TOLERANCE",
            "SMOOTH_TOLERANCE_FACTOR"]
 
 #: Tolerance (m/s) of the exact and Moreau methods: a few ulps of speeds of order 1.
@@ -59,9 +61,13 @@ class StabilityCase:
     wall_time : float, s
         Wall time of the call, measured around ``simulate``.
     budget : float, s
-        The case's wall-clock budget.
+        The case's wall-clock guard (compile time is not charged to it).
+    judged : bool
+        False when the wall-clock guard stopped the run: the case then has no verdict
+        (``ok`` is False, but the case did not fail), since a verdict never depends on the
+        machine's speed.
     ok : bool
-        ``finished and finite and events <= max_events`` and the check holds:
+        ``judged and finished and finite and events <= max_events`` and the check holds:
         ``"equilibrium"``: the final speed lies in the plant's equilibrium set
         ``[lo - tolerance, hi + tolerance]``; ``"mirror"``: the run on the mirrored plant
         (every speed, command, force and ``v0`` negated) gives ``-V`` at the same times
@@ -84,8 +90,8 @@ class StabilityCase:
     max_samples : int
         The case's ``Budget.max_samples``. A ``"horizon"`` check (the 1e9 s cases) is ok when
         the run is finite, keeps at most ``max_samples + 1`` samples, and either finished in
-        the equilibrium set or was stopped by its wall-clock or step budget
-        (``finished`` is then False: the budget stop is the expected outcome).
+        the equilibrium set or was stopped by its step budget (``finished`` is then False: the
+        budget stop is the expected outcome).
     """
 
     name: str
@@ -107,6 +113,12 @@ class StabilityCase:
     status: str
     samples: int = 0
     max_samples: int = Budget().max_samples
+    judged: bool = True
+
+    @property
+    def failed(self) -> bool:
+        """Judged and not ok."""
+        return self.judged and not self.ok
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dictionary (``name``, ``method``, ``finished``, ``finite``, ``events``,
@@ -120,7 +132,7 @@ class StabilityCase:
                 "expected": list(self.expected),
                 "deviation": self.deviation if np.isfinite(self.deviation) else None,
                 "message": self.message, "status": self.status, "samples": self.samples,
-                "max_samples": self.max_samples}
+                "max_samples": self.max_samples, "judged": self.judged, "failed": self.failed}
 
 
 @dataclass(frozen=True)
@@ -134,9 +146,27 @@ class StabilityReport:
         """True when every case is ``ok``."""
         return all(case.ok for case in self.cases)
 
+    @property
+    def failed(self) -> tuple[StabilityCase, ...]:
+        """The judged cases that are not ok."""
+        return tuple(case for case in self.cases if case.failed)
+
+    @property
+    def unjudged(self) -> tuple[StabilityCase, ...]:
+        """The cases a wall-clock guard stopped (no verdict)."""
+        return tuple(case for case in self.cases if not case.judged)
+
     def to_dict(self) -> dict[str, Any]:
-        """``{"all_ok": bool, "cases": [case.to_dict(), ...]}``, JSON-able."""
-        return {"all_ok": self.all_ok, "cases": [case.to_dict() for case in self.cases]}
+        """``{"all_ok": bool, "failed": [...], "unjudged": [...], "cases": [case.to_dict(),
+        ...]}`` (the failed and unjudged cases by ``"name (method)"``), JSON-able."""
+        return {"all_ok": self.all_ok, "failed": [case_label(c) for c in self.failed],
+                "unjudged": [case_label(c) for c in self.unjudged],
+                "cases": [case.to_dict() for case in self.cases]}
+
+
+def case_label(case: StabilityCase) -> str:
+    """``"name (method)"``: how a case is named in messages."""
+    return f"{case.name} ({case.method})"
 
 
 @dataclass(frozen=True)
@@ -147,7 +177,8 @@ class _Spec:
     method: str = "exact"
     v0: float = 0.0
     options: dict[str, Any] = field(default_factory=dict)
-    wall_time: float = 5.0
+    wall_time: float = 120.0        # a guard only: verdicts come from max_steps and the events
+    max_steps: int = Budget().max_steps
     check: str = "equilibrium"
     tolerance: float = EXACT_TOLERANCE
     switches: int = 0
@@ -202,8 +233,7 @@ def _specs(quick: bool) -> list[_Spec]:
         _Spec("N = 1", _equal([0.25], total=0.5), 5.0, v0=-0.3),
     ]
     big = 10_000 if quick else 100_000
-    specs.append(_Spec(f"N = {big:.0e} random", _equal(rng.uniform(-0.35, 0.35, big + 1)), 50.0,
-                       wall_time=20.0))
+    specs.append(_Spec(f"N = {big:.0e} random", _equal(rng.uniform(-0.35, 0.35, big + 1)), 50.0))
     for mass in (1e-6, 1e6):
         plant = _equal(eleven, mass=mass)
         specs.append(_Spec(f"mass {mass:g} kg", plant, _settle_time(plant, 0.0)))
@@ -254,8 +284,9 @@ def _specs(quick: bool) -> list[_Spec]:
     return specs
 
 
-#: Wall-clock budget (s) and memory cap (samples) of the 1e9 s horizon cases.
-_HORIZON_WALL, _HORIZON_SAMPLES = 0.5, 10_000
+#: Step budget (steps, events or evaluations, as each method counts) and memory cap (samples)
+#: of the 1e9 s horizon cases.
+_HORIZON_STEPS, _HORIZON_SAMPLES = 20_000, 10_000
 
 
 def _horizon_specs(plant: Plant) -> list[_Spec]:
@@ -270,14 +301,15 @@ def _horizon_specs(plant: Plant) -> list[_Spec]:
             ("casadi", {"integrator": "cvodes", "friction": "tanh", "epsilon": 1e-6}, smooth),
             ("casadi", {"integrator": "idas", "friction": "stribeck", "epsilon": 1e-6}, smooth)]
     return [_Spec("horizon 1e9 s", plant, 1e9, method, options=options, tolerance=tolerance,
-                  wall_time=_HORIZON_WALL, check="horizon", max_samples=_HORIZON_SAMPLES)
+                  max_steps=_HORIZON_STEPS, check="horizon", max_samples=_HORIZON_SAMPLES)
             for method, options, tolerance in runs]
 
 
 def _run(spec: _Spec, plant: Plant, v0: float, t_eval: Any = None) -> tuple[SimulationResult, float]:
     start = time.perf_counter()
     result = simulate(plant, spec.t_end, v0=v0, method=spec.method, t_eval=t_eval,
-                      budget=Budget(wall_time=spec.wall_time, max_samples=spec.max_samples),
+                      budget=Budget(wall_time=spec.wall_time, max_steps=spec.max_steps,
+                                    max_samples=spec.max_samples),
                       **spec.options)
     return result, time.perf_counter() - start
 
@@ -309,8 +341,9 @@ def _case(spec: _Spec) -> StabilityCase:
     levels = np.unique(plant.final_command()).size if plant.commands is None else np.unique(
         plant.commands.values).size
     max_events = (levels + 2) * (spec.switches + 1) + spec.switches
+    judged = status is not SimulationStatus.WALL_TIME      # the guard fired: no verdict
     if spec.check == "horizon":
-        stopped = status in (SimulationStatus.WALL_TIME, SimulationStatus.MAX_STEPS)
+        stopped = status is SimulationStatus.MAX_STEPS
         bounded = result.t.size <= spec.max_samples + 1
         ok = finite and bounded and events <= max_events and (
             stopped or (finished and deviation <= spec.tolerance))
@@ -318,17 +351,18 @@ def _case(spec: _Spec) -> StabilityCase:
             deviation = 0.0
     else:
         ok = finished and finite and events <= max_events and deviation <= spec.tolerance
+    ok = ok and judged
     return StabilityCase(
         name=spec.name, method=spec.method, setting=result.setting, finished=finished,
         finite=finite, events=int(events), max_events=int(max_events), wall_time=wall,
         budget=spec.wall_time * (2 if spec.check == "mirror" else 1), ok=bool(ok),
         check=spec.check, tolerance=spec.tolerance, final_speed=final,
         expected=(float(lo), float(hi)), deviation=float(deviation), message=result.message,
-        status=status.name, samples=int(result.t.size), max_samples=spec.max_samples)
+        status=status.name, samples=int(result.t.size), max_samples=spec.max_samples, judged=judged)
 
 
 def stability_suite(*, quick: bool = False) -> StabilityReport:
-    """Run the stability cases (each under its own wall-clock budget).
+    """Run the stability cases (each under its own step budget and a wall-clock guard).
 
     Parameters
     ----------
@@ -339,6 +373,7 @@ def stability_suite(*, quick: bool = False) -> StabilityReport:
     Returns
     -------
     StabilityReport
-        One :class:`StabilityCase` per case; ``report.all_ok`` says whether all passed.
+        One :class:`StabilityCase` per case; ``report.all_ok`` says whether all passed,
+        ``report.failed`` and ``report.unjudged`` name the others.
     """
     return StabilityReport(tuple(_case(spec) for spec in _specs(bool(quick))))

@@ -367,7 +367,8 @@ def schedule_shortfalls(scene: Scene | SceneObjects, result: ScheduleResult,
     A target beyond the speed limits (``"unreachable: best achievable error X m/s, because
     the target exceeds the speed limit Y m/s"``: the schedule's certified lower bound, or
     its exact error without one), an unverified schedule (its deviation beyond the
-    prediction bound) and a braking target not reached (the final distance to it).
+    prediction bound), a schedule whose exact check a budget stopped (never a pass: a budget is a
+    guard, not a verdict) and a braking target not reached (the final distance to it).
     A VERIFIED schedule that is not proven optimal is a success.
     """
     objects = _built(scene)
@@ -383,7 +384,10 @@ def schedule_shortfalls(scene: Scene | SceneObjects, result: ScheduleResult,
         found.append(Shortfall("schedule", f"unreachable: best achievable error {best:.3g} m/s, because "
                                f"the target exceeds the speed limit {beyond[1]:g} m/s "
                                f"(target speed {beyond[0]:g} m/s)", best, "m/s"))
-    if result.status is ScheduleStatus.UNVERIFIED:
+    if not check.success:             # a budget stopped the exact check: never a pass
+        found.append(Shortfall("schedule", f"unchecked: the exact simulation of the schedule stopped "
+                               f"({check.message}); the schedule must not be played", math.nan, ""))
+    elif result.status is ScheduleStatus.UNVERIFIED:
         deviation = float(result.exact_deviation)
         excess = deviation - float(result.prediction_bound) if math.isfinite(deviation) else math.nan
         found.append(Shortfall("schedule", f"unverified: the exact simulation ({check.status.value}) left the "

@@ -28,12 +28,12 @@ limits; :mod:`~toolkit.schedule.commands`):
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from .._compiled import budget_clock
 from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Motors, PiecewiseConstant, Plant
@@ -280,7 +280,7 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
     >>> result.status.name                                      # doctest: +SKIP
     'OPTIMAL'
     """
-    start_clock = time.perf_counter()
+    start_clock = budget_clock()
     if not isinstance(plant, Plant):
         raise ParameterTypeError(parameter_message("plant", _OWNER, "be a Plant", plant))
     if not isinstance(target, (SpeedTrajectory, Braking)):
@@ -376,7 +376,7 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
     design_model = built.body_speed
     method, iterations, solver_status = "constructive", 0, "not run"
     optimal = is_optimal(best, gap, arrival)
-    remaining = time_limit - (time.perf_counter() - start_clock)
+    remaining = time_limit - (budget_clock() - start_clock)
     if refine and remaining > 0:
         U_r, V_r, iterations, solver_status = _refine(
             ca, plant, motor, U0=best.commands, start=start, v0=v0, lo=lo, hi=hi,
@@ -417,6 +417,6 @@ def design_schedule(plant: Plant, target: SpeedTrajectory | Braking, *, v0: floa
         times, speeds, best.contact_speeds, best.body, ref_fn(times), best.bound,
         best.tracking, best.objective, arrival, minimum, used_epsilon, period, mismatch,
         iterations, solver_status, status, f"{status.value}; " + "; ".join(detail),
-        time.perf_counter() - start_clock, method=method, exact_tracking_error=best.exact_tracking,
+        budget_clock() - start_clock, method=method, exact_tracking_error=best.exact_tracking,
         exact_deviation=best.deviation, lower_bound=lower, gap=gap, tolerance=tolerance,
         exact_body_speed=best.exact_body, target=target)

@@ -95,6 +95,7 @@ class ScheduleResult:
     status : ScheduleStatus
     message : str
     wall_time : float, s
+        Time the design took, compiling kernels left out (the one-time cost is reported apart).
     method : str
         ``"constructive"`` or ``"constructive + ipopt"``: what produced the schedule.
     exact_tracking_error : float, m/s

@@ -93,6 +93,7 @@ from typing import Any
 import numpy as np
 
 from .. import _compiled
+from .._compiled import budget_clock
 from .._compiled import core as _core     # the kernels' source module (imports no numba)
 from ..model import ContactSet, MotorPiece, PiecewiseConstant, Plant, compliant_breakpoints
 from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
@@ -176,7 +177,7 @@ class _Recorder:
                 _INITIAL_STATES.clear()
             initial = _INITIAL_STATES[key] = (fstate, istate)
         self.fstate, self.istate = initial[0].copy(), initial[1].copy()
-        self.deadline = time.perf_counter() + budget.wall_time
+        self.deadline = budget_clock() + budget.wall_time
         self.status = _SUCCESS
         self.detail = ""
 
@@ -230,7 +231,7 @@ class _Recorder:
         rounds = int(istate[_core.I_ROUNDS])
         if rounds > istate[_core.I_MAXSTEPS]:
             return self.stopped(_core.MAX_STEPS, t)
-        if time.perf_counter() > self.deadline:
+        if budget_clock() > self.deadline:
             return self.stopped(-1, t)
         code = _core.budget_code(rounds, int(istate[_core.I_MAXSTEPS]), self.ev,
                                  int(istate[_core.I_NEV]), self.window,
@@ -590,19 +591,19 @@ def _finish_piece(plant: Plant, land: _Landscape, E: float, b: float, rec: _Reco
     """Resume the kernel's piece (state in ``rec``) while it pauses, looking at the wall clock
     and growing the buffers; then :func:`_ideal_piece`'s ``(t, V, stuck, stopped)``."""
     fstate, istate = rec.fstate, rec.istate
-    if code == _core.DONE and _COMPILED and time.perf_counter() <= rec.deadline:
+    if code == _core.DONE and _COMPILED and budget_clock() <= rec.deadline:
         k = int(istate[2])                          # (the common case, written out)
         return b, float(fstate[1]), (None if k < 0 else k), False
     while True:
         if code == _core.PAUSE:
-            if time.perf_counter() > rec.deadline:
+            if budget_clock() > rec.deadline:
                 code = -1
             else:
                 rec.room()
                 code = _kernels().ideal_piece(*land.args, plant.mass, plant.damping, E, b,
                                               fstate, istate, rec.seg, rec.ev)
                 continue
-        elif code == _core.DONE and time.perf_counter() > rec.deadline:
+        elif code == _core.DONE and budget_clock() > rec.deadline:
             code = -1
         break
     if not _COMPILED:
@@ -731,13 +732,13 @@ class _DynamicPlant:
                 rec.fstate, rec.istate, rec.seg, rec.ev)
             if code != _core.PAUSE:
                 break
-            if time.perf_counter() > rec.deadline:
+            if budget_clock() > rec.deadline:
                 return -1
             rec.room()
         if not _COMPILED:                 # the rounds run interpreted count towards compiling
             rounds = int(rec.istate[_core.I_ROUNDS]) - n_rounds
             _compiled.charge(rounds * (_ROUND_WORK + _CONTACT_WORK * self.n))
-        if code == _core.DONE and time.perf_counter() > rec.deadline:
+        if code == _core.DONE and budget_clock() > rec.deadline:
             return -1
         return code
 
@@ -836,7 +837,7 @@ def simulate_exact(plant: Plant, t_end: float, *, v0: float, t_eval: np.ndarray 
         code = _kernels(20 + 2 * times.size).ideal_run(
             *land.args, m, plant.damping, E, t_end, rec.fstate, rec.istate, rec.seg, rec.ev,
             times, table)
-        if code == _core.DONE and _COMPILED and time.perf_counter() <= rec.deadline:
+        if code == _core.DONE and _COMPILED and budget_clock() <= rec.deadline:
             t_stop, V_stop = t_end, float(rec.fstate[1])          # (the common case)
         else:
             if code != _core.DONE:

@@ -15,12 +15,12 @@ Private. The scipy, Moreau-Jean and casadi methods all
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from .._compiled import budget_clock
 from ..errors import as_float, check_option
 from ..model import FRICTION_LAWS, Plant
 from ._result import Budget, SimulationResult, SimulationStatus, status_message
@@ -56,13 +56,13 @@ class Meter:
     def __init__(self, budget: Budget, counts: str = "evaluations") -> None:
         self.budget = budget
         self.counts = counts
-        self.start = time.perf_counter()
+        self.start = budget_clock()
         self.evaluations = 0
         self.steps = 0
 
     def elapsed(self) -> float:
         """Wall time since the meter was created, s."""
-        return time.perf_counter() - self.start
+        return budget_clock() - self.start
 
     def _check(self, count: int) -> None:
         if count > self.budget.max_steps:

@@ -31,7 +31,6 @@ Displacements are exact closed forms: the integral of each stored segment of ``V
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,6 +38,7 @@ import numpy as np
 
 from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
+from .._compiled import budget_clock
 from .._compiled import core as _core
 from ..model import Plant
 from ._exact import _build_landscape, _dynamic_plant, _ideal_piece, _kernels, _Recorder
@@ -260,7 +260,7 @@ def advance(plant: Plant, state: ExactState, command: Any, t1: float, *,
                            rec)
             body = _kernels().advance_outputs(motor, dyn.tau, t0, rec.fstate, rec.istate,
                                               rec.seg, out)
-        elif code == _core.DONE and time.perf_counter() > rec.deadline:
+        elif code == _core.DONE and budget_clock() > rec.deadline:
             code = -1                    # (the wall clock, looked at after the kernel)
         t, V = float(rec.fstate[_core.F_T]), float(rec.fstate[_core.F_V])
         if code != _core.DONE:

@@ -1,0 +1,53 @@
+"""A first run on an empty kernel cache says that it compiles (stderr only), and what it cost;
+a run that loads the kernels from the cache says nothing; ``warm`` compiles them ahead."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import toolkit
+
+ROOT = Path(toolkit.__file__).resolve().parents[1]
+JIT = os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
+
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not JIT, reason="nothing is compiled")]
+
+
+def _run(cache: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_DISABLE_JIT",)}
+    env.update(PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(cache), ACTIVE_CONTACTS_COMPILE="eager")
+    return subprocess.run([sys.executable, "-m", "toolkit.cli", *args], capture_output=True, text=True,
+                          cwd=ROOT, env=env)
+
+
+def test_a_cold_run_announces_its_compile_on_stderr_only(tmp_path):
+    cache = tmp_path / "cache"
+    first = _run(cache, "curve", "designs/equal.toml", "--json")
+    assert first.returncode == 0, first.stderr
+    lines = first.stderr.splitlines()
+    assert lines[0].startswith("active-contacts: compiling kernels (first run only"), lines
+    assert lines[-1].startswith("active-contacts: compiled ") and "kernels in" in lines[-1], lines
+    assert "compil" not in first.stdout
+    json.loads(first.stdout)                               # stdout stays machine-readable
+    again = _run(cache, "curve", "designs/equal.toml", "--json")
+    assert again.returncode == 0 and again.stderr == "", again.stderr     # loaded: silent
+    assert json.loads(again.stdout) == json.loads(first.stdout)
+
+
+def test_warm_compiles_what_every_design_runs(tmp_path):
+    # After `warm`, the first run of a shipped design compiles nothing (no notice at all).
+    cache = tmp_path / "cache"
+    warm = _run(cache, "warm", "--json")
+    assert warm.returncode == 0, warm.stderr
+    data = json.loads(warm.stdout)
+    assert data["compile_time"] > 0 and "carousel" in data["designs"]
+    for design in ("carousel", "closed_loop", "estimate"):
+        run = _run(cache, "run", f"designs/{design}.toml", "--out", str(tmp_path / design), "--json")
+        assert run.returncode in (0, 3), run.stderr
+        assert "compiling kernels" not in run.stderr, (design, run.stderr)

@@ -70,6 +70,13 @@ def test_fitted_values_are_solved_from_the_residual_friction():
     assert k.bounds == rise.bounds
 
 
+def test_the_spreads_record_quotes_the_equal_wheels_slope_it_computes():
+    # The slope the record quotes for equal wheels is the ideal model's population value
+    # (the quadrature of ideal_median_law_slope), to the 4 digits quoted.
+    quoted = re.search(r"equal wheels' ([0-9.]+)", PARAMETERS["friction_spread"].predicts).group(1)
+    assert quoted == f"{tk.experiments.ideal_median_law_slope(10):.4f}"
+
+
 def test_the_carousel_reads_its_nonidealities_from_the_table():
     assert CAROUSEL.motor_lag == PARAMETERS["motor_lag"].value
     assert CAROUSEL.wheel_backlash == PARAMETERS["wheel_backlash"].value

@@ -142,9 +142,10 @@ _RECORDS = (
         "s = 0.357.",
         fitted_to=_RESIDUAL_TEXT,
         predicts="nothing the paper tests: unequal wheels lift the median-law slope from the equal "
-                 "wheels' 0.76 to about 0.99 over a wide range of spreads, so the slope does not "
-                 "test 0.36 (notebooks/gaps.ipynb); it predicts that the residual changes with which "
-                 "wheels run forwards and is a constant push of one sign across the band"),
+                 "wheels' 0.7744 (their population value) to about 0.99 over a wide range of "
+                 "spreads, so the slope does not test 0.36 (notebooks/gaps.ipynb); it predicts that "
+                 "the residual changes with which wheels run forwards and is a constant push of one "
+                 "sign across the band"),
     Parameter(
         "bearing_friction", round(_RESIDUAL * _F_TOT, 4), "N", Origin.FITTED,
         "A Coulomb friction of the lazy-susan bearing ('low rotational resistance', no number) on "

@@ -203,9 +203,9 @@ def _ring_shape(eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     ``K`` diverges at ``rho = 1`` (``m = 1``), where ``m`` itself rounds to 1 within 1e-8 of
     it: ``K`` is taken at the complementary parameter ``1 - m = ((1 - rho) / (1 + rho))^2``
-    (``scipy.special.ellipkm1``), and where that underflows from the series
-    ``K = ln(4 / k') + O(k'^2 ln k')``, ``k' = |1 - rho| / (1 + rho)``; the term
-    ``(1 - rho) K`` is then accurate to rounding up to ``rho = 1``, where it vanishes.
+    (``scipy.special.ellipkm1``), computed without cancellation and at least 3e-33 for any
+    double ``rho != 1``, so the term ``(1 - rho) K ~ (1 - rho) ln(4 / |1 - rho|)`` is
+    accurate to rounding up to ``rho = 1``, where it vanishes (and is set to 0).
     """
     from scipy.special import ellipe, ellipkm1
 
@@ -214,11 +214,8 @@ def _ring_shape(eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         fin = np.isfinite(rho)
         r = np.where(fin, rho, 1.0)
         gap = 1 - r
-        kc = np.abs(gap) / (1 + r)                       # k', the complementary modulus
-        m1 = kc * kc                                      # 1 - m, without cancellation
         E = ellipe(np.minimum(4 * r / (1 + r) ** 2, 1.0))
-        K = np.where(m1 > 1e-300, ellipkm1(np.maximum(m1, 1e-300)),
-                     np.log(4 / np.where(kc > 0, kc, 1.0)))
+        K = ellipkm1((gap / (1 + r)) ** 2)                # at 1 - m, without cancellation
         psi = 2 / np.pi * (1 + r) * E
         # Psi' = (2/pi) [E + (E - K)(1 - rho) / (2 rho)]; (1 - rho) K -> 0 at rho = 1.
         dk = np.where(gap == 0.0, 0.0, (E - K) * gap / np.where(r > 0, 2 * r, 1.0))

@@ -118,6 +118,12 @@ def test_sliding_spinning_thin_ring_finishes_at_its_terminal_ratio():
     # T(1) = 2/pi); the reduced ODE stops at w = w0 e^-80 with its rtol 1e-13 on eps.
     np.testing.assert_allclose(run.terminal_ratio, 1.0, rtol=0, atol=1e-12)
     np.testing.assert_allclose(terminal_ratio("ring"), 1.0, rtol=0, atol=1e-15)
+    # A second method: Moreau-Jean steps of h = 2 ms on 64 arcs stop within a few steps of it
+    # (first order in h; the arcs' wrench error is far smaller).
+    h = 2e-3
+    stepped = tk.simulate(PlanarPlant(ring.contacts, ring.mass, ring.inertia, resolution=64), 1.5,
+                          v0=[2.0, 0.0], omega0=30.0, method="moreau", step=h)
+    assert abs(stepped.stop_time - run.stop_time) <= 3 * h
 
 
 def _ring_by_quadrature(eps: float) -> tuple[float, float]:

@@ -177,8 +177,6 @@ def cross_check(plant: Plant, controller: Any, t_end: float, *, widths: Any = WI
     -------
     CrossCheck
     """
-    import control   # python-control: loaded only by the cross-check
-
     owner = "cross_check"
     _check_plant(plant, owner)
     w = as_float_array(widths, "widths", owner)
@@ -198,8 +196,8 @@ def cross_check(plant: Plant, controller: Any, t_end: float, *, widths: Any = WI
     if status is SimulationStatus.SUCCESS:
         try:
             for width in w.tolist():
-                speed = _smoothed_loop(control, smoothed_plant(plant, width), plant, controller,
-                                       times, rate, float(v0), meter)
+                speed = _smoothed_loop(smoothed_plant(plant, width), plant, controller, times,
+                                       rate, float(v0), meter)
                 differences.append(float(np.max(np.abs(speed - exact.speed))))
             message = status.value
         except BudgetExceeded as stopped:
@@ -214,10 +212,12 @@ def cross_check(plant: Plant, controller: Any, t_end: float, *, widths: Any = WI
                       time.perf_counter() - started)
 
 
-def _smoothed_loop(control: Any, system: Any, plant: Plant, controller: Any, times: np.ndarray,
-                   rate: float, v0: float, meter: Meter) -> np.ndarray:
+def _smoothed_loop(system: Any, plant: Plant, controller: Any, times: np.ndarray, rate: float,
+                   v0: float, meter: Meter) -> np.ndarray:
     """The speed at each sample of the loop closed around ``system`` (commands and force held
     over each period), every right-hand-side evaluation counted by ``meter``."""
+    import control   # python-control: loaded only by the cross-check
+
     law = controller.bind(plant, 1.0 / rate)
     z = law.initial_state()
     x = np.concatenate(([v0], plant.initial_speeds())) if system.nstates > 1 else np.array([v0])

@@ -24,7 +24,7 @@ class Shortfall:
     amount : float
         By how much (NaN when no amount applies), in ``unit``.
     unit : str
-        ``"N"``, ``"m/s"``, ``"s"`` or ``"runs"``.
+        ``"N"``, ``"m/s"``, ``"s"``, ``"runs"`` or ``"order"`` (of convergence, dimensionless).
     """
 
     stage: str

@@ -198,25 +198,46 @@ def _disc_shape(eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _ring_shape(eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``F(eps)``, ``T(eps)`` of a thin uniform ring: force / (mu N), torque / (mu N R), from
-    the mean distance ``Psi(rho) = (2/pi) (1 + rho) E(4 rho / (1 + rho)^2)``:
-    ``F = Psi'``, ``T = Psi - rho Psi'``."""
-    from scipy.special import ellipe, ellipk
+    the mean distance ``Psi(rho) = (2/pi) (1 + rho) E(m)``, ``m = 4 rho / (1 + rho)^2``:
+    ``F = Psi'``, ``T = Psi - rho Psi'``.
+
+    ``K`` diverges at ``rho = 1`` (``m = 1``), where ``m`` itself rounds to 1 within 1e-8 of
+    it: ``K`` is taken at the complementary parameter ``1 - m = ((1 - rho) / (1 + rho))^2``
+    (``scipy.special.ellipkm1``), computed without cancellation and at least 3e-33 for any
+    double ``rho != 1``, so the term ``(1 - rho) K ~ (1 - rho) ln(4 / |1 - rho|)`` is
+    accurate to rounding up to ``rho = 1``, where it vanishes (and is set to 0).
+    """
+    from scipy.special import ellipe, ellipkm1
 
     rho = np.asarray(eps, dtype=float)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         fin = np.isfinite(rho)
         r = np.where(fin, rho, 1.0)
-        m = np.minimum(4 * r / (1 + r) ** 2, 1.0)
-        E = ellipe(m)
-        K = ellipk(m)
+        gap = 1 - r
+        E = ellipe(np.minimum(4 * r / (1 + r) ** 2, 1.0))
+        K = ellipkm1((gap / (1 + r)) ** 2)                # at 1 - m, without cancellation
         psi = 2 / np.pi * (1 + r) * E
         # Psi' = (2/pi) [E + (E - K)(1 - rho) / (2 rho)]; (1 - rho) K -> 0 at rho = 1.
-        dk = np.where(r == 1.0, 0.0, (E - K) * (1 - r) / np.where(r > 0, 2 * r, 1.0))
+        dk = np.where(gap == 0.0, 0.0, (E - K) * gap / np.where(r > 0, 2 * r, 1.0))
         dpsi = 2 / np.pi * (E + dk)
         dpsi = np.where(r > 0, dpsi, 0.0)
         F = np.where(fin, dpsi, 1.0)
         T = np.where(fin, psi - r * dpsi, 0.0)
     return F, T
+
+
+def _annulus_shape(eta: float):
+    """The shape functions ``(F, T)`` of a uniform annulus of inner radius ``eta R``
+    (:func:`_disc_shape` for ``eta = 0``): the disc's minus its hole's, at one pressure."""
+    if eta == 0:
+        return _disc_shape
+
+    def shape(eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        area = 1 - eta * eta
+        Fo, To = _disc_shape(eps)
+        Fi, Ti = _disc_shape(np.asarray(eps) / eta)
+        return (Fo - eta * eta * Fi) / area, (To - eta ** 3 * Ti) / area
+    return shape
 
 
 def _axisymmetric(shape, V: Any, omega: Any, centre: np.ndarray, radius: float, force: float,
@@ -322,14 +343,7 @@ def terminal_ratio(kind: str = "disc", *, inertia_ratio: float | None = None,
         if not eta < 1.0:
             raise ParameterError(parameter_message("inner_ratio", "terminal_ratio", "be < 1", eta))
         k = (1 + eta * eta) / 2 if inertia_ratio is None else inertia_ratio
-        if eta > 0:
-            def shape(e):
-                area = 1 - eta * eta
-                Fo, To = _disc_shape(e)
-                Fi, Ti = _disc_shape(e / eta)
-                return (Fo - eta * eta * Fi) / area, (To - eta ** 3 * Ti) / area
-        else:
-            shape = _disc_shape
+        shape = _annulus_shape(eta)
     else:
         raise ParameterError(parameter_message("kind", "terminal_ratio", "be 'disc' or 'ring'", kind))
     k = as_float(k, "inertia_ratio", "terminal_ratio", low=0.0, low_open=True)

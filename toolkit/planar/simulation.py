@@ -30,11 +30,11 @@ import numpy as np
 
 from ..errors import (ParameterError, ParameterTypeError, as_float, as_float_array, check_option,
                       parameter_message)
-from ..simulation import Budget, SimulationStatus
+from ..simulation import Budget, BudgetExceeded, Meter, SimulationStatus
 from ._socp import NormSum, solve_fast
 from .contacts import PlanarContactSet
 from .equilibrium import twist_problem
-from .regions import CurveRegion, DiscRegion, Quadrature, RingRegion, _disc_shape, _ring_shape
+from .regions import CurveRegion, DiscRegion, Quadrature, RingRegion, _annulus_shape, _ring_shape
 
 __all__ = ["PlanarPlant", "PlanarSimulationResult", "PLANAR_METHODS", "simulate_planar", "check_start", "check_method", "MAX_SPEED"]
 
@@ -376,28 +376,40 @@ def _exact_line(plant, t_end, s, times, budget, red, world) -> PlanarSimulationR
     from ..simulation import ExactState, advance, simulate
 
     started = time.perf_counter()
+    meter = Meter(budget)                                # the clock over the whole run
     plant1 = Plant(red.contacts, mass=plant.mass, damping=plant.damping,
                    external_force=float(plant.external_force @ world))
     v0 = float(s.V @ world)
     run = simulate(plant1, t_end, v0=v0, method="exact", t_eval=times, budget=budget)
-    # Exact displacements between the samples (closed forms of the same engine).
+    # Exact displacements between the samples (closed forms of the same engine), within the
+    # wall-clock budget (the run counted the steps).
+    status, message = run.status, run.message
     x = np.zeros(run.t.size)
     state = ExactState.initial(plant1, v0)
     command = red.contacts.speeds
     external = float(plant.external_force @ world)
-    for k in range(1, run.t.size):
-        if run.t[k] > state.t:
-            step = advance(plant1, state, command, float(run.t[k]), external=external)
-            x[k] = x[k - 1] + step.body_displacement
-            state = step.state
-        else:
-            x[k] = x[k - 1]
-    pos = s.position + x[:, None] * world
-    vel = run.V[:, None] * world
     n = run.t.size
-    return _result(run.t, pos, np.full(n, s.heading), vel, np.zeros(n), run.status, "exact",
+    try:
+        for k in range(1, n):
+            meter.check_clock()
+            if run.t[k] > state.t:
+                step = advance(plant1, state, command, float(run.t[k]), external=external,
+                               budget=budget)
+                if step.status is not SimulationStatus.SUCCESS:
+                    raise BudgetExceeded(step.status, step.message)
+                x[k] = x[k - 1] + step.body_displacement
+                state = step.state
+            else:
+                x[k] = x[k - 1]
+    except BudgetExceeded as stopped:
+        n = k
+        status, message = stopped.status, (f"{stopped.status.value} ({stopped.detail}, while "
+                                           f"integrating the displacements to t = {run.t[k]:.6g} s)")
+    pos = s.position + x[:n, None] * world
+    vel = run.V[:n, None] * world
+    return _result(run.t[:n], pos, np.full(n, s.heading), vel, np.zeros(n), status, "exact",
                    "1-D line: exact event-driven engine", "contacts and motion on one line: "
-                   + run.message, run.n_steps, started)
+                   + message, run.n_steps, started)
 
 
 # -- exact: the axisymmetric passive region ------------------------------------------------------
@@ -408,18 +420,7 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
     started = time.perf_counter()
     region = plant.contacts
     R = region.radius
-    if isinstance(region, RingRegion):
-        shape = _ring_shape
-    elif region.inner_radius > 0:
-        eta = region.inner_radius / R
-
-        def shape(e):
-            area = 1 - eta * eta
-            Fo, To = _disc_shape(e)
-            Fi, Ti = _disc_shape(np.asarray(e) / eta)
-            return (Fo - eta * eta * Fi) / area, (To - eta ** 3 * Ti) / area
-    else:
-        shape = _disc_shape
+    shape = _ring_shape if isinstance(region, RingRegion) else _annulus_shape(region.inner_radius / R)
     a = region.force / plant.mass                         # m/s^2
     b = region.force * R * R / plant.inertia             # m/s^2 (rim)
     W0 = s.V - region.velocity
@@ -441,7 +442,14 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
     else:
         # dtau = dt / w: d eps/dtau = -a F + b eps T, d ln w/dtau = -b T, dt/dtau = w,
         # ds/dtau = eps w^2, dphi/dtau = w^2 / R (docs/planar.md section 4).
+        # Every evaluation is counted against the budget (steps: evaluations; and the clock):
+        # a spent budget ends the run with its status at the simulated time last evaluated.
+        meter = Meter(budget, counts="evaluations")
+        reached = [0.0]
+
         def rhs(tau, y):
+            meter.evaluation()
+            reached[0] = max(reached[0], min(float(y[2]), t_end))
             eps, lw = y[0], y[1]
             F, T = shape(np.array(eps))
             w = w0 * math.exp(lw)
@@ -454,8 +462,15 @@ def _exact_axisymmetric(plant: PlanarPlant, t_end: float, s: _State, times: np.n
         def late(tau, y):
             return y[2] - t_end                          # t(tau) reaches t_end: still moving
         late.terminal = True
-        sol = solve_ivp(rhs, (0.0, 1e9), [v0 / w0, 0.0, 0.0, 0.0, 0.0], method="DOP853",
-                        rtol=1e-13, atol=1e-15, dense_output=True, events=(low, late))
+        try:
+            sol = solve_ivp(rhs, (0.0, 1e9), [v0 / w0, 0.0, 0.0, 0.0, 0.0], method="DOP853",
+                            rtol=1e-13, atol=1e-15, dense_output=True, events=(low, late))
+        except BudgetExceeded as stopped:
+            return _result([0.0], s.position[None, :], [s.heading], s.V[None, :], [s.omega],
+                           stopped.status, "exact", "reduced ODE, DOP853 rtol=1e-13",
+                           f"{stopped.status.value} ({stopped.detail}; the reduced ODE had reached "
+                           f"t = {reached[0]:.6g} s of {t_end:g} s; only the start is reported)",
+                           min(meter.evaluations, budget.max_steps), started)
         steps = int(sol.nfev)
         tau_end = float(sol.t[-1])
         y_end = sol.y[:, -1]
@@ -639,15 +654,10 @@ def _smooth(plant: PlanarPlant, t_end: float, s: _State, times: np.ndarray | Non
     M = np.array([plant.mass, plant.mass, plant.inertia])
     C = np.array([plant.damping, plant.damping, plant.angular_damping])
     wext = np.array([plant.external_force[0], plant.external_force[1], plant.external_torque])
-    calls = [0]
-
-    class _Stop(Exception):
-        pass
+    meter = Meter(budget, counts="evaluations")
 
     def rhs(t, y):
-        calls[0] += 1
-        if calls[0] > budget.max_steps or time.perf_counter() - started > budget.wall_time:
-            raise _Stop
+        meter.evaluation()
         world = plant.contacts_at(t).transformed(angle=y[2])
         sl = world.slips(y[3:5], y[5])
         dmat = world.limit_factors
@@ -663,16 +673,15 @@ def _smooth(plant: PlanarPlant, t_end: float, s: _State, times: np.ndarray | Non
         return np.concatenate((y[3:], acc))
 
     y0 = np.array([s.position[0], s.position[1], s.heading, s.V[0], s.V[1], s.omega])
-    status = SimulationStatus.SUCCESS
+    status, detail = SimulationStatus.SUCCESS, "regularized friction"
     try:
         sol = solve_ivp(rhs, (0.0, t_end), y0, method=solver, rtol=rtol, atol=atol, t_eval=times)
         if not sol.success:
-            status = SimulationStatus.FAILED
+            status, detail = SimulationStatus.FAILED, f"{solver}: {sol.message}"
         T, Y = sol.t, sol.y
-    except _Stop:
-        status = (SimulationStatus.WALL_TIME if time.perf_counter() - started > budget.wall_time
-                  else SimulationStatus.MAX_STEPS)
+    except BudgetExceeded as stopped:
+        status, detail = stopped.status, f"{stopped.detail}; only the start is reported"
         T, Y = np.array([0.0]), y0[:, None]
     setting = f"{solver} epsilon={eps:g} rtol={rtol:g}"
     return _result(T, Y[:2].T, Y[2], Y[3:5].T, Y[5], status, "smooth", setting,
-                   f"{status.value}; regularized friction", calls[0], started)
+                   f"{status.value}; {detail}", min(meter.evaluations, budget.max_steps), started)

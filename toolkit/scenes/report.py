@@ -162,8 +162,17 @@ def control_lines(study: Any) -> list[str]:
     if d["estimator"]:
         lines.append(f"estimate error: RMS {d['estimate_rms_error'] * 1e3:.3g} mm/s, max "
                      f"{d['estimate_max_error'] * 1e3:.3g} mm/s")
-    if d["cross_check_max_difference"] is not None:
-        lines.append(f"python-control interconnection: largest difference {d['cross_check_max_difference']:.3g} m/s")
+    check = d["cross_check"]
+    if check is not None:
+        lines.append(f"cross-check against the smoothed model in python-control ({check['compared']}):")
+        lines.append(f"  {'width (m/s)':>12} {'difference (m/s)':>17} {'order':>6}")
+        orders = [None] + check["observed_orders"]
+        for width, difference, order in zip(check["widths"], check["max_speed_differences"], orders):
+            shown = "" if order is None else f"{order:.2f}"
+            lines.append(f"  {width:12.3g} {difference:17.3g} {shown:>6}")
+        lines.append(f"  fitted order {check['fitted_order']:.3g} (band {check['order_band'][0]:g} to "
+                     f"{check['order_band'][1]:g}: {'converges' if check['converges'] else 'does NOT converge'}); "
+                     f"{check['message']}")
     return lines
 
 

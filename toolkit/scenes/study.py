@@ -66,16 +66,11 @@ from ..model.truth import realize
 from ..shortfall import Shortfall
 from ..simulation import SimulationResult, SimulationStatus, simulate
 
-#: Largest difference (m/s) between python-control's and the toolkit's closed loop that the
-#: cross check accepts: both run the same arithmetic (identical numbers, 0 observed); 1e-9
-#: leaves room for fused multiply-adds on other platforms.
-CROSS_CHECK_TOLERANCE = 1e-9
-
 __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve", "run_study",
            "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
            "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
            "estimate_scene", "estimate_record", "control_scene", "estimation_shortfalls", "control_shortfalls",
-           "CROSS_CHECK_TOLERANCE", "sweep_scene", "sweep_shortfalls", "planar_scene",
+           "sweep_scene", "sweep_shortfalls", "planar_scene",
            "planar_precision", "check_sweep_table"]
 
 
@@ -566,9 +561,10 @@ class ControlStudy:
         The scene's ``control.controller``.
     estimator : str or None
         The estimator's name (None: the ideal loop on the true speed).
-    cross_check : float or None, m/s
-        Largest difference of speed and estimate between python-control's simulation of the
-        loop and the toolkit's (None when not asked for, or the loop stopped early).
+    cross_check : CrossCheck or None
+        The loop's plant against its smoothed model in python-control, width by width
+        (:func:`toolkit.loop.cross_check.cross_check`; None when not asked for, or the loop
+        stopped early).
     compile_time : float, s
         The one-time cost paid before the loop was timed (the kernels compiled and the loop
         run once, untimed: the policy of :mod:`toolkit._compiled`); not in the loop's
@@ -578,7 +574,7 @@ class ControlStudy:
     loop: Any
     controller: str
     estimator: str | None
-    cross_check: float | None = None
+    cross_check: Any = None
     compile_time: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
@@ -590,7 +586,7 @@ class ControlStudy:
                 "final_speed": float(loop.speed[-1]), "wall_time": loop.wall_time,
                 "compile_time": self.compile_time, "estimate_rms_error": float(np.sqrt(np.mean(error ** 2))),
                 "estimate_max_error": float(np.max(np.abs(error))),
-                "cross_check_max_difference": self.cross_check,
+                "cross_check": None if self.cross_check is None else self.cross_check.to_dict(),
                 "times": loop.times, "speed": loop.speed, "estimate": loop.estimate,
                 "force": loop.force, "commands": loop.commands}
 
@@ -637,22 +633,19 @@ def control_scene(scene: Scene | SceneObjects, schedule: ScheduleResult | None =
     compile_time = warm(lambda: simulate_closed_loop(plant, controller, spec.duration, rate=rate,
                                                      **arguments), "core", "lines")
     loop = simulate_closed_loop(plant, controller, spec.duration, rate=rate, **arguments)
-    difference = None
+    check = None
     if spec.cross_check and loop.status is SimulationStatus.SUCCESS:
-        import control                 # python-control: only for a [control] cross check
-        from ..loop.interop import closed_loop_system
+        from ..loop.cross_check import cross_check     # python-control: only for a cross check
 
-        system = closed_loop_system(plant, controller, rate=rate, **arguments)
-        response = control.input_output_response(system.system, loop.times, 0, system.initial_state)
-        y = response.outputs
-        difference = float(max(np.max(np.abs(y[0] - loop.speed)), np.max(np.abs(y[1] - loop.estimate))))
+        check = cross_check(plant, controller, spec.duration, rate=objects.rate, v0=spec.v0,
+                            budget=objects.budget)
     name = getattr(objects.estimator, "name", None) if objects.sensors is not None else None
-    return ControlStudy(loop, spec.controller, name, difference, compile_time)
+    return ControlStudy(loop, spec.controller, name, check, compile_time)
 
 
 def control_shortfalls(scene: Scene | SceneObjects, study: ControlStudy) -> list[Shortfall]:
-    """A loop stopped before ``duration`` (time left, s); a cross check beyond
-    :data:`CROSS_CHECK_TOLERANCE` (the difference, m/s)."""
+    """A loop stopped before ``duration`` (time left, s); a cross check that does not converge
+    (:attr:`toolkit.loop.cross_check.CrossCheck.converges`; its fitted order)."""
     found: list[Shortfall] = []
     loop, duration = study.loop, _spec(scene).control.duration
     if loop.status is not SimulationStatus.SUCCESS:
@@ -660,10 +653,15 @@ def control_shortfalls(scene: Scene | SceneObjects, study: ControlStudy) -> list
         found.append(Shortfall("control", f"the closed loop {loop.status.value} at t = {reached:.6g} s of "
                                f"duration = {duration:g} s ({duration - reached:.6g} s not run): "
                                f"{loop.message}", duration - reached, "s"))
-    if study.cross_check is not None and not study.cross_check <= CROSS_CHECK_TOLERANCE:
-        found.append(Shortfall("control", f"python-control's simulation of the loop differs from the "
-                               f"toolkit's by {study.cross_check:.3g} m/s (tolerance "
-                               f"{CROSS_CHECK_TOLERANCE:g} m/s)", study.cross_check, "m/s"))
+    check = study.cross_check
+    if check is not None and not check.converges:
+        from ..loop.cross_check import ORDER_BAND
+
+        found.append(Shortfall("control", f"the smoothed model's loop does not converge to the exact "
+                               f"one: differences {', '.join(f'{d:.3g}' for d in check.differences)} m/s "
+                               f"at widths {', '.join(f'{w:g}' for w in check.widths)} m/s, fitted "
+                               f"order {check.order:.3g} (band {ORDER_BAND[0]:g} to {ORDER_BAND[1]:g}; "
+                               f"{check.message})", check.order, "order"))
     return found
 
 

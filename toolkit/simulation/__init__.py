@@ -21,6 +21,8 @@ period under a held command (the exact engine, no restart cost), with the exact 
 contact displacements over the step: the plant of a sampled closed loop.
 
 Also public: :func:`warm_up` (compile or load the kernels before timing anything),
+:class:`Meter` and :class:`BudgetExceeded` (how every integrator, here and in other
+packages' simulators, counts its work against a :class:`Budget` and stops),
 :func:`clear_cache` (forget a plant's cached landscapes: time a run from scratch) and
 :func:`refuse_backlash` (the check every method but Moreau-Jean makes). Everything else in
 this package is private: other packages use this face only.
@@ -43,6 +45,7 @@ from ..errors import as_float, as_float_array, check_option, suggestion
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model import Plant
 from ._batch import BatchResult, simulate_batch
+from ._reference import BudgetExceeded, Meter
 from ._result import Budget, Event, SimulationResult, SimulationStatus, refuse_backlash
 from ._exact import clear_cache
 from ._sampled import SampledLaw, SampledRun, sampled_batch, sampled_supported
@@ -52,6 +55,7 @@ from ._warmup import warm_up
 __all__ = ["simulate", "simulate_batch", "BatchResult", "SimulationStatus", "Budget", "Event",
            "SimulationResult", "METHODS", "advance", "ExactState", "ExactStep", "clear_cache", "warm_up",
            "refuse_backlash", "SampledLaw", "SampledRun", "sampled_batch", "sampled_supported"]
+__all__ += ["Meter", "BudgetExceeded"]
 
 _SCIPY_OPTIONS = ("friction", "epsilon", "rtol", "atol")
 

@@ -87,7 +87,9 @@ def _interrupt(process: subprocess.Popen[str], sig: int, *, whole_group: bool) -
 
 def _check_ended(process: subprocess.Popen[str], out: Path) -> None:
     stderr = process.stderr.read()
-    assert process.returncode == 130, stderr
+    # 130, or the death by SIGINT that Python itself chooses once a KeyboardInterrupt went
+    # through a C-level import (a shell reports both as $? = 130)
+    assert process.returncode in (130, -signal.SIGINT), stderr
     assert stderr.splitlines() == ["active-contacts: interrupted"], stderr      # one line
     # multiprocessing's resource tracker ends on its own once its parent has gone (it reads
     # the end of its pipe): allow it a moment, then nothing of the group may be left.
@@ -100,14 +102,14 @@ def _check_ended(process: subprocess.Popen[str], out: Path) -> None:
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".out.")]   # no temp folder
 
 
-def _catches_sigint(pid: int) -> bool:
-    """Whether process ``pid`` has a handler for SIGINT (Python installs its own as it starts)."""
+def _importing(pid: int) -> bool:
+    """Whether process ``pid`` has started importing numpy (the command line does so inside its
+    own handlers; before that, Python itself is still starting, and a Ctrl-C then is
+    Python's to report)."""
     try:
-        status = Path(f"/proc/{pid}/status").read_text()
+        return "_multiarray_umath" in Path(f"/proc/{pid}/maps").read_text()
     except OSError:
         return False
-    caught = int(next(line for line in status.splitlines() if line.startswith("SigCgt:")).split()[1], 16)
-    return bool(caught & (1 << (signal.SIGINT - 1)))
 
 
 def _wait_for(condition: Any, process: subprocess.Popen[str], what: str) -> None:
@@ -137,7 +139,7 @@ def test_ctrl_c_at_any_moment_of_a_pool_sweep(tmp_path, moment, sign, delay):
                           runs="400" if sign == "done" else RUNS)
     try:
         if sign == "python":
-            _wait_for(lambda: _catches_sigint(process.pid), process, "the parent's SIGINT handler")
+            _wait_for(lambda: _importing(process.pid), process, "the parent importing numpy")
         elif sign in ("worker", "workers"):
             count = 2 if sign == "worker" else 3
             _wait_for(lambda: len(_group(process.pid)) >= count, process, f"{count - 1} worker(s)")

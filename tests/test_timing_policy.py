@@ -1,82 +1,78 @@
-"""The timing policy of toolkit._compiled: no reported time includes compilation.
+"""The timing policy of toolkit._compiled: no reported time and no budget includes a compile.
 
-Checked without a clock: a fresh process with an empty numba cache (every kernel compiles)
-makes each timed report, and every kernel compile in it is recorded with whether it happened
-inside :func:`toolkit._compiled.warm` (the untimed warm-up each report runs before its clock
-starts). A compile outside every warm-up would be inside a reported time. How fast the
-compiled code is belongs to ``python -m toolkit.bench``, not to these tests.
+Checked without a clock: every reported run time and every wall-clock budget reads
+:func:`toolkit._compiled.budget_clock`, which stands still while numba compiles; here a fake
+``perf_counter`` drives it through a compile, and a fake ``budget_clock`` shows that reports
+read it. How fast the compiled code is belongs to ``python -m toolkit.bench``.
 """
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
+import itertools
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import toolkit
-from toolkit import load_scene
-from toolkit.scenes.study import run_study
+from toolkit import _compiled, load_scene
+from toolkit.scenes.study import control_scene, estimate_scene, run_study
 
 ROOT = Path(toolkit.__file__).resolve().parents[1]
-JIT = os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
-
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(not JIT, reason="nothing is compiled")]
-
-#: Each timed report in turn, in one process: kernels compiled by an earlier report are
-#: machine code for the later ones, which then compile only what is new to them.
-_REPORTS = """
-import json, sys
-from toolkit import _compiled
-record, depth = [], [0]
-original = _compiled.warm
-def warm(*args):
-    depth[0] += 1
-    try:
-        return original(*args)
-    finally:
-        depth[0] -= 1
-_compiled.warm = warm                       # (before any module binds the name)
-report = [None]
-_compiled.on_compile(lambda event, name, s: event == "end" and record.append([report[0], name, depth[0] > 0]))
-from toolkit import load_scene
-from toolkit.analysis.precision import MethodSetting, precision_report
-from toolkit.experiments import MedianLaw
-from toolkit.model.carousel import carousel_startup_plant
-from toolkit.predictions import prediction_checks
-from toolkit.scenes.study import control_scene, estimate_scene
-from toolkit.sweeps import sweep
-costs = {}
-report[0] = "precision"
-costs[report[0]] = precision_report(carousel_startup_plant(0), 5.0, settings=[MethodSetting("exact")],
-                                    repeats=2).compile_time
-report[0] = "estimate"
-costs[report[0]] = estimate_scene(load_scene("designs/estimate.toml")).compile_time
-report[0] = "closed loop"
-costs[report[0]] = control_scene(load_scene("designs/closed_loop.toml")).compile_time
-report[0] = "sweep"
-costs[report[0]] = sweep(MedianLaw(), 2000, seed=3).compile_time
-report[0] = "predict"
-costs[report[0]] = prediction_checks(runs=40).compile_time
-print(json.dumps({"compiles": record, "costs": costs}))
-"""
+TICK = 2.0 ** -30
 
 
-def test_no_reported_time_includes_a_compile(tmp_path):
-    env = {k: v for k, v in os.environ.items() if k not in ("ACTIVE_CONTACTS_COMPILE", "NUMBA_DISABLE_JIT")}
-    env.update(PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(tmp_path / "cache"))    # an empty cache
-    done = subprocess.run([sys.executable, "-c", _REPORTS], env=env, cwd=ROOT, check=True,
-                          capture_output=True, text=True)
-    data = json.loads(done.stdout.strip().splitlines()[-1])
-    compiles = data["compiles"]
-    assert compiles, "nothing compiled: the cache was not empty"
-    outside = [(report, name) for report, name, inside in compiles if not inside]
-    assert not outside, f"compiled inside a timed region: {outside}"
-    # the one-time cost is reported apart (every report here ran a warm-up that compiled)
-    assert all(cost > 0 for cost in data["costs"].values()), data["costs"]
+@pytest.fixture
+def fake_clock(monkeypatch):
+    """``time.perf_counter`` as _compiled reads it: the next value of a list, then stays."""
+    values: list[float] = []
+
+    def perf_counter() -> float:
+        return values.pop(0) if len(values) > 1 else values[0]
+
+    monkeypatch.setattr(_compiled.time, "perf_counter", perf_counter)
+    monkeypatch.setitem(_compiled._COMPILING, "seconds", 0.0)
+    monkeypatch.setitem(_compiled._COMPILING, "depth", 0)
+    monkeypatch.setitem(_compiled._COMPILING, "listener", None)
+    return values
+
+
+def test_budget_clock_stands_still_while_a_kernel_compiles(fake_clock):
+    # perf_counter reads 10 (before), 12 (compile starts), 19 and 30 (the nested compile's
+    # start and end: no reading), 40 (the outer ends), 45: the clock reads 10, 12, 12, 17.
+    # Exact: sums of small integers in doubles.
+    fake_clock[:] = [10.0, 12.0, 40.0, 45.0]
+    seen = []
+    _compiled.on_compile(lambda event, name, seconds: seen.append((event, name, seconds)))
+    assert _compiled.budget_clock() == 10.0
+    _compiled.compile_started("outer")
+    assert _compiled.budget_clock() == 12.0          # during the compile: still
+    _compiled.compile_started("inner")                # nested: counted in the outer one
+    _compiled.compile_ended("inner")
+    assert _compiled.budget_clock() == 12.0
+    _compiled.compile_ended("outer")                  # 28 s of compile, reported once
+    assert _compiled.compile_seconds() == 28.0
+    assert _compiled.budget_clock() == 45.0 - 28.0
+    assert seen == [("start", "outer", 0.0), ("end", "outer", 28.0)]
+
+
+def test_reported_run_times_read_the_budget_clock(monkeypatch):
+    # With budget_clock replaced by a counter of ticks of 2**-30 s (exact in doubles; small,
+    # so that no budget reading it runs out), each report's time is the difference of two of
+    # its readings: a whole number of ticks, whatever the machine did.
+    ticks = itertools.count()                 # one clock for all (a deadline set in one is read in another)
+    readers = [module for name, module in sorted(sys.modules.items())
+               if name.startswith("toolkit.") and getattr(module, "budget_clock", None) is _compiled.budget_clock]
+    assert len(readers) >= 10, readers
+    for module in readers:
+        monkeypatch.setattr(module, "budget_clock", lambda: next(ticks) * TICK)
+    study = estimate_scene(load_scene(ROOT / "designs" / "estimate.toml"))
+    times = [result.wall_time for result in study.results]
+    times.append(control_scene(load_scene(ROOT / "designs" / "closed_loop.toml")).loop.wall_time)
+    times.append(toolkit.simulate(toolkit.Plant(toolkit.ContactSet([0.1, -0.2, 0.3], [1.0, 2.0, 0.5]), 1.0),
+                                  1.0).wall_time)
+    assert all(t > 0 and t / TICK == np.floor(t / TICK) for t in times), times
 
 
 def test_study_reports_the_one_time_cost_apart():

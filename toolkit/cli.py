@@ -605,7 +605,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     Everything past the standard library is imported in here, under the same handlers as the
     work: a Ctrl-C at any moment (while numpy loads, while workers start, while outputs are
     written) ends with one line and exit 130, never a traceback."""
-    previous = _terminate_as_interrupt()
+    interrupted, previous = _interrupts_noted()
     try:
         args = _parser().parse_args(argv)
         from .errors import ToolkitError
@@ -622,9 +622,35 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("active-contacts: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except Exception:
+        if not interrupted:
+            raise
+        # What a Ctrl-C broke off (a compiled module's import turns it into an ImportError).
+        print("active-contacts: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _interrupts_noted() -> tuple[list[int], dict[int, Any]]:
+    """Ctrl-C (SIGINT) and SIGTERM raise ``KeyboardInterrupt`` (workers stopped, partial
+    outputs removed, exit 130) and are noted in the returned list, so that an error they
+    cause is known for what it is; returns it and the previous handlers (none off the main
+    thread, where signals are not ours to take)."""
+    noted: list[int] = []
+
+    def interrupt(signum: int, frame: Any) -> None:
+        noted.append(signum)
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    previous: dict[int, Any] = {}
+    try:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            previous[signum] = signal.signal(signum, interrupt)
+    except ValueError:                 # not the main thread (an embedding caller's thread)
+        pass
+    return noted, previous
 
 
 @contextlib.contextmanager
@@ -665,18 +691,6 @@ def _compiles_announced() -> Iterator[None]:
         if state["count"]:
             print(f"active-contacts: compiled {state['count']} kernels in {state['seconds']:.1f} s "
                   "(not charged to any budget)", file=stream, flush=True)
-
-
-def _terminate_as_interrupt() -> Any:
-    """SIGTERM ends a command as Ctrl-C does (``KeyboardInterrupt``: workers stopped, partial
-    outputs removed, exit 130); returns the previous handler (None off the main thread)."""
-    def interrupt(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt(f"signal {signum}")
-
-    try:
-        return signal.signal(signal.SIGTERM, interrupt)
-    except ValueError:                 # not the main thread (an embedding caller's thread)
-        return None
 
 
 if __name__ == "__main__":

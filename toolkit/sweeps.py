@@ -42,10 +42,10 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import multiprocessing.connection
+import pickle
 import os
 import signal
 import threading
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from collections.abc import Callable
@@ -53,6 +53,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from ._compiled import budget_clock
 from ._compiled import warm
 from ._forked import stop
 from .errors import as_float, as_int, suggestion
@@ -374,19 +375,18 @@ def _terminate_interrupts() -> Iterator[None]:
 
 @contextlib.contextmanager
 def _interrupts_held() -> Iterator[None]:
-    """While a worker starts: the new interpreter is born ignoring SIGINT (an ignored signal
-    stays ignored through exec), so a Ctrl-C reaching the whole process group never raises in
-    a worker, not even while it imports (the parent stops the workers); the parent holds the
-    signal back meanwhile (blocked, not lost) and receives it when the block ends."""
+    """While a worker starts, SIGINT is blocked (held back, not lost): the new interpreter
+    inherits the blocked signal and keeps it blocked for its whole life, so a Ctrl-C reaching
+    the whole process group never raises in a worker, not even while it imports (the parent
+    stops the workers); the parent receives the held signal when the block ends. (Only the
+    mask changes: setting SIGINT ignored would discard one already held.)"""
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
     before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, handler)
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
@@ -395,18 +395,22 @@ def _pool_worker(connection: Any) -> None:
     until ``None``. Ctrl-C in a terminal reaches every process of its group; the parent stops
     the workers itself (:func:`_run_pool`), so they ignore it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    while True:
-        task = connection.recv()
-        if task is None:
-            return
-        j, experiment, seed, a, b = task
-        try:
-            connection.send((j, _run_chunk(experiment, seed, a, b), None))
-        except Exception as error:                  # (reported to the parent, raised there)
+    try:
+        while True:
+            task = connection.recv()
+            if task is None:
+                return
+            j, experiment, seed, a, b = task
             try:
-                connection.send((j, None, error))
-            except Exception:                       # an error that does not pickle
-                connection.send((j, None, RuntimeError(repr(error))))
+                reply = (j, _run_chunk(experiment, seed, a, b), None)
+            except Exception as error:              # (reported to the parent, raised there)
+                reply = (j, None, error)
+            try:
+                connection.send(reply)
+            except (TypeError, AttributeError, pickle.PicklingError):   # it does not pickle
+                connection.send((j, None, RuntimeError(repr(reply[2]))))
+    except (EOFError, OSError):                     # the parent has gone: no one to tell
+        return
 
 
 def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers: int,
@@ -422,8 +426,8 @@ def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers
     that dies on its own is reported, not waited for.
     """
     context = multiprocessing.get_context("spawn")
-    # multiprocessing's resource tracker unblocks SIGINT as it starts, which would drop one
-    # held back while a worker starts: it starts first, outside the hold.
+    # multiprocessing's resource tracker unblocks SIGINT as it starts, which would let the
+    # workers started in the same hold inherit it unblocked: it starts first, outside.
     from multiprocessing import resource_tracker
     resource_tracker.ensure_running()
     tasks = iter(enumerate(bounds))
@@ -554,7 +558,7 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     compile_time = 0.0
     if kind == "local":          # the timing policy: compiled, and run 0 once, before the clock
         compile_time = warm(lambda: _run_chunk(experiment, seed, 0, 1), "core")
-    started = time.perf_counter()
+    started = budget_clock()
     bar = _progress(runs, progress, experiment.name)
     parts: list[dict[str, np.ndarray] | None] = [None] * len(bounds)
 
@@ -582,4 +586,4 @@ def sweep(experiment: Experiment, runs: int, *, seed: int = 0, scheduler: Any = 
     table = pd.DataFrame(columns)
     summary = experiment.summarize(table)
     return SweepResult(experiment, table, summary, runs, seed, chunk_size, kind,
-                       time.perf_counter() - started, len(bounds), compile_time)
+                       budget_clock() - started, len(bounds), compile_time)

@@ -250,9 +250,10 @@ def compile_seconds() -> float:
 
 
 def budget_clock() -> float:
-    """The clock every wall-clock budget reads, s: ``time.perf_counter()`` less the time spent
-    compiling kernels, so that a one-time compile is never charged to any budget (it stands
-    still while one runs)."""
+    """The clock every wall-clock budget and every reported run time reads, s:
+    ``time.perf_counter()`` less the time spent compiling kernels, so that a one-time compile
+    is never charged to a budget nor counted in a reported time (it stands still while one
+    runs; its cost is reported apart)."""
     state = _COMPILING
     return (state["since"] if state["depth"] else time.perf_counter()) - state["seconds"]
 
@@ -268,36 +269,50 @@ def on_compile(listener: Callable[[str, str, float], None] | None) -> Callable[[
 
 
 def _install_compile_events(numba: ModuleType) -> None:
-    """Listen to numba's ``numba:compile`` events (once per process): nested compiles (a kernel
-    compiling the kernels it calls) count once, in the outermost."""
+    """Listen to numba's ``numba:compile`` events (once per process)."""
     if _COMPILING["installed"]:
         return
     from numba.core import event
 
     class _Listener(event.Listener):          # numba's event API (numba.core.event)
         def on_start(self, ev: Any) -> None:
-            if _COMPILING["depth"] == 0:
-                _COMPILING["since"] = time.perf_counter()
-                _tell("start", ev, 0.0)
-            _COMPILING["depth"] += 1
+            compile_started(_kernel_name(ev))
 
         def on_end(self, ev: Any) -> None:
-            _COMPILING["depth"] -= 1
-            if _COMPILING["depth"] == 0:
-                seconds = time.perf_counter() - _COMPILING["since"]
-                _COMPILING["seconds"] += seconds
-                _COMPILING["kernels"] += 1
-                _tell("end", ev, seconds)
+            compile_ended(_kernel_name(ev))
 
     event.register("numba:compile", _Listener())
     _COMPILING["installed"] = True
 
 
-def _tell(kind: str, ev: Any, seconds: float) -> None:
+def _kernel_name(ev: Any) -> str:
+    function = getattr(ev.data.get("dispatcher"), "py_func", None)
+    return getattr(function, "__name__", "kernel")
+
+
+def compile_started(kernel: str) -> None:
+    """A compile of ``kernel`` starts: nested compiles (a kernel compiling the kernels it
+    calls) count once, in the outermost, which stops :func:`budget_clock`."""
+    if _COMPILING["depth"] == 0:
+        _COMPILING["since"] = time.perf_counter()
+        _tell("start", kernel, 0.0)
+    _COMPILING["depth"] += 1
+
+
+def compile_ended(kernel: str) -> None:
+    """A compile of ``kernel`` ends (the outermost restarts :func:`budget_clock`)."""
+    _COMPILING["depth"] -= 1
+    if _COMPILING["depth"] == 0:
+        seconds = time.perf_counter() - _COMPILING["since"]
+        _COMPILING["seconds"] += seconds
+        _COMPILING["kernels"] += 1
+        _tell("end", kernel, seconds)
+
+
+def _tell(kind: str, kernel: str, seconds: float) -> None:
     listener = _COMPILING["listener"]
     if listener is not None:
-        function = getattr(ev.data.get("dispatcher"), "py_func", None)
-        listener(kind, getattr(function, "__name__", "kernel"), seconds)
+        listener(kind, kernel, seconds)
 
 
 def _compile(module: ModuleType) -> None:

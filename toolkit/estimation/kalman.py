@@ -112,12 +112,12 @@ toolkit (or a scene without sensors) never loads it.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from .._compiled import budget_clock
 from .._compiled import kernels
 from ..errors import as_float, as_float_array
 from ..errors import ParameterError, ParameterTypeError, parameter_message
@@ -518,7 +518,7 @@ class NominalKalman(Estimator):
         """Run over a record (initial speed ``speed``, m/s, of std ``speed_std``): the
         filter's pass, states and covariances with what made them."""
         self._check_record(record)
-        started = time.perf_counter()
+        started = budget_clock()
         model = self.model
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         K = record.n_samples
@@ -568,7 +568,7 @@ class NominalKalman(Estimator):
         self._pending = (track[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1], force_l[-1])
         return FilterPass(np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Fs),
                           np.array(Qs), np.array(nis), np.array(failed), np.array(cells),
-                          time.perf_counter() - started)
+                          budget_clock() - started)
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
@@ -612,7 +612,7 @@ class RTSSmoother(Estimator):
 
         forward = self.forward.filter(record, speed=speed, speed_std=speed_std)
         X, P = forward.states, forward.covariances
-        started = time.perf_counter()
+        started = budget_clock()
         K = X.shape[0]
         Xa = np.concatenate((X, np.ones((K, 1))), axis=1)
         Pa = np.zeros((K, 3, 3))
@@ -623,7 +623,7 @@ class RTSSmoother(Estimator):
         Qa = np.zeros((K, 3, 3))
         Qa[:, :2, :2] = forward.process_noises
         xs, ps, _, _ = KalmanFilter(dim_x=3, dim_z=1).rts_smoother(Xa, Pa, Fa, Qa, inv=np.linalg.pinv)
-        wall = time.perf_counter() - started
+        wall = budget_clock() - started
         return score(record, self.name, xs[:, 1], ps[:, 1, 1], wall, position=xs[:, 0],
                      covariance=ps[:, :2, :2])
 

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Any
 
+from .._compiled import budget_clock
 from .._compiled import warm
 from ..errors import ParameterTypeError, as_int, parameter_message
 from .apparatus import Apparatus
@@ -116,7 +116,7 @@ def prediction_checks(apparatus: Apparatus | None = None, *, runs: int = 490, se
     # Every wall time below is of compiled code: the sweeps once on a few runs, untimed.
     compile_time = warm(lambda: [viscosity_check(ViscosityProblem(apparatus, mode, WARM_RUNS, seed=seed), workers=1)
                                  for mode in ("ideal", "loop")[:1 + loop]], *KERNELS)
-    started = time.perf_counter()
+    started = budget_clock()
     vis_ideal = viscosity_check(ViscosityProblem(apparatus, "ideal", runs, seed=seed), progress=progress)
     vis_loop = (viscosity_check(ViscosityProblem(apparatus, "loop", runs, seed=seed), progress=progress)
                 if loop else None)
@@ -125,4 +125,4 @@ def prediction_checks(apparatus: Apparatus | None = None, *, runs: int = 490, se
                 if even else None)
     fr_loop = (friction_fraction_check(FrictionFractionProblem(apparatus, "loop", seed=seed), progress=progress)
                if loop and even else None)
-    return PredictionChecks(vis_loop, vis_ideal, fr_loop, fr_ideal, time.perf_counter() - started, compile_time)
+    return PredictionChecks(vis_loop, vis_ideal, fr_loop, fr_ideal, budget_clock() - started, compile_time)

@@ -30,12 +30,12 @@ no transition happens within twice the ``j = 1`` time).
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from .._compiled import budget_clock
 from ..errors import as_float, as_int, check_option
 from ..allocation import FrictionFraction, allocate
 from ..loop.closed_loop import simulate_closed_loop
@@ -214,7 +214,7 @@ def friction_fraction_check(problem: FrictionFractionProblem | None = None, *,
     if not isinstance(problem, FrictionFractionProblem):
         raise ParameterTypeError(parameter_message(
             "problem", "friction_fraction_check", "be a FrictionFractionProblem", problem))
-    started = time.perf_counter()
+    started = budget_clock()
     p, a = problem, problem.apparatus
     v, m, N = a.speed_limit, a.mass, a.n
     js = np.arange(N // 2 + 1)
@@ -277,4 +277,4 @@ def friction_fraction_check(problem: FrictionFractionProblem | None = None, *,
         message = "; ".join(bad)
     return FrictionFractionCheck(p, js, fractions, mu, float(F0), dT, np.asarray(dT_pred, dtype=float),
                                  np.asarray(dT_mu, dtype=float), ok, status, message,
-                                 time.perf_counter() - started)
+                                 budget_clock() - started)

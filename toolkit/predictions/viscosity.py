@@ -49,13 +49,13 @@ from __future__ import annotations
 import enum
 import math
 import sys
-import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
+from .._compiled import budget_clock
 from .._compiled import ensure_compiled
 from .._forked import fork_map, idle_cores
 from ..controllers import OpenLoop, VirtualViscosity
@@ -729,7 +729,7 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
         raise ParameterTypeError(parameter_message("problem", "viscosity_check", "be a ViscosityProblem", problem))
     if workers is not None:
         workers = as_int(workers, "workers", "viscosity_check", low=1)
-    started = time.perf_counter()
+    started = budget_clock()
     design, measured, correction, failures = _sweep(problem, progress, workers)
     m = problem.apparatus.mass
     tau_predicted = {d: correction[d] * m / design.slope for d in problem.definitions}
@@ -750,4 +750,4 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
                          ok & np.all([np.isfinite(measured["tau_true"][d]) for d in problem.definitions], axis=0))
     status, message = _verdict(problem, fits, failures)
     return ViscosityCheck(problem, design, measured["tau"], tau_predicted, measured["tau_true"], correction,
-                          measured["settled"], ok, fits, status, message, time.perf_counter() - started)
+                          measured["settled"], ok, fits, status, message, budget_clock() - started)

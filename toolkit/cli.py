@@ -310,7 +310,12 @@ def _cmd_live(args: argparse.Namespace) -> int:
 
     with claim_output_dir(_out_dir(args, scene)) as out:
         warm_loop(loop)
-        result = run_live(loop, device, status=status if sys.stderr.isatty() else None)
+        def started(hello: Any) -> None:
+            if not args.json:
+                print(f"live on {args.device}: {hello.wheels} wheels at {hello.rate:g} Hz; Ctrl-C stops "
+                      "(zero commands sent)", flush=True)
+
+        result = run_live(loop, device, status=status if sys.stderr.isatty() else None, started=started)
         if sys.stderr.isatty():
             sys.stderr.write("\n")
         truth, report = getattr(device, "truth", None), getattr(device, "report", None)
@@ -529,7 +534,8 @@ def _parser() -> argparse.ArgumentParser:
     live = command("live", _cmd_live, "run the scene's [control] loop live on a device over serial (or on the "
                    "scene's world simulated on a pseudo-terminal): record, estimates, deadlines; docs/live.md")
     live.add_argument("--device", required=True, metavar="URL",
-                      help="serial://PATH[?baud=N] (e.g. serial:///dev/ttyACM0?baud=115200), or 'sim'")
+                      help="serial://PATH[?baud=N] (e.g. serial:///dev/ttyACM0?baud=115200), or 'sim' (the scene's "
+                           "[control.truth] world simulated; sim?corrupt=P&silent_after=K&apply=sample for tests)")
     live.add_argument("--duration", type=float, metavar="S", help="seconds to run (default: control.duration)")
     live.add_argument("--out", metavar="DIR", type=_folder, help=out_help + "; record.csv replays with "
                       "'estimate SCENE --record DIR/record.csv'")

@@ -154,8 +154,8 @@ class LiveResult:
                 f"{t['out_of_order']} out-of-order lines")
 
 
-def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, float]], None] | None = None
-             ) -> LiveResult:
+def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, float]], None] | None = None,
+             started: Callable[[Any], None] | None = None) -> LiveResult:
     """Run ``loop`` on ``device`` in real time for ``loop.duration`` seconds of device time.
 
     Parameters
@@ -167,6 +167,8 @@ def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, floa
     status : callable, optional
         Called about every :data:`STATUS_INTERVAL` seconds with ``t`` (s), ``estimate``,
         ``sigma`` and ``command`` (m/s, the commands' mean), ``p99_ms`` and ``missed``.
+    started : callable, optional
+        Called with the device's handshake once it is accepted, before the first sample.
 
     Returns
     -------
@@ -203,6 +205,8 @@ def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, floa
     collecting = gc.isenabled()
     try:
         hello = device.open(expected_hello(sensors))
+        if started is not None:
+            started(hello)
         origin = time.perf_counter()
         next_status = origin + STATUS_INTERVAL
         gc.disable()                 # no collector pause inside a period
@@ -212,6 +216,8 @@ def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, floa
             got = time.perf_counter()
             if sample is None:
                 end = LiveStatus.SILENCE
+                break
+            if sample.seq >= samples:                # the duration's last sample was lost
                 break
             if sample.wheels.shape != (n,):
                 device.counts.unexpected += 1
@@ -235,6 +241,8 @@ def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, floa
             sequence[k], times[k], received[k], answered[k] = sample.seq, t, got - origin, done - origin
             central[k], wheel[k], commands[k], estimate[k], variance[k] = sample.central, sample.wheels, u, est, var
             k += 1
+            if sample.seq == samples - 1:            # the duration's last sample (device time)
+                break
             run = run + 1 if done - got > period else 0
             if run >= MISSED_RUN:
                 end = LiveStatus.MISSED

@@ -265,7 +265,7 @@ def _run(port: _Port, world: DeviceWorld, faults: DeviceFaults, apply: str, max_
     for k in range(limit):
         central, wheel = side.read()
         state = side.state
-        truth = (k * period, central, wheel.copy(), state.V, side.X, state.contact_speeds.copy())
+        truth = (k / rate, central, wheel.copy(), state.V, side.X, state.contact_speeds.copy())
         if faults.silent_after is None or k < faults.silent_after:
             line = protocol.sample_line(k, round(k * 1e6 / rate), central, wheel)
             if faults.corrupt > 0 and noise.random() < faults.corrupt:
@@ -274,7 +274,7 @@ def _run(port: _Port, world: DeviceWorld, faults: DeviceFaults, apply: str, max_
                 tally["corrupted"] += 1
             port.write(line)
         tally["samples"] = k + 1
-        following = side.next_instant((k + 1) * period, period)
+        following = side.next_instant((k + 1) / rate, period)   # the offline grid, k / rate
         answered, stopped = False, False
         while not stopped and (left := origin + following - time.perf_counter()) > 0 and not port.closed:
             for message in _messages(port, left, tally):
@@ -282,10 +282,9 @@ def _run(port: _Port, world: DeviceWorld, faults: DeviceFaults, apply: str, max_
                 if isinstance(message, Stop):
                     tally["stop"] = {"sample": k, "last_command": last_command}
                     new, stopped = zeros, True
-                elif isinstance(message, Command) and message.seq == k and not answered \
-                        and message.speeds.shape == (n,):
+                elif isinstance(message, Command) and message.seq == k and message.speeds.shape == (n,):
+                    tally["commands"] += not answered                  # a repeat replaces it
                     new, answered, last_command = message.speeds, True, k
-                    tally["commands"] += 1
                 else:
                     if isinstance(message, Command):
                         tally["late"] += 1

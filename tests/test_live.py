@@ -242,3 +242,11 @@ def test_a_busy_port_is_one_line_exit_2(tmp_path):
         os.close(slave)
     assert run.returncode == 2 and len(run.stderr.splitlines()) == 1
     assert "busy" in run.stderr and path in run.stderr
+
+
+def test_the_docs_examples_are_valid_lines():
+    text = (ROOT / "docs" / "live.md").read_text()
+    lines = [line.strip() for line in text.splitlines() if line.startswith("    $")]
+    assert len(lines) == 8
+    kinds = [type(protocol.parse(line.encode())).__name__ for line in lines]
+    assert kinds == ["Query", "Hello", "Start", "Sample", "Command", "Sample", "Command", "Stop"]

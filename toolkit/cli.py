@@ -327,10 +327,12 @@ def _cmd_live(args: argparse.Namespace) -> int:
         for line in live_lines(result, truth):
             print(line)
         print(f"wrote {', '.join(str(p) for p in written)}")
-    if result.status is LiveStatus.COMPLETED:
-        return EXIT_OK
-    print(f"active-contacts: {result.message}", file=sys.stderr)
-    return EXIT_INTERRUPTED if result.status is LiveStatus.INTERRUPTED else EXIT_SHORTFALL
+    if result.status is LiveStatus.INTERRUPTED:
+        print(f"active-contacts: {result.message}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    reached = float(result.record.times[-1]) if result.record is not None else 0.0
+    return _finish([] if result.status is LiveStatus.COMPLETED else
+                   [Shortfall("live", result.message, loop.duration - reached, "s")])
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:

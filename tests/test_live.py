@@ -4,11 +4,13 @@ safety rules (Ctrl-C, silence, corrupt lines, a handshake unlike the scene, bad 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
 import subprocess
 import sys
+import time
 import tty
 from pathlib import Path
 
@@ -17,9 +19,10 @@ import pytest
 
 from toolkit import build_scene, load_scene
 from toolkit.errors import DeviceError
-from toolkit.live import DeviceFaults, DeviceWorld, Hello, LiveStatus, SimulatedDevice, run_live
+from toolkit.live import Device, DeviceFaults, DeviceWorld, Hello, LinkCounts, LiveStatus, SimulatedDevice, run_live
 from toolkit.live import protocol
-from toolkit.live.scene import scene_loop, warm_loop
+from toolkit.live.runner import MISSED_RUN
+from toolkit.live.scene import scene_device, scene_loop, warm_loop
 from toolkit.loop import closed_loop
 from toolkit.model.record_io import LiveColumns, read_live_record, read_record_csv, write_record_csv
 from toolkit.scenes.spec import loads_scene
@@ -177,6 +180,7 @@ def test_ctrl_c_sends_zeros_within_a_period_and_exits_130(tmp_path):
     np.testing.assert_array_equal(truth.commands[-1], 0.0)
 
 
+@pytest.mark.slow
 def test_silence_sends_zeros_and_exits_3(tmp_path):
     run = cli("live", str(DESIGN), "--device", "sim?silent_after=20", "--duration", "5", "--out", str(tmp_path))
     assert run.returncode == 3
@@ -223,8 +227,8 @@ def test_a_missing_port_is_one_line_exit_2(tmp_path):
     run = cli("live", str(DESIGN), "--device", "serial:///dev/no-such-port?baud=115200", "--out", str(tmp_path))
     assert run.returncode == 2 and len(run.stderr.splitlines()) == 1
     assert "'device'" in run.stderr and "/dev/no-such-port" in run.stderr and "Traceback" not in run.stderr
-    bad = cli("live", str(DESIGN), "--device", "usb:ttyACM0", "--out", str(tmp_path))
-    assert bad.returncode == 2 and "serial://PATH" in bad.stderr
+    with pytest.raises(DeviceError, match="serial://PATH"):
+        scene_device(build_scene(load_scene(DESIGN)), "usb:ttyACM0", 1.0)
 
 
 def test_a_busy_port_is_one_line_exit_2(tmp_path):
@@ -250,3 +254,62 @@ def test_the_docs_examples_are_valid_lines():
     assert len(lines) == 8
     kinds = [type(protocol.parse(line.encode())).__name__ for line in lines]
     assert kinds == ["Query", "Hello", "Start", "Sample", "Command", "Sample", "Command", "Stop"]
+
+
+class _Bench(Device):
+    """A device in memory: samples at once (counts at rest), commands kept; ``interrupt_at``
+    raises KeyboardInterrupt instead of that sample (a Ctrl-C while waiting for it)."""
+
+    def __init__(self, interrupt_at: int | None = None) -> None:
+        self.counts, self.sent, self.closed, self.k, self.interrupt_at = LinkCounts(), [], 0, 0, interrupt_at
+
+    def open(self, expected):
+        return expected
+
+    def read_sample(self, deadline):
+        if self.k == self.interrupt_at:
+            raise KeyboardInterrupt
+        self.k += 1
+        return protocol.Sample(self.k - 1, (self.k - 1) * 20000, 0, np.zeros(10, dtype=np.int64))
+
+    def write_command(self, seq, speeds):
+        self.sent.append((seq, speeds.copy()))
+
+    def close(self):
+        self.closed += 1
+
+
+class _Slow:
+    """An estimator that takes ``delay`` seconds to observe (a host that cannot keep up)."""
+
+    def __init__(self, estimator, delay):
+        self.estimator, self.delay = estimator, delay
+
+    def reset(self, **state):
+        self.estimator.reset(**state)
+
+    def observe(self, sample):
+        time.sleep(self.delay)
+        return self.estimator.observe(sample)
+
+    def commanded(self, command, force=0.0):
+        self.estimator.commanded(command, force)
+
+
+def test_missed_deadlines_in_a_row_stop_the_run():
+    loop = scene_loop(slow_design(50.0), 5.0)
+    slow = dataclasses.replace(loop, estimator=_Slow(loop.estimator, 1.5 * 0.02))    # 1.5 periods each
+    device = _Bench()
+    result = run_live(slow, device)
+    assert result.status is LiveStatus.MISSED and result.sequence.size == MISSED_RUN
+    assert result.missed == MISSED_RUN and device.closed == 1
+    assert "deadlines missed in a row" in result.message and "zero commands sent" in result.message
+
+
+def test_ctrl_c_while_waiting_ends_the_run_and_closes_the_device():
+    loop = scene_loop(slow_design(50.0), 5.0)
+    device = _Bench(interrupt_at=7)
+    result = run_live(loop, device)
+    assert result.status is LiveStatus.INTERRUPTED and result.sequence.tolist() == list(range(7))
+    assert device.closed == 1 and [seq for seq, _ in device.sent] == list(range(7))
+    np.testing.assert_array_equal(result.record.commands, np.array([u for _, u in device.sent]))

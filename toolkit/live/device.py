@@ -121,7 +121,8 @@ class SerialDevice(Device):
     ----------
     url : str
         ``serial://PATH[?baud=N]`` (``serial:///dev/ttyACM0?baud=115200``); the port is opened
-        exclusively (a port another program holds is refused as busy).
+        here, exclusively (a missing port, or one another program holds, is refused at once),
+        and :meth:`open` makes the handshake.
     """
 
     def __init__(self, url: str) -> None:
@@ -133,6 +134,7 @@ class SerialDevice(Device):
         self._last_seq = -1
         self._started = False
         self._wheels = 1
+        self._connect()
 
     # -- the link -------------------------------------------------------------------------
     def _connect(self) -> None:
@@ -179,7 +181,7 @@ class SerialDevice(Device):
     # -- Device ---------------------------------------------------------------------------
     def open(self, expected: Hello) -> Hello:
         self._wheels = expected.wheels
-        if self._port is None:
+        if self._port is None:            # closed: open again
             self._connect()
         self._write(protocol.STOP_LINE)               # a device left streaming by an earlier host
         self._port.reset_input_buffer()

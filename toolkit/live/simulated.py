@@ -148,9 +148,8 @@ class SimulatedDevice(Device):
                                                              self.max_duration, self._folder), daemon=True)
         self._process.start()
         os.close(master)
-        path = os.ttyname(slave)
-        self._link = SerialDevice(f"serial://{path}")
         try:
+            self._link = SerialDevice(f"serial://{os.ttyname(slave)}")
             return self._link.open(expected)
         finally:
             os.close(slave)                    # the host's own port keeps the terminal open

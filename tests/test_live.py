@@ -167,11 +167,13 @@ def test_ctrl_c_sends_zeros_within_a_period_and_exits_130(tmp_path):
                                 "--duration", "60", "--out", str(tmp_path)], cwd=ROOT, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
     assert process.stdout.readline().startswith("live on sim")          # the loop runs
+    time.sleep(1.0)                                                    # (a Ctrl-C mid-run, not at its start)
     process.send_signal(signal.SIGINT)
     out, err = process.communicate(timeout=120)
     assert process.returncode == 130
     assert len(err.splitlines()) == 1 and "interrupted" in err
     result = json.loads((tmp_path / "result.json").read_text())
+    assert result["status"] == "INTERRUPTED" and result["timing"]["samples"] >= 1
     stop = result["device"]["stop"]
     # STOP (wheels to zero) came before the device's next sample: at most one sample passed
     # after the last command it took.

@@ -176,7 +176,15 @@ class SerialDevice(Device):
             buffer += chunk
 
     def _write(self, data: bytes) -> None:
-        self._port.write(data)
+        """Write all of ``data`` on the (non-blocking) port: one system call unless the output
+        buffer is full (pyserial's ``write`` waits on a select after every write)."""
+        view = memoryview(data)
+        while view:
+            try:
+                view = view[os.write(self._fd, view):]
+            except BlockingIOError:
+                if not select.select([], [self._fd], [], 1.0)[1]:
+                    raise DeviceError(f"The device on {self.url} took no output for 1 s.") from None
 
     # -- Device ---------------------------------------------------------------------------
     def open(self, expected: Hello) -> Hello:

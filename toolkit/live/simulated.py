@@ -119,7 +119,7 @@ class SimulatedDevice(Device):
     report : dict or None
         After :meth:`close`: the device's tallies (``samples``, ``commands``, ``late``,
         ``missing``, ``corrupted``, ``watchdog``, ``stop``: the sequence numbers of the last
-        sample sent and the last command taken when ``STOP`` came, or None).
+        sample sent and the last command taken when ``STOP`` came (-1: before any), or None).
     """
 
     def __init__(self, world: DeviceWorld, faults: DeviceFaults | None = None, *, apply: str = "arrival",
@@ -231,15 +231,16 @@ def _serve(master: int, slave: int, world: DeviceWorld, faults: DeviceFaults, ap
                              "watchdog": 0, "bad_lines": 0, "stop": None}
     hello = faults.hello or Hello(protocol.VERSION, sensors.n_wheels, sensors.rate,
                                   sensors.central.counts_per_rev, sensors.wheel.counts_per_rev)
-    started = False
-    while not started and not port.closed:
+    started = stopped = False
+    while not started and not stopped and not port.closed:
         for message in _messages(port, 0.5, tally):
             if isinstance(message, Query):
                 port.write(protocol.hello_line(hello.wheels, hello.rate, hello.central_cpr, hello.wheel_cpr))
             elif isinstance(message, Start):
                 started = True
-            elif isinstance(message, Stop):
-                pass                                   # not sampling: nothing to stop
+            elif isinstance(message, Stop) and started:     # stopped before the first sample
+                started, stopped = False, True
+                tally["stop"] = {"sample": -1, "last_command": -1}
     if started:
         _run(port, world, faults, apply, max_duration, folder, tally)
     (folder / "device.json").write_text(json.dumps(tally))

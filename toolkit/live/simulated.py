@@ -11,8 +11,8 @@ speed, position and contact speeds) and its tallies to files read after the run.
 
 from __future__ import annotations
 
+import gc
 import json
-import math
 import multiprocessing
 import os
 import select
@@ -146,7 +146,11 @@ class SimulatedDevice(Device):
         context = multiprocessing.get_context("fork")
         self._process = context.Process(target=_serve, args=(master, slave, self.world, self.faults, self.apply,
                                                              self.max_duration, self._folder), daemon=True)
-        self._process.start()
+        gc.freeze()                            # the collector of the child writes no inherited page
+        try:
+            self._process.start()
+        finally:
+            gc.unfreeze()
         os.close(master)
         try:
             self._link = SerialDevice(f"serial://{os.ttyname(slave)}")
@@ -224,9 +228,11 @@ def _serve(master: int, slave: int, world: DeviceWorld, faults: DeviceFaults, ap
     """The device process: handshake, then sample in real time until ``STOP``, the host's
     end closing, or ``max_duration``; then the truth and the tallies written to ``folder``."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # a terminal's Ctrl-C is the host's to handle
+    gc.disable()                                       # no collector pause inside a period
     os.close(slave)
     port = _Port(master)
     sensors = world.sensors
+    _rehearse(world)
     tally: dict[str, Any] = {"samples": 0, "commands": 0, "late": 0, "missing": 0, "corrupted": 0,
                              "watchdog": 0, "bad_lines": 0, "stop": None}
     hello = faults.hello or Hello(protocol.VERSION, sensors.n_wheels, sensors.rate,
@@ -245,6 +251,20 @@ def _serve(master: int, slave: int, world: DeviceWorld, faults: DeviceFaults, ap
         _run(port, world, faults, apply, max_duration, folder, tally)
     (folder / "device.json").write_text(json.dumps(tally))
     os.close(master)
+
+
+def _rehearse(world: DeviceWorld, periods: int = 25) -> None:
+    """Step a copy of the world over a few periods before the handshake: the pages the
+    process shares with its parent are copied now, not inside the first periods."""
+    from ..loop.closed_loop import PlantSide
+
+    plant, rate = world.plant, world.sensors.rate
+    side = PlantSide(plant, world.sensors, world.v0, np.random.default_rng(0), world.wander, world.budget)
+    command = plant.initial_speeds()
+    for k in range(periods):
+        side.read()
+        if not side.hold(k, command, 0.0, (k + 1) / rate):
+            break
 
 
 def _run(port: _Port, world: DeviceWorld, faults: DeviceFaults, apply: str, max_duration: float,

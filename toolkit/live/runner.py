@@ -1,8 +1,9 @@
 """The live loop's runner: the scene's estimator and controller stepped per sample on a device,
 with the deadlines kept and the safety rules applied.
 
-Per sample, in order: read the sample line, step :class:`~toolkit.loop.closed_loop.HostStep`
-(the offline loop's own per-sample code: estimate, act, tell the estimator), write the command.
+Per sample, in order: read the sample line, estimate and act (:class:`~toolkit.loop.closed_loop.HostStep`,
+the offline loop's own per-sample code), write the command, then tell the estimator the command
+and move the law's state on (the same step's second half, outside the latency).
 The latency is the host's time from the sample's line received to its command written; the
 deadline is one period (the command for sample ``k`` must reach the device before sample
 ``k + 1``). The run stops, with zero commands sent and the device stopped, at its duration, on
@@ -229,13 +230,14 @@ def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, floa
             if k and not t > times[k - 1]:
                 device.counts.out_of_order += 1
                 continue
-            est, var, u, f = host(t, sample.central, sample.wheels)
+            est, var, u, f = host.act(t, sample.central, sample.wheels)
             if f != 0.0:
                 raise ParameterError(parameter_message(
                     "controller", "run_live", "send wheel speeds only (the protocol carries no outside "
                     "force: a rig's force cannot be applied live)", f"a force of {f:g} N"))
             device.write_command(sample.seq, u)
             done = time.perf_counter()
+            host.settle()                            # after the command: not in the latency
             if k and got - origin - received[k - 1] > 1.5 * period:
                 late += 1
             sequence[k], times[k], received[k], answered[k] = sample.seq, t, got - origin, done - origin

@@ -197,18 +197,33 @@ class HostStep:
     def __call__(self, t: float, central: int, wheel: np.ndarray, true_speed: float = math.nan
                  ) -> tuple[float, float, np.ndarray, float]:
         """Sample at ``t`` (s) with its counts; returns the estimate (m/s), its variance
-        ((m/s)^2), the commands (m/s, shape (n,)) and the outside force (N) to send."""
+        ((m/s)^2), the commands (m/s, shape (n,)) and the outside force (N) to send:
+        :meth:`act`, then :meth:`settle`."""
+        out = self.act(t, central, wheel, true_speed)
+        self.settle()
+        return out
+
+    def act(self, t: float, central: int, wheel: np.ndarray, true_speed: float = math.nan
+            ) -> tuple[float, float, np.ndarray, float]:
+        """What the command needs: the estimate from the counts, then the law's action (a live
+        loop sends it before :meth:`settle`)."""
         if self.observe is not None:
             est, var = self.observe(EncoderSample(t, central, wheel, self.previous, self.previous_force))
         else:
             est, var = true_speed, 0.0
         action = self.output(t, self.z, est)
         u, f = action.commands, float(action.force)
+        self._acted = (t, est, u, f)
+        return est, var, u, f
+
+    def settle(self) -> None:
+        """The rest of the sample, once the command is sent: the estimator told the command,
+        the law's state moved on."""
+        t, est, u, f = self._acted
         if self.commanded is not None:
             self.commanded(u, f)
         self.previous, self.previous_force = u, f
         self.z = self.update(t, self.z, est)
-        return est, var, u, f
 
 
 class PlantSide:

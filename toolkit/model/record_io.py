@@ -16,8 +16,7 @@ encoder's count, one count per wheel channel, one commanded contact speed per wh
 sent at that sample and held to the next). Optional, after them: ``force_N`` (an outside
 force held over the period), then the simulated truth ``truth_speed_m_s``,
 ``truth_position_m`` and ``truth_contact_speed_1_m_s .. _n_m_s`` (for scoring; a hardware log
-has none), then a live run's columns (:class:`LiveColumns`: ``sequence``, ``received_s``,
-``answered_s``, ``estimate_m_s``, ``estimate_variance_m2_s2``; readers of the counts skip them). Counts are integers; every number finite. The resolutions come from the comment
+has none), then a live run's (:class:`LiveColumns`; :func:`read_record_csv` skips them). Counts are integers; every number finite. The resolutions come from the comment
 lines or, when the file has none, from the scene's encoders (``sensors``); both present must
 agree. Numbers are written with 17 significant digits (``repr``), so a record written and
 read back is the same record, bit for bit (tested). A malformed file is refused with its line

@@ -317,6 +317,51 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     return _finish(shortfalls)
 
 
+def _cmd_live(args: argparse.Namespace) -> int:
+    from .live import run_live
+    from .live.report import live_files, live_lines, live_to_dict
+    from .live.runner import LiveStatus
+    from .live.scene import scene_device, scene_loop, warm_loop
+    from .scenes._io import claim_output_dir, write_tree
+    from .shortfall import Shortfall
+
+    objects = _scene(args, "control", "to run live")
+    loop = scene_loop(objects, args.duration)
+    device = scene_device(objects, args.device, loop.duration)
+    scene = objects.scene
+
+    def status(s: dict[str, float]) -> None:
+        sys.stderr.write(f"\rt {s['t']:8.2f} s  V^ {s['estimate']:+.5f} +- {s['sigma']:.5f} m/s  u {s['command']:+.4f} "
+                         f"m/s  p99 {s['p99_ms']:.2f} ms  missed {s['missed']}  ")
+        sys.stderr.flush()
+
+    with claim_output_dir(_out_dir(args, scene)) as out:
+        warm_loop(loop)
+        def started(hello: Any) -> None:
+            if not args.json:
+                print(f"live on {args.device}: {hello.wheels} wheels at {hello.rate:g} Hz; Ctrl-C stops "
+                      "(zero commands sent)", flush=True)
+
+        result = run_live(loop, device, status=status if sys.stderr.isatty() else None, started=started)
+        if sys.stderr.isatty():
+            sys.stderr.write("\n")
+        truth, report = getattr(device, "truth", None), getattr(device, "report", None)
+        plots_too = scene.report is None or scene.report.plots
+        written = write_tree(out, live_files(result, truth, report, name=scene.name, plots_too=plots_too))
+    if args.json:
+        _print_json({"scene": scene.name, **live_to_dict(result, truth, report), "written": [str(p) for p in written]})
+    else:
+        for line in live_lines(result, truth):
+            print(line)
+        print(f"wrote {', '.join(str(p) for p in written)}")
+    if result.status is LiveStatus.INTERRUPTED:
+        print(f"active-contacts: {result.message}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    reached = float(result.record.times[-1]) if result.record is not None else 0.0
+    return _finish([] if result.status is LiveStatus.COMPLETED else
+                   [Shortfall("live", result.message, loop.duration - reached, "s")])
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from .scenes._io import claim_output_dir
     from .scenes.report import sweep_lines, sweep_to_dict, write_sweep
@@ -562,6 +607,14 @@ def _parser() -> argparse.ArgumentParser:
                                "a simulated record: estimates, NIS and the monitor's verdict, no truth")
     estimate.add_argument("--save-record", metavar="FILE.csv", type=_file,
                           help="also write the simulated record in the same CSV format")
+    live = command("live", _cmd_live, "run the scene's [control] loop live on a device over serial (or on the "
+                   "scene's world simulated on a pseudo-terminal): record, estimates, deadlines; docs/live.md")
+    live.add_argument("--device", required=True, metavar="URL",
+                      help="serial://PATH[?baud=N] (e.g. serial:///dev/ttyACM0?baud=115200), or 'sim' (the scene's "
+                           "[control.truth] world simulated; sim?corrupt=P&silent_after=K&apply=sample for tests)")
+    live.add_argument("--duration", type=float, metavar="S", help="seconds to run (default: control.duration)")
+    live.add_argument("--out", metavar="DIR", type=_folder, help=out_help + "; record.csv replays with "
+                      "'estimate SCENE --record DIR/record.csv'")
     sweep = command("sweep", _cmd_sweep, "run the scene's [sweep]: many seeded runs of one of the paper's "
                     "experiments, summary statistics, one table row per run")
     sweep.add_argument("--runs", type=_bounded("sweep --runs"), help="number of runs (default: the scene's)")

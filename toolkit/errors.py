@@ -27,6 +27,7 @@ __all__ = [
     "SceneFileNotFoundError",
     "SolverError",
     "OutputError",
+    "DeviceError",
     "parameter_message",
     "ParameterMessage",
     "as_float",
@@ -85,6 +86,11 @@ class SolverError(ToolkitError, RuntimeError):
 
 class OutputError(ToolkitError, OSError):
     """An output folder that cannot be written (found before any work)."""
+
+
+class DeviceError(_ParameterNamed, ToolkitError, OSError):
+    """A device of the live loop that cannot be opened (no such port, a busy one) or whose
+    handshake disagrees with the scene (``.parameter`` names what was given)."""
 
 
 def _show(value: Any) -> str:

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_estimation",
+__all__ = ["plot_live", "plot_force_curve", "plot_simulation", "plot_schedule", "plot_precision", "plot_estimation",
            "plot_closed_loop", "figure_png", "render_png", "offscreen",
            "plot_median_law", "plot_ratio_histogram", "plot_mean_median", "plot_outliers",
            "plot_summary_comparison", "plot_sweep", "plot_viscosity_check", "plot_friction_fraction_check",
@@ -551,6 +551,46 @@ def plot_closed_loop(loop: Any, axes: Any = None, *, title: str | None = None,
     _title(top, title, what)
     if loop.status.name != "SUCCESS":
         _note(top, f"{loop.message} at t = {t[-1]:.4g} s", corner="upper right", color="C3")
+    top.legend(loc="best", fontsize="small")
+    bottom.legend(loc="best", fontsize="small")
+    return top, bottom
+
+
+def plot_live(result: Any, truth: Any = None, axes: Any = None, *, title: str | None = None):
+    """A live run: the speed estimate with its 2-sigma band and, where known, the simulated
+    device's true speed (top); the host's latency per sample against the deadline (bottom).
+
+    Parameters
+    ----------
+    result : LiveResult
+    truth : EncoderRecord, optional
+        A simulated device's own record (its truth columns), matched by sequence number.
+    axes : pair of matplotlib Axes, optional
+    title : str, optional
+
+    Returns
+    -------
+    pair of matplotlib Axes
+    """
+    top, bottom = axes if axes is not None else _figure(2, (7.0, 6.0))
+    t = result.record.times
+    sigma = np.sqrt(np.maximum(result.variance, 0.0))
+    if truth is not None and truth.truth_speed is not None:
+        top.plot(truth.times, truth.truth_speed, color="k", lw=1.6, label="true speed (simulated device)",
+                 zorder=_Z_EXACT)
+    top.fill_between(t, result.estimate - 2 * sigma, result.estimate + 2 * sigma, step="post", color="C0",
+                     alpha=0.25, lw=0, label="2 sigma")
+    top.step(t, result.estimate, where="post", color="C0", lw=1.0, label="estimate (controller input)")
+    top.set_ylabel("speed (m/s)")
+    latency = result.latency * 1e3
+    bottom.plot(t, latency, ".", color="C2", ms=2, label="host latency")
+    bottom.axhline(result.period * 1e3, color="C3", lw=1.0, label="deadline (one period)")
+    bottom.set_yscale("log")
+    bottom.set_ylabel("latency (ms)")
+    bottom.set_xlabel("device time t (s)")
+    _title(top, title, "live loop")
+    if result.status.name != "COMPLETED":
+        _note(top, result.message, corner="upper right", color="C3")
     top.legend(loc="best", fontsize="small")
     bottom.legend(loc="best", fontsize="small")
     return top, bottom

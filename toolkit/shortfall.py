@@ -17,7 +17,7 @@ class Shortfall:
     ----------
     stage : str
         ``"scene"``, ``"allocation"``, ``"schedule"``, ``"simulation"``, ``"estimation"``,
-        ``"control"`` or ``"sweep"``.
+        ``"control"``, ``"sweep"`` or ``"live"``.
     what : str
         What was missed and by how much, in words, e.g. ``"friction fraction 1.7 is not
         realizable: projected to 1 (distance 7 N)"``.

@@ -42,7 +42,8 @@ from ..model.sensors import EncoderRecord, EncoderSample, SensorReader, Sensors,
 from ..simulation import (Budget, ExactState, SampledLaw, SampledRun, SimulationStatus, advance,
                           refuse_backlash, sampled_supported)
 
-__all__ = ["ClosedLoopResult", "simulate_closed_loop", "nominal_model", "MAX_SAMPLES", "LOOP_RATE"]
+__all__ = ["ClosedLoopResult", "simulate_closed_loop", "nominal_model", "HostStep", "PlantSide",
+           "MAX_SAMPLES", "LOOP_RATE"]
 
 #: Most samples one closed-loop run may take (the arrays it keeps grow with them).
 MAX_SAMPLES = 10_000_000
@@ -170,11 +171,117 @@ def _run_sampled(plant: Plant, law: ControlLaw, program: SampledLaw | None, time
     return run
 
 
+class HostStep:
+    """The host's half of one sample, as every loop runs it (offline here, live in
+    :mod:`toolkit.live`): the estimator observes the counts, the law acts on its estimate,
+    the estimator is told the command, the law's state moves on.
+
+    Parameters
+    ----------
+    law : ControlLaw
+        The controller bound to the plant and period.
+    estimator : Estimator or None
+        Reset by the caller; None: the law acts on the true speed (an ideal loop).
+    initial_commands : ndarray of shape (n,), m/s
+        The commands before the first sample (the motors' settled speeds).
+    """
+
+    def __init__(self, law: ControlLaw, estimator: Any, initial_commands: np.ndarray) -> None:
+        self.output, self.update = law.output, law.update
+        self.z = law.initial_state()
+        self.observe = self.commanded = None
+        if estimator is not None:
+            self.observe, self.commanded = estimator.observe, estimator.commanded
+        self.previous, self.previous_force = initial_commands, 0.0
+
+    def __call__(self, t: float, central: int, wheel: np.ndarray, true_speed: float = math.nan
+                 ) -> tuple[float, float, np.ndarray, float]:
+        """Sample at ``t`` (s) with its counts; returns the estimate (m/s), its variance
+        ((m/s)^2), the commands (m/s, shape (n,)) and the outside force (N) to send:
+        :meth:`act`, then :meth:`settle`."""
+        out = self.act(t, central, wheel, true_speed)
+        self.settle()
+        return out
+
+    def act(self, t: float, central: int, wheel: np.ndarray, true_speed: float = math.nan
+            ) -> tuple[float, float, np.ndarray, float]:
+        """What the command needs: the estimate from the counts, then the law's action (a live
+        loop sends it before :meth:`settle`)."""
+        if self.observe is not None:
+            est, var = self.observe(EncoderSample(t, central, wheel, self.previous, self.previous_force))
+        else:
+            est, var = true_speed, 0.0
+        action = self.output(t, self.z, est)
+        u, f = action.commands, float(action.force)
+        self._acted = (t, est, u, f)
+        return est, var, u, f
+
+    def settle(self) -> None:
+        """The rest of the sample, once the command is sent: the estimator told the command,
+        the law's state moved on."""
+        t, est, u, f = self._acted
+        if self.commanded is not None:
+            self.commanded(u, f)
+        self.previous, self.previous_force = u, f
+        self.z = self.update(t, self.z, est)
+
+
+class PlantSide:
+    """The device's half of the loop: the exact plant held between samples
+    (:func:`~toolkit.simulation.advance`) and the sensor law read at them.
+
+    Parameters
+    ----------
+    plant : Plant
+    sensors : Sensors or None
+    v0 : float, m/s
+    rng : numpy.random.Generator
+        The sensors' draws (missed counts, read noise), then each period's jitter.
+    offsets : ndarray of shape (k, n), m/s, or None
+        The motors' wander about the commands, one row per period (past the end: the last).
+    budget : Budget or None
+    """
+
+    def __init__(self, plant: Plant, sensors: Sensors | None, v0: float, rng: np.random.Generator,
+                 offsets: np.ndarray | None = None, budget: Budget | None = None) -> None:
+        self.plant, self.rng, self.offsets, self.budget = plant, rng, offsets, budget
+        self.state = ExactState.initial(plant, v0)
+        self.X, self.x = 0.0, np.zeros(plant.n)
+        self.reader = None
+        self.jitter = 0.0
+        if sensors is not None:
+            self.reader = SensorReader(sensors, sensors.initial_state(self.state.contact_speeds), rng)
+            self.jitter = sensors.jitter
+        self.status, self.message = SimulationStatus.SUCCESS, ""
+
+    def read(self) -> tuple[int, np.ndarray]:
+        """The encoders' counts now (the sensor law)."""
+        return self.reader.read(self.X, self.x)
+
+    def next_instant(self, t_next: float, period: float) -> float:
+        """The instant the next sample is read: ``t_next`` plus the sensors' jitter."""
+        if self.jitter > 0:
+            t_next += float(np.clip(self.rng.normal(0.0, self.jitter), -0.25 * period, 0.25 * period))
+        return t_next
+
+    def hold(self, k: int, command: np.ndarray, force: float, t1: float) -> bool:
+        """Hold the command of period ``k`` (plus the wander) up to ``t1`` (s); False when the
+        plant step failed (``status`` and ``message`` say why)."""
+        held = command if self.offsets is None else command + self.offsets[min(k, self.offsets.shape[0] - 1)]
+        step = advance(self.plant, self.state, held, t1, external=force, budget=self.budget)
+        if step.status is not SimulationStatus.SUCCESS:
+            self.status, self.message = step.status, step.message
+            return False
+        self.state = step.state
+        self.X, self.x = self.X + step.body_displacement, self.x + step.contact_displacements
+        return True
+
+
 def _run_python(plant: Plant, law: ControlLaw, times: np.ndarray, sensors: Sensors | None,
                 estimator: Any, v0: float, seed: Any, budget: Budget | None,
                 offsets: np.ndarray | None = None) -> tuple[Any, ...]:
-    """The loop in Python around :func:`~toolkit.simulation.advance` and the sensor law's
-    :class:`~toolkit.model.sensors.SensorReader`: noisy sensors, jitter, the motors' wander
+    """The loop in Python around :class:`PlantSide` (:func:`~toolkit.simulation.advance` and
+    the sensor law) and :class:`HostStep`: noisy sensors, jitter, the motors' wander
     (``offsets``), and the plants and budgets the kernel does not run
     (:func:`toolkit.simulation.sampled_supported`)."""
     rng = np.random.default_rng(seed)
@@ -185,52 +292,29 @@ def _run_python(plant: Plant, law: ControlLaw, times: np.ndarray, sensors: Senso
     position, force = [0.0] * samples, [0.0] * samples
     commands, contact = np.empty((samples, n)), np.empty((samples, n))
     central, wheel = [0] * samples, np.zeros((samples, n), dtype=np.int64)
-    state = ExactState.initial(plant, v0)
-    X, x = 0.0, np.zeros(n)
-    reader = None
-    if sensors is not None:
-        reader = SensorReader(sensors, sensors.initial_state(state.contact_speeds), rng)
-        observe, commanded = estimator.observe, estimator.commanded
-        jitter = sensors.jitter
-    else:
-        jitter = 0.0
-    output, update = law.output, law.update
-    z = law.initial_state()
-    status, message, last = SimulationStatus.SUCCESS, "", samples
-    previous, previous_force = state.contact_speeds, 0.0
+    side = PlantSide(plant, sensors, v0, rng, offsets, budget)
+    host = HostStep(law, estimator, side.state.contact_speeds)
+    last = samples
+    c, w = 0, wheel[0]
     for k in range(samples):
         t = t_list[k]
-        V = state.V
-        speed[k], position[k], contact[k] = V, X, state.contact_speeds
-        if reader is not None:
-            c, w = reader.read(X, x)
+        state = side.state
+        speed[k], position[k], contact[k] = state.V, side.X, state.contact_speeds
+        if side.reader is not None:
+            c, w = side.read()
             central[k] = c
             wheel[k] = w
-            estimate[k], variance[k] = est, _ = observe(EncoderSample(t, c, w, previous, previous_force))
-        else:
-            estimate[k] = est = V
-        action = output(t, z, est)
-        u = action.commands
+        estimate[k], variance[k], u, f = host(t, c, w, state.V)
         commands[k] = u
-        force[k] = f = float(action.force)
-        if reader is not None:
-            commanded(u, f)
-        previous, previous_force = u, f
-        z = update(t, z, est)
+        force[k] = f
         if k + 1 == samples:
             break
-        t_next = t_list[k + 1]
-        if jitter > 0:
-            t_next += float(np.clip(rng.normal(0.0, jitter), -0.25 * period, 0.25 * period))
-        held = u if offsets is None else u + offsets[min(k, offsets.shape[0] - 1)]
-        step = advance(plant, state, held, t_next, external=float(f), budget=budget)
-        if step.status is not SimulationStatus.SUCCESS:
-            status, message, last = step.status, step.message, k + 1
+        if not side.hold(k, u, f, side.next_instant(t_list[k + 1], period)):
+            last = k + 1
             break
-        state, X, x = step.state, X + step.body_displacement, x + step.contact_displacements
     return (np.array(speed), np.array(estimate), np.array(variance), np.array(position),
-            np.array(force), np.array(central, dtype=np.int64), wheel, commands, contact, status,
-            message, last)
+            np.array(force), np.array(central, dtype=np.int64), wheel, commands, contact, side.status,
+            side.message, last)
 
 
 def nominal_model(plant: Plant, sensors: Sensors) -> Any:

@@ -16,7 +16,7 @@ encoder's count, one count per wheel channel, one commanded contact speed per wh
 sent at that sample and held to the next). Optional, after them: ``force_N`` (an outside
 force held over the period), then the simulated truth ``truth_speed_m_s``,
 ``truth_position_m`` and ``truth_contact_speed_1_m_s .. _n_m_s`` (for scoring; a hardware log
-has none). Counts are integers; every number finite. The resolutions come from the comment
+has none), then a live run's (:class:`LiveColumns`; :func:`read_record_csv` skips them). Counts are integers; every number finite. The resolutions come from the comment
 lines or, when the file has none, from the scene's encoders (``sensors``); both present must
 agree. Numbers are written with 17 significant digits (``repr``), so a record written and
 read back is the same record, bit for bit (tested). A malformed file is refused with its line
@@ -26,6 +26,7 @@ number, the column, the rule and the value found.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -34,38 +35,68 @@ import numpy as np
 from ..errors import ParameterError, ParameterTypeError, SceneFileNotFoundError, parameter_message
 from .sensors import EncoderRecord, Sensors
 
-__all__ = ["write_record_csv", "read_record_csv", "record_csv_text", "RECORD_MAGIC"]
+__all__ = ["write_record_csv", "read_record_csv", "read_live_record", "record_csv_text", "LiveColumns",
+           "RECORD_MAGIC"]
 
 #: The first line of every record file (its version).
 RECORD_MAGIC = "# active-contacts encoder record 1"
 _META = ("central_resolution", "wheel_resolution", "wheel_backlash", "initial_commands")
+_LIVE = ("sequence", "received_s", "answered_s", "estimate_m_s", "estimate_variance_m2_s2")
 
 
-def _header(n: int, force: bool, truth: bool) -> list[str]:
+@dataclass(frozen=True, eq=False)
+class LiveColumns:
+    """What a live run logs beside each sample's counts and commands
+    (:func:`toolkit.live.run_live`).
+
+    Attributes
+    ----------
+    sequence : ndarray of shape (k,), int
+        The device's sequence number of the sample.
+    received, answered : ndarray of shape (k,), s
+        Host time the sample's line was received and its command written (from the start).
+    estimate, variance : ndarray of shape (k,), m/s and (m/s)^2
+        The estimate the controller acted on, and its variance.
+    """
+
+    sequence: np.ndarray
+    received: np.ndarray
+    answered: np.ndarray
+    estimate: np.ndarray
+    variance: np.ndarray
+
+
+def _header(n: int, force: bool, truth: bool, live: bool = False) -> list[str]:
     names = (["time_s", "central_count"] + [f"wheel_count_{i}" for i in range(1, n + 1)]
              + [f"command_{i}_m_s" for i in range(1, n + 1)])
     if force:
         names.append("force_N")
     if truth:
         names += ["truth_speed_m_s", "truth_position_m"] + [f"truth_contact_speed_{i}_m_s" for i in range(1, n + 1)]
+    if live:
+        names += list(_LIVE)
     return names
 
 
-def write_record_csv(record: EncoderRecord, path: Any) -> Path:
+def write_record_csv(record: EncoderRecord, path: Any, live: LiveColumns | None = None) -> Path:
     """Write ``record`` to ``path`` (CSV, the format of the module docstring); return the path.
 
     The truth columns are written when the record has the true speed, position and contact
-    speeds (a simulated record); ``force_N`` when it has a force.
+    speeds (a simulated record); ``force_N`` when it has a force; a live run's columns when
+    ``live`` is given (one entry per sample).
     """
     path = Path(path)
-    path.write_text(record_csv_text(record, "write_record_csv"), encoding="utf-8")
+    path.write_text(record_csv_text(record, "write_record_csv", live), encoding="utf-8")
     return path
 
 
-def record_csv_text(record: EncoderRecord, owner: str = "record_csv_text") -> str:
+def record_csv_text(record: EncoderRecord, owner: str = "record_csv_text", live: LiveColumns | None = None) -> str:
     """The CSV text :func:`write_record_csv` writes (for a caller that writes files its own way)."""
     if not isinstance(record, EncoderRecord):
         raise ParameterTypeError(parameter_message("record", owner, "be an EncoderRecord", record))
+    if live is not None and (not isinstance(live, LiveColumns) or live.sequence.shape != (record.n_samples,)):
+        raise ParameterError(parameter_message("live", owner, f"be LiveColumns of {record.n_samples} samples",
+                                               live))
     n = record.n_wheels
     truth = (record.truth_speed is not None and record.truth_position is not None
              and record.truth_contact_speeds is not None)
@@ -76,7 +107,7 @@ def record_csv_text(record: EncoderRecord, owner: str = "record_csv_text") -> st
              f"# wheel_backlash = {record.wheel_backlash!r}"]
     if record.initial_commands is not None:
         lines.append("# initial_commands = " + " ".join(repr(float(v)) for v in record.initial_commands))
-    lines.append(",".join(_header(n, force, truth)))
+    lines.append(",".join(_header(n, force, truth, live is not None)))
     for k in range(record.n_samples):
         row = [repr(float(record.times[k])), str(int(record.central_counts[k]))]
         row += [str(int(c)) for c in record.wheel_counts[k]]
@@ -86,6 +117,9 @@ def record_csv_text(record: EncoderRecord, owner: str = "record_csv_text") -> st
         if truth:
             row += [repr(float(record.truth_speed[k])), repr(float(record.truth_position[k]))]
             row += [repr(float(v)) for v in record.truth_contact_speeds[k]]
+        if live is not None:
+            row += [str(int(live.sequence[k]))] + [repr(float(column[k])) for column in
+                                                   (live.received, live.answered, live.estimate, live.variance)]
         lines.append(",".join(row))
     return "\n".join(lines) + "\n"
 
@@ -117,7 +151,8 @@ class _Reader:
 
 
 def read_record_csv(path: Any, sensors: Sensors | None = None) -> EncoderRecord:
-    """Read an encoder record written by :func:`write_record_csv` or by a logger.
+    """Read an encoder record written by :func:`write_record_csv` or by a logger (a live run's
+    columns, if any, are checked and left out: :func:`read_live_record` returns them).
 
     Parameters
     ----------
@@ -134,6 +169,11 @@ def read_record_csv(path: Any, sensors: Sensors | None = None) -> EncoderRecord:
     ParameterError
         A malformed file, naming the line, the column, the rule and the value.
     """
+    return read_live_record(path, sensors)[0]
+
+
+def read_live_record(path: Any, sensors: Sensors | None = None) -> tuple[EncoderRecord, LiveColumns | None]:
+    """:func:`read_record_csv`, and the live run's columns (None when the file has none)."""
     owner = "read_record_csv"
     path = Path(path)
     if sensors is not None and not isinstance(sensors, Sensors):
@@ -169,7 +209,8 @@ def read_record_csv(path: Any, sensors: Sensors | None = None) -> EncoderRecord:
         raise reader.fail(header_line, "header", "name at least one 'wheel_count_1' column", lines[index])
     force = "force_N" in header
     truth = "truth_speed_m_s" in header
-    expected = _header(wheels, force, truth)
+    live = "sequence" in header
+    expected = _header(wheels, force, truth, live)
     if header != expected:
         raise reader.fail(header_line, "header", f"be {','.join(expected)!r}", lines[index])
     n = wheels
@@ -192,7 +233,8 @@ def read_record_csv(path: Any, sensors: Sensors | None = None) -> EncoderRecord:
             wheel[j, i] = reader.count(fields[2 + i], line, expected[2 + i])
             commands[j, i] = reader.number(fields[2 + n + i], line, expected[2 + n + i])
         for i, column in enumerate(expected[2 + 2 * n:]):
-            extra[j, i] = reader.number(fields[2 + 2 * n + i], line, column)
+            text = fields[2 + 2 * n + i]
+            extra[j, i] = reader.count(text, line, column) if column == "sequence" else reader.number(text, line, column)
     resolutions = {}
     for key, from_sensors in (("central_resolution", None if sensors is None else sensors.central.distance_per_count),
                               ("wheel_resolution", None if sensors is None else sensors.wheel.distance_per_count),
@@ -223,6 +265,11 @@ def read_record_csv(path: Any, sensors: Sensors | None = None) -> EncoderRecord:
     if truth:
         fields.update(truth_speed=extra[:, column], truth_position=extra[:, column + 1],
                       truth_contact_speeds=extra[:, column + 2:column + 2 + n])
-    return EncoderRecord(times, central, wheel, commands, resolutions["central_resolution"],
-                         resolutions["wheel_resolution"], resolutions["wheel_backlash"],
-                         initial_commands=initial, **fields)
+    columns = None
+    if live:
+        values = extra[:, extra.shape[1] - len(_LIVE):]
+        columns = LiveColumns(values[:, 0].astype(np.int64), *(values[:, i].copy() for i in range(1, len(_LIVE))))
+    record = EncoderRecord(times, central, wheel, commands, resolutions["central_resolution"],
+                           resolutions["wheel_resolution"], resolutions["wheel_backlash"],
+                           initial_commands=initial, **fields)
+    return record, columns

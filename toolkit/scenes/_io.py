@@ -33,7 +33,7 @@ __all__ = ["OUTPUT_NAMES", "OutputError", "atomic_write_bytes", "atomic_write_te
 OUTPUT_NAMES = frozenset({"result.json", "force_curve.png", "simulation.png", "schedule.png",
                           "schedule.csv", "schedule.json", "precision.json", "precision.png",
                           "estimation.png", "closed_loop.png", "estimate.json", "estimate.png", "estimate.csv",
-                          "results.csv", "sweep.json", "sweep.png", "planar.json", "planar.png", "planar_precision.png"})
+                          "results.csv", "record.csv", "truth.csv", "live.png", "sweep.json", "sweep.png", "planar.json", "planar.png", "planar_precision.png"})
 
 
 def _umask() -> int:

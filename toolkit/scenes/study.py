@@ -69,8 +69,8 @@ from ..simulation import SimulationResult, SimulationStatus, simulate
 __all__ = ["CurveSamples", "CurveStep", "Shortfall", "StudyResult", "force_curve", "run_study",
            "allocate_scene", "design_scene_schedule", "request_shortfalls", "allocation_shortfalls",
            "schedule_shortfalls", "simulation_shortfalls", "EstimationStudy", "ControlStudy",
-           "estimate_scene", "estimate_record", "control_scene", "estimation_shortfalls", "control_shortfalls",
-           "sweep_scene", "sweep_shortfalls", "planar_scene",
+           "estimate_scene", "estimate_record", "control_scene", "control_world", "estimation_shortfalls",
+           "control_shortfalls", "sweep_scene", "sweep_shortfalls", "planar_scene",
            "planar_precision", "check_sweep_table"]
 
 
@@ -608,7 +608,6 @@ def control_scene(scene: Scene | SceneObjects, schedule: ScheduleResult | None =
     spec, objects = built.scene.control, built.control
     if spec is None or objects is None:
         raise SceneError(f"The scene {built.scene.name!r} has no [control] section.")
-    plant = built.plant_on(None)
     controller = objects.controller
     if controller is None:                                     # open loop: the designed schedule
         from ..controllers import OpenLoop
@@ -617,13 +616,7 @@ def control_scene(scene: Scene | SceneObjects, schedule: ScheduleResult | None =
             schedule, _ = design_scene_schedule(built)
         controller = OpenLoop(schedule)
     rate = None if objects.sensors is not None else objects.rate
-    # The loop runs on the true world ([control.truth]); its estimator knows the scene only.
-    truth, sensors = objects.truth, objects.sensors
-    wander = None
-    if not truth.is_nominal:
-        plant = truth.plant(plant, spec.seed)
-        sensors = None if sensors is None else truth.sensors(sensors)
-        wander = truth.wander(sample_count(spec.duration, objects.rate), plant.n, 1.0 / objects.rate, spec.seed)
+    plant, sensors, wander = control_world(built, spec.duration)
     arguments = dict(sensors=sensors, estimator=objects.estimator, v0=spec.v0, seed=spec.seed,
                      budget=objects.budget)
     if wander is not None:
@@ -641,6 +634,25 @@ def control_scene(scene: Scene | SceneObjects, schedule: ScheduleResult | None =
                             budget=objects.budget)
     name = getattr(objects.estimator, "name", None) if objects.sensors is not None else None
     return ControlStudy(loop, spec.controller, name, check, compile_time)
+
+
+def control_world(scene: Scene | SceneObjects, duration: float | None = None) -> tuple[Any, Any, Any]:
+    """The true world ``[control]``'s loop runs on (``[control.truth]``; the scene itself when it
+    says nothing): its plant, its encoders (None for an ideal loop) and the motors' wander
+    (ndarray of shape (k, n), m/s, one row per period of ``duration`` s, default
+    ``control.duration``; None without wander), every draw from ``control.seed``. The loop's
+    estimator knows the scene only."""
+    built = _built(scene)
+    spec, objects = built.scene.control, built.control
+    if spec is None or objects is None:
+        raise SceneError(f"The scene {built.scene.name!r} has no [control] section.")
+    duration = spec.duration if duration is None else duration
+    plant, truth, sensors = built.plant_on(None), objects.truth, objects.sensors
+    if truth.is_nominal:
+        return plant, sensors, None
+    plant = truth.plant(plant, spec.seed)
+    sensors = None if sensors is None else truth.sensors(sensors)
+    return plant, sensors, truth.wander(sample_count(duration, objects.rate), plant.n, 1.0 / objects.rate, spec.seed)
 
 
 def control_shortfalls(scene: Scene | SceneObjects, study: ControlStudy) -> list[Shortfall]:

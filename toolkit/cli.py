@@ -271,7 +271,9 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                              "record on the scene's wheel forces, as in the shipped 'estimate' design).")
         scene = replace(scene, estimation=EstimationSpec(scenario="simulation"))
     objects = build_scene(scene)
-    record = None if args.record is None else read_record_csv(args.record, sensors=objects.estimation.sensors)
+    record = None if args.record is None else read_record_csv(
+        args.record, sensors=objects.estimation.sensors, motors=objects.estimation.plant.motors,
+        progress=sys.stderr.isatty())
     with claim_output_dir(_out_dir(args, scene)) as out:
         study = estimate_scene(objects) if record is None else estimate_record(objects, record)
         shortfalls = estimation_shortfalls(objects, study)

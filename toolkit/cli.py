@@ -12,7 +12,7 @@ code is in :data:`EXIT_CODES` (also shown by ``--help``):
    projected or unreachable allocation target, speeds clipped to the motor limits, an
    unreachable or unverified schedule): the outputs are written and one line on stderr
    says what was missed and by how much (``StudyResult.shortfalls``);
-130. interrupted.
+130. interrupted; 141. the reader of the output stopped reading (``| head``): ended quietly.
 
 ``--json`` prints machine-readable output on stdout. Outputs are all or nothing: the output
 folder is checked before any work and replaced as a whole at the end.
@@ -32,11 +32,11 @@ from .analysis.precision import exact_speedup, precision_report, precision_short
 from .analysis.stability import stability_suite
 from .errors import SceneError, ToolkitError
 from .scenes._io import claim_output_dir
-from .scenes.build import SceneObjects, build_scene, planar_scene_error, sweep_scene_error
+from .scenes.build import SceneObjects, build_scene, check_record_outputs, planar_scene_error, sweep_scene_error
 from .scenes.limits import FLAGS, LIMITS
-from .scenes.report import (compile_line, schedule_check, schedule_lines, shortfall_dicts, shortfall_line, study_summary,
-                            study_to_dict, sweep_lines, sweep_to_dict, to_json, write_planar,
-                            write_planar_precision, write_precision, write_schedule, write_study, write_sweep)
+from .scenes.report import (compile_line, planar_to_dict, run_head, schedule_check, schedule_lines, shortfall_dicts,
+                            shortfall_line, study_summary, study_to_dict, sweep_lines, sweep_to_dict, to_json,
+                            write_planar, write_planar_precision, write_precision, write_schedule, write_study, write_sweep)
 from .scenes.spec import Scene, load_scene
 from .scenes.study import (allocate_scene, check_sweep_table, allocation_shortfalls, design_scene_schedule, force_curve,
                            planar_precision, planar_scene, request_shortfalls, run_study, schedule_shortfalls,
@@ -45,7 +45,7 @@ from .shortfall import Shortfall
 
 __all__ = ["main", "EXIT_CODES"]
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_SHORTFALL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_SHORTFALL, EXIT_INTERRUPTED, EXIT_PIPE = 0, 1, 2, 3, 130, 141
 
 #: Every exit code of the command line and what it means (shown by ``--help``).
 EXIT_CODES = {
@@ -57,6 +57,7 @@ EXIT_CODES = {
                     "unreachable, speeds clipped to the limits, schedule unreachable or unverified): "
                     "outputs written, one 'shortfall:' line on stderr",
     EXIT_INTERRUPTED: "interrupted",
+    EXIT_PIPE: "the reader of the standard output stopped reading (a pipe into head): ended quietly",
 }
 
 
@@ -109,6 +110,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if objects.sweep is not None:          # a sweep scene's one stage
         args.runs = args.seed = args.scheduler = args.workers = None
         args.out = str(_out_dir(args, objects.scene))
+        args.run_keys = True               # its JSON with every run's top-level keys
         return _cmd_sweep(args)
     if objects.planar is not None:         # a planar scene's one stage
         return _run_planar(args, objects)
@@ -129,9 +131,9 @@ def _run_planar(args: argparse.Namespace, objects: SceneObjects) -> int:
     with claim_output_dir(_out_dir(args, scene)) as out:
         result = planar_scene(objects)
         plots_too = scene.report is None or scene.report.plots
-        written = write_planar(result, out, plots_too=plots_too, title=scene.name)
+        written = write_planar(result, out, plots_too=plots_too, title=scene.name, stages=scene.stages)
     if args.json:
-        _print_json({"scene": scene.name, "planar": result.to_dict(), "written": [str(p) for p in written]})
+        _print_json({**planar_to_dict(result, scene.name, scene.stages), "written": [str(p) for p in written]})
     else:
         for line in result.lines():
             print(line)
@@ -274,6 +276,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     record = None if args.record is None else read_record_csv(
         args.record, sensors=objects.estimation.sensors, motors=objects.estimation.plant.motors,
         progress=sys.stderr.isatty())
+    if record is not None:
+        check_record_outputs(record.n_samples, objects.estimation, args.record)
     with claim_output_dir(_out_dir(args, scene)) as out:
         study = estimate_scene(objects) if record is None else estimate_record(objects, record)
         shortfalls = estimation_shortfalls(objects, study)
@@ -307,7 +311,10 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         written = (write_sweep(result, out, statistics=statistics, shortfalls=shortfalls, plots_too=plots_too,
                                title=scene.name) if out is not None else [])
     if args.json:
-        _print_json({**sweep_to_dict(result, statistics, shortfalls), "written": [str(p) for p in written]})
+        data = sweep_to_dict(result, statistics, shortfalls)
+        if getattr(args, "run_keys", False):
+            data = {**run_head(scene.name, scene.stages, shortfalls, result.compile_time), "sweep": data}
+        _print_json({**data, "written": [str(p) for p in written]})
     else:
         for line in sweep_lines(result, statistics, shortfalls):
             print(line)
@@ -528,14 +535,22 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``active-contacts`` console script; returns the exit code."""
+    if sys.stdout is None:             # started with its standard output closed (>&-)
+        return _stdout_closed()
     parser = _parser()
     args = parser.parse_args(argv)
     previous = _terminate_as_interrupt()
     try:
-        return args.handler(args)
+        code = args.handler(args)
+        sys.stdout.flush()             # a write error found here is still this command's
+        return code
     except ToolkitError as error:
         print(f"active-contacts: error: {error}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:
+        if not _stdout_gone():
+            raise
+        return _reader_gone()
     except OSError as error:  # found only while writing: a full disk, a folder removed meanwhile
         print(f"active-contacts: error: cannot write the output: {error}", file=sys.stderr)
         return EXIT_USAGE
@@ -545,6 +560,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _stdout_closed() -> int:
+    """Exit 2 with one line: the command has nowhere to write its results."""
+    if sys.stderr is not None:
+        print("active-contacts: error: the standard output is closed; the command writes its results "
+              "there (redirect it to a file, or to /dev/null to discard them).", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _stdout_gone() -> bool:
+    """Whether the standard output is a pipe whose reader has closed it (``| head``)."""
+    try:
+        import select
+
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):    # no poll (Windows), no descriptor: assume so
+        return True
+
+
+def _reader_gone() -> int:
+    """End quietly as a Unix filter does when its reader stops reading (exit 141, 128 +
+    SIGPIPE); the standard output is pointed at /dev/null so the final flush stays silent."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (AttributeError, OSError, ValueError):
+        pass
+    return EXIT_PIPE
 
 
 def _terminate_as_interrupt() -> Any:

@@ -119,8 +119,9 @@ class _Reader:
         return value
 
 
-#: Largest record file :func:`read_record_csv` reads, bytes: 256 MiB (about a million samples
-#: of ten wheels with their truth columns, a thirty-hour log at 10 Hz or six hours at 50 Hz).
+#: Largest record file :func:`read_record_csv` reads, bytes: 256 MiB (about a million rows of
+#: ten wheels as a logger writes them, some 6 hours at 50 Hz; half as many with the simulated
+#: truth columns). A longer log is split into records.
 MAX_RECORD_BYTES = 256 << 20
 #: Longest line of a record file, bytes (a row of a thousand wheels fits many times over).
 MAX_LINE_BYTES = 1 << 20
@@ -130,7 +131,7 @@ _PROGRESS_BYTES = 32 << 20
 _BLOCK_ROWS = 4096
 _INT64 = (int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max))
 _COUNT_RULE = f"be an integer count within int64 [{_INT64[0]}, {_INT64[1]}]"
-_COUNT_DIGITS = 40                       # longer: out of int64 whatever it says (int() of it is slow)
+_COUNT_DIGITS = 40                       # a longer count is refused unread (int() of a long text is slow)
 
 
 def _lines(stream: Any, reader: _Reader, bar: Any) -> Any:

@@ -538,7 +538,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if sys.stdout is None:             # started with its standard output closed (>&-)
         return _stdout_closed()
     parser = _parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:         # --help, --version or a usage error: printed already
+        raise SystemExit(_flushed(done.code)) from None
     previous = _terminate_as_interrupt()
     try:
         code = args.handler(args)
@@ -568,6 +571,15 @@ def _stdout_closed() -> int:
         print("active-contacts: error: the standard output is closed; the command writes its results "
               "there (redirect it to a file, or to /dev/null to discard them).", file=sys.stderr)
     return EXIT_USAGE
+
+
+def _flushed(code: Any) -> int:
+    """``code`` once the standard output is flushed; a reader gone meanwhile ends quietly."""
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return _reader_gone()
+    return code if isinstance(code, int) else EXIT_USAGE if code else EXIT_OK
 
 
 def _stdout_gone() -> bool:

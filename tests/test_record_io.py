@@ -211,3 +211,26 @@ def test_a_progress_bar_only_when_allowed_and_the_file_is_large(scenario, tmp_pa
     assert capsys.readouterr().err == ""
     read_record_csv(path, progress=True)
     assert "run.csv" in capsys.readouterr().err       # tqdm's bar, named by the file, on stderr
+
+
+def test_times_follow_the_encoders_period_when_the_scene_gives_it(scenario, tmp_path):
+    # At 50 Hz a row must follow the previous by 0.02 s within 0.01 s: 0.029 s passes, 0.031 s
+    # and a gap of 1e9 s do not (refused on the row that breaks the rule); without the scene's
+    # encoders only the order is checked.
+    path, lines = _lines(scenario, tmp_path)
+    assert scenario.sensors.period == 0.02
+    row = 6 + 40                                   # data row 40 (line 47): t = 0.8 s, previous 0.78
+    for value, refused in (("0.809", False), ("0.811", True), ("1e9", True)):
+        edited = list(lines)
+        edited[row] = value + "," + edited[row].split(",", 1)[1]
+        if value == "1e9":                         # keep the order: every later row moved too
+            edited[row + 1:] = [repr(1e9 + 0.02 * k) + "," + line.split(",", 1)[1]
+                                for k, line in enumerate(edited[row + 1:], start=1)]
+        path.write_text("\n".join(edited) + "\n")
+        if refused:
+            with pytest.raises(ParameterError, match=r"'time_s' parameter of .* on line 47, column 1 must follow the "
+                               r"previous row \(0.78 s\) by one period of the scene's encoders \(0.02 s\) within half"):
+                read_record_csv(path, scenario.sensors)
+        else:
+            assert read_record_csv(path, scenario.sensors).times[40] == 0.809
+        assert read_record_csv(path).times[40] == float(value)

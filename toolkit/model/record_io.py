@@ -9,7 +9,7 @@ The format (UTF-8, a byte-order mark allowed; at most :data:`MAX_RECORD_BYTES`):
     time_s,central_count,wheel_count_1..n,command_1_m_s..n_m_s[,force_N][,truth_...]
     0.0,0,0,...,0.15,...
 
-Times in s, strictly increasing; counts integers within int64; commands (m/s, held to the
+Times in s, one encoder period apart; counts integers within int64; commands (m/s, held to the
 next row) within the motors' limits; ``force_N`` and the simulated truth (speed, position,
 contact speeds) optional. Written with 17 significant digits: a record round-trips bit for
 bit. A bad file is refused with its line, column, rule and value."""
@@ -181,15 +181,16 @@ def read_record_csv(path: Any, sensors: Sensors | None = None, *, motors: Motors
     The file is read as a stream (in memory at once: the arrays returned and one line), at
     most :data:`MAX_RECORD_BYTES`; a UTF-8 byte-order mark (a spreadsheet's "CSV UTF-8") is
     accepted. Every value is checked as it is read: counts integers within int64, every
-    number finite, times strictly increasing, commands within ``motors``' speed limits.
+    number finite, times strictly increasing (with ``sensors``, one encoder period apart
+    within half a period), commands within ``motors``' speed limits.
 
     Parameters
     ----------
     path : str or Path
     sensors : Sensors, optional
         The encoders that wrote it (a scene's ``[sensors]``): their resolutions and backlash
-        when the file gives none; checked against the file's when both do, and their wheel
-        count against the file's channels.
+        when the file gives none; checked against the file's when both do, their wheel
+        count against the file's channels and their period against the rows' times.
     motors : Motors, optional
         The motors that took the commands (a scene's ``[motors]``): every command, and the
         initial commands, must lie within their speed limits (m/s).
@@ -228,7 +229,8 @@ def read_record_csv(path: Any, sensors: Sensors | None = None, *, motors: Motors
         meta, meta_lines, number, text = _preamble(lines, reader, limits)
         header = [name.strip() for name in text.split(",")]
         expected = _check_header(header, number, text, reader, sensors)
-        record = _rows(lines, number, capacity - number, expected, reader, limits)
+        period = None if sensors is None else sensors.period
+        record = _rows(lines, number, capacity - number, expected, reader, limits, period)
     return _record(record, meta, meta_lines, expected, reader, sensors)
 
 
@@ -279,7 +281,7 @@ def _check_header(header: list[str], line: int, text: str, reader: _Reader,
 
 
 def _rows(lines: Any, header_line: int, capacity: int, expected: list[str], reader: _Reader,
-          limits: tuple[float, float] | None) -> dict[str, np.ndarray]:
+          limits: tuple[float, float] | None, period: float | None) -> dict[str, np.ndarray]:
     """Every sample row into preallocated arrays, a block at a time (NumPy's reader converts
     a block; a block it refuses is read again row by row, naming the line and the column)."""
     n = sum(1 for name in expected if name.startswith("wheel_count_"))
@@ -290,9 +292,9 @@ def _rows(lines: Any, header_line: int, capacity: int, expected: list[str], read
 
     def flush() -> None:
         nonlocal k, previous
-        parsed = _fast_block([text for _, text in block], len(expected), n, limits, previous)
+        parsed = _fast_block([text for _, text in block], len(expected), n, limits, period, previous)
         if parsed is None:
-            parsed = _slow_block(block, expected, n, reader, limits, previous)
+            parsed = _slow_block(block, expected, n, reader, limits, period, previous)
         m = len(block)
         times[k:k + m], counts[k:k + m], numbers[k:k + m] = parsed
         k += m
@@ -313,7 +315,7 @@ def _rows(lines: Any, header_line: int, capacity: int, expected: list[str], read
     return {"times": times, "counts": counts, "numbers": numbers}
 
 
-def _fast_block(texts: list[str], width: int, n: int, limits: tuple[float, float] | None,
+def _fast_block(texts: list[str], width: int, n: int, limits: tuple[float, float] | None, period: float | None,
                 previous: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The rows converted by :func:`numpy.loadtxt`, or None when any row breaks a rule (a
     field count, a value): then :func:`_slow_block` says where."""
@@ -327,14 +329,18 @@ def _fast_block(texts: list[str], width: int, n: int, limits: tuple[float, float
         return None
     times, numbers = floats[:, 0], floats[:, 1:]
     commands = numbers[:, :n]
-    if (not np.all(np.isfinite(floats)) or not np.all(np.diff(times, prepend=previous) > 0)
+    steps = np.diff(times, prepend=previous)
+    if (not np.all(np.isfinite(floats)) or not np.all(steps > 0)
+            or (period is not None and not np.all(np.abs((steps[1:] if math.isinf(previous) else steps) - period)
+                                                  <= 0.5 * period))
             or (limits is not None and not np.all((commands >= limits[0]) & (commands <= limits[1])))):
         return None
     return times, counts, numbers
 
 
 def _slow_block(block: list[tuple[int, str]], expected: list[str], n: int, reader: _Reader,
-                limits: tuple[float, float] | None, previous: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                limits: tuple[float, float] | None, period: float | None,
+                previous: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The block read row by row, refusing the first bad value with its line and column."""
     width = len(expected)
     m = len(block)
@@ -347,6 +353,9 @@ def _slow_block(block: list[tuple[int, str]], expected: list[str], n: int, reade
         times[j] = reader.number(fields[0], line, 1, "time_s")
         if not times[j] > previous:
             raise reader.fail(line, 1, "time_s", f"increase strictly (previous row {previous!r})", fields[0])
+        if period is not None and math.isfinite(previous) and not abs(times[j] - previous - period) <= 0.5 * period:
+            raise reader.fail(line, 1, "time_s", f"follow the previous row ({previous!r} s) by one period of the "
+                              f"scene's encoders ({period:g} s) within half a period", fields[0])
         previous = float(times[j])
         for i in range(1 + n):
             counts[j, i] = reader.count(fields[1 + i], line, 2 + i, expected[1 + i])

@@ -589,7 +589,7 @@ def _stdout_gone() -> bool:
 
         poll = select.poll()
         poll.register(sys.stdout.fileno(), select.POLLOUT)
-        return any(events & select.POLLERR for _, events in poll.poll(0))
+        return any(events & (select.POLLERR | select.POLLHUP) for _, events in poll.poll(0))
     except (AttributeError, OSError, ValueError):    # no poll (Windows), no descriptor: assume so
         return True
 

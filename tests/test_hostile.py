@@ -403,7 +403,8 @@ def test_a_record_whose_estimates_pass_the_output_limit_is_refused_before_work(t
     from toolkit.cli import main
 
     text = (Path(ESTIMATE).read_text().replace("duration = 10.0 ", "duration = 0.1 ")
-            .replace("brake_time = 5.0 ", "brake_time = 0.05 ").replace("plots = true", "plots = true\ncurve_points = 2"))
+            .replace("brake_time = 5.0 ", "brake_time = 0.05 ")
+            .replace("plots = true", "plots = true\ncurve_points = 2"))
     path = tmp_path / "record.csv"
     path.write_text("\n".join(record_lines) + "\n")
     monkeypatch.setattr(build, "MAX_OUTPUT_BYTES", 10000)

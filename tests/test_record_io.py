@@ -63,10 +63,12 @@ def _lines(scenario, tmp_path):
 
 
 @pytest.mark.parametrize("edit, match", [
-    (lambda L: L.__setitem__(0, "# some other format"), "'first line' parameter of read_record_csv\\(run.csv\\) on line 1, column 1"),
+    (lambda L: L.__setitem__(0, "# some other format"),
+     "'first line' parameter of read_record_csv\\(run.csv\\) on line 1, column 1"),
     (lambda L: L.__setitem__(5, L[5].replace("time_s", "t")), "'header' parameter of .* on line 6, column 1"),
     (lambda L: L.__setitem__(9, L[9].replace(",", ";", 1)), "'row' parameter of .* on line 10, column \\d+ must have"),
-    (lambda L: L.__setitem__(9, "0.0," + L[9].split(",", 1)[1]), "'time_s' parameter of .* on line 10, column 1 must increase"),
+    (lambda L: L.__setitem__(9, "0.0," + L[9].split(",", 1)[1]),
+     "'time_s' parameter of .* on line 10, column 1 must increase"),
     (lambda L: L.__setitem__(12, L[12].split(",")[0] + ",12.5," + L[12].split(",", 2)[2]),
      "'central_count' parameter of .* on line 13, column 2 must be an integer count. Got '12.5'"),
     (lambda L: L.__setitem__(20, ",".join(L[20].split(",")[:13] + ["nan"] + L[20].split(",")[14:])),
@@ -181,11 +183,12 @@ def test_size_line_length_and_encoding_are_capped_with_the_rule(scenario, tmp_pa
         read_record_csv(path)
     monkeypatch.undo()
     monkeypatch.setattr(record_io, "MAX_LINE_BYTES", 100)
-    with pytest.raises(ParameterError, match=r"'line' parameter of .* on line 5 must be at most 100 bytes"):
+    with pytest.raises(ParameterError, match=r"'line' parameter of .* on line 5, column 101 must be at most 100 bytes"):
         read_record_csv(path)           # line 5, initial_commands, is the first over 100 bytes
     monkeypatch.undo()
     path.write_bytes(path.read_bytes().replace(b"time_s", b"time_\xe9", 1))
-    with pytest.raises(ParameterError, match=r"'line' parameter of .* on line 6 must be UTF-8 text. Got 'byte 0xe9"):
+    with pytest.raises(ParameterError, match=r"'line' parameter of .* on line 6, column 6 must be UTF-8 text "
+                       r"\(columns counted in bytes here\). Got 'byte 0xe9'"):
         read_record_csv(path)
 
 

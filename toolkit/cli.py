@@ -36,7 +36,8 @@ from .scenes.build import SceneObjects, build_scene, check_record_outputs, plana
 from .scenes.limits import FLAGS, LIMITS
 from .scenes.report import (compile_line, planar_to_dict, run_head, schedule_check, schedule_lines, shortfall_dicts,
                             shortfall_line, study_summary, study_to_dict, sweep_lines, sweep_to_dict, to_json,
-                            write_planar, write_planar_precision, write_precision, write_schedule, write_study, write_sweep)
+                            write_planar, write_planar_precision, write_precision, write_schedule, write_study,
+                            write_sweep)
 from .scenes.spec import Scene, load_scene
 from .scenes.study import (allocate_scene, check_sweep_table, allocation_shortfalls, design_scene_schedule, force_curve,
                            planar_precision, planar_scene, request_shortfalls, run_study, schedule_shortfalls,

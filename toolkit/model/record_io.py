@@ -145,13 +145,13 @@ def _lines(stream: Any, reader: _Reader, bar: Any) -> Any:
         number += 1
         bar.update(len(raw))
         if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
-            raise reader.fail(number, None, "line", f"be at most {MAX_LINE_BYTES} bytes (1 MiB)",
+            raise reader.fail(number, MAX_LINE_BYTES + 1, "line", f"be at most {MAX_LINE_BYTES} bytes (1 MiB)",
                               f"a longer line ({raw[:20]!r}...)")
         try:
             text = raw.decode("utf-8-sig" if number == 1 else "utf-8")
         except UnicodeDecodeError as error:
-            raise reader.fail(number, None, "line", "be UTF-8 text",
-                              f"byte 0x{raw[error.start]:02x} at byte {error.start + 1} of the line") from None
+            raise reader.fail(number, error.start + 1, "line", "be UTF-8 text (columns counted in bytes here)",
+                              f"byte 0x{raw[error.start]:02x}") from None
         yield number, text.rstrip("\r\n")
 
 
@@ -178,7 +178,7 @@ def read_record_csv(path: Any, sensors: Sensors | None = None, *, motors: Motors
                     progress: bool = False) -> EncoderRecord:
     """Read an encoder record written by :func:`write_record_csv` or by a logger.
 
-    The file is read as a stream (in memory at once: the arrays returned and one line), at
+    The file is read as a stream (in memory at once: the arrays returned and a block of rows), at
     most :data:`MAX_RECORD_BYTES`; a UTF-8 byte-order mark (a spreadsheet's "CSV UTF-8") is
     accepted. Every value is checked as it is read: counts integers within int64, every
     number finite, times strictly increasing (with ``sensors``, one encoder period apart
@@ -260,7 +260,7 @@ def _preamble(lines: Any, reader: _Reader, limits: tuple[float, float] | None) -
                     raise reader.fail(number, 1, key, "be > 0" if key != "wheel_backlash" else "be >= 0",
                                       value.strip())
             where[key] = number
-    raise reader.fail(number + 1, None, "header", "follow the comment lines", "end of file")
+    raise reader.fail(number + 1, 1, "header", "follow the comment lines", "end of file")
 
 
 def _check_header(header: list[str], line: int, text: str, reader: _Reader,
@@ -309,7 +309,7 @@ def _rows(lines: Any, header_line: int, capacity: int, expected: list[str], read
     if block:
         flush()
     if k == 0:
-        raise reader.fail(header_line + 1, None, "data", "hold at least one sample row", "end of file")
+        raise reader.fail(header_line + 1, 1, "data", "hold at least one sample row", "end of file")
     if k < capacity:                   # blank lines: trim (copies only then)
         times, counts, numbers = times[:k].copy(), counts[:k].copy(), numbers[:k].copy()
     return {"times": times, "counts": counts, "numbers": numbers}

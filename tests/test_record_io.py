@@ -48,7 +48,8 @@ def test_a_logger_file_without_metadata_takes_the_scene_encoders(scenario, tmp_p
     text = path.read_text().splitlines()
     log = [text[0]] + [line for line in text[1:] if not line.startswith("#")]
     path.write_text("\n".join(log) + "\n")
-    with pytest.raises(ParameterError, match="'sensors' parameter of read_record_csv must be given"):
+    with pytest.raises(ParameterError, match=r"'sensors' parameter of read_record_csv\(log.csv\) on line 2, column 1 "
+                       r"must be given \(the scene's \[sensors\]\) when no '# central_resolution = ...' line"):
         read_record_csv(path)
     back = read_record_csv(path, scenario.sensors)
     assert back.central_resolution == scenario.sensors.central.distance_per_count

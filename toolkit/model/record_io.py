@@ -229,6 +229,7 @@ def read_record_csv(path: Any, sensors: Sensors | None = None, *, motors: Motors
         meta, meta_lines, number, text = _preamble(lines, reader, limits)
         header = [name.strip() for name in text.split(",")]
         expected = _check_header(header, number, text, reader, sensors)
+        meta_lines["header"] = number
         period = None if sensors is None else sensors.period
         record = _rows(lines, number, capacity - number, expected, reader, limits, period)
     return _record(record, meta, meta_lines, expected, reader, sensors)
@@ -379,9 +380,8 @@ def _record(rows: dict[str, np.ndarray], meta: dict[str, Any], meta_lines: dict[
             if key == "wheel_backlash":
                 value = 0.0
             else:
-                raise ParameterError(parameter_message(
-                    "sensors", "read_record_csv", f"be given when the file states no {key} (the scene's "
-                    "[sensors])", None))
+                raise reader.fail(meta_lines["header"], 1, "sensors", f"be given (the scene's [sensors]) when "
+                                  f"no '# {key} = ...' line precedes the header", None)
         if from_sensors is not None and not math.isclose(value, from_sensors, rel_tol=1e-12, abs_tol=1e-15):
             raise reader.fail(meta_lines[key], 1, key, f"equal the scene's encoders' {from_sensors!r}", value)
         resolutions[key] = value

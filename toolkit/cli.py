@@ -529,8 +529,9 @@ def _parser() -> argparse.ArgumentParser:
     predict.add_argument("--seed", type=_bounded("predict --seed"), default=0, help="seed of the sweep (default 0)")
     predict.add_argument("--contacts", type=_bounded("predict --contacts"), default=None, metavar="N",
                          help="run the checks with N equal contacts sharing the apparatus's total "
-                              "friction (default: the scene's, ten on the carousel); the friction-"
-                              "fraction check needs N even")
+                              "friction (default: the scene's, ten on the carousel); "
+                              f"N {FLAGS['predict --contacts'].rule[3:]} (the viscosity check's default "
+                              "starts need 5); the friction-fraction check needs N even")
     return parser
 
 

@@ -26,10 +26,23 @@ def test_estimation_plot_draws_truth_and_every_estimator():
         np.testing.assert_array_equal(lines[label].get_ydata(), result.speed)
         # The legend carries the RMS error in mm/s, as scored.
         assert f"{result.rms_error * 1e3:.3g} mm/s" in label
-    # The error panel: estimate - truth in mm/s for each estimator, in the same order.
-    errors = [line.get_ydata() for line in bottom.get_lines()][:len(study.results)]
-    for result, error in zip(study.results, errors):
-        np.testing.assert_allclose(error, (result.speed - study.record.truth_speed) * 1e3, rtol=0, atol=0)
+    # The error panel is the filters': it spans 4 x their largest error (mm/s); estimate -
+    # truth of each estimator within that span, exactly; the others are left out and named
+    # in its legend (the alpha-beta tracker's error, tens of mm/s, among them).
+    errors = {r.method: (r.speed - study.record.truth_speed) * 1e3 for r in study.results}
+    limit = 4.0 * max(np.abs(errors[m]).max() for m in errors if m in plots._FILTERS)
+    assert bottom.get_ylim() == (-limit, limit)
+    drawn = {line.get_label(): line.get_ydata() for line in bottom.get_lines()}
+    note = " ".join(label for label in drawn if label.startswith("not shown")).replace("\n", " ")
+    left_out = [m for m in errors if m not in plots._FILTERS and np.abs(errors[m]).max() > limit]
+    assert "alpha_beta" in left_out and {"kalman", "rts"} <= set(errors)
+    for method, error in errors.items():
+        name = plots._ESTIMATOR_STYLE[method]["label"]
+        if method in left_out:
+            assert name not in drawn and name in note, (name, note)
+        else:
+            np.testing.assert_allclose(drawn[name], error, rtol=0, atol=0)
+    assert f"beyond +-{limit:.3g} mm/s" in note
     assert top.get_title() == "estimate: speed from encoder counts at 50 Hz"
     assert plots.figure_png((top, bottom))[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -445,7 +445,7 @@ def test_cli_predict_with_contacts(capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["predict", "--contacts", "0"])
     assert exit_info.value.code == 2
-    assert "--contacts: must be an integer >= 1, got 0" in capsys.readouterr().err
+    assert "--contacts: must be an integer >= 5, got 0" in capsys.readouterr().err
     # The flag is bounded like the constructor it feeds (toolkit.scenes.limits.FLAGS).
     from toolkit.predictions.apparatus import MAX_CONTACTS
     from toolkit.scenes.limits import FLAGS

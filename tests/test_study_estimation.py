@@ -164,11 +164,15 @@ BAD = [
      "'sensors.wheel_counts_per_rev'", "must be > 0"),
     (_with(LOOP, "sensors = true", "sensors = false\nrate = 0.0").replace('estimator = "kalman"\n', ""),
      "'control.rate'", "must be > 0. Got 0.0"),
-    # a rate above what the simulation can honour
-    (_with(ESTIMATE, "rate = 50.0 ", "rate = 5e6 "), "'sensors.rate'", "at most 10000000 samples"),
-    (_with(LOOP, "duration = 2.0 ", "duration = 1e12 "), "'sensors.rate'", "at most 10000000 samples"),
+    # more samples than the simulation can honour: the run's length is named (the rate is the
+    # hardware's), with the longest it may be, (1e7 - 1) / rate
+    (_with(ESTIMATE, "rate = 50.0 ", "rate = 5e6 "), "'estimation.duration'",
+     "must be at most 2 s at sensors.rate = 5e+06 Hz (the estimation record takes at most 10000000 samples)"),
+    (_with(ESTIMATE, "duration = ", "duration = 1e12 #"), "'estimation.duration'",
+     "must be at most 200000 s at sensors.rate = 50 Hz"),
+    (_with(LOOP, "duration = 2.0 ", "duration = 1e12 "), "'control.duration'", "at most 200000 s at sensors.rate"),
     (_with(_with(LOOP, "sensors = true", "sensors = false\nrate = 1.0"), 'estimator = "kalman"\n', "")
-     .replace("duration = 2.0 ", "duration = 1e300 "), "'control.rate'", "at most 10000000 samples"),
+     .replace("duration = 2.0 ", "duration = 1e300 "), "'control.duration'", "at most 1e+07 s at control.rate = 1 Hz"),
     # covariances that are not symmetric positive definite
     (_with(ESTIMATE, "seed = 0", "seed = 0\ninitial_covariance = [[1e-8, 1e-9], [0.0, 1e-4]]"),
      "'estimation.initial_covariance'", "must be symmetric"),
@@ -222,7 +226,7 @@ def test_bad_input_is_refused_naming_key_rule_and_value(text, key, rule):
     assert key in message and rule in message, message
 
 
-@pytest.mark.parametrize("index", [0, 5, 8, 11, 18])
+@pytest.mark.parametrize("index", [0, 5, 6, 9, 12, 19])   # 6: estimation.duration = 1e12
 def test_bad_input_exits_2_with_one_line_and_writes_nothing(index, tmp_path):
     text, key, _ = BAD[index]
     scene = tmp_path / "bad.toml"

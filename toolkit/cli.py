@@ -13,7 +13,7 @@ code is in :data:`EXIT_CODES` (also shown by ``--help``):
    unreachable, unverified or unchecked schedule, a budget's wall-clock guard that fired,
    a stability case that guard left unjudged): the outputs are written and one line on
    stderr says what was missed and by how much (``StudyResult.shortfalls``);
-130. interrupted.
+130. interrupted; 141. the reader of the output stopped reading (``| head``): ended quietly.
 
 ``--json`` prints machine-readable output on stdout. Outputs are all or nothing: the output
 folder is checked before any work and replaced as a whole at the end.
@@ -39,7 +39,7 @@ if TYPE_CHECKING:
 
 __all__ = ["main", "EXIT_CODES"]
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_SHORTFALL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_SHORTFALL, EXIT_INTERRUPTED, EXIT_PIPE = 0, 1, 2, 3, 130, 141
 
 #: Every exit code of the command line and what it means (shown by ``--help``).
 EXIT_CODES = {
@@ -51,6 +51,7 @@ EXIT_CODES = {
                     "unreachable, speeds clipped to the limits, schedule unreachable, unverified or "
                     "unchecked, a wall-clock guard fired): outputs written, one 'shortfall:' line on stderr",
     EXIT_INTERRUPTED: "interrupted",
+    EXIT_PIPE: "the reader of the standard output stopped reading (a pipe into head): ended quietly",
 }
 
 
@@ -114,6 +115,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if objects.sweep is not None:          # a sweep scene's one stage
         args.runs = args.seed = args.scheduler = args.workers = None
         args.out = str(_out_dir(args, objects.scene))
+        args.run_keys = True               # its JSON with every run's top-level keys
         return _cmd_sweep(args)
     if objects.planar is not None:         # a planar scene's one stage
         return _run_planar(args, objects)
@@ -131,15 +133,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _run_planar(args: argparse.Namespace, objects: SceneObjects) -> int:
     from .scenes._io import claim_output_dir
-    from .scenes.report import write_planar
+    from .scenes.report import planar_to_dict, write_planar
     from .scenes.study import planar_scene
     scene = objects.scene
     with claim_output_dir(_out_dir(args, scene)) as out:
         result = planar_scene(objects)
         plots_too = scene.report is None or scene.report.plots
-        written = write_planar(result, out, plots_too=plots_too, title=scene.name)
+        written = write_planar(result, out, plots_too=plots_too, title=scene.name, stages=scene.stages)
     if args.json:
-        _print_json({"scene": scene.name, "planar": result.to_dict(), "written": [str(p) for p in written]})
+        _print_json({**planar_to_dict(result, scene.name, scene.stages), "written": [str(p) for p in written]})
     else:
         for line in result.lines():
             print(line)
@@ -267,7 +269,7 @@ def _planar_precision(args: argparse.Namespace, objects: SceneObjects) -> int:
 def _cmd_estimate(args: argparse.Namespace) -> int:
     from .errors import SceneError
     from .scenes._io import claim_output_dir
-    from .scenes.build import build_scene
+    from .scenes.build import build_scene, check_record_outputs
     from .scenes.report import shortfall_dicts
     from dataclasses import replace
 
@@ -297,7 +299,11 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                              "record on the scene's wheel forces, as in the shipped 'estimate' design).")
         scene = replace(scene, estimation=EstimationSpec(scenario="simulation"))
     objects = build_scene(scene)
-    record = None if args.record is None else read_record_csv(args.record, sensors=objects.estimation.sensors)
+    record = None if args.record is None else read_record_csv(
+        args.record, sensors=objects.estimation.sensors, motors=objects.estimation.plant.motors,
+        progress=sys.stderr.isatty())
+    if record is not None:
+        check_record_outputs(record.n_samples, objects.estimation, args.record)
     with claim_output_dir(_out_dir(args, scene)) as out:
         study = estimate_scene(objects) if record is None else estimate_record(objects, record)
         shortfalls = estimation_shortfalls(objects, study)
@@ -364,7 +370,7 @@ def _cmd_live(args: argparse.Namespace) -> int:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from .scenes._io import claim_output_dir
-    from .scenes.report import sweep_lines, sweep_to_dict, write_sweep
+    from .scenes.report import run_head, sweep_lines, sweep_to_dict, write_sweep
     from .scenes.study import check_sweep_table, sweep_scene, sweep_shortfalls
     objects = _scene(args, "sweep", "to run")
     scene = objects.scene
@@ -379,7 +385,10 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         written = (write_sweep(result, out, statistics=statistics, shortfalls=shortfalls, plots_too=plots_too,
                                title=scene.name) if out is not None else [])
     if args.json:
-        _print_json({**sweep_to_dict(result, statistics, shortfalls), "written": [str(p) for p in written]})
+        data = sweep_to_dict(result, statistics, shortfalls)
+        if getattr(args, "run_keys", False):
+            data = {**run_head(scene.name, scene.stages, shortfalls, result.compile_time), "sweep": data}
+        _print_json({**data, "written": [str(p) for p in written]})
     else:
         for line in sweep_lines(result, statistics, shortfalls):
             print(line)
@@ -555,7 +564,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _parser() -> argparse.ArgumentParser:
-    from .scenes.limits import LIMITS
+    from .scenes.limits import FLAGS, LIMITS
     parser = _Parser(
         prog="active-contacts",
         description="Design, simulate and analyse friction created by active contacts.",
@@ -647,8 +656,9 @@ def _parser() -> argparse.ArgumentParser:
     predict.add_argument("--seed", type=_bounded("predict --seed"), default=0, help="seed of the sweep (default 0)")
     predict.add_argument("--contacts", type=_bounded("predict --contacts"), default=None, metavar="N",
                          help="run the checks with N equal contacts sharing the apparatus's total "
-                              "friction (default: the scene's, ten on the carousel); the friction-"
-                              "fraction check needs N even")
+                              "friction (default: the scene's, ten on the carousel); "
+                              f"N {FLAGS['predict --contacts'].rule[3:]} (the viscosity check's default "
+                              "starts need 5); the friction-fraction check needs N even")
     return parser
 
 
@@ -658,17 +668,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     Everything past the standard library is imported in here, under the same handlers as the
     work: a Ctrl-C at any moment (while numpy loads, while workers start, while outputs are
     written) ends with one line and exit 130, never a traceback."""
+    if sys.stdout is None:             # started with its standard output closed (>&-)
+        return _stdout_closed()
     interrupted, previous = _interrupts_noted()
     try:
-        args = _parser().parse_args(argv)
+        parser = _parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as done:     # --help, --version or a usage error: printed already
+            raise SystemExit(_flushed(done.code)) from None
         from .errors import ToolkitError
 
         try:
             with _compiles_announced():
-                return args.handler(args)
+                code = args.handler(args)
+            sys.stdout.flush()         # a write error found here is still this command's
+            return code
         except ToolkitError as error:
             print(f"active-contacts: error: {error}", file=sys.stderr)
             return EXIT_USAGE
+        except BrokenPipeError:
+            if not _stdout_gone():
+                raise
+            return _reader_gone()
         except OSError as error:  # found only while writing: a full disk, a folder removed meanwhile
             print(f"active-contacts: error: cannot write the output: {error}", file=sys.stderr)
             return EXIT_USAGE
@@ -684,6 +706,47 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+def _stdout_closed() -> int:
+    """Exit 2 with one line: the command has nowhere to write its results."""
+    if sys.stderr is not None:
+        print("active-contacts: error: the standard output is closed; the command writes its results "
+              "there (redirect it to a file, or to /dev/null to discard them).", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _flushed(code: Any) -> int:
+    """``code`` once the standard output is flushed; a reader gone meanwhile ends quietly."""
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return _reader_gone()
+    return code if isinstance(code, int) else EXIT_USAGE if code else EXIT_OK
+
+
+def _stdout_gone() -> bool:
+    """Whether the standard output is a pipe whose reader has closed it (``| head``)."""
+    try:
+        import select
+
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & (select.POLLERR | select.POLLHUP) for _, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):    # no poll (Windows), no descriptor: assume so
+        return True
+
+
+def _reader_gone() -> int:
+    """End quietly as a Unix filter does when its reader stops reading (exit 141, 128 +
+    SIGPIPE); the standard output is pointed at /dev/null so the final flush stays silent."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (AttributeError, OSError, ValueError):
+        pass
+    return EXIT_PIPE
 
 
 def _interrupts_noted() -> tuple[list[int], dict[int, Any]]:

@@ -465,12 +465,24 @@ _ESTIMATOR_STYLE = {"central_difference": dict(color="C7", lw=0.7, label="centra
                     "kalman": dict(color="C0", lw=1.2, label="Kalman filter (default)"),
                     "kalman_nominal": dict(color="C1", lw=1.0, label="Kalman filter, nominal model"),
                     "rts": dict(color="C3", lw=1.0, ls="--", label="RTS smoother"),
-                    "unscented": dict(color="C2", lw=1.0, label="unscented filter")}
+                    "unscented": dict(color="C2", lw=1.0, label="unscented filter"),
+                    "kalman_adaptive": dict(color="C4", lw=1.0, label="adaptive Kalman filter")}
+
+
+#: The model-based filters an estimation figure is for: its error panel is scaled to them.
+_FILTERS = ("kalman", "kalman_adaptive", "kalman_nominal", "rts", "unscented")
+#: The error panel spans this many times the filters' largest error.
+_ERROR_SPAN = 4.0
 
 
 def plot_estimation(study: Any, axes: Any = None, *, title: str | None = None):
     """The estimators' speeds over time (top) and their errors against the truth (bottom); for
     a recorded file (no truth), their differences from the default Kalman filter's estimate.
+
+    The error panel is the filters' (:data:`_FILTERS`): it spans :data:`_ERROR_SPAN` times
+    their largest error, and an estimator whose error leaves that span (a finite difference,
+    the alpha-beta tracker) is left out of it, named in the panel's legend; every estimator
+    is in the top panel, with its RMS error.
 
     Parameters
     ----------
@@ -493,21 +505,34 @@ def plot_estimation(study: Any, axes: Any = None, *, title: str | None = None):
         truth, against = reference.speed, f"difference from {reference.method}"
     else:
         top.plot(t, truth, color="k", lw=1.6, label="truth V", zorder=_Z_EXACT)
+    errors = {id(r): (r.speed - truth) * 1e3 for r in study.results}
+    scale = [float(np.abs(errors[id(r)]).max()) for r in study.results if r.method in _FILTERS]
+    limit = _ERROR_SPAN * max(scale) if scale and max(scale) > 0 else math.inf
+    left_out = []
     for result in study.results:
         style = dict(_ESTIMATOR_STYLE.get(result.method, dict(lw=1.0, label=result.method)))
+        name = style["label"]
         rms = f" (RMS {result.rms_error * 1e3:.3g} mm/s)" if result.rms_error is not None else ""
-        style["label"] = style["label"] + rms
+        style["label"] = name + rms
         top.plot(t, result.speed, **style)
-        bottom.plot(t, (result.speed - truth) * 1e3, **{k: v for k, v in style.items() if k != "label"})
+        error = errors[id(result)]
+        if result.method not in _FILTERS and np.abs(error).max() > limit:
+            left_out.append(name)
+            continue
+        bottom.plot(t, error, **{**style, "label": name})
     top.set_ylabel("body speed (m/s)")
     bottom.set_ylabel(f"{against} (mm/s)")
     bottom.set_xlabel("time t (s)")
-    scale = [abs(r.speed - truth).max() for r in study.results if r.method in ("kalman", "rts", "unscented")]
-    if scale:
-        limit = 1e3 * 4.0 * max(scale)
+    if math.isfinite(limit):
         bottom.set_ylim(-limit, limit)
-        _note(bottom, "errors of the finite differences clipped to the filters' scale", corner="upper left")
+    if left_out:
+        import textwrap
+
+        bottom.plot([], [], ls="none", label=textwrap.fill(
+            f"not shown, error beyond +-{limit:.3g} mm/s ({_ERROR_SPAN:g} x the filters'): {', '.join(left_out)}",
+            width=50, break_on_hyphens=False))
     bottom.axhline(0.0, color="0.5", lw=0.5)
+    bottom.legend(loc="lower right", fontsize="x-small")
     _title(top, title, f"speed from encoder counts at {1.0 / record.period:g} Hz")
     top.legend(loc="best", fontsize="x-small")
     return top, bottom

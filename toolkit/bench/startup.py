@@ -29,7 +29,10 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import ExitStack
 from pathlib import Path
+
+from toolkit.scenes.designs import design_path
 
 _FIRST_CALL = """
 import time
@@ -59,9 +62,9 @@ def _python(code: str, cwd: Path, env: dict[str, str]) -> list[float]:
     return [float(x) for x in done.stdout.split()]
 
 
-def _cli_run(tree: Path, env: dict[str, str], out: Path) -> float:
+def _cli_run(tree: Path, env: dict[str, str], out: Path, design: Path) -> float:
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "toolkit.cli", "run", "designs/carousel.toml",
+    subprocess.run([sys.executable, "-m", "toolkit.cli", "run", str(design),
                     "--out", str(out)], cwd=tree, env=env, check=True, capture_output=True)
     return time.perf_counter() - start
 
@@ -77,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     base_env = {k: v for k, v in os.environ.items()
                 if k not in ("ACTIVE_CONTACTS_COMPILE", "NUMBA_CACHE_DIR", "NUMBA_DISABLE_JIT")}
     eager = {**base_env, "ACTIVE_CONTACTS_COMPILE": "eager"}
-    with tempfile.TemporaryDirectory(prefix="bench-startup-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="bench-startup-") as tmp, ExitStack() as stack:
         tmp_path = Path(tmp)
         cache = tmp_path / "numba-cache"
         cold_env = {**eager, "NUMBA_CACHE_DIR": str(cache)}
@@ -110,13 +113,16 @@ def main(argv: list[str] | None = None) -> int:
             out = tmp_path / "out"
             runs: dict[str, list[float]] = {"this tree": [], "this tree, compiled": [],
                                             "baseline": []}
-            trees = {"this tree": (here, base_env), "baseline": (baseline, base_env),
-                     "this tree, compiled": (here, cold_env)}
-            for name, (tree, env) in trees.items():          # once each: caches, page cache
-                _cli_run(tree, env, out)
+            # This tree's design through the package (installed or not); the baseline is a checkout.
+            design = stack.enter_context(design_path("carousel"))
+            trees = {"this tree": (here, base_env, design),
+                     "baseline": (baseline, base_env, baseline / "designs" / "carousel.toml"),
+                     "this tree, compiled": (here, cold_env, design)}
+            for name, (tree, env, path) in trees.items():          # once each: caches, page cache
+                _cli_run(tree, env, out, path)
             for _ in range(args.runs):
-                for name, (tree, env) in trees.items():
-                    runs[name].append(_cli_run(tree, env, out))
+                for name, (tree, env, path) in trees.items():
+                    runs[name].append(_cli_run(tree, env, out, path))
         finally:
             if worktree is not None:
                 subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force",

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from toolkit.experiments import MedianLaw
+from toolkit.scenes.designs import design_path
 from toolkit.model import ContactSet, Plant
 from toolkit.simulation import simulate, simulate_batch
 from toolkit.sweeps import run_keys, sweep
@@ -100,16 +101,19 @@ def main(argv: list[str] | None = None) -> int:
     ok = rel <= 1e-12 and same and agree and sweep_ok
 
     root = Path(__file__).resolve().parents[2]
-    command = [str(Path(sys.executable).with_name("active-contacts")), "sweep",
-               str(root / "designs" / "median_law.toml"), "--runs", str(args.runs),
-               "--seed", str(args.seed), "--json"]
-    if not Path(command[0]).exists():
-        command[:1] = [sys.executable, "-m", "toolkit.cli"]
-    start = time.perf_counter()
-    done = subprocess.run(command, capture_output=True, text=True, cwd=root,
-                          env={**os.environ, "PYTHONPATH": str(root)})
-    cli = time.perf_counter() - start
+    with design_path("median_law") as design:          # the package's, installed or not
+        command = [str(Path(sys.executable).with_name("active-contacts")), "sweep", str(design),
+                   "--runs", str(args.runs), "--seed", str(args.seed), "--json"]
+        if not Path(command[0]).exists():
+            command[:1] = [sys.executable, "-m", "toolkit.cli"]
+        start = time.perf_counter()
+        done = subprocess.run(command, capture_output=True, text=True, cwd=root,
+                              env={**os.environ, "PYTHONPATH": str(root)})
+        cli = time.perf_counter() - start
     cli_ok = done.returncode == 0 and (not full or cli * 100_000 / args.runs < _CLI)
+    if done.returncode != 0:           # a failure, not a speed: say what failed
+        print(f"active-contacts sweep median_law failed (exit {done.returncode}): "
+              f"{(done.stderr.strip().splitlines() or [''])[-1]}")
     print(f"active-contacts sweep designs/median_law.toml --runs {args.runs}: {cli:.2f} s "
           f"including process start ({'met' if cli_ok else 'SHORT'}: target < {_CLI} s per 1e5 "
           f"runs; exit {done.returncode})")

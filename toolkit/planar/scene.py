@@ -23,6 +23,7 @@ from .contacts import PlanarContactSet
 from .equilibrium import PlanarEquilibrium
 from .precision import PlanarPrecisionReport, precision_report
 from .regions import DiscRegion, RingRegion, terminal_ratio
+from ._warmup import warm_up
 from .simulation import PlanarPlant, PlanarSimulationResult, check_method, check_start, simulate_planar
 
 __all__ = ["PlanarSceneObjects", "PlanarStudyResult", "build_planar", "run_planar", "scene_precision", "PUBLISHED"]
@@ -115,6 +116,8 @@ class PlanarStudyResult:
     shortfalls : tuple of Shortfall
         Requests missed (stage ``"planar"``: a run stopped by its budget, a ratio off the
         published value by more than its rounding).
+    compile_time : float, s
+        The planar kernels compiled (or loaded) before the timed run (:func:`warm_up`).
     """
 
     objects: PlanarSceneObjects
@@ -125,6 +128,7 @@ class PlanarStudyResult:
     equilibrium: PlanarEquilibrium | None
     precision: PlanarPrecisionReport | None
     shortfalls: tuple[Shortfall, ...] = ()
+    compile_time: float = 0.0
 
     def to_dict(self, samples: int = 101) -> dict[str, Any]:
         """JSON form (the value of the key ``planar``): ``body``, ``method``, ``status``,
@@ -204,6 +208,7 @@ def run_planar(objects: PlanarSceneObjects) -> PlanarStudyResult:
     """Run a planar scene: simulation, terminal ratio, equilibrium, work-precision rows."""
     spec = objects.spec
     plant = objects.plant
+    compile_time = warm_up()           # every time reported below: compiled code
     sim = simulate_planar(plant, spec.t_end, v0=objects.v0, omega0=objects.omega0, method=spec.method,
                           **objects.options)
     shortfalls = []
@@ -228,4 +233,5 @@ def run_planar(objects: PlanarSceneObjects) -> PlanarStudyResult:
     if spec.body == "legs":
         equilibrium = plant.contacts.equilibrium()
     report = scene_precision(objects) if spec.precision is not None else None
-    return PlanarStudyResult(objects, sim, ratio, closed, published, equilibrium, report, tuple(shortfalls))
+    return PlanarStudyResult(objects, sim, ratio, closed, published, equilibrium, report, tuple(shortfalls),
+                             compile_time)

@@ -69,7 +69,7 @@ from .theory import least_squares_correction, resting_speed, travel_time, viscos
 
 __all__ = ["ViscosityProblem", "ViscosityDesign", "ViscosityFit", "ViscosityCheck", "CheckStatus",
            "viscosity_check", "draw_design", "plan_runs", "measure_time_constants",
-           "predict_time_constants", "fit_viscosity", "START_GROUPS", "EQUILIBRIUM_MARGIN"]
+           "predict_time_constants", "fit_viscosity", "START_GROUPS", "EQUILIBRIUM_MARGIN", "MIN_CONTACTS"]
 
 #: The groups of starts fitted apart: inside the spread (``p >= 0``) and below it.
 START_GROUPS = ("inside", "outside")
@@ -78,6 +78,11 @@ RUNS_PER_PROCESS = 8
 _NO_SWITCH = np.empty(0)            # (a PiecewiseConstant's switching times: none, a constant)
 #: Spacings between the default starts and the equilibrium set, at least (for ``n >= 10``).
 EQUILIBRIUM_MARGIN = 3.0
+#: Fewest contacts for which the default starts (0 to 1 spacing above the lowest contact)
+#: lie below the equilibrium set: ``(n - 1) / 2 - 1`` spacings must exceed its half-width
+#: (0 for odd ``n``, 1/2 for even), so 5 (odd) or 6 (even).
+MIN_CONTACTS = 5
+_DEFAULT_START = (0.0, 1.0)
 
 
 class CheckStatus(enum.Enum):
@@ -128,9 +133,10 @@ class ViscosityProblem:
     spacing : (float, float), m/s, optional
         Range of the contact spacing ``s``; the staircase must fit between the speed limits.
         Default ``(0.2 / n, 0.6 / n)``.
-    start : (float, float)
+    start : (float, float), optional
         Range of the start's position above the lowest contact, in spacings (negative: below
-        the whole staircase, fitted apart). Default ``(0, 1)``.
+        the whole staircase, fitted apart). Default ``(0, 1)``, which needs at least
+        :data:`MIN_CONTACTS` contacts.
     pre_roll, tail : float, s
         Carry time before the staircase (``>= 0``) and settled time after the predicted
         stop (``> 0``).
@@ -150,7 +156,7 @@ class ViscosityProblem:
     mode: str = "loop"
     runs: int = 490
     spacing: tuple[float, float] | None = None
-    start: tuple[float, float] = (0.0, 1.0)
+    start: tuple[float, float] | None = None
     pre_roll: float = 0.1
     tail: float = 0.2
     tail_samples: int = 5
@@ -167,7 +173,8 @@ class ViscosityProblem:
         object.__setattr__(self, "runs", as_int(self.runs, "runs", owner, low=2))
         default = (0.2 / a.n, 0.6 / a.n)
         spacing = _pair(default if self.spacing is None else self.spacing, "spacing", owner, low=0.0)
-        start = _pair(self.start, "start", owner)
+        given = self.start is not None
+        start = _pair(self.start if given else _DEFAULT_START, "start", owner)
         object.__setattr__(self, "spacing", spacing)
         object.__setattr__(self, "start", start)
         object.__setattr__(self, "pre_roll", as_float(self.pre_roll, "pre_roll", owner, low=0.0))
@@ -182,6 +189,11 @@ class ViscosityProblem:
             raise ParameterError(parameter_message(
                 "spacing", owner, f"keep the {a.n} contacts within +-{a.speed_limit:g} m/s "
                 f"(at most {a.speed_limit / max(half, 0.5):.6g} m/s)", self.spacing))
+        if not given and half - start[1] <= self.resting_position:
+            raise ParameterError(parameter_message(
+                "apparatus", owner, f"have at least {MIN_CONTACTS} contacts for the default starts (0 to 1 "
+                "spacing above the lowest contact) to lie below the equilibrium set, or be given starts "
+                "(start)", f"{a.n} contacts"))
         reach = (half - start[0]) * spacing[1]
         if reach > a.speed_limit:
             raise ParameterError(parameter_message(

@@ -51,7 +51,7 @@ from .limits import BYTES_PER_NUMBER, LIMITS, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES,
 from .spec import Scene, ScheduleSpec
 
 __all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "schedule_target",
-           "output_numbers", "sweep_scene_error", "planar_scene_error"]
+           "output_numbers", "sweep_scene_error", "planar_scene_error", "check_record_outputs"]
 
 _fail = scene_value_error
 #: Keys of ``[estimation]`` / ``[control]`` that set the encoders' noise.
@@ -432,28 +432,56 @@ def output_numbers(scene: Scene, estimation: EstimationObjects | None = None,
     """How many numbers the series of a run's JSON output hold (the force-speed curve, the
     estimation record's truth and estimates, the closed loop's signals), known before any
     work: what :data:`~toolkit.scenes.limits.MAX_OUTPUT_BYTES` bounds."""
+    return sum(numbers for numbers, _ in _output_parts(scene, estimation, control))
+
+
+def _output_parts(scene: Scene, estimation: EstimationObjects | None,
+                  control: ControlObjects | None) -> list[tuple[int, str]]:
+    """The numbers of each series of the outputs, with what would make it smaller."""
     n = scene.contacts.n if scene.contacts is not None else 0
     points = scene.report.curve_points if scene.report is not None else 801
-    numbers = 2 * points + 3 * n
+    parts = [(2 * points, "sample the curve at fewer points (report.curve_points)"),
+             (3 * n, f"declare fewer contacts (the scene has {n})")]
     if estimation is not None:
         samples = sample_count(estimation.duration, estimation.sensors.rate)
-        numbers += samples * (2 + len(estimation.estimators))
+        parts.append((estimation_numbers(samples, estimation),
+                      "shorten the estimation record or lower its rate (estimation.duration, sensors.rate)"))
     if control is not None:
-        numbers += sample_count(scene.control.duration, control.rate) * (4 + n)
-    return numbers
+        parts.append((sample_count(scene.control.duration, control.rate) * (4 + n),
+                      "shorten the closed loop or lower its rate (control.duration)"))
+    return parts
+
+
+def estimation_numbers(samples: int, estimation: EstimationObjects) -> int:
+    """Numbers of an estimation record's series in the outputs: per sample its time, the
+    truth and one estimate per estimator."""
+    return samples * (2 + len(estimation.estimators))
+
+
+def check_record_outputs(samples: int, estimation: EstimationObjects, source: str) -> None:
+    """Refuse, before any work, a recorded file (``source``) of ``samples`` rows whose
+    estimates would pass :data:`~toolkit.scenes.limits.MAX_OUTPUT_BYTES`."""
+    size = estimation_numbers(samples, estimation) * BYTES_PER_NUMBER
+    if size > MAX_OUTPUT_BYTES:
+        most = MAX_OUTPUT_BYTES // (BYTES_PER_NUMBER * estimation_numbers(1, estimation))
+        raise SceneError(
+            f"The record file {source!r} has {samples} samples; their estimates would take about "
+            f"{size / 2**20:.0f} MiB of estimate.json, and outputs are limited to {MAX_OUTPUT_BYTES >> 20} MiB: "
+            f"at most {most} samples with {len(estimation.estimators)} estimators (split the record, or "
+            "name fewer estimation.methods).")
 
 
 def _check_output_size(scene: Scene, estimation: EstimationObjects | None,
                        control: ControlObjects | None) -> None:
-    numbers = output_numbers(scene, estimation, control)
+    parts = _output_parts(scene, estimation, control)
+    numbers = sum(count for count, _ in parts)
     size = numbers * BYTES_PER_NUMBER
     if size > MAX_OUTPUT_BYTES:
-        key = ("control.duration" if control is not None else "estimation.duration" if estimation is not None
-               else "report.curve_points")
+        advice = max(parts)[1]          # the largest series
         raise SceneError(
             f"The scene {scene.name!r} asks for outputs of about {size / 2**20:.0f} MiB ({numbers} numbers "
-            f"in its series: the curve, the estimation record, the closed loop); outputs are limited "
-            f"to {MAX_OUTPUT_BYTES >> 20} MiB. Shorten the run or lower its rate ({key}).")
+            f"in its series: the curve, the contacts, the estimation record, the closed loop); outputs are "
+            f"limited to {MAX_OUTPUT_BYTES >> 20} MiB: {advice}.")
 
 
 # -- constructor errors named by scene key -------------------------------------------------------
@@ -655,15 +683,21 @@ def _simulation_options(scene: Scene) -> dict[str, Any]:
 
 # -- estimation and control ----------------------------------------------------------------------
 
-def _check_rate(rate: float, duration: float, key: str, what: str) -> None:
-    """A sample rate the run can honour: a resolvable period and at most MAX_RUN_SAMPLES samples."""
+def _check_rate(rate: float, duration: float, keys: tuple[str, str], what: str) -> None:
+    """A sample rate the run can honour: a resolvable period and at most MAX_RUN_SAMPLES samples.
+
+    ``keys``: the rate's scene key and the duration's. Too many samples are the duration's
+    fault (the rate is the hardware's, or the loop's; the length is what the run asks for).
+    """
+    rate_key, duration_key = keys
     samples = sample_count(duration, rate)
     if samples > MAX_RUN_SAMPLES:
-        raise SceneError(f"The {key!r} value in the scene must give at most {MAX_RUN_SAMPLES} samples "
-                         f"over the {what} of {duration:g} s. Got {rate:g} Hz ({samples} samples) instead.")
+        raise SceneError(f"The {duration_key!r} value in the scene must be at most "
+                         f"{(MAX_RUN_SAMPLES - 1) / rate:g} s at {rate_key} = {rate:g} Hz (the {what} takes "
+                         f"at most {MAX_RUN_SAMPLES} samples). Got {duration:g} s ({samples} samples) instead.")
     if not duration + 1.0 / rate > duration:
-        raise SceneError(f"The {key!r} value in the scene must give a period the simulation clock "
-                         f"resolves at t = {duration:g} s. Got {rate:g} Hz instead.")
+        raise SceneError(f"The {rate_key!r} value in the scene must give a period the simulation clock "
+                         f"resolves at t = {duration:g} s ({duration_key}). Got {rate:g} Hz instead.")
 
 
 def _noisy_sensors(objects: SceneObjects, section: str, spec: Any) -> Sensors:
@@ -739,7 +773,8 @@ def _estimation(scene: Scene, objects: SceneObjects) -> EstimationObjects | None
         v0 = 0.0
     else:
         duration, record_plant, v0 = scene.simulation.t_end, plant, scene.simulation.v0
-    _check_rate(sensors.rate, duration, "sensors.rate", "estimation record")
+    duration_key = "simulation.t_end" if spec.scenario == "simulation" else "estimation.duration"
+    _check_rate(sensors.rate, duration, ("sensors.rate", duration_key), "estimation record")
     model = _model(plant, sensors, spec.friction_spread)
     truth, prior = _knowledge("estimation", spec, sensors)
     covariance = None if spec.initial_covariance is None else np.array(spec.initial_covariance)
@@ -776,7 +811,7 @@ def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
         rate, key = (50.0 if spec.rate is None else spec.rate), "control.rate"
         if not rate > 0:
             raise _fail(key, "be > 0", rate)
-    _check_rate(rate, spec.duration, key, "closed loop")
+    _check_rate(rate, spec.duration, (key, "control.duration"), "closed loop")
     if controller is not None:
         # Bind once to check the controller on this plant (e.g. finite speed limits).
         with _scene_keys("control", {"plant": "motors.speed_limit"}):

@@ -6,13 +6,15 @@ well as from a checkout (where ``designs/`` at the repository root points at the
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from importlib import resources
 from pathlib import Path
 
 from ..errors import suggestion
 from ..errors import OutputError, ParameterError, parameter_message
 
-__all__ = ["design_names", "design_text", "load_design", "copy_designs"]
+__all__ = ["design_names", "design_text", "load_design", "copy_designs", "design_path"]
 
 _PACKAGE = "toolkit"
 _FOLDER = "designs"
@@ -36,6 +38,16 @@ def design_text(name: str) -> str:
         raise ParameterError(parameter_message("name", "design_text", "name a shipped design", name)
                              + hint)
     return (_folder() / f"{stem}.toml").read_text(encoding="utf-8")
+
+
+@contextmanager
+def design_path(name: str) -> Iterator[Path]:
+    """A file system path of the shipped design ``name`` while the ``with`` block runs (for
+    a command run in another process); from a zipped install, a temporary copy."""
+    design_text(name)                  # refuses an unknown name with the shipped ones
+    stem = name[:-5] if name.endswith(".toml") else name
+    with resources.as_file(_folder() / f"{stem}.toml") as path:
+        yield path
 
 
 def load_design(name: str):

@@ -154,5 +154,6 @@ FLAGS: dict[str, Limit] = {
     "sweep --workers": Limit(low=1, high=1024, integer=True),
     "predict --runs": Limit(low=2, high=MAX_RUNS, integer=True),
     "predict --seed": Limit(low=0, integer=True),
-    "predict --contacts": Limit(low=1, high=10_000, integer=True),     # Apparatus.with_contacts' bound
+    # Apparatus.with_contacts' bound, and the viscosity check's default starts' (MIN_CONTACTS)
+    "predict --contacts": Limit(low=5, high=10_000, integer=True),
 }

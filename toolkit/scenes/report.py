@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,7 @@ from .study import StudyResult
 __all__ = ["study_summary", "study_to_dict", "study_files", "write_study", "to_json", "schedule_csv",
            "schedule_check", "schedule_lines", "shortfall_dicts", "shortfall_line", "write_precision",
            "write_schedule", "estimation_to_dict", "estimation_lines", "estimation_files", "control_lines",
-           "write_planar", "write_planar_precision"]
+           "write_planar", "write_planar_precision", "planar_to_dict", "run_head", "RUN_KEYS"]
 
 
 def _clean(value: Any) -> Any:
@@ -119,16 +120,18 @@ def estimation_to_dict(study: Any) -> dict[str, Any]:
 
 def estimation_csv(study: Any) -> str:
     """The estimates as CSV text: ``time_s``, then per estimator its speed and standard
-    deviation (m/s) and, for the filters, the NIS of the central reading (``nan`` where there
-    is no innovation: the first sample); one row per sample."""
+    deviation (m/s) and, for the filters, the NIS of the central reading; one row per
+    sample. A filter has no innovation at the first sample, so its NIS cell there is empty
+    (a missing value to every CSV reader), never a number."""
     n = study.record.n_samples
     columns: list[tuple[str, Any]] = [("time_s", study.record.times)]
     for r in study.results:
         columns += [(f"{r.method}_speed_m_s", r.speed), (f"{r.method}_std_m_s", np.sqrt(r.variance))]
         if r.nis is not None:        # the innovations start at the second sample
-            columns.append((f"{r.method}_nis", np.concatenate((np.full(n - r.nis.size, np.nan), r.nis))))
+            columns.append((f"{r.method}_nis", [None] * (n - r.nis.size) + r.nis.tolist()))
     lines = [",".join(name for name, _ in columns)]
-    lines += [",".join(repr(float(column[k])) for _, column in columns) for k in range(study.record.n_samples)]
+    lines += [",".join("" if column[k] is None else repr(float(column[k])) for _, column in columns)
+              for k in range(n)]
     return "\n".join(lines) + "\n"
 
 
@@ -186,11 +189,20 @@ def estimation_files(study: Any, name: str, *, plots_too: bool = True) -> dict[s
     return payload
 
 
+#: The keys every ``run --json`` (and ``result.json``, ``planar.json``) starts with, whatever
+#: the scene's kind; the stages' results follow under their own names.
+RUN_KEYS = ("scene", "stages", "met", "shortfalls", "compile_time")
+
+
+def run_head(name: str, stages: Sequence[str], shortfalls: Any, compile_time: float) -> dict[str, Any]:
+    """The :data:`RUN_KEYS` of a run: its scene, stages, whether it met every request, the
+    shortfalls and the one-time compile cost (s) paid before any timed call."""
+    return dict(zip(RUN_KEYS, (name, list(stages), not shortfalls, shortfall_dicts(shortfalls), compile_time)))
+
+
 def study_to_dict(result: StudyResult) -> dict[str, Any]:
     """Everything the study computed, JSON-able."""
-    out: dict[str, Any] = {"scene": result.scene.name, "stages": list(result.stages),
-                           "met": result.met, "shortfalls": shortfall_dicts(result.shortfalls),
-                           "compile_time": result.compile_time,
+    out: dict[str, Any] = {**run_head(result.scene.name, result.stages, result.shortfalls, result.compile_time),
                            "curve": result.curve.to_dict(), "contacts": {
                                "speeds": result.contacts.speeds, "forces": result.contacts.forces}}
     if result.sensors is not None:
@@ -337,14 +349,19 @@ def write_sweep(result: Any, out_dir: str | Path, *, statistics: tuple[str, ...]
     return write_tree(out_dir, payload)
 
 
+def planar_to_dict(result: Any, name: str | None, stages: Sequence[str] = ("planar",)) -> dict[str, Any]:
+    """JSON form of a planar scene's run: :func:`run_head`'s keys, then ``planar``."""
+    return {**run_head(name, stages, result.shortfalls, result.compile_time), "planar": result.to_dict()}
+
+
 def write_planar(result: Any, out_dir: str | Path, *, plots_too: bool = True,
-                 title: str | None = None) -> list[Path]:
-    """Write ``planar.json`` (``{"scene", "planar": result.to_dict()}``) and, with
+                 title: str | None = None, stages: Sequence[str] = ("planar",)) -> list[Path]:
+    """Write ``planar.json`` (:func:`planar_to_dict`) and, with
     ``plots_too``, ``planar.png`` (the trajectory of a disc or ring; the work-precision plot
     when the scene asks for it) into ``out_dir``, replacing it as a whole."""
     from ..planar.plots import plot_planar_precision, plot_sliding_disc
 
-    payload = {"planar.json": to_json({"scene": title, "planar": result.to_dict()}).encode()}
+    payload = {"planar.json": to_json(planar_to_dict(result, title, stages)).encode()}
     region = result.objects.region
     if plots_too and region is not None:
         reference = result.published[0] if result.published is not None else result.closed_form_ratio

@@ -969,22 +969,27 @@ def _alone(data: Mapping[str, Any], kind: str, allowed: tuple[str, ...], declare
                          f"may hold {', '.join(f'[{k}]' for k in allowed)}.")
 
 
-def loads_scene(text: str, *, name: str = "scene") -> Scene:
-    """Parse a scene from TOML text and check its form; see :func:`load_scene`."""
+def loads_scene(text: str, *, name: str = "scene", source: str | None = None) -> Scene:
+    """Parse a scene from TOML text and check its form; see :func:`load_scene`.
+
+    ``source``, the file the text was read from, is what messages about the file's form
+    (invalid TOML, unknown or missing sections) name; without one they name the scene.
+    """
+    where = f"scene {name!r}" if source is None else f"scene file {source!r}"
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
-        raise SceneError(f"The scene {name!r} is not valid TOML: {error}.") from None
+        raise SceneError(f"The {where} is not valid TOML: {error}.") from None
     allowed = ("scene", *_SECTIONS)
     for key, value in data.items():
         if key in PLANNED_SECTIONS:
-            raise SceneError(f"Unknown section [{key}] in scene {name!r}. Did you mean "
+            raise SceneError(f"Unknown section [{key}] in {where}. Did you mean "
                              f"[{PLANNED_SECTIONS[key]}]?")
         if key not in allowed:
             hint = suggestion(key, allowed) or f" Valid sections: {', '.join(allowed)}."
-            raise SceneError(f"Unknown section [{key}] in scene {name!r}.{hint}")
+            raise SceneError(f"Unknown section [{key}] in {where}.{hint}")
         if not isinstance(value, dict):
-            raise SceneError(f"[{key}] in scene {name!r} must be a table (a [section]), got {value!r}.")
+            raise SceneError(f"[{key}] in {where} must be a table (a [section]), got {value!r}.")
     meta = data.get("scene", {})
     _check_keys("scene", meta, ("name", "description"))
     if "sweep" in data:
@@ -992,7 +997,7 @@ def loads_scene(text: str, *, name: str = "scene") -> Scene:
     elif "planar" in data:
         _alone(data, "planar", _PLANAR_SECTIONS, "its body and contacts in [planar]")
     elif "contacts" not in data:
-        raise SceneError(f"The scene {name!r} needs a [contacts] section.")
+        raise SceneError(f"The {where} needs a [contacts] section.")
     sections = {key: _SECTIONS[key](value) for key, value in data.items() if key in _SECTIONS}
     scene_name = _text("scene.name", meta.get("name", name))
     if not _NAME.fullmatch(scene_name):
@@ -1026,7 +1031,7 @@ def load_scene(path: str | Path) -> Scene:
     """
     file = Path(path)
     stem = file.stem if _NAME.fullmatch(file.stem) else "scene"
-    return loads_scene(_read_scene_text(file), name=stem)
+    return loads_scene(_read_scene_text(file), name=stem, source=str(file))
 
 
 def _read_scene_text(file: Path) -> str:

@@ -20,6 +20,16 @@ loops on 20 % unequal wheels (speed hold, virtual viscosity: the in-loop estimat
 the first second against central differencing's, target >= 10x, median over ``M`` seeds).
 The load average is printed beside the timings (the machine may be shared). Exit status 0
 when every line is met.
+
+With ``--random N [--seed S]`` it runs ``N`` worlds drawn at random instead
+(:func:`toolkit.analysis.robustness.draw_world`, worlds ``S/0 .. S/N-1``): per world what was
+drawn, then per estimator (the baselines, the default ``kalman``, ``truth_told``: the default
+told the true world) the RMS overall and per phase, the NEES shares (in the 95 % band, above
+100) and the largest NEES, wall time per sample, the ratio to the best baseline and the lines
+of :data:`~toolkit.analysis.robustness.WORLD_LINES` met; at the end the share of worlds
+meeting each line, the worst worlds and the default's median cost per sample.
+``--write-scenes DIR`` also writes each world as a scene file (``estimate`` gives the same
+numbers). Exit status 0 when every line holds on its share of the worlds.
 """
 
 from __future__ import annotations
@@ -30,7 +40,8 @@ import time
 
 import numpy as np
 
-from toolkit.analysis.robustness import ROBUSTNESS_CASES, loop_robustness, robustness_table
+from toolkit.analysis.robustness import (BASELINES, ROBUSTNESS_CASES, WORLD_LINES, draw_world, loop_robustness,
+                                         robustness_table, score_world)
 from toolkit.analysis.scenarios import carousel_brake_scenario
 from toolkit.estimation import AdaptiveKalman, KalmanEstimator
 
@@ -42,10 +53,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--cases", nargs="*", default=None, choices=list(ROBUSTNESS_CASES))
     parser.add_argument("--loop-seeds", type=int, default=10)
+    parser.add_argument("--random", type=int, default=None, metavar="N", help="run N random worlds instead")
+    parser.add_argument("--seed", type=int, default=0, metavar="S", help="the random worlds' seed")
+    parser.add_argument("--write-scenes", default=None, metavar="DIR", help="write each random world's scene")
     args = parser.parse_args(argv)
 
     ideal = carousel_brake_scenario(seed=0)
     KalmanEstimator(ideal.model).warm_up()
+    if args.random is not None:
+        return _random(args.random, args.seed, args.write_scenes)
     started = time.perf_counter()
     table = robustness_table(args.cases, seeds=args.seeds)
     print(f"{len(table.cases)} cases x {args.seeds} seeds in {time.perf_counter() - started:.0f} s "
@@ -123,3 +139,62 @@ def _costs(ideal, cases, seeds: int) -> int:
           f"{np.median(list(costs.values())):.0f} over the {len(costs)} mismatch cases; target <= 100 in every "
           f"case; load average {os.getloadavg()[0]:.2f})")
     return status | (0 if met else 1)
+
+
+def _random(count: int, seed: int, folder: str | None) -> int:
+    """Score ``count`` random worlds of ``seed`` (module docstring); the exit status."""
+    import sys
+    from pathlib import Path
+
+    from toolkit.scenes.spec import dumps_scene
+
+    if count < 1 or seed < 0:
+        print(f"error: --random must be >= 1 and --seed >= 0; got {count} and {seed}", file=sys.stderr)
+        return 2
+    if folder is not None:
+        Path(folder).mkdir(parents=True, exist_ok=True)
+    print(f"{count} random worlds of seed {seed}; RMS in mm/s; NEES in band = share of samples in the 95 % "
+          "chi-square(2) interval, > 100 = share above 100, max = largest; cost in us per sample")
+    header = (f"  {'estimator':20s} {'RMS':>8s} " + " ".join(f"{p:>8s}" for p in _PHASES)
+              + f" {'NEES in':>8s} {'> 100':>7s} {'max':>9s} {'us/s':>7s}")
+    worlds = []
+    started = time.perf_counter()
+    for index in range(count):
+        world = draw_world(seed, index)
+        if folder is not None:
+            name = world.scene().name
+            (Path(folder) / f"{name}.toml").write_text(dumps_scene(world.scene()), encoding="utf-8")
+        scored = score_world(world)
+        worlds.append(scored)
+        print(f"== {world.describe()}")
+        print(header)
+        for name, row in scored.scores.items():
+            def cell(key: str, scale: float = 1e3, form: str = "8.3f") -> str:
+                width = int(form.split(".")[0])
+                return f"{'-':>{width}s}" if row[key] is None else format(row[key] * scale, form)
+            print(f"  {name:20s} {cell('rms')} " + " ".join(cell(p) for p in _PHASES)
+                  + f" {cell('nees_in_band', 1.0, '8.3f')} {cell('nees_over_100', 1.0, '7.4f')}"
+                  f" {cell('nees_max', 1.0, '9.3g')} {cell('us_per_sample', 1.0, '7.0f')}")
+        checks = scored.checks()
+        told = scored.scores["truth_told"]["rms"] / scored.best_baseline()
+        print(f"  kalman / best baseline {scored.ratio:.3f} (truth_told {told:.3f}); "
+              + "; ".join(f"{'met' if ok else 'SHORT'} {line}" for line, ok in checks.items()), flush=True)
+    print(f"== {count} worlds in {time.perf_counter() - started:.0f} s (load average {os.getloadavg()[0]:.2f})")
+    status = 0
+    for line, target in WORLD_LINES.items():
+        share = float(np.mean([w.checks()[line] for w in worlds]))
+        met = share >= target
+        status |= 0 if met else 1
+        print(f"  {'met  ' if met else 'SHORT'} {line:42s} in {share:6.1%} of the worlds (target >= {target:.0%})")
+    told = np.array([w.scores["truth_told"]["rms"] / w.best_baseline() for w in worlds])
+    print(f"  truth_told itself: <= best baseline / 5 in {np.mean(told <= 0.2):.1%} of the worlds, never worse "
+          f"than the best baseline in {np.mean(told <= 1.0):.1%}")
+    cost = np.median([w.scores["kalman"]["us_per_sample"] for w in worlds])
+    print(f"  kalman median cost {cost:.0f} us per sample over the worlds (at their own rates and contact counts)")
+    print("  worst worlds (kalman / best baseline RMS):")
+    for w in sorted(worlds, key=lambda w: -w.ratio)[:10]:
+        kf = w.scores["kalman"]
+        print(f"    {w.world.label:10s} ratio {w.ratio:7.3f}  truth_told {w.scores['truth_told']['rms'] / w.best_baseline():6.3f}"
+              f"  nees_in_band {kf['nees_in_band']:.2f}  > 100 {kf['nees_over_100']:.4f}  max {kf['nees_max']:.3g}"
+              f"  ({w.world.n} contacts, {w.world.rate:.4g} Hz; {w.world.truth.describe()})")
+    return status

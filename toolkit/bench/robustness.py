@@ -191,6 +191,15 @@ def _random(count: int, seed: int, folder: str | None) -> int:
     reach = [w for w in worlds if w.checks("truth_told")["RMS <= best baseline / 5"]]
     print(f"  where truth_told itself is 5x better than the best baseline ({len(reach)} worlds) kalman is too in "
           f"{sum(w.checks()['RMS <= best baseline / 5'] for w in reach)}")
+    print("  by sample rate: worlds; share 5x better than the best baseline and median ratio to it, kalman and "
+          "truth_told")
+    for low, high in ((10, 25), (25, 50), (50, 100), (100, 250), (250, 501)):
+        group = [w for w in worlds if low <= w.world.rate < high]
+        if group:
+            ratios = {name: np.array([w.scores[name]["rms"] / w.best_baseline() for w in group])
+                      for name in ("kalman", "truth_told")}
+            print(f"    {low:3d}-{min(high, 500):3d} Hz: {len(group):3d} worlds; " + "; ".join(
+                f"{name} {np.mean(r <= 0.2):6.1%}, median {np.median(r):.3f}" for name, r in ratios.items()))
     cost = np.median([w.scores["kalman"]["us_per_sample"] for w in worlds])
     print(f"  kalman median cost {cost:.0f} us per sample over the worlds (at their own rates and contact counts)")
     print("  worst worlds (kalman / best baseline RMS):")

@@ -109,6 +109,14 @@ def robustness_estimators(scenario: Any) -> dict[str, Any]:
             "kalman": KalmanEstimator(model, scenario.prior)}
 
 
+def _with_truth_told(scenario: BrakeScenario) -> dict[str, Any]:
+    """:func:`robustness_estimators`, then the default told the scenario's true world
+    (:func:`~toolkit.estimation.truth_told`, the reference; it alone reads the world)."""
+    from ..estimation import truth_told
+
+    return {**robustness_estimators(scenario), TRUTH_TOLD: truth_told(scenario.world)}
+
+
 #: The phases scored (:data:`toolkit.estimation.PHASES`).
 _PHASES = ("startup", "cruise", "brake", "braked")
 
@@ -123,13 +131,13 @@ class RobustnessTable:
     cases : tuple of str
     estimators : tuple of str
     scores : dict of (case, estimator) to dict
-        ``rms`` (m/s), ``startup`` / ``cruise`` / ``brake`` / ``braked`` (m/s), ``nees_in_band``
-        (None without a covariance), ``us_per_sample``, ``missed_count_prob`` and
+        ``rms`` (m/s), ``startup`` / ``cruise`` / ``brake`` / ``braked`` (m/s), ``nees_in_band``,
+        ``nees_over_100`` and ``nees_max`` (None without a covariance), ``us_per_sample``, ``missed_count_prob`` and
         ``missed_count_std`` (the rate the position was reported under, told or identified;
         None for estimators without it): medians over the seeds.
-    raw : dict of (case, estimator) to ndarray of shape (seeds, 9)
+    raw : dict of (case, estimator) to ndarray of shape (seeds, 11)
         The per-seed values (rms, the four phases, nees_in_band, us_per_sample,
-        missed_count_prob, missed_count_std).
+        missed_count_prob, missed_count_std, nees_over_100, nees_max).
     """
 
     seeds: int
@@ -162,7 +170,8 @@ class RobustnessTable:
         for (case, name), score in self.scores.items():
             row = {"case": case, "estimator": name, "rms_mm_s": score["rms"] * 1e3}
             row.update({f"{p}_mm_s": score[p] * 1e3 for p in _PHASES})
-            row.update(nees_in_band=score["nees_in_band"], us_per_sample=score["us_per_sample"],
+            row.update(nees_in_band=score["nees_in_band"], nees_over_100=score["nees_over_100"],
+                       nees_max=score["nees_max"], us_per_sample=score["us_per_sample"],
                        missed_count_prob=score["missed_count_prob"])
             rows.append(row)
         return pd.DataFrame(rows)
@@ -170,7 +179,8 @@ class RobustnessTable:
 
 def robustness_table(cases: Any = None, seeds: int = 10, t_end: float = 10.0,
                      progress: Callable[[str, int], None] | None = None) -> RobustnessTable:
-    """Score every estimator of :func:`robustness_estimators` on ``cases`` over ``seeds``.
+    """Score every estimator of :func:`robustness_estimators`, and beside them the default told
+    the truth (``truth_told``), on ``cases`` over ``seeds``.
 
     Parameters
     ----------
@@ -201,10 +211,10 @@ def robustness_table(cases: Any = None, seeds: int = 10, t_end: float = 10.0,
             if progress is not None:
                 progress(case.name, seed)
             sc = case.scenario(seed, t_end=t_end)
-            estimators = robustness_estimators(sc)
+            estimators = _with_truth_told(sc)
             names = tuple(estimators)
             for name, estimator in estimators.items():
-                speed_std = 1e-4 if name == "kalman" else None
+                speed_std = 1e-4 if name in ("kalman", TRUTH_TOLD) else None
                 result = estimator.run(sc.record, speed_std=speed_std) if speed_std else estimator.run(sc.record)
                 phases = result.rms_phases
                 raw.setdefault((case.name, name), []).append(
@@ -212,7 +222,9 @@ def robustness_table(cases: Any = None, seeds: int = 10, t_end: float = 10.0,
                     + [math.nan if result.nees_in_band is None else result.nees_in_band,
                        result.wall_time / sc.record.n_samples * 1e6,
                        math.nan if result.missed_count_prob is None else result.missed_count_prob,
-                       math.nan if result.missed_count_std is None else result.missed_count_std])
+                       math.nan if result.missed_count_std is None else result.missed_count_std,
+                       math.nan if result.nees_over_100 is None else result.nees_over_100,
+                       math.nan if result.nees_max is None else result.nees_max])
     arrays = {key: np.array(rows) for key, rows in raw.items()}
     scores = {}
     for key, table in arrays.items():
@@ -223,6 +235,8 @@ def robustness_table(cases: Any = None, seeds: int = 10, t_end: float = 10.0,
         score["us_per_sample"] = float(med[6])
         score["missed_count_prob"] = None if np.isnan(med[7]) else float(med[7])
         score["missed_count_std"] = None if np.isnan(med[8]) else float(med[8])
+        score["nees_over_100"] = None if np.isnan(med[9]) else float(med[9])
+        score["nees_max"] = None if np.isnan(med[10]) else float(med[10])
         scores[key] = score
     return RobustnessTable(seeds, tuple(c.name for c in chosen), names, scores, arrays)
 
@@ -531,11 +545,8 @@ def score_world(world: RandomWorld) -> WorldScores:
     """Run :data:`WORLD_METHODS` and ``truth_told`` over ``world``'s record as a scene does
     (:func:`world_scenario`): each from the start speed with a prior std of 1e-4 m/s (the
     scene's ``speed_std``)."""
-    from ..estimation import truth_told
-
     sc = world_scenario(world)
-    estimators = robustness_estimators(sc)
-    estimators[TRUTH_TOLD] = truth_told(sc.world)
+    estimators = _with_truth_told(sc)
     scores: dict[str, dict[str, float | None]] = {}
     for name, estimator in estimators.items():
         result = estimator.run(sc.record, speed=world.v0, speed_std=1e-4)

@@ -83,6 +83,7 @@ def test_a_world_is_a_scene_that_round_trips_and_builds_its_plant():
     assert tuple(objects.estimation.estimators) == WORLD_METHODS
     assert objects.estimation.truth == world.truth
     assert world.label in scene.description and world.truth.describe() in scene.description
+    assert str(world) == scene.description and f"{world.n} contacts" in str(world)
 
 
 def _small(count: int) -> list:

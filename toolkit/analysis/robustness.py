@@ -411,8 +411,11 @@ class RandomWorld:
                                       commands={"times": self.times, "values": self.commands}),
             estimation=EstimationSpec(methods=WORLD_METHODS, scenario="simulation", seed=self.seed, truth=truth))
 
+    def __str__(self) -> str:
+        return self.describe()
+
     def describe(self) -> str:
-        """What was drawn, in words with units."""
+        """What was drawn, in words with units (also ``str(world)``)."""
         f = np.array(self.forces)
         period = 1.0 / self.rate
         steps = ", ".join(f"{t:.4g}" + (" (within a period of the last)" if i and t - self.times[i - 1] < period

@@ -17,7 +17,7 @@ from toolkit.analysis.robustness import (DEPARTURES, WORLD_LINES, WORLD_METHODS,
 from toolkit.analysis.scenarios import carousel_brake_scenario
 from toolkit.estimation import KalmanEstimator, TRUTH_TOLD, truth_told
 from toolkit.estimation._base import GROSS_NEES, score
-from toolkit.model.sensors import MAX_JITTER_PERIODS, EncoderRecord
+from toolkit.model.sensors import EncoderRecord
 from toolkit.scenes.build import build_scene
 from toolkit.scenes.spec import dumps_scene, loads_scene
 from toolkit.scenes.study import estimate_scene

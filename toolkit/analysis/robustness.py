@@ -274,10 +274,6 @@ def loop_robustness(controller: str, spread: float = 0.2, seeds: int = 10, t_end
     from ..controllers import SpeedHold, VirtualViscosity
     from ..estimation import CentralDifference, EstimatorModel, KalmanEstimator
     from ..loop.closed_loop import simulate_closed_loop
-    from ..model import ContactSet, Plant
-    from ..model.carousel import CAROUSEL
-    from ..model.sensors import Sensors
-    from ..model.truth import realize
 
     owner = "loop_robustness"
     makers = {"speed_hold": lambda: SpeedHold(0.2, 50.0), "viscosity": lambda: VirtualViscosity(50.0, 0.15)}

@@ -40,7 +40,7 @@ import time
 
 import numpy as np
 
-from toolkit.analysis.robustness import (BASELINES, ROBUSTNESS_CASES, WORLD_LINES, draw_world, loop_robustness,
+from toolkit.analysis.robustness import (ROBUSTNESS_CASES, WORLD_LINES, draw_world, loop_robustness,
                                          robustness_table, score_world)
 from toolkit.analysis.scenarios import carousel_brake_scenario
 from toolkit.estimation import AdaptiveKalman, KalmanEstimator

@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -57,6 +58,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, metavar="S", help="the random worlds' seed")
     parser.add_argument("--write-scenes", default=None, metavar="DIR", help="write each random world's scene")
     args = parser.parse_args(argv)
+    if args.random is not None and (args.random < 1 or args.seed < 0):
+        parser.exit(2, f"error: --random must be >= 1 and --seed >= 0; got {args.random} and {args.seed}\n")
+    if args.write_scenes is not None:
+        try:
+            Path(args.write_scenes).mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            parser.exit(2, f"error: --write-scenes {args.write_scenes!r} cannot be made a folder: {error.strerror}\n")
 
     ideal = carousel_brake_scenario(seed=0)
     KalmanEstimator(ideal.model).warm_up()
@@ -146,16 +154,8 @@ def _costs(ideal, cases, seeds: int) -> int:
 
 def _random(count: int, seed: int, folder: str | None) -> int:
     """Score ``count`` random worlds of ``seed`` (module docstring); the exit status."""
-    import sys
-    from pathlib import Path
-
     from toolkit.scenes.spec import dumps_scene
 
-    if count < 1 or seed < 0:
-        print(f"error: --random must be >= 1 and --seed >= 0; got {count} and {seed}", file=sys.stderr)
-        return 2
-    if folder is not None:
-        Path(folder).mkdir(parents=True, exist_ok=True)
     print(f"{count} random worlds of seed {seed}; RMS in mm/s; NEES in band = share of samples in the 95 % "
           "chi-square(2) interval, > 100 = share above 100, max = largest; cost in us per sample")
     header = (f"  {'estimator':20s} {'RMS':>8s} " + " ".join(f"{p:>8s}" for p in _PHASES)

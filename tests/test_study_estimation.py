@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -43,14 +44,23 @@ def test_estimation_and_control_round_trip():
                                         "alpha_beta", "kalman", "rts")
 
 
+def _scene_reference(**kwargs):
+    """``carousel_brake_scenario(seed=0, **kwargs)`` recorded as a scene records it: the
+    encoders' grids where the scene's seed puts them."""
+    from toolkit.analysis.scenarios import carousel_brake_scenario, grid_positions, record_world
+
+    reference = carousel_brake_scenario(seed=0, **kwargs)
+    _, record = record_world(reference.world, 10.0, seed=0, **grid_positions(reference.sensors, 0))
+    return dataclasses.replace(reference, record=record)
+
+
 def test_estimation_stage_is_the_carousel_brake_scenario():
     # Second method: the estimation package's own acceptance scenario (same plant, encoders
     # and seed) gives the same record and the same scores, exactly (same arithmetic).
     from toolkit.estimation import CentralDifference, KalmanEstimator, RTSSmoother
-    from toolkit.analysis.scenarios import carousel_brake_scenario
 
     study = estimate_scene(loads_scene(ESTIMATE))
-    reference = carousel_brake_scenario(seed=0)
+    reference = _scene_reference()
     np.testing.assert_array_equal(study.record.central_counts, reference.record.central_counts)
     np.testing.assert_array_equal(study.record.wheel_counts, reference.record.wheel_counts)
     np.testing.assert_allclose(study.record.truth_speed, reference.record.truth_speed, rtol=0, atol=0)
@@ -275,7 +285,8 @@ def test_estimate_cli_json_has_the_documented_keys(tmp_path, capsys):
     assert names == ["central_difference", "wheel_difference", "foaw_end", "foaw_best", "alpha_beta", "kalman",
                      "rts"]
     for row in data["estimators"]:
-        assert {"name", "rms", "max_error", "nees_mean", "wall_time", "rms_phases", "nees_in_band"} <= set(row)
+        assert {"name", "rms", "max_error", "nees_mean", "wall_time", "rms_phases", "nees_in_band", "nees_over_100",
+                "nees_max"} <= set(row)
         assert row["rms"] <= row["max_error"]          # RMS never exceeds the largest error
         assert set(row["rms_phases"]) == {"startup", "cruise", "brake", "braked"}
         # The overall mean square is the samples' weighted mean of the phases' (every sample
@@ -285,6 +296,10 @@ def test_estimate_cli_json_has_the_documented_keys(tmp_path, capsys):
     kalman = names.index("kalman")
     # NEES in band: a share of samples, for the estimators with a covariance only.
     assert 0.0 <= data["estimators"][kalman]["nees_in_band"] <= 1.0
+    # The share above 100 and the largest NEES: consistent with each other (no NEES above
+    # 100 exactly when the largest is at most 100).
+    row = data["estimators"][kalman]
+    assert 0.0 <= row["nees_over_100"] <= 1.0 and (row["nees_over_100"] > 0) == (row["nees_max"] > 100)
     assert data["estimators"][names.index("central_difference")]["nees_in_band"] is None
     # The missed-count rate the kalman position was reported under: the shipped scene's
     # encoders are ideal and the nominal model holds, so none (0, std 0); the baselines
@@ -341,11 +356,10 @@ def test_estimation_truth_is_the_scenarios_true_world_and_the_estimators_are_not
     # Second method: carousel_brake_scenario with the same WorldTruth, prior and seed records
     # the same true world (counts equal bit for bit) and gives the same default filter.
     from toolkit import ModelPrior, WorldTruth, build_estimator
-    from toolkit.analysis.scenarios import carousel_brake_scenario
 
     study = estimate_scene(loads_scene(ESTIMATE + TRUTH))
-    reference = carousel_brake_scenario(seed=0, truth=WorldTruth(friction_spread=0.2, drag=0.5),
-                                        prior=ModelPrior(drag_range=(0.0, 2.0)))
+    reference = _scene_reference(truth=WorldTruth(friction_spread=0.2, drag=0.5),
+                                 prior=ModelPrior(drag_range=(0.0, 2.0)))
     np.testing.assert_array_equal(study.record.central_counts, reference.record.central_counts)
     np.testing.assert_array_equal(study.record.wheel_counts, reference.record.wheel_counts)
     assert study.plant.damping == 0.5 and not np.allclose(study.plant.contacts.forces, 1.0)
@@ -356,6 +370,14 @@ def test_estimation_truth_is_the_scenarios_true_world_and_the_estimators_are_not
                                                                                      speed_std=1e-4)
     assert rows["kalman"]["rms"] == pytest.approx(expected.rms_error, rel=1e-12, abs=0)
     assert rows["kalman"]["monitor"].startswith("left the nominal model")          # it saw the mismatch
+    # With a truth the default told it is reported last (truth_told), from the true world.
+    from toolkit.estimation import truth_told
+
+    assert list(rows)[-1] == "truth_told" and "truth_told" not in [r["name"] for r in estimate_scene(
+        loads_scene(ESTIMATE)).rows()]
+    told = truth_told(reference.world).run(reference.record, speed_std=1e-4)
+    assert rows["truth_told"]["rms"] == pytest.approx(told.rms_error, rel=1e-12, abs=0)
+    assert rows["truth_told"]["nees_max"] == pytest.approx(told.nees_max, rel=1e-12, abs=0)
     # The issue's first line on this record: at most 1/5 of the best practitioner baseline.
     best = min(rows[name]["rms"] for name in ("central_difference", "foaw_end", "foaw_best", "alpha_beta"))
     assert rows["kalman"]["rms"] <= best / 5
@@ -442,3 +464,60 @@ def test_control_truth_runs_the_loop_on_the_true_world_with_the_scenes_estimator
     difference = CentralDifference(build_scene(loads_scene(text)).control.sensors).run(loop.record)
     central = float(np.sqrt(np.mean((difference.speed[late] - loop.speed[late]) ** 2)))
     assert error <= central / 10, (error, central)
+
+
+def test_a_brake_between_samples_reaches_the_motors_then_and_the_record_one_sample_later():
+    # Six 4 N wheels under a 2 kg body read at 20 Hz, braked at 4.0536 s: between the samples
+    # at 4.05 and 4.10 s. The motors switch at 4.0536 s; the record carries only what the
+    # device logs (times on the grid, counts, the commands sent at each sample), so the brake
+    # command shows from 4.10 s, and nothing in it holds 4.0536.
+    from toolkit.model.record_io import record_csv_text
+
+    text = _with(ESTIMATE, "speeds = [0.15, 0.161, 0.172, 0.183, 0.194, 0.206, 0.217, 0.228, 0.239, 0.25]",
+                 "speeds = [0.15, 0.17, 0.19, 0.21, 0.23, 0.25]")
+    text = _with(text, "forces = 1.0", "forces = 4.0")
+    text = _with(text, "inertia = 0.353780            # kg m^2: moving mass I / L^2 = 5.0 kg\n"
+                       "contact_radius = 0.266        # m\n", "mass = 2.0\n")
+    text = _with(text, "rate = 50.0", "rate = 20.0")
+    text = _with(text, "brake_time = 5.0", "brake_time = 4.0536")
+    study = estimate_scene(loads_scene(text))
+    record = study.record
+    np.testing.assert_array_equal(record.times, np.arange(201) / 20.0)     # the sample grid, exactly
+    cruise, brake = 0.2 + np.linspace(-0.05, 0.05, 6), -0.1 + np.linspace(-0.05, 0.05, 6)
+    k = 81                                                                  # t = 4.05 s
+    np.testing.assert_array_equal(record.commands[: k + 1], np.tile(cruise, (k + 1, 1)))
+    np.testing.assert_array_equal(record.commands[k + 1:], np.tile(brake, (201 - k - 1, 1)))
+    # The motors got it at 4.0536 s: at 4.10 s each contact is the first-order lag's closed
+    # form from there (tau = 7.5 ms; rtol 1e-12: the flow's exponentials, rounding only).
+    settled = brake + (cruise - brake) * np.exp(-(4.10 - 4.0536) / 0.0075)
+    np.testing.assert_allclose(record.truth_contact_speeds[k + 1], settled, rtol=1e-12, atol=0)
+    # The brake completes within that sample: at 4.05 s the body rides the cruise set, at
+    # 4.10 s it is within the braking set (24 N on 2 kg sheds 0.3 m/s in 25 ms).
+    assert cruise[0] <= record.truth_speed[k] <= cruise[-1]
+    assert brake[0] <= record.truth_speed[k + 1] <= brake[-1]
+    csv = record_csv_text(record)
+    header = csv.splitlines()[[line.startswith("time_s") for line in csv.splitlines()].index(True)]
+    logged = header.split(",")[: 2 + 6 + 6]
+    assert logged == (["time_s", "central_count"] + [f"wheel_count_{i}" for i in range(1, 7)]
+                      + [f"command_{i}_m_s" for i in range(1, 7)])
+    assert "4.0536" not in csv
+
+
+def test_the_seed_moves_the_encoders_grid_phase():
+    # A nominal scene (no noise, no truth) draws nothing but the grids' phase: its seed puts
+    # the body and the wheels within one count of their grids (grid_positions, the seed's
+    # grid stream), so two seeds give two records and two sets of estimates.
+    from toolkit.analysis.scenarios import grid_positions
+
+    studies = {seed: estimate_scene(loads_scene(_with(ESTIMATE, "seed = 0", f"seed = {seed}")))
+               for seed in (0, 1)}
+    for seed, study in studies.items():
+        grid = grid_positions(build_scene(loads_scene(ESTIMATE)).estimation.sensors, seed)
+        # The body starts at rest where the seed put it (the true position at t = 0, exactly).
+        assert study.record.truth_position[0] == grid["central_position"]
+        assert 0.0 < grid["central_position"] < study.record.central_resolution
+    assert not np.array_equal(studies[0].record.central_counts, studies[1].record.central_counts)
+    kalman = [next(r for r in study.results if r.method == "kalman").speed for study in studies.values()]
+    assert not np.array_equal(*kalman)
+    # The grid's phase does not move the truth: the body's speeds agree (the same run).
+    np.testing.assert_array_equal(studies[0].record.truth_speed, studies[1].record.truth_speed)

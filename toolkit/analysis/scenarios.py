@@ -19,10 +19,10 @@ from ..errors import ParameterTypeError, as_int, parameter_message
 from ..model import ContactSet, Motors, PiecewiseConstant, Plant, sample_times
 from ..model.carousel import CAROUSEL
 from ..model.sensors import EncoderRecord, Sensors, record_simulation
-from ..model.truth import TrueWorld, WorldTruth, realize
+from ..model.truth import GRID_STREAM, TrueWorld, WorldTruth, realize
 from ..estimation import EstimatorModel, ModelPrior
 
-__all__ = ["BrakeScenario", "carousel_brake_scenario", "record_world"]
+__all__ = ["BrakeScenario", "carousel_brake_scenario", "record_world", "grid_positions"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,14 +60,30 @@ class BrakeScenario:
     nominal: Plant | None = None
 
 
+def grid_positions(sensors: Sensors, rng: Any) -> dict[str, Any]:
+    """Where the body and the contacts start on their encoders' count grids, uniform within one
+    count: :func:`~toolkit.model.sensors.record_simulation`'s ``central_position`` (m) and
+    ``contact_positions`` (m, shape (n,)).
+
+    ``rng`` is a ``numpy.random.Generator``, or an integer seed whose grid stream
+    (``default_rng([seed, GRID_STREAM])``, :data:`toolkit.model.truth.GRID_STREAM`) draws them:
+    a scene's ``[estimation] seed``.
+    """
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng([as_int(rng, "rng", "grid_positions", low=0), GRID_STREAM])
+    return {"central_position": rng.uniform(0.0, sensors.central.distance_per_count),
+            "contact_positions": rng.uniform(0.0, sensors.wheel.distance_per_count, sensors.n_wheels)}
+
+
 def record_world(world: TrueWorld, t_end: float, *, seed: int, v0: float = 0.0,
                  **positions: Any) -> tuple[Any, EncoderRecord]:
     """Simulate a true world exactly from ``v0`` (m/s) over ``t_end`` (s) and record it
     through its encoders.
 
-    The motors run towards the plant's commands plus the world's wander (one offset per
-    sample, :meth:`~toolkit.model.truth.TrueWorld.wander`); the record logs the commands
-    sent. ``seed`` seeds the encoders' own draws (``numpy.random.default_rng(seed)``);
+    The motors run towards the plant's commands (switched when sent, on or off the sample
+    grid) plus the world's wander (one offset per sample,
+    :meth:`~toolkit.model.truth.TrueWorld.wander`); the record logs the commands sent at
+    the samples. ``seed`` seeds the encoders' own draws (``numpy.random.default_rng(seed)``);
     ``positions`` are :func:`~toolkit.model.sensors.record_simulation`'s
     ``central_position`` and ``contact_positions``.
 
@@ -87,8 +103,15 @@ def record_world(world: TrueWorld, t_end: float, *, seed: int, v0: float = 0.0,
         return np.asarray([plant.commands(t) for t in times])
 
     simulated = plant
-    if wander is not None:        # switched at each sample: the command plus the wander
-        simulated = replace(plant, commands=PiecewiseConstant(stamps[1:], sent(stamps) + wander))
+    if wander is not None:        # the command, switched when sent (on or off the samples), plus
+        # the wander, switched at each sample
+        breaks = stamps[1:]
+        if plant.commands is not None:
+            switches = plant.commands.times
+            breaks = np.union1d(breaks, switches[(switches > 0.0) & (switches <= stamps[-1])])
+        held = np.searchsorted(stamps, np.concatenate(([0.0], breaks)), side="right") - 1
+        simulated = replace(plant, commands=PiecewiseConstant(
+            breaks, sent(np.concatenate(([0.0], breaks))) + wander[held]))
     result = simulate(simulated, t_end, v0=v0)
     record = record_simulation(result, simulated, world.sensors, rng=np.random.default_rng(seed), **positions)
     if wander is not None:        # the commands sent, not the speeds the wandering motors ran at
@@ -144,9 +167,8 @@ def carousel_brake_scenario(*, seed: int = 0, t_end: float = 10.0, brake_time: f
     plant = world.plant
     positions: dict = {}
     if grid_phase is not None:
-        draw = np.random.default_rng(as_int(grid_phase, "grid_phase", "carousel_brake_scenario", low=0))
-        positions = {"central_position": draw.uniform(0.0, sensors.central.distance_per_count),
-                     "contact_positions": draw.uniform(0.0, sensors.wheel.distance_per_count, n)}
+        positions = grid_positions(sensors, np.random.default_rng(
+            as_int(grid_phase, "grid_phase", "carousel_brake_scenario", low=0)))
     result, record = record_world(world, t_end, seed=seed, **positions)
     # The estimators know the nominal scene: its forces, lag and drag (none).
     model = EstimatorModel(forces, mass, sensors, motor_lag=lag, friction_uncertainty=0.0,

@@ -17,7 +17,8 @@ sample (``reset``, ``step``) in a closed loop:
   holds, one optional layer) are its parts;
 - :mod:`~toolkit.estimation.unscented`: the unscented Kalman filter whose process model is
   the exact simulator over one sample;
-- :mod:`~toolkit.estimation.registry`: the estimators by name.
+- :mod:`~toolkit.estimation.registry`: the estimators by name, and the default told the true
+  world (``truth_told``, a reference for simulated records).
 
 filterpy is imported only where a filter is built.
 """
@@ -36,7 +37,7 @@ from .kalman import FilterPass, NominalKalman, RTSSmoother, steady_state_gain
 
 from .unscented import UnscentedEstimator
 from .window import AdaptiveWindow
-from .registry import ESTIMATOR_NAMES, build_estimator
+from .registry import ESTIMATOR_NAMES, TRUTH_TOLD, build_estimator, truth_told
 from ._base import PHASES, phase_masks
 
 __all__ = ["Estimator", "EstimationResult", "EstimatorModel", "ModelPrior", "chi2_band", "contact_speed_estimates", "FilterPass",
@@ -44,4 +45,4 @@ __all__ = ["Estimator", "EstimationResult", "EstimatorModel", "ModelPrior", "chi
            "CentralDifference", "WheelDifference", "KalmanEstimator", "NominalKalman", "RTSSmoother",
            "steady_state_gain", "UnscentedEstimator", "AdaptiveWindow", "AlphaBetaTracker", "kalata_gains",
            "AdaptiveKalman", "WheelSpeedBank", "LagIdentifier", "MissedCountRate", "RideCheck", "ConsistencyMonitor", "NoiseMatcher",
-           "NOMINAL", "ADAPTING", "FALLBACK", "ESTIMATOR_NAMES", "build_estimator", "PHASES", "phase_masks"]
+           "NOMINAL", "ADAPTING", "FALLBACK", "ESTIMATOR_NAMES", "build_estimator", "truth_told", "TRUTH_TOLD", "PHASES", "phase_masks"]

@@ -25,12 +25,15 @@ from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 
 __all__ = ["Estimator", "EstimationResult", "chi2_band", "check_covariance", "PHASES", "phase_masks",
-           "nees_band"]
+           "nees_band", "GROSS_NEES"]
 
 #: The phases of a record scored separately (:func:`phase_masks`).
 PHASES = ("startup", "cruise", "brake", "braked")
 #: Length of the startup and brake phases after their command, s (:func:`phase_masks`).
 SETTLE_TIME = 1.0
+#: A NEES above this is gross overconfidence (:attr:`EstimationResult.nees_over_100`): a
+#: consistent 2-dimensional NEES exceeds it with probability ``exp(-50)``.
+GROSS_NEES = 100.0
 
 
 def chi2_band(samples: int, dim: int, level: float = 0.95) -> tuple[float, float]:
@@ -143,6 +146,11 @@ class EstimationResult:
     nees_in_band : float or None
         Fraction of the samples whose NEES lies in the two-sided 95 % interval of one
         chi-square(2) (:func:`nees_band`); ``None`` without a covariance or the truth.
+    nees_over_100 : float or None
+        Fraction of the samples whose NEES exceeds :data:`GROSS_NEES` (100): gross
+        overconfidence, which the in-band share hides; ``None`` as ``nees_in_band``.
+    nees_max : float or None
+        The largest NEES of the record; ``None`` as ``nees_in_band``.
     missed_count_prob, missed_count_std : float or None
         The encoders' missed-count rate (per count transition) the position was reported
         under and its std at the record's end: the told rate (std 0) or the identified one
@@ -166,6 +174,8 @@ class EstimationResult:
     nis_band: tuple[float, float] | None = None
     rms_phases: dict[str, float | None] | None = None
     nees_in_band: float | None = None
+    nees_over_100: float | None = None
+    nees_max: float | None = None
     missed_count_prob: float | None = None
     missed_count_std: float | None = None
 
@@ -189,7 +199,8 @@ class EstimationResult:
                 "max_error": self.max_error, "nees_mean": self.nees_mean, "nees_band": self.nees_band,
                 "nis_mean": self.nis_mean, "nis_band": self.nis_band,
                 "rms_phases": None if self.rms_phases is None else dict(self.rms_phases),
-                "nees_in_band": self.nees_in_band}
+                "nees_in_band": self.nees_in_band, "nees_over_100": self.nees_over_100,
+                "nees_max": self.nees_max}
 
 
 def score(record: EncoderRecord, method: str, speed: np.ndarray, variance: np.ndarray,
@@ -211,10 +222,11 @@ def score(record: EncoderRecord, method: str, speed: np.ndarray, variance: np.nd
             e = np.stack((position - record.truth_position, error), axis=1)
             nees = np.einsum("ki,kij,kj->k", e, np.linalg.inv(covariance[:, :2, :2]), e)
             lo, hi = nees_band(2)
-            finite = np.isfinite(nees)
-            fields.update(nees=nees, nees_mean=float(np.mean(nees)), nees_band=chi2_band(K, 2),
-                          nees_in_band=float(np.mean((nees[finite] >= lo) & (nees[finite] <= hi)))
-                          if finite.any() else None)
+            finite = nees[~np.isnan(nees)]          # an infinite NEES counts: zero variance, an error
+            fields.update(nees=nees, nees_mean=float(np.mean(nees)), nees_band=chi2_band(K, 2))
+            if finite.size:
+                fields.update(nees_in_band=float(np.mean((finite >= lo) & (finite <= hi))),
+                              nees_over_100=float(np.mean(finite > GROSS_NEES)), nees_max=float(finite.max()))
     if nis is not None:
         fields.update(nis=np.asarray(nis, dtype=float), nis_mean=float(np.mean(nis)),
                       nis_band=chi2_band(K, 1))

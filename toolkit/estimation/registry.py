@@ -2,18 +2,24 @@
 
 :func:`build_estimator` maps a name of :data:`ESTIMATOR_NAMES` to an estimator built from the
 nominal model and the prior knowledge (``[estimation.model]``), so that a caller only maps
-keys to arguments.
+keys to arguments. :func:`truth_told` is the default filter told the true world: a reference
+of what is achievable, for simulated records only.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from ..errors import check_option
 from ._input import EstimatorModel
-from ..model.truth import ModelPrior
+from ..errors import ParameterTypeError, parameter_message
+from ..model.truth import ModelPrior, TrueWorld
 
-__all__ = ["ESTIMATOR_NAMES", "build_estimator"]
+__all__ = ["ESTIMATOR_NAMES", "build_estimator", "truth_told", "TRUTH_TOLD"]
+
+#: The name of :func:`truth_told`'s results.
+TRUTH_TOLD = "truth_told"
 
 #: Every estimator name, baselines first.
 ESTIMATOR_NAMES = ("central_difference", "wheel_difference", "foaw_end", "foaw_best", "alpha_beta", "kalman",
@@ -62,3 +68,39 @@ def build_estimator(name: str, model: EstimatorModel, *, prior: ModelPrior | Non
         return KalmanEstimator(model, prior, initial_covariance=initial_covariance)
     make = {"kalman_nominal": NominalKalman, "rts": RTSSmoother, "ukf": UnscentedEstimator}[name]
     return make(model, initial_covariance=initial_covariance)
+
+
+def truth_told(world: TrueWorld, *, initial_covariance: Any = None) -> Any:
+    """The default ``kalman`` told the true world: the reference of what is achievable.
+
+    Its model is built from the true plant and encoders (each wheel's friction magnitude,
+    the mass, drag, motor lag and speed limits; the read noise, missed-count rate and jitter;
+    the motors' wander) and its prior is the truth itself (no friction spread, the drag and
+    lag ranges a single point, the wander's intensity, the missed-count rate told). Its
+    results are named :data:`TRUTH_TOLD`. It reads the world, so it scores simulated records
+    only; the gap between it and the default is the price of not knowing.
+
+    Parameters
+    ----------
+    world : TrueWorld
+        The world the record was simulated in (:func:`~toolkit.model.truth.realize`).
+    initial_covariance : array_like of shape (2, 2), optional
+        As :func:`build_estimator`'s.
+    """
+    from .adaptive import KalmanEstimator
+    from ._input import EstimatorModel
+
+    if not isinstance(world, TrueWorld):
+        raise ParameterTypeError(parameter_message("world", "truth_told", "be a TrueWorld", world))
+    plant, sensors = world.plant, world.sensors
+    motors = plant.motors
+    lag = motors.lag if motors is not None else 0.0
+    drift = world.truth.contact_drift
+    model = EstimatorModel(plant.contacts.forces, plant.mass, sensors, motor_lag=lag, damping=plant.damping,
+                           contact_drift=drift,
+                           speed_limits=motors.speed_limits if motors is not None else (-math.inf, math.inf))
+    prior = ModelPrior(friction_spread=0.0, drag_range=(plant.damping, plant.damping), lag_range=(lag, lag),
+                       contact_drift=drift, missed_count_prob=min(sensors.missed_count_prob, 0.5))
+    estimator = KalmanEstimator(model, prior, initial_covariance=initial_covariance)
+    estimator.name = TRUTH_TOLD
+    return estimator

@@ -27,13 +27,14 @@ from .motors import Motors
 from .plant import Plant
 from .sensors import Sensors
 
-__all__ = ["WorldTruth", "TrueWorld", "realize", "seed_streams", "ModelPrior", "DEFAULT_DRAG", "DEFAULT_LAG",
+__all__ = ["WorldTruth", "TrueWorld", "realize", "seed_streams", "GRID_STREAM", "ModelPrior", "DEFAULT_DRAG", "DEFAULT_LAG",
            "DEFAULT_DRIFT", "DEFAULT_MISSED", "MAX_MISSED_MEAN"]
 
 #: Sub-streams of one seed (``numpy.random.default_rng([seed, stream])``): the wheels' friction
-#: draw (the stream scenes used before, so a scene's draw is unchanged) and the motors' wander.
+#: draw (the stream scenes used before, so a scene's draw is unchanged), the motors' wander and
+#: where the encoders' count grids start (:func:`toolkit.analysis.scenarios.grid_positions`).
 #: The sensors draw from ``default_rng(seed)`` itself (missed counts, read noise, jitter).
-FRICTION_STREAM, WANDER_STREAM = 1, 2
+FRICTION_STREAM, WANDER_STREAM, GRID_STREAM = 1, 2, 3
 
 
 def seed_streams(seed: Any, owner: str) -> int:

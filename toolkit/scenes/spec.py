@@ -592,8 +592,12 @@ class EstimationSpec:
     ``scenario``: ``"brake"`` (default: the contacts at ``cruise + linspace(-spread,
     spread, n)`` m/s from rest, then at ``brake + ...`` from ``brake_time`` s, over
     ``duration`` s; defaults 0.2, 0.05, -0.1, 5, 10) or ``"simulation"`` (the scene's own
-    ``[simulation]``, exact, recorded over its ``t_end``); ``seed`` (integer, the sensors' and
-    friction draws); ``friction_spread`` (relative std of each true ``f_i`` around the
+    ``[simulation]``, exact, recorded over its ``t_end``). A ``brake_time`` (or a command
+    switch) between two samples is honoured: the motors get the new command at that instant,
+    and the record, which carries only what the device logs (the commands sent at each
+    sample), shows it from the first sample at or after it. ``seed`` (integer, the sensors',
+    friction and wander draws and where the encoders' count grids start, so that each seed is
+    another phase of the quantization); ``friction_spread`` (relative std of each true ``f_i`` around the
     declared one, drawn once; the model-based estimators are told the spread, not the
     draw); ``missed_count_prob``, ``count_noise`` (counts), ``jitter`` (s) of the encoders;
     ``speed_std`` (m/s, > 0, default 1e-4: the std of the filters' prior on the start speed,

@@ -61,7 +61,7 @@ from ..model import ContactSet, Plant, sample_count
 from .build import SceneObjects, build_scene
 from .spec import Scene
 from ..schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
-from ..analysis.scenarios import record_world
+from ..analysis.scenarios import grid_positions, record_world
 from ..model.truth import realize
 from ..shortfall import Shortfall
 from ..simulation import SimulationResult, SimulationStatus, simulate
@@ -448,7 +448,8 @@ class EstimationStudy:
         """Per estimator: ``name``, ``rms``, ``max_error`` (m/s), ``rms_phases`` (m/s per
         phase: startup, cruise, brake, braked), ``nees_mean`` (None without a covariance or
         the truth), its 95 % ``nees_band``, ``nees_in_band`` (the share of samples whose NEES
-        lies in the 95 % chi-square(2) interval), ``nis_mean``, ``monitor`` (the consistency
+        lies in the 95 % chi-square(2) interval), ``nees_over_100`` (the share above 100:
+        gross overconfidence) and ``nees_max``, ``nis_mean``, ``monitor`` (the consistency
         monitor's verdict), ``missed_count_prob`` and ``missed_count_std`` (the encoders'
         missed-count rate the position was reported under, told or identified; None where an
         estimator does not use it), ``wall_time`` (s) and ``real_time_ratio``."""
@@ -456,6 +457,7 @@ class EstimationStudy:
         return [{"name": r.method, "rms": r.rms_error, "max_error": r.max_error,
                  "rms_phases": None if r.rms_phases is None else dict(r.rms_phases),
                  "nees_mean": r.nees_mean, "nees_band": r.nees_band, "nees_in_band": r.nees_in_band,
+                 "nees_over_100": r.nees_over_100, "nees_max": r.nees_max,
                  "nis_mean": r.nis_mean, "monitor": monitor, "missed_count_prob": r.missed_count_prob,
                  "missed_count_std": r.missed_count_std, "wall_time": r.wall_time,
                  "real_time_ratio": r.real_time_ratio} for r, monitor in zip(self.results, monitors)]
@@ -476,22 +478,36 @@ def estimate_scene(scene: Scene | SceneObjects, simulation: SimulationResult | N
     Returns
     -------
     EstimationStudy
+        One result per method and, when the scene has ``[estimation.truth]``, last, the
+        default told that true world (:func:`~toolkit.estimation.truth_told`, named
+        ``truth_told``: the reference of what is achievable).
+
+    Notes
+    -----
+    The encoders' count grids start where ``[estimation] seed`` puts them
+    (:func:`~toolkit.analysis.scenarios.grid_positions`): each seed is another phase of the
+    quantization, so a nominal scene too gives other records for other seeds.
     """
+    from ..estimation import truth_told
     from ..model.sensors import record_simulation
 
     built = _built(scene)
     spec, objects = built.scene.estimation, built.estimation
     if spec is None or objects is None:
         raise SceneError(f"The scene {built.scene.name!r} has no [estimation] section.")
-    plant = objects.plant
+    plant, told = objects.plant, None
+    grid = grid_positions(objects.sensors, spec.seed)     # the seed's phase of the count grids
     if spec.scenario == "simulation" and objects.truth.is_nominal:      # the scene's own run
         run = simulation if simulation is not None else _simulation(built, built.contacts)
-        record = record_simulation(run, plant, objects.sensors, rng=np.random.default_rng(spec.seed))
+        record = record_simulation(run, plant, objects.sensors, rng=np.random.default_rng(spec.seed), **grid)
     else:     # the true world ([estimation.truth]; the scene itself when it says nothing)
         world = realize(plant, objects.sensors, objects.truth, spec.seed)
-        run, record = record_world(world, objects.duration, seed=spec.seed, v0=objects.v0)
+        run, record = record_world(world, objects.duration, seed=spec.seed, v0=objects.v0, **grid)
         plant = world.plant
-    return _run_estimators(objects, spec, record, run, plant)
+        if spec.truth is not None:        # the default told this world: the reference
+            told = truth_told(world, initial_covariance=None if spec.initial_covariance is None
+                              else np.array(spec.initial_covariance))
+    return _run_estimators(objects, spec, record, run, plant, told)
 
 
 def estimate_record(scene: Scene | SceneObjects, record: Any) -> EstimationStudy:
@@ -517,11 +533,12 @@ def estimate_record(scene: Scene | SceneObjects, record: Any) -> EstimationStudy
 
 
 def _run_estimators(objects: Any, spec: Any, record: Any, run: SimulationResult | None,
-                    plant: Any) -> EstimationStudy:
-    """Every estimator over ``record``, each timed on compiled code (warmed first, untimed)."""
+                    plant: Any, told: Any = None) -> EstimationStudy:
+    """Every estimator over ``record``, each timed on compiled code (warmed first, untimed),
+    then ``told`` (the default told the true world) when there is one."""
     compile_time = warm(None, "core", "lines")     # every wall time below: compiled code
     results, monitors = [], []
-    for estimator in objects.estimators.values():
+    for estimator in [*objects.estimators.values(), *([] if told is None else [told])]:
         compile_time += warm(lambda: estimator.warm_up(record))
         results.append(estimator.run(record, speed=objects.v0, speed_std=spec.speed_std))
         monitors.append(_verdict(estimator))

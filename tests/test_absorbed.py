@@ -121,6 +121,7 @@ def test_unseen_transitions_of_a_window() -> None:
     assert np.all(lines.unseen < travel)
 
 
+@pytest.mark.slow
 def test_missed_counts_nees_in_band_over_20_seeds() -> None:
     # Issue 18's lines for untold missed counts (1e-3) over 20 seeds: NEES in band 0.790
     # before the absorbed variance, 0.952 with it (target 0.8); the RMS lines still met.

@@ -24,7 +24,12 @@ def cli(*args: str) -> subprocess.CompletedProcess[str]:
                           text=True, cwd=ROOT)
 
 
-@pytest.mark.parametrize("path", DESIGNS, ids=lambda p: p.stem)
+#: The designs whose run takes more than a few seconds (make test-quick leaves them out).
+_SLOW_DESIGNS = {"sliding_disc"}
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in _SLOW_DESIGNS else p
+                                  for p in DESIGNS], ids=lambda p: p.stem)
 def test_run_succeeds_on_every_design(path, tmp_path, capsys):
     assert main(["run", str(path), "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
@@ -127,6 +132,7 @@ def test_allocate_without_target_is_a_user_error():
     assert done.returncode == 2 and "no [target]" in done.stderr and "Traceback" not in done.stderr
 
 
+@pytest.mark.slow
 def test_precision_json_rows(tmp_path):
     done = cli("precision", "designs/odd7.toml", "--json", "--repeats", "1", "--out", str(tmp_path))
     assert done.returncode == 0, done.stderr
@@ -185,6 +191,7 @@ def test_output_folder_that_is_a_file_is_a_user_error(tmp_path):
     assert done.returncode == 2 and "cannot write the output" in done.stderr and "Traceback" not in done.stderr
 
 
+@pytest.mark.slow
 def test_precision_plot_with_motors_where_exact_is_the_reference(tmp_path):
     # random10 has motors: no rational-arithmetic reference, so the exact row has no
     # independent error (null in JSON) and is drawn as the reference line (regression test).

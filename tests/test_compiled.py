@@ -102,7 +102,7 @@ def test_simulate_refuses_the_same_times_with_and_without_the_kernel(monkeypatch
 
 
 # -- the Coulomb force ---------------------------------------------------------------------------
-@pytest.mark.parametrize("n, m", [(1, 5), (7, 1), (40, 3000), (2000, 50_000)])
+@pytest.mark.parametrize("n, m", [(1, 5), (7, 1), (40, 3000), pytest.param(2000, 50_000, marks=pytest.mark.slow)])
 def test_coulomb_force_is_the_definition(rng, n, m):
     # Second method: the definition sum_i f_i sign(v_i - V) as an n x m broadcast. Speeds on
     # a grid of 1/64 m/s and forces in halves make every sum exact in binary, so the two must

@@ -101,6 +101,7 @@ def test_outputs_beyond_the_documented_size_are_refused_before_work(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_a_second_run_into_a_claimed_folder_is_refused_before_work(tmp_path):
     out = tmp_path / "o"
     with claim_output_dir(out):                  # another run holds the folder

@@ -61,7 +61,7 @@ def test_ideal_loop_matches_simulate_closed_loop(name):
     _compare(closed_loop_system(PLANT, controller, v0=0.05), reference, 2.0)
 
 
-@pytest.mark.parametrize("name", ["viscosity", "speed_hold", "brake", "drive"])
+@pytest.mark.parametrize("name", ["viscosity", pytest.param("speed_hold", marks=pytest.mark.slow), "brake", "drive"])
 def test_loop_with_sensors_and_kalman_filter_matches(name):
     # "drive": the rig's force reaches the filter as a known input (the estimator block's
     # force input, connected to the controller's force output).

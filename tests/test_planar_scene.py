@@ -44,6 +44,7 @@ def _env() -> dict[str, str]:
     return env
 
 
+@pytest.mark.slow
 def test_cli_prints_the_terminal_ratio_of_the_sliding_disc(tmp_path):
     out = subprocess.run([sys.executable, "-m", "toolkit.cli", "run", str(DISC), "--json", "--out",
                           str(tmp_path / "disc")], capture_output=True, text=True, cwd=ROOT, env=_env())
@@ -101,6 +102,7 @@ def test_bad_planar_sections_are_refused(text, message):
         build_scene(loads_scene(text))
 
 
+@pytest.mark.slow
 def test_precision_on_a_planar_scene_is_its_work_precision_report(tmp_path, capsys):
     # 'active-contacts precision' on the disc prints and writes the planar report; its errors
     # are the library's own (toolkit.planar.precision_report with the scene's settings: a

@@ -141,6 +141,7 @@ def test_paper_table_rows_of_the_ideal_model_come_from_their_designs() -> None:
     assert _quoted(section, r"population value ([0-9.]+)") == (f"{tk.experiments.ideal_median_law_slope(10):.4f}",)
 
 
+@pytest.mark.slow
 def test_gap_numbers_come_from_the_models_they_name() -> None:
     # The paragraphs under the table (notebooks/gaps.ipynb at the paper's sizes): the same
     # computations here, every value from toolkit.PARAMETERS, formatted to the digits quoted.

@@ -128,7 +128,7 @@ def test_precision_command_exits_3_on_a_shortfall(monkeypatch: pytest.MonkeyPatc
     from toolkit import cli
 
     short = _report(_row("exact", 3e-17), _row("moreau", 4e-3, setting="h=0.01"))
-    monkeypatch.setattr(cli, "precision_report", lambda *args, **kwargs: short)
+    monkeypatch.setattr("toolkit.analysis.precision.precision_report", lambda *args, **kwargs: short)
     code = cli.main(["precision", str(ROOT / "designs" / "startup11.toml"), "--repeats", "1"])
     err = capsys.readouterr().err
     assert code == 3

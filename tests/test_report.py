@@ -84,7 +84,7 @@ def test_a_folder_with_foreign_files_is_refused_before_any_work(tmp_path, monkey
     out = tmp_path / "mine"
     out.mkdir()
     (out / "notes.txt").write_text("keep me\n")
-    monkeypatch.setattr("toolkit.cli.run_study", lambda *a, **k: pytest.fail("the study ran"))
+    monkeypatch.setattr("toolkit.scenes.study.run_study", lambda *a, **k: pytest.fail("the study ran"))
     assert main(["run", str(EQUAL), "--out", str(out)]) == 2
     assert "holds files the toolkit did not write (notes.txt)" in capsys.readouterr().err
     assert snapshot(out) == {"notes.txt": b"keep me\n"}
@@ -93,7 +93,7 @@ def test_a_folder_with_foreign_files_is_refused_before_any_work(tmp_path, monkey
 def test_an_output_that_is_a_file_is_refused_before_the_study_runs(tmp_path, monkeypatch, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    monkeypatch.setattr("toolkit.cli.run_study", lambda *a, **k: pytest.fail("the study ran"))
+    monkeypatch.setattr("toolkit.scenes.study.run_study", lambda *a, **k: pytest.fail("the study ran"))
     assert main(["run", str(EQUAL), "--out", str(blocker)]) == 2
     err = capsys.readouterr().err
     assert err == f"active-contacts: error: cannot write the output: {str(blocker)!r} exists and is not a folder\n"
@@ -103,7 +103,7 @@ def test_an_output_that_is_a_file_is_refused_before_the_study_runs(tmp_path, mon
 def test_an_unwritable_parent_is_refused_before_the_study_runs(tmp_path, monkeypatch, capsys):
     # os.access is patched: the tests may run as root, who may write anywhere.
     monkeypatch.setattr(io.os, "access", lambda path, mode: Path(path) != tmp_path)
-    monkeypatch.setattr("toolkit.cli.run_study", lambda *a, **k: pytest.fail("the study ran"))
+    monkeypatch.setattr("toolkit.scenes.study.run_study", lambda *a, **k: pytest.fail("the study ran"))
     assert main(["run", str(EQUAL), "--out", str(tmp_path / "out")]) == 2
     assert f"the folder {str(tmp_path)!r} is not writable" in capsys.readouterr().err
 

@@ -267,6 +267,7 @@ def _modules_after_run(text: str, tmp_path: Path) -> dict[str, bool]:
     return json.loads(done.stdout)
 
 
+@pytest.mark.slow
 def test_without_control_never_imports_control_and_without_sensors_never_filterpy(tmp_path):
     ideal = BASE + '[control]\ncontroller = "viscosity"\nslope = 40.0\nduration = 0.5\n'
     assert _modules_after_run(ideal, tmp_path) == {"filterpy": False, "control": False}

@@ -76,6 +76,7 @@ def test_every_experiment_with_nonidealities_does_not_depend_on_chunking(experim
     assert tables[0].equals(tables[1]) and tables[0].equals(tables[2])
 
 
+@pytest.mark.slow
 def test_process_pool_and_dask_give_identical_tables_for_every_experiment():
     # The chunks are the same wherever they run: local, a process pool (fresh interpreters) and
     # a Dask LocalCluster give identical tables, bit for bit, for every experiment with its

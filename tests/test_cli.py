@@ -418,3 +418,38 @@ def test_report_figures_need_no_backend(tmp_path):
     assert done.stdout.split()[-2:] == ["False", "True"]
     for name in ("force_curve.png", "simulation.png", "schedule.png"):
         assert (tmp_path / "out" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_estimate_reads_a_record_for_a_scene_with_neither_estimation_nor_simulation(tmp_path):
+    # A lab's scene names its hardware only ([body], [motors], [sensors]): `estimate --record`
+    # estimates from the log with the default estimators; without --record it is refused
+    # (nothing to simulate), naming the sections it needs.
+    hardware = """[scene]
+name = "rig"
+[contacts]
+speeds = [0.1, -0.1, 0.2]
+forces = [1.0, 0.5, 2.0]
+[body]
+inertia = 0.353780
+contact_radius = 0.266
+[motors]
+speed_limit = 0.35
+lag = 0.0075
+[sensors]
+rate = 50.0
+wheel_counts_per_rev = 3591.84
+wheel_radius = 0.045
+wheel_backlash = 0.0008
+central_counts_per_rev = 8192
+contact_radius = 0.266
+"""
+    recorded = tmp_path / "recorded.toml"
+    recorded.write_text(hardware + "[simulation]\nt_end = 1.0\n")
+    log = tmp_path / "log.csv"
+    assert main(["estimate", str(recorded), "--save-record", str(log), "--out", str(tmp_path / "a")]) == 0
+    rig = tmp_path / "rig.toml"
+    rig.write_text(hardware)
+    assert main(["estimate", str(rig), "--record", str(log), "--out", str(tmp_path / "b"), "--json"]) == 0
+    done = cli("estimate", str(rig), "--out", str(tmp_path / "c"))
+    assert done.returncode == 2 and len(done.stderr.splitlines()) == 1
+    assert "[estimation]" in done.stderr and "[simulation]" in done.stderr

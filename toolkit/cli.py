@@ -297,7 +297,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             raise SceneError(f"The scene {scene.name!r} has no [estimation] section and no [simulation] "
                              "run to record: add [estimation] (scenario = \"brake\", the startup-then-brake "
                              "record on the scene's wheel forces, as in the shipped 'estimate' design).")
-        scene = replace(scene, estimation=EstimationSpec(scenario="simulation"))
+        else:
+            scene = replace(scene, estimation=EstimationSpec(scenario="simulation"))
     objects = build_scene(scene)
     record = None if args.record is None else read_record_csv(
         args.record, sensors=objects.estimation.sensors, motors=objects.estimation.plant.motors,

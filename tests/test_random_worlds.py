@@ -19,6 +19,7 @@ from toolkit.estimation import KalmanEstimator, TRUTH_TOLD, truth_told
 from toolkit.estimation._base import GROSS_NEES, score
 from toolkit.model.sensors import EncoderRecord
 from toolkit.scenes.build import build_scene
+from toolkit.scenes.worlds import world_scene
 from toolkit.scenes.spec import dumps_scene, loads_scene
 from toolkit.scenes.study import estimate_scene
 
@@ -71,7 +72,7 @@ def test_the_draws_cover_their_ranges():
 
 def test_a_world_is_a_scene_that_round_trips_and_builds_its_plant():
     world = draw_world(2026, 3)
-    scene = world.scene()
+    scene = world_scene(world)
     assert loads_scene(dumps_scene(scene)) == scene
     objects = build_scene(loads_scene(dumps_scene(scene)))
     plant = objects.estimation.plant
@@ -104,7 +105,7 @@ def test_the_same_world_through_its_scene_gives_the_same_numbers(world):
     # Second path: the scene file (estimate with [estimation.truth]) against the bench's
     # world_scenario and score_world; the same arithmetic, so equal to the bit (rtol 0).
     scored = score_world(world)
-    study = estimate_scene(loads_scene(dumps_scene(world.scene())))
+    study = estimate_scene(loads_scene(dumps_scene(world_scene(world))))
     rows = {row["name"]: row for row in study.rows()}
     assert list(rows) == [*WORLD_METHODS, TRUTH_TOLD]
     for name, score_row in scored.scores.items():

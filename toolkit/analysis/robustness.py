@@ -6,7 +6,7 @@ Named cases (:data:`ROBUSTNESS_CASES`): the carousel's brake record
 the scene in one way or all at once, over seeds (:func:`robustness_table`); and the closed
 loops on unequal wheels (:func:`loop_robustness`). Random worlds (:func:`draw_world` over
 :data:`WORLD_RANGES`): scene, schedule and departures drawn at random, each a
-:class:`RandomWorld` that is also a scene (:meth:`RandomWorld.scene`), scored by
+:class:`RandomWorld` that is also a scene (:func:`toolkit.scenes.worlds.world_scene`), scored by
 :func:`score_world` beside the default told the truth and held to :data:`WORLD_LINES`.
 The estimators are told the declared scene only, never the truth.
 """
@@ -14,7 +14,7 @@ The estimators are told the declared scene only, never the truth.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
@@ -383,30 +383,6 @@ class RandomWorld:
                      motors=Motors(lag=self.lag, speed_limits=(-v_max, v_max)),
                      commands=PiecewiseConstant(self.times, self.commands))
 
-    def scene(self) -> Any:
-        """The world as a :class:`~toolkit.scenes.spec.Scene`: the declared plant and encoders,
-        its commands under ``[simulation]``, and ``[estimation]`` (``scenario =
-        "simulation"``, the seed, :data:`WORLD_METHODS`) with the departures under
-        ``[estimation.truth]`` (write it with :func:`~toolkit.scenes.spec.dumps_scene`)."""
-        from ..scenes.spec import (BodySpec, ContactsSpec, EstimationSpec, MotorsSpec, Scene, SensorsSpec,
-                                   SimulationSpec)
-
-        v_max = CAROUSEL.speed_limit
-        truth = {item.name: getattr(self.truth, item.name) for item in fields(WorldTruth)
-                 if getattr(self.truth, item.name) not in (None, 0.0)}
-        sensors = self.sensors()
-        return Scene(
-            name=f"random-{self.label.replace('/', '-')}", description=self.describe(),
-            contacts=ContactsSpec(speeds=self.commands[0], forces=self.forces), body=BodySpec(mass=self.mass),
-            motors=MotorsSpec(speed_limits=(-v_max, v_max), speed_limit=v_max, lag=self.lag),
-            sensors=SensorsSpec(rate=self.rate, wheel_counts_per_rev=sensors.wheel.counts_per_rev,
-                                wheel_radius=sensors.wheel.radius, wheel_backlash=sensors.wheel.backlash,
-                                central_counts_per_rev=sensors.central.counts_per_rev,
-                                contact_radius=sensors.central.radius),
-            simulation=SimulationSpec(t_end=self.duration, v0=self.v0,
-                                      commands={"times": self.times, "values": self.commands}),
-            estimation=EstimationSpec(methods=WORLD_METHODS, scenario="simulation", seed=self.seed, truth=truth))
-
     def __str__(self) -> str:
         return self.describe()
 
@@ -476,7 +452,7 @@ def draw_world(seed: int, index: int) -> RandomWorld:
 
 def world_scenario(world: RandomWorld) -> BrakeScenario:
     """Simulate ``world`` as a scene does (:func:`~toolkit.scenes.study.estimate_scene` on
-    :meth:`RandomWorld.scene`): the truth realized from the seed, recorded exactly with the
+    :func:`toolkit.scenes.worlds.world_scene`): the truth realized from the seed, recorded exactly with the
     seed's grid phase; the model the declared plant's (what the estimators are told)."""
     from ..loop.closed_loop import nominal_model
 

@@ -155,6 +155,7 @@ def _costs(ideal, cases, seeds: int) -> int:
 def _random(count: int, seed: int, folder: str | None) -> int:
     """Score ``count`` random worlds of ``seed`` (module docstring); the exit status."""
     from toolkit.scenes.spec import dumps_scene
+    from toolkit.scenes.worlds import world_scene
 
     print(f"{count} random worlds of seed {seed}; RMS in mm/s; NEES in band = share of samples in the 95 % "
           "chi-square(2) interval, > 100 = share above 100, max = largest; cost in us per sample")
@@ -165,8 +166,8 @@ def _random(count: int, seed: int, folder: str | None) -> int:
     for index in range(count):
         world = draw_world(seed, index)
         if folder is not None:
-            name = world.scene().name
-            (Path(folder) / f"{name}.toml").write_text(dumps_scene(world.scene()), encoding="utf-8")
+            scene = world_scene(world)
+            (Path(folder) / f"{scene.name}.toml").write_text(dumps_scene(scene), encoding="utf-8")
         scored = score_world(world)
         worlds.append(scored)
         print(f"== {world.describe()}")

@@ -375,19 +375,34 @@ def _terminate_interrupts() -> Iterator[None]:
 
 @contextlib.contextmanager
 def _interrupts_held() -> Iterator[None]:
-    """While a worker starts, SIGINT is blocked (held back, not lost): the new interpreter
-    inherits the blocked signal and keeps it blocked for its whole life, so a Ctrl-C reaching
-    the whole process group never raises in a worker, not even while it imports (the parent
-    stops the workers); the parent receives the held signal when the block ends. (Only the
-    mask changes: setting SIGINT ignored would discard one already held.)"""
+    """While a worker starts, Ctrl-C and SIGTERM are held back, never lost:
+
+    - SIGINT is blocked in this thread, so the new interpreter inherits it blocked and keeps
+      it so for its whole life: a Ctrl-C reaching the whole process group never raises in a
+      worker, not even while it imports (the parent stops the workers);
+    - here, both signals are only noted while the block runs (another thread may receive them
+      and Python still raises in this one), and acted on as they would have been once it ends,
+      so a start is never broken off half written.
+    """
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
+    held: list[int] = []
+    handlers = {signum: signal.signal(signum, lambda signum, frame: held.append(signum))
+                for signum in (signal.SIGINT, signal.SIGTERM)}
     before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)    # (a blocked SIGINT is noted now)
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+    if held:
+        handler = handlers[held[0]]
+        if callable(handler):
+            handler(held[0], None)                  # as if it came now: KeyboardInterrupt
+        elif handler == signal.SIG_DFL:
+            os.kill(os.getpid(), held[0])
 
 
 def _pool_worker(connection: Any) -> None:
@@ -433,8 +448,10 @@ def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers
     tasks = iter(enumerate(bounds))
     pool: list[tuple[Any, Any]] = []
     busy: dict[Any, Any] = {}                          # connection -> its worker process
+    fed: set[Any] = set()                              # connections sent a task or the end
 
     def feed(process: Any, connection: Any) -> None:
+        fed.add(connection)
         task = next(tasks, None)
         if task is None:
             connection.send(None)
@@ -450,8 +467,8 @@ def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers
             process = context.Process(target=_pool_worker, args=(child,), daemon=True)
             with _interrupts_held():
                 process.start()
-            child.close()
-            pool.append((process, connection))
+                child.close()
+                pool.append((process, connection))
             feed(process, connection)
         while busy:
             sentinels = {process.sentinel: process for process in busy.values()}
@@ -467,8 +484,8 @@ def _run_pool(experiment: Any, seed: int, bounds: list[tuple[int, int]], workers
                 done(j, columns)
                 feed(busy[ready], ready)
     finally:
-        for process, connection in pool:
-            stop(process, connection, busy=connection in busy)
+        for process, connection in pool:               # (one never fed may be starting still)
+            stop(process, connection, busy=connection in busy or connection not in fed)
 
 
 def _run_dask(experiment: Any, seed: int, bounds: list[tuple[int, int]], scheduler: Any,

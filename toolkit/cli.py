@@ -264,7 +264,7 @@ def _planar_precision(args: argparse.Namespace, objects: SceneObjects) -> int:
     return EXIT_OK
 
 
-# -- estimate (issue 9): every estimator of the scene over one simulated encoder record -------
+# -- estimate: every estimator of the scene over one simulated encoder record -------
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
     from .errors import SceneError

@@ -237,9 +237,8 @@ def loaded() -> tuple[str, ...]:
 # -- compile time: counted, reported to a listener, never charged to a budget ---------------
 
 #: Compiles in this process: seconds of finished top-level compiles, nesting depth, start of
-#: the open one (``perf_counter``), kernels compiled, and the listener (:func:`on_compile`).
-_COMPILING: dict[str, Any] = {"seconds": 0.0, "depth": 0, "since": 0.0, "kernels": 0, "listener": None,
-                              "installed": False}
+#: the open one (``perf_counter``), and the listener (:func:`on_compile`).
+_COMPILING: dict[str, Any] = {"seconds": 0.0, "depth": 0, "since": 0.0, "listener": None, "installed": False}
 
 
 def compile_seconds() -> float:
@@ -305,7 +304,6 @@ def compile_ended(kernel: str) -> None:
     if _COMPILING["depth"] == 0:
         seconds = time.perf_counter() - _COMPILING["since"]
         _COMPILING["seconds"] += seconds
-        _COMPILING["kernels"] += 1
         _tell("end", kernel, seconds)
 
 

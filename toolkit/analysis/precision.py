@@ -5,7 +5,7 @@ tolerances, step sizes and smoothing widths (:func:`default_settings`) on one pl
 its error against the exact event-driven solution and its run time, and flags the failure
 modes that make plain integrators unfit for Coulomb contacts (see :class:`PrecisionRow` for the
 precise definitions). :func:`work_precision_curves` gives the data of the log-log plot (error
-against run time); :func:`exact_speedup` the speed ratio the acceptance criterion of issue 3
+against run time); :func:`exact_speedup` the speed ratio the acceptance criterion
 asks for. The reference scene, :func:`toolkit.model.carousel.carousel_startup_plant`, lives
 with the model.
 
@@ -672,7 +672,7 @@ def precision_shortfalls(report: PrecisionReport, error: float = ERROR_LEVEL) ->
       none finished).
 
     Not shortfalls: reference runs stopped by their budgets (showing those stalls is what the
-    report is for; they are flagged in its rows) and issue 3's 100x speedup target (a
+    report is for; they are flagged in its rows) and the 100x speedup target (a
     benchmark target: ``python -m toolkit.bench precision`` exits 1 while it is missed).
 
     Parameters

@@ -86,7 +86,7 @@ def _cases() -> dict[str, RobustnessCase]:
     return {case.name: case for case in cases}
 
 
-#: The cases of issue 18: the nominal world, each departure alone, and all at once (the
+#: The fixed cases: the nominal world, each departure alone, and all at once (the
 #: 20 % spread, 2 N s/m drag and 20 ms lag with every sensor fault).
 ROBUSTNESS_CASES: dict[str, RobustnessCase] = _cases()
 
@@ -147,7 +147,7 @@ class RobustnessTable:
     raw: dict[tuple[str, str], np.ndarray] = field(repr=False)
 
     def checks(self) -> list[tuple[str, str, float, float, bool]]:
-        """Issue 18's lines per case: ``(case, line, value, target, met)``. The default's
+        """The robustness lines per case: ``(case, line, value, target, met)``. The default's
         overall RMS at most a fifth of the best baseline's; its cruise and braked RMS at most
         1.5 times the better FOAW's; its NEES in band on at least 80 % of the samples."""
         out = []

@@ -9,7 +9,7 @@
   (60 halvings) of the sampled target's inverse, one contact at a time in Python.
 
 Each line gives the best of several runs and the ratio baseline / quantile. The exit status
-is 1 when a target of issue 4 (< 1 ms at N = 10, < 100 ms at N = 1e5) is missed, 0 otherwise.
+is 1 when a target (< 1 ms at N = 10, < 100 ms at N = 1e5) is missed, 0 otherwise.
 """
 
 from __future__ import annotations

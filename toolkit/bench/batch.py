@@ -23,7 +23,7 @@ from toolkit.simulation import warm_up
 from toolkit.model import ContactSet, Plant
 from toolkit.simulation import simulate, simulate_batch
 
-TARGET = 0.4            # s per 1e6 scenes (issue 11)
+TARGET = 0.4            # s per 1e6 scenes
 
 
 def main(argv: list[str] | None = None) -> int:

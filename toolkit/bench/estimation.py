@@ -1,4 +1,4 @@
-"""Estimation benchmark: the carousel's 10 s startup-then-brake run (issue 9).
+"""Estimation benchmark: the carousel's 10 s startup-then-brake run.
 
 Run ``python -m toolkit.bench estimation [--seed K] [--repeat R] [--phases P]``. Simulates
 the run exactly, records it through the sensor law (paper's encoders, 50 Hz), and runs every

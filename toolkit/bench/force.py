@@ -6,7 +6,7 @@ memory stays near 100 MB (a single 1e4 x 1e5 matrix would need 8 GB). Both are t
 the same run on the same inputs and their results compared. The kernel of
 :meth:`ContactSet.force` (:func:`toolkit._compiled.core.coulomb_force`) is compiled or
 loaded from numba's cache first, outside the timings. Exit status 0 when the ratio is at
-least 100 and N = 1e5 contacts at M = 1e6 speeds take under 0.15 s (issue 11), construction
+least 100 and N = 1e5 contacts at M = 1e6 speeds take under 0.15 s, construction
 included.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 from toolkit.simulation import warm_up
 from toolkit.model import ContactSet
 
-TARGET = 0.15           # s for N = 1e5, M = 1e6 (issue 11)
+TARGET = 0.15           # s for N = 1e5, M = 1e6
 
 
 def broadcast_force(speeds: np.ndarray, forces: np.ndarray, V: np.ndarray, chunk: int = 1000) -> np.ndarray:

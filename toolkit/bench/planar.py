@@ -9,7 +9,7 @@ same way), each called from scratch through :func:`toolkit.planar.geometric_medi
 the accuracy up to N = 1e4: objective values, positions against cvxpy and against
 Weiszfeld's iteration (Vardi-Zhang) run to a 1e-15 step.
 
-Exit status 0 when the fast solver is at least 20x faster than cvxpy at N = 1e3 (issue 22),
+Exit status 0 when the fast solver is at least 20x faster than cvxpy at N = 1e3,
 its certified gap is at most 1e-8 F_tot times the speed scale everywhere, and its median
 agrees with Weiszfeld's to 1e-9 of the speed scale and with cvxpy's objective to 1e-9.
 """

@@ -8,7 +8,7 @@ this run. Every method, the exact one included, is asked for the same output tim
 exact event times and 1001 uniform times) and timed on those calls
 (:func:`toolkit.analysis.precision.precision_report`). The exact method's compiled kernels are loaded
 (or compiled) first, outside the timings, and that time is printed. Exit status 0 when the
-issue-11 criterion holds (exact error <= 1e-12 and ratio >= 200; issue 3 asked for 100).
+criterion holds (exact error <= 1e-12 and ratio >= 200).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from toolkit.model.carousel import carousel_startup_plant
 from toolkit.analysis.precision import default_settings, exact_speedup, precision_report
 
 
-TARGET = 200.0          # issue 11: reference / exact
+TARGET = 200.0          # reference / exact
 
 
 def _format(value: float) -> str:

@@ -1,4 +1,4 @@
-"""Prediction benchmark: the 490-run viscosity sweep on one core (issue 9) and on every core (issue 21).
+"""Prediction benchmark: the 490-run viscosity sweep on one core and on every core.
 
 Run ``python -m toolkit.bench predict [--runs N] [--repeat R] [--seed K]``. Pins the process
 to one core (``os.sched_setaffinity``, where available), then times
@@ -104,7 +104,7 @@ def _every_core(args: argparse.Namespace) -> int:
     print(f"  (viscosity_check's default at this load: {idle_cores()} process(es), the cores the load "
           "average leaves idle)")
     print(f"{'met  ' if target < 1.0 else 'SHORT'} in-loop sweep of 490 runs under 1 s on {cores} cores "
-          f"(issue 21; {target:.2f} s{scaled}; {_load()})")
+          f"(target {target:.2f} s{scaled}; {_load()})")
     return 0 if same else 1
 
 

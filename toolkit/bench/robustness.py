@@ -1,4 +1,4 @@
-"""Robustness benchmark: the estimators when the world is not the scene (issue 18).
+"""Robustness benchmark: the estimators when the world is not the scene.
 
 Run ``python -m toolkit.bench robustness [--seeds N] [--cases NAME ...] [--loop-seeds M]``.
 For every case of :data:`toolkit.analysis.robustness.ROBUSTNESS_CASES` (the nominal world,
@@ -8,12 +8,12 @@ differencing, FOAW (end- and best-fit), the alpha-beta tracker and the default `
 Printed per case and estimator, medians over the seeds: RMS speed error overall and per phase
 (startup, cruise, brake, braked), the share of samples whose NEES lies in its 95 % chi-square(2)
 interval, the share above 100 and the largest NEES, and wall time per sample; the missed-count rate the default reported its position
-under (told, or identified online); then issue 18's lines (met / SHORT) per case.
+under (told, or identified online); then the robustness lines (met / SHORT) per case.
 
 Then the costs, with the kernels compiled beforehand (``KalmanEstimator.warm_up``): the
 default on the shipped scene's record (its real-time ratio, target >= 1000x; best of 20), and
 the adaptive filter stepped over each mismatch record with every adaptive part active (us
-per 50 Hz sample, best of 3 per record, median over the ``N`` seeds per case, as issue 18's other
+per 50 Hz sample, best of 3 per record, median over the ``N`` seeds per case, as the other
 lines, with the seeds' range; target <= 100 in every case, the line held against the largest);
 and the closed
 loops on 20 % unequal wheels (speed hold, virtual viscosity: the in-loop estimate's RMS after
@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
         s = table.scores[(case, "kalman")]
         print(f"  {case:28s} {s['missed_count_prob']:.3g} +- {s['missed_count_std']:.2g}")
     status = 0
-    print("== issue 18's lines per case (the default kalman)")
+    print("== the robustness lines per case (the default kalman)")
     for case, line, value, target, met in table.checks():
         status |= 0 if met else 1
         scale = 1e3 if "NEES" not in line else 1.0

@@ -4,7 +4,7 @@ Run ``python -m toolkit.bench stepper [--steps S] [--seed K]``. On the carousel 
 motor lag 0.0075 s, speed limits +-0.35 m/s) it steps ``S`` periods of 20 ms (50 Hz) with
 :func:`toolkit.simulation.advance`, the command of each period drawn near the previous one
 (a random walk of 0.02 m/s per period, clipped to the limits, as a controller's would be),
-and prints the time per step (the best of ``--repeat`` passes; target of issue 21: <= 15 us
+and prints the time per step (the best of ``--repeat`` passes; target: <= 15 us
 per step; exit status 1 when missed) and its ratio against running ``simulate`` from scratch over each period (a new
 plant holding that period's command, started from the same state). It also prints how many
 steps took the certified no-event shortcut of ``advance`` and the time per step of the full
@@ -37,7 +37,7 @@ from toolkit.model.carousel import CAROUSEL, carousel_startup_plant
 from toolkit.simulation import ExactState, advance, simulate
 
 _PERIOD = 1.0 / CAROUSEL.rate          # s
-_TARGET = 15e-6                        # s per advance step with lagging motors (issue 21)
+_TARGET = 15e-6                        # s per advance step with lagging motors
 
 
 def _commands(seed: int, steps: int, n: int) -> np.ndarray:

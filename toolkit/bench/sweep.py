@@ -3,7 +3,7 @@
 Run ``python -m toolkit.bench sweep [--runs R] [--loop L] [--seed K] [--dask] [--processes]``.
 Times the median-law sweep (``toolkit.sweep(MedianLaw(), R)``: 10 random speeds per run, from
 rest, 20 s each, the exact batch path with the settled check read from the same run; target
-of issue 21: 1e5 runs under 0.5 s) after its one-time compile (printed apart), and, as
+(1e5 runs under 0.5 s) after its one-time compile (printed apart), and, as
 baselines measured in the same run:
 
 - the first ``L`` runs one by one through ``simulate(..., method="exact")`` (extrapolated per

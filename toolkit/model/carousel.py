@@ -100,7 +100,7 @@ CAROUSEL_SPEED_LIMIT = CAROUSEL.speed_limit
 
 
 def carousel_startup_plant(seed: int = 0, *, n: int = 11, mass: float = 1.0) -> Plant:
-    """The carousel startup scene of issue 3: ``n`` random speeds, equal loads, from rest.
+    """The carousel startup scene of the work-precision comparison: ``n`` random speeds, equal loads, from rest.
 
     Speeds are uniform in ``[-v_max, v_max]`` with ``v_max = 0.35`` m/s; the contacts carry
     equal magnitudes with ``F_tot / m = 2`` m/s^2 (the paper's transition time, docs/physics.md

@@ -267,20 +267,15 @@ def _planar_precision(args: argparse.Namespace, objects: SceneObjects) -> int:
 # -- estimate: every estimator of the scene over one simulated encoder record -------
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
-    from .errors import SceneError
-    from .scenes._io import claim_output_dir
-    from .scenes.build import build_scene, check_record_outputs
-    from .scenes.report import shortfall_dicts
     from dataclasses import replace
 
-    from .scenes._io import write_tree
-    from .scenes.report import estimation_files, estimation_lines, estimation_to_dict
-    from .scenes.spec import EstimationSpec
-    from .scenes.study import estimate_scene, estimation_shortfalls
-
+    from .errors import SceneError
     from .model.record_io import read_record_csv, record_csv_text
-    from .scenes._io import atomic_write_text, check_output_file
-    from .scenes.study import estimate_record
+    from .scenes._io import atomic_write_text, check_output_file, claim_output_dir, write_tree
+    from .scenes.build import build_scene, check_record_outputs
+    from .scenes.report import estimation_files, estimation_lines, estimation_to_dict, shortfall_dicts
+    from .scenes.spec import EstimationSpec
+    from .scenes.study import estimate_record, estimate_scene, estimation_shortfalls
 
     scene = _parsed(args)
     if args.record is not None and args.save_record is not None:

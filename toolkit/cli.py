@@ -668,12 +668,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _stdout_closed()
     interrupted, previous = _interrupts_noted()
     try:
-        parser = _parser()
-        try:
-            args = parser.parse_args(argv)
-        except SystemExit as done:     # --help, --version or a usage error: printed already
-            raise SystemExit(_flushed(done.code)) from None
-        from .errors import ToolkitError
+        with _interrupts_deferred(interrupted):
+            parser = _parser()
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as done:  # --help, --version or a usage error: printed already
+                raise SystemExit(_flushed(done.code)) from None
+            from .errors import ToolkitError
+            from .scenes import build, report, study  # noqa: F401  (what every command runs on)
 
         try:
             with _compiles_announced():
@@ -743,6 +745,27 @@ def _reader_gone() -> int:
     except (AttributeError, OSError, ValueError):
         pass
     return EXIT_PIPE
+
+
+@contextlib.contextmanager
+def _interrupts_deferred(noted: list[int]) -> Iterator[None]:
+    """While the command line imports what it runs on, Ctrl-C and SIGTERM are only noted, and
+    raised once the imports are done: an interrupt raised inside an import may be turned into
+    an ImportError (a compiled module's import does so) and then swallowed by a guard for an
+    optional dependency, and the command would run on."""
+    try:
+        handlers = {signum: signal.signal(signum, lambda signum, frame: noted.append(signum))
+                    for signum in (signal.SIGINT, signal.SIGTERM)}
+    except ValueError:                 # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+    if noted:
+        raise KeyboardInterrupt(f"signal {noted[0]}")
 
 
 def _interrupts_noted() -> tuple[list[int], dict[int, Any]]:

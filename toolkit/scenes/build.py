@@ -21,8 +21,8 @@ objects (a study builds them once per run: estimators and controllers carry stat
 ``[sweep]``                 the experiment (:mod:`toolkit.experiments`)
 ==========================  ===============================================================
 
-The bounds of values no constructor takes are :data:`toolkit.scenes.limits.LIMITS`; every
-other value is checked by the constructor that takes it, and a constructor's
+The bounds of values no constructor takes are declared with their keys
+(:mod:`toolkit.scenes.spec`); every other value is checked by the constructor that takes it, and a constructor's
 :class:`~toolkit.errors.ParameterError` (whose ``parameter`` names what it refused) becomes
 a :class:`~toolkit.errors.SceneError` that keeps the rule and value and names the scene key::
 
@@ -47,8 +47,9 @@ from ..model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant, sampl
 from ..model.sensors import Sensors
 from ..schedule import Braking, SpeedTrajectory
 from ..simulation import Budget
-from .limits import BYTES_PER_NUMBER, LIMITS, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES, scene_value_error
-from .spec import Scene, ScheduleSpec
+from .keys import bounded_values
+from .limits import BYTES_PER_NUMBER, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES, scene_value_error
+from .spec import SECTIONS, Scene, ScheduleSpec
 
 __all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "schedule_target",
            "output_numbers", "sweep_scene_error", "planar_scene_error", "check_record_outputs"]
@@ -293,26 +294,10 @@ def build_scene(scene: Scene) -> SceneObjects:
 
 # -- bounds and rules between sections ---------------------------------------------------------
 
-def _declared(scene: Scene, key: str) -> list[tuple[str, Any]]:
-    """The values ``scene`` declares under ``key`` (``section.name``, ``[]`` for each entry)."""
-    section, _, rest = key.partition(".")
-    node: Any = getattr(scene, section)
-    if node is None:
-        return []
-    many = rest.endswith("[]")
-    path = rest[:-2] if many else rest
-    for part in path.split("."):
-        node = node.get(part) if isinstance(node, Mapping) else getattr(node, part, None)
-        if node is None:
-            return []
-    if many:
-        return [(f"{key[:-2]}[{i}]", value) for i, value in enumerate(node)]
-    return [(key, node)]
-
-
 def _check_limits(scene: Scene) -> None:
-    for key, limit in LIMITS.items():
-        for where, value in _declared(scene, key):
+    for section in SECTIONS:
+        spec = getattr(scene, section)
+        for where, limit, value in bounded_values(section, spec) if spec is not None else ():
             if not limit.holds(value):
                 raise _fail(where, limit.broken(value), value)
     contacts = scene.contacts
@@ -618,12 +603,12 @@ def _target(scene: Scene) -> Any:
         if spec.method is not None:
             check_option(spec.method, "method", "allocate", METHODS)
         if spec.kind == "force_curve":
-            return ForceCurve(p["speeds"], p["forces"], p.get("weights"))
+            return ForceCurve(p["speeds"], p["forces"], spec.param("weights"))
         if spec.kind == "viscosity":
             return Viscosity(p["slope"], p["center"], p["band"])
         if spec.kind == "friction_fraction":
             return FrictionFraction(p["fraction"], p["band"])
-        return EquilibriumSpeed(p["speed"], p.get("margin", 0))
+        return EquilibriumSpeed(p["speed"], spec.param("margin"))
 
 
 def schedule_target(spec: ScheduleSpec | None) -> Braking | SpeedTrajectory | None:
@@ -632,7 +617,7 @@ def schedule_target(spec: ScheduleSpec | None) -> Braking | SpeedTrajectory | No
         return None
     with _scene_keys("schedule", _same_keys("schedule", tuple(spec.params))):
         if spec.kind == "braking":
-            return Braking(spec.params["speed"], spec.params.get("duration"))
+            return Braking(spec.params["speed"], spec.param("duration"))
         return SpeedTrajectory(spec.params["times"], spec.params["speeds"])
 
 
@@ -792,11 +777,11 @@ def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
     p = spec.params
     with _scene_keys("control", _same_keys("control", tuple(p))):
         if spec.controller == "viscosity":
-            controller = controllers.VirtualViscosity(p["slope"], p.get("reference", 0.0), p.get("band"))
+            controller = controllers.VirtualViscosity(p["slope"], spec.param("reference"), spec.param("band"))
         elif spec.controller == "speed_hold":
-            controller = controllers.SpeedHold(p["reference"], p["slope"], p.get("kp", 0.5), p.get("ki", 5.0))
+            controller = controllers.SpeedHold(p["reference"], p["slope"], spec.param("kp"), spec.param("ki"))
         elif spec.controller == "friction_brake":
-            controller = controllers.FrictionBrake(p["fraction"], p.get("start", 0.0), p.get("hold"))
+            controller = controllers.FrictionBrake(p["fraction"], spec.param("start"), spec.param("hold"))
         else:
             controller = None
     reads = spec.sensors if spec.sensors is not None else scene.sensors is not None

@@ -1,30 +1,12 @@
 """Build toolkit objects from a parsed scene: the one place scene specs become objects.
 
 :func:`build_scene` checks every value and every rule between sections, then builds fresh
-objects (a study builds them once per run: estimators and controllers carry state):
-
-==========================  ===============================================================
-``[contacts]``              :class:`~toolkit.model.ContactSet` (speeds within the motor
-                            limits, or clipped to them with ``[motors] clip = true``)
-``[motors]``                :class:`~toolkit.model.Motors`
-``[body]`` (+ motors,       :class:`~toolkit.model.Plant`, its external force and commands
-``simulation.commands``)    as :class:`~toolkit.model.PiecewiseConstant` signals
-``[sensors]``               :class:`~toolkit.model.Encoder` per declared encoder, and the
-                            :class:`~toolkit.model.Sensors` when both are declared
-``[target]``                the allocation target (:class:`~toolkit.ForceCurve`, ...)
-``[schedule]``              the schedule target (:class:`~toolkit.Braking` or
-                            :class:`~toolkit.SpeedTrajectory`)
-``simulation.options``      the options of :func:`toolkit.simulate`; a ``budget`` table
-                            becomes a :class:`~toolkit.simulation.Budget`
-``[estimation]``            :class:`EstimationObjects`
-``[control]``               :class:`ControlObjects`
-``[sweep]``                 the experiment (:mod:`toolkit.experiments`)
-==========================  ===============================================================
+objects (a study builds them once per run: estimators and controllers carry state).
 
 The bounds of values no constructor takes are declared with their keys
-(:mod:`toolkit.scenes.spec`); every other value is checked by the constructor that takes it, and a constructor's
-:class:`~toolkit.errors.ParameterError` (whose ``parameter`` names what it refused) becomes
-a :class:`~toolkit.errors.SceneError` that keeps the rule and value and names the scene key::
+(:mod:`toolkit.scenes.spec`); every other value is checked by the constructor that takes it,
+and a constructor's :class:`~toolkit.errors.ParameterError` becomes a
+:class:`~toolkit.errors.SceneError` that keeps the rule and value and names the scene key::
 
     In [motors]: The 'lag' parameter of Motors must be >= 0. Got -0.1 instead.
     (scene key 'motors.lag')
@@ -49,14 +31,12 @@ from ..schedule import Braking, SpeedTrajectory
 from ..simulation import Budget
 from .keys import bounded_values
 from .limits import BYTES_PER_NUMBER, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES, scene_value_error
-from .spec import SECTIONS, Scene, ScheduleSpec
+from .spec import NOISE_KEYS, SECTIONS, Scene, ScheduleSpec
 
 __all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "schedule_target",
            "output_numbers", "sweep_scene_error", "planar_scene_error", "check_record_outputs"]
 
 _fail = scene_value_error
-#: Keys of ``[estimation]`` / ``[control]`` that set the encoders' noise.
-_NOISE_KEYS = ("missed_count_prob", "count_noise", "jitter")
 
 
 @dataclass(frozen=True)
@@ -261,6 +241,25 @@ def build_scene(scene: Scene) -> SceneObjects:
     Returns
     -------
     SceneObjects
+        What each section becomes:
+
+        ==========================  ===============================================================
+        ``[contacts]``              :class:`~toolkit.model.ContactSet` (speeds within the motor
+                                    limits, or clipped to them with ``[motors] clip = true``)
+        ``[motors]``                :class:`~toolkit.model.Motors`
+        ``[body]`` (+ motors,       :class:`~toolkit.model.Plant`, its external force and commands
+        ``simulation.commands``)    as :class:`~toolkit.model.PiecewiseConstant` signals
+        ``[sensors]``               :class:`~toolkit.model.Encoder` per declared encoder, and the
+                                    :class:`~toolkit.model.Sensors` when both are declared
+        ``[target]``                the allocation target (:class:`~toolkit.ForceCurve`, ...)
+        ``[schedule]``              the schedule target (:class:`~toolkit.Braking` or
+                                    :class:`~toolkit.SpeedTrajectory`)
+        ``simulation.options``      the options of :func:`toolkit.simulate`; a ``budget`` table
+                                    becomes a :class:`~toolkit.simulation.Budget`
+        ``[estimation]``            :class:`EstimationObjects`
+        ``[control]``               :class:`ControlObjects`
+        ``[sweep]``                 the experiment (:mod:`toolkit.experiments`)
+        ==========================  ===============================================================
 
     Raises
     ------
@@ -400,7 +399,7 @@ def _check_sensing(scene: Scene) -> None:
         if control.estimator is not None:
             raise _fail("control.estimator", "be left out of an ideal loop (control.sensors = false "
                         "or no [sensors]): the controller sees the true speed", control.estimator)
-        for key in _NOISE_KEYS:
+        for key in NOISE_KEYS:
             if getattr(control, key) != 0.0:
                 raise _fail(f"control.{key}", "be left out of an ideal loop (no sensors read)",
                             getattr(control, key))
@@ -686,7 +685,7 @@ def _check_rate(rate: float, duration: float, keys: tuple[str, str], what: str) 
 
 
 def _noisy_sensors(objects: SceneObjects, section: str, spec: Any) -> Sensors:
-    noise = {key: getattr(spec, key) for key in _NOISE_KEYS}
+    noise = {key: getattr(spec, key) for key in NOISE_KEYS}
     with _scene_keys(section, _same_keys(section, tuple(noise))):
         return replace(objects.sensors, **noise)
 

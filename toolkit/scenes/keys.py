@@ -316,7 +316,11 @@ class Section:
         """The rules between keys in words (the reference page's)."""
         out = [f"at most one of {', '.join(f'``{k}``' for k in group)}" for group in cls.EXCLUSIVE]
         out += [f"one of {', '.join(f'``{k}``' for k in group)} is needed" for group in cls.ONE_OF]
-        out += [f"``{a}`` needs ``{b}``" for a, b in cls.NEEDS]
+        for a, b in cls.NEEDS:
+            if (b, a) not in cls.NEEDS:
+                out.append(f"``{a}`` needs ``{b}``")
+            elif cls.NEEDS.index((a, b)) < cls.NEEDS.index((b, a)):
+                out.append(f"``{a}`` and ``{b}`` go together")
         return out
 
     @classmethod
@@ -341,6 +345,8 @@ class Section:
                                  f"{', '.join(cls._named(k) for k in group)}.")
         for a, b in cls.NEEDS:
             if a in table and b not in table:
+                if (b, a) in cls.NEEDS:
+                    raise SceneError(f"In [{section}] {a!r} and {b!r} go together.")
                 raise SceneError(f"In [{section}] {a!r} needs {cls._named(b)}.")
         for k in keys:
             if k.takes(kind) and k.needed(kind):

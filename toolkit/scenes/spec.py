@@ -64,6 +64,8 @@ _NOISE = {
     "count_noise": dict(read=NUMBER, unit="counts", meaning="std of the noise on each encoder count"),
     "jitter": dict(read=NUMBER, unit="s", meaning="std of the jitter of the sample times"),
 }
+#: The keys of ``[estimation]`` and ``[control]`` that set the encoders' noise.
+NOISE_KEYS = tuple(_NOISE)
 _PAIRS = ("drag_range", "lag_range")
 #: Keys of the ``truth`` and ``model`` sub-tables: the fields of WorldTruth and ModelPrior.
 TRUTH_KEYS = tuple(item.name for item in fields(WorldTruth))
@@ -432,7 +434,8 @@ class SweepSpec(Section):
     def kinds(cls) -> Mapping[str, str]:
         from ..experiments import EXPERIMENTS
 
-        return {name: (kind.__doc__ or "").strip().split("\n")[0] for name, kind in EXPERIMENTS.items()}
+        return {name: (kind.__doc__ or "").strip().split("\n")[0].split(" (see")[0].rstrip(".")
+                for name, kind in EXPERIMENTS.items()}
 
     @classmethod
     def parse(cls, table: dict[str, Any]) -> SweepSpec:

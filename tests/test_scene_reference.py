@@ -76,7 +76,8 @@ def test_sections_without_required_keys_parse_to_their_declared_defaults():
      "In [contacts] give only one of 'speeds', 'random'; got ['speeds', 'random']."),
     ("[contacts]\nforces = 1.0\n", "The [contacts] section needs one of 'speeds' (m/s), 'random'."),
     (MINIMAL + "[body]\ninertia = 1.0\n", "In [body] 'inertia' needs 'contact_radius' (m)."),
-    (MINIMAL + "[sensors]\nwheel_radius = 0.05\n", "In [sensors] 'wheel_radius' and 'wheel_counts_per_rev' go together."),
+    (MINIMAL + "[sensors]\nwheel_radius = 0.05\n",
+     "In [sensors] 'wheel_radius' and 'wheel_counts_per_rev' go together."),
     (MINIMAL + "[report]\ncurve_points = 1.5\n", "The 'report.curve_points' value in the scene must be an integer. "
      "Got 1.5 instead."),
     (MINIMAL + "[report]\ncurve_pionts = 5\n", "Unknown key 'curve_pionts' in [report]. Did you mean 'curve_points'?"),

@@ -31,7 +31,7 @@ from ..schedule import Braking, SpeedTrajectory
 from ..simulation import Budget
 from .keys import bounded_values
 from .limits import BYTES_PER_NUMBER, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES, scene_value_error
-from .spec import NOISE_KEYS, SECTIONS, Scene, ScheduleSpec
+from .spec import IDEAL_LOOP_RATE, LOOP_ESTIMATOR, NOISE_KEYS, SECTIONS, Scene, ScheduleSpec
 
 __all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "schedule_target",
            "output_numbers", "sweep_scene_error", "planar_scene_error", "check_record_outputs"]
@@ -789,10 +789,10 @@ def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
         sensors = _noisy_sensors(objects, "control", spec)
     truth, prior = _knowledge("control", spec, sensors)
     if reads:
-        estimator = _estimator(spec.estimator or "kalman", _model(plant, sensors), "control", prior)
+        estimator = _estimator(spec.estimator or LOOP_ESTIMATOR, _model(plant, sensors), "control", prior)
         rate, key = sensors.rate, "sensors.rate"
     else:
-        rate, key = (50.0 if spec.rate is None else spec.rate), "control.rate"
+        rate, key = (IDEAL_LOOP_RATE if spec.rate is None else spec.rate), "control.rate"
         if not rate > 0:
             raise _fail(key, "be > 0", rate)
     _check_rate(rate, spec.duration, (key, "control.duration"), "closed loop")

@@ -14,8 +14,8 @@ from typing import Any
 from ..errors import SceneError
 from ..sweeps import MAX_RUNS
 
-__all__ = ["Limit", "FLAGS", "POSITIVE", "NON_NEGATIVE", "SEED", "INDEX", "MAX_SAMPLES", "MAX_RUN_SAMPLES", "MAX_OUTPUT_BYTES",
-           "BYTES_PER_NUMBER", "MAX_CURVE_POINTS", "MAX_TABLE_BYTES", "scene_value_error"]
+__all__ = ["Limit", "FLAGS", "POSITIVE", "NON_NEGATIVE", "SEED", "INDEX", "MAX_SAMPLES", "MAX_RUN_SAMPLES",
+           "MAX_OUTPUT_BYTES", "BYTES_PER_NUMBER", "MAX_CURVE_POINTS", "MAX_TABLE_BYTES", "scene_value_error"]
 
 #: Largest generated array a scene may ask for (random contacts, curve samples): 1e7.
 MAX_SAMPLES = 10_000_000

@@ -337,6 +337,10 @@ class EstimationSpec(Section):
         return BRAKE_RECORD if self.duration is None else self.duration
 
 
+#: What an absent ``[control] estimator`` and ``rate`` (of the ideal loop) mean.
+LOOP_ESTIMATOR, IDEAL_LOOP_RATE = "kalman", 50.0
+
+
 @dataclass(frozen=True)
 class ControlSpec(Section):
     """``[control]``: a closed loop at the sample rate (needs ``[body]``)."""
@@ -372,9 +376,10 @@ class ControlSpec(Section):
                                "``estimator``; false: the ideal loop on the true speed (absent: whether the "
                                "scene has ``[sensors]``)")
     estimator: str | None = key(None, read=TEXT, meaning="the loop's estimator, a name of "
-                                ":data:`toolkit.estimation.ESTIMATOR_NAMES` but ``rts`` (absent: ``kalman``)")
+                                ":data:`toolkit.estimation.ESTIMATOR_NAMES` but ``rts`` "
+                                f"(absent: ``{LOOP_ESTIMATOR}``)")
     rate: float | None = key(None, read=NUMBER, unit="Hz", meaning="rate of the ideal loop (with sensors: "
-                             "theirs)")
+                             f"theirs; absent: {IDEAL_LOOP_RATE:g} Hz)")
     seed: int = key(0, read=INTEGER, limit=SEED, meaning="seed of the sensors' and the world's draws")
     missed_count_prob: float = key(0.0, **_NOISE["missed_count_prob"])
     count_noise: float = key(0.0, **_NOISE["count_noise"])
@@ -518,7 +523,8 @@ class PlanarSpec(Section):
         if values.get("method") == "smooth" and "epsilon" not in values:
             raise SceneError("The [planar] section needs the key 'epsilon' (m/s) with method = 'smooth'.")
         precision = values.get("precision") or {}
-        if "resolutions" in precision and len(precision["resolutions"]) != len(precision.get("steps", (4e-3, 2e-3, 1e-3))):
+        steps = precision.get("steps", (4e-3, 2e-3, 1e-3))        # scene_precision's default steps
+        if "resolutions" in precision and len(precision["resolutions"]) != len(steps):
             raise SceneError("In [planar.precision] give one resolution per step.")
         return values
 
@@ -633,7 +639,8 @@ def load_scene(path: str | Path) -> Scene:
     Parameters
     ----------
     path : str or Path
-        A TOML scene file (see the module docstring for the sections; SI units).
+        A TOML scene file (its sections and keys: the scene reference page,
+        :func:`toolkit.scenes.reference.render`; SI units).
 
     Returns
     -------

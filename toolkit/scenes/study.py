@@ -23,7 +23,7 @@ from ..allocation import (AllocationResult, AllocationStatus, EquilibriumSpeed, 
 from ..errors import ParameterError, SceneError
 from ..model import ContactSet, Plant, sample_count
 from .build import SceneObjects, build_scene
-from .spec import Scene
+from .spec import ReportSpec, Scene
 from ..schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
 from ..analysis.scenarios import grid_positions, record_world
 from ..model.truth import realize
@@ -711,7 +711,7 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
         raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
     contacts = objects.contacts
     found = [s for s in known if s.stage == "scene"]
-    points = scene.report.curve_points if scene.report is not None else 801
+    points = (scene.report or ReportSpec()).curve_points
     sensors = ({name: encoder.summary() for name, encoder in objects.encoders.items()}
                if scene.sensors is not None else None)
     allocation = None

@@ -262,7 +262,10 @@ class Key:
 
 
 def key(default: Any = MISSING, *, factory: Callable[[], Any] | None = None, **declaration: Any) -> Any:
-    """A dataclass field declaring a scene key (see :class:`Key` for ``declaration``)."""
+    """A dataclass field declaring a scene key (see :class:`Key` for ``declaration``; a sub-table's
+    ``keys`` give its reader)."""
+    if "keys" in declaration:
+        declaration.setdefault("read", subtable(declaration["keys"]))
     meta = {"scene": Key(**declaration)}
     if factory is not None:
         return field(default_factory=factory, metadata=meta)

@@ -30,7 +30,7 @@ from ..simulation import Budget
 from ..sweeps import MAX_RUNS
 from .keys import (COMMANDS, FLAG, INDICES, INTEGER, INTEGERS, MATRIX, NAMES, NUMBER, NUMBER_OR_INF,
                    NUMBER_OR_NUMBERS, NUMBERS, PAIR, POINTS, SIGNAL, TABLE, TEXT, Key, Reader, Section,
-                   check_keys, choice, key, known, plain, subtable)
+                   check_keys, choice, key, known, plain)
 from .limits import (INDEX, MAX_CURVE_POINTS, MAX_SAMPLES, NON_NEGATIVE, POSITIVE, SEED, Limit,
                      scene_value_error)
 
@@ -70,11 +70,16 @@ _PAIRS = ("drag_range", "lag_range")
 #: Keys of the ``truth`` and ``model`` sub-tables: the fields of WorldTruth and ModelPrior.
 TRUTH_KEYS = tuple(item.name for item in fields(WorldTruth))
 MODEL_KEYS = tuple(item.name for item in fields(ModelPrior))
-_KNOWLEDGE_ITEM = (lambda name: NUMBERS if name in _PAIRS else NUMBER)
-_TRUTH = dict(read=known(lambda: TRUTH_KEYS, _KNOWLEDGE_ITEM),
+
+
+def _knowledge_item(name: str) -> Reader:
+    return NUMBERS if name in _PAIRS else NUMBER
+
+
+_TRUTH = dict(read=known(lambda: TRUTH_KEYS, _knowledge_item),
               meaning="how the simulated world departs from the scene, drawn from ``seed`` and not told "
                       "to the estimators: the fields of :class:`~toolkit.model.truth.WorldTruth`")
-_MODEL = dict(read=known(lambda: MODEL_KEYS, _KNOWLEDGE_ITEM),
+_MODEL = dict(read=known(lambda: MODEL_KEYS, _knowledge_item),
               meaning="what the estimators are told beyond the scene: the fields of "
                       ":class:`~toolkit.estimation.ModelPrior`")
 _ANY = Reader("value", lambda where, value: value)
@@ -107,7 +112,7 @@ class ContactsSpec(Section):
 
     speeds: tuple[float, ...] | None = key(None, read=NUMBERS, unit="m/s", meaning="the contacts' speeds, one "
                                            "per contact, within the motors' speed limits")
-    random: dict[str, Any] | None = key(None, read=subtable(_RANDOM), keys=_RANDOM, meaning="``n`` speeds drawn "
+    random: dict[str, Any] | None = key(None, keys=_RANDOM, meaning="``n`` speeds drawn "
                                         "uniformly on ``[low, high]`` by NumPy's default generator from ``seed``")
     forces: float | tuple[float, ...] | None = key(None, read=NUMBER_OR_NUMBERS, unit="N", meaning="friction "
                                                    "magnitudes, one for all or one per contact (neither "
@@ -514,9 +519,9 @@ class PlanarSpec(Section):
                                          "resolution^2 nodes)")
     epsilon: float | None = key(None, read=NUMBER, unit="m/s", limit=POSITIVE, meaning="regularization "
                                 "width of ``smooth``")
-    precision: dict[str, Any] | None = key(None, read=subtable(_PRECISION), keys=_PRECISION,
+    precision: dict[str, Any] | None = key(None, keys=_PRECISION,
                                            meaning="also the work-precision rows against the exact method "
-                                                   "(absent keys: :func:`toolkit.planar.scene.scene_precision`'s)")
+                                                   "(absent keys: the planar work-precision report's defaults)")
 
     @classmethod
     def _finish(cls, values: dict[str, Any]) -> dict[str, Any]:

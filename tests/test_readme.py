@@ -4,8 +4,6 @@
   team's physics brief in ``../shared``, and no mention of that file);
 - every notebook it names exists and contains what the README says it shows, and the numbers
   it quotes from a notebook come out of the same computation here;
-- every scene key that :mod:`toolkit.scenes.spec` accepts is in the README's table, in the row of
-  its section, with the units and meanings issue 10 found missing;
 - the exit codes it documents are those of :data:`toolkit.cli.EXIT_CODES`.
 """
 
@@ -20,8 +18,6 @@ import pytest
 
 import toolkit as tk
 from toolkit.cli import EXIT_CODES
-from toolkit.scenes.spec import (BodySpec, ContactsSpec, ControlSpec, EstimationSpec, MotorsSpec, PlanarSpec,
-                           ReportSpec, ScheduleSpec, SensorsSpec, SimulationSpec, SweepSpec, TargetSpec)
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The team's physics brief, which lives outside the repository (named in pieces: this file does not cite it).
@@ -235,55 +231,6 @@ def test_viscosity_constants_of_ten_contacts_come_from_the_check() -> None:
         row = next(line for line in README.splitlines() if line.startswith(f"| N = 10 | `{fit.definition}` |"))
         assert (f"{fit.k_fit:.4f} / {fit.k_predicted:.4f} = {fit.ratio:.4f} ({fit.r2:.4f})") in row, row
     assert "`definition`, `starts`, `n`, `mode`, `k_fit`, `k_predicted`" in README
-
-
-def _table_row(section: str) -> str:
-    # the section's row of the scene-file table (and, for [estimation] and [control], the rows
-    # of their own key table)
-    rows = [line for line in README.splitlines() if line.startswith(f"| `[{section}]` |")]
-    assert rows, section
-    return "\n".join(rows)
-
-
-@pytest.mark.parametrize("section, keys", [
-    ("scene", ("name", "description")),
-    ("contacts", ContactsSpec.KEYS),
-    ("body", BodySpec.KEYS),
-    ("motors", MotorsSpec.KEYS),
-    ("sensors", SensorsSpec.KEYS),
-    ("target", TargetSpec.COMMON + tuple(k for keys in TargetSpec._KIND_KEYS.values() for k in keys)
-     + tuple(TargetSpec._KIND_KEYS)),
-    ("schedule", ("kind", "v0", "period", "epsilon", "horizon", "time_limit")
-     + tuple(k for keys in ScheduleSpec._KIND_KEYS.values() for k in keys) + tuple(ScheduleSpec._KIND_KEYS)),
-    ("simulation", SimulationSpec.KEYS),
-    ("report", ReportSpec.KEYS),
-    ("estimation", EstimationSpec.KEYS),
-    ("control", ControlSpec.COMMON),
-    ("sweep", SweepSpec.COMMON),
-    ("planar", PlanarSpec.COMMON + tuple(k for keys in PlanarSpec._BODY_KEYS.values() for k in keys)
-     + tuple(PlanarSpec._BODY_KEYS)),
-])
-def test_every_scene_key_is_in_the_readme_table(section: str, keys: tuple[str, ...]) -> None:
-    row = _table_row(section)
-    for key in keys:
-        assert re.search(rf"`{key}(`| =)", row), (section, key)
-
-
-def test_scene_keys_issue_10_found_undocumented_have_their_meaning_and_units() -> None:
-    target = _table_row("target")
-    assert re.search(r"`margin`: a count of contacts, not a speed", target)
-    body = _table_row("body")
-    assert "`{times, values}`" in body and "one entry more than `times`" in body
-    motors = _table_row("motors")
-    assert "`clip` (bool" in motors
-    simulation = _table_row("simulation")
-    for key in ("wall_time", "max_steps", "max_event_rate"):
-        assert f"`{key}`" in simulation
-    # every unit-bearing key of [body] and [motors] states its unit beside it
-    for row, pairs in ((body, ("`mass` (kg)", "`damping` (N s/m)", "`contact_radius` (m)")),
-                       (motors, ("`lag` (s)", "`rate_limit` (m/s^2)", "`compliance` ((m/s)/N)"))):
-        for pair in pairs:
-            assert pair in row, pair
 
 
 def test_exit_codes_in_the_readme_are_the_clis() -> None:

@@ -532,8 +532,9 @@ def test_a_brake_commanded_between_samples_widens_the_filter():
     # enters the process noise before the update and the speed follows the counts (without
     # it: 189.98 +- 0.2 mm/s against a true 54 mm/s, NEES 4.6e5). The issue's lines: the
     # default never worse than the best baseline overall nor 1.5 x its brake phase, and no
-    # more than 0.5 % of the samples with NEES above 100 (GROSS_NEES); measured 1.2 mm/s
-    # against FOAW's 8.4.
+    # more than 0.5 % of the samples with NEES above 100 (GROSS_NEES); measured 0.84 mm/s
+    # against alpha-beta's 7.0 (brake phase 2.6 against 5.0), NEES 44 at the first sample after
+    # the brake, none above 100.
     record, results = _brake_between()
     kf = results["kalman"]
     baselines = [results[name] for name in ("central_difference", "foaw_end", "foaw_best", "alpha_beta")]
@@ -565,3 +566,24 @@ def test_the_unknown_force_noise_is_the_discrete_white_noise_of_the_excess(scale
                                    rtol=1e-12, atol=0.0)
 
 
+
+
+@pytest.mark.parametrize("scale", [2.0**-20, 1.0, 2.0**20])
+def test_a_commands_timing_is_the_smaller_reach_over_three(scale):
+    # Closed form: the body departs from the old command's flow by at most the contacts'
+    # change over a period (the motor law, u + (v0 - u) exp(-h / tau); the whole step for
+    # ideal motors) and at most a_max h; the variance of a departure uniform on [0, e] about
+    # its end is e^2 / 3. Unequal steps; forces and mass at unequal scales move a_max only.
+    # rtol 1e-12: a few roundings (exp, products).
+    from toolkit.estimation.adaptive import command_timing_variance
+
+    h, tau = 0.02, 0.0075
+    before, after = np.array([0.15, 0.19, 0.25]), np.array([-0.05, -0.1, -0.2])
+    step = np.max(np.abs(after - before)) * (1.0 - np.exp(-h / tau))
+    forces, mass = np.array([0.6, 1.4, 1.0]) * scale, 2.0 * np.sqrt(scale)
+    largest = float(forces.sum()) / mass
+    expected = min(step, largest * h) ** 2 / 3.0
+    assert command_timing_variance(before, after, h, tau, largest) == pytest.approx(expected, rel=1e-12)
+    ideal = min(np.max(np.abs(after - before)), largest * h) ** 2 / 3.0
+    assert command_timing_variance(before, after, h, 0.0, largest) == pytest.approx(ideal, rel=1e-12)
+    assert command_timing_variance(before, before, h, tau, largest) == 0.0

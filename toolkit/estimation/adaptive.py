@@ -7,8 +7,9 @@ it hands over, for good, to :class:`AdaptiveKalman`, replayed from the start of 
 (free: the flow at the identified parameters; stuck: riding the nearest contact; free-form:
 no model) over an extended filter of ``(X, V)``, the friction errors and the drag, with the
 motor lag, the missed-count rate and the reading noise identified from the wheels, the told
-ranges as noise of the known input from the first sample, and a monitor that acts: gross
-innovations widen the filter, a failing window falls back towards the window estimate.
+ranges and a command's timing within its period as noise of the known input, and a monitor
+that acts: gross innovations widen the filter, a failing window falls back towards the
+window estimate.
 :class:`WheelSpeedBank` gives each contact's speed from its wheel. Derivations:
 docs/estimation.md.
 """
@@ -84,6 +85,37 @@ def unknown_force_noise(innovation: float, variance: float, count: float, period
         return None
     accel = min(2.0 * excess / (period * period), largest)
     return Q_discrete_white_noise(2, dt=period, var=accel * accel)
+
+
+def command_timing_variance(before: np.ndarray, after: np.ndarray, period: float, lag: float,
+                            largest: float) -> float:
+    """The body's speed variance from a command that reached the motors at an unknown time
+    within the period before the sample that records it, (m/s)^2.
+
+    A record carries the command from the first sample after it was sent; the motors may have
+    taken it anywhere in the period before (a command between samples, serial latency).
+    Over that unseen time, uniform on ``[0, h]``, the body's speed departs from the old
+    command's flow by at most the contacts' change, ``max_i |u_i - u_i'| (1 - exp(-h /
+    tau))`` (the motor law over a period, :func:`~toolkit.model.laws.lag_response`; the
+    whole step for ideal motors), and by at most
+    what the largest force gives over the period, ``a_max h``: the smaller, ``e``, as the
+    largest of a departure that grows with the unseen time, uniform on ``[0, e]``, whose
+    second moment is ``e^2 / 3``.
+
+    Parameters
+    ----------
+    before, after : ndarray of shape (n,), m/s
+        The commands before and after the change.
+    period : float, s
+    lag : float, s
+        The motors' lag (0: ideal motors).
+    largest : float, m/s^2
+        The largest acceleration the forces can give.
+    """
+    before, after = np.asarray(before, dtype=float), np.asarray(after, dtype=float)
+    moved = lag_response(after, before, period, lag) if lag > 0.0 else after
+    reach = min(float(np.max(np.abs(moved - before), initial=0.0)), largest * period)
+    return reach * reach / 3.0
 
 
 def _checked(model: Any, prior: Any, owner: str) -> tuple[EstimatorModel, ModelPrior]:
@@ -466,6 +498,7 @@ class AdaptiveKalman(Estimator):
         self._ride = RideCheck(self.q, sensors.wheel.distance_per_count, self.missed_rate, self.h,
                                sensors.backlash)
         self._moments, self._empty = np.zeros(5), np.zeros((1, 2))
+        self._timing = 0.0
         self.monitor.reset()
         self._foaw.reset(speed=speed)
         self.fallback = False
@@ -714,6 +747,10 @@ class AdaptiveKalman(Estimator):
                                     self._largest_accel + abs(force) / self.model.mass)
         if gross is not None:
             noises += gross                  # (every mode's, before the update)
+        if self._timing > 0.0:
+            h = self.h
+            noises += self._timing * np.array([[h * h, h], [h, 1.0]])
+            self._timing = 0.0
         if self.reference:
             self._modes_reference(z, R, means, list(zip(rows0.copy(), rows1.copy())), noises.copy())
         else:
@@ -896,6 +933,9 @@ class AdaptiveKalman(Estimator):
                 speeds = np.where(self._large | back, speeds, banked)
             else:
                 var, speeds = var_b, banked
+        if tracker.changed and self._held is not None:
+            self._timing = command_timing_variance(self._held, u, self.h, self.lag,
+                                                   self._largest_accel + abs(force) / self.model.mass)
         self._held = u
         track = np.array((speeds, speeds if steady else u))
         if not steady:

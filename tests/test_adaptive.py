@@ -370,7 +370,7 @@ def test_the_untold_missed_count_rate_makes_the_position_consistent(monkeypatch)
     # filter's is far below (measured median 0.14 over these ten seeds).
     import dataclasses
 
-    import toolkit.estimation.adaptive as adaptive
+    import toolkit.estimation.kalman as kalman
 
     told, untold, rates = [], [], []
     scenes = [carousel_brake_scenario(seed=seed, grid_phase=seed, truth=WorldTruth(missed_count_prob=1e-3))
@@ -383,7 +383,7 @@ def test_the_untold_missed_count_rate_makes_the_position_consistent(monkeypatch)
         told.append(KalmanEstimator(sc.model, prior).run(sc.record, speed_std=1e-4).nees_in_band)
     assert np.median(told) >= 0.8, told
     assert np.median(untold) >= 0.8, untold
-    monkeypatch.setattr(adaptive, "count_offset", lambda times, position, covariance, *args: (position, covariance))
+    monkeypatch.setattr(kalman, "count_offset", lambda times, position, covariance, *args: (position, covariance))
     raw = [KalmanEstimator(sc.model, sc.prior).run(sc.record, speed_std=1e-4).nees_in_band for sc in scenes[:5]]
     assert np.median(raw) < 0.5, raw
 
@@ -480,3 +480,110 @@ def test_noise_matcher_fits_the_last_window_of_rows(window):
                 assert matcher.a == pytest.approx(a, rel=1e-9, abs=1e-30)
                 assert matcher.b == pytest.approx(b, rel=1e-9, abs=1e-30)
     assert matcher.b > 0.0
+
+
+# A brake commanded between two samples (a command that reaches the motors late): six
+# unequal contacts (0.6-1.4 N, told), a 2 kg body read at 20 Hz, the brake at 4.0536 s, off
+# the sample grid; the record shows the new command at the next sample (4.10 s), and the
+# contacts' 7.5 ms lag completes the brake within that sample.
+_BRAKE_BETWEEN = """
+[scene]
+name = "brake_between"
+[contacts]
+speeds = [0.15, 0.17, 0.19, 0.21, 0.23, 0.25]
+forces = [0.6, 1.4, 1.0, 0.8, 1.2, 1.0]
+[body]
+inertia = {inertia}
+contact_radius = 0.266
+[motors]
+speed_limit = 0.35
+lag = 0.0075
+[sensors]
+rate = 20.0
+wheel_counts_per_rev = 3591.84
+wheel_radius = 0.045
+wheel_backlash = 0.0008
+central_counts_per_rev = 8192
+contact_radius = 0.266
+[estimation]
+methods = ["central_difference", "foaw_end", "foaw_best", "alpha_beta", "kalman", "rts"]
+scenario = "brake"
+duration = 10.0
+brake_time = 4.0536
+cruise = 0.2
+brake = -0.1
+spread = 0.05
+seed = 0
+speed_std = 1e-4
+"""
+
+
+def _brake_between(mass: float = 2.0):
+    from toolkit.scenes.spec import loads_scene
+    from toolkit.scenes.study import estimate_scene
+
+    study = estimate_scene(loads_scene(_BRAKE_BETWEEN.format(inertia=mass * 0.266**2)))
+    return study.record, {r.method: r for r in study.results}
+
+
+def test_a_brake_commanded_between_samples_widens_the_filter():
+    # The first sample after the brake shows the body ~15 counts short of where the old
+    # command takes it: gross even with a count lost, so the unknown force that explains it
+    # enters the process noise before the update and the speed follows the counts (without
+    # it: 189.98 +- 0.2 mm/s against a true 54 mm/s, NEES 4.6e5). The issue's lines: the
+    # default never worse than the best baseline overall nor 1.5 x its brake phase, and no
+    # more than 0.5 % of the samples with NEES above 100 (GROSS_NEES); measured 0.84 mm/s
+    # against alpha-beta's 7.0 (brake phase 2.6 against 5.0), NEES 44 at the first sample after
+    # the brake, none above 100.
+    record, results = _brake_between()
+    kf = results["kalman"]
+    baselines = [results[name] for name in ("central_difference", "foaw_end", "foaw_best", "alpha_beta")]
+    assert kf.rms_error <= min(b.rms_error for b in baselines)
+    assert kf.rms_phases["brake"] <= 1.5 * min(b.rms_phases["brake"] for b in baselines)
+    assert kf.nees_over_100 <= 0.005
+    k = int(np.searchsorted(record.times, 4.0536))           # the first sample after the brake
+    assert record.times[k] > 4.0536 and kf.nees[k] < 100.0
+
+
+@pytest.mark.parametrize("scale", [2.0**-20, 1.0, 2.0**20])
+def test_the_unknown_force_noise_is_the_discrete_white_noise_of_the_excess(scale):
+    # Closed form: the innovation's part beyond one count and the gate sqrt(GROSS_NIS S) is
+    # explained by an acceleration a = 2 excess / h^2 held over the period (at most the
+    # largest, F_tot / m: forces and mass at unequal scales), whose noise is a^2 g g^T with g
+    # = (h^2 / 2, h). rtol 1e-12: a few roundings of the products.
+    from toolkit.estimation.adaptive import GROSS_NIS, unknown_force_noise
+
+    q, h, S = 2e-4, 0.05, 1e-9
+    forces, mass = np.array([0.6, 1.4, 1.0]) * scale, 2.0 * scale**0.5
+    largest = float(forces.sum()) / mass
+    gate = q + np.sqrt(GROSS_NIS * S)
+    assert unknown_force_noise(0.999 * gate, S, q, h, largest) is None
+    assert unknown_force_noise(-0.999 * gate, S, q, h, largest) is None
+    for y in (gate + 1e-6, -(gate + 3e-5), gate + 1e-3):
+        a = min(2.0 * (abs(y) - gate) / h**2, largest)
+        g = np.array([h * h / 2.0, h])
+        np.testing.assert_allclose(unknown_force_noise(y, S, q, h, largest), a * a * np.outer(g, g),
+                                   rtol=1e-12, atol=0.0)
+
+
+
+
+@pytest.mark.parametrize("scale", [2.0**-20, 1.0, 2.0**20])
+def test_a_commands_timing_is_the_smaller_reach_over_three(scale):
+    # Closed form: the body departs from the old command's flow by at most the contacts'
+    # change over a period (the motor law, u + (v0 - u) exp(-h / tau); the whole step for
+    # ideal motors) and at most a_max h; the variance of a departure uniform on [0, e] about
+    # its end is e^2 / 3. Unequal steps; forces and mass at unequal scales move a_max only.
+    # rtol 1e-12: a few roundings (exp, products).
+    from toolkit.estimation.adaptive import command_timing_variance
+
+    h, tau = 0.02, 0.0075
+    before, after = np.array([0.15, 0.19, 0.25]), np.array([-0.05, -0.1, -0.2])
+    step = np.max(np.abs(after - before)) * (1.0 - np.exp(-h / tau))
+    forces, mass = np.array([0.6, 1.4, 1.0]) * scale, 2.0 * np.sqrt(scale)
+    largest = float(forces.sum()) / mass
+    expected = min(step, largest * h) ** 2 / 3.0
+    assert command_timing_variance(before, after, h, tau, largest) == pytest.approx(expected, rel=1e-12)
+    ideal = min(np.max(np.abs(after - before)), largest * h) ** 2 / 3.0
+    assert command_timing_variance(before, after, h, 0.0, largest) == pytest.approx(ideal, rel=1e-12)
+    assert command_timing_variance(before, before, h, tau, largest) == 0.0

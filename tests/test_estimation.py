@@ -118,6 +118,32 @@ def test_smoother_is_no_worse_than_the_filter_in_each_phase(scenario):
     assert rts.rms_error <= kf.rms_error
 
 
+def test_the_smoother_is_refused_where_the_filter_left_its_model_and_never_worse():
+    # Where the default's monitor trips (20 % unequal wheels the scene does not know, drag 1 N
+    # s/m: the nominal model the smoother would run backwards is refuted), the smoother is
+    # refused and its result is the filter's, to the bit; where the model holds (the
+    # acceptance record), it smooths the filter's pass and is no worse than the default
+    # filter overall (identity and the smoother's optimality for the affine model).
+    from toolkit.estimation import KalmanEstimator
+    from toolkit.model.truth import WorldTruth
+
+    for seed in (0, 1):
+        sc = carousel_brake_scenario(seed=seed, t_end=4.0, brake_time=2.0, grid_phase=seed,
+                                     truth=WorldTruth(friction_spread=0.2, drag=1.0))
+        kf = KalmanEstimator(sc.model).run(sc.record, speed_std=1e-4)
+        rts = RTSSmoother(sc.model)
+        smoothed = rts.run(sc.record, speed_std=1e-4)
+        assert rts.refused is not None and rts.tripped == rts.refused
+        assert smoothed.method == "rts"
+        np.testing.assert_array_equal(smoothed.speed, kf.speed)
+        assert smoothed.rms_error <= kf.rms_error
+    sc = carousel_brake_scenario(seed=0)
+    kf = KalmanEstimator(sc.model).run(sc.record, speed_std=1e-4)
+    rts = RTSSmoother(sc.model)
+    smoothed = rts.run(sc.record, speed_std=1e-4)
+    assert rts.refused is None and smoothed.rms_error <= kf.rms_error
+
+
 def test_acceptance_kalman_beats_finite_differences_tenfold(scenario):
     record, model = scenario.record, scenario.model
     fd = CentralDifference(model.sensors).run(record)

@@ -1,51 +1,12 @@
 """A body riding a settled contact, estimated from the exact set of lines its counts allow.
 
-While the contacts hold their speeds and the body sticks to one of them (the carousel
-cruising or braked), body and that contact's wheel move at one speed ``V``: the body passes
-``X_a + V tau`` (``tau`` the time since the hold's first sample ``a``) and the wheel ``x_0 +
-V tau'`` (``tau'`` since its window start). An ideal encoder reads ``c = floor(position /
-q)``, so each reading confines the line's intercept and speed to a strip ``c q <= x + tau V <
-(c + 1) q``, and the readings together to a convex polygon: exactly the lines that give these
-counts (:mod:`toolkit._compiled.lines`).
-
-Why not the white model. The quantization error of a body at constant speed is not noise
-but a deterministic sawtooth ``q (frac(X_0 / q + k V h / q) - 1/2)`` (the Kalman filter's
-module docstring): for most speeds it pins ``V`` far better than ``q^2 / 12`` white readings
-would (the polygon's speed width falls like ``1 / k^2``, the white model's std like ``k^{-3/2}``),
-and near a rational ``V h / q`` far worse (the pattern repeats and stops informing). A filter
-with white ``R`` is then overconfident or underconfident depending on the grid phase, which
-it cannot know. The polygon is the exact likelihood: with the grid phases uniform (the
-encoders' zero is wherever the parts were at power-up) and no other prior, the posterior of
-``(X_a, V)`` given that the body rides wheel ``i`` is uniform over the central polygon,
-weighted by the width of wheel ``i``'s polygon at the same ``V`` (the wheel's intercept
-integrated out). Which wheel the body rides is not assumed: the Gaussian filter's belief at
-the hold's start gives the prior odds (``exp(-d_i^2 / 2)``, ``d_i`` the distance of wheel
-``i``'s estimated speed from the body's in stds of their difference, floored at ``1e-300``
-of the largest: the belief may be wrong), each wheel's evidence (the likelihood of the
-central counts if the body rides it) updates them, and the filter's state is the mixture's
-mean and covariance (:func:`~toolkit._compiled.lines.ride_moments`, exact). Wheels whose
-speeds the counts exclude drop out; two wheels at nearly one speed share the weight.
-
-Where the lines are exact. A wheel's window starts once the contacts hold their speeds
-(``steady``), the motor law's remaining transient would move the contact by less than
-:data:`TRANSIENT` counts, and, after a reversal (or a start from rest), the contact has
-travelled the gearbox play since it turned (the encoder's play operator passes no motion
-before). A wheel whose readings leave every line restarts its window there. A hold starts
-only where the Gaussian filter has the body reach the equilibrium set after the wheels'
-lines became exact (a body that meets an edge contact still settling towards it may stop
-short inside a zero-force band and coast there, at a speed of its own). It ends when the
-contacts move, and fails at a reading no line allows (or when no wheel's speeds meet the
-body's, e.g. a hold begun before the body stuck): the filter's state then restarts from
-what the reading and the one-period difference of the readings know, and the Gaussian
-steps take the body until they see it reach the set again. A new outside force also ends a
-hold. Not held, conservatively: a body that reached the set before the wheels' lines became
-exact (the motors still settling) stays with the Gaussian model until it next arrives.
-
-The hold needs ideal encoders (no read noise, no missed counts, no jitter), motors that
-hold their speeds (``contact_drift = 0``), no drag, and the friction the model knows
-(``friction_uncertainty = 0``: with an unknown spread the filter cannot tell that the body
-stuck, it may still creep towards the weighted median); otherwise the filter keeps its
-Gaussian model.
+While the contacts hold their speeds and the body sticks to one of them, body and that
+contact's wheel move on one straight line: each ideal reading confines the line to a strip,
+the readings to a convex polygon (:mod:`toolkit._compiled.lines`), and the posterior of
+``(X, V)`` with uniform grid phases is uniform over it, mixed over the wheels the body may
+ride by their evidence. :class:`WheelLines` keeps each wheel's polygon; :class:`HoldLayer` is
+the optional layer of a filter's step that uses them. Needs ideal encoders, motors that
+hold their speeds, no drag and known friction. Derivations: docs/estimation.md.
 """
 
 from __future__ import annotations
@@ -56,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ..model.laws import cell_centre, quantization_variance
 from .._compiled import kernels
 from ..model.motors import lag_settling_time
 from ._input import EstimatorModel
@@ -470,9 +432,9 @@ class HoldLayer:
             hold.start(anchor[0], anchor[1], np.maximum(np.exp(-0.5 * (d2 - d2.min())), 1e-300))
             self.unseen = 0.0
             self.started = anchor[0]
-        z = (count + 0.5) * q
+        z = cell_centre(count, q)
         innovation = z - (x[0] + h * x[1])
-        nis = innovation * innovation / (P[0, 0] + 2.0 * h * P[0, 1] + h * h * P[1, 1] + q * q / 12.0)
+        nis = innovation * innovation / (P[0, 0] + 2.0 * h * P[0, 1] + h * h * P[1, 1] + quantization_variance(q))
         state = hold.push(t, count, self.lines)
         repaired = 0
         if state is None and repair and x[1] != 0.0 and hold.behind(t, count, 1.0 if x[1] > 0.0 else -1.0):
@@ -484,7 +446,7 @@ class HoldLayer:
         if state is None:
             self.holding = False
             dt = t - anchor[0]
-            restart = (q * q / 12.0) * np.array([[1.0, 1.0 / dt], [1.0 / dt, 2.0 / (dt * dt)]])
+            restart = quantization_variance(q) * np.array([[1.0, 1.0 / dt], [1.0 / dt, 2.0 / (dt * dt)]])
             return HoldStep(True, np.array([z, (count - anchor[1]) * q / dt]), restart, nis)
         self.holding = True
         if seen:

@@ -1,66 +1,14 @@
 """What the model-based estimators know, and the known input they compute from the wheels.
 
-The known input of the Kalman filters over a sample period is the plant's own exact flow
-(:func:`toolkit.simulation.advance`, the engine of :func:`~toolkit.simulation.simulate`)
-from the estimated body speed, with the contact speeds the wheel encoders measure at the
-start of the period moving towards the command by the motor law (held when settled) and the
-outside force ``F`` (N) a controller applies over the period (a test rig's,
-:class:`~toolkit.controllers.ForceDrive`; held like the command). Crossings, sticking,
-release and the motor transient are therefore the simulator's, to rounding, for a plant whose
-motors have a lag and speed limits (the model knows no rate limit or compliance): the
-estimator has no integrator of its own (an earlier version averaged the force over eight
-sub-intervals and placed every crossing at a sub-interval midpoint, up to ``h / 16`` off:
-a 0.16 mm/s bias through the carousel's brake). Three cases are decided from the equilibrium
-set alone (:meth:`EstimatorModel.bounds_row`, the weighted quantile of the contact speeds,
-:class:`~toolkit.model.ContactSet`), without running the flow: a body on the set with
-settled contacts stays there (stiction, docs/physics.md section 4); a body farther from every
-contact speed than both the period's largest speed change ``(F_tot + |F|) h / m`` and
-``w = 2 sqrt(P_VV + sigma_v^2)`` feels the whole friction one way (``dV = (-+F_tot + F) h /
-m``, ``dx = dV h / 2``); a body on a slowly moving set (inside it, or on the contact at its
-edge) stays on it, following that contact by the motor law.
-
-The filter linearizes the flow (an extended Kalman filter): from the events of the step,
-``dV+/dV`` is the product of the saltation factors ``(a+ - v_i') / (a- - v_i')`` of its
-crossings (``a-+`` the body's acceleration before and after, ``v_i'`` the crossed contact's
-own acceleration, the motor law's ``(u_i - v_i) / tau`` in a transient, 0 when held) and of
-the drag's ``exp(-c dt / m)`` between them, and 0 after the body sticks (``V+`` is then a
-contact's speed whatever ``V`` was); ``dX+/dV`` is its integral over the period. The process
-noise is what the filter does not know of the input: (a) each contact speed estimate errs by
-``sigma_v`` (its std); moving a crossing of contact ``i`` by ``sigma_v / (a- - v_i')``
-changes ``V`` right after it by ``(1 - s_i) sigma_v`` (``s_i`` the saltation factor), carried
-to the period's end like ``V`` itself; a stick on contact ``j`` makes ``V+`` err by
-``sigma_v`` and the position by ``(h - t_stick) sigma_v``; (b) unequal, unknown friction:
-each ``f_i`` has a relative std ``epsilon``, a force error of variance ``epsilon^2 sum
-f_i^2`` held over the period. A stuck body has no force error: it moves with a settled
-contact, which the motor law holds at its speed; ``contact_drift`` (m/s per sqrt(s), default
-0) adds a random walk of that speed for motors that wander. A contact's error enters once
-per event it takes part in (its gains add up), and the errors of different contacts are
-independent: ``Q = sigma_v^2 sum_i g_i g_i^T``. Tested against central finite differences
-of the flow; a period that both crosses a contact and releases one has an approximate
-position gain.
-
-Contact speeds from the wheels (:func:`contact_speed_estimates`, vectorized over a record;
-a loop uses :class:`ContactSpeedTracker`, the same formulas one row at a time): a straight
-line fitted by least squares to the counts of a window that starts ``settle`` samples after
-the last command change
-(the motor lag and the gearbox play have then been taken up: 4 lags = 30 ms, and 0.8 mm
-of play at 0.1 m/s is 8 ms) and spans at most ``max_window`` samples. Within the window
-the contact runs at one speed ``v`` and reading ``i`` is ``x_0 + v t_i`` plus its
-quantization error, ``q^2 / 12`` each (the sensor model's white approximation, as for the
-central encoder): the least-squares slope ``sum (t_i - tbar) c_i q / S``, ``S = sum (t_i -
-tbar)^2``, is the minimum-variance linear unbiased estimate of ``v`` from all ``m``
-readings, with variance ``(q^2 / 12) / S``. Two readings (``m = 2``) give the plain
-difference and its ``q^2 / (6 T^2)``; ``m`` equally spaced readings ``(q^2 / 12) 12 / (h^2
-m (m^2 - 1))``, ``m (m + 1) / 12`` times less (a 26-sample window: 56x; the two end
-readings alone left the 24 readings between them unused). Inside the
-transient after a change the contact speeds are the motor law from the speeds at the
-change (that row's own estimate) towards the command. The first command is a change when
-the motors had settled elsewhere before it (``initial``, the record's
-``initial_commands``).
-
-A period's *track* (:meth:`EstimatorModel.period_track`) is the pair of rows ``(start,
-target)``: the contact speeds at the start of the period and the speeds they move towards
-over it (the command in a transient; the start speeds themselves when settled).
+:class:`EstimatorModel` is the plant as an estimator knows it (friction magnitudes, mass,
+sensors, motor lag, drag, speed limits, wander); its :meth:`~EstimatorModel.increment` is the
+known input over one sample period: the simulator's exact flow
+(:func:`toolkit.simulation.advance`) from the estimated speed, with the contacts moving from
+the wheel-measured speeds towards the command by the motor law, linearized for the filter,
+and the process noise of what the filter does not know of it.
+:func:`contact_speed_estimates` (a record) and :class:`ContactSpeedTracker` (one row at a
+time, the same formulas) give each contact's speed from least-squares lines through its
+wheel's counts. Derivations: docs/estimation.md.
 """
 
 from __future__ import annotations
@@ -71,6 +19,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..model.laws import quantization_variance
 from ..errors import as_float, as_float_array, as_int, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from .._compiled import core as _core
@@ -283,7 +232,7 @@ class EstimatorModel:
         sigma_t)^2`` for a contact at ``speed`` (m/s)."""
         sensors = self.sensors
         q = sensors.wheel.distance_per_count
-        return q * q * (1.0 / 12.0 + self._read_noise) + (speed * sensors.jitter) ** 2
+        return quantization_variance(q) + q * q * self._read_noise + (speed * sensors.jitter) ** 2
 
     def clip(self, commands: Any) -> np.ndarray:
         """Commands clipped to the motors' speed limits (the motor law's clip), m/s."""
@@ -349,7 +298,7 @@ class EstimatorModel:
             Position (m) and speed (m/s) increments of the flow from ``V``: ``x+ = x + h V
             + dx``, ``V+ = V + dV``.
         Q : ndarray of shape (2, 2)
-            Process noise of ``(X, V)`` over the period (see the module docstring).
+            Process noise of ``(X, V)`` over the period (docs/estimation.md).
         slopes : tuple of 2 floats or None
             ``(dX+/dV, dV+/dV)`` of the flow; ``None`` for ``(h, 1)`` (no event, no drag).
         arrival : float or None, (m/s)^2
@@ -537,7 +486,7 @@ class EstimatorModel:
     def _linearized(self, V: float, track: np.ndarray, force: float, step: Period, contact_std: float,
                     response: np.ndarray | None = None, signs: np.ndarray | None = None
                     ) -> tuple[float, float, np.ndarray, tuple[float, float] | None, float | None, bool]:
-        """Increments, process noise and slopes of one exact step (see the module docstring).
+        """Increments, process noise and slopes of one exact step (docs/estimation.md).
 
         Walks the events of ``step`` (:meth:`period`) in order
         (:func:`toolkit._compiled.core.linearize_step`),
@@ -704,7 +653,7 @@ def contact_speed_estimates(wheel_counts: Any, commands: Any, times: Any, model:
     speeds : ndarray of shape (k, n), m/s
     variance : ndarray of shape (k,), (m/s)^2
         Per-contact variance: the least-squares slope's ``(q^2 / 12) / S`` with ``S = sum
-        (t_i - tbar)^2`` over the window's readings (see the module docstring); in a transient the motor law's own uncertainty, taken
+        (t_i - tbar)^2`` over the window's readings (docs/estimation.md); in a transient the motor law's own uncertainty, taken
         as 10 % of the remaining gap, squared, plus one period's quantization ``q^2 / (6
         h^2)``.
     steady : ndarray of shape (k,), bool
@@ -833,7 +782,7 @@ class ContactSpeedTracker:
         self.white_variance = 0.0
         self.window_length = 0
         self._q = model.sensors.wheel.distance_per_count
-        self.reading_variance = np.full(model.n, self._q * self._q / 12.0)
+        self.reading_variance = np.full(model.n, quantization_variance(self._q))
         self._settle = model.settle
         self._keep = model.max_window + 1
         self._initial = None if initial is None else np.array(initial, dtype=float)
@@ -915,9 +864,9 @@ class ContactSpeedTracker:
                     centred = wb - wb.mean(axis=0)
                     along = tt @ centred
                     rss = np.einsum("ij,ij->j", centred, centred) - along * along / S
-                    self.reading_variance = (q * q) * np.maximum(rss / (m - 2), 1.0 / 12.0)
+                    self.reading_variance = np.maximum((q * q) * rss / (m - 2), quantization_variance(q))
                 elif m < 4:
-                    self.reading_variance = np.full(model.n, q * q / 12.0)
+                    self.reading_variance = np.full(model.n, quantization_variance(q))
                 self.contact_variance = (self.reading_variance / S if m >= 4 else np.full(model.n, variance))
         elif lc >= 0:
             t_c, u_c, before = self._change  # type: ignore[misc]
@@ -932,7 +881,7 @@ class ContactSpeedTracker:
             self.window_length = 0
         if self._residuals and not ok:
             self.contact_variance = np.full(model.n, float(variance))
-            self.reading_variance = np.full(model.n, q * q / 12.0)
+            self.reading_variance = np.full(model.n, quantization_variance(q))
         steady = (j - lc) >= self._settle and not changed
         if changed:
             # The speeds at the change: this row's own estimate (contact_speed_estimates).

@@ -1,62 +1,21 @@
-"""The default estimator: the nominal filter while its model holds, an adaptive one after.
+"""The adaptive filter the default ``kalman`` hands over to where the nominal model fails.
 
-:class:`KalmanEstimator` (``kalman``) runs :class:`~toolkit.estimation.kalman.NominalKalman`,
-which trusts the scene, under a :class:`~toolkit.estimation.monitor.ConsistencyMonitor`
-(the windowed NIS of its innovations, any exact hold that fails, and any count whose cell
-the nominal prediction gives less than :data:`CELL_ALARM`: the quantized likelihood sees
-a count off the model's reach samples before the Gaussian NIS does). At the first sample
-where the data contradict the model it hands over, for good, to :class:`AdaptiveKalman`,
-replayed from the start of the run over the samples kept so far (it then stands where it
-would had it run all along; its estimates from that sample on are the output). In a world
-that matches the scene the monitor passes and the result is the nominal filter's, to the
-bit: the adaptive parts cost nothing there.
-
-:class:`AdaptiveKalman` does not trust what the scene cannot know (derivations in
-docs/physics.md section 10):
-
-- *Parameters as states.* An extended Kalman filter of ``(X, V, e_1 .. e_n, dc)``: the body's
-  position and speed, each wheel's relative friction error (``f_i (1 + e_i)``) and the
-  drag's error (N s/m), with the prior of :class:`~toolkit.estimation.ModelPrior` and a slow
-  random walk (forgetting). The known input is the plant's exact flow at the current
-  estimates (the model rebuilt when they move), linearized; its sensitivity to the
-  parameters is :meth:`EstimatorModel.force_gains`. Identifiable is what the body's motion
-  feels: while it slides through a region the net force ``sum_i f_i e_i s_i - dc V`` of
-  that region's signs ``s_i``; while it rides contact ``k`` nothing (stiction absorbs it).
-  The filter's covariance carries the rest at the prior.
-- *The body's modes* as an interacting multiple model (filterpy's ``IMMEstimator``
-  arithmetic, compiled in :mod:`toolkit._compiled.imm`: the mixing, the stuck and free-form
-  modes' predictions, and the update with its matched noise, one call each; ``reference=True``
-  runs filterpy's own objects, and the tests find the two equal): *free* (the flow decides: sliding,
-  coasting in a zero-force band or creeping across it, sticking where the estimated
-  friction holds the body), *stuck* (the body rides the contact nearest its speed, whatever
-  the estimated friction says: a marginal stiction is undecided until the counts decide)
-  and *free-form* (no model: a random walk of the speed at the motors' wander, where the
-  contacts hold their speeds; the mode the filter falls back on when neither physical one
-  explains the counts).
-- *Contact speeds* from the wheels: least-squares windows (:class:`ContactSpeedTracker`,
-  with each wheel's read noise from its residuals), then per wheel a random-walk Kalman
-  filter weighted over hypotheses of the motors' wander (:class:`WheelSpeedBank`), and
-  where the encoders read exactly, each wheel's exact set of lines.
-- *Motor lag* identified from the wheels after each command change
-  (:class:`~toolkit.estimation.identification.LagIdentifier`).
-- *The missed-count rate* (not told) identified from the wheels' repaired counts over the
-  transitions where a loss would show (:class:`~toolkit.estimation.MissedCountRate`) and,
-  where read noise hides losses from the lines, from the body's counts against the wheel it
-  rides (:class:`~toolkit.estimation.RideCheck`): the default reports the position with the
-  count offset it implies (:func:`count_offset`).
-- *Noise*: read noise and jitter matched from the central innovations and from the wheels'
-  residuals (:class:`~toolkit.estimation.monitor.NoiseMatcher`).
-- *The exact holds* (:class:`~toolkit.estimation._hold.HoldLayer`) as the optional layer of
-  the step (predict, layer, update): used where the modes say the body rides a settled
-  contact and the encoders look ideal (lines hold, innovations quiet); within a hold a
-  reading one count behind every line is a missed count, repaired.
-- *The monitor acts*: while its windowed NIS fails, the filter widens its covariances and
-  falls back towards the window (FOAW) estimate, and its result says so (``fallback``).
+:class:`~toolkit.estimation.kalman.KalmanEstimator` (``kalman``) runs the nominal filter
+under a consistency monitor; at the first sample where the data contradict the nominal model
+it hands over, for good, to :class:`AdaptiveKalman`, replayed from the start of the run.
+:class:`AdaptiveKalman` is an interacting multiple model
+(free: the flow at the identified parameters; stuck: riding the nearest contact; free-form:
+no model) over an extended filter of ``(X, V)``, the friction errors and the drag, with the
+motor lag, the missed-count rate and the reading noise identified from the wheels, the told
+ranges and a command's timing within its period as noise of the known input, and a monitor
+that acts: gross innovations widen the filter, a failing window falls back towards the
+window estimate.
+:class:`WheelSpeedBank` gives each contact's speed from its wheel. Derivations:
+docs/estimation.md.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections import deque
 from typing import Any
@@ -65,12 +24,13 @@ import numpy as np
 
 from .._compiled import budget_clock
 from .._compiled import kernels
-from ..errors import as_float, as_int
+from ..errors import as_float
 from ..errors import ParameterTypeError, parameter_message
 from ..model.friction import contact_forces
+from ..model.laws import cell_centre, lag_response, quantization_variance
 from ..model.motors import MotorPiece, unsaturated_response
 from ..model.sensors import EncoderRecord, EncoderSample, play
-from ._base import EstimationResult, Estimator, check_covariance, score, warm_record
+from ._base import EstimationResult, Estimator, score
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel
 from ..model.truth import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
@@ -78,12 +38,84 @@ from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
 from .window import AdaptiveWindow
 
-__all__ = ["KalmanEstimator", "AdaptiveKalman", "WheelSpeedBank", "NOMINAL", "ADAPTING", "FALLBACK"]
+__all__ = ["AdaptiveKalman", "WheelSpeedBank", "NOMINAL", "ADAPTING", "FALLBACK"]
 
 #: Verdicts of :attr:`KalmanEstimator.verdicts` (per sample): the nominal filter's model
 #: holds; the adaptive filter runs; the adaptive filter's own monitor fails and it falls back
 #: towards the window estimate.
 NOMINAL, ADAPTING, FALLBACK = 0, 1, 2
+#: chi-square(1)'s quantile at 1 - 1e-6: one innovation beyond it is gross, and widens the filter.
+GROSS_NIS = 23.93
+
+
+def unknown_force_noise(innovation: float, variance: float, count: float, period: float,
+                        largest: float) -> np.ndarray | None:
+    """The process noise of ``(X, V)`` that a gross innovation implies, or None.
+
+    The part of the innovation ``y`` beyond one count (a count lost) and the gate
+    ``sqrt(GROSS_NIS S)`` of its predicted spread is what no measurement hypothesis explains:
+    a force the model does not know (a command that reached the motors between two samples,
+    a knock). The acceleration that explains it held over the period, ``a = 2 |y|_excess /
+    h^2``, at most ``largest``, enters as filterpy's discrete white-noise acceleration,
+    ``a^2 [[h^4 / 4, h^3 / 2], [h^3 / 2, h^2]]``.
+
+    Parameters
+    ----------
+    innovation : float, m
+        ``y = z - X-``.
+    variance : float, m^2
+        Its predicted variance ``S`` (prediction and reading).
+    count : float, m
+        The central encoder's count.
+    period : float, s
+        The sample period ``h``.
+    largest : float, m/s^2
+        The largest acceleration the forces can give (friction's all one way, and the
+        outside force's).
+
+    Returns
+    -------
+    ndarray of shape (2, 2) or None
+        None where the innovation is within the gate.
+    """
+    from filterpy.common import Q_discrete_white_noise
+
+    excess = abs(innovation) - count - math.sqrt(GROSS_NIS * variance)
+    if not excess > 0.0:
+        return None
+    accel = min(2.0 * excess / (period * period), largest)
+    return Q_discrete_white_noise(2, dt=period, var=accel * accel)
+
+
+def command_timing_variance(before: np.ndarray, after: np.ndarray, period: float, lag: float,
+                            largest: float) -> float:
+    """The body's speed variance from a command that reached the motors at an unknown time
+    within the period before the sample that records it, (m/s)^2.
+
+    A record carries the command from the first sample after it was sent; the motors may have
+    taken it anywhere in the period before (a command between samples, serial latency).
+    Over that unseen time, uniform on ``[0, h]``, the body's speed departs from the old
+    command's flow by at most the contacts' change, ``max_i |u_i - u_i'| (1 - exp(-h /
+    tau))`` (the motor law over a period, :func:`~toolkit.model.laws.lag_response`; the
+    whole step for ideal motors), and by at most
+    what the largest force gives over the period, ``a_max h``: the smaller, ``e``, as the
+    largest of a departure that grows with the unseen time, uniform on ``[0, e]``, whose
+    second moment is ``e^2 / 3``.
+
+    Parameters
+    ----------
+    before, after : ndarray of shape (n,), m/s
+        The commands before and after the change.
+    period : float, s
+    lag : float, s
+        The motors' lag (0: ideal motors).
+    largest : float, m/s^2
+        The largest acceleration the forces can give.
+    """
+    before, after = np.asarray(before, dtype=float), np.asarray(after, dtype=float)
+    moved = lag_response(after, before, period, lag) if lag > 0.0 else after
+    reach = min(float(np.max(np.abs(moved - before), initial=0.0)), largest * period)
+    return reach * reach / 3.0
 
 
 def _checked(model: Any, prior: Any, owner: str) -> tuple[EstimatorModel, ModelPrior]:
@@ -159,11 +191,11 @@ class WheelSpeedBank:
         play as the sensor law starts it (loaded behind a moving contact, centred at rest)."""
         q, H = self.q, len(self.DRIFTS)
         self._nominal = np.array(speeds, dtype=float)
-        self._y = (np.asarray(wheels, dtype=float) + 0.5) * q          # the encoder side, m
+        self._y = cell_centre(np.asarray(wheels, dtype=float), q)          # the encoder side, m
         self._x = np.zeros((H, self.n, 2))
         self._x[:, :, 0] = self._y + np.sign(self._nominal) * 0.5 * self.play
         self._P[:] = 0.0
-        self._P[:, :, 0] = q * q / 12.0
+        self._P[:, :, 0] = quantization_variance(q)
         self._P[:, :, 2] = variance
 
     def restart(self, which: np.ndarray, wheels: np.ndarray, speeds: np.ndarray, variance: np.ndarray) -> None:
@@ -218,7 +250,7 @@ class WheelSpeedBank:
         if drift >= 0.0:
             self._drift = drift
             return speeds, var
-        z = (np.asarray(wheels, dtype=float) + 0.5) * self.q
+        z = cell_centre(np.asarray(wheels, dtype=float), self.q)
         if moved is None:
             moved = s[:, None] * end
         best = int(np.argmax(self._log_weights))
@@ -241,7 +273,7 @@ class WheelSpeedBank:
 
 
 class AdaptiveKalman(Estimator):
-    """The adaptive filter (see the module): an interacting multiple model of the body's
+    """The adaptive filter (the module; docs/estimation.md): an interacting multiple model of the body's
     modes over an augmented-state EKF of the friction errors and the drag.
 
     Parameters
@@ -402,7 +434,7 @@ class AdaptiveKalman(Estimator):
         for sample, command in zip(samples, commands):
             speeds, _, steady, _ = tracker.push(sample.time, sample.wheel_counts, command)
             if steady and tracker.window_length >= 5:
-                a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
+                a, b = fit_noise(tracker.reading_variance - quantization_variance(q_w), speeds * speeds)
                 noise = (a / (q_w * q_w), b)
         self._primed = noise
 
@@ -431,6 +463,8 @@ class AdaptiveKalman(Estimator):
         h = self.h
         self._h3 = h ** 3
         self._walk = np.array([h ** 3 / 3.0, h * h / 2.0, h])
+        # The largest acceleration friction can give (all contacts one way), m/s^2.
+        self._largest_accel = float(self.model.forces.sum()) / self.model.mass
         self._means, self._rows0, self._rows1 = np.empty((3, d)), np.empty((3, d)), np.empty((3, d))
         self._noises, self._nis = np.empty((3, 2, 2)), np.empty(3)
         self._noise_models = np.empty(4)
@@ -464,6 +498,7 @@ class AdaptiveKalman(Estimator):
         self._ride = RideCheck(self.q, sensors.wheel.distance_per_count, self.missed_rate, self.h,
                                sensors.backlash)
         self._moments, self._empty = np.zeros(5), np.zeros((1, 2))
+        self._timing = 0.0
         self.monitor.reset()
         self._foaw.reset(speed=speed)
         self.fallback = False
@@ -641,8 +676,8 @@ class AdaptiveKalman(Estimator):
         self.hold_failed = out is not None and out.failed
         self._repeats = self._repeats + 1 if c == self._count_prev else 0
         self._count_prev = c
-        R0 = q * q / 12.0 * (1 + self._repeats)
-        z = (c + 0.5) * q
+        R0 = quantization_variance(q) * (1 + self._repeats)
+        z = cell_centre(c, q)
         self._modes(z, R0, track, var, steady, force)
         self.holding = out is not None and not out.failed
         if self.holding:
@@ -705,10 +740,18 @@ class AdaptiveKalman(Estimator):
         # The mixture's predicted X (its variance: (A P0 A^T)[0, 0] + Q[0, 0] with row 0 of A,
         # per mode, and the modes' spread) and V.
         q = self.q
+        x_pred, predicted, speed = K.predicted_first(cbar, means, rows0, Ps0, noises)
+        wheel = q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed
+        R = R0 + max(self._noise.extra(speed), wheel)
+        gross = unknown_force_noise(z - x_pred, predicted + R, q, self.h,
+                                    self._largest_accel + abs(force) / self.model.mass)
+        if gross is not None:
+            noises += gross                  # (every mode's, before the update)
+        if self._timing > 0.0:
+            h = self.h
+            noises += self._timing * np.array([[h * h, h], [h, 1.0]])
+            self._timing = 0.0
         if self.reference:
-            x_pred, predicted, speed = K.predicted_first(cbar, means, rows0, Ps0, noises)
-            wheel = q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed
-            R = R0 + max(self._noise.extra(speed), wheel)
             self._modes_reference(z, R, means, list(zip(rows0.copy(), rows1.copy())), noises.copy())
         else:
             x, P = self.x, self.P = np.empty(self.d), np.empty((self.d, self.d))
@@ -825,10 +868,10 @@ class AdaptiveKalman(Estimator):
         self._told_apart.append(lines.spared if lines.active else 0)
         if self._first:
             q = self.q
-            self.xs[:, 0] = (c + 0.5) * q
+            self.xs[:, 0] = cell_centre(c, q)
             self.Ps[:, 0, :] = 0.0
             self.Ps[:, :, 0] = 0.0
-            self.Ps[:, 0, 0] = q * q / 12.0
+            self.Ps[:, 0, 0] = quantization_variance(q)
             self.x, self.P = self.xs[0].copy(), self.Ps[0].copy()
             if self.reference:
                 self.imm = self._reference_imm()
@@ -863,7 +906,7 @@ class AdaptiveKalman(Estimator):
             # Read noise (counts) and jitter (s) from the wheels' residuals against their
             # speeds (windows of 15 readings: clear of the transient).
             q_w = self.model.sensors.wheel.distance_per_count
-            a, b = fit_noise(tracker.reading_variance - q_w * q_w / 12.0, speeds * speeds)
+            a, b = fit_noise(tracker.reading_variance - quantization_variance(q_w), speeds * speeds)
             self._wheel_noise = (a / (q_w * q_w), b)
         u = tracker.command                                 # (clipped to the speed limits)
         if self._held is None:
@@ -890,8 +933,21 @@ class AdaptiveKalman(Estimator):
                 speeds = np.where(self._large | back, speeds, banked)
             else:
                 var, speeds = var_b, banked
+        if tracker.changed and self._held is not None:
+            self._timing = command_timing_variance(self._held, u, self.h, self.lag,
+                                                   self._largest_accel + abs(force) / self.model.mass)
         self._held = u
         track = np.array((speeds, speeds if steady else u))
+        if not steady:
+            # The lag within its prior range moves the contacts' speeds over the coming period
+            # by this much: its spread (uniform over the range) is noise of the known input.
+            lo, hi = self._lag_range
+            if self._lag_id.lag is not None:
+                # Identified: two standard deviations about it, within the range.
+                spread = 2.0 * self._lag_id.lag_std
+                lo, hi = max(lo, self._lag_id.lag - spread), min(hi, self._lag_id.lag + spread)
+            ends = [lag_response(u, speeds, self.h, lag) if lag > 0.0 else u for lag in (lo, hi)]
+            var = var + quantization_variance(ends[0] - ends[1])
         self._pending = (track, var, steady, force)
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
@@ -1036,191 +1092,3 @@ def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray
     if np.any(var_arr > 0.0):
         P[:, 0, 0] += np.where(lost, (signed * q) ** 2 * var / (1.0 - p) ** 4, 0.0)
     return position + np.where(lost, signed * p / (1.0 - p) * q, 0.0), P
-
-
-def _failure(hold_failed: bool, cell: float) -> str:
-    """The nominal filter's hard failures at one sample, as the monitor's reason."""
-    if hold_failed:
-        return "an exact hold failed"
-    if cell < CELL_ALARM:
-        return f"the count's cell has probability {cell:.2g} under the nominal prediction"
-    return ""
-
-
-class KalmanEstimator(Estimator):
-    """The default estimator (``kalman``): the nominal filter while it is consistent with the
-    data, the adaptive filter from the first sample where it is not (see the module).
-
-    Parameters
-    ----------
-    model : EstimatorModel
-        The nominal scene.
-    prior : ModelPrior, optional
-        The adaptive filter's prior (default ``ModelPrior()``).
-    initial_covariance : array_like of shape (2, 2), optional
-        The nominal filter's prior covariance of ``(X, V)`` (:class:`NominalKalman`).
-    exact_holds : bool
-        The nominal filter's exact holds (default True).
-    window : int
-        Samples of the monitor's windowed NIS (``>= 1``).
-    false_alarm : float
-        The monitor's false-alarm level per window, in ``(0, 1)`` (default 1e-6: a threshold
-        of 46.9 on ten NIS; the nominal filter's windows stay below 35 over worlds that match
-        it, declared read noise and jitter included, and reach 10^2-10^4 under the issue's
-        mismatches, where exact holds also fail).
-
-    Attributes
-    ----------
-    verdicts : list of int
-        Per sample: :data:`NOMINAL`, :data:`ADAPTING` or :data:`FALLBACK`.
-    tripped : tuple of (float, str) or None
-        When (s) and why the nominal model was left.
-    adaptive : AdaptiveKalman or None
-        The adaptive filter once it runs.
-    """
-
-    name = "kalman"
-    KERNELS = ("core", "lines", "window", "imm")
-
-    def __init__(self, model: EstimatorModel, prior: ModelPrior | None = None, *,
-                 initial_covariance: Any = None, exact_holds: bool = True, window: int = 10,
-                 false_alarm: float = 1e-6) -> None:
-        from .kalman import NominalKalman
-
-        owner = type(self).__name__
-        self.model, self.prior = _checked(model, prior, owner)
-        if initial_covariance is not None:
-            initial_covariance = check_covariance(initial_covariance, "initial_covariance", owner, 2)
-        self.nominal = NominalKalman(model, initial_covariance=initial_covariance, exact_holds=exact_holds)
-        self.monitor = ConsistencyMonitor(as_int(window, "window", owner, low=1), false_alarm)
-        self.reset()
-
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
-              contact_speeds: Any = None) -> None:
-        self._reset_args = dict(speed=speed, speed_std=speed_std, contact_speeds=contact_speeds)
-        self.nominal.reset(**self._reset_args)
-        self.monitor.reset()
-        self.adaptive: AdaptiveKalman | None = None
-        self._history: list[tuple[EncoderSample, Any, float]] = []
-        self._waiting: EncoderSample | None = None
-        self._last_command: Any = None
-        self._last_force = 0.0
-        self.verdicts: list[int] = []
-        self.tripped: tuple[float, str] | None = None
-
-    def warm_up(self, record: Any = None) -> float:
-        """Compile (or load from numba's cache) every kernel the nominal and the adaptive
-        filters run, by running both over ``record`` (default: a short record of the nominal
-        model, :func:`~toolkit.estimation._base.warm_record`; the estimator is reset after),
-        so that a timed run pays no one-time compilation; returns the time it took (s)."""
-        from .._compiled import load
-
-        started = budget_clock()
-        for name in self.KERNELS:
-            load(name)
-        args = self._reset_args
-        record = warm_record(self.model.sensors, self.model) if record is None else record
-        self.run(record)
-        self._adaptive().run(record)
-        self.reset(**args)
-        return budget_clock() - started
-
-    def _adaptive(self) -> AdaptiveKalman:
-        return AdaptiveKalman(self.model, self.prior)
-
-    def _switch(self, sample: EncoderSample, reason: str) -> tuple[float, float]:
-        """The nominal model failed at ``sample``: the adaptive filter from the start of the
-        run, replayed over the samples kept (it then stands where it would had it run all
-        along)."""
-        self.tripped = (sample.time, reason)
-        adaptive = self.adaptive = self._adaptive()
-        adaptive.prime([past for past, _, _ in self._history] + [sample],
-                       [command for _, command, _ in self._history] + [sample.command],
-                       self._reset_args["contact_speeds"])
-        adaptive.reset(**self._reset_args)
-        for past, command, force in self._history:
-            adaptive.observe(past)
-            adaptive.commanded(command, force)
-        self._history = []
-        return adaptive.observe(sample)
-
-    def observe(self, sample: EncoderSample) -> tuple[float, float]:
-        if self._waiting is not None:             # no command given after the last sample
-            self.commanded(self._last_command, self._last_force)
-        self._waiting = sample
-        if self.adaptive is not None:
-            out = self.adaptive.observe(sample)
-            self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
-            return out
-        out = self.nominal.observe(sample)
-        verdict = self.monitor.push(self.nominal.last_nis,
-                                    _failure(self.nominal.hold_failed, self.nominal.last_cell))
-        if verdict.passes:
-            self.verdicts.append(NOMINAL)
-            return out
-        out = self._switch(sample, verdict.reason)
-        self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
-        return out
-
-    def commanded(self, command: Any, force: float = 0.0) -> None:
-        if self._waiting is None:
-            raise RuntimeError("commanded() follows observe(): once per observed sample.")
-        sample, self._waiting = self._waiting, None
-        self._last_command, self._last_force = command, force
-        if self.adaptive is not None:
-            self.adaptive.commanded(command, force)
-        else:
-            self.nominal.commanded(command, force)
-            self._history.append((sample, command, force))
-
-    def run(self, record: EncoderRecord, *, speed: float = 0.0,
-            speed_std: float | None = None) -> EstimationResult:
-        """Offline: the nominal filter's pass (its vectorized wheel estimates), the monitor
-        over its NIS and hold failures, and from the first failing sample on the adaptive
-        filter's pass over the record (what stepping gives)."""
-        self._check_record(record)
-        started = budget_clock()
-        self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
-        nominal = self.nominal.filter(record, speed=speed, speed_std=speed_std)
-        X, P, nis = nominal.states, nominal.covariances, nominal.nis
-        failures = nominal.hold_failures.tolist()
-        cells = nominal.cell_probabilities.tolist()
-        K = record.n_samples
-        trip = None
-        for k in range(K):
-            verdict = self.monitor.push(nis[k], _failure(failures[k], cells[k]))
-            if not verdict.passes:
-                trip = k
-                self.tripped = (float(record.times[k]), verdict.reason)
-                break
-        verdicts = np.full(K, NOMINAL, dtype=np.int64)
-        if trip is not None:
-            adaptive = self.adaptive = self._adaptive()
-            adaptive.prime([record.sample(k) for k in range(trip + 1)], list(record.commands[:trip + 1]),
-                           record.initial_commands)
-            adaptive.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
-            X, P = X.copy(), P.copy()
-            for k in range(K):
-                adaptive.step(record.sample(k))
-                if k >= trip:
-                    X[k], P[k] = adaptive.out_x[:2], adaptive.out_P[:2, :2]
-                    verdicts[k] = FALLBACK if adaptive.fallback else ADAPTING
-        self.verdicts = verdicts.tolist()
-        p, var, seen = told_missed_rate(self.model, self.prior), 0.0, None
-        if self.adaptive is not None:
-            # The adaptive filter ran from the start: where its holds would have repaired a
-            # lost central count; not told, the rate it identified by each sample. While the
-            # nominal model holds throughout, nothing contradicted it (not told: no offset).
-            rate, rate_var, seen = np.array(self.adaptive.missed_history).T
-            seen = seen > 0.0
-            if p == 0.0:
-                p, var = rate, rate_var
-        if np.any(p > 0.0):
-            X = X.copy()
-            X[:, 0], P = count_offset(record.times, X[:, 0], P, X[:, 1], p,
-                                      self.model.sensors.central.distance_per_count, var, seen)
-        wall = budget_clock() - started
-        result = score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0], covariance=P,
-                       nis=nis[1:])
-        rate = (float(np.atleast_1d(p)[-1]), math.sqrt(float(np.atleast_1d(var)[-1])))
-        return dataclasses.replace(result, missed_count_prob=rate[0], missed_count_std=rate[1])

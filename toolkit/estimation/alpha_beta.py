@@ -1,23 +1,11 @@
 """The alpha-beta tracker of the central encoder, tuned by Kalata's tracking index.
 
-A fixed-gain filter of position and speed: per sample period ``h``::
-
-    X- = X + h V            r = z - X-            X = X- + alpha r      V = V + (beta / h) r
-
-with ``z = (c + 1/2) q``. Kalata (IEEE Trans. AES 20(2), 1984) gives the gains from the
-tracking index ``Lambda = sigma_a h^2 / sigma_z``::
-
-    alpha = -(L^2 + 8 L - (L + 4) sqrt(L^2 + 8 L)) / 8
-    beta  =  (L^2 + 4 L - L sqrt(L^2 + 8 L)) / 4
-
-which are the steady-state Kalman gains of the piecewise-constant white-acceleration model
-(``Q = sigma_a^2 g g^T``, ``g = (h^2 / 2, h)``, ``R = sigma_z^2``; a test checks them
-against :func:`~toolkit.estimation.steady_state_gain`), with the steady covariance
-``P = sigma_z^2 [[alpha, beta / h], [beta / h, beta (2 alpha - beta) / (2 (1 - alpha) h^2)]]``
-(Bar-Shalom, Li and Kirubarajan, *Estimation with Applications to Tracking and Navigation*,
-2001, section 6.5). Tuning: ``sigma_z = q / sqrt(12)`` (the quantization as white noise) and
-``sigma_a`` half the largest acceleration the contacts can give, ``F_tot / (2 m)`` (the same
-book's rule for this model, ``0.5 a_max <= sigma_a <= a_max``, at its quiet end).
+A fixed-gain filter of position and speed, ``X- = X + h V``, ``r = z - X-``, ``X = X- +
+alpha r``, ``V = V + (beta / h) r``, with ``z`` the count's cell centre and the gains
+Kalata's (IEEE Trans. AES 20(2), 1984) for the tracking index ``sigma_a h^2 / sigma_z``: the
+steady-state Kalman gains of the piecewise-constant white-acceleration model. Tuned with
+``sigma_z`` the quantization's and ``sigma_a = F_tot / (2 m)``. Derivations and references:
+docs/estimation.md.
 """
 
 from __future__ import annotations
@@ -27,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..model.laws import cell_centre
 from .._compiled import budget_clock
 from ..errors import as_float
 from ..errors import ParameterTypeError, parameter_message
@@ -46,7 +35,7 @@ def kalata_gains(index: float) -> tuple[float, float]:
 
 
 class AlphaBetaTracker(Estimator):
-    """Alpha-beta tracker of the central encoder (see the module).
+    """Alpha-beta tracker of the central encoder (the module; docs/estimation.md).
 
     Parameters
     ----------
@@ -80,7 +69,7 @@ class AlphaBetaTracker(Estimator):
 
     @classmethod
     def tuned(cls, sensors: Sensors, total_force: float, mass: float) -> AlphaBetaTracker:
-        """The tracker with ``sigma_a = F_tot / (2 m)`` (see the module)."""
+        """The tracker with ``sigma_a = F_tot / (2 m)`` (the module; docs/estimation.md)."""
         owner = f"{cls.__name__}.tuned"
         total_force = as_float(total_force, "total_force", owner, low=0.0, low_open=True)
         mass = as_float(mass, "mass", owner, low=0.0, low_open=True)
@@ -93,7 +82,7 @@ class AlphaBetaTracker(Estimator):
         self._t = 0.0
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
-        z = (sample.central_count + 0.5) * self._q
+        z = cell_centre(sample.central_count, self._q)
         if self._x is None:
             self._x = (z, self._speed0)
         else:

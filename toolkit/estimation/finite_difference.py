@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.laws import quantization_variance
 from ..model.contacts import ContactSet
 from ..model.sensors import EncoderSample, Sensors
 from ..errors import ParameterTypeError, parameter_message
@@ -53,9 +54,9 @@ class CentralDifference(Estimator):
         q = self.sensors.central.distance_per_count
         last, self._last = self._last, (sample.time, sample.central_count)
         if last is None:
-            return self._speed, 2.0 * (q * self.sensors.rate) ** 2 / 12.0
+            return self._speed, 2.0 * quantization_variance(q * self.sensors.rate)
         h = sample.time - last[0]
-        return (sample.central_count - last[1]) * q / h, 2.0 * (q / h) ** 2 / 12.0
+        return (sample.central_count - last[1]) * q / h, 2.0 * quantization_variance(q / h)
 
     def commanded(self, command: object, force: float = 0.0) -> None:
         """Unused: finite differences do not predict."""
@@ -98,11 +99,11 @@ class WheelDifference(Estimator):
         last, self._last = self._last, (sample.time, counts)
         self._first = last is None
         if last is None:
-            return self._speed, 2.0 * (q * self.sensors.rate) ** 2 / 12.0
+            return self._speed, 2.0 * quantization_variance(q * self.sensors.rate)
         h = sample.time - last[0]
         self.contact_speeds = (counts - last[1]) * q / h
         lo, hi = self.contacts.with_speeds(self.contact_speeds).equilibrium()
-        return 0.5 * (lo + hi), 2.0 * (q / h) ** 2 / 12.0
+        return 0.5 * (lo + hi), 2.0 * quantization_variance(q / h)
 
     def commanded(self, command: object, force: float = 0.0) -> None:
         """With no wheel history yet, the commands are the contact speeds' best guess."""

@@ -1,44 +1,10 @@
 """Online identification of what the nominal model does not know, from the wheel counts.
 
-:class:`LagIdentifier`: the motors' first-order lag. After a command change from settled
-speeds ``v0`` to ``u`` the motor law (:class:`toolkit.model.motors.MotorPiece`) moves each
-contact by ``u t + (v0 - u) tau (1 - exp(-t / tau))``: once the transient has died out its
-position runs on the line ``x_c + u t + (v0 - u) tau`` whose intercept is linear in ``tau``
-(the law's displacement is evaluated, never rewritten: its slope in ``tau`` is taken from
-the law at two lags). Each wheel's encoder sees the contact through its gearbox play, which
-shifts the line by half the play at a start from rest and by the whole play at a reversal
-(the play operator of :mod:`toolkit.model.sensors`). The least-squares line through a
-wheel's readings once the transient is over (``settle`` after the change, the longest lag
-the prior allows times eight) gives its intercept at the change; the reading just before
-the change gives the start; each wheel gives ``tau``, and the wheels' estimates are pooled
-with weights ``(v0 - u)^2`` (the intercept's error is a fraction of a count whatever the
-step, so a larger step pins ``tau`` better: ``sigma_tau ~ q / (sqrt(12 m) |v0 - u|)`` per
-wheel for ``m`` readings). With ideal encoders the error is the quantization's alone: a
-fraction of ``q / |v0 - u|`` (0.4 ms for the carousel's wheels at a 0.2 m/s step).
-
-:class:`MissedCountRate`: the encoders' missed-count rate ``p`` (one sensor law for every
-channel: :mod:`toolkit.model.sensors`) from the wheels' repaired counts. A wheel's exact line
-repairs a reading one count short of it (:class:`~toolkit.estimation._hold.WheelLines`) only
-where a missed count would show: the line has held long enough and reaches far enough past the
-reading's neighbour cell. The transitions read there are the *exposure*; each is lost with
-probability ``p`` whatever the line's state, so the repairs over the exposure are Poisson
-(``p`` small), and with a Gamma prior the posterior is Gamma (conjugate: docs/physics.md
-section 10). Dividing by every transition instead (most lie in transients, young windows,
-filters not yet trusting their encoders, or cells where a loss would not show) gives a
-fraction of the rate (0.43e-3 for 1e-3 over four brake records; 1.02e-3 over the exposure).
-
-:class:`RideCheck`: the same rate where no line lasts long enough to show a loss (read noise):
-while the body rides a contact, the difference of its position and that wheel's, both read as
-counts, is a level (the gearbox play, the grids' phases) that moves only when a count is lost,
-down by the body's count or up by the wheel's (against the motion), seen through the reads'
-noise; motion, the motors' wander and jitter (one read instant for all encoders) cancel. Over
-a period the body's ``n_c = d / q_c`` transitions and the wheel's ``n_w = d / q_w`` (``d`` the
-travel) move the level by a step of mean ``p (n_w q_w - n_c q_c) = 0`` and variance ``p (n_c
-q_c^2 + n_w q_w^2) = p d (q_c + q_w)``: a random walk whose intensity is proportional to ``p``.
-A bank of level filters over a grid of rates (:func:`toolkit._compiled.imm.ride_step`) gives
-each rate's Gaussian likelihood of the readings, a quasi-likelihood with the steps' true
-first two moments (the steps are whole counts and the quantization a sawtooth, not white);
-:class:`MissedCountRate` multiplies it into its posterior (docs/physics.md section 10).
+:class:`LagIdentifier`: the motors' first-order lag, from the intercepts of the wheels'
+lines after each command change. :class:`MissedCountRate`: the encoders' missed-count rate,
+a Gamma posterior over the repaired counts and their exposure. :class:`RideCheck`: the same
+rate where no line lasts long enough to show a loss, from the level between the body's
+count and the wheel it rides. Derivations: docs/estimation.md.
 """
 
 from __future__ import annotations
@@ -48,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..model.laws import cell_centre, quantization_variance
 from .._compiled import kernels
 from ..errors import as_float
 from ..model.motors import MotorPiece
@@ -103,7 +70,7 @@ class LagIdentifier:
 
     def push(self, t: float, wheels: Any, command: Any) -> None:
         """One sample: its time (s), wheel counts and the command sent then (m/s)."""
-        x = (np.asarray(wheels, dtype=float) + 0.5) * self.q
+        x = cell_centre(np.asarray(wheels, dtype=float), self.q)
         u = np.asarray(command, dtype=float)
         last = self._last
         before = self._initial if last is None else last[2]
@@ -149,7 +116,7 @@ class LagIdentifier:
         # Each intercept errs by the line's intercept error and the start reading's: q^2 / 12
         # (1 / m + tbar^2 / S) + q^2 / 12, white.
         m = times.size
-        var_offset = (self.q ** 2 / 12.0) * (1.0 / m + tbar * tbar / S + 1.0)
+        var_offset = quantization_variance(self.q) * (1.0 / m + tbar * tbar / S + 1.0)
         std = math.sqrt(var_offset / float(weights.sum()))
         self.estimates.append((lag, std))
         values = np.array(self.estimates)

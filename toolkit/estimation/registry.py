@@ -37,17 +37,18 @@ def build_estimator(name: str, model: EstimatorModel, *, prior: ModelPrior | Non
         the wheels; FOAW end- and best-fit (its band at one count, :class:`AdaptiveWindow`);
         the alpha-beta tracker (Kalata's gains at ``F_tot / (2 m)``); ``kalman``, the default
         (:class:`KalmanEstimator`: the nominal filter while it holds, the adaptive one after);
-        ``kalman_nominal`` (:class:`NominalKalman`, trusting the scene); the RTS smoother; the
-        unscented filter.
+        ``kalman_nominal`` (:class:`NominalKalman`, trusting the scene); the RTS smoother over
+        the default's pass (refused, and the filter's result, where the default's monitor
+        tripped); the unscented filter.
     model : EstimatorModel
         The nominal scene.
     prior : ModelPrior, optional
-        The adaptive filter's prior knowledge (``kalman``; default ``ModelPrior()``).
+        The adaptive filter's prior knowledge (``kalman``, ``rts``; default ``ModelPrior()``).
     initial_covariance : array_like of shape (2, 2), optional
         The Kalman filters' prior covariance of ``(X, V)``.
     """
     from .alpha_beta import AlphaBetaTracker
-    from .adaptive import KalmanEstimator
+    from .kalman import KalmanEstimator
     from .finite_difference import CentralDifference, WheelDifference
     from .kalman import NominalKalman, RTSSmoother
     from .unscented import UnscentedEstimator
@@ -66,7 +67,9 @@ def build_estimator(name: str, model: EstimatorModel, *, prior: ModelPrior | Non
         return AlphaBetaTracker.tuned(sensors, float(model.forces.sum()), model.mass)
     if name == "kalman":
         return KalmanEstimator(model, prior, initial_covariance=initial_covariance)
-    make = {"kalman_nominal": NominalKalman, "rts": RTSSmoother, "ukf": UnscentedEstimator}[name]
+    if name == "rts":
+        return RTSSmoother(model, prior=prior, initial_covariance=initial_covariance)
+    make = {"kalman_nominal": NominalKalman, "ukf": UnscentedEstimator}[name]
     return make(model, initial_covariance=initial_covariance)
 
 
@@ -87,7 +90,7 @@ def truth_told(world: TrueWorld, *, initial_covariance: Any = None) -> Any:
     initial_covariance : array_like of shape (2, 2), optional
         As :func:`build_estimator`'s.
     """
-    from .adaptive import KalmanEstimator
+    from .kalman import KalmanEstimator
     from ._input import EstimatorModel
 
     if not isinstance(world, TrueWorld):

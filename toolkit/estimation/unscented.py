@@ -1,23 +1,11 @@
 """Unscented Kalman filter whose process model is the exact simulator over one sample.
 
-Same state ``(X, V)``, measurement, noise and known inputs (contact speeds and the outside
-force) as
+Same state ``(X, V)``, measurement, noise and known inputs as
 :class:`~toolkit.estimation.kalman.NominalKalman` (whose per-sample loop it reuses), but
-the prediction propagates each sigma point through the plant's exact flow over the period
-(:meth:`~toolkit.estimation.EstimatorModel.flow`, the simulator's
-:func:`~toolkit.simulation.advance`: the contacts from the wheel-measured speeds towards the
-command by the motor law, drag and the outside force included), the body starting at the
-sigma point's speed; its position advances by the flow's exact displacement. The sign
-nonlinearity near sticking is then sampled, not linearized: sigma points on both sides of a
-contact speed end where the exact model takes them (stuck on it, or past it). The process
-noise is the linear filter's (contact-speed and friction uncertainty); when sigma points end
-stuck they all end on the contact's *estimated* speed, so the contact estimate's variance is
-added to ``Q_VV`` (the linear filter fuses that estimate as a measurement instead, and keeps
-the central encoder's long-run information, which this filter forgets at each stuck step).
-On the acceptance record it is consistent where the linear filter is not (NEES mean 2.15;
-over 12 random grid phases median 2.14, 10-90 % 2.11-2.21) at about four times its RMS
-error (0.094 against 0.023 mm/s) and twenty times its cost. filterpy is imported where the
-filter is built.
+each sigma point is propagated through the plant's exact flow over the period
+(:meth:`~toolkit.estimation.EstimatorModel.flow`), so the sign nonlinearity near sticking is
+sampled, not linearized; sigma points that end stuck add the contact estimate's variance to
+``Q_VV``. filterpy is imported where the filter is built. Derivations: docs/estimation.md.
 """
 
 from __future__ import annotations
@@ -27,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..model.laws import quantization_variance
 from .kalman import NominalKalman
 
 __all__ = ["UnscentedEstimator"]
@@ -61,7 +50,7 @@ class UnscentedEstimator(NominalKalman):
         ukf = self.kf.ukf
         ukf.x = np.array([z, self._speed0])
         ukf.P = (self.initial_covariance.copy() if self.initial_covariance is not None
-                 else np.diag([self._q * self._q / 12.0, self._std0**2]))
+                 else np.diag([quantization_variance(self._q), self._std0**2]))
 
     def _advance(self, z: float, R: float, track: np.ndarray | None, var_v: float, steady: bool,
                  bounds: Any = None, force: float = 0.0, count: int = 0, t: float = 0.0,

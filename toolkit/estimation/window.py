@@ -1,21 +1,11 @@
 """First-order adaptive windowing (FOAW): the practitioner's window estimator of speed.
 
-Janabi-Sharifi, Hayward and Chen, "Discrete-time adaptive windowing for velocity
-estimation", IEEE Trans. Control Systems Technology 8(6), 2000. From the central encoder's
-readings ``y_k = (c_k + 1/2) q``, the speed at sample ``k`` is the slope of the line over the
-longest window of the last ``n + 1`` readings (``n <= n_max``) whose readings all lie within
-the uncertainty band ``d`` of that line: short windows where the speed changes (little
-lag), long ones where it holds (little noise). End-fit: the line through the window's first
-and last readings; best-fit: its least-squares line (the kernels:
-:mod:`toolkit._compiled.window`).
-
-Tuning (the paper's rule): ``d`` is the peak of the position noise, here the quantization's
-``q / 2`` (a mid-count reading is within half a count of the truth), and ``n_max`` bounds the
-window (default 50 samples, 1 s at 50 Hz; the window of a body at constant speed reaches it
-and the error then falls as ``1 / n``). The estimators report the variance of their slope with
-the quantization taken as white, ``q^2 / 12`` per reading: ``2 (q^2 / 12) / T^2`` for the
-end-fit over ``T`` seconds, ``(q^2 / 12) / sum (t - tbar)^2`` for the best-fit (as honest as
-that white model, :mod:`~toolkit.estimation.kalman`).
+Janabi-Sharifi, Hayward and Chen, IEEE Trans. Control Systems Technology 8(6), 2000: the
+speed at a sample is the slope of the line over the longest window of recent central
+readings that all lie within the band ``d`` of that line (end-fit: through the window's end
+readings; best-fit: least squares; kernels in :mod:`toolkit._compiled.window`), with ``d``
+the quantization's half count. Variances with the quantization taken as white.
+Derivations: docs/estimation.md.
 """
 
 from __future__ import annotations
@@ -24,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..model.laws import cell_centre, quantization_variance
 from .._compiled import kernels
 from ..errors import as_float, as_int, check_option
 from ..errors import ParameterTypeError, parameter_message
@@ -37,7 +28,7 @@ DEFAULT_MAX_WINDOW = 50
 
 
 class AdaptiveWindow(Estimator):
-    """FOAW on the central encoder (see the module).
+    """FOAW on the central encoder (the module; docs/estimation.md).
 
     Parameters
     ----------
@@ -103,7 +94,7 @@ class AdaptiveWindow(Estimator):
             self._m = kept
         m = self._m
         self._t[m] = time
-        self._y[m] = (count + 0.5) * self._q
+        self._y[m] = cell_centre(count, self._q)
         self._m = m + 1
 
     def estimate(self) -> tuple[float, float]:
@@ -114,7 +105,7 @@ class AdaptiveWindow(Estimator):
         slope, n = kernels("window", 2 * count * count).foaw(self._t[a:m], self._y[a:m], count, self.band,
                                                             self.fit == "best")
         self.window = n
-        white = self._q * self._q / 12.0
+        white = quantization_variance(self._q)
         if n == 0:
             self.matched_variance = white * 2.0 * self.sensors.rate ** 2
             return self._speed, self.matched_variance

@@ -320,18 +320,33 @@ def _compile(module: ModuleType) -> None:
 
     if hasattr(module, "prange"):
         module.prange = numba.prange                          # a parallel loop when compiled
+    # The kernels it imports from the other kernel modules: those modules loaded first, their
+    # compiled kernels bound here (numba resolves a kernel's globals when it compiles it).
+    for fname, value in list(vars(module).items()):
+        home = getattr(value, "__module__", None) or ""
+        if (callable(value) and home != module.__name__ and home.startswith(__name__ + ".")
+                and not hasattr(value, "py_func")):
+            setattr(module, fname, getattr(load(home.rsplit(".", 1)[1]), value.__name__))
     for fname, options in module.KERNELS.items():
         function = getattr(module, fname)
-        try:
-            compiled = numba.njit(cache=True, **options)(function)
-            _CACHE.setdefault(module.__name__, getattr(compiled._cache, "_cache_path", None))
-        except RuntimeError:        # no writable cache directory anywhere: compile per process
-            compiled = numba.njit(cache=False, **options)(function)
-            _CACHE.setdefault(module.__name__, None)
+        if hasattr(function, "py_func"):                      # (bound above)
+            continue
+        compiled = _DISPATCHERS.get(function)
+        if compiled is None:
+            try:
+                compiled = numba.njit(cache=True, **options)(function)
+                _CACHE.setdefault(module.__name__, getattr(compiled._cache, "_cache_path", None))
+            except RuntimeError:    # no writable cache directory anywhere: compile per process
+                compiled = numba.njit(cache=False, **options)(function)
+                _CACHE.setdefault(module.__name__, None)
+            _DISPATCHERS[function] = compiled
         setattr(module, fname, compiled)
 
 
 _CACHE: dict[str, str | None] = {}       # kernel module -> the folder numba caches it in
+#: Each kernel function compiled once per process, whichever modules list it (a kernel that
+#: several modules import, such as a law of :mod:`toolkit.model.laws`, is one dispatcher).
+_DISPATCHERS: dict[Callable[..., Any], Any] = {}
 
 
 def cache_note() -> str | None:

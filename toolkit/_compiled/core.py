@@ -56,6 +56,8 @@ import math
 
 import numpy as np
 
+from ..model.laws import lag_decay, lag_response, lag_travel, tie_tolerance
+
 #: Replaced by ``numba.prange`` when compiled (a parallel loop); ``range`` as Python.
 prange = range
 
@@ -117,6 +119,8 @@ KERNELS = {
     "sampled_batch": {"parallel": True, "error_model": "numpy"},
     # Counter-based random numbers for sweeps.
     "mulhilo": _INLINE, "philox_block": _INLINE, "philox_uniform": {},
+    # The model's laws (toolkit.model.laws), compiled as they are written.
+    "tie_tolerance": _IEEE, "lag_decay": _IEEE, "lag_response": _IEEE, "lag_travel": _IEEE,
 }
 
 
@@ -328,7 +332,7 @@ def ideal_piece(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
         return PAUSE                               # no room even to start: grow and resume
     chunk = min((free - 4) // 2, istate[I_CHUNK])
     kind = CROSS if coulomb else SATURATION
-    tol = 4.0 * (K + 1) * EPS * total              # the prefix sums' rounding (tie_tolerance)
+    tol = tie_tolerance(K, total)                  # the prefix sums' rounding
     push_scale = total + abs(E)
     code = DONE
     if istate[I_STARTED] == 0:                     # a new piece: locate V (binary search)
@@ -364,7 +368,7 @@ def ideal_piece(coulomb: bool, K: int, land: np.ndarray, first: np.ndarray,
                 W = 0.0
                 G = land[4, j]
             G += E - c * V
-            tol_G = 4.0 * (K + 1) * EPS * (push_scale + c * abs(V))
+            tol_G = tie_tolerance(K, push_scale + c * abs(V))
             n_eval += 1
             if abs(G) <= W + tol_G:                 # stick (or rest at a balance)
                 if coulomb:
@@ -652,10 +656,8 @@ def quiet_piece(forces: np.ndarray, total_force: float, m: float, c: float, tau:
         top = max(top, abs(u[i]))
     if spread > ramp_gap:
         return False, math.nan, math.nan     # a motor ramps at its rate limit: a phase change
-    decay = math.exp(-S / tau)
     for i in range(n):
-        d = start[i] - u[i]                  # MotorPiece: v(s) = u + d exp(-s / tau)
-        out[0, i] = d * decay + u[i]         # MotorPiece.speeds(S)
+        out[0, i] = lag_response(u[i], start[i], S, tau, math.exp)   # MotorPiece.speeds(S)
     grow = expm1_ratio(mu, S)                # v_i(S) - v_i(0) = e_i grow
     reach = (speed_bound if speed_bound < INF else top) + spread
     if stuck < 0:
@@ -718,9 +720,8 @@ def quiet_piece(forces: np.ndarray, total_force: float, m: float, c: float, tau:
         if max(abs(h0), abs(h1)) > W - margin_rel * scale:
             return False, math.nan, math.nan
         body = vc * S + ec * expm1_ratio_integral(mu, S)     # displacement()
-    ramp = tau * -math.expm1(-S / tau)
-    for i in range(n):
-        out[1, i] = u[i] * S + (start[i] - u[i]) * ramp    # MotorPiece.displacement, no ramp
+    for i in range(n):                                     # MotorPiece.displacement, no ramp
+        out[1, i] = lag_travel(u[i], start[i], S, tau, math.expm1)
     return True, V_end, body
 
 
@@ -1248,8 +1249,7 @@ def motor_speed(motor: np.ndarray, tau: float, i: int, s: float) -> float:
     if s < end:
         return motor[M_START, i] + motor[M_RAMP, i] * s
     if tau > 0:
-        ui = motor[M_U, i]
-        return ui + (motor[M_AFTER, i] - ui) * math.exp(-(s - end) / tau)
+        return lag_response(motor[M_U, i], motor[M_AFTER, i], s - end, tau, math.exp)
     return motor[M_AFTER, i]
 
 
@@ -1279,10 +1279,8 @@ def motor_displacement(motor: np.ndarray, tau: float, s: float, out: np.ndarray)
         on_ramp = min(s, motor[M_END, i])
         rest = s - on_ramp
         distance = motor[M_START, i] * on_ramp + 0.5 * motor[M_RAMP, i] * on_ramp * on_ramp
-        ui = motor[M_U, i]
         if tau > 0:
-            out[i] = distance + (ui * rest
-                                 + (motor[M_AFTER, i] - ui) * (tau * -math.expm1(-rest / tau)))
+            out[i] = distance + lag_travel(motor[M_U, i], motor[M_AFTER, i], rest, tau, math.expm1)
         else:
             out[i] = distance + motor[M_AFTER, i] * rest
 
@@ -1644,7 +1642,7 @@ def dynamic_run(f: np.ndarray, total: float, m: float, c: float, k: float, tau: 
                 steepest = max(steepest, abs(q[i] + e[i]))
             scale = max(scale, top)
             tie_v = 64.0 * EPS * scale
-            tol = 4.0 * (n + 1) * EPS * (total + abs(E) + c * abs(V) + m * steepest)
+            tol = tie_tolerance(n, total + abs(E) + c * abs(V) + m * steepest)
             n_eval += 1
             if k > 0:
                 count, B, lam, c1, C, D = compliant_round(
@@ -2299,7 +2297,7 @@ def median_row(speeds: np.ndarray, forces: np.ndarray, F: float, row_s: np.ndarr
     K = sorted_landscape(row_s, row_f, 0, order, land, first)
     if K == 0:
         return slowest, slowest
-    return staircase_median(land[0], land[1], land[2], K, 4.0 * (K + 1) * EPS * land[1, K])
+    return staircase_median(land[0], land[1], land[2], K, tie_tolerance(K, land[1, K]))
 
 
 def median_edges(speeds: np.ndarray, forces: np.ndarray, outside: np.ndarray,
@@ -2608,7 +2606,7 @@ def linearize_step(ev: np.ndarray, nev: int, V: float, start: np.ndarray, target
             for j in range(touched):
                 gv[order[j]] *= factor
             # The crossed contacts' common error, split by force (a group at one speed).
-            share = (1.0 - factor) * (math.exp(-s / tau) if lagging else 1.0)
+            share = (1.0 - factor) * (lag_decay(s, tau, math.exp) if lagging else 1.0)
             for i in range(n):
                 if at[i]:
                     if not contains(order, touched, i):
@@ -2663,7 +2661,7 @@ def linearize_step(ev: np.ndarray, nev: int, V: float, start: np.ndarray, target
     out[6], out[7] = sX, sV
     if stuck:
         touched = stuck_stretch(f, group, tmp, order, touched, gx, gv, stick_at, h, lagging, tau)
-        w_end = math.exp(-h / tau) if lagging else 1.0
+        w_end = lag_decay(h, tau, math.exp) if lagging else 1.0
         arrival = var_v * w_end ** 2
     q00, q01, q11 = noise[0], noise[1], noise[2]
     for j in range(touched):
@@ -2682,7 +2680,7 @@ def stuck_stretch(f: np.ndarray, group: np.ndarray, scratch: np.ndarray, order: 
     motors, 1 held); ``scratch`` (n,) for the group's sum; returns the count of contacts in
     ``order``."""
     f_group, _ = gathered_sum(f, group, scratch)
-    w1 = math.exp(-t1 / tau) if lagging else 1.0
+    w1 = lag_decay(t1, tau, math.exp) if lagging else 1.0
     for i in range(f.size):
         if group[i]:
             if not contains(order, touched, i):
@@ -2690,7 +2688,7 @@ def stuck_stretch(f: np.ndarray, group: np.ndarray, scratch: np.ndarray, order: 
                 touched += 1
             share = f[i] / f_group
             if lagging:
-                gx[i] += share * (tau * (math.exp(-t0 / tau) - w1))
+                gx[i] += share * (tau * (lag_decay(t0, tau, math.exp) - w1))
             else:
                 gx[i] += share * (t1 - t0)
             gv[i] += share * w1

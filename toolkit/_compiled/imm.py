@@ -41,7 +41,9 @@ import math
 
 import numpy as np
 
-KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {}, "measure_cycle": {}, "predict_held": {}, "held_noise": {}, "predict_walk": {},
+from ..model.laws import cell_centre, quantization_variance
+
+KERNELS = {"cell_centre": {"error_model": "numpy"}, "quantization_variance": {"error_model": "numpy"}, "mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {}, "measure_cycle": {}, "predict_held": {}, "held_noise": {}, "predict_walk": {},
            "bank_moments": {}, "bank_push": {}, "play_loaded": {}, "sign_of": {},
            "predicted_first": {}, "ride_step": {}, "ride_push": {}, "read_variance": {},
            "rate_moments": {}}
@@ -290,7 +292,7 @@ def bank_push(x, P, Q, start, end, cx, gx, law, y, wheels, q, noise, logw, forge
     for i in range(n):
         d = law * (end[i] - start[i])
         qv[i] = d * d
-        z[i] = (wheels[i] + 0.5) * q
+        z[i] = cell_centre(wheels[i], q)
     bank_step(x, P, Q, cx, gx, qv, shift, loaded, z, noise, logw, forget)
     for i in range(n):
         y[i] = x[best, i, 0] + shift[i]
@@ -455,7 +457,7 @@ def ride_push(state, ring, level, var, grid, loglik, y, travel, qc, qw, h, slope
     state[5] += travel
     state[6] += 1.0
     R = read_variance(state, qc, qw, rate_mean)
-    if R < noise_over * (qc * qc + qw * qw) / 12.0:
+    if R < noise_over * quantization_variance(qc, qw):
         state[7] = 0.0
         return 0
     if state[7] == 0.0:
@@ -471,7 +473,7 @@ def read_variance(state, qc, qw, rate_mean):  # noqa: ANN001, ANN201 (numba kern
     """The check's read noise variance (m^2) from its sums (:func:`ride_push`): the two
     quantizations' ``(qc^2 + qw^2) / 12`` plus half the mean squared step less the
     quantizations' and the losses' share (at ``rate_mean``), at least 0."""
-    floor = (qc * qc + qw * qw) / 12.0
+    floor = quantization_variance(qc, qw)
     if state[6] == 0.0:
         return floor
     losses = rate_mean * state[5] * (qc + qw)

@@ -38,9 +38,11 @@ import math
 
 import numpy as np
 
+from ..model.laws import quantization_variance
+
 _INLINE = {"inline": "always"}
 
-KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach": _INLINE, "reach_gaps": {}, "reach_seen": {}, "seen_steps": {},
+KERNELS = {"quantization_variance": {"error_model": "numpy"}, "clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach": _INLINE, "reach_gaps": {}, "reach_seen": {}, "seen_steps": {},
            "behind": {}, "slice_x": _INLINE,
            "line_moments": {}, "area": _INLINE, "ride_moments": {}, "sharper_lines": {}}
 
@@ -284,7 +286,7 @@ def line_moments(pc: np.ndarray, nc: int, pw: np.ndarray, nw: int, out: np.ndarr
                 else:
                     dv = v - mv
                     dx = xm - mx
-                    vxx += rho * (dx * dx + wc * wc / 12.0)
+                    vxx += rho * (dx * dx + quantization_variance(wc))
                     vxv += rho * dx * dv
                     vvv += rho * dv * dv
         if sweep == 0 and not total > 0.0:

@@ -95,11 +95,11 @@ from .. import _compiled
 from .._compiled import budget_clock
 from .._compiled import core as _core     # the kernels' source module (imports no numba)
 from ..model import ContactSet, MotorPiece, PiecewiseConstant, Plant, compliant_breakpoints
+from ..model.laws import tie_tolerance
 from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
 
 __all__ = ["simulate_exact"]
 
-_EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _ROOT_WORK = 15             # interpreted work (about us) of the first-root search per function
 _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than an Enum member)
@@ -436,7 +436,7 @@ class _CoulombLandscape:
 
     @property
     def _tol(self) -> float:
-        return 4.0 * (self.levels.size + 1) * _EPS * self.total
+        return tie_tolerance(self.levels.size, self.total)
 
     def force(self, j: int, V: float) -> tuple[float, float]:
         """Force (N) at ``V`` inside interval ``j`` (the plateau), and its slope: 0."""

@@ -57,45 +57,18 @@ import numpy as np
 
 from ..errors import as_float
 from ..errors import ParameterError, parameter_message
-from ..model import Plant, implicit_step
+from ..model import Plant
+from ..model import implicit_step as motor_implicit_step
+from ..model.laws import implicit_step, tie_tolerance
 from ._reference import BudgetExceeded, Meter, StepRecord, build_result, format_setting, segment_edges
 from ._result import Budget, SimulationResult, SimulationStatus
 
 __all__ = ["simulate_moreau", "moreau_step_staircase"]
 
 
-def moreau_step_staircase(levels: np.ndarray, plateaus: np.ndarray, a: float,
-                          b: float) -> tuple[float, bool]:
-    """Solve ``a W - b in F(W)`` on a Coulomb staircase (one Moreau-Jean step).
-
-    Parameters
-    ----------
-    levels : ndarray of shape (K,), m/s
-        Distinct contact speeds, ascending.
-    plateaus : ndarray of shape (K + 1,), N
-        Force below ``levels[0]``, between consecutive levels, above ``levels[-1]``.
-    a : float, N s/m
-        ``m / h + c > 0``.
-    b : float, N
-        ``m V / h + F_ext``.
-
-    Returns
-    -------
-    W : float, m/s
-        The unique solution.
-    stuck : bool
-        True when ``W`` is a contact speed (the set-valued force was used).
-    """
-    upper = a * levels - plateaus[1:]            # increasing: a s_k - P_{k+1}
-    k = int(np.searchsorted(upper, b, side="left"))
-    return _resolve(levels, plateaus, a, b, k)
-
-
-def _resolve(levels: np.ndarray, plateaus: np.ndarray, a: float, b: float,
-             k: int) -> tuple[float, bool]:
-    if k < levels.size and a * levels[k] - plateaus[k] <= b:
-        return float(levels[k]), True
-    return float((b + plateaus[k]) / a), False
+#: One Moreau-Jean step on a Coulomb staircase: ``(W, stuck)`` from ``(levels, plateaus, a, b)``
+#: (the model's law, :func:`toolkit.model.laws.implicit_step`).
+moreau_step_staircase = implicit_step
 
 
 def _staircase(speeds: np.ndarray, forces_sorted_by: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -113,7 +86,7 @@ def _staircase(speeds: np.ndarray, forces_sorted_by: np.ndarray) -> tuple[np.nda
     below = np.concatenate(([0.0], np.cumsum(steps)))
     total = below[-1]
     plateaus = total - 2.0 * below
-    tolerance = 4.0 * (levels.size + 1) * np.finfo(float).eps * total
+    tolerance = tie_tolerance(levels.size, total)
     plateaus[np.abs(plateaus) <= tolerance] = 0.0
     return levels, plateaus
 
@@ -331,7 +304,7 @@ def _staircase_segment(plant: Plant, t0: float, t1: float, h: float, count: int,
             cache[hj] = (a, (a * levels - plateaus[1:]).tolist())
         a, upper = cache[hj]
         b = m * V / hj + ext
-        W, _ = _resolve(levels, plateaus, a, b, bisect.bisect_left(upper, b))
+        W, _ = implicit_step(levels, plateaus, a, b, bisect.bisect_left(upper, b))
         meter.evaluations += 1
         meter.step()
         out.add(t_prev, V, t_next, W, _finite_step(t_next, W, m * (W - V) / hj))
@@ -349,7 +322,7 @@ def _motor_steps(plant: Plant, t0: float, t1: float, h: float, count: int, speed
     for j in range(1, count + 1):
         t_next, hj = (t0 + j * h, h) if j < count else (t1, last)
         before = speeds
-        speeds = implicit_step(plant.motors, speeds, command, hj) if dynamic else command
+        speeds = motor_implicit_step(plant.motors, speeds, command, hj) if dynamic else command
         yield t_next, hj, before, speeds
 
 
@@ -433,7 +406,7 @@ def play_staircase(speeds: np.ndarray, forces: np.ndarray, play: np.ndarray,
     levels, drops = s[starts], np.add.reduceat(below - above, starts)
     first = float(np.sum(below))
     plateaus = first - np.concatenate(([0.0], np.cumsum(drops)))
-    tolerance = 4.0 * (levels.size + 1) * np.finfo(float).eps * float(np.sum(forces[engaged]))
+    tolerance = tie_tolerance(levels.size, float(np.sum(forces[engaged])))
     plateaus[np.abs(plateaus) <= tolerance] = 0.0
     return levels, plateaus
 

@@ -23,7 +23,6 @@ from .tables import lowest_contact, net_force, sorted_landscape
 #: Replaced by ``numba.prange`` when compiled (a parallel loop); ``range`` as Python.
 prange = range
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
 KERNELS = {"piece_start": {}, "at_breakpoint": {}, "ideal_piece": {}, "ideal_run": {},

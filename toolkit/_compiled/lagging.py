@@ -26,7 +26,6 @@ from .motors import M_START, motor_build, motor_coefficients, motor_displacement
  P_MARGIN) = range(9)
 N_PARAMS = 9
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
 KERNELS = {"quiet_piece": {}, "filippov": _IEEE, "compliant_round": _IEEE, "dynamic_run": _IEEE,

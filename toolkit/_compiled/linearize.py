@@ -17,11 +17,10 @@ from .segments import (CROSS, INF, RELEASE, STICK, expm1_ratio, expm1_ratio_inte
 from .tables import median_row
 from .motors import motor_build, motor_coefficients
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
 KERNELS = {"linearize_step": {}, "flip_signs": {}, "cross_gains": {}, "stick_group": {},
-           "release_force": {}, "stuck_stretch": {}, "gathered_sum": _INLINE, "contains": _INLINE,
+           "release_force": {}, "stuck_stretch": {}, "gathered_sum": {}, "contains": {},
            "period_bounds": {}, "window_line": {}, "kalman_step": {}, "lag_decay": _IEEE}
 
 

@@ -16,10 +16,9 @@ from .segments import INF, sign
 
 M_START, M_U, M_RAMP, M_END, M_AFTER = 0, 1, 2, 3, 4      # the rows of a piece's table
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
-KERNELS = {"motor_build": _IEEE, "motor_speed": {"inline": "always", "error_model": "numpy"},
+KERNELS = {"motor_build": _IEEE, "motor_speed": _IEEE,
            "motor_coefficients": _IEEE, "motor_displacement": _IEEE, "play_taken_up": _IEEE,
            "play_take_up_time": _IEEE, "lag_response": _IEEE, "lag_travel": _IEEE}
 

@@ -21,10 +21,9 @@ SHIFT32 = np.uint64(32)
 SHIFT11 = np.uint64(11)
 DOUBLE_UNIT = 1.0 / 9007199254740992.0          # 2^-53
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
-KERNELS = {"mulhilo": _INLINE, "philox_block": _INLINE, "philox_uniform": {}}
+KERNELS = {"mulhilo": {}, "philox_block": {}, "philox_uniform": {}}
 
 
 def mulhilo(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:

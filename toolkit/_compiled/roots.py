@@ -20,12 +20,11 @@ BRENT_RTOL = 4.0 * EPS       # Brent's method: relative tolerance (scipy.optimiz
 BRENT_XTOL = 5e-324          # ... no absolute floor: the smallest subnormal (math.ulp(0.0))
 BRENT_MAXITER = 500
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
 KERNELS = {"event_value": _IEEE, "event_slope": _IEEE, "event_inflection": _IEEE, "midpoint": _IEEE,
            "bisect": _IEEE, "newton_root": _IEEE, "brent_root": _IEEE, "polish_root": _IEEE,
-           "all_zero": _INLINE, "first_root_all": _IEEE, "first_root": _IEEE,
+           "all_zero": {}, "first_root_all": _IEEE, "first_root": _IEEE,
            "free_first_root": _IEEE, "stuck_first_root": _IEEE}
 
 

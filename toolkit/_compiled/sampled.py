@@ -33,10 +33,9 @@ LAW_TABLE, LAW_GIVEN = 0, 1          # commands: the law's table, or given per s
 S_T, S_V, S_X, S_REL = 0, 1, 2, 3
 S_STUCK, S_HINT = 0, 1
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
-KERNELS = {"sensor_read": _INLINE, "law_output": _IEEE, "sampled_steps": _IEEE,
+KERNELS = {"sensor_read": _IEEE, "law_output": _IEEE, "sampled_steps": _IEEE,
            "fresh_counters": {}, "lagging_period": _IEEE, "ideal_period": _IEEE,
            "sampled_batch": {"parallel": True, "error_model": "numpy"}}
 

@@ -31,13 +31,12 @@ N_FSTATE, N_ISTATE = 7, 13
 #: ``(x + expm1(-x)) / x^2``, truncated below ``1e-17`` relative for ``0 <= x < 0.5``.
 RATIO_INTEGRAL_SERIES = tuple((-1.0) ** k / math.factorial(k + 2) for k in range(14, -1, -1))
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
-KERNELS = {"expm1_ratio": _INLINE, "expm1_ratio_integral": {}, "reach_time": _INLINE, "sign": _IEEE,
-           "segment_value": _INLINE, "dense_values": {}, "displacement": {}, "samples": {},
-           "ordered_within": {}, "push_segment": _INLINE, "push_event": _INLINE,
-           "budget_code": _INLINE, "grown": {}, "pairwise_sum": _IEEE, "pairwise_block": _INLINE}
+KERNELS = {"expm1_ratio": {}, "expm1_ratio_integral": {}, "reach_time": {}, "sign": _IEEE,
+           "segment_value": {}, "dense_values": {}, "displacement": {}, "samples": {},
+           "ordered_within": {}, "push_segment": {}, "push_event": {},
+           "budget_code": {}, "grown": {}, "pairwise_sum": _IEEE, "pairwise_block": {}}
 
 
 def expm1_ratio(rate: float, s: float) -> float:

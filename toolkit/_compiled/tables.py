@@ -17,11 +17,10 @@ from .segments import INF, pairwise_sum
 #: Contacts up to which the lowest index at a level is found by a scan (else one sort).
 SMALL = 64
 
-_INLINE = {"inline": "always"}      # small helpers: inlined into their callers by numba
 _IEEE = {"error_model": "numpy"}   # IEEE division: x / 0 is inf or NaN (as NumPy), never raises
 #: The kernels of this module and their numba options (toolkit._compiled.load compiles them).
-KERNELS = {"net_force": _INLINE, "coulomb_force": {}, "lowest_contact": {}, "sorted_landscape": {},
-           "contact_table": {}, "sorted_steps": _INLINE, "staircase_sums": _INLINE,
+KERNELS = {"net_force": {}, "coulomb_force": {}, "lowest_contact": {}, "sorted_landscape": {},
+           "contact_table": {}, "sorted_steps": {}, "staircase_sums": {},
            "staircase_median": {}, "median_row": {}, "median_edges": {}, "tie_tolerance": _IEEE}
 
 

@@ -1,54 +1,14 @@
 """Compiled kernels: one source, run by numba compiled or by Python as written.
 
-The kernel modules of this package, :mod:`.core` (the exact method's event loops for ideal and
-for lagging motors, dense evaluator, no-event certificate, batch path, sampled closed loops,
-the Coulomb force on many speeds, the estimators' linearization of one step), :mod:`.lines` (the quantized lines of the estimators'
-holds) and :mod:`.planar` (the planar contacts' forces), are plain Python functions over arrays and scalars. They import nothing
-heavy, so the rest of the toolkit may import them freely (a process that never runs a kernel
-never loads numba). :func:`load` returns one compiled: the first time, it replaces every
-function the module lists in ``KERNELS`` by ``numba.njit(cache=True, **options)`` of that very
-function. numba resolves a kernel's globals when it compiles it, so kernels that call each
-other call the compiled versions; callers go through the module attribute
-(``load("core").ideal_piece(...)``), never through a name imported before :func:`load`; a
-kernel calls only kernels of its own module.
-
-There is no second implementation to keep in step: with ``NUMBA_DISABLE_JIT=1`` (numba's own
-switch) :func:`load` returns the same functions uncompiled and the same source runs as
-Python (as it does before a process compiles, see :func:`kernels`), each call inside
-``np.errstate(all="ignore")`` since compiled code does not warn either. The tests run the
-kernel tests both ways (``make test``).
-
-When a process compiles (the policy, stated here once)
-------------------------------------------------------
-- **Work nobody times** runs the kernels as Python until the process has done about 0.25 s
-  of work in them (:data:`COMPILE_AFTER`), then compiles (:func:`kernels`): loading numba
-  and the machine code costs about that much even from the cache, more than a short CLI run
-  spends in the kernels, so a short run never loads numba. ``ACTIVE_CONTACTS_COMPILE=eager``
-  compiles at the first call instead.
-- **Every time the toolkit reports** (the precision report's run times, the estimators'
-  ``wall_time``, ``simulate_closed_loop``'s and the stages' in ``result.json``, a sweep's,
-  the benchmarks') is of machine code loaded or compiled before the clock starts: the code
-  that reports it calls :func:`warm` first (the kernel modules compiled, then the timed call
-  itself once, untimed, on a short horizon: numba compiles or loads each kernel lazily, at
-  its first call with its argument types, so only the kernels that call uses) and reports
-  that one-time cost on its own (a ``compile_time`` field, a line of its own).
-
-Results never depend on either choice: compiled and interpreted kernels run the same source
-with the same IEEE operations and libm calls (tested).
-
-Threads. A parallel kernel (``prange``: many scenes, many loops) runs on the cores the load
-average leaves idle (:func:`parallel`), at least one: on a shared machine a thread waiting
-for a busy core stalls the whole loop (measured: 2 threads 5-30x slower than 1 at a load of
-3 on 2 cores). OpenMP's threads wait passively between loops (``OMP_WAIT_POLICY=PASSIVE``
-unless set), so they take no core from the serial code around them. Each scene or loop is
-computed alone, so results do not depend on the number of threads.
-
-Caching. ``cache=True`` stores the machine code beside the source (``__pycache__``), keyed on
-the source file, so a fresh process loads it instead of compiling. Where that directory is not
-writable (a read-only site-packages) numba falls back to its user-wide cache directory;
-``NUMBA_CACHE_DIR`` puts every cache in a directory of one's choice; where no cache directory
-is writable at all the kernels are compiled without a cache (each process pays the compile).
-If numba cannot be imported, the kernels run as Python with a warning.
+The kernel modules (:mod:`.core` and the engines it gathers, :mod:`.lines`, :mod:`.planar`,
+:mod:`.imm`, :mod:`.window`) are plain Python functions over arrays and scalars that import
+nothing of the toolkit but :mod:`toolkit.model.laws`. :func:`load` returns one compiled: each
+function a module lists in ``KERNELS`` replaced by ``numba.njit(cache=True, **options)`` of
+itself, and the kernels it imports from the other kernel modules bound to theirs. Under ``NUMBA_DISABLE_JIT=1`` the same source runs
+as Python. :func:`kernels` runs them as Python until a process has done enough work in them
+to pay for compiling; :func:`warm` compiles before a timed call; :func:`budget_clock` is the
+clock budgets read (compile time excluded); :func:`on_compile` reports compiles; :func:`parallel`
+sets the threads of a parallel kernel. The policy and its reasons: docs/physics.md, section 11.
 """
 
 from __future__ import annotations
@@ -320,18 +280,50 @@ def _compile(module: ModuleType) -> None:
 
     if hasattr(module, "prange"):
         module.prange = numba.prange                          # a parallel loop when compiled
+    # The kernels it imports from the other kernel modules: those modules loaded first, their
+    # compiled kernels bound here (numba resolves a kernel's globals when it compiles it).
+    for fname, value in list(vars(module).items()):
+        home = getattr(value, "__module__", None) or ""
+        if (callable(value) and home != module.__name__ and home.startswith(__name__ + ".")
+                and not hasattr(value, "py_func")):
+            setattr(module, fname, getattr(load(home.rsplit(".", 1)[1]), value.__name__))
     for fname, options in module.KERNELS.items():
         function = getattr(module, fname)
-        try:
-            compiled = numba.njit(cache=True, **options)(function)
-            _CACHE.setdefault(module.__name__, getattr(compiled._cache, "_cache_path", None))
-        except RuntimeError:        # no writable cache directory anywhere: compile per process
-            compiled = numba.njit(cache=False, **options)(function)
-            _CACHE.setdefault(module.__name__, None)
+        if hasattr(function, "py_func"):                      # (bound above)
+            continue
+        compiled = _DISPATCHERS.get(function)
+        if compiled is None:
+            try:
+                compiled = numba.njit(cache=True, **options)(function)
+                _CACHE.setdefault(module.__name__, getattr(compiled._cache, "_cache_path", None))
+            except RuntimeError:    # no writable cache directory anywhere: compile per process
+                compiled = numba.njit(cache=False, **options)(function)
+                _CACHE.setdefault(module.__name__, None)
+            _one_specialization(compiled)
+            _DISPATCHERS[function] = compiled
         setattr(module, fname, compiled)
 
 
+def _one_specialization(dispatcher: Any) -> None:
+    """Type a kernel called from another kernel by its arguments' plain types: a constant
+    argument (``0``, ``True``) makes numba compile the callee once more for that literal value
+    (``Literal[int](0)``), which no kernel needs (none asks for a literal); with plain types a
+    kernel compiles once whatever its callers pass (numba's own conversions do the rest)."""
+    from numba.core import types
+
+    template = dispatcher.get_call_template
+
+    def get_call_template(args: Any, kws: Any) -> Any:
+        return template(tuple(types.unliteral(a) for a in args),
+                        {k: types.unliteral(v) for k, v in kws.items()})
+
+    dispatcher.get_call_template = get_call_template
+
+
 _CACHE: dict[str, str | None] = {}       # kernel module -> the folder numba caches it in
+#: Each kernel function compiled once per process, whichever modules list it (a kernel that
+#: several modules import, such as a law of :mod:`toolkit.model.laws`, is one dispatcher).
+_DISPATCHERS: dict[Callable[..., Any], Any] = {}
 
 
 def cache_note() -> str | None:

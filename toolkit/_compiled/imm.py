@@ -1,38 +1,13 @@
 """Kernels of the adaptive filter's interacting multiple model: plain Python over arrays.
 
-Compiled by :func:`toolkit._compiled.load` (``load("imm")``); as written, this module imports
-nothing but ``math`` and NumPy and runs as Python (``NUMBA_DISABLE_JIT=1``). The arithmetic is
-filterpy's (``filterpy.kalman.IMMEstimator`` over ``KalmanFilter`` objects: the tests run
-both on the same steps and find them equal to rounding); the adaptive filter keeps its
-modes' states in arrays and calls these per sample.
-
-- :func:`mix`: the IMM's mixing (``M`` row-stochastic, from row i to column j): the predicted
-  mode probabilities ``cbar = mu M`` and each mode's mixed state and covariance.
-- :func:`predict_rows`: ``P <- A P A^T + Q`` for a transition that is the identity but for
-  its first two rows (the body's ``(X, V)`` over the augmented state), ``Q`` on ``(X, V)``.
-- :func:`update_first`: the Kalman update with a scalar measurement of the first state; the
-  Gaussian likelihood of the innovation and its NIS.
-- :func:`combine`: the modes' mixture mean and covariance.
-- :func:`cycle`: after :func:`mix` and the modes' predicted means (nonlinear, computed by
-  the caller from the mixed states), the rest of one IMM step: each mode's
-  :func:`predict_rows` and :func:`update_first`, the mode probabilities, :func:`combine`.
-- :func:`measure_cycle`: :func:`predicted_first`, the measurement noise from its speed and
-  :func:`cycle` in one call (the adaptive filter's update per sample).
-- :func:`predict_held`, :func:`predict_walk`: the stuck mode's prediction while its contact
-  holds its speed, and the free-form mode's (mean, transition rows, process noise in place).
-- :func:`bank_step`: the wheels' filters (every hypothesis and wheel at once): predict over
-  the period (the motor law's affine transition, and a random walk), update with the
-  readings, add each hypothesis's log-likelihood.
-- :func:`bank_moments`: the hypotheses' weights from their log-likelihoods, the weighted
-  wander intensity and each wheel's offset mean and variance over the hypotheses.
-- :func:`predicted_first`: the modes' mixture prediction of the first state (its mean and
-  variance) and the second's mean, before the update.
-- :func:`play_loaded`: which wheels keep their gearbox play loaded over a period.
-- :func:`ride_push`, :func:`ride_step`, :func:`read_variance`, :func:`rate_moments`: the
-  missed-count rate's evidence from the body's counts against the wheel it rides (its window,
-  the level filters over a grid of rates, its read noise), and the posterior's moments.
-- :func:`bank_push`: one sample of the wheels' filters where every play stays loaded
-  (:func:`play_loaded`, :func:`bank_step`, :func:`bank_moments` in one call).
+The arithmetic of filterpy's ``IMMEstimator`` over ``KalmanFilter`` objects (the tests run both
+on the same steps), with the modes' states in arrays: mixing (:func:`mix`), prediction with an
+identity transition but for the body's rows (:func:`predict_rows`), the scalar update
+(:func:`update_first`), the mixture (:func:`combine`), one whole step (:func:`cycle`,
+:func:`measure_cycle`), the stuck and free-form modes' predictions (:func:`predict_held`,
+:func:`predict_walk`), the wheels' filter bank (:func:`bank_step`, :func:`bank_moments`,
+:func:`bank_push`, :func:`play_loaded`) and the missed-count rate's evidence
+(:func:`ride_push`, :func:`ride_step`, :func:`read_variance`, :func:`rate_moments`).
 """
 
 from __future__ import annotations
@@ -41,7 +16,9 @@ import math
 
 import numpy as np
 
-KERNELS = {"mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {}, "measure_cycle": {}, "predict_held": {}, "held_noise": {}, "predict_walk": {},
+from ..model.laws import cell_centre, quantization_variance
+
+KERNELS = {"cell_centre": {"error_model": "numpy"}, "quantization_variance": {"error_model": "numpy"}, "mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {}, "measure_cycle": {}, "predict_held": {}, "held_noise": {}, "predict_walk": {},
            "bank_moments": {}, "bank_push": {}, "play_loaded": {}, "sign_of": {},
            "predicted_first": {}, "ride_step": {}, "ride_push": {}, "read_variance": {},
            "rate_moments": {}}
@@ -290,7 +267,7 @@ def bank_push(x, P, Q, start, end, cx, gx, law, y, wheels, q, noise, logw, forge
     for i in range(n):
         d = law * (end[i] - start[i])
         qv[i] = d * d
-        z[i] = (wheels[i] + 0.5) * q
+        z[i] = cell_centre(wheels[i], q)
     bank_step(x, P, Q, cx, gx, qv, shift, loaded, z, noise, logw, forget)
     for i in range(n):
         y[i] = x[best, i, 0] + shift[i]
@@ -455,7 +432,7 @@ def ride_push(state, ring, level, var, grid, loglik, y, travel, qc, qw, h, slope
     state[5] += travel
     state[6] += 1.0
     R = read_variance(state, qc, qw, rate_mean)
-    if R < noise_over * (qc * qc + qw * qw) / 12.0:
+    if R < noise_over * quantization_variance(qc, qw):
         state[7] = 0.0
         return 0
     if state[7] == 0.0:
@@ -471,7 +448,7 @@ def read_variance(state, qc, qw, rate_mean):  # noqa: ANN001, ANN201 (numba kern
     """The check's read noise variance (m^2) from its sums (:func:`ride_push`): the two
     quantizations' ``(qc^2 + qw^2) / 12`` plus half the mean squared step less the
     quantizations' and the losses' share (at ``rate_mean``), at least 0."""
-    floor = (qc * qc + qw * qw) / 12.0
+    floor = quantization_variance(qc, qw)
     if state[6] == 0.0:
         return floor
     losses = rate_mean * state[5] * (qc + qw)

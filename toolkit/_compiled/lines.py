@@ -1,35 +1,11 @@
 """Kernels of quantized straight lines: the exact set of lines a run of counts allows.
 
-Compiled by :func:`toolkit._compiled.load` (``load("lines")``); as written, this module
-imports nothing but ``math`` and NumPy and runs as Python (``NUMBA_DISABLE_JIT=1``).
-
-A body (or a wheel) that moves at one constant speed ``v`` passes position ``x0 + v tau_j``
-at the sample times ``tau_j``, and an ideal encoder of count ``q`` reads ``c_j = floor(position
-/ q)``. Each reading confines ``(x0, v)`` to the strip ``c_j q <= x0 + tau_j v < (c_j + 1) q``;
-together the readings confine it to a convex polygon, exactly the lines that give these
-counts (no noise model, no white approximation of the quantization's sawtooth).
-
-- :func:`clip_strip`: a convex polygon intersected with a strip (Sutherland-Hodgman against
-  its two half-planes; a vertex within ``tol`` of a boundary counts as on it, so rounding
-  adds no sliver vertices).
-- :func:`extend_lines`: many polygons (one per wheel) clipped by one reading each.
-- :func:`reach_gaps`: how far each polygon's lines reach past the cell one count short of a
-  reading (against the motion): where a missed count would leave every line;
-  :func:`reach_seen` with the thresholds that decide it; :func:`seen_steps` the steps read
-  there (and those read elsewhere, where a loss would be absorbed); :func:`behind` for one polygon (:func:`reach`: its lowest and highest position).
-- :func:`ride_moments`: the body's line riding an unknown wheel: the evidence-weighted
-  mixture of :func:`line_moments` over the wheels.
-- :func:`sharper_lines`: contacts' speeds (and their variances) replaced by their wheels'
-  exact lines where those are sharper (the adaptive filter's settled contacts).
-- :func:`line_moments`: mean and covariance of ``(x0, v)`` uniform over a polygon and
-  weighted by the ``x``-width of a second polygon at the same ``v`` (the wheel a body rides:
-  the joint uniform law over both lines' intercepts, with the shared speed). Exact: between
-  consecutive vertex speeds every slice width is linear in ``v``, the integrands are
-  polynomials of degree at most 4, and 3-point Gauss-Legendre integrates them exactly.
-
-Polygons are arrays of shape ``(capacity, 2)`` with rows ``(x, v)`` counter-clockwise in
-their first ``n`` rows: ``x`` the intercept less the first reading's count edge (m), ``v``
-the speed (m/s).
+A body moving at one constant speed ``v`` passes ``x0 + v tau_j`` at the sample times, and an
+ideal encoder of count ``q`` reads ``floor(position / q)``: each reading confines ``(x0, v)`` to
+a strip, and together they confine it to a convex polygon (:func:`clip_strip`,
+:func:`extend_lines`). The kernels keep those polygons for the estimators' holds, test which
+speeds they allow and when a reading must come (:func:`reach_seen`, :func:`seen_steps`,
+:func:`behind`), and give their moments (:func:`line_moments`, :func:`sharper_lines`).
 """
 
 from __future__ import annotations
@@ -38,9 +14,11 @@ import math
 
 import numpy as np
 
+from ..model.laws import quantization_variance
+
 _INLINE = {"inline": "always"}
 
-KERNELS = {"clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach": _INLINE, "reach_gaps": {}, "reach_seen": {}, "seen_steps": {},
+KERNELS = {"quantization_variance": {"error_model": "numpy"}, "clip_half": _INLINE, "clip_strip": {}, "extend_lines": {}, "reach": _INLINE, "reach_gaps": {}, "reach_seen": {}, "seen_steps": {},
            "behind": {}, "slice_x": _INLINE,
            "line_moments": {}, "area": _INLINE, "ride_moments": {}, "sharper_lines": {}}
 
@@ -284,7 +262,7 @@ def line_moments(pc: np.ndarray, nc: int, pw: np.ndarray, nw: int, out: np.ndarr
                 else:
                     dv = v - mv
                     dx = xm - mx
-                    vxx += rho * (dx * dx + wc * wc / 12.0)
+                    vxx += rho * (dx * dx + quantization_variance(wc))
                     vxv += rho * dx * dv
                     vvv += rho * dv * dv
         if sweep == 0 and not total > 0.0:

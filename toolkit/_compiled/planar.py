@@ -1,18 +1,10 @@
 """Kernels of the planar contact model: plain Python over arrays, one source.
 
-Compiled by :func:`toolkit._compiled.load` (``load("planar")``); as written, this module
-imports nothing but ``math`` and NumPy and runs as Python (``NUMBA_DISABLE_JIT=1``). The
-callers (:mod:`toolkit.planar`) keep validation, scaling, certificates and results; the
-kernels do the loops over contacts.
-
-- :func:`wrench`: net force and torque of planar Coulomb contacts at many body twists
-  (the friction law of :mod:`toolkit.planar.contacts`, docs/planar.md section 1), and
-  :func:`dissipation`, the potential ``sum f_i |D_i^T s_i|`` it is minus the gradient of.
-- :func:`newton`: damped Newton's method on ``P(x) = sum_i phi_mu(f_i, c_i - B_i x)
-  + x^T Q x / 2 - b x`` for ``x`` of 1 to 3 components, where ``phi_mu`` is the
-  pseudo-Huber smoothing ``sqrt(mu^2 + f^2 |z|^2) - mu`` of ``f |z|`` (``mu = 0``: the norm
-  itself). The equilibrium and the time step of the planar simulation are this problem
-  (docs/planar.md sections 2 and 4).
+:func:`wrench`: net force and torque of planar Coulomb contacts at many body twists (the law
+of :mod:`toolkit.planar.contacts`), and :func:`dissipation`, the potential it is minus the
+gradient of; :func:`newton`: damped Newton's method on the smoothed potential of the planar
+equilibrium for 1 to 3 unknowns, and :func:`slide_forces`. The callers
+(:mod:`toolkit.planar`) keep validation, scaling, certificates and results.
 """
 
 from __future__ import annotations

@@ -34,14 +34,27 @@ from toolkit import _compiled
 from toolkit.cli import main
 seconds, count = collections.Counter(), collections.Counter()
 module = {}
-for name in _compiled.MODULES + ("imm", "window"):
-    kernels = getattr(__import__(f"toolkit._compiled.{name}", fromlist=["KERNELS"]), "KERNELS", {})
-    module.update({kernel: name for kernel in kernels})
+from toolkit._compiled import core
+names = (tuple(e.__name__.rsplit(".", 1)[1] for e in getattr(core, "ENGINES", ())) + _compiled.MODULES
+         + ("imm", "window"))
+for name in names:
+    kernels = __import__(f"toolkit._compiled.{name}", fromlist=["KERNELS"])
+    for kernel in kernels.KERNELS:
+        home = getattr(kernels, kernel).__module__.rsplit(".", 1)[1]
+        module.setdefault(kernel, home if home != "laws" else name)
 def listen(event, kernel, s):
     if event == "end":
         seconds[module.get(kernel, "other")] += s
         count[module.get(kernel, "other")] += 1
-_compiled.on_compile(listen)
+def chained(listener, own=_compiled.on_compile):
+    # The command's own listener (its compile notice) and this one, both.
+    def both(event, kernel, s):
+        listen(event, kernel, s)
+        if listener is not None:
+            listener(event, kernel, s)
+    return own(both)
+_compiled.on_compile = chained
+_compiled.on_compile(None)
 code = main(sys.argv[1:])
 print(json.dumps({"code": code, "seconds": seconds, "count": count}))
 """

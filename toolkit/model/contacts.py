@@ -43,11 +43,11 @@ import numpy as np
 from .._compiled import compiled, kernels
 from ..errors import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
+from .laws import tie_tolerance
 
 __all__ = ["ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads",
            "weighted_median"]
 
-_EPS = np.finfo(float).eps
 #: Largest set whose staircase the compiled kernel sorts (by insertion; NumPy's sort above).
 _SMALL = 64
 
@@ -274,7 +274,7 @@ class ContactSet:
         ``4 (K + 1) eps F_tot`` for ``K`` distinct speeds: a bound on the rounding error of
         the prefix sums from which every force is computed.
         """
-        return 4.0 * (self._levels.size + 1) * _EPS * self._total
+        return tie_tolerance(self._levels.size, self._total)
 
     def staircase(self) -> Staircase:
         """The staircase (levels, step magnitudes, plateau forces); see :class:`Staircase`."""
@@ -457,7 +457,7 @@ class ContactDistribution:
             point = float(self.distribution.ppf(0.5))
             return point, point
         edges, cum = self._edges, self._cumulative
-        tol = 4.0 * edges.size * _EPS
+        tol = tie_tolerance(edges.size - 1, 1.0)          # (a prefix sum of probabilities)
         flat = np.flatnonzero(np.abs(cum - 0.5) <= tol)
         if flat.size:
             return float(edges[flat[0]]), float(edges[flat[-1]])

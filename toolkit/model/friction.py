@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import as_float, check_option
 from ._xp import ops
+from .laws import tie_tolerance
 
 __all__ = ["FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",
            "compliant_breakpoints", "compliant_zero_set"]
@@ -126,7 +127,7 @@ def compliant_breakpoints(speeds: np.ndarray, forces: np.ndarray, k: float) -> t
     slope = np.concatenate(([0.0], np.cumsum(change)))           # slope inside interval j
     slope[-1] = 0.0                                                # exactly flat above all
     at_x = total + np.concatenate(([0.0], np.cumsum(slope[1:-1] * np.diff(x))))
-    tol = 4.0 * (x.size + 1) * float(np.finfo(float).eps) * total
+    tol = tie_tolerance(x.size, total)
     at_x = np.where(np.abs(at_x) <= tol, 0.0, at_x)
     return x, at_x, owner[new], slope, total
 

@@ -36,6 +36,7 @@ import numpy as np
 from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ._xp import ops
+from .laws import lag_decay, lag_response, lag_travel
 
 __all__ = ["Motors", "motor_rate", "MotorPiece", "unsaturated_response", "lag_memory",
            "lag_settling_time", "implicit_step", "reach"]
@@ -184,7 +185,7 @@ def unsaturated_response(start: Any, command: Any, s: Any, lag: float, rate: flo
     """
     o = ops(xp)
     if lag > 0:
-        return command + (start - command) * o.exp(-s / lag)
+        return lag_response(command, start, s, lag, o.exp)
     if math.isfinite(rate):
         return start + o.fmin(o.fmax(command - start, -rate * s), rate * s)
     return command + 0.0 * s
@@ -201,8 +202,7 @@ def lag_memory(s: float, lag: float) -> tuple[float, float]:
     lag : float, s
         ``tau > 0``.
     """
-    decay = math.exp(-s / lag)
-    return decay, -lag * math.expm1(-s / lag)
+    return lag_decay(s, lag, math.exp), lag_travel(0.0, 1.0, s, lag, math.expm1)
 
 
 def lag_settling_time(gap: float, lag: float, travel: float) -> float:
@@ -274,7 +274,7 @@ class MotorPiece:
         ramping = s < self.ramp_end
         if self.tau > 0:
             with np.errstate(over="ignore", invalid="ignore"):    # only on the ramp, masked
-                settle = self.u + (self.after - self.u) * np.exp(-(s - self.ramp_end) / self.tau)
+                settle = lag_response(self.u, self.after, s - self.ramp_end, self.tau)
         else:
             settle = self.after.copy()
         if not ramping.any():
@@ -307,8 +307,7 @@ class MotorPiece:
         rest = s - on_ramp
         distance = self.start * on_ramp + 0.5 * self.ramp * on_ramp * on_ramp
         if self.tau > 0:
-            return distance + (self.u * rest
-                               + (self.after - self.u) * (self.tau * -np.expm1(-rest / self.tau)))
+            return distance + lag_travel(self.u, self.after, rest, self.tau)
         return distance + self.after * rest
 
 
@@ -360,8 +359,8 @@ def reach(tau: float, rate: float, v: np.ndarray, limit: float, s: np.ndarray) -
     if tau <= 0:
         return v + direction * np.minimum(gap, rate * s)
     if not math.isfinite(rate):
-        return limit - direction * gap * np.exp(-s / tau)
+        return lag_response(limit, v, s, tau)          # (v - limit = -direction gap exactly)
     linear = np.maximum(gap - rate * tau, 0.0) / rate    # saturated rate until gap = r tau
     near = np.minimum(gap, rate * tau)
-    moved = np.where(s <= linear, rate * s, gap - near * np.exp(-(s - linear) / tau))
+    moved = np.where(s <= linear, rate * s, gap - near * lag_decay(s - linear, tau))
     return v + direction * moved

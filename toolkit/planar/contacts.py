@@ -21,6 +21,7 @@ from .._compiled import kernels
 from ..errors import (ParameterError, ParameterTypeError, as_float, as_float_array, check_nonnegative,
                       parameter_message)
 from ..model import ContactSet
+from ..model.laws import tie_tolerance
 from .equilibrium import PlanarEquilibrium, _canonical, solve_equilibrium
 
 __all__ = ["PlanarContactSet", "WrenchSet", "LineReduction", "limit_factors", "wrench_batch", "geometric_median"]
@@ -378,7 +379,7 @@ class PlanarContactSet:
         """Net force components below this (N) are reported as exactly 0:
         ``4 (n + 1) eps F_tot``, a bound on the rounding of the sum (as
         :attr:`toolkit.ContactSet.tie_tolerance`)."""
-        return 4.0 * (self.n + 1) * _EPS * self._total
+        return tie_tolerance(self.n, self._total)
 
     @property
     def arm(self) -> float:

@@ -34,6 +34,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..model import laws
 from ..model.motors import lag_memory, reach, unsaturated_response
 
 #: Shifts of the follow target, in units of the period's reference change (plus -kappa).
@@ -72,11 +73,8 @@ class Construction:
 
 def implicit_step(V: np.ndarray, v: np.ndarray, forces: np.ndarray, mass: float, damping: float,
                   external: float, h: float) -> np.ndarray:
-    """One implicit (Moreau) step of ``m V' in sum f_i Sign(v_i - V) + F_ext - c V`` per row.
-
-    Solves ``m (W - V) / h + c W - F_ext in F(W)`` exactly for ``W``: the left side increases
-    and the set-valued force ``F`` does not, so the solution is unique; it is a contact speed
-    (the body sticks) or lies between two of them.
+    """One implicit (Moreau) step of ``m V' in sum f_i Sign(v_i - V) + F_ext - c V`` per row:
+    :func:`toolkit.model.laws.implicit_step` on each row's staircase (its contacts sorted).
 
     Parameters
     ----------
@@ -92,23 +90,13 @@ def implicit_step(V: np.ndarray, v: np.ndarray, forces: np.ndarray, mass: float,
     -------
     ndarray of shape (C,), m/s
     """
-    n = v.shape[1]
-    rows = np.arange(v.shape[0])
     order = np.argsort(v, axis=1)
-    speeds = v[rows[:, None], order]
     f = forces[order]
-    total = f.sum(axis=1)
-    above = total[:, None] - 2.0 * np.cumsum(f, axis=1)   # force just above each contact
-    below = above + 2.0 * f                                # ... and just below it
-    alpha = mass / h + damping
-    beta = mass * V / h + external
-    g = alpha * speeds - beta[:, None]                     # left side at each contact speed
-    count = np.sum(g < above, axis=1)                      # contacts wholly below the solution
-    at = np.minimum(count, n - 1)
-    inside = count < n
-    level = np.where(inside, below[rows, at], -total)      # force on the gap under contact `at`
-    stick = inside & (g[rows, at] <= level)
-    return np.where(stick, speeds[rows, at], (beta + level) / alpha)
+    swept = np.concatenate((np.zeros((v.shape[0], 1)), np.cumsum(f, axis=1)), axis=1)
+    plateaus = f.sum(axis=1)[:, None] - 2.0 * swept        # force between consecutive contacts
+    W, _ = laws.implicit_step(np.take_along_axis(v, order, axis=1), plateaus, mass / h + damping,
+                              mass * V / h + external)
+    return W
 
 
 def _steady_shift(tau: float, period: float) -> float:

@@ -1,35 +1,13 @@
 """Simulate a body on active contacts: one verb, :func:`simulate`, over interchangeable methods.
 
-Methods (``method=``):
-
-- ``"exact"`` (default): event-driven, closed-form segments, Filippov sliding modes; exact
-  to rounding for the Coulomb model (:mod:`toolkit.simulation._exact`).
-- ``"rk45"``, ``"lsoda"``, ``"radau"``, ``"bdf"``: ``scipy.integrate.solve_ivp`` on the
-  ``sign``, ``tanh`` or ``stribeck`` friction law (options ``friction``, ``epsilon``,
-  ``rtol``, ``atol``).
-- ``"moreau"``: Moreau-Jean time stepping, the set-valued force resolved exactly each step
-  (option ``step``); the only method that models drive backlash (``Motors(backlash=b)``),
-  which every other method refuses.
-- ``"casadi"``: a casadi CVODES/IDAS integrator on the smoothed model (options
-  ``integrator``, ``friction``, ``epsilon``, ``rtol``, ``atol``).
-
-:func:`simulate_batch` runs many constant-speed startup scenes at once (vectorized exact
-method) and returns their final speeds.
-
-:func:`advance` continues an exact simulation from an :class:`ExactState` over one sample
-period under a held command (the exact engine, no restart cost), with the exact body and
-contact displacements over the step: the plant of a sampled closed loop.
-
-Also public: :func:`warm_up` (compile or load the kernels before timing anything),
-:class:`Meter` and :class:`BudgetExceeded` (how every integrator, here and in other
-packages' simulators, counts its work against a :class:`Budget` and stops),
-:func:`clear_cache` (forget a plant's cached landscapes: time a run from scratch) and
-:func:`refuse_backlash` (the check every method but Moreau-Jean makes). Everything else in
-this package is private: other packages use this face only.
-
-:class:`SampledRun` runs a whole sampled loop (plant steps, noiseless sensors, a law with a
-compiled form, :class:`SampledLaw`) in the compiled kernels, :func:`sampled_batch` many of
-them in parallel.
+Methods (``method=``): ``"exact"`` (default; event-driven closed-form segments, exact to
+rounding for the Coulomb model), ``"rk45"``, ``"lsoda"``, ``"radau"``, ``"bdf"`` (scipy's
+``solve_ivp`` on the ``sign``, ``tanh`` or ``stribeck`` law), ``"moreau"`` (Moreau-Jean time
+stepping; the only method that models drive backlash) and ``"casadi"`` (SUNDIALS on the
+smoothed model). Also here: :func:`advance` (one held command from an :class:`ExactState`),
+:func:`simulate_batch` (many constant-speed scenes), :class:`SampledRun` and
+:func:`sampled_batch` (sampled loops in the kernels), :class:`Budget` and the result types.
+The methods and their options: docs/physics.md, section 11.
 """
 
 from __future__ import annotations

@@ -1,40 +1,9 @@
 """Reference method: a casadi SUNDIALS integrator (CVODES or IDAS) on the smoothed model.
 
-``simulate(plant, t_end, method="casadi", integrator="cvodes" | "idas", friction=..., ...)``.
-
-The right-hand side is the plant's own :meth:`toolkit.model.Plant.rhs` evaluated over casadi
-symbols (the friction laws ``"tanh"`` and ``"stribeck"`` of :mod:`toolkit.model.friction`; a
-compliant motor's saturated linear law when the plant has compliance; the motor law of
-:mod:`toolkit.model.motors`). ``"sign"`` is refused: SUNDIALS' error control assumes a smooth
-right-hand side. The state is ``[V]`` or, with dynamic motors, ``[V, v_1, ..., v_n]``.
-
-The output grid is the requested times, or 201 uniform times when ``t_eval`` is None, plus
-every switching time of the commands and of the external force; it is the whole output
-(memory in proportion to it and to the inputs, never to the integrator's steps). Without
-``t_eval``, a grid of more than ``budget.max_samples`` times (many switches) is reported
-decimated (every 2nd, 4th, ... time and the last, said in the message). Commands and ``F_ext`` enter
-as the integrator's controls ``u``, which casadi holds constant on each grid interval, so the
-integrator restarts exactly at every switch.
-
-The grid is integrated in blocks of consecutive output times, one ``casadi.integrator`` call
-per block, each continuing from the last state of the one before. A block aims at 64 output
-intervals first, then up to twice as many per call (fewer when the wall-clock budget left
-would not cover them at the pace so far), and ends at a switching time when one is near
-(the controls jump there), else after at least 4096 intervals: each call restarts SUNDIALS
-(a few small steps), so a grid without switches of up to 4096 times (the default 201, the
-precision report's ~1000) is one call, exactly as without blocks. Between calls the budget
-is checked, so that, as far as casadi allows:
-
-- ``budget.max_steps`` counts SUNDIALS steps over the run: each call gets the steps left as
-  its ``max_num_steps`` (which SUNDIALS applies per output interval) and the total is checked
-  after each call (status ``MAX_STEPS``, also when SUNDIALS gave up with too much work).
-- The wall clock cannot interrupt a running casadi call: it is checked after each call
-  (status ``WALL_TIME``); block sizes follow the pace so far, so an overrun is at most about
-  one call (up to 4096 output intervals when no switching time is near).
-- A stopped run returns the trajectory of the calls that completed (a failed call returns
-  no partial trajectory of its own block).
-
-``wall_time`` includes building the symbolic model and the integrator (as every call does).
+``simulate(plant, t_end, method="casadi", integrator="cvodes" | "idas", friction=..., ...)``:
+the plant's own right-hand side over casadi symbols (``"tanh"`` or ``"stribeck"`` friction,
+compliant motors, the motor law; ``"sign"`` is refused), integrated over the requested times
+plus every switching time. The output grid, tolerances and budgets: docs/physics.md, section 11.
 """
 
 from __future__ import annotations

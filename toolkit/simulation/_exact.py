@@ -1,84 +1,12 @@
 """The exact event-driven method: closed-form segments between events, Filippov sliding modes.
 
-Between two events the body obeys a linear ODE with closed-form solution, and every segment
-is stored in the one form
-
-    V(t0 + s) = V0 + c1 s + B expm1_ratio(lam, s) + C expm1_ratio(mu, s) + D s exp(-mu s),
-    expm1_ratio(x, s) = (1 - exp(-x s)) / x = -expm1(-x s) / x   (= s at x = 0),
-
-where ``lam = b / m`` is the body's own rate (drag, plus ``1/k`` per unsaturated compliant
-contact) and ``mu = 1 / tau`` the motor rate. Contact speeds take the same form with
-``c1 = q`` (ramp) and ``C = e`` (exponential approach).
-
-Two engines share that form:
-
-- **Ideal motors** (contact speeds piecewise constant in time): the force-speed map of the
-  current commands is a "landscape" of breakpoints (contact speeds for Coulomb contacts,
-  saturation limits ``v_i +- k f_i`` for compliant ones) with constant or linear force
-  between them. Locating ``V`` is a binary search; each event then costs ``O(1)``, so a
-  run from rest over ``N = 1e5`` contacts costs ``O(N)`` events of constant work.
-- **Dynamic motors** (lag, rate limit) with a command schedule: contact speeds move
-  between events (with constant commands the motors never leave their settled speeds and
-  the ideal engine applies). Every event function (a crossing ``V(t) = v_i(t)``, a
-  saturation limit, the end of a sliding mode) is
-  ``g(s) = alpha + beta s + gamma expm1_ratio(lam, s) + delta expm1_ratio(mu, s)
-  + D s exp(-mu s)``, which has
-  at most three roots: the root of ``g''`` is explicit, the roots of ``g'`` and then of ``g``
-  are bracketed on monotone pieces, and the earliest is located by bisection and Newton's
-  or Brent's method (the kernel :func:`toolkit._compiled.core.first_root`). With many
-  contacts a bound on ``|g'|`` first discards the functions that cannot change sign soon,
-  so an event costs ``O(N)``.
-
-Compiled core
--------------
-The ideal-motor engine's event loop, the dense evaluator, the segment integrals and samples,
-and the no-event certificate of :func:`~toolkit.simulation.advance` are the kernels of
-:mod:`toolkit._compiled.core`: plain Python over arrays that numba compiles (one source:
-under ``NUMBA_DISABLE_JIT=1`` the same functions run as Python). This module validates,
-keeps the per-plant landscape cache, grows the kernels' buffers and assembles the result; a
-one-piece run with sample times is a single kernel call (:func:`toolkit._compiled.core.ideal_run`).
-The result's events, contact-speed table and dense output are built from the run's record on
-first access (``SimulationResult._trusted``): a caller that reads only ``t``, ``V`` and
-``force`` (a sweep, a benchmark, a loop) does not pay for them.
-The dynamic-motor engine (lag, rate limit with a command schedule) is a kernel too,
-:func:`toolkit._compiled.core.dynamic_run`: one call runs every piece of constant command
-(each round: the motor law's closed form, the tied contacts, the Filippov solution, the
-segment and its first event, found by :func:`toolkit._compiled.core.first_root`); this module
-passes it the schedule's pieces and resumes it while it pauses.
-A process runs the kernels as Python until it has done enough work to pay for loading the
-compiled ones (:func:`toolkit._compiled.kernels`): the results are the same either way.
-
-Limits of exactness
--------------------
-Event times are roots located to a few ulp at any time scale, down to the smallest motor lag
-:class:`Plant` accepts (about 1e-305 s at carousel scales with compliance): bisection, with
-scale-free midpoints for brackets many binades wider than their root, then Brent's method.
-A crossing in which ``V`` only touches a moving contact speed without crossing it (a double
-root) is not an event. With compliance and a motor lag, a body rate ``b/m`` within rounding
-of ``1/tau`` loses digits in ``1 / (b - m/tau)`` (exact resonance itself is handled in
-closed form).
-
-Zeno guard
-----------
-With constant commands the body passes each breakpoint at most once, so a burst of more
-than ``2 K + 1000`` events (``K = 2 N + 2`` bounds the breakpoints) can only come from fast
-switching or chatter;
-such a burst inside ``(2 K + 1000) / Budget.max_event_rate`` seconds stops the run with
-``SimulationStatus.ZENO``. Memory: one closed-form segment is stored per event; a run that
-would store ``Budget.max_samples`` of them stops with ``SimulationStatus.MAX_STEPS``.
-
-Tie convention
---------------
-At ``V = s`` with contacts of total magnitude ``W`` at ``s`` and ``G`` the rest of the force
-(other contacts, external force, drag; for a moving contact minus ``m dv/dt``), the body
-sticks when ``|G| <= W + tol`` and passes in the direction of ``sign(G)`` otherwise. ``tol``
-is ``4 (K + 1) eps (F_tot + |F_ext| + c |V|)``, a bound on the rounding of the prefix sums
-(the same rule as :attr:`ContactSet.tie_tolerance`), so that exactly balanced cases (an
-even-N zero band edge, ``|G| == W``) stick. When contacts moving at different rates meet
-the body at once, the body's acceleration ``a`` solves
-``0 in G + sum_i f_i Sign(dv_i/dt - a) - m a`` (unique: the left side decreases in ``a``);
-it follows the contacts whose rate equals ``a``, if any. Events name the lowest contact index
-among coincident contacts.
+Between events every segment is ``V(t0 + s) = V0 + c1 s + B expm1_ratio(lam, s) +
+C expm1_ratio(mu, s) + D s exp(-mu s)``; events (crossings, sticks, releases, saturations,
+command switches) are found as first roots of closed-form functions. This module holds the
+landscapes (Coulomb staircase, compliant piecewise-linear force), the recorder of segments
+and events, the dense output, and the drivers of the kernels :func:`toolkit._compiled.core.ideal_piece`
+(ideal motors) and :func:`toolkit._compiled.core.dynamic_run` (lagging or rate-limited
+motors). The derivation, the tie and Zeno rules: docs/physics.md, section 11.
 """
 
 from __future__ import annotations
@@ -95,11 +23,11 @@ from .. import _compiled
 from .._compiled import budget_clock
 from .._compiled import core as _core     # the kernels' source module (imports no numba)
 from ..model import ContactSet, MotorPiece, PiecewiseConstant, Plant, compliant_breakpoints
+from ..model.laws import tie_tolerance
 from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
 
 __all__ = ["simulate_exact"]
 
-_EPS = float(np.finfo(float).eps)
 _ZENO_FLOOR = 1000          # events a Zeno window holds beyond the per-interval cascade bound
 _ROOT_WORK = 15             # interpreted work (about us) of the first-root search per function
 _SUCCESS = SimulationStatus.SUCCESS  # (a module constant is faster to read than an Enum member)
@@ -436,7 +364,7 @@ class _CoulombLandscape:
 
     @property
     def _tol(self) -> float:
-        return 4.0 * (self.levels.size + 1) * _EPS * self.total
+        return tie_tolerance(self.levels.size, self.total)
 
     def force(self, j: int, V: float) -> tuple[float, float]:
         """Force (N) at ``V`` inside interval ``j`` (the plateau), and its slope: 0."""

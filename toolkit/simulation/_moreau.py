@@ -1,51 +1,11 @@
 """Reference method: Moreau-Jean time stepping (implicit Euler with the set-valued force).
 
-``simulate(plant, t_end, method="moreau", step=1e-3)``.
-
-One step of length ``h`` from ``V`` solves the inclusion
-
-    m (W - V) / h  in  F(W) + F_ext - c W,        F(W) = sum_i f_i Sign(v_i - W)
-
-for the new speed ``W``, with the contact speeds ``v_i`` and ``F_ext`` of the step's end
-(implicit Euler). Writing ``a = m / h + c`` and ``b = m V / h + F_ext``, ``W`` is the zero of
-``g(W) = a W - b - F(W)``: since ``F`` is non-increasing (maximal monotone), ``g`` is strictly
-increasing, so the zero exists, is unique and is found exactly on the staircase of
-:meth:`toolkit.model.ContactSet.staircase` (levels ``s_k``, plateau forces ``P_k`` below
-``s_k`` and ``P_{k+1}`` above):
-
-- at a level, ``g(s_k) = [a s_k - b - P_k, a s_k - b - P_{k+1}]``; both ends increase with
-  ``k``, so a binary search finds the first level whose upper end is ``>= 0``;
-- if its lower end is ``<= 0`` the zero is the level itself: the body **sticks** at ``s_k``
-  (the contacts there supply the stiction force that balances the rest);
-- otherwise the zero lies on the open plateau before it: ``W = (b + P_k) / a``.
-
-So a body at an equilibrium stays there exactly (no chattering) and inside a zero-force band
-with ``c = 0`` it keeps its speed exactly (no creep). The method is first-order accurate: the
-error of the stick and crossing times is ``O(h)``; with drag, the exponential is approximated
-by ``(1 + c h / m)^(-k)``.
-
-Motor compliance makes ``F`` continuous and piecewise linear (kinks at ``v_i +- k f_i``); the
-zero of ``g`` is then found by binary search over the kinks and a linear solve between them.
-Dynamic motors are advanced first, by the model's implicit Euler step of the motor law
-(:func:`toolkit.model.motors.implicit_step`, solved exactly: a monotone scalar equation per
-contact); their speeds then enter the body's step.
-
-Drive backlash (``Motors(backlash=b)``, the physics in :class:`toolkit.model.Motors`) adds a
-play state ``g_i`` in ``[-b/2, b/2]`` per contact. A drive at its lower edge ``-b/2`` can only
-push the body forward: its contact enters the step's staircase as a half step (force ``f_i``
-below its level ``v_i``, ``[0, f_i]`` at it, ``0`` above); at its upper edge ``+b/2`` as the
-other half (``0`` below, ``[-f_i, 0]`` at ``v_i``, ``-f_i`` above); a contact inside its play
-carries zero force and is left out of the staircase. The staircase stays non-increasing, so
-the step is still the exact set-valued solve above for the engaged contacts. After the step
-every play moves with its wheel rolling at the body's new speed, ``g_i <- clip(g_i + h (W -
-v_i), -b/2, b/2)``: a drive whose force would reverse leaves its edge, and a drive that
-reaches the other edge is engaged from the next step (first-order in ``h`` like the rest).
-Backlash with motor compliance is refused (the compliant law is not split into halves).
-
-Steps land exactly on every command or external-force switch; the step before a switch (and
-before ``t_end``) is shortened. ``budget.max_steps`` counts steps. The steps are generated
-one at a time and only the requested ``t_eval`` times (or a record of at most
-``budget.max_samples`` steps) are kept, so memory does not grow with the number of steps.
+``simulate(plant, t_end, method="moreau", step=1e-3)``. Each step solves ``m (W - V) / h in
+F(W) + F_ext - c W`` exactly on the staircase (:func:`toolkit.model.laws.implicit_step`), or
+by a search over the kinks of compliant contacts; dynamic motors are advanced first by the
+motor law's implicit step; drive backlash adds a play per contact whose engaged drives enter
+the staircase as half steps. Steps land on every switch; only the requested samples are kept.
+The method, its order and the backlash model: docs/physics.md, section 11.
 """
 
 from __future__ import annotations
@@ -57,45 +17,18 @@ import numpy as np
 
 from ..errors import as_float
 from ..errors import ParameterError, parameter_message
-from ..model import Plant, implicit_step
+from ..model import Plant
+from ..model import implicit_step as motor_implicit_step
+from ..model.laws import implicit_step, tie_tolerance
 from ._reference import BudgetExceeded, Meter, StepRecord, build_result, format_setting, segment_edges
 from ._result import Budget, SimulationResult, SimulationStatus
 
 __all__ = ["simulate_moreau", "moreau_step_staircase"]
 
 
-def moreau_step_staircase(levels: np.ndarray, plateaus: np.ndarray, a: float,
-                          b: float) -> tuple[float, bool]:
-    """Solve ``a W - b in F(W)`` on a Coulomb staircase (one Moreau-Jean step).
-
-    Parameters
-    ----------
-    levels : ndarray of shape (K,), m/s
-        Distinct contact speeds, ascending.
-    plateaus : ndarray of shape (K + 1,), N
-        Force below ``levels[0]``, between consecutive levels, above ``levels[-1]``.
-    a : float, N s/m
-        ``m / h + c > 0``.
-    b : float, N
-        ``m V / h + F_ext``.
-
-    Returns
-    -------
-    W : float, m/s
-        The unique solution.
-    stuck : bool
-        True when ``W`` is a contact speed (the set-valued force was used).
-    """
-    upper = a * levels - plateaus[1:]            # increasing: a s_k - P_{k+1}
-    k = int(np.searchsorted(upper, b, side="left"))
-    return _resolve(levels, plateaus, a, b, k)
-
-
-def _resolve(levels: np.ndarray, plateaus: np.ndarray, a: float, b: float,
-             k: int) -> tuple[float, bool]:
-    if k < levels.size and a * levels[k] - plateaus[k] <= b:
-        return float(levels[k]), True
-    return float((b + plateaus[k]) / a), False
+#: One Moreau-Jean step on a Coulomb staircase: ``(W, stuck)`` from ``(levels, plateaus, a, b)``
+#: (the model's law, :func:`toolkit.model.laws.implicit_step`).
+moreau_step_staircase = implicit_step
 
 
 def _staircase(speeds: np.ndarray, forces_sorted_by: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -113,7 +46,7 @@ def _staircase(speeds: np.ndarray, forces_sorted_by: np.ndarray) -> tuple[np.nda
     below = np.concatenate(([0.0], np.cumsum(steps)))
     total = below[-1]
     plateaus = total - 2.0 * below
-    tolerance = 4.0 * (levels.size + 1) * np.finfo(float).eps * total
+    tolerance = tie_tolerance(levels.size, total)
     plateaus[np.abs(plateaus) <= tolerance] = 0.0
     return levels, plateaus
 
@@ -331,7 +264,7 @@ def _staircase_segment(plant: Plant, t0: float, t1: float, h: float, count: int,
             cache[hj] = (a, (a * levels - plateaus[1:]).tolist())
         a, upper = cache[hj]
         b = m * V / hj + ext
-        W, _ = _resolve(levels, plateaus, a, b, bisect.bisect_left(upper, b))
+        W, _ = implicit_step(levels, plateaus, a, b, bisect.bisect_left(upper, b))
         meter.evaluations += 1
         meter.step()
         out.add(t_prev, V, t_next, W, _finite_step(t_next, W, m * (W - V) / hj))
@@ -349,7 +282,7 @@ def _motor_steps(plant: Plant, t0: float, t1: float, h: float, count: int, speed
     for j in range(1, count + 1):
         t_next, hj = (t0 + j * h, h) if j < count else (t1, last)
         before = speeds
-        speeds = implicit_step(plant.motors, speeds, command, hj) if dynamic else command
+        speeds = motor_implicit_step(plant.motors, speeds, command, hj) if dynamic else command
         yield t_next, hj, before, speeds
 
 
@@ -433,7 +366,7 @@ def play_staircase(speeds: np.ndarray, forces: np.ndarray, play: np.ndarray,
     levels, drops = s[starts], np.add.reduceat(below - above, starts)
     first = float(np.sum(below))
     plateaus = first - np.concatenate(([0.0], np.cumsum(drops)))
-    tolerance = 4.0 * (levels.size + 1) * np.finfo(float).eps * float(np.sum(forces[engaged]))
+    tolerance = tie_tolerance(levels.size, float(np.sum(forces[engaged])))
     plateaus[np.abs(plateaus) <= tolerance] = 0.0
     return levels, plateaus
 

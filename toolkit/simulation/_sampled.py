@@ -1,27 +1,11 @@
 """Sampled loops of the exact plant, run by the compiled kernels: :class:`SampledRun`, :func:`sampled_batch`.
 
-A sampled-data loop holds a command over each sample period: at ``t_k`` it reads the
-sensors, estimates the speed, evaluates a law and holds its commands and outside force until
-``t_{k+1}``, while the plant follows the exact engine (:func:`~toolkit.simulation.advance`).
-:class:`SampledRun` runs such a loop in the kernel :func:`toolkit._compiled.core.sampled_steps`:
-the plant step (the engines of ``advance``: the same numbers), the exact displacements, the
-sensor law (noiseless encoders: :func:`toolkit._compiled.core.sensor_read`, the compiled form
-of :class:`~toolkit.model.sensors.SensorReader`) and, when the law has a compiled form
-(:class:`SampledLaw`), the law. What the kernels cannot run is given per sample by the caller:
-
-- an estimate (``estimator=True``): the caller reads :attr:`SampledRun.central` and
-  :attr:`~SampledRun.wheel` at sample ``k``, writes ``estimate[k]`` and ``variance[k]``,
-  then calls :meth:`SampledRun.run_to` ``(k + 1)``; without, the loop sees the true speed;
-- commands (``law=None``): the caller writes ``commands[k]`` and ``force[k]`` likewise.
-
-How an estimator plugs in later. A compiled estimator is one more kind of the kernel's
-estimate slot (``EST_TRUTH``, ``EST_GIVEN`` today): its per-sample arithmetic (observe the
-counts, predict under the held command and force) goes into ``sampled_steps`` beside the law,
-with its state in arrays the run holds, and the estimator object offers its constants the way
-a law offers a :class:`SampledLaw`; a loop with it then runs every sample in one call.
-
-:func:`sampled_batch` runs many loops of one plant on the true speed (Monte Carlo studies), in
-parallel over the cores (``numba.prange``).
+A sampled-data loop reads the sensors at ``t_k``, estimates the speed, evaluates a law and
+holds its commands and outside force until ``t_{k+1}`` while the plant follows the exact
+engine. :class:`SampledRun` runs such a loop in the kernel ``sampled_steps`` (the plant step,
+the displacements, the noiseless sensor law and, with :class:`SampledLaw`, the law); what the
+kernels cannot run (an estimator, a law without compiled form) the caller gives per sample.
+:func:`sampled_batch` runs many loops of one plant in parallel. Details: docs/physics.md, section 11.
 """
 
 from __future__ import annotations

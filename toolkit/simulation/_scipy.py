@@ -1,37 +1,9 @@
 """Reference method: scipy's adaptive ODE solvers on the Coulomb or a smoothed friction law.
 
-``simulate(plant, t_end, method="rk45" | "lsoda" | "radau" | "bdf", friction=..., ...)``.
-
-The state is ``y = [V]`` with ideal motors and ``y = [V, v_1, ..., v_n]`` when the motors
-are dynamic (a lag or a rate limit), with
-
-    dV/dt   = (sum_i phi_i(v_i - V) + F_ext - c V) / m
-    dv_i/dt = the motor law of toolkit.model.motors
-
-evaluated by the plant's own :meth:`toolkit.model.Plant.rhs`, where ``phi_i`` is the friction
-law of :mod:`toolkit.model.friction`:
-
-- ``"sign"``: ``f_i sign(s)`` (``sign(0) = 0``). A discontinuous right-hand side: adaptive
-  solvers chatter around the median and their step size collapses. This is the case the
-  budget exists for.
-- ``"tanh"``: ``f_i tanh(s / epsilon)``; Coulomb's law as ``epsilon -> 0`` for every ``s != 0``.
-  Stiff (slope ``f_i / epsilon``) and it makes the body creep inside zero-force bands.
-- ``"stribeck"``: ``f_i tanh(s / epsilon) (1 + (P - 1) exp(-(s / (S epsilon))^2))`` with
-  ``P = toolkit.model.STRIBECK_PEAK`` (breakaway over Coulomb force, 1.5) and
-  ``S = toolkit.model.STRIBECK_SPEED`` (Stribeck speed in units of ``epsilon``, 3). Both
-  widths scale with ``epsilon``, so the law tends to Coulomb's ``f_i sign(s)`` pointwise for
-  ``s != 0`` as ``epsilon -> 0``; the hump makes the force non-monotone in slip.
-
-The solver classes behind ``scipy.integrate.solve_ivp`` (``RK45``, ``LSODA``, ``Radau``,
-``BDF``) are stepped here exactly as ``solve_ivp`` steps them, one segment between command or
-external-force switches at a time (a fresh solver per segment, as a careful user restarts
-``solve_ivp`` at a discontinuity). Stepping by hand keeps the trajectory when a budget stops
-the run: every right-hand-side evaluation is counted and checked against
-``budget.max_steps`` and, every few calls, the wall clock; when a budget is spent a private
-exception aborts the solver and the accepted steps so far are returned with status
-``MAX_STEPS`` or ``WALL_TIME``. Memory does not grow with the number of steps: only the
-requested ``t_eval`` times are stored, or (``t_eval=None``) a record of at most
-``budget.max_samples`` steps, decimated when full (:class:`StepRecord`).
+``simulate(plant, t_end, method="rk45" | "lsoda" | "radau" | "bdf", friction=..., ...)``: the
+state ``[V]`` (ideal motors) or ``[V, v_1, ..., v_n]`` (dynamic motors) under the plant's own
+right-hand side with the friction law of :mod:`toolkit.model.friction`, integrated piece by
+piece between switches. The laws, tolerances and budgets: docs/physics.md, section 11.
 """
 
 from __future__ import annotations

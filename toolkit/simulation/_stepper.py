@@ -1,31 +1,10 @@
-"""Continue an exact simulation from a state, one sample period at a time.
+"""Continue an exact simulation from a state, one sample period at a time: :func:`advance`.
 
-A closed loop (encoders, estimator, controller) samples the plant at a fixed rate and holds
-each command for one period. :func:`advance` takes the state at ``t0`` (body speed, contact
-speeds: with lagging motors these are states, not the commands), one command held on
-``[t0, t1)`` and a constant external force, and returns the state at ``t1`` together with the
-exact displacements over the step (what encoders count) and the events inside it.
-
-It runs the engine of :func:`toolkit.simulation.simulate` (``method="exact"``) itself, one
-piece of constant command: :func:`toolkit._compiled.core.advance_dynamic` with lagging or
-rate-limited motors, ``_ideal_piece`` otherwise. Stepping ``0 .. T`` under a command schedule
-therefore gives the trajectory of one ``simulate`` run of that schedule, to rounding. No
-restart cost: the state carries the engine's sliding mode, and nothing is built per call but
-the step's own closed forms (with ideal motors, the force landscape of the new command).
-
-Most steps of a closed loop hold no event: the body slides between two contact speeds, or
-stays stuck to one contact while its motor settles. A cheap certificate
-(:func:`toolkit._compiled.core.quiet_piece`: the range of every crossing function and of the
-stiction margin over the step, bounded from the engine's closed forms) recognises them, and
-such a step evaluates the engine's one closed-form segment directly, to rounding what the
-engine computes; when the certificate is unsure, the engine runs, in the same kernel call
-(:func:`toolkit._compiled.core.dynamic_run`): a step with lagging motors never leaves
-compiled code.
-
-Displacements are exact closed forms: the integral of each stored segment of ``V``
-(:func:`toolkit._compiled.core.displacement`) and of each contact's motor track
-(:func:`toolkit._compiled.core.motor_displacement`, the compiled form of
-:meth:`toolkit.model.motors.MotorPiece.displacement`).
+From the state at ``t0`` (:class:`ExactState`: body speed, contact speeds, the contact
+followed) under one command held on ``[t0, t1)`` and a constant external force, the state at
+``t1`` with the exact displacements and the events inside (:class:`ExactStep`): the engine of
+``simulate(method="exact")`` itself, so stepping a schedule gives one ``simulate`` run of it to
+rounding. A no-event certificate shortcuts quiet steps. Details: docs/physics.md, section 11.
 """
 
 from __future__ import annotations

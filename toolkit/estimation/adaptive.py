@@ -204,12 +204,12 @@ class WheelSpeedBank:
         if not which.any():
             return
         q = self.q
-        y = (np.asarray(wheels, dtype=float) + 0.5) * q
+        y = cell_centre(np.asarray(wheels, dtype=float), q)
         self._nominal = np.where(which, speeds, self._nominal)
         self._y = np.where(which, y, self._y)
         self._x[:, which, 0] = (y + np.sign(speeds) * 0.5 * self.play)[which]
         self._x[:, which, 1] = 0.0
-        self._P[:, which, 0] = q * q / 12.0
+        self._P[:, which, 0] = quantization_variance(q)
         self._P[:, which, 1] = 0.0
         self._P[:, which, 2] = np.broadcast_to(variance, (self.n,))[which]
 

@@ -35,7 +35,9 @@ _METHOD, _RTOL, _ATOL = "LSODA", 1e-10, 1e-12
 
 
 def smoothed_plant(plant: Plant, width: float) -> Any:
-    """The plant as its own smoothed model, a continuous-time ``control.nlsys``::
+    """The plant as its own smoothed model, a continuous-time ``control.nlsys``.
+
+    The model::
 
         m dV/dt  = sum_i f_i tanh((v_i - V) / w) + F - c V
         dv_i/dt  = (clip(u_i) - v_i) / tau          (v_i = clip(u_i) when tau = 0)

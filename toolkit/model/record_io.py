@@ -1,19 +1,9 @@
 """Encoder records as CSV files: what a 50 Hz logger on the hardware writes, and what a
 simulated run saves in the same form (:func:`write_record_csv`, :func:`read_record_csv`).
 
-The format (UTF-8, a byte-order mark allowed; at most :data:`MAX_RECORD_BYTES`)::
-
-    # active-contacts encoder record 1
-    # central_resolution = 0.000204     (optional, as are wheel_resolution, wheel_backlash
-    # initial_commands = 0.0 0.0 ...     and initial_commands: m per count, m, m/s)
-    time_s,central_count,wheel_count_1..n,command_1_m_s..n_m_s[,force_N][,truth_...][,sequence,...]
-    0.0,0,0,...,0.15,...
-
-Times in s, one encoder period apart; counts integers within int64; commands (m/s, held to the
-next row) within the motors' limits; ``force_N`` and the simulated truth (speed, position,
-contact speeds) optional, then a live run's columns (:class:`LiveColumns`). Written with 17
-significant digits: a record round-trips bit for bit. A bad file is refused with its line,
-column, rule and value."""
+The format (at most :data:`MAX_RECORD_BYTES`; written with 17 significant digits, so a record
+round-trips bit for bit) is in docs/guide/estimators.md. A bad file is refused with its
+line, column, rule and value."""
 
 from __future__ import annotations
 

@@ -1,26 +1,11 @@
 """Encoders as the hardware has them: integer counts of position sampled at a fixed rate.
 
-An encoder with ``counts_per_rev`` counts on a shaft whose contact point sits at ``radius``
-resolves ``2 pi radius / counts_per_rev`` metres; differencing counts at ``rate`` Hz gives
-speed in steps of that distance times the rate. At constant speed the quantization error
-is a deterministic sawtooth, not white noise (docs/physics.md section 5).
-
-The sensor law is written once, in :func:`measure`: positions in, integer counts out, one
-sample (a closed loop) or a whole record (offline) through the same code. It quantizes
-position, never speed (``floor(x / q)``), and models:
-
-- gearbox backlash of the wheels as the play (hysteresis) operator :func:`play` of width
-  ``b``: the encoder sits on the motor side and sees the contact position through the dead
-  band; the motor side is dragged along at the edge of the play and stands still for ``b``
-  of contact travel after each reversal;
-- missed counts (each count transition lost with probability ``p``, for good), additive
-  read noise in counts, and sample-time jitter (the read instants, not the stamps), all
-  drawn from a ``numpy.random.Generator`` passed in.
-
-:class:`Sensors` describes the suite (the carousel's: :meth:`CAROUSEL.sensors <toolkit.model.carousel.CarouselHardware.sensors>`);
-:class:`EncoderRecord` holds what it reports; :func:`record_simulation` turns an exact
-simulation into a record, with positions integrated exactly from its dense output.
-"""
+The sensor law is written once, in :func:`measure`: positions in, integer counts out
+(``floor(x / q)``), with gearbox backlash as the play operator :func:`play`, missed counts,
+read noise and sample-time jitter drawn from a generator passed in. :class:`Sensors`
+describes a suite, :class:`EncoderRecord` holds what it reports, and
+:func:`record_simulation` turns an exact simulation into a record. At constant speed the
+quantization error is a deterministic sawtooth (docs/physics.md section 5; docs/methods.md)."""
 
 from __future__ import annotations
 

@@ -50,21 +50,34 @@ nitpick_ignore_regex = [
     # private modules and names, which the docstrings may cite but the reference does not document
     (r"py:.*", r"(.*\.)?_[a-z]\w*(\..*)?"),
 ]
+#: References, in docstrings of modules other work is rewriting now (toolkit/estimation,
+#: toolkit/simulation, toolkit/scenes), to names the reference does not document: to be made
+#: literals or documented there, and this list emptied.
+nitpick_ignore = [
+    ("py:func", "nees_band"), ("py:data", "GROSS_NEES"), ("py:func", "warm_record"),
+    ("py:mod", "toolkit.model.motors"), ("py:class", "Period"), ("py:attr", "contact_variance"),
+    ("py:data", "toolkit.model.truth.DEFAULT_MISSED"), ("py:attr", "loglik"),
+    ("py:data", "toolkit.model.truth.MAX_MISSED_MEAN"), ("py:attr", "ContactSpeedTracker.reading_variance"),
+    ("py:meth", "warm_up"),
+    ("py:func", "loads_scene"), ("py:func", "request_shortfalls"), ("py:attr", "StudyResult.shortfalls"),
+    ("py:data", "METHODS"), ("py:attr", "central"), ("py:attr", "wheel"), ("py:attr", "status"),
+    ("py:attr", "message"), ("py:attr", "last"),
+]
 
 # -- API reference: autosummary pages of the public names; numpydoc renders the docstrings
 autosummary_generate = True
 autosummary_imported_members = True
 autodoc_typehints = "none"                    # numpydoc's parameter sections carry the types
-autodoc_default_options = {"members": False}
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 numpydoc_xref_param_type = False
 numpydoc_validation_checks: set[str] = set()
 
 # -- notebooks (myst-nb)
-myst_enable_extensions = ["dollarmath", "colon_fence", "deflist"]
+myst_enable_extensions = ["dollarmath", "colon_fence", "deflist", "substitution"]
 myst_heading_anchors = 3
-nb_execution_mode = "off"
+nb_execution_mode = "cache"
+nb_execution_cache_path = str(HERE / "_build" / ".jupyter_cache")
 nb_execution_timeout = 600
 nb_execution_raise_on_error = True
 

@@ -172,12 +172,12 @@ ISSUE_10_TESTS = {
         "tests/test_plots.py::test_simulation_shades_the_zero_force_band_and_keeps_the_status_out_of_the_title",
         "tests/test_plots.py::test_simulation_thins_many_contacts_and_notes_a_stopped_run",
         "tests/test_cli.py::test_curve_text_lists_every_step_even_narrow_ones"],
-    "6 README true on a fresh clone": [
+    "6 README and docs true on a fresh clone": [
         "tests/test_readme.py::test_every_link_stays_inside_the_repository",
         "tests/test_readme.py::test_force_speed_curves_notebook_shows_the_allocator_and_dt_to_1e_12",
-        "tests/test_readme.py::test_every_scene_key_is_in_the_readme_table",
-        "tests/test_readme.py::test_scene_keys_issue_10_found_undocumented_have_their_meaning_and_units",
-        "tests/test_readme.py::test_exit_codes_in_the_readme_are_the_clis"],
+        "tests/test_readme.py::test_every_scene_key_is_in_the_scene_table",
+        "tests/test_readme.py::test_scene_keys_once_found_undocumented_have_their_meaning_and_units",
+        "tests/test_readme.py::test_exit_codes_documented_are_the_clis"],
 }
 
 

@@ -190,7 +190,7 @@ _MASK64 = (1 << 64) - 1
 
 @dataclass(frozen=True)
 class RunKeys:
-    """The random numbers of runs ``start .. stop - 1`` of a sweep with root ``seed``.
+    """The random numbers of runs ``start`` to ``stop - 1`` of a sweep with root ``seed``.
 
     Counter-based (Philox4x64-10, the generator of ``numpy.random.Philox``): the numbers of
     run ``i``'s stream ``s`` are those of ``Philox(counter=(0, 0, i, s), key=(seed mod 2^64,
@@ -264,7 +264,7 @@ class RunKeys:
 
 
 def run_keys(seed: int, start: int, stop: int) -> RunKeys:
-    """The keys of runs ``start .. stop - 1`` of a sweep with root ``seed`` (checked)."""
+    """The keys of runs ``start`` to ``stop - 1`` of a sweep with root ``seed`` (checked)."""
     seed = as_int(seed, "seed", "run_keys", low=0)
     start = as_int(start, "start", "run_keys", low=0)
     stop = as_int(stop, "stop", "run_keys", low=start + 1)

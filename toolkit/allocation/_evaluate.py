@@ -55,7 +55,7 @@ def evaluate_errors(curve: ForceCurve, contacts: ContactSet, compliance: float =
     compliance : float, (m/s)/N
         Motor compliance ``k``: 0 (default) is the Coulomb staircase; ``k > 0`` the
         saturated linear law ``f_i clip((v_i - V) / (k f_i), -1, 1)`` of
-        :func:`compliant_force` (how ``allocate(..., compliance=k)`` measures its errors,
+        ``compliant_force`` (how ``allocate(..., compliance=k)`` measures its errors,
         so its results can be re-evaluated here).
     """
     if compliance != 0.0:

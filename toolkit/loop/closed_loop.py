@@ -332,7 +332,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     estimator : Estimator, optional
         Turns the counts into a speed estimate (needs ``sensors``); default with sensors: a
         :class:`~toolkit.estimation.KalmanEstimator` on the plant's nominal parameters
-        (:func:`nominal_model`).
+        (``nominal_model``).
     rate : float, Hz, optional
         Sample rate without sensors (default 50 Hz); with sensors their rate is used.
     v0 : float, m/s

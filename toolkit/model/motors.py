@@ -102,7 +102,7 @@ class Motors:
         return self.lag > 0 or math.isfinite(self.rate_limit)
 
     def clip(self, command: Any, xp: Any = np) -> Any:
-        """Commands clipped to :attr:`speed_limits`, m/s (numpy array or casadi expression)."""
+        """Commands clipped to ``speed_limits``, m/s (numpy array or casadi expression)."""
         low, high = self.speed_limits
         if xp is np or xp is None:
             return np.clip(command, low, high)
@@ -251,7 +251,7 @@ class MotorPiece:
 
     def speeds_at(self, s: float) -> np.ndarray:
         """Speeds at one offset ``s`` (s) from ``a``: shape (n,), m/s, fresh; the operations
-        of :meth:`speeds` on one time (without the work of a ramp phase when none is left)."""
+        of ``speeds`` on one time (without the work of a ramp phase when none is left)."""
         ramping = s < self.ramp_end
         if self.tau > 0:
             with np.errstate(over="ignore", invalid="ignore"):    # only on the ramp, masked
@@ -278,7 +278,7 @@ class MotorPiece:
 
     def displacement(self, s: float) -> np.ndarray:
         """Distance each contact travels over the offsets ``[0, s]`` from ``a``: the exact
-        integral of :meth:`speeds`, m, shape (n,).
+        integral of ``speeds``, m, shape (n,).
 
         ``start x + ramp x^2 / 2`` over the ramp (``x = min(s, ramp_end)``), then
         ``u y + (after - u) tau (1 - exp(-y / tau))`` over the remaining ``y = s - x``

@@ -1,7 +1,7 @@
 """Encoder records as CSV files: what a 50 Hz logger on the hardware writes, and what a
 simulated run saves in the same form (:func:`write_record_csv`, :func:`read_record_csv`).
 
-The format (at most :data:`MAX_RECORD_BYTES`; written with 17 significant digits, so a record
+The format (at most ``MAX_RECORD_BYTES``; written with 17 significant digits, so a record
 round-trips bit for bit) is in docs/guide/estimators.md. A bad file is refused with its
 line, column, rule and value."""
 
@@ -202,10 +202,10 @@ def _too_large(reader: _Reader, size: int) -> ParameterError:
 def read_record_csv(path: Any, sensors: Sensors | None = None, *, motors: Motors | None = None,
                     progress: bool = False) -> EncoderRecord:
     """Read an encoder record written by :func:`write_record_csv` or by a logger (a live run's
-    columns, if any, are checked and left out: :func:`read_live_record` returns them).
+    columns, if any, are checked and left out: ``read_live_record`` returns them).
 
     The file is read as a stream (in memory at once: the arrays returned and a block of rows), at
-    most :data:`MAX_RECORD_BYTES`; a UTF-8 byte-order mark (a spreadsheet's "CSV UTF-8") is
+    most ``MAX_RECORD_BYTES``; a UTF-8 byte-order mark (a spreadsheet's "CSV UTF-8") is
     accepted. Every value is checked as it is read: counts integers within int64, every
     number finite, times strictly increasing (with ``sensors``, one encoder period apart
     within half a period), commands within ``motors``' speed limits.

@@ -101,7 +101,7 @@ class Sensors:
         Standard deviation (``>= 0``) of an additive read noise, rounded to whole counts and
         not accumulated (e.g. a glitching line read once).
     jitter : float, s
-        Standard deviation (``>= 0``, at most :data:`MAX_JITTER_PERIODS` of a period) of the
+        Standard deviation (``>= 0``, at most ``MAX_JITTER_PERIODS`` of a period) of the
         sample-time jitter: the positions are read at ``t_k + d_k`` while the record stamps
         ``t_k``; ``d_k`` is a normal law truncated at a quarter period (so that samples keep
         their order), at least 4 standard deviations out: the truncation changes fewer than
@@ -177,7 +177,7 @@ class Sensors:
     @property
     def read_noise_variance(self) -> float:
         """Variance of the read noise the sensor law adds, counts^2: a normal draw of std
-        ``count_noise`` rounded to whole counts (:meth:`SensorReader.read`), so ``sum_k k^2
+        ``count_noise`` rounded to whole counts (``SensorReader.read``), so ``sum_k k^2
         P(k)`` with ``P(k)`` the normal's mass on ``[k - 1/2, k + 1/2)``: not ``count_noise^2``
         (0.325 against 0.25 at half a count)."""
         sigma = self.count_noise
@@ -674,7 +674,7 @@ def record_simulation(result: Any, plant: Any, sensors: Sensors, *,
     -----
     Positions are exact integrals of the dense output: the body position is
     ``integral_0^t V``, each contact's position ``integral_0^t v_i``, computed by
-    Gauss-Legendre (:data:`GAUSS_NODES` nodes) on every piece between consecutive read
+    Gauss-Legendre (``GAUSS_NODES`` nodes) on every piece between consecutive read
     instants, events, switches and motor ramp ends, on each of which the speeds are smooth
     (lines or exponentials); the error is far below 1e-12 m. Jitter moves the read instants,
     not the stamps.

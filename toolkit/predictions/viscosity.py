@@ -98,7 +98,7 @@ class ViscosityProblem:
     start : (float, float), optional
         Range of the start's position above the lowest contact, in spacings (negative: below
         the whole staircase, fitted apart). Default ``(0, 1)``, which needs at least
-        :data:`MIN_CONTACTS` contacts.
+        ``MIN_CONTACTS`` contacts.
     pre_roll, tail : float, s
         Carry time before the staircase (``>= 0``) and settled time after the predicted
         stop (``> 0``).
@@ -365,7 +365,7 @@ def _sweep(problem: ViscosityProblem, progress: bool, workers: int | None
            ) -> tuple[ViscosityDesign, dict[str, Any], dict[str, np.ndarray], list[str]]:
     """:func:`_sweep_rows` of every run: in the loop over ``workers`` processes (forked,
     :func:`toolkit._forked.fork_map`; default the idle cores, at most one per
-    :data:`RUNS_PER_PROCESS` runs), each an equal share of the
+    ``RUNS_PER_PROCESS`` runs), each an equal share of the
     runs; ideal in this process (its batch kernel already runs over the cores). Each run is
     computed whole by one process: the results do not depend on ``workers`` (tested)."""
     drawn = draw_design(problem)
@@ -464,7 +464,7 @@ class ViscosityFit:
     definition : str
         One of :data:`~toolkit.predictions._measure.TIME_CONSTANTS`.
     starts : str
-        ``"inside"`` or ``"outside"`` the spread (:data:`START_GROUPS`).
+        ``"inside"`` or ``"outside"`` the spread (``START_GROUPS``).
     n : int
         Contacts.
     mode : str
@@ -690,7 +690,7 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
         Show a progress bar (tqdm) on stderr.
     workers : int, optional
         Processes the in-loop runs are shared among (forked; ``>= 1``); default: the cores
-        the load average leaves idle, at most one per :data:`RUNS_PER_PROCESS` runs. The
+        the load average leaves idle, at most one per ``RUNS_PER_PROCESS`` runs. The
         results do not depend on it; ideal runs always run in one batch kernel over the cores.
 
     Returns

@@ -55,7 +55,7 @@ def deviation_bound(times: Any, body_speed: Any, contact_speeds: Any, forces: An
     between ``min(V_a, V_b) - A h`` and ``max(V_a, V_b) + A h``), widened by
     ``allowance``; ``d_delta`` is bounded there by its interval extension (``tanh`` and the
     sign patterns are monotone) and multiplied by ``h``. ``A`` is
-    :func:`~toolkit.schedule.construct.speed_rate` of ``F_tot + |F_ext|`` from the larger
+    ``speed_rate`` of ``F_tot + |F_ext|`` from the larger
     end speed plus ``allowance`` (drag included). Floating-point rounding of the sums is not
     accounted for (relative 1e-15).
 

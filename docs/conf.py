@@ -60,6 +60,8 @@ nitpick_ignore = [
     ("py:data", "toolkit.model.truth.MAX_MISSED_MEAN"), ("py:attr", "ContactSpeedTracker.reading_variance"),
     ("py:meth", "warm_up"),
     ("py:func", "loads_scene"), ("py:func", "request_shortfalls"), ("py:attr", "StudyResult.shortfalls"),
+    ("py:class", "EstimationObjects"), ("py:class", "ControlObjects"),
+    ("py:func", "toolkit.scenes.reference.render"),
     ("py:data", "METHODS"), ("py:attr", "central"), ("py:attr", "wheel"), ("py:attr", "status"),
     ("py:attr", "message"), ("py:attr", "last"),
 ]

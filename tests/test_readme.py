@@ -3,8 +3,7 @@
 - every link resolves to a file inside the repository (no link outside it, such as the
   team's physics brief in ``../shared``, and no mention of that file);
 - every notebook a page names exists and contains what the page says it shows;
-- every scene key that :mod:`toolkit.scenes.spec` accepts is in the scene table of the user
-  guide, in the row of its section, with its units and meaning;
+- every scene key is on the generated scene reference (tests/test_scene_reference.py);
 - the exit codes documented are those of :data:`toolkit.cli.EXIT_CODES`;
 - the validation page labels every model number and takes each one from the code.
 
@@ -21,8 +20,6 @@ import nbformat
 import pytest
 
 from toolkit.cli import EXIT_CODES
-from toolkit.scenes.spec import (BodySpec, ContactsSpec, ControlSpec, EstimationSpec, MotorsSpec, PlanarSpec,
-                                 ReportSpec, ScheduleSpec, SensorsSpec, SimulationSpec, SweepSpec, TargetSpec)
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -83,55 +80,6 @@ def test_force_speed_curves_notebook_shows_the_allocator_and_dt_to_1e_12() -> No
     assert "tk.allocate(tk.FrictionFraction(n / 5" in source
     assert "tk.simulate(plant" in source and "1e-12 * closed" in source
     assert "mass * 2 * v_max / (plant.contacts.total_force * n / 5)" in source
-
-
-def _table_row(section: str) -> str:
-    # the section's row of the scene-file table (and, for [estimation] and [control], the rows
-    # of their own key table)
-    rows = [line for line in _page("guide/scenes.md").splitlines() if line.startswith(f"| `[{section}]` |")]
-    assert rows, section
-    return "\n".join(rows)
-
-
-@pytest.mark.parametrize("section, keys", [
-    ("scene", ("name", "description")),
-    ("contacts", ContactsSpec.KEYS),
-    ("body", BodySpec.KEYS),
-    ("motors", MotorsSpec.KEYS),
-    ("sensors", SensorsSpec.KEYS),
-    ("target", TargetSpec.COMMON + tuple(k for keys in TargetSpec._KIND_KEYS.values() for k in keys)
-     + tuple(TargetSpec._KIND_KEYS)),
-    ("schedule", ("kind", "v0", "period", "epsilon", "horizon", "time_limit")
-     + tuple(k for keys in ScheduleSpec._KIND_KEYS.values() for k in keys) + tuple(ScheduleSpec._KIND_KEYS)),
-    ("simulation", SimulationSpec.KEYS),
-    ("report", ReportSpec.KEYS),
-    ("estimation", EstimationSpec.KEYS),
-    ("control", ControlSpec.COMMON),
-    ("sweep", SweepSpec.COMMON),
-    ("planar", PlanarSpec.COMMON + tuple(k for keys in PlanarSpec._BODY_KEYS.values() for k in keys)
-     + tuple(PlanarSpec._BODY_KEYS)),
-])
-def test_every_scene_key_is_in_the_scene_table(section: str, keys: tuple[str, ...]) -> None:
-    row = _table_row(section)
-    for key in keys:
-        assert re.search(rf"`{key}(`| =)", row), (section, key)
-
-
-def test_scene_keys_once_found_undocumented_have_their_meaning_and_units() -> None:
-    target = _table_row("target")
-    assert re.search(r"`margin`: a count of contacts, not a speed", target)
-    body = _table_row("body")
-    assert "`{times, values}`" in body and "one entry more than `times`" in body
-    motors = _table_row("motors")
-    assert "`clip` (bool" in motors
-    simulation = _table_row("simulation")
-    for key in ("wall_time", "max_steps", "max_event_rate"):
-        assert f"`{key}`" in simulation
-    # every unit-bearing key of [body] and [motors] states its unit beside it
-    for row, pairs in ((body, ("`mass` (kg)", "`damping` (N s/m)", "`contact_radius` (m)")),
-                       (motors, ("`lag` (s)", "`rate_limit` (m/s^2)", "`compliance` ((m/s)/N)"))):
-        for pair in pairs:
-            assert pair in row, pair
 
 
 def test_exit_codes_documented_are_the_clis() -> None:

@@ -509,10 +509,11 @@ def _seconds(value: float | None) -> str:
 
 
 def _bounded(name: str) -> Callable[[str], int]:
-    """An integer flag with the bounds of its scene key (:data:`~toolkit.scenes.limits.LIMITS`)
+    """An integer flag with the bound of the scene key it also sets (:func:`~toolkit.scenes.spec.flag_limit`)
     or of its own entry in :data:`~toolkit.scenes.limits.FLAGS`."""
-    from .scenes.limits import FLAGS, LIMITS
-    limit = FLAGS.get(name) or next(lim for lim in LIMITS.values() if lim.flag == name)
+    from .scenes.limits import FLAGS
+    from .scenes.spec import flag_limit
+    limit = FLAGS.get(name) or flag_limit(name)
 
     def convert(text: str) -> int:
         try:
@@ -552,7 +553,8 @@ def parser() -> argparse.ArgumentParser:
 
     The command-line reference of the documentation is generated from it.
     """
-    from .scenes.limits import FLAGS, LIMITS
+    from .scenes.limits import FLAGS
+    from .scenes.spec import ReportSpec
     parser = _Parser(
         prog="active-contacts",
         description="Design, simulate and analyse friction created by active contacts.",
@@ -582,8 +584,9 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", type=_folder, help=out_help)
     curve = command("curve", _cmd_curve, "print every step of the force-speed curve of the scene's "
                     "contacts (--json: also the sampled curve)")
-    curve.add_argument("--points", type=_bounded("curve --points"), default=801,
-                       help=f"samples in --json (default 801; {LIMITS['report.curve_points'].rule[3:]})")
+    points = ReportSpec.key("curve_points")
+    curve.add_argument("--points", type=_bounded("curve --points"), default=points.default,
+                       help=f"samples in --json (default {points.default}; {points.limit.rule[3:]})")
     command("allocate", _cmd_allocate, "allocate contact speeds that realize the scene's [target]",
             strict=True)
     schedule = command("schedule", _cmd_schedule,

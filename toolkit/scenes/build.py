@@ -1,30 +1,12 @@
 """Build toolkit objects from a parsed scene: the one place scene specs become objects.
 
 :func:`build_scene` checks every value and every rule between sections, then builds fresh
-objects (a study builds them once per run: estimators and controllers carry state):
+objects (a study builds them once per run: estimators and controllers carry state).
 
-==========================  ===============================================================
-``[contacts]``              :class:`~toolkit.model.ContactSet` (speeds within the motor
-                            limits, or clipped to them with ``[motors] clip = true``)
-``[motors]``                :class:`~toolkit.model.Motors`
-``[body]`` (+ motors,       :class:`~toolkit.model.Plant`, its external force and commands
-``simulation.commands``)    as :class:`~toolkit.model.PiecewiseConstant` signals
-``[sensors]``               :class:`~toolkit.model.Encoder` per declared encoder, and the
-                            :class:`~toolkit.model.Sensors` when both are declared
-``[target]``                the allocation target (:class:`~toolkit.ForceCurve`, ...)
-``[schedule]``              the schedule target (:class:`~toolkit.Braking` or
-                            :class:`~toolkit.SpeedTrajectory`)
-``simulation.options``      the options of :func:`toolkit.simulate`; a ``budget`` table
-                            becomes a :class:`~toolkit.simulation.Budget`
-``[estimation]``            :class:`EstimationObjects`
-``[control]``               :class:`ControlObjects`
-``[sweep]``                 the experiment (:mod:`toolkit.experiments`)
-==========================  ===============================================================
-
-The bounds of values no constructor takes are :data:`toolkit.scenes.limits.LIMITS`; every
-other value is checked by the constructor that takes it, and a constructor's
-:class:`~toolkit.errors.ParameterError` (whose ``parameter`` names what it refused) becomes
-a :class:`~toolkit.errors.SceneError` that keeps the rule and value and names the scene key::
+The bounds of values no constructor takes are declared with their keys
+(:mod:`toolkit.scenes.spec`); every other value is checked by the constructor that takes it,
+and a constructor's :class:`~toolkit.errors.ParameterError` becomes a
+:class:`~toolkit.errors.SceneError` that keeps the rule and value and names the scene key::
 
     In [motors]: The 'lag' parameter of Motors must be >= 0. Got -0.1 instead.
     (scene key 'motors.lag')
@@ -47,15 +29,14 @@ from ..model import ContactSet, Encoder, Motors, PiecewiseConstant, Plant, sampl
 from ..model.sensors import Sensors
 from ..schedule import Braking, SpeedTrajectory
 from ..simulation import Budget
-from .limits import BYTES_PER_NUMBER, LIMITS, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES, scene_value_error
-from .spec import Scene, ScheduleSpec
+from .keys import bounded_values
+from .limits import BYTES_PER_NUMBER, MAX_OUTPUT_BYTES, MAX_RUN_SAMPLES, scene_value_error
+from .spec import IDEAL_LOOP_RATE, LOOP_ESTIMATOR, NOISE_KEYS, SECTIONS, Scene, ScheduleSpec
 
 __all__ = ["Clip", "SceneObjects", "EstimationObjects", "ControlObjects", "build_scene", "schedule_target",
            "output_numbers", "sweep_scene_error", "planar_scene_error", "check_record_outputs"]
 
 _fail = scene_value_error
-#: Keys of ``[estimation]`` / ``[control]`` that set the encoders' noise.
-_NOISE_KEYS = ("missed_count_prob", "count_noise", "jitter")
 
 
 @dataclass(frozen=True)
@@ -260,6 +241,25 @@ def build_scene(scene: Scene) -> SceneObjects:
     Returns
     -------
     SceneObjects
+        What each section becomes:
+
+        ==========================  ===============================================================
+        ``[contacts]``              :class:`~toolkit.model.ContactSet` (speeds within the motor
+                                    limits, or clipped to them with ``[motors] clip = true``)
+        ``[motors]``                :class:`~toolkit.model.Motors`
+        ``[body]`` (+ motors,       :class:`~toolkit.model.Plant`, its external force and commands
+        ``simulation.commands``)    as :class:`~toolkit.model.PiecewiseConstant` signals
+        ``[sensors]``               :class:`~toolkit.model.Encoder` per declared encoder, and the
+                                    :class:`~toolkit.model.Sensors` when both are declared
+        ``[target]``                the allocation target (:class:`~toolkit.ForceCurve`, ...)
+        ``[schedule]``              the schedule target (:class:`~toolkit.Braking` or
+                                    :class:`~toolkit.SpeedTrajectory`)
+        ``simulation.options``      the options of :func:`toolkit.simulate`; a ``budget`` table
+                                    becomes a :class:`~toolkit.simulation.Budget`
+        ``[estimation]``            :class:`EstimationObjects`
+        ``[control]``               :class:`ControlObjects`
+        ``[sweep]``                 the experiment (:mod:`toolkit.experiments`)
+        ==========================  ===============================================================
 
     Raises
     ------
@@ -293,26 +293,10 @@ def build_scene(scene: Scene) -> SceneObjects:
 
 # -- bounds and rules between sections ---------------------------------------------------------
 
-def _declared(scene: Scene, key: str) -> list[tuple[str, Any]]:
-    """The values ``scene`` declares under ``key`` (``section.name``, ``[]`` for each entry)."""
-    section, _, rest = key.partition(".")
-    node: Any = getattr(scene, section)
-    if node is None:
-        return []
-    many = rest.endswith("[]")
-    path = rest[:-2] if many else rest
-    for part in path.split("."):
-        node = node.get(part) if isinstance(node, Mapping) else getattr(node, part, None)
-        if node is None:
-            return []
-    if many:
-        return [(f"{key[:-2]}[{i}]", value) for i, value in enumerate(node)]
-    return [(key, node)]
-
-
 def _check_limits(scene: Scene) -> None:
-    for key, limit in LIMITS.items():
-        for where, value in _declared(scene, key):
+    for section in SECTIONS:
+        spec = getattr(scene, section)
+        for where, limit, value in bounded_values(section, spec) if spec is not None else ():
             if not limit.holds(value):
                 raise _fail(where, limit.broken(value), value)
     contacts = scene.contacts
@@ -415,7 +399,7 @@ def _check_sensing(scene: Scene) -> None:
         if control.estimator is not None:
             raise _fail("control.estimator", "be left out of an ideal loop (control.sensors = false "
                         "or no [sensors]): the controller sees the true speed", control.estimator)
-        for key in _NOISE_KEYS:
+        for key in NOISE_KEYS:
             if getattr(control, key) != 0.0:
                 raise _fail(f"control.{key}", "be left out of an ideal loop (no sensors read)",
                             getattr(control, key))
@@ -618,12 +602,12 @@ def _target(scene: Scene) -> Any:
         if spec.method is not None:
             check_option(spec.method, "method", "allocate", METHODS)
         if spec.kind == "force_curve":
-            return ForceCurve(p["speeds"], p["forces"], p.get("weights"))
+            return ForceCurve(p["speeds"], p["forces"], spec.param("weights"))
         if spec.kind == "viscosity":
             return Viscosity(p["slope"], p["center"], p["band"])
         if spec.kind == "friction_fraction":
             return FrictionFraction(p["fraction"], p["band"])
-        return EquilibriumSpeed(p["speed"], p.get("margin", 0))
+        return EquilibriumSpeed(p["speed"], spec.param("margin"))
 
 
 def schedule_target(spec: ScheduleSpec | None) -> Braking | SpeedTrajectory | None:
@@ -632,7 +616,7 @@ def schedule_target(spec: ScheduleSpec | None) -> Braking | SpeedTrajectory | No
         return None
     with _scene_keys("schedule", _same_keys("schedule", tuple(spec.params))):
         if spec.kind == "braking":
-            return Braking(spec.params["speed"], spec.params.get("duration"))
+            return Braking(spec.params["speed"], spec.param("duration"))
         return SpeedTrajectory(spec.params["times"], spec.params["speeds"])
 
 
@@ -701,7 +685,7 @@ def _check_rate(rate: float, duration: float, keys: tuple[str, str], what: str) 
 
 
 def _noisy_sensors(objects: SceneObjects, section: str, spec: Any) -> Sensors:
-    noise = {key: getattr(spec, key) for key in _NOISE_KEYS}
+    noise = {key: getattr(spec, key) for key in NOISE_KEYS}
     with _scene_keys(section, _same_keys(section, tuple(noise))):
         return replace(objects.sensors, **noise)
 
@@ -792,11 +776,11 @@ def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
     p = spec.params
     with _scene_keys("control", _same_keys("control", tuple(p))):
         if spec.controller == "viscosity":
-            controller = controllers.VirtualViscosity(p["slope"], p.get("reference", 0.0), p.get("band"))
+            controller = controllers.VirtualViscosity(p["slope"], spec.param("reference"), spec.param("band"))
         elif spec.controller == "speed_hold":
-            controller = controllers.SpeedHold(p["reference"], p["slope"], p.get("kp", 0.5), p.get("ki", 5.0))
+            controller = controllers.SpeedHold(p["reference"], p["slope"], spec.param("kp"), spec.param("ki"))
         elif spec.controller == "friction_brake":
-            controller = controllers.FrictionBrake(p["fraction"], p.get("start", 0.0), p.get("hold"))
+            controller = controllers.FrictionBrake(p["fraction"], spec.param("start"), spec.param("hold"))
         else:
             controller = None
     reads = spec.sensors if spec.sensors is not None else scene.sensors is not None
@@ -805,10 +789,10 @@ def _control(scene: Scene, objects: SceneObjects) -> ControlObjects | None:
         sensors = _noisy_sensors(objects, "control", spec)
     truth, prior = _knowledge("control", spec, sensors)
     if reads:
-        estimator = _estimator(spec.estimator or "kalman", _model(plant, sensors), "control", prior)
+        estimator = _estimator(spec.estimator or LOOP_ESTIMATOR, _model(plant, sensors), "control", prior)
         rate, key = sensors.rate, "sensors.rate"
     else:
-        rate, key = (50.0 if spec.rate is None else spec.rate), "control.rate"
+        rate, key = (IDEAL_LOOP_RATE if spec.rate is None else spec.rate), "control.rate"
         if not rate > 0:
             raise _fail(key, "be > 0", rate)
     _check_rate(rate, spec.duration, (key, "control.duration"), "closed loop")

@@ -1,9 +1,8 @@
-"""The bounds of every scene value and command-line flag that no constructor checks: one table.
+"""Bounds of values that no constructor checks: :class:`Limit`, the scene's error template, the
+bounds of command-line flags without a scene key (:data:`FLAGS`) and the sizes of what a run writes.
 
-A scene key and the flag that overrides it (``report.curve_points`` and ``curve --points``,
-``sweep.runs`` and ``sweep --runs``, ...) share one :class:`Limit`, so the command line
-refuses what the scene file refuses, with the same rule. The sizes of what a run writes are
-bounded here too (:data:`MAX_OUTPUT_BYTES`), before any work starts.
+A scene key declares its own bound (:mod:`toolkit.scenes.spec`); the flag that sets the same
+value (``curve --points``, ``sweep --runs``) takes the key's, so both refuse with one rule.
 """
 
 from __future__ import annotations
@@ -15,8 +14,8 @@ from typing import Any
 from ..errors import SceneError
 from ..sweeps import MAX_RUNS
 
-__all__ = ["Limit", "LIMITS", "FLAGS", "MAX_SAMPLES", "MAX_RUN_SAMPLES", "MAX_OUTPUT_BYTES",
-           "BYTES_PER_NUMBER", "MAX_CURVE_POINTS", "MAX_TABLE_BYTES", "scene_value_error"]
+__all__ = ["Limit", "FLAGS", "POSITIVE", "NON_NEGATIVE", "SEED", "INDEX", "MAX_SAMPLES", "MAX_RUN_SAMPLES",
+           "MAX_OUTPUT_BYTES", "BYTES_PER_NUMBER", "MAX_CURVE_POINTS", "MAX_TABLE_BYTES", "scene_value_error"]
 
 #: Largest generated array a scene may ask for (random contacts, curve samples): 1e7.
 MAX_SAMPLES = 10_000_000
@@ -46,15 +45,12 @@ class Limit:
         ``low`` itself is refused (``> low``).
     integer : bool
         Only whole numbers (``bool`` refused).
-    flag : str or None
-        The command-line flag that sets the same value, e.g. ``"curve --points"``.
     """
 
     low: float | None = None
     high: float | None = None
     open: bool = False
     integer: bool = False
-    flag: str | None = None
 
     @property
     def rule(self) -> str:
@@ -97,58 +93,14 @@ def scene_value_error(key: str, rule: str, value: Any) -> SceneError:
     return SceneError(f"The {key!r} value in the scene must {rule}. Got {value!r} instead.")
 
 
-_POSITIVE = Limit(low=0.0, open=True)
-_NON_NEGATIVE = Limit(low=0.0)
-_SEED = Limit(low=0, integer=True)
-_INDEX = Limit(low=0, integer=True)
+#: The bounds most scene keys share (each key names its own in its declaration,
+#: :mod:`toolkit.scenes.spec`).
+POSITIVE = Limit(low=0.0, open=True)
+NON_NEGATIVE = Limit(low=0.0)
+SEED = Limit(low=0, integer=True)
+INDEX = Limit(low=0, integer=True)
 
-#: Every bounded scene key (``section.key``; ``[]`` marks each entry of a list).
-LIMITS: dict[str, Limit] = {
-    "contacts.random.n": Limit(low=1, high=MAX_SAMPLES, integer=True),
-    "contacts.random.seed": _SEED,
-    "body.inertia": _POSITIVE,
-    "body.contact_radius": _POSITIVE,
-    "motors.speed_limit": _POSITIVE,
-    "target.dt": _POSITIVE,
-    "target.time_limit": _POSITIVE,
-    "target.fixed[]": _INDEX,
-    "target.failed[]": _INDEX,
-    "target.liftable[]": _INDEX,
-    "schedule.period": _POSITIVE,
-    "schedule.epsilon": _POSITIVE,
-    "schedule.horizon": _POSITIVE,
-    "schedule.time_limit": _POSITIVE,
-    "simulation.t_end": _POSITIVE,
-    "estimation.duration": _POSITIVE,
-    "estimation.brake_time": _NON_NEGATIVE,
-    "estimation.spread": _NON_NEGATIVE,
-    "estimation.seed": _SEED,
-    "estimation.friction_spread": _NON_NEGATIVE,
-    "estimation.speed_std": _POSITIVE,
-    "control.duration": _POSITIVE,
-    "control.seed": _SEED,
-    "report.curve_points": Limit(low=2, high=MAX_CURVE_POINTS, integer=True, flag="curve --points"),
-    "sweep.runs": Limit(low=1, high=MAX_RUNS, integer=True, flag="sweep --runs"),
-    "sweep.seed": Limit(low=0, integer=True, flag="sweep --seed"),
-    "sweep.chunk_size": Limit(low=1, integer=True),
-    "planar.mass": _POSITIVE,
-    "planar.inertia": _POSITIVE,
-    "planar.radius": _POSITIVE,
-    "planar.inner_radius": _NON_NEGATIVE,
-    "planar.mu": _POSITIVE,
-    "planar.gravity": _POSITIVE,
-    "planar.t_end": _POSITIVE,
-    "planar.step": _POSITIVE,
-    "planar.epsilon": _POSITIVE,
-    # A disc's quadrature has about pi resolution^2 nodes: 1000 rings, 3e6 nodes.
-    "planar.resolution": Limit(low=1, high=1000, integer=True),
-    "planar.forces[]": _NON_NEGATIVE,
-    "planar.precision.steps[]": _POSITIVE,
-    "planar.precision.epsilons[]": _POSITIVE,
-    "planar.precision.resolutions[]": Limit(low=1, high=1000, integer=True),
-}
-
-#: Command-line flags with no scene key of their own, bounded like the keys above.
+#: Command-line flags with no scene key of their own, and their bounds.
 FLAGS: dict[str, Limit] = {
     "precision --repeats": Limit(low=1, high=1000, integer=True),
     "sweep --workers": Limit(low=1, high=1024, integer=True),

@@ -1,48 +1,12 @@
 """Run the stages a scene declares (numerics only: no files, no plots, no building).
 
-``run_study(scene)`` always computes the force-speed curve; it adds the encoder summary
-when the scene has ``[sensors]``, the allocation when it has ``[target]`` and the
-simulation when it has ``[simulation]``. A stage that is not declared is not run, and the
-packages only it needs are not imported. When a scene has both a target and a simulation,
-the simulation runs on the allocated contact speeds: the design is checked by simulating it.
-A ``[schedule]`` is designed and then simulated exactly under its own commands.
-
-Every object a stage needs (contacts, motors, plant, encoders, targets, estimators,
-controllers) comes from :func:`~toolkit.scenes.build.build_scene`, called once per run: each
-stage function takes those :class:`~toolkit.scenes.build.SceneObjects` (or a
-:class:`~toolkit.scenes.spec.Scene`, built then).
-
-A study that finishes may still miss what the scene asked for. Each miss is a
-:class:`Shortfall` (``StudyResult.shortfalls``), one kind per way of missing:
-
-=============  ===================================================================  ======
-stage          what                                                                 unit
-=============  ===================================================================  ======
-scene          speeds beyond the motor limits clipped (``[motors] clip = true``)   m/s
-allocation     a target that is not realizable, projected (distance to it)          N
-allocation     a target the contacts cannot reach (best achievable error)           N
-allocation     no allocation (infeasible, time limit, solver error)                 N
-schedule       a target beyond the speed limits (best achievable error)             m/s
-schedule       an unverified schedule (exact run left the prediction bound)         m/s
-schedule       a braking target not reached (final distance to it)                  m/s
-simulation     a run stopped before ``t_end`` (budget, Zeno, failure; time left)    s
-estimation     the recorded run stopped before its end (time not recorded)          s
-control        the closed loop stopped before ``duration`` (budget; time left)     s
-control        python-control's simulation of the loop differs from the toolkit's   m/s
-=============  ===================================================================  ======
-
-``[estimation]`` simulates its scenario exactly (the brake scenario's plant, or the scene's
-``[simulation]`` run), records it through the sensor law and runs every estimator over the
-record, scored against the truth (:func:`estimate_scene`). ``[control]`` runs
-:func:`toolkit.simulate_closed_loop` on the scene's plant (declared contacts at ``t = 0``)
-with the declared controller, sensors and estimator (:func:`control_scene`); with
-``cross_check = true`` the same loop is also simulated by python-control
-(:mod:`toolkit.loop.interop`) and compared sample by sample.
-
-The ones that can be known before any work (clipped speeds, a target that needs projection
-or lies beyond reach, a schedule target beyond the speed limits) are
-:func:`request_shortfalls`; ``run_study(scene, strict=True)`` refuses them with a
-:class:`~toolkit.errors.SceneError` instead.
+:func:`run_study` computes the force-speed curve and each declared stage (encoders, allocation,
+simulation, schedule, estimation, closed loop) on the objects
+:func:`~toolkit.scenes.build.build_scene` makes once per run; a stage not declared is not run
+and the packages only it needs are not imported. With a target and a simulation, the
+simulation runs on the allocated speeds; a schedule is designed, then simulated exactly. Each
+way a finished study misses its request is a :class:`Shortfall` (listed on :func:`run_study`);
+those known before any work are :func:`request_shortfalls`, refused with ``strict=True``.
 """
 
 from __future__ import annotations
@@ -53,13 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from .._compiled import warm
+from .._compiled import compile_seconds, warm
 from ..allocation import (AllocationResult, AllocationStatus, EquilibriumSpeed, FrictionFraction,
                          allocate, build_problem)
 from ..errors import ParameterError, SceneError
 from ..model import ContactSet, Plant, sample_count
 from .build import SceneObjects, build_scene
-from .spec import Scene
+from .spec import ReportSpec, Scene
 from ..schedule import Braking, ScheduleResult, ScheduleStatus, design_schedule
 from ..analysis.scenarios import grid_positions, record_world
 from ..model.truth import realize
@@ -174,8 +138,8 @@ class StudyResult:
     estimation: EstimationStudy | None = None
     control: ControlStudy | None = None
     plant: Plant | None = None
-    #: The one-time cost paid before the timed stages (s): kernels compiled, each timed call
-    #: run once first (:func:`toolkit._compiled.warm`); in no ``wall_time`` of the result.
+    #: Seconds spent compiling kernels during the study (numba's compile events: 0 when every
+    #: kernel came from the cache); in no ``wall_time`` of the result.
     compile_time: float = 0.0
 
     @property
@@ -708,13 +672,31 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
     Returns
     -------
     StudyResult
-        With :attr:`StudyResult.shortfalls`: every way the result misses the request.
+        With :attr:`StudyResult.shortfalls`: every way the result misses the request, one
+        :class:`Shortfall` kind per way of missing:
+
+        =============  =====================================================================  ======
+        stage          what                                                                   unit
+        =============  =====================================================================  ======
+        scene          speeds beyond the motor limits clipped (``[motors] clip = true``)      m/s
+        allocation     a target that is not realizable, projected (distance to it)            N
+        allocation     a target the contacts cannot reach (best achievable error)             N
+        allocation     no allocation (infeasible, time limit, solver error)                   N
+        schedule       a target beyond the speed limits (best achievable error)               m/s
+        schedule       an unverified schedule (exact run left the prediction bound)           m/s
+        schedule       a braking target not reached (final distance to it)                    m/s
+        simulation     a run stopped before ``t_end`` (budget, Zeno, failure; time left)      s
+        estimation     the recorded run stopped before its end (time not recorded)            s
+        control        the closed loop stopped before ``duration`` (budget; time left)        s
+        control        python-control's simulation of the loop differs from the toolkit's     m/s
+        =============  =====================================================================  ======
 
     Raises
     ------
     SceneError
         ``strict=True`` and the request falls short before any work.
     """
+    compiled_before = compile_seconds()
     objects = _built(scene)
     scene = objects.scene
     if scene.sweep is not None:
@@ -730,7 +712,7 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
         raise SceneError(f"--strict: {known[0]}" + (f" (and {len(known) - 1} more)" if len(known) > 1 else ""))
     contacts = objects.contacts
     found = [s for s in known if s.stage == "scene"]
-    points = scene.report.curve_points if scene.report is not None else 801
+    points = (scene.report or ReportSpec()).curve_points
     sensors = ({name: encoder.summary() for name, encoder in objects.encoders.items()}
                if scene.sensors is not None else None)
     allocation = None
@@ -743,26 +725,23 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
         schedule, check = design_scene_schedule(objects, contacts)
         found += schedule_shortfalls(objects, schedule, check)
     simulation = None
-    compile_time = 0.0
     if scene.simulation is not None:
         if scene.simulation.method == "exact":       # its wall time: of compiled kernels
-            compile_time += warm(lambda: _simulation(objects, contacts, 1e-3), "core")
+            warm(lambda: _simulation(objects, contacts, 1e-3), "core")
         simulation = _simulation(objects, contacts)
         found += simulation_shortfalls(scene, simulation)
     estimation = None
     if scene.estimation is not None:
         estimation = estimate_scene(objects, simulation)
         found += estimation_shortfalls(objects, estimation)
-        compile_time += estimation.compile_time
     loop = None
     if scene.control is not None:
         loop = control_scene(objects, schedule)
         found += control_shortfalls(objects, loop)
-        compile_time += loop.compile_time
     plant = objects.plant_on(contacts) if objects.plant is not None else None
     return StudyResult(scene, contacts, force_curve(contacts, points), sensors, allocation,
                        schedule, check, simulation, tuple(found), estimation, loop, plant,
-                       compile_time)
+                       compile_seconds() - compiled_before)
 
 
 # -- planar scenes ----------------------------------------------------------------------------------

@@ -3,6 +3,10 @@
 #   make test   creates or updates .venv, runs the whole test suite
 #   make test-min  creates or updates .venv-min with the tested minimum versions
 #                  (constraints/minimum.txt = the lower bounds in pyproject.toml), runs the suite
+#   make docs      adds the docs group to .venv, builds the site into docs/_build/html
+#                  (warnings are errors, every cross-reference checked)
+#   make bench-page  runs every benchmark and writes benchmarks/performance.txt (the site's
+#                  performance page includes it)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -11,7 +15,7 @@ MIN_VENV  := .venv-min
 MIN_BIN   := $(MIN_VENV)/bin
 MIN_STAMP := $(MIN_VENV)/.installed
 
-.PHONY: demo test test-quick test-min bench clean venv
+.PHONY: demo test test-quick test-min bench bench-page docs clean venv
 
 venv: $(STAMP)
 
@@ -54,5 +58,18 @@ test-min: $(MIN_STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m toolkit.bench all
 
+bench-page: $(STAMP)
+	$(BIN)/python -m toolkit.bench all > benchmarks/performance.txt.new
+	mv benchmarks/performance.txt.new benchmarks/performance.txt
+
+DOCS_STAMP := $(VENV)/.installed-docs
+$(DOCS_STAMP): $(STAMP) pyproject.toml
+	$(BIN)/python -m pip install --quiet -e ".[test,docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	rm -rf docs/generated docs/reference/generated
+	$(BIN)/python -m sphinx -b html -W --keep-going -n -q docs docs/_build/html
+
 clean:
-	rm -rf $(VENV) $(MIN_VENV) out .pytest_cache .hypothesis
+	rm -rf $(VENV) $(MIN_VENV) out .pytest_cache .hypothesis docs/_build docs/reference/generated

@@ -1,10 +1,13 @@
-"""Citations in the code point at documents and sections that exist."""
+"""Citations in the code point at documents and sections that exist; every code block of the
+README and the docs runs or is checked; module docstrings stay short; no history in the text."""
 
 from __future__ import annotations
 
 import re
 import subprocess
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The team's physics brief, which lives outside the repository (named in pieces: this file does not cite it).
@@ -110,3 +113,146 @@ def test_figure_and_equation_numbers_are_the_papers():
         seen += len(_REFERENCE.findall(" ".join(text.split())))
         assert not check_references(text), (name, check_references(text))
     assert seen >= 30                                     # the test reads the references it checks
+
+
+# -- the pages' code blocks: every one runs, or is checked against what it shows
+
+DOCS = ROOT / "docs"
+FENCE = re.compile(r"^```(\S*)[^\n]*\n(.*?)^```$", re.M | re.S)
+#: The languages a page's fenced block may have: python (doctests, run by pytest's
+#: --doctest-glob), console (commands, run below), text (a synopsis or a diagram, checked below
+#: where it shows commands), toml (a scene), and MyST directives ({toctree}, {literalinclude}, ...).
+LANGUAGES = {"python", "console", "text", "toml"}
+
+
+def _pages() -> list[Path]:
+    return [ROOT / "README.md"] + sorted(
+        p for p in DOCS.rglob("*.md")
+        if not {"_build", "generated", "notebooks"} & set(p.relative_to(DOCS).parts))
+
+
+def _blocks(language: str) -> list[tuple[Path, str]]:
+    return [(page, body) for page in _pages() for lang, body in FENCE.findall(page.read_text(encoding="utf-8"))
+            if lang == language]
+
+
+def test_every_code_block_is_a_doctest_or_a_command() -> None:
+    seen = 0
+    for page in _pages():
+        for lang, body in FENCE.findall(page.read_text(encoding="utf-8")):
+            seen += 1
+            assert lang in LANGUAGES or lang.startswith("{"), (page.name, lang)
+            if lang == "python":
+                # every line a prompt, a continuation, output or blank: pytest runs it all
+                assert body.lstrip().startswith(">>> "), (page.name, body[:60])
+            if lang == "console":
+                assert all(line.startswith("$ ") for line in body.splitlines() if line.strip()), page.name
+    assert seen >= 20
+
+
+def _commands() -> list[tuple[Path, str]]:
+    return [(page, line[2:]) for page, body in _blocks("console") for line in body.splitlines()
+            if line.startswith("$ ")]
+
+
+def _check_against_parser(words: list[str]) -> None:
+    from toolkit.cli import parser
+
+    sub = parser()._subparsers._group_actions[0].choices  # noqa: SLF001 (argparse keeps them here)
+    command = words[0]
+    assert command in sub, command
+    flags = {option for action in sub[command]._actions for option in action.option_strings}  # noqa: SLF001
+    for word in words[1:]:
+        if word.startswith("--"):
+            assert word.split("=")[0] in flags, (command, word)
+
+
+def test_every_command_shown_is_one_the_parser_accepts() -> None:
+    # console blocks and the README's synopsis: each subcommand exists and takes every flag shown
+    shown = [line.split() for _, line in _commands() if line.startswith("active-contacts ")]
+    synopsis = [line.split() for _, body in _blocks("text") for line in body.splitlines()
+                if line.startswith("active-contacts ")]
+    assert len(synopsis) >= 10 and len(shown) >= 5
+    for words in shown + synopsis:
+        _check_against_parser([w.strip("[]|") for w in words[1:]])
+    made = {line.split()[1] for _, line in _commands() if line.startswith("make ")}
+    targets = set(re.findall(r"^([\w-]+):", (ROOT / "Makefile").read_text(), flags=re.M))
+    assert made and made <= targets, made - targets
+
+
+#: Console commands that run for as long as they say (a live loop for 60 s of real time, on a
+#: serial port or the simulated device) or need hardware: checked against the parser above, and
+#: run by tests/test_live.py on short durations instead.
+NOT_RUN = ("active-contacts live ", "active-contacts estimate designs/speed_hold_live.toml --record out/sim")
+
+
+@pytest.mark.slow
+def test_console_blocks_run(tmp_path: Path) -> None:
+    # Each page's commands, in order, in a fresh folder holding the repository's designs: every
+    # one exits 0 (make lines are what CI itself runs: `make test`, `make docs`).
+    import os
+    import shlex
+    import sys
+
+    (tmp_path / "designs").symlink_to(ROOT / "designs")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    ran = 0
+    for page, line in _commands():
+        if not line.startswith("active-contacts ") or line.startswith(NOT_RUN):
+            continue
+        args = shlex.split(line)[1:]
+        done = subprocess.run([sys.executable, "-m", "toolkit.cli", *args], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, (page.name, line, done.stderr[-2000:])
+        ran += 1
+    assert ran >= 4
+
+
+# -- what module docstrings hold, and what no text of the package carries
+
+#: Modules whose docstring is still over 15 lines, each owned by work in progress elsewhere
+#: (the estimators, the compiled kernels and the simulation engines).
+#: The list is exact: a module that comes under the limit must leave it.
+LONG_DOCSTRINGS = {
+    "toolkit/_compiled/__init__.py", "toolkit/_compiled/core.py", "toolkit/_compiled/imm.py",
+    "toolkit/_compiled/lines.py",
+    "toolkit/estimation/__init__.py", "toolkit/estimation/_hold.py", "toolkit/estimation/_input.py",
+    "toolkit/estimation/adaptive.py", "toolkit/estimation/alpha_beta.py",
+    "toolkit/estimation/identification.py", "toolkit/estimation/kalman.py",
+    "toolkit/estimation/unscented.py", "toolkit/estimation/window.py",
+    "toolkit/simulation/__init__.py", "toolkit/simulation/_casadi.py", "toolkit/simulation/_exact.py",
+    "toolkit/simulation/_moreau.py", "toolkit/simulation/_sampled.py", "toolkit/simulation/_scipy.py",
+    "toolkit/simulation/_stepper.py",
+}
+MAX_DOCSTRING_LINES = 15
+
+
+def _docstring_lines(path: Path) -> int:
+    import ast
+
+    doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8")), clean=False)
+    return len(doc.strip().splitlines()) if doc else 0
+
+
+def test_module_docstrings_say_what_the_module_holds_in_15_lines() -> None:
+    sizes = {str(p.relative_to(ROOT)): _docstring_lines(p) for p in _tracked("toolkit") if p.suffix == ".py"}
+    assert len(sizes) > 50
+    over = {name for name, n in sizes.items() if n > MAX_DOCSTRING_LINES}
+    assert over - LONG_DOCSTRINGS == set(), {name: sizes[name] for name in over - LONG_DOCSTRINGS}
+    assert LONG_DOCSTRINGS - over == set(), f"now within {MAX_DOCSTRING_LINES} lines: leave the list"
+
+
+#: History lives in git: no load figure and no issue number in the package, the README, the
+#: docs or the notebooks.
+HISTORY = re.compile(r"load (average )?(of |about )?[0-9]|issues? [0-9]+", re.I)
+
+
+def test_no_load_figures_or_issue_numbers() -> None:
+    found = []
+    for path in _tracked("toolkit", "docs", "notebooks") + [ROOT / "README.md"]:
+        if path.suffix in (".py", ".md", ".toml", ".ipynb", ".rst", ".txt"):
+            for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                if HISTORY.search(line):
+                    found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()[:80]}")
+    assert found == []
+    assert HISTORY.search("the load average 2.8 on 2 cores") and HISTORY.search("issue 32, row 6")

@@ -142,7 +142,7 @@ def unlabelled_lines(text: str) -> list[str]:
 
 def unlabelled_cells(markdown: str) -> list[str]:
     """Cells of markdown tables with a "paper" column whose other numeric cells carry no
-    label (the README's paper table follows the same rule: tests/test_readme.py)."""
+    label (the validation page's table follows the same rule: tests/test_readme.py)."""
     missing, header = [], None
     for line in markdown.splitlines():
         if not line.lstrip().startswith("|"):

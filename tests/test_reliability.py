@@ -172,12 +172,12 @@ ISSUE_10_TESTS = {
         "tests/test_plots.py::test_simulation_shades_the_zero_force_band_and_keeps_the_status_out_of_the_title",
         "tests/test_plots.py::test_simulation_thins_many_contacts_and_notes_a_stopped_run",
         "tests/test_cli.py::test_curve_text_lists_every_step_even_narrow_ones"],
-    "6 README true on a fresh clone": [
+    "6 README and docs true on a fresh clone": [
         "tests/test_readme.py::test_every_link_stays_inside_the_repository",
         "tests/test_readme.py::test_force_speed_curves_notebook_shows_the_allocator_and_dt_to_1e_12",
         # every scene key documented with its unit and meaning: the generated reference page
         "tests/test_scene_reference.py::test_every_declared_key_kind_bound_and_rule_is_on_the_page_under_its_section",
-        "tests/test_readme.py::test_exit_codes_in_the_readme_are_the_clis"],
+        "tests/test_readme.py::test_exit_codes_documented_are_the_clis"],
 }
 
 

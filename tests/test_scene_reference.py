@@ -102,11 +102,11 @@ def _copy_with(tmp_path: Path, old: str, new: str) -> Path:
 _PROBE = """
 from toolkit.scenes.reference import render
 from toolkit.scenes.spec import loads_scene
-from toolkit.cli import _parser
+from toolkit.cli import parser
 row = render().split("* - ``curve_points``", 1)[1].split("* - ", 1)[0]
 print(row.split("\\n")[2].strip())
 print(loads_scene("[contacts]\\nspeeds = [0.1]\\n[report]\\n").report.curve_points)
-print(_parser().parse_args(["curve", "x.toml"]).points)
+print(parser().parse_args(["curve", "x.toml"]).points)
 """
 
 

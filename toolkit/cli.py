@@ -1,23 +1,11 @@
 """The ``active-contacts`` command line.
 
-One function per subcommand (``_cmd_<name>``), registered in :func:`_parser`; every exit
-code is in :data:`EXIT_CODES` (also shown by ``--help``):
-
-0. the request was met;
-1. ``stability``: a case of the suite failed;
-2. a user error (bad arguments, bad scene, unreadable scene file, unwritable output, or
-   with ``--strict`` a request known to fall short), one line on stderr, no traceback,
-   nothing written;
-3. the run finished but missed the request (a simulation stopped before ``t_end``, a
-   projected or unreachable allocation target, speeds clipped to the motor limits, an
-   unreachable, unverified or unchecked schedule, a budget's wall-clock guard that fired,
-   a stability case that guard left unjudged): the outputs are written and one line on
-   stderr says what was missed and by how much (``StudyResult.shortfalls``);
-130. interrupted; 141. the reader of the output stopped reading (``| head``): ended quietly.
-
+One function per subcommand (``_cmd_<name>``), registered in :func:`parser`; every exit
+code is in :data:`EXIT_CODES` (also shown by ``--help``): 0 met, 1 a stability case failed,
+2 a user error (one line on stderr, nothing written), 3 finished but missed the request
+(outputs written, one ``shortfall:`` line), 130 interrupted, 141 the reader stopped reading.
 ``--json`` prints machine-readable output on stdout. Outputs are all or nothing: the output
-folder is checked before any work and replaced as a whole at the end.
-"""
+folder is checked before any work and replaced as a whole at the end."""
 
 from __future__ import annotations
 
@@ -560,7 +548,11 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _parser() -> argparse.ArgumentParser:
+def parser() -> argparse.ArgumentParser:
+    """The command line's argument parser: every subcommand, its flags and the exit codes.
+
+    The command-line reference of the documentation is generated from it.
+    """
     from .scenes.limits import FLAGS
     from .scenes.spec import ReportSpec
     parser = _Parser(
@@ -672,9 +664,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     interrupted, previous = _interrupts_noted()
     try:
         with _interrupts_deferred(interrupted):
-            parser = _parser()
             try:
-                args = parser.parse_args(argv)
+                args = parser().parse_args(argv)
             except SystemExit as done:  # --help, --version or a usage error: printed already
                 raise SystemExit(_flushed(done.code)) from None
             from .errors import ToolkitError

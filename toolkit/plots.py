@@ -88,7 +88,7 @@ def _note(ax: Any, text: str, *, corner: str = "lower left", color: str = "0.25"
 
 
 def _thinned(n: int, order: np.ndarray | None = None) -> np.ndarray:
-    """Indices of at most :data:`MAX_LINES` of ``n`` lines, evenly spread over ``order``
+    """Indices of at most ``MAX_LINES`` of ``n`` lines, evenly spread over ``order``
     (e.g. the contacts sorted by speed, so the drawn ones span the whole set)."""
     order = np.arange(n) if order is None else np.asarray(order)
     if n <= MAX_LINES:
@@ -163,7 +163,7 @@ def plot_simulation(result: Any, ax: Any = None, *, plant: Any = None, title: st
 
     Notes
     -----
-    At most :data:`MAX_LINES` contact speeds are drawn, evenly spread over the contacts
+    At most ``MAX_LINES`` contact speeds are drawn, evenly spread over the contacts
     sorted by initial speed; a note on the axes says how many of how many. A run that did
     not succeed carries its status in a corner note (none for a successful run).
 
@@ -389,7 +389,7 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
     Parameters
     ----------
     curves : sequence of WorkPrecisionCurve
-        From :func:`toolkit.analysis.precision.work_precision_curves`. Runs a budget stopped
+        From ``toolkit.analysis.precision.work_precision_curves``. Runs a budget stopped
         (or that failed) are drawn with hollow markers, explained in the legend (their error
         covers only the part they simulated).
     ax : matplotlib Axes, optional
@@ -404,7 +404,7 @@ def plot_precision(curves: Any, ax: Any = None, *, reference_time: float | None 
     Notes
     -----
     A horizontal line marks ``error_level`` when given (the report passes
-    :data:`toolkit.analysis.precision.ERROR_LEVEL`, 1e-6 m/s, the level of the exact
+    ``toolkit.analysis.precision.ERROR_LEVEL``, 1e-6 m/s, the level of the exact
     method's speed-up). The legend sits beside the axes, so no label covers a point.
 
     Returns

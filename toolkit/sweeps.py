@@ -1,41 +1,11 @@
 """Sweeps: many seeded runs of one experiment, on this machine or on a Dask cluster.
 
-An *experiment* (for example :class:`toolkit.experiments.MedianLaw`) says what one run is:
-it draws its scene from the run's own random numbers, simulates it and returns one row of
-results. :func:`sweep` runs it ``runs`` times and gathers a tidy table (a pandas DataFrame,
-one row per run) and the experiment's summary statistics.
-
-Reproducibility
----------------
-Random numbers are counter-based (:class:`RunKeys`): draw ``p`` of stream ``s`` of run ``i``
-is the Philox4x64-10 block of the counter ``(p // 4 + 1, 0, i, s)`` under the key ``seed``
-(NumPy's ``Philox``, compiled: :func:`toolkit._compiled.core.philox_uniform`). A run's
-numbers depend only on ``seed``, ``i`` and the stream, never on how runs are grouped or
-where they execute, and a chunk draws all of its runs' numbers at once, without a Python
-step per run.
-
-Runs are grouped into chunks of ``chunk_size`` consecutive runs (a fixed function of
-``runs`` and ``chunk_size``, not of the number of workers). An experiment evaluates a whole
-chunk at once (vectorized over runs where it can: the exact batch path). The chunks then go:
-
-- ``scheduler=None`` (default): one after another in this process (the vectorized exact
-  batch path; no process pool unless asked for: on a shared 2-core machine a pool's start-up
-  of fresh interpreters costs more than it saves on the sweeps of the paper's sizes);
-- ``scheduler="processes"``: to a pool of worker processes (``workers``; fresh interpreters,
-  the "spawn" start method);
-- ``scheduler="tcp://host:port"`` or a ``distributed.Client``: to a Dask cluster
-  (``pip install active-contacts[dask]``).
-
-The chunks are the same in all three, so the tables are identical bit for bit.
-
-Sampling uncertainty: :func:`bootstrap` resamples a sweep's runs with replacement and
-recomputes a summary statistic (or any function of the table) on each resample: the spread
-a finite number of runs leaves on every number a sweep gives.
-
-Interrupts. Ctrl-C (``KeyboardInterrupt``) or SIGTERM during a sweep stops it: a process
-pool's workers are terminated and waited for, a Dask cluster's chunks cancelled, and the
-exception propagates (``active-contacts`` then exits 130 with nothing written).
-"""
+An experiment (for example :class:`toolkit.experiments.MedianLaw`) says what one run is;
+:func:`sweep` runs it ``runs`` times in chunks and gathers a table (one row per run) and the
+experiment's summary statistics; :func:`bootstrap` gives their sampling uncertainty. Random
+numbers are counter-based (:class:`RunKeys`), so the table is the same bit for bit in this
+process, on a process pool or on a Dask cluster. Reproducibility, scheduling and interrupts:
+docs/methods.md."""
 
 from __future__ import annotations
 
@@ -220,7 +190,7 @@ _MASK64 = (1 << 64) - 1
 
 @dataclass(frozen=True)
 class RunKeys:
-    """The random numbers of runs ``start .. stop - 1`` of a sweep with root ``seed``.
+    """The random numbers of runs ``start`` to ``stop - 1`` of a sweep with root ``seed``.
 
     Counter-based (Philox4x64-10, the generator of ``numpy.random.Philox``): the numbers of
     run ``i``'s stream ``s`` are those of ``Philox(counter=(0, 0, i, s), key=(seed mod 2^64,
@@ -294,7 +264,7 @@ class RunKeys:
 
 
 def run_keys(seed: int, start: int, stop: int) -> RunKeys:
-    """The keys of runs ``start .. stop - 1`` of a sweep with root ``seed`` (checked)."""
+    """The keys of runs ``start`` to ``stop - 1`` of a sweep with root ``seed`` (checked)."""
     seed = as_int(seed, "seed", "run_keys", low=0)
     start = as_int(start, "start", "run_keys", low=0)
     stop = as_int(stop, "stop", "run_keys", low=start + 1)

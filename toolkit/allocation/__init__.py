@@ -1,21 +1,12 @@
 """Allocation: choose contact speeds that realize a target force-speed behaviour.
 
-One verb, :func:`allocate`, over small frozen target objects
-(:class:`ForceCurve`, :class:`Viscosity`, :class:`FrictionFraction`,
-:class:`EquilibriumSpeed`). Methods, one module each:
-
-- ``"quantile"`` (:mod:`._quantile`): the exact construction for equal magnitudes sharing
-  one speed box (docs/physics.md section 8), with its closed-form optimal error.
-- ``"milp"`` (:mod:`._milp`): a mixed-integer program (cvxpy + HiGHS) for unequal
-  magnitudes, per-contact boxes, rate limits, fixed/failed and liftable contacts.
-- ``"casadi"`` (:mod:`._smooth`): compliant contacts and continuous distributions.
-
-Every result reports its error (evaluated on the achieved contacts), a lower bound on the
-best achievable error, and the gap. The bound is certified for ``"quantile"`` (closed form)
-and ``"milp"`` (HiGHS's dual bound less a stated tolerance allowance). ``"casadi"`` results
-are in general *uncertified*: their bound is 0 (for a patch under speed limits, the error
-those limits force), the gap is then the whole error, and the message says so.
-"""
+One verb, :func:`allocate`, over small frozen targets (:class:`ForceCurve`,
+:class:`Viscosity`, :class:`FrictionFraction`, :class:`EquilibriumSpeed`); one module per
+method: ``"quantile"`` (the exact construction for equal magnitudes), ``"milp"`` (cvxpy +
+HiGHS) and ``"casadi"`` (compliant contacts, continuous patches). Every result reports its
+error on the achieved contacts, a lower bound on the best achievable error and the gap
+(certified for ``"quantile"`` and ``"milp"``). The methods and their certificates:
+docs/methods.md."""
 
 from __future__ import annotations
 

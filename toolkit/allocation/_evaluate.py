@@ -1,20 +1,6 @@
-"""Exact error evaluation of an allocation (private).
-
-Error definitions (used for every result, whatever the method):
-
-- The target is the piecewise-linear curve through its samples; at a repeated speed it is
-  the interval between the two forces (a vertical step).
-- The achieved force is the staircase of the achieved :class:`~toolkit.model.ContactSet`;
-  at a contact speed it is the interval :meth:`~toolkit.model.ContactSet.force_bounds`.
-- ``error_sup = sup_V dist(target(V), achieved(V))`` over the band, with ``dist`` the
-  distance between the two intervals (0 when they meet).
-- ``error_l1 = integral |achieved - target| dV`` over the band.
-
-Both are computed exactly: between consecutive breakpoints (target samples and contact
-speeds) the achieved force is a constant ``c`` and the target is linear, so the sup over the
-open piece is ``max(|T(x0+) - c|, |T(x1-) - c|)`` and the integral of ``|T - c|`` is a
-trapezoid or two triangles. No sampling and no quadrature error.
-"""
+"""Exact error evaluation of an allocation (private): the sup and L1 distances between the
+target curve and the achieved staircase, computed piece by piece between breakpoints (no
+sampling, no quadrature error). The definitions: docs/methods.md."""
 
 from __future__ import annotations
 
@@ -69,7 +55,7 @@ def evaluate_errors(curve: ForceCurve, contacts: ContactSet, compliance: float =
     compliance : float, (m/s)/N
         Motor compliance ``k``: 0 (default) is the Coulomb staircase; ``k > 0`` the
         saturated linear law ``f_i clip((v_i - V) / (k f_i), -1, 1)`` of
-        :func:`compliant_force` (how ``allocate(..., compliance=k)`` measures its errors,
+        ``compliant_force`` (how ``allocate(..., compliance=k)`` measures its errors,
         so its results can be re-evaluated here).
     """
     if compliance != 0.0:

@@ -1,35 +1,9 @@
 """Mixed-integer allocation for unequal magnitudes (cvxpy + HiGHS) (private).
 
-Minimize the sup error ``t`` of the staircase against a realizable target ``T`` on its band
-``[lo, hi]``. Two exact formulations; both are relaxations of the true problem (every real
-allocation maps to a feasible point with the same ``t``), so HiGHS's dual bound is a
-certified lower bound on the best achievable error, and both are tight (the optimum is
-attained), so the error evaluated on the returned contacts closes the gap.
-
-**Partition** (every contact free in one shared box ``[L, H]``, target continuous on the
-effective band ``[a, b] = [lo, hi] ∩ [L, H]``, ``a < b``). Between two steps the staircase
-is flat and ``T`` is continuous, so a contact placed strictly inside the band costs at least
-its own magnitude (its step ``2 f_i`` splits between the two sides) and, conversely, steps
-of at most ``2 t`` can follow ``T`` within ``t`` by placing each step where ``T`` crosses the
-middle of the step. The problem reduces to classifying each contact as *below* (at ``a``),
-*inside*, *above* (at ``b``) or *lifted*::
-
-    t >= |T(a+) - P(a+)|,  t >= |T(b-) - P(b-)|,  t >= f_i [i inside],
-    P(a+) = F_act - 2 w(below),  P(b-) = 2 w(above) - F_act,
-
-plus the forced errors ``|T - F_act|`` on ``[lo, a)`` and ``|T + F_act|`` on ``(b, hi]``:
-the subset sums of the paper's friction fractions with ``4 n`` binaries.
-
-**Pairwise order** (general: per-contact boxes, rate limits, fixed/failed contacts, vertical
-steps in the target, equilibrium margins). With ``o_ij`` = "i is before j" binaries the force
-just below contact ``j`` is ``A_j- = F_act - 2 sum_i f_i [o_ij and i active]`` and just above
-``A_j+ = A_j- - 2 f_j``. Since ``T`` is non-increasing, the sup over a flat piece is attained
-at its ends, so the error is ``max_j max(A_j- - T(v_j-), T(v_j+) - A_j+)`` (with the band
-ends). ``T(v_j)`` is piecewise linear in the continuous ``v_j``: a disaggregated
-segment choice per contact makes it linear (one choice for the left limit, one for the right
-limit, so each picks the side of a vertical step that applies); outside the band the
-constraint is void (a plateau outside the band costs nothing) or uses the band's end value.
-"""
+Minimizes the sup error of the staircase against a realizable target with two exact
+formulations, a partition of the contacts (one shared speed box) and a pairwise order
+(per-contact boxes, rate limits, fixed or failed contacts, equilibrium margins); HiGHS's
+dual bound is a certified lower bound. The formulations: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The allocation problem and result shared by every allocation method (private).
 
-:func:`build_problem` turns the arguments of :func:`toolkit.allocation.allocate` into a
+``build_problem`` turns the arguments of :func:`toolkit.allocation.allocate` into a
 validated, frozen :class:`AllocationProblem`: per-contact speed boxes (motor limits
 intersected with what the rate limit allows from the current speeds), the masks of fixed,
 failed and liftable contacts, and the target reduced to a realizable
@@ -50,7 +50,7 @@ class AllocationStatus(enum.Enum):
 
 @dataclass(frozen=True, eq=False)
 class AllocationProblem:
-    """A validated allocation problem (built by :func:`build_problem`).
+    """A validated allocation problem (built by ``build_problem``).
 
     Attributes
     ----------

@@ -1,23 +1,6 @@
-"""The exact quantile construction for equal magnitudes (private).
-
-With ``N`` contacts of equal magnitude ``f`` (``F_tot = N f``) the achieved force is
-``F_tot (1 - 2 k(V)/N)`` with ``k(V)`` the number of contacts below ``V``. Write the
-target as a CDF, ``G(V) = (1 - F*(V)/F_tot) / 2`` (non-decreasing once the target is
-realizable). Then:
-
-- Lower bound: ``k(V)`` is an integer, so at every ``V`` the error is at least
-  ``(2 F_tot / N) * dist(N G(V), Z)``. Where the speed box ``[L, H]`` stops contacts from
-  going, the force is forced: ``+F_tot`` for ``V < L`` and ``-F_tot`` for ``V > H``.
-- Construction: put contact ``i`` at the ``(i - 1/2)/N`` quantile of ``G``
-  (``v_i = inf {V : G(V) >= (i - 1/2)/N}``, clamped to the box). Then
-  ``k(V) = floor(N G(V) + 1/2)``, the nearest integer, which meets the bound at every ``V``.
-
-So the construction is optimal and the bound is its error; for a continuous target that
-spans ``[-F_tot, F_tot]`` the error is exactly ``F_tot / N`` (``N G`` crosses a half
-integer). On a piecewise-linear ``G``, ``sup dist(N G, Z)`` over a segment is ``1/2`` if the
-segment's range holds a half integer and the larger endpoint distance otherwise. Cost:
-``O(N log k)`` for ``k`` target samples.
-"""
+"""The exact quantile construction for equal magnitudes (private): contact ``i`` at the
+``(i - 1/2)/N`` quantile of the target written as a CDF, optimal, with its closed-form
+error bound. The derivation: docs/methods.md and docs/physics.md section 8."""
 
 from __future__ import annotations
 

@@ -1,33 +1,9 @@
-"""Smooth allocation variants solved with casadi (ipopt): compliant contacts and patches.
+"""Smooth allocation variants solved with casadi (ipopt): compliant contacts and continuous
+patches (private).
 
-Two models whose force-speed law is continuous, so that a gradient method applies:
-
-- **Compliant contacts** (a motor torque-speed line of slope ``k``, (m/s)/N): contact ``i``
-  pushes with the saturated linear law ``f_i clip((v_i - V) / (k f_i), -1, 1)``. Each
-  contact is a ramp of slope ``-1/k`` and width ``2 k f_i`` centred on ``v_i``.
-- **A continuous patch** (:class:`~toolkit.model.ContactDistribution`): a uniform density
-  of contact speed on ``[a, b]`` gives ``F(V) = F_tot (1 - 2 clip((V - a)/(b - a), 0, 1))``;
-  the optimizer chooses ``a`` and ``b``.
-
-Both laws are piecewise linear in ``V`` but not differentiable in the decision variables at
-the saturation corners, so the optimizer works on a smooth surrogate of ``clip``,
-``0.5 (sqrt((x + 1)^2 + d^2) - sqrt((x - 1)^2 + d^2))`` (``d -> 0`` by continuation), and
-minimizes the squared error over dense samples of the target's band. The reported errors are
-then computed *exactly* on the true piecewise-linear law: the difference of two piecewise
-linear functions attains its sup at a breakpoint and its L1 norm is a sum of exact pieces.
-
-Certificates: for a patch confined to scalar ``speed_limits`` ``[L, H]`` the error forced
-outside the limits (:func:`~toolkit.allocation._evaluate.forced_error`) is a certified lower
-bound. Otherwise there is no closed form: ``bound`` is 0 (or the error itself when that is 0
-to rounding), ``gap = error_sup``, and the message says the result is uncertified.
-
-For compliant contacts the returned ``contacts`` is a :class:`~toolkit.model.ContactSet` of
-the chosen speeds and the magnitudes: the contacts to drive *with motors of that compliance*
-(``result.compliance``, also ``extra["compliance"]``). Its own Coulomb staircase is not what
-was optimized; re-evaluate with ``evaluate_errors(result.curve, result.contacts,
-compliance=result.compliance)`` or a :class:`~toolkit.model.Plant` with
-``Motors(compliance=k)``.
-"""
+Ipopt works on a smooth surrogate of the saturations; the reported errors are then computed
+exactly on the true piecewise-linear law. A bound is certified only for a patch within
+scalar speed limits; otherwise the result says it is uncertified. Details: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,22 +1,11 @@
 """Allocation targets: what force-speed behaviour the contacts should produce.
 
-Four frozen value objects, validated when built:
-
-- :class:`ForceCurve`: an arbitrary curve given by samples ``(V_k, F_k)``, linear between
-  samples; a repeated speed is a vertical step (the target is set-valued there).
-- :class:`Viscosity`: ``F(V) = -slope (V - center)`` over a band of speeds.
-- :class:`FrictionFraction`: ``F(V) = -fraction * F_tot`` over a band of sliding speeds
-  (the paper's ``mu / mu0 = fraction`` against forward sliding).
-- :class:`EquilibriumSpeed`: the body should settle at ``speed`` even if ``margin``
-  contacts fail.
-
-Every target becomes a :class:`ForceCurve` over its band with :meth:`to_curve`; errors are
-always measured against that curve (:mod:`toolkit.allocation._evaluate`).
-
-A target is only a request: it may ask for forces beyond ``+-F_tot``, an increasing curve
-or non-finite values. :func:`toolkit.allocation.allocate` projects such targets onto the
-realizable set (and reports the projection) or refuses them when ``strict=True``.
-"""
+Four frozen value objects, validated when built: :class:`ForceCurve` (samples, linear
+between them, a repeated speed a vertical step), :class:`Viscosity`,
+:class:`FrictionFraction` and :class:`EquilibriumSpeed`. Each becomes a :class:`ForceCurve`
+over its band (:meth:`to_curve`), against which errors are measured. A target is only a
+request: :func:`toolkit.allocation.allocate` projects an unrealizable one (and reports the
+projection) or refuses it with ``strict=True``."""
 
 from __future__ import annotations
 

@@ -1,16 +1,16 @@
 """Work-precision report: every simulation method against the exact one, error versus run time.
 
 :func:`precision_report` runs each method of :mod:`toolkit.simulation` over a range of
-tolerances, step sizes and smoothing widths (:func:`default_settings`) on one plant, measures
+tolerances, step sizes and smoothing widths (``default_settings``) on one plant, measures
 its error against the exact event-driven solution and its run time, and flags the failure
 modes that make plain integrators unfit for Coulomb contacts (see :class:`PrecisionRow` for the
-precise definitions). :func:`work_precision_curves` gives the data of the log-log plot (error
+precise definitions). ``work_precision_curves`` gives the data of the log-log plot (error
 against run time); :func:`exact_speedup` the speed ratio the acceptance criterion
 asks for. The reference scene, :func:`toolkit.model.carousel.carousel_startup_plant`, lives
 with the model.
 
 The exact method itself is checked against an independent solution computed in rational
-arithmetic (:func:`rational_trajectory`), so its error is measured, not assumed zero.
+arithmetic (``rational_trajectory``), so its error is measured, not assumed zero.
 
 Pure numerics: no files, no matplotlib.
 """
@@ -238,7 +238,7 @@ class PrecisionRow:
         ``max |V - V_exact|`` over the report's common evaluation times (up to where the run
         stopped): the exact event times together with 1001 uniform times on ``[0, t_end]``,
         which every method is asked for through ``t_eval`` (see :func:`precision_report`).
-        ``V_exact`` is :func:`rational_trajectory` when the plant is within what it supports,
+        ``V_exact`` is ``rational_trajectory`` when the plant is within what it supports,
         otherwise the exact method's dense output; the exact row itself is measured against
         the rational reference only (``nan`` when the plant is outside what it supports).
     final_error : float, m/s
@@ -247,7 +247,7 @@ class PrecisionRow:
         Minimum over the repeats of the run time of one call of ``simulate`` from scratch
         (the exact method's cache for the plant emptied before each call): after a first and a second
         (warm) call, each repeat times back-to-back calls for at least 20 ms
-        with :class:`timeit.Timer` (garbage collection off while timing, as ``timeit`` does)
+        with ``timeit.Timer`` (garbage collection off while timing, as ``timeit`` does)
         and divides; the repeats of all settings run round-robin. The minimum, as ``timeit``
         advises: a slower repeat measures other processes, not the method. A run that does
         not succeed is timed once; a first run of at least 0.2 s counts as one repeat and
@@ -283,8 +283,8 @@ class PrecisionRow:
         The smallest step of an adaptive solver (from the same untimed run as
         ``step_collapse``).
     options : tuple of (str, value) pairs
-        The setting's options (:attr:`MethodSetting.options`), for grouping the rows into
-        families (:func:`work_precision_curves`).
+        The setting's options (``MethodSetting.options``), for grouping the rows into
+        families (``work_precision_curves``).
     """
 
     method: str
@@ -575,7 +575,7 @@ def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: in
     """Run every method and setting on one plant and measure error against run time.
 
     The comparison is made on equal terms: every method, the exact one included, is asked
-    for the same output times (:func:`evaluation_times`: the exact event times, where the
+    for the same output times (``evaluation_times``: the exact event times, where the
     solution has its kinks, and 1001 uniform times) through ``t_eval``, each with its own way
     of producing them (dense output, interpolation between steps, an output grid); errors
     are measured at those times and the wall time is that of the same calls, so every method
@@ -589,13 +589,13 @@ def precision_report(plant: Plant, t_end: float, *, v0: float = 0.0, repeats: in
     repeats : int
         Timing repeats per successful run (the minimum is reported), ``>= 1``.
     settings : sequence of MethodSetting, optional
-        Default :func:`default_settings`. Include ``"exact"`` to time the exact method.
+        Default ``default_settings``. Include ``"exact"`` to time the exact method.
 
     Returns
     -------
     PrecisionReport
         One row per setting, in order. The reference of every error is
-        :func:`rational_trajectory` when the plant is within what it supports, else the
+        ``rational_trajectory`` when the plant is within what it supports, else the
         exact method's dense output.
 
     Raises
@@ -665,7 +665,7 @@ def precision_shortfalls(report: PrecisionReport, error: float = ERROR_LEVEL) ->
 
     - the exact method, measured against the independent rational solution, is itself within
       ``error`` (amount: its error minus ``error``); a plant outside what
-      :func:`rational_trajectory` supports has no independent reference (``max_error`` NaN),
+      ``rational_trajectory`` supports has no independent reference (``max_error`` NaN),
       which the report states and which is not a shortfall;
     - at least one reference method finishes with ``max_error <= error``, otherwise there is
       no ratio (amount: the closest finished reference's error minus ``error``, NaN when

@@ -110,7 +110,7 @@ def robustness_estimators(scenario: Any) -> dict[str, Any]:
 
 
 def _with_truth_told(scenario: BrakeScenario) -> dict[str, Any]:
-    """:func:`robustness_estimators`, then the default told the scenario's true world
+    """``robustness_estimators``, then the default told the scenario's true world
     (:func:`~toolkit.estimation.truth_told`, the reference; it alone reads the world)."""
     from ..estimation import truth_told
 
@@ -179,7 +179,7 @@ class RobustnessTable:
 
 def robustness_table(cases: Any = None, seeds: int = 10, t_end: float = 10.0,
                      progress: Callable[[str, int], None] | None = None) -> RobustnessTable:
-    """Score every estimator of :func:`robustness_estimators`, and beside them the default told
+    """Score every estimator of ``robustness_estimators``, and beside them the default told
     the truth (``truth_told``), on ``cases`` over ``seeds``.
 
     Parameters
@@ -265,11 +265,14 @@ class LoopRobustness:
 
 
 def loop_robustness(controller: str, spread: float = 0.2, seeds: int = 10, t_end: float = 10.0) -> LoopRobustness:
-    """The carousel (ten 1 N wheels, 5 kg, lag 7.5 ms, the paper's encoders) from rest under
+    """The closed loop on the carousel in worlds of unequal wheels, scored against central
+    differencing.
+
+    The carousel (ten 1 N wheels, 5 kg, lag 7.5 ms, the paper's encoders) from rest under
     ``controller`` (``"speed_hold"``: SpeedHold(0.2 m/s, 50 N s/m); ``"viscosity"``:
     VirtualViscosity(50 N s/m, 0.15 m/s)) reading the default estimator built from the
-    nominal scene, in worlds whose wheels' friction spreads by ``spread`` (seeds ``0 ..
-    seeds - 1``); the in-loop estimate's RMS after the first second against central
+    nominal scene, in worlds whose wheels' friction spreads by ``spread`` (seeds ``0`` to
+    ``seeds - 1``); the in-loop estimate's RMS after the first second against central
     differencing's on the same record."""
     from ..controllers import SpeedHold, VirtualViscosity
     from ..estimation import CentralDifference, EstimatorModel, KalmanEstimator
@@ -369,7 +372,7 @@ class RandomWorld:
         return len(self.forces)
 
     def sensors(self) -> Sensors:
-        """The declared encoders: the carousel's, coarser by the scales, read at :attr:`rate`."""
+        """The declared encoders: the carousel's, coarser by the scales, read at ``rate``."""
         return Sensors(Encoder(CAROUSEL.central_counts_per_rev * self.central_scale, CAROUSEL.contact_radius,
                                self.rate),
                        Encoder(CAROUSEL.wheel_counts_per_rev * self.wheel_scale, CAROUSEL.wheel_radius, self.rate,

@@ -1,24 +1,9 @@
 """Stability suite: stiff and extreme cases every simulation method must survive.
 
-:func:`stability_suite` runs a fixed list of cases (odd and even N, coincident speeds,
-N = 1 and N = 1e5, masses from 1e-6 to 1e6 kg, speeds exactly at the motor limits, smoothing
-widths down to 1e-9, horizons up to 1e4 s, a contact speed oscillating around the body's
-speed, mirrored sign conventions), each under its own step budget, and reports for each whether
-it finished, whether every value is finite, how many events it produced against a stated bound,
-and whether its final state is right (:class:`StabilityCase` says what "right" means). Verdicts
-come from step, event and sample budgets only: a wall-clock guard that fires leaves its case
-unjudged (never passed, never failed).
-
-The ``"horizon 1e9 s"`` cases (full suite only, not ``quick``) run every method (exact, moreau, rk45, lsoda, radau, bdf,
-casadi with CVODES and IDAS) to ``t_end = 1e9`` s under a step budget and a ``max_samples``
-memory cap: a method that can finish must end in the equilibrium set, one that cannot (a fixed
-step of 1 ms needs 1e12 steps; ``sign`` friction makes explicit solvers chatter) must return
-the step-budget status with a finite partial result, and either way the record
-must respect the memory cap (the subprocess test ``tests/test_memory_bounds.py`` runs the
-same horizon under a 1 GiB address-space limit).
-
-Pure numerics: no files, no matplotlib.
-"""
+:func:`stability_suite` runs a fixed list of cases, each under its own budgets, and reports
+per case whether it finished, stayed finite, produced a bounded number of events and ended
+right (:class:`StabilityCase` says what "right" means); a wall-clock guard that fires leaves
+its case unjudged. The cases: docs/guide/simulation.md and docs/methods.md. Pure numerics."""
 
 from __future__ import annotations
 

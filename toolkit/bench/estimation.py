@@ -1,22 +1,9 @@
-"""Estimation benchmark: the carousel's 10 s startup-then-brake run.
+"""Estimation benchmark: the carousel's 10 s startup-then-brake record through the paper's
+encoders, every estimator on it (errors, NEES and NIS against their bands, the filter's
+time), then the consistency over random phases of the count grids.
 
-Run ``python -m toolkit.bench estimation [--seed K] [--repeat R] [--phases P]``. Simulates
-the run exactly, records it through the sensor law (paper's encoders, 50 Hz), and runs every
-estimator on it. Prints the Kalman filter's wall time (best of ``R``), its real-time ratio,
-and the RMS / max speed error of each estimator, with the NEES and NIS means against their
-95 % bands. Exit status 0 when the issue-9 criteria hold: KF RMS <= FD RMS / 10, KF RMS
-<= 1.5 RTS RMS, KF NEES mean in its band, KF >= 1000x real time.
-
-Then the same run recorded with ``P`` random phases of the encoders' count grids (where
-the body and the wheels start within a count; ``grid_phase = 0 .. P-1``): the quantization
-sawtooth at constant speed is deterministic, so one record's NEES depends on its phase.
-Printed, for the filter as shipped (exact holds) and with the white measurement model
-throughout (``exact_holds=False``): the KF's NEES mean per record (median and 10-90 %
-range), per phase of the run, and the Monte Carlo test (Bar-Shalom): the mean over the
-``P`` records at each sample against the chi-square band of ``2 P`` degrees of freedom,
-with the fraction of samples inside it (95 % for a consistent filter). Information only:
-it does not set the exit status.
-"""
+Run ``python -m toolkit.bench estimation [--seed K] [--repeat R] [--phases P]``; what it
+prints and its exit status: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,25 +1,8 @@
-"""Closed-loop benchmark: 60 s at 50 Hz with the exact plant, sensors, Kalman filter and controller.
+"""Closed-loop benchmark: 60 s at 50 Hz with the exact plant, sensors, Kalman filter and
+controller, compiled against the same loop in Python around ``advance``.
 
-Run ``python -m toolkit.bench loop [--seconds T] [--repeat R]``. The carousel (ten equal
-1 N wheels, moving inertia 5 kg, motor lag 7.5 ms, speeds within +-0.35 m/s, the paper's
-encoders at 50 Hz) is started from rest under two controllers that read the Kalman
-filter's estimate: :class:`~toolkit.controllers.SpeedHold` (its PI law moves the commands
-at every sample, so every period is a motor transient for the plant and the filter) and
-:class:`~toolkit.controllers.VirtualViscosity` (one command, held). For each it prints the
-best of ``R`` wall times of :func:`toolkit.simulate_closed_loop` over ``T`` seconds in the
-compiled loop (:class:`toolkit.simulation.SampledRun`: plant steps, sensor law and control
-law in the kernel, the filter called per sample) and, as the baseline measured in the same
-run, in the Python loop around ``advance`` (``toolkit.loop.closed_loop._COMPILED = False``),
-their ratio and whether the two trajectories are the same; the split of one compiled run
-into the estimator (``observe`` + ``commanded``, timed) and the rest; and the same loop on the
-true speed (no sensors, no filter: one kernel call) against its Python loop.
-
-Targets: the whole loop under 0.5 s for 60 s; the loop itself under 0.1 s (the
-estimator's hot per-sample arithmetic in kernels: the wheels' lines, the period's bounds,
-the Kalman step). Exit status 1 when the 0.5 s target or the 0.1 s target of the loop
-without its estimator is missed (for 60 s); the whole loop's 0.1 s is printed, not enforced
-(timing on a shared machine).
-"""
+Run ``python -m toolkit.bench loop [--seconds T] [--repeat R]``; what it prints and its exit
+status: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,22 +1,7 @@
 """Prediction benchmark: the 490-run viscosity sweep on one core and on every core.
 
-Run ``python -m toolkit.bench predict [--runs N] [--repeat R] [--seed K]``. Pins the process
-to one core (``os.sched_setaffinity``, where available), then times
-:func:`toolkit.predictions.viscosity_check` on the carousel ideal and in the loop (motor
-lag, encoders, Kalman filter), ``R`` times each, and the friction-fraction check once per
-mode. Baseline in the same run: one fixed-length 10 s closed loop of the same kind (the
-length a sweep would need without stopping each run once it has settled), times the number
-of runs. Prints the minimum of the repeats, the closed-loop samples simulated, the cost per
-sample and the ratio to the baseline, with the sweep's R^2 and k_fit / k_predicted (both
-time-constant definitions).
-Then, on every core the process may use (the affinity restored), times the in-loop sweep
-as users run it, its runs shared among forked processes (``viscosity_check(workers=cores)``),
-against the serial per-run path (``workers=1``) in the same run, alternating, ``R`` times each,
-and checks that both give every run the same tau.
-Exit status 0 when the issue-9 target holds (the in-loop sweep of 490 runs in under 60 s on
-one core) and both ways of running the sweep give the same tau; the issue-21 line (under 1 s
-on every core) is printed, met or SHORT, not judged by the exit status (it depends on the load).
-"""
+Run ``python -m toolkit.bench predict [--runs N] [--repeat R] [--seed K]``; what it prints
+and its exit status: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,36 +1,9 @@
 """Robustness benchmark: the estimators when the world is not the scene.
 
-Run ``python -m toolkit.bench robustness [--seeds N] [--cases NAME ...] [--loop-seeds M]``.
-For every case of :data:`toolkit.analysis.robustness.ROBUSTNESS_CASES` (the nominal world,
-each departure alone, all at once) the carousel's brake record is simulated over ``N`` seeds
-(each its own grid phase) and every estimator runs on it told the nominal scene only: central
-differencing, FOAW (end- and best-fit), the alpha-beta tracker and the default ``kalman``.
-Printed per case and estimator, medians over the seeds: RMS speed error overall and per phase
-(startup, cruise, brake, braked), the share of samples whose NEES lies in its 95 % chi-square(2)
-interval, the share above 100 and the largest NEES, and wall time per sample; the missed-count rate the default reported its position
-under (told, or identified online); then the robustness lines (met / SHORT) per case.
-
-Then the costs, with the kernels compiled beforehand (``KalmanEstimator.warm_up``): the
-default on the shipped scene's record (its real-time ratio, target >= 1000x; best of 20), and
-the adaptive filter stepped over each mismatch record with every adaptive part active (us
-per 50 Hz sample, best of 3 per record, median over the ``N`` seeds per case, as the other
-lines, with the seeds' range; target <= 100 in every case, the line held against the largest);
-and the closed
-loops on 20 % unequal wheels (speed hold, virtual viscosity: the in-loop estimate's RMS after
-the first second against central differencing's, target >= 10x, median over ``M`` seeds).
-The load average is printed beside the timings (the machine may be shared). Exit status 0
-when every line is met.
-
-With ``--random N [--seed S]`` it runs ``N`` worlds drawn at random instead
-(:func:`toolkit.analysis.robustness.draw_world`, worlds ``S/0 .. S/N-1``): per world what was
-drawn, then per estimator (the baselines, the default ``kalman``, ``truth_told``: the default
-told the true world) the RMS overall and per phase, the NEES shares (in the 95 % band, above
-100) and the largest NEES, wall time per sample, the ratio to the best baseline and the lines
-of :data:`~toolkit.analysis.robustness.WORLD_LINES` met; at the end the share of worlds
-meeting each line, the worst worlds and the default's median cost per sample.
-``--write-scenes DIR`` also writes each world as a scene file (``estimate`` gives the same
-numbers). Exit status 0 when every line holds on its share of the worlds.
-"""
+Run ``python -m toolkit.bench robustness [--seeds N] [--cases NAME ...] [--loop-seeds M]``
+(the fixed cases of :data:`toolkit.analysis.robustness.ROBUSTNESS_CASES`), or
+``--random N [--seed S] [--write-scenes DIR]`` (worlds drawn at random). What it prints and
+its exit status: docs/methods.md."""
 
 from __future__ import annotations
 

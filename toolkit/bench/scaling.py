@@ -1,25 +1,7 @@
-"""Cost against size: the README's table of what a run costs as contacts, horizon, runs and
-closed-loop length grow.
+"""Cost against size: what one call costs as contacts, horizon, runs and closed-loop length
+grow (each row the best of three calls, with its cost per unit of size).
 
-Run ``python -m toolkit.bench scaling [--quick]``. After the kernels are compiled or loaded
-(printed, not timed), each row is the best of three wall times of one call, and its cost per
-unit of size (per contact, per simulated second, per run, per sample) with the ratio of that
-cost to the row's smallest size (1.0: linear in the size):
-
-- contacts ``N`` = 10 .. 1e5, exact method, ideal motors: a body from rest on ``N`` contacts
-  (speeds uniform in +-0.35 m/s, ``F_tot / m`` = 2 m/s^2) for 5 s (``simulate``);
-- contacts ``N`` = 10 .. 1e4, lagging motors (7.5 ms) and one command switch at 1 s: the
-  dynamic-motor engine (``simulate``);
-- horizon ``T`` = 1 .. 1000 s: the carousel (10 contacts, lag 7.5 ms) under new commands at
-  50 Hz (a random walk), one ``simulate`` call over ``50 T`` pieces;
-- runs ``R`` = 1 .. 1e6: the median-law sweep (``toolkit.sweep(MedianLaw(), R)``: 10 contacts,
-  20 s each, the table included);
-- closed-loop length ``L`` = 1 .. 600 s at 50 Hz (the carousel, lag 7.5 ms,
-  ``VirtualViscosity``): on the true speed (one kernel call), and with the encoders and the
-  Kalman filter (``simulate_closed_loop``).
-
-``--quick`` keeps the two smallest sizes of each row (for the tests).
-"""
+Run ``python -m toolkit.bench scaling [--quick]``; the rows: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,24 +1,8 @@
-"""Start-up benchmark: what compiled kernels cost a fresh process, and the CLI before and after.
+"""Start-up benchmark: what compiled kernels cost a fresh process, and the command line
+against a baseline tree before the compiled core.
 
-Run ``python -m toolkit.bench startup [--runs R] [--baseline PATH | --base-commit REV]``
-from the repository root. Every figure is the minimum over ``R`` fresh processes (the
-machine may be shared: the load average is printed), measured in this run:
-
-- first call in a fresh process with the kernels compiled at once
-  (``ACTIVE_CONTACTS_COMPILE=eager``): ``simulate`` of the carousel startup with 1004 sample
-  times, and :func:`toolkit.simulation.warm_up` (every kernel the toolkit runs), with a cold
-  numba cache (an empty ``NUMBA_CACHE_DIR``: numba compiles) and a warm one (the same
-  directory afterwards: numba loads machine code);
-- the same first ``simulate`` call without that switch (the default: kernels run as Python
-  until a process has done enough work to pay for compiling, see
-  :data:`toolkit._compiled.COMPILE_AFTER`);
-- ``python -m toolkit.cli run designs/carousel.toml`` (what ``active-contacts run`` runs) in
-  this tree, by default and with the kernels compiled from a warm cache, against the same
-  command in a baseline tree (``--baseline``: a checkout of the toolkit before the compiled
-  core, by default a temporary ``git worktree`` of ``--base-commit``, 8ca862c). Runs of the
-  trees alternate, so a burst of load hits both. Exit status 0 when the default CLI run is
-  no slower than the baseline (within 3 %: the noise of a shared machine).
-"""
+Run ``python -m toolkit.bench startup [--runs R] [--baseline PATH | --base-commit REV]`` from
+the repository root; what it measures and its exit status: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,22 +1,7 @@
-"""Exact stepper benchmark: the cost of one sample period of a closed loop.
+"""Exact stepper benchmark: the cost of one sample period of a closed loop (``advance``), and of
+a step with six motor-lag crossings, compiled against the same source run as Python.
 
-Run ``python -m toolkit.bench stepper [--steps S] [--seed K]``. On the carousel (11 contacts,
-motor lag 0.0075 s, speed limits +-0.35 m/s) it steps ``S`` periods of 20 ms (50 Hz) with
-:func:`toolkit.simulation.advance`, the command of each period drawn near the previous one
-(a random walk of 0.02 m/s per period, clipped to the limits, as a controller's would be),
-and prints the time per step (the best of ``--repeat`` passes; target: <= 15 us
-per step; exit status 1 when missed) and its ratio against running ``simulate`` from scratch over each period (a new
-plant holding that period's command, started from the same state). It also prints how many
-steps took the certified no-event shortcut of ``advance`` and the time per step of the full
-engine on every step (the shortcut off), measured in the same run.
-
-Last, a step with events for the dynamic-motor engine (:func:`lag_transient`: ten contacts
-with a 7.5 ms lag braked under a cruising body, six crossings within 1.6 ms): the time per
-``advance`` call with the compiled kernels (the whole engine,
-:func:`toolkit._compiled.core.advance_dynamic`), and its ratio against the same call with the
-same source run as Python (``NUMBA_DISABLE_JIT=1``, what a process runs before it compiles),
-measured in a subprocess of the same run.
-"""
+Run ``python -m toolkit.bench stepper [--steps S] [--seed K]``; details: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,26 +1,8 @@
-"""Sweep benchmark: the median-law sweep of issues 12 and 21 on this machine and on Dask.
+"""Sweep benchmark: the median-law sweep in one process, from the command line, and
+optionally on a process pool or a Dask cluster, against single runs measured in the same run.
 
-Run ``python -m toolkit.bench sweep [--runs R] [--loop L] [--seed K] [--dask] [--processes]``.
-Times the median-law sweep (``toolkit.sweep(MedianLaw(), R)``: 10 random speeds per run, from
-rest, 20 s each, the exact batch path with the settled check read from the same run; target
-(1e5 runs under 0.5 s) after its one-time compile (printed apart), and, as
-baselines measured in the same run:
-
-- the first ``L`` runs one by one through ``simulate(..., method="exact")`` (extrapolated per
-  run; checks that they give the sweep's speeds to 1e-12 relative);
-- the sweep's random draws one run at a time (a ``numpy.random.Generator`` per run on the
-  run's Philox stream, the same numbers: what per-run seeding costs) against the chunk's one
-  compiled call;
-- the settled check as a second batch simulation to half the horizon against the speed read
-  from the same run (``simulate_batch(t_probe=...)``).
-
-Then ``active-contacts sweep designs/median_law.toml --runs R`` as a user runs it, in a fresh
-process (process start, imports and kernel loading included; target: under 3 s for 1e5 runs).
-With ``--dask``, also runs the same sweep on a 2-worker ``distributed.LocalCluster`` and checks
-that its table equals the local one bit for bit. With ``--processes``, also runs it on a
-2-worker process pool (fresh interpreters, start-up included) and prints the pool's time over
-the local one. Exit status 0 when the targets are met (for 1e5 runs) and every check holds.
-"""
+Run ``python -m toolkit.bench sweep [--runs R] [--loop L] [--seed K] [--dask] [--processes]``;
+what it prints and its exit status: docs/methods.md."""
 
 from __future__ import annotations
 

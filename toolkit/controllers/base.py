@@ -1,20 +1,15 @@
 """The controller interface: a law from the speed estimate to contact-speed commands.
 
 A controller is a frozen settings object; :meth:`Controller.bind` prepares it for one plant
-and sample period (allocations solved once there) and returns a :class:`ControlLaw`, whose
-two pure functions a closed loop calls once per sample::
+and sample period and returns a :class:`ControlLaw`, whose two pure functions a closed loop
+calls once per sample::
 
     action = law.output(t, z, estimate)     # commands (n,) m/s and an outside force (N)
     z = law.update(t, z, estimate)          # the controller's own state, shape (law.n_states,)
 
-Pure functions of an explicit state make the same law usable in the toolkit's closed loop
-and as a discrete-time ``control.NonlinearIOSystem`` (:mod:`toolkit.loop.interop`).
-
-A law whose arithmetic the compiled loop can run also offers it as data:
-``law.sampled()`` returns a :class:`toolkit.simulation.SampledLaw` (the same operations, in
-the kernel; None when it has none), and :func:`toolkit.simulate_closed_loop` then runs the law
-in the kernel instead of calling ``output`` and ``update`` per sample.
-"""
+The same law runs in the toolkit's loop, as a ``control.NonlinearIOSystem``
+(:mod:`toolkit.loop.interop`), and in the compiled loop when ``law.sampled()`` gives its
+arithmetic as a :class:`toolkit.simulation.SampledLaw`."""
 
 from __future__ import annotations
 

@@ -1,20 +1,9 @@
 """Mean against median (the paper's Fig. 3c): hold one, vary the other, watch the speed.
 
-Each run builds ``n = 2 h`` speeds (``h`` below and ``h`` above a middle pair ``m +- g``;
-``numpy.median`` is ``m``): ``held = "mean"`` draws the median ``m`` uniformly in
-``[-median_range, median_range]`` and rescales the outer speeds so that the mean stays at
-``level``; ``held = "median"`` keeps ``m = level`` and draws the outer speeds freely, so the
-mean varies. The body starts from rest and settles (exact batch path).
-
-Ideal model (closed form, equal loads, from rest): the body stops at ``clip(0, m - g,
-m + g)``, the near edge of the zero-force band, whatever the mean: with the median held the
-speed is one number for every run; with the mean held it follows the median.
-
-Non-ideality: ``friction_spread`` (relative std of each wheel's load,
-:func:`toolkit.model.unequal_loads`; one carousel for every run with ``wheel_seed``, as in
-the paper). The equilibrium is then the weighted median, and the body stops at
-``clip(0, lo, hi)`` of the weighted equilibrium set.
-"""
+Each run builds ``n = 2 h`` speeds around a middle pair, holding either the mean or the
+median, and lets the body settle from rest (exact batch path); with unequal wheels
+(``friction_spread``, ``wheel_seed``) the equilibrium is the weighted median. The run's
+construction and the ideal model's closed form: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,41 +1,10 @@
 """The median law (the paper's Fig. 3b): steady speed against the median of random speeds.
 
 Each run draws ``n`` contact speeds uniformly in ``[-v_max, v_max]``, starts the body from
-rest and lets it settle; the row holds the numpy median of the commanded speeds, the
-speed the body settles at and their ratio. Over many runs the paper fits
-``V = slope * median`` through the origin and finds ``slope = 1.065 +- 0.01`` (660 runs).
-
-The ideal model (equal friction, ideal motors, no drag) gives a slope below 1 for even
-``n``: from rest the body stops at the edge of the zero-force band ``[v_(n/2),
-v_(n/2+1)]`` that it reaches first, ``V = clip(0, v_(n/2), v_(n/2+1))``, not at the band's
-midpoint that ``numpy.median`` returns (docs/physics.md section 6); with odd ``n`` the slope is 1.
-
-Non-idealities (each a physical parameter, 0 = ideal)
------------------------------------------------------
-friction_spread : relative std of each contact's friction magnitude (lognormal, mean kept):
-    unequal wheels. Moves the equilibrium to the weighted median. With ``wheel_seed`` the
-    loads are drawn once from that seed (one carousel, its wheels in every run, as in the
-    paper's 660 runs); without, they are drawn anew in every run (a Monte Carlo over
-    carousels).
-damping : bearing drag ``c``, N s/m: the body settles where ``F(V) = c V``.
-wheel_radius_bias, wheel_radius_std : relative error of the wheels' radius, common to all
-    wheels (calibration, tyre compression) and per wheel (manufacturing): a wheel commanded
-    to ``v_i`` runs at ``v_i (1 + bias + std z_i)``; ``std < 0.5`` (a wheel two spreads short
-    still runs forwards).
-contact_radius_error : relative error of the contact radius ``L`` the central encoder's
-    angle is converted with: the reported speed is ``V / (1 + error)`` (``L_true = L (1 +
-    error)``).
-compliance : motor compliance ``k``, (m/s)/N: a loaded motor droops by ``k`` times its
-    contact force (the torque-speed line). The paper's 4.6 % speed rise on release does not
-    determine ``k`` in this model: a sliding wheel carries ``f_i`` whether the body is held
-    or not, so on release only motors whose slip reverses change speed
-    (:meth:`MedianLaw.release_rise`); :data:`toolkit.PARAMETERS` ``compliance`` holds the
-    assumed value of that order and its origin. Needs the single-run exact engine (the batch path has no compliance), about
-    0.2 ms per run.
-
-Everything but ``compliance`` runs on the vectorized exact batch path
-(:func:`toolkit.simulate_batch`).
-"""
+rest and lets it settle; the row holds the numpy median, the settled speed and their ratio.
+:class:`MedianLaw` takes the non-idealities as physical parameters (0 = ideal): unequal
+wheels, bearing drag, wheel-radius errors, a contact-radius error, motor compliance. The
+ideal model's slope and each parameter's meaning: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,28 +1,9 @@
 """Outliers (the paper's sinusoidal-outlier experiment): the fastest contacts oscillate while
 the median is held; does the body's speed move?
 
-Each run draws ``n`` speeds uniformly in ``[-v_max, v_max]``; the ``k`` fastest become
-outliers commanded ``c_i + A sin(2 pi f t + phi_i)`` with their own centre ``c_i`` (the drawn
-speed, moved down if needed so that the oscillation stays within the motor limits: ``c_i
-<= v_max - A``) and a random phase. Commands are sampled at the controller rate (50 Hz on
-the carousel) and reach the contacts through the motor law (first-order lag). The body
-starts from rest, settles, and the row reports how far its speed strays from where it
-settled while the outliers oscillate.
-
-Non-idealities: unequal wheels (``friction_spread``, ``wheel_seed``) and compliant motors
-(``compliance``); the stiction rule below then reads the weighted force (with compliance the
-force near a contact is saturated-linear, so the rule is the ideal model's only).
-
-Ideal model (the stiction rule): the body rests at ``V*`` (for even ``n`` from rest, the
-near edge of the zero-force band, a contact speed) and stays there exactly as long as zero
-stays in the set-valued force at ``V*``, ``0 in [F(V*+), F(V*-)]``, at every instant. While
-every outlier's contact speed stays above ``V*`` nothing changes; an outlier dipping below
-``V*`` shifts the others' force by ``2 f``, which the contact the body rests on (``+-f``)
-may still hold. The row's ``held`` evaluates that rule on the contact speeds of the run
-(at every reported instant: the command times, where the lagged contact speeds have their
-extremes, and the crossings, which are events), so ``deviation == 0`` exactly where
-``held``.
-"""
+Each run draws ``n`` speeds, makes the ``k`` fastest oscillate through the motor law, and
+reports how far the settled body strays, beside the ideal model's stiction rule (``held``:
+``deviation == 0`` exactly where it holds). The rule and the non-idealities: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,40 +1,10 @@
 """Residual friction of a friction-fraction split (the paper's Fig. 6) with unequal wheels
 and bearing losses.
 
-``5 - n`` of ten contacts run at ``+v_max`` and ``5 + n`` at ``-v_max``. For a body inside
-``(-v_max, v_max)`` the ideal net force is ``-(n/5) F_tot``: ``mu/mu0 = n/5``, so at ``n = 0``
-friction vanishes (the paper measured a 91 +- 4 % reduction, not 100 %). Each run here draws
-the wheels' friction magnitudes with a relative spread and adds the carousel's own losses:
-
-- unequal wheels: ``f_i`` lognormal with mean ``f`` and relative std ``friction_spread``; the
-  band force becomes ``sum_{+} f_i - sum_{-} f_i``, whose variance is ``friction_spread^2 *
-  10 f^2`` at ``n = 0`` (the closed form the tests check against);
-- bearing friction (Coulomb, N): a contact that never moves, speed 0, magnitude
-  ``bearing_friction`` (the same friction law, so it is added to the :class:`ContactSet`);
-- bearing drag ``c`` (N s/m): ``-c V``.
-
-``mu_ratio`` is measured as the paper did, quasi-statically and on the same rig: the mean
-over the band of the magnitude of the force a rig must apply to hold each speed, ``|F(V) - c
-V|`` (``probes`` speeds evenly spread inside ``(-v_max, v_max)``), divided by the same reading
-with all ten wheels reversed (``n = 5``) on the same carousel, ``mu0``. On the symmetric probe
-band the bearing's ``-F_b sign(V)`` and the drag's ``-c V`` cancel in ``mu0`` (while ``F_b +
-c v_max < sum f_i``), so ``mu0 = sum f_i``, each carousel's own total, not the nominal
-``F_tot``. Drag does **not** average out of ``mu``: at ``n = 0`` the wheels' force in the band
-is ``sum_+ f_i - sum_- f_i`` and the rig reads ``|band - c V|``; with equal wheels that is
-``c |V|``, whose mean over an even number of midpoint probes is ``c v_max / 2`` exactly, so
-``mu/mu0 = c v_max / (2 F_tot)`` (0.044 at ``c = 0.5`` N s/m on the carousel): drag is a third
-explanation of a residual friction, next to unequal wheels and a Coulomb bearing.
-
-``dT`` is the exact simulator's time from ``+v_max`` to ``-v_max`` (the body released at
-``+v_max`` on this split), against ``dT_ideal = m 2 v_max / (F_tot n/5)``. With a bearing
-``F_b`` at ``n >= 1`` and equal wheels the closed form is ``m v_max / (F_n + F_b) + m v_max /
-(F_n - F_b)`` with ``F_n = (n/5) F_tot`` (the bearing helps above 0 and brakes below).
-
-The wheels come from :func:`toolkit.experiments.carousel_wheels` (radius normals first, then
-loads): ``wheel_seed`` gives the same carousel as every other experiment with that seed,
-wheel ``i`` at ``+v_max`` for ``i < 5 - n``. Which wheels go forwards matters: one
-carousel's residual depends on its split.
-"""
+``5 - n`` of ten contacts at ``+v_max`` and ``5 + n`` at ``-v_max``; each run draws the
+wheels' magnitudes with a spread and adds a bearing's friction and drag, reads ``mu/mu0`` as
+the paper's rig did, and times the transition ``dT``. What each loss does to the reading,
+with the closed forms the tests check: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The loop on a rig: the scene's estimator and controller run live over a serial link
-(:mod:`~toolkit.live.protocol`: the line protocol; :mod:`~toolkit.live.device`: the device
+(``protocol``: the line protocol; :mod:`~toolkit.live.device`: the device
 interface and a real port; :mod:`~toolkit.live.simulated`: the exact plant as a device on a
 pseudo-terminal; :mod:`~toolkit.live.runner`: the per-sample loop, its deadlines and safety).
 docs/live.md documents the protocol and the timing contract.

@@ -3,7 +3,7 @@
 :class:`Device` is what :func:`~toolkit.live.run_live` needs of a rig: ``open`` (the handshake,
 checked against the scene, then ``START``), ``read_sample``, ``write_command`` and ``close``
 (zero commands, ``STOP``). :class:`SerialDevice` speaks the line protocol
-(:mod:`toolkit.live.protocol`) over a port that pyserial opens (``serial:///dev/ttyACM0?baud=115200``);
+(``toolkit.live.protocol``) over a port that pyserial opens (``serial:///dev/ttyACM0?baud=115200``);
 it skips and counts corrupt and out-of-order lines and counts the sequence numbers it never
 saw. The simulated device (:mod:`toolkit.live.simulated`) is this class on a pseudo-terminal.
 """
@@ -62,7 +62,7 @@ class Device(abc.ABC):
 
     @abc.abstractmethod
     def open(self, expected: Hello) -> Hello:
-        """Open the link, ask who the device is, refuse (:class:`~toolkit.errors.DeviceError`,
+        """Open the link, ask who the device is, refuse (``DeviceError``,
         naming every field that differs) a device unlike ``expected``, then start it;
         returns its handshake."""
 
@@ -115,7 +115,7 @@ def _port_path(url: str) -> tuple[str, int]:
 
 
 class SerialDevice(Device):
-    """A device on a serial port, speaking :mod:`toolkit.live.protocol`.
+    """A device on a serial port, speaking ``toolkit.live.protocol``.
 
     Parameters
     ----------

@@ -166,7 +166,7 @@ def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, floa
         Opened here (the handshake checked against ``loop.sensors``) and closed at the end,
         whatever ends the run (zero commands and ``STOP`` sent).
     status : callable, optional
-        Called about every :data:`STATUS_INTERVAL` seconds with ``t`` (s), ``estimate``,
+        Called about every ``STATUS_INTERVAL`` seconds with ``t`` (s), ``estimate``,
         ``sigma`` and ``command`` (m/s, the commands' mean), ``p99_ms`` and ``missed``.
     started : callable, optional
         Called with the device's handshake once it is accepted, before the first sample.

@@ -1,29 +1,10 @@
 """Closed loop at the sample rate: exact plant, motors, encoders, estimator and controller.
 
-At each sample ``t_k`` (50 Hz by default)::
-
-    counts  = reader.read(X(t_k), x(t_k))             # the sensor law (SensorReader)
-    V_hat   = estimator.observe(counts)                 # e.g. the Kalman filter
-    u_k, F  = controller.output(t_k, z, V_hat)          # contact-speed commands, rig force
-    estimator.commanded(u_k, F); z = controller.update(...)
-    plant   : advance(plant, state, u_k, t_{k+1}, external=F)   # exact, one held command
-
-The plant continues from its state sample to sample (:func:`toolkit.simulation.advance`:
-the exact engine with motor lag and limits, which also returns the exact body and contact
-displacements that the encoders count). Without sensors the controller acts on the true
-speed (an ideal loop). With sample-time jitter the whole sample (read and command) happens
-at ``t_k + d_k`` while the record stamps ``t_k``.
-
-Where it runs. A loop the compiled kernels support (:func:`toolkit.simulation.sampled_supported`:
-noiseless sensors without jitter, any plant ``advance`` steps but compliant ideal motors)
-runs in :class:`toolkit.simulation.SampledRun`: the plant steps and the sensor law in the
-kernel, and the controller's law too when it has a compiled form (``law.sampled()``:
-:class:`~toolkit.controllers.VirtualViscosity`, :class:`~toolkit.controllers.SpeedHold`,
-:class:`~toolkit.controllers.OpenLoop`, a carry phase before them); without an estimator such a
-loop is one kernel call, with one (a Python object today) the kernel and ``observe`` /
-``commanded`` alternate each sample. Other loops run in Python around ``advance`` and the
-:class:`~toolkit.model.sensors.SensorReader`. Both give the same numbers (tested).
-"""
+At each sample the sensor law reads the exact plant, the estimator observes, the controller
+commands, and :func:`toolkit.simulation.advance` continues the plant exactly over the
+period. A loop the compiled kernels support runs in :class:`toolkit.simulation.SampledRun`;
+others run in Python around ``advance``; both give the same numbers. The sample's steps and
+where the loop runs: docs/methods.md."""
 
 from __future__ import annotations
 
@@ -351,7 +332,7 @@ def simulate_closed_loop(plant: Plant, controller: Controller, t_end: float, *,
     estimator : Estimator, optional
         Turns the counts into a speed estimate (needs ``sensors``); default with sensors: a
         :class:`~toolkit.estimation.KalmanEstimator` on the plant's nominal parameters
-        (:func:`nominal_model`).
+        (``nominal_model``).
     rate : float, Hz, optional
         Sample rate without sensors (default 50 Hz); with sensors their rate is used.
     v0 : float, m/s

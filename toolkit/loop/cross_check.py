@@ -35,7 +35,9 @@ _METHOD, _RTOL, _ATOL = "LSODA", 1e-10, 1e-12
 
 
 def smoothed_plant(plant: Plant, width: float) -> Any:
-    """The plant as its own smoothed model, a continuous-time ``control.nlsys``::
+    """The plant as its own smoothed model, a continuous-time ``control.nlsys``.
+
+    The model::
 
         m dV/dt  = sum_i f_i tanh((v_i - V) / w) + F - c V
         dv_i/dt  = (clip(u_i) - v_i) / tau          (v_i = clip(u_i) when tau = 0)
@@ -128,7 +130,7 @@ class CrossCheck:
     @property
     def converges(self) -> bool:
         """Every width done, no difference exactly 0, the differences shrinking with the width
-        and the fitted order within :data:`ORDER_BAND`."""
+        and the fitted order within ``ORDER_BAND``."""
         d = self.differences
         return (self.status is SimulationStatus.SUCCESS and d.size >= 2 and bool(np.all(d > 0))
                 and bool(np.all(np.diff(d) < 0)) and ORDER_BAND[0] <= self.order <= ORDER_BAND[1])
@@ -164,7 +166,7 @@ def cross_check(plant: Plant, controller: Any, t_end: float, *, widths: Any = WI
         E.g. :class:`~toolkit.controllers.SpeedHold`.
     t_end : float, s
     widths : array_like of shape (k,), m/s
-        Distinct positive widths, largest first (default :data:`WIDTHS`).
+        Distinct positive widths, largest first (default ``WIDTHS``).
     rate : float, Hz, optional
         Sample rate (default that of :func:`toolkit.simulate_closed_loop`).
     v0 : float, m/s

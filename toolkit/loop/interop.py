@@ -1,47 +1,11 @@
 """python-control interop: the plant, an estimator and a controller as discrete-time
 ``control.NonlinearIOSystem`` blocks that ``control.interconnect`` joins.
 
-python-control cannot mix time bases in one interconnection, so all three blocks are
-discrete at the sample rate (``dt = 1 / rate``) and follow its convention
-``y[k] = h(t_k, x[k], u[k])``, ``x[k+1] = f(t_k, x[k], u[k])``:
-
-==========  ======================================  ==========================================
-block       state ``x[k]``                          update / output (the toolkit's own code)
-==========  ======================================  ==========================================
-plant       body speed, contact speeds, body and    update: :func:`toolkit.simulation.advance`
-            contact positions, the exact engine's   over one period holding the input command
-            sliding mode; with sensors also the     and force, then the sensor law
-            sensor state and the counts read at     :func:`toolkit.model.sensors.measure` at
-            ``t_k``                                 ``t_{k+1}``; output: the true speed and
-                                                    the counts read at ``t_k``
-estimator   samples observed, last estimate and     output: ``estimator.observe`` of the
-            its variance                            counts at ``t_k`` (feedthrough); update:
-                                                    ``estimator.commanded`` with the command
-                                                    and the controller's force
-controller  the law's own state ``z``               output: ``law.output(t_k, z, estimate)``;
-                                                    update: ``law.update(t_k, z, estimate)``
-==========  ======================================  ==========================================
-
 Nothing is re-implemented: the exact plant step, the sensor law, the filter and the control
-law are the toolkit's own, so ``control.input_output_response`` of :func:`closed_loop_system`
-reproduces :func:`toolkit.simulate_closed_loop` sample for sample (the same floating-point
-operations in the same order: the same numbers; the test allows 1e-12 for that).
-
-The toolkit's estimators keep their state as Python objects (a filterpy filter, the recent
-wheel counts), not as a vector. python-control evaluates output functions several times per
-sample (it iterates the feedthrough chain, first with stale inputs), so the estimator block
-observes each sample on a copy of the filter as it stood after the previous update, keeps
-the copy that saw the final inputs and commits it in the update. Its vector state counts the
-samples observed, so a run that does not start from :attr:`IOBlock.initial_state` or skips
-a sample is refused instead of silently going wrong. The plant block likewise owns the random
-generator of noisy sensors (missed counts, read noise): a run from ``t = 0`` restarts it
-from the seed, so two runs give the same numbers. Sample-time jitter moves the read instants
-off the grid a discrete-time system lives on: it is refused here (use
-:func:`toolkit.simulate_closed_loop`).
-
-``control`` is imported inside the functions: importing the toolkit, or running a scene
-without ``[control]``, never loads it.
-"""
+law are the toolkit's own, so ``control.input_output_response`` of
+:func:`closed_loop_system` reproduces :func:`toolkit.simulate_closed_loop` sample for sample.
+The blocks' states, and how an estimator's object state survives python-control's repeated
+output calls: docs/methods.md. ``control`` is imported inside the functions."""
 
 from __future__ import annotations
 

@@ -1,24 +1,12 @@
 """The model: the physics of active contacts, written once.
 
-Read this package alone to know the whole model:
-
-- :mod:`~toolkit.model.contacts`: contact sets and continuous patches, their net force
-  ``F(V) = sum f_i sign(v_i - V)`` and its equilibrium set (the weighted median);
-- :mod:`~toolkit.model.friction`: the friction law of one contact (Coulomb, tanh, Stribeck,
-  compliant), over numpy or casadi;
-- :mod:`~toolkit.model.motors`: the motor law (lag, rate limit, speed limits) and its
-  closed-form solutions;
-- :mod:`~toolkit.model.signals`: piecewise-constant signals (external force, commands) and
-  the sample instants of a run at a rate;
-- :mod:`~toolkit.model.plant`: the body on its contacts, ``m dV/dt in F(V) + F_ext - c V``,
-  and its right-hand side :meth:`Plant.rhs`;
-- :mod:`~toolkit.model.sensors`: encoders as integer counts of position (the sensor law
-  :func:`measure`, gearbox backlash, records of exact simulations);
-- :mod:`~toolkit.model.parameters`: the non-ideal carousel's parameters, each with its
-  origin (measured in the paper, bounded by it, fitted to it, assumed).
-
-Every solver, estimator and controller calls these; none re-derives them.
-"""
+:mod:`~toolkit.model.contacts` (contact sets and patches, the net force and its
+equilibrium), :mod:`~toolkit.model.friction` (the friction law of one contact),
+:mod:`~toolkit.model.motors` (the motor law and its closed forms),
+:mod:`~toolkit.model.signals` (piecewise-constant signals, sample instants),
+:mod:`~toolkit.model.plant` (the body on its contacts), :mod:`~toolkit.model.sensors` (the
+encoders' law) and :mod:`~toolkit.model.parameters` (the non-ideal carousel's parameters
+and their origins). Every solver, estimator and controller calls these; none re-derives them."""
 
 from __future__ import annotations
 

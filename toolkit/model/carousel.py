@@ -57,7 +57,7 @@ class CarouselHardware:
         choice of units.
     inertia : float, kg m^2
         Moving inertia about the axis, chosen (6 digits) so that ``m = I / L^2`` = 5 kg gives
-        ``F_tot / m`` = 2 m/s^2 with :attr:`wheel_force`.
+        ``F_tot / m`` = 2 m/s^2 with ``wheel_force``.
     """
 
     contact_radius: float = 0.266
@@ -79,11 +79,11 @@ class CarouselHardware:
         return self.inertia / self.contact_radius**2
 
     def motors(self) -> Motors:
-        """The motors: lag :attr:`motor_lag`, commands clipped to ``+-`` :attr:`speed_limit`."""
+        """The motors: lag ``motor_lag``, commands clipped to ``+-`` :attr:`speed_limit`."""
         return Motors(lag=self.motor_lag, speed_limits=(-self.speed_limit, self.speed_limit))
 
     def sensors(self, n_wheels: int | None = None, **noise: float) -> Sensors:
-        """The encoders (the central one, one per wheel) sampled at :attr:`rate`; ``noise``
+        """The encoders (the central one, one per wheel) sampled at ``rate``; ``noise``
         takes :class:`~toolkit.model.sensors.Sensors`' ``missed_count_prob``, ``count_noise``
         and ``jitter``."""
         return Sensors(Encoder(self.central_counts_per_rev, self.contact_radius, self.rate),

@@ -1,37 +1,11 @@
 """The active-contact model: the net Coulomb force of contacts that move at their own speeds.
 
-Contact ``i`` moves along the ground at speed ``v_i`` (m/s) and pushes the body, which moves
-at ``V``, with ``f_i * sign(v_i - V)`` newtons. The net force
-
-    F(V) = sum_i f_i sign(v_i - V) = F_tot * (1 - 2 CDF_w(V))
-
-is a non-increasing staircase from ``+F_tot`` to ``-F_tot`` whose zero set, the
-equilibrium, is the weighted median of the speeds (docs/physics.md section 3).
-
-Two models share one interface (:class:`ContactModel`):
-
-- :class:`ContactSet`: N discrete contacts (a weighted set of speeds).
-- :class:`ContactDistribution`: a continuous density of contact speed over a contact patch,
-  from a ``scipy.stats`` distribution or a tabulated histogram.
-
-:func:`weighted_median` is the equilibrium of many sets of speeds at once (with an outside
-force); it and :meth:`ContactSet.equilibrium` run the toolkit's one weighted median, the
-kernel :func:`toolkit._compiled.core.staircase_median`, with one tie tolerance.
-
-Evaluation. :meth:`ContactSet.force` on many speeds is the kernel
-:func:`toolkit._compiled.core.coulomb_force` over these prefix sums (one source, compiled by
-numba once a process has run enough through it); the same prefix sums, snapped by
-:func:`toolkit._compiled.core.net_force`, are the force landscape of the exact simulator.
-
-Ties. Exactly at a contact speed the force is set-valued. :meth:`ContactSet.force` returns
-the midpoint of the interval there (``sign(0) = 0``); :meth:`ContactSet.force_bounds`
-returns the interval itself. Net forces are computed from prefix sums of the sorted
-magnitudes; a net force whose magnitude is below :attr:`ContactSet.tie_tolerance` (a few
-rounding errors of those sums) is reported as exactly zero, so that cancelling contacts
-(five at -v, five at +v, or loads 0.1 + 0.2 against 0.3) give an exactly zero-force band.
-The price: a contact whose magnitude is itself below that tolerance (about ``1e-15 F_tot``)
-is not resolved; such a contact is lost to rounding in any floating-point sum anyway.
-"""
+``F(V) = sum_i f_i sign(v_i - V) = F_tot (1 - 2 CDF_w(V))``, a non-increasing staircase whose
+zero set is the weighted median of the speeds (docs/physics.md section 3). Two models share
+one interface (:class:`ContactModel`): :class:`ContactSet` (N discrete contacts) and
+:class:`ContactDistribution` (a continuous patch); :func:`weighted_median` gives the
+equilibrium of many sets at once. How the force is evaluated and what a tie returns:
+docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,24 +1,10 @@
 """Friction laws of one contact: the force ``phi(s)`` as a function of slip ``s = v_i - V``.
 
-Every solver, the schedule designer, the estimators and the controllers evaluate contact
-forces through :func:`contact_forces`; this module is the only place the laws are written.
-Each law is written once over an array namespace (:mod:`toolkit.model._xp`): with
-``xp=numpy`` it evaluates arrays, with ``xp=casadi`` it builds the symbolic expression that
-casadi integrates or optimizes.
-
-The laws (``f`` the contact's friction magnitude, N; slip in m/s):
-
-- ``"sign"``: Coulomb, ``f sign(s)``. Set-valued at ``s = 0`` (anything in ``[-f, f]``);
-  this function returns the midpoint 0 there. The exact simulator resolves the set itself.
-- ``"tanh"``: ``f tanh(s / epsilon)``, a smooth law that tends to Coulomb's for every
-  ``s != 0`` as ``epsilon -> 0``; its slope at 0 is ``f / epsilon`` (a stiff ODE).
-- ``"stribeck"``: ``f tanh(s / epsilon) (1 + (P - 1) exp(-(s / (S epsilon))^2))``, a
-  breakaway hump of peak ratio ``P = STRIBECK_PEAK`` at slips of order ``S epsilon``
-  (``S = STRIBECK_SPEED``); non-monotone in slip.
-- compliant motors (``compliance = k > 0``, (m/s)/N): the motor's torque-speed line makes
-  the force the saturated linear ``f clip(s / (k f), -1, 1)``, whatever the law named
-  (it is already Lipschitz: nothing to smooth).
-"""
+:func:`contact_forces` is the only place the laws are written, once, over an array
+namespace (numpy arrays or casadi expressions): ``"sign"`` (Coulomb, set-valued at 0, its
+midpoint returned), ``"tanh"``, ``"stribeck"`` (a breakaway hump of peak ratio
+:data:`STRIBECK_PEAK`) and the saturated linear law of compliant motors. The laws written
+out: docs/methods.md."""
 
 from __future__ import annotations
 

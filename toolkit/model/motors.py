@@ -1,29 +1,10 @@
 """The motor law: how a contact's speed follows its command.
 
-One law, written once (:func:`motor_rate`), for every contact::
-
-    dv/dt = clip((u - v) / tau, -r, r)     with a lag tau > 0 (rate limit r, inf = none)
-    dv/dt = r sign(u - v)                  with tau = 0 and a finite rate limit r
-    v = u                                  ideal motors (tau = 0, r = inf)
-
-where ``u`` is the command clipped to the speed limits. The other functions here are that
-law solved, for the solvers that need it in closed form:
-
-- :class:`MotorPiece`: the exact speeds over a constant command (a ramp at the rate limit
-  while the gap exceeds ``r tau``, then the exponential approach), for the exact simulator;
-- :func:`unsaturated_response`: the exponential (or ramp) alone, exact while the motor stays
-  off its rate limit; written over an array namespace for the schedule designer's casadi
-  model;
-- :func:`lag_memory` and :func:`lag_settling_time`: what a lagging motor keeps of its start
-  speed after ``s`` seconds (and its integral), and when its remaining travel falls under a
-  distance, for the estimators' error propagation and the schedule and braking analyses;
-- :func:`implicit_step`: one backward-Euler step, solved exactly (Moreau-Jean stepping);
-- :func:`reach`: the fastest motion towards a speed limit under any admissible command (the
-  comparison bound of the schedule certificate).
-
-A compliant motor (``compliance = k > 0``) droops by ``k`` times its contact force; that
-changes the contact force law, written in :mod:`toolkit.model.friction`.
-"""
+:func:`motor_rate` writes it once: ``dv/dt = clip((u - v) / tau, -r, r)`` with a lag ``tau``
+and a rate limit ``r``, ``u`` the command clipped to the speed limits (ideal motors: ``v =
+u``). The rest is that law solved in closed form for the solvers that need it:
+:class:`MotorPiece`, :func:`unsaturated_response`, :func:`lag_memory`,
+:func:`lag_settling_time`, :func:`implicit_step` and :func:`reach` (docs/methods.md)."""
 
 from __future__ import annotations
 
@@ -122,7 +103,7 @@ class Motors:
         return self.lag > 0 or math.isfinite(self.rate_limit)
 
     def clip(self, command: Any, xp: Any = np) -> Any:
-        """Commands clipped to :attr:`speed_limits`, m/s (numpy array or casadi expression)."""
+        """Commands clipped to ``speed_limits``, m/s (numpy array or casadi expression)."""
         low, high = self.speed_limits
         if xp is np or xp is None:
             return np.clip(command, low, high)
@@ -270,7 +251,7 @@ class MotorPiece:
 
     def speeds_at(self, s: float) -> np.ndarray:
         """Speeds at one offset ``s`` (s) from ``a``: shape (n,), m/s, fresh; the operations
-        of :meth:`speeds` on one time (without the work of a ramp phase when none is left)."""
+        of ``speeds`` on one time (without the work of a ramp phase when none is left)."""
         ramping = s < self.ramp_end
         if self.tau > 0:
             with np.errstate(over="ignore", invalid="ignore"):    # only on the ramp, masked
@@ -297,7 +278,7 @@ class MotorPiece:
 
     def displacement(self, s: float) -> np.ndarray:
         """Distance each contact travels over the offsets ``[0, s]`` from ``a``: the exact
-        integral of :meth:`speeds`, m, shape (n,).
+        integral of ``speeds``, m, shape (n,).
 
         ``start x + ramp x^2 / 2`` over the ramp (``x = min(s, ramp_end)``), then
         ``u y + (after - u) tau (1 - exp(-y / tau))`` over the remaining ``y = s - x``

@@ -36,7 +36,7 @@ class Origin(enum.Enum):
     ASSUMED = "assumed: the paper gives no value"
 
 
-#: How a model number shown beside a paper number is labelled (README table, notebooks):
+#: How a model number shown beside a paper number is labelled (the validation page, notebooks):
 #: ``predicted`` (no parameter chosen to hit a paper number), ``bounded`` (a parameter range
 #: from the paper's own characterisation), ``fitted`` (to which paper number; and what it
 #: then predicts).

@@ -1,19 +1,9 @@
 """Encoder records as CSV files: what a 50 Hz logger on the hardware writes, and what a
 simulated run saves in the same form (:func:`write_record_csv`, :func:`read_record_csv`).
 
-The format (UTF-8, a byte-order mark allowed; at most :data:`MAX_RECORD_BYTES`)::
-
-    # active-contacts encoder record 1
-    # central_resolution = 0.000204     (optional, as are wheel_resolution, wheel_backlash
-    # initial_commands = 0.0 0.0 ...     and initial_commands: m per count, m, m/s)
-    time_s,central_count,wheel_count_1..n,command_1_m_s..n_m_s[,force_N][,truth_...][,sequence,...]
-    0.0,0,0,...,0.15,...
-
-Times in s, one encoder period apart; counts integers within int64; commands (m/s, held to the
-next row) within the motors' limits; ``force_N`` and the simulated truth (speed, position,
-contact speeds) optional, then a live run's columns (:class:`LiveColumns`). Written with 17
-significant digits: a record round-trips bit for bit. A bad file is refused with its line,
-column, rule and value."""
+The format (at most ``MAX_RECORD_BYTES``; written with 17 significant digits, so a record
+round-trips bit for bit) is in docs/guide/estimators.md. A bad file is refused with its
+line, column, rule and value."""
 
 from __future__ import annotations
 
@@ -212,10 +202,10 @@ def _too_large(reader: _Reader, size: int) -> ParameterError:
 def read_record_csv(path: Any, sensors: Sensors | None = None, *, motors: Motors | None = None,
                     progress: bool = False) -> EncoderRecord:
     """Read an encoder record written by :func:`write_record_csv` or by a logger (a live run's
-    columns, if any, are checked and left out: :func:`read_live_record` returns them).
+    columns, if any, are checked and left out: ``read_live_record`` returns them).
 
     The file is read as a stream (in memory at once: the arrays returned and a block of rows), at
-    most :data:`MAX_RECORD_BYTES`; a UTF-8 byte-order mark (a spreadsheet's "CSV UTF-8") is
+    most ``MAX_RECORD_BYTES``; a UTF-8 byte-order mark (a spreadsheet's "CSV UTF-8") is
     accepted. Every value is checked as it is read: counts integers within int64, every
     number finite, times strictly increasing (with ``sensors``, one encoder period apart
     within half a period), commands within ``motors``' speed limits.

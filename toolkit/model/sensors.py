@@ -1,26 +1,11 @@
 """Encoders as the hardware has them: integer counts of position sampled at a fixed rate.
 
-An encoder with ``counts_per_rev`` counts on a shaft whose contact point sits at ``radius``
-resolves ``2 pi radius / counts_per_rev`` metres; differencing counts at ``rate`` Hz gives
-speed in steps of that distance times the rate. At constant speed the quantization error
-is a deterministic sawtooth, not white noise (docs/physics.md section 5).
-
-The sensor law is written once, in :func:`measure`: positions in, integer counts out, one
-sample (a closed loop) or a whole record (offline) through the same code. It quantizes
-position, never speed (``floor(x / q)``), and models:
-
-- gearbox backlash of the wheels as the play (hysteresis) operator :func:`play` of width
-  ``b``: the encoder sits on the motor side and sees the contact position through the dead
-  band; the motor side is dragged along at the edge of the play and stands still for ``b``
-  of contact travel after each reversal;
-- missed counts (each count transition lost with probability ``p``, for good), additive
-  read noise in counts, and sample-time jitter (the read instants, not the stamps), all
-  drawn from a ``numpy.random.Generator`` passed in.
-
-:class:`Sensors` describes the suite (the carousel's: :meth:`CAROUSEL.sensors <toolkit.model.carousel.CarouselHardware.sensors>`);
-:class:`EncoderRecord` holds what it reports; :func:`record_simulation` turns an exact
-simulation into a record, with positions integrated exactly from its dense output.
-"""
+The sensor law is written once, in :func:`measure`: positions in, integer counts out
+(``floor(x / q)``), with gearbox backlash as the play operator :func:`play`, missed counts,
+read noise and sample-time jitter drawn from a generator passed in. :class:`Sensors`
+describes a suite, :class:`EncoderRecord` holds what it reports, and
+:func:`record_simulation` turns an exact simulation into a record. At constant speed the
+quantization error is a deterministic sawtooth (docs/physics.md section 5; docs/methods.md)."""
 
 from __future__ import annotations
 
@@ -116,7 +101,7 @@ class Sensors:
         Standard deviation (``>= 0``) of an additive read noise, rounded to whole counts and
         not accumulated (e.g. a glitching line read once).
     jitter : float, s
-        Standard deviation (``>= 0``, at most :data:`MAX_JITTER_PERIODS` of a period) of the
+        Standard deviation (``>= 0``, at most ``MAX_JITTER_PERIODS`` of a period) of the
         sample-time jitter: the positions are read at ``t_k + d_k`` while the record stamps
         ``t_k``; ``d_k`` is a normal law truncated at a quarter period (so that samples keep
         their order), at least 4 standard deviations out: the truncation changes fewer than
@@ -192,7 +177,7 @@ class Sensors:
     @property
     def read_noise_variance(self) -> float:
         """Variance of the read noise the sensor law adds, counts^2: a normal draw of std
-        ``count_noise`` rounded to whole counts (:meth:`SensorReader.read`), so ``sum_k k^2
+        ``count_noise`` rounded to whole counts (``SensorReader.read``), so ``sum_k k^2
         P(k)`` with ``P(k)`` the normal's mass on ``[k - 1/2, k + 1/2)``: not ``count_noise^2``
         (0.325 against 0.25 at half a count)."""
         sigma = self.count_noise
@@ -689,7 +674,7 @@ def record_simulation(result: Any, plant: Any, sensors: Sensors, *,
     -----
     Positions are exact integrals of the dense output: the body position is
     ``integral_0^t V``, each contact's position ``integral_0^t v_i``, computed by
-    Gauss-Legendre (:data:`GAUSS_NODES` nodes) on every piece between consecutive read
+    Gauss-Legendre (``GAUSS_NODES`` nodes) on every piece between consecutive read
     instants, events, switches and motor ramp ends, on each of which the speeds are smooth
     (lines or exponentials); the error is far below 1e-12 m. Jitter moves the read instants,
     not the stamps.

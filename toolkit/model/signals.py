@@ -23,7 +23,7 @@ def sample_count(duration: float, rate: float) -> int:
 
 
 def sample_times(duration: float, rate: float) -> np.ndarray:
-    """The sample instants ``k / rate`` (s), ``k = 0 .. sample_count(duration, rate) - 1``:
+    """The sample instants ``k / rate`` (s), ``k`` from 0 to ``sample_count(duration, rate) - 1``:
     the one grid of every sampled run (encoder records, closed loops, python-control)."""
     return np.arange(sample_count(duration, rate)) / rate
 

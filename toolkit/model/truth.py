@@ -236,14 +236,14 @@ class ModelPrior:
         the paper's residual friction). 0 trusts the nominal magnitudes.
     drag_range : tuple of 2 floats or None, N s/m
         The bearing drag lies in ``[low, high]`` (uniform prior); ``None``: the nominal
-        scene's drag up to that plus :data:`DEFAULT_DRAG`.
+        scene's drag up to that plus ``DEFAULT_DRAG``.
     lag_range : tuple of 2 floats or None, s
         The motor lag lies in ``[low, high]``; the estimator identifies it from the wheel
-        counts after each command change. ``None``: 0 to :data:`DEFAULT_LAG` (or the nominal
+        counts after each command change. ``None``: 0 to ``DEFAULT_LAG`` (or the nominal
         lag, if larger).
     contact_drift : float or None, m/s per sqrt(s)
         Prior intensity of the motors' speed wander (a random walk about the command);
-        ``None``: :data:`DEFAULT_DRIFT`; the filter adapts it from the wheel counts.
+        ``None``: ``DEFAULT_DRIFT``; the filter adapts it from the wheel counts.
     missed_count_prob : float
         The central encoder misses each count transition with this probability, in
         ``[0, 0.5]`` (default 0: not expected); the default ``kalman`` then reports the
@@ -251,7 +251,7 @@ class ModelPrior:
     missed_count_mean : float or None
         Not told the rate (``missed_count_prob`` 0), the prior mean of the rate the default
         ``kalman`` identifies online, in ``(0, 0.01]`` (its prior std is ``sqrt(2)`` times it:
-        :class:`toolkit.estimation.MissedCountRate`); ``None``: :data:`DEFAULT_MISSED`.
+        :class:`toolkit.estimation.MissedCountRate`); ``None``: ``DEFAULT_MISSED``.
     """
 
     friction_spread: float = 0.3

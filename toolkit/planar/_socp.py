@@ -1,21 +1,10 @@
 """The convex program behind the planar equilibrium and the planar time step (private).
 
-    P(x) = sum_i f_i |c_i - B_i x| + x^T Q x / 2 - b . x,    x in R^d (d = 1, 2 or 3)
-
-in scaled units (forces over ``F_tot``, speeds over a speed scale, lengths over a length
-scale; the callers scale and unscale). ``Q = None`` is the equilibrium (no quadratic term,
-``b = 0``); a positive definite ``Q`` is one Moreau-Jean step. The dual variables ``g_i``
-(``|g_i| <= f_i``) are the contact forces; a dual-feasible ``g`` and the primal ``x`` give the
-duality gap that certifies ``x`` (docs/planar.md section 2).
-
-- :func:`solve_fast`: pseudo-Huber path following (damped Newton on the smoothed ``P``, the
-  kernel :func:`toolkit._compiled.planar.newton`), then an exact polish on the set of
-  contacts that stick (Vardi and Zhang's test at a data point, generalized), then the
-  certificate.
-- :func:`solve_cvxpy`: the same program as a second-order cone program in cvxpy (Clarabel),
-  certified the same way.
-- :func:`certify`: the duality gap and the stationarity residual of a twist.
-"""
+``P(x) = sum_i f_i |c_i - B_i x| + x^T Q x / 2 - b . x`` in scaled units; its dual variables
+are the contact forces, and a dual-feasible point certifies the twist by its duality gap
+(docs/planar.md section 2). :func:`solve_fast` (pseudo-Huber path following, an exact
+polish, the certificate), :func:`solve_cvxpy` (the same as a second-order cone program) and
+:func:`certify`."""
 
 from __future__ import annotations
 

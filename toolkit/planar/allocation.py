@@ -1,20 +1,7 @@
 """Allocation in the plane: leg velocities, within per-leg speed limits, that realize a wanted
-equilibrium twist or a wanted local resistance around a twist.
-
-- :func:`allocate_twist`: make a target twist ``x_t`` the equilibrium. Legs whose body-point
-  velocity at ``x_t`` is within their speed limit can stick there (any force in their friction
-  disc); the others must slip, towards their speed disc, with a force of full magnitude in a
-  cone of directions. The convex relaxation (each cone's arc replaced by its circular segment)
-  is a second-order cone program (cvxpy): infeasible means no allocation exists, with a twist
-  direction that proves it (a Farkas certificate, checked here from the support functions);
-  feasible forces on the arcs are realized directly, others by a non-convex polish (casadi /
-  ipopt). Every result is checked by the certified equilibrium of the achieved contacts.
-- :func:`allocate_resistance`: make ``x_t`` the equilibrium with the local resistance matrix
-  ``-dW/dx`` close to a target (an anisotropic viscosity): non-convex (casadi / ipopt,
-  multi-start), error measured on the achieved contacts, no certified bound.
-
-Contacts are isotropic here (docs/planar.md section 7).
-"""
+equilibrium twist (:func:`allocate_twist`, with a checked certificate when none exists) or a
+wanted local resistance around a twist (:func:`allocate_resistance`, ipopt, no certified
+bound). Contacts are isotropic here (docs/planar.md section 7); the method: docs/methods.md."""
 
 from __future__ import annotations
 

@@ -1,23 +1,9 @@
 """Gaits: legs (or body elements) whose positions, velocities and loads change through a cycle.
 
-A :class:`Gait` samples one period of a contact schedule in the body frame: positions,
-contact velocities and friction magnitudes of every leg (a leg touches down and lifts off as
-its load goes to and from zero), optionally anisotropy axes. Between samples everything is
-linear in time. From it:
-
-- :func:`force_twist_map`: the instantaneous force and torque at given twists through the cycle;
-- :func:`quasi_static_cycle`: the net motion over a cycle of a body light enough to sit at
-  its instantaneous equilibrium twist (certified at every sample), with a Richardson error
-  estimate of the time quadrature;
-- :func:`dynamic_cycles`: the same with mass and inertia, by the certified Moreau-Jean
-  simulation, over several cycles (the last one reported);
-- :func:`averaged_model`: the resistive-force approximation, one contact set whose
-  dissipation is the cycle average, its equilibrium and its resistance matrix; and
-  :func:`compare_averaged`, its error against a cycle (docs/planar.md section 6).
-
-Constructors: :func:`tripod_gait` (a hexapod's alternating tripod) and :func:`serpenoid` (a
-snake's lateral undulation with anisotropic friction).
-"""
+A :class:`Gait` samples one period of a contact schedule in the body frame (linear between
+samples); :func:`force_twist_map`, :func:`quasi_static_cycle`, :func:`dynamic_cycles`,
+:func:`averaged_model` and :func:`compare_averaged` analyse it (docs/planar.md section 6);
+:func:`tripod_gait` and :func:`serpenoid` build a hexapod's and a snake's."""
 
 from __future__ import annotations
 

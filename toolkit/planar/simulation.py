@@ -1,23 +1,11 @@
 """Simulation of a rigid body on planar contacts, through slip and stick.
 
-``M dx/dt in W(x, t) + w_ext - C x`` for the twist ``x = (Vx, Vy, omega)`` at the centre of
-mass (world frame), with ``W`` the set-valued wrench of the contacts, which are fixed in the
-body (positions, velocities and limit axes turn with it). Methods:
-
-- ``"exact"``: where a closed form exists. Contacts and motion on one line through the centre
-  of mass: the 1-D exact engine (:func:`toolkit.simulate`), so the two agree exactly. A passive
-  uniform disc, annulus or thin ring centred on the centre of mass: the reduced ODE of its
-  closed-form force and torque, integrated to 1e-13 (docs/planar.md section 4).
-- ``"moreau"``: Moreau-Jean time stepping; each step is the convex program of
-  :mod:`toolkit.planar._socp` (the equilibrium's, plus the kinetic term), solved and
-  certified (its duality gap bounds the step's solve error).
-- ``"smooth"``: the regularized law ``f_i M_i s / sqrt(s^T M_i s + epsilon^2)`` with a
-  ``scipy.integrate.solve_ivp`` solver: what simulators that regularize Coulomb friction do,
-  as a baseline (it creeps where the exact model sticks).
-
-:func:`simulate_planar` is also reached through :func:`toolkit.simulate` with a
-:class:`PlanarPlant`.
-"""
+``M dx/dt in W(x, t) + w_ext - C x`` for the twist ``x = (Vx, Vy, omega)``, with ``W`` the
+set-valued wrench of contacts fixed in the body. Methods: ``"exact"`` where a closed form
+exists (a line: the 1-D engine; a passive disc, annulus or ring: the reduced ODE,
+docs/planar.md section 4), ``"moreau"`` (certified Moreau-Jean steps) and ``"smooth"`` (the
+regularized law, a baseline that creeps). :func:`simulate_planar`, also reached through
+:func:`toolkit.simulate` with a :class:`PlanarPlant`."""
 
 from __future__ import annotations
 

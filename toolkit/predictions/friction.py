@@ -1,31 +1,10 @@
 """The paper's friction-fraction experiment (its Fig. 6) in the closed loop.
 
-Ten (in general ``N``, even) equal contacts: ``N/2 - j`` at ``+v_max`` and ``N/2 + j`` at
-``-v_max`` (the allocator's split for :class:`~toolkit.allocation.FrictionFraction`
-``2 j / N``, as :class:`~toolkit.controllers.FrictionBrake` commands it) cancel in pairs for
-every speed inside ``(-v_max, v_max)``: ``mu / mu0 = 2 j / N`` (``j / 5`` for ten).
-
-Friction ratio, measured as the paper measured force-speed curves: a test rig
-(:class:`~toolkit.controllers.ForceDrive`) drives the body along a slow speed ramp while
-the contacts hold their speeds, and the contacts' force is read from the rig's force with
-the body's inertia removed (:func:`~toolkit.predictions._measure.rig_friction`) over the
-part of the ramp after the rig's own transient (``window``). ``mu / mu0 = F / F0`` with
-``F0`` the brake condition's force (every contact at 0, ramped over positive speeds), as in
-the paper. In the loop the rig's speed loop closes on the Kalman filter of
-:mod:`toolkit.estimation`, which takes the rig's force as a known input beside the contact
-force (``commanded(command, force)``); ``rig_estimator="central_difference"`` closes it on
-the central encoder's finite difference instead, for comparison. (A filter told only the
-contact force diverges on a rig-driven body: the rig's force, about ``2 j f``, is then an
-unmodelled acceleration.)
-
-Transition time: the wheels carry the body at ``+v_max`` for ``pre_roll`` seconds, then
-:class:`~toolkit.controllers.FrictionBrake` commands the split; ``dT`` is read off the speed
-(the estimate in the loop, the Kalman filter by default) from its crossings of ``+-(v_max -
-margin)`` (:func:`~toolkit.predictions._measure.crossing_duration`) and compared with
-``dT = m 2 v_max / (F_tot mu / mu0)`` (:func:`~toolkit.predictions.theory.transition_time`;
-infinite at ``j = 0``, where the body coasts in the zero-force band: then the check is that
-no transition happens within twice the ``j = 1`` time).
-"""
+``N/2 - j`` equal contacts at ``+v_max`` and ``N/2 + j`` at ``-v_max`` give ``mu/mu0 =
+2 j / N``: measured with a test rig (:class:`~toolkit.controllers.ForceDrive`) as the paper
+measured force-speed curves, and the transition time read off the speed and compared with
+``dT = m 2 v_max / (F_tot mu/mu0)``, ideal or in the loop. The procedure:
+docs/validation.md and docs/methods.md."""
 
 from __future__ import annotations
 

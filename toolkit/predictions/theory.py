@@ -1,70 +1,11 @@
 """What the ideal model predicts for the paper's viscosity and friction-fraction experiments.
 
-Numerics only, on the model's own :class:`~toolkit.model.ContactSet` and its exact simulation.
-
-Viscosity of a finite staircase
--------------------------------
-``n`` equal contacts (magnitude ``f``) spread uniformly with spacing ``s`` realize, on
-average, the viscous law ``F = -k (V - c)`` with ``k = dF/dV = 2 f / s`` (docs/physics.md
-section 6), whose startup from ``V0`` is exponential with ``tau = m / k``. The staircase is
-only approximately viscous: between two contact speeds its force is constant, so ``V(t)`` is
-piecewise linear and the body reaches its resting speed ``V_stop`` (the median, or for even
-``n`` the near edge of the zero-force band) in finite time. So a startup has no single time
-constant: what ``tau`` is depends on how it is read off, and each definition
-(:data:`~toolkit.predictions._measure.TIME_CONSTANTS`) has its own **correction factor**
-
-    C = tau_staircase k / m                (1 for a purely viscous law),
-
-which depends only on ``n`` and on where the start lies in spacings (and, for the fit, on
-the fit's window in units of ``m / k``): neither the spacing, nor the magnitudes, nor the
-mass. :func:`startup_correction` gives it for either definition.
-
-- ``"least_squares"`` (the paper's way: "we fit an exponential curve to the speed versus
-  time curve"): the exponential from the start to the settled speed, ``tau`` fitted by least
-  squares over the whole record (:func:`~toolkit.predictions._measure.exponential_time_constant`).
-  No closed form: :func:`least_squares_correction` fits the exact ideal trajectory of the
-  uniform staircase (:func:`toolkit.simulate`, exact method), sampled finely, over the same
-  window. For ten contacts and starts in the lowest spacing ``C = 0.735-0.780``; for 100,
-  ``0.972``.
-- ``"crossing_63"``: ``tau`` is the time at which the body has covered ``1 - 1/e`` (63.2 %)
-  of its way from ``V0`` to where it comes to rest. For the linear law that is exactly
-  ``m / k``; for the staircase it is the travel time (:func:`travel_time`, a sum of
-  ``m dV / F`` over plateaus, exact) to ``V0 + (1 - 1/e)(V_stop - V0)``, in closed form below
-  (:func:`staircase_correction`; :func:`viscosity_correction` for any contact set). Between
-  contact speeds the staircase force equals the linear law at the middle of each step, so
-  ``C`` is a midpoint-rule estimate of ``integral du / u = 1``: far inside the spread ``C -> 1``
-  with an error of order ``(e^2 - 1) / (24 u0^2)``, ``u0 = (V_stop - V0) / s``.
-
-Closed form for ``n`` equal steps (:func:`staircase_correction`). Measure speeds from the
-reference in spacings, ``x = (V - c) / s``; the contacts sit at ``p_j = j - (n + 1)/2``,
-``j = 1..n``. Between ``p_j`` and ``p_{j+1}`` (``j`` contacts below the body, ``p_0 =
--inf``, ``p_{n+1} = +inf``) the force is ``f (n - 2 j)``, so ``dt = m s dx / (f (n - 2 j))``
-and, with ``k = 2 f / s``,
-
-    C(n, x0) = 2 * sum_j |[x0, x*] ∩ [p_j, p_{j+1}]| / |n - 2 j|,
-    x* = x0 + (1 - 1/e) (x_stop - x0),
-
-with ``x_stop = 0`` for odd ``n`` and ``x_stop = -sign(x0)/2`` (the near edge of the
-zero-force band) for even ``n``; ``C`` is symmetric in ``x0``. It depends on ``n`` and ``x0``
-only: neither the spacing, nor the magnitudes, nor the mass. Replacing the plateaus by the
-linear law they sample (``n - 2 j ~ -2 x``) gives the large-``|x0|`` limits
-
-    odd n:   C -> ln(x0 / x*) = 1,
-    even n:  C -> 1 - ln(1 + (e - 1) / (2 |x0|))          (< 1: the body stops half a
-             step short of the reference, so the fitted exponential ends early),
-
-e.g. ``0.842`` at ``|x0| = 5`` (a start half a spacing below the lowest of ten contacts)
-against the exact ``0.856``. A start outside the spread (``|x0| > (n - 1)/2``) first meets
-the saturated force ``n f`` and ``C`` grows past these limits without bound (``C = 1.07`` at
-four spacings outside ten contacts, ``3.0`` at 20).
-
-Friction fraction
------------------
-``5 - j`` contacts at ``+v_max`` and ``5 + j`` at ``-v_max`` (ten equal contacts) give
-``F = -(2 j f)`` for every ``V`` in ``(-v_max, v_max)``: ``mu / mu0 = j / 5`` exactly, and a
-body released at ``+v_max`` crosses the band in ``dT = m 2 v_max / (F_tot mu / mu0)``
-(:func:`transition_time`).
-"""
+The viscosity correction ``C = tau k / m`` of a finite staircase of equal contacts for each
+definition of the time constant (:func:`startup_correction`, :func:`staircase_correction`
+in closed form for the 63.2 % crossing, :func:`least_squares_correction` by fitting the exact
+ideal trajectory, :func:`viscosity_correction` for any set), the exact travel time
+(:func:`travel_time`) and the braking transition time (:func:`transition_time`). Numerics
+only; the derivations: docs/methods.md and docs/physics.md section 6."""
 
 from __future__ import annotations
 

@@ -1,48 +1,10 @@
 """The paper's viscosity experiment (its Fig. 5) in the closed loop, against the ideal model.
 
-Each run commands a virtual viscosity ``k = dF/dV`` (:class:`~toolkit.controllers.VirtualViscosity`:
-``n`` equal contacts spaced ``s = 2 f / k`` around a reference ``c``) on a body the wheels
-were carrying at ``V0``, and reads the startup's time constant under each definition of
-:data:`~toolkit.predictions._measure.TIME_CONSTANTS`: ``"least_squares"`` (an exponential
-fitted to the whole startup, the paper's way) and ``"crossing_63"`` (the 63.2 % crossing).
-A viscous law would give ``1 / tau = k / m``; the staircase gives ``1 / tau = (k / m) / C``
-with the definition's correction ``C`` (:func:`~toolkit.predictions.theory.startup_correction`,
-from the exact ideal model: closed form for the crossing, a fit of the exact ideal
-trajectory for the least squares), which depends on ``n`` and on where the start lies,
-``x0 = (V0 - c) / s``.
-
-The work is split so that each part can change alone:
-
-- :func:`draw_design`: the seeded sweep design (spacings, starts, directions, seeds);
-- :func:`plan_runs`: what the ideal model says of each run (the commanded staircase, its
-  resting speed, the time to get there, the record's length);
-- :func:`_simulate_startups`: the closed-loop runs themselves (the only step that simulates
-  them);
-- :func:`measure_time_constants` (from the records) and :func:`predict_time_constants`
-  (from the ideal model, never from the records);
-- :func:`fit_viscosity`: ``1 / tau`` against ``k / m`` through the origin, per definition
-  and per group of starts.
-
-Everything before the fit is done run by run, so the in-loop runs are shared among forked
-processes (:func:`toolkit._forked.fork_map`, each run whole in one process: the same numbers
-whatever the split); the ideal runs go through one batch kernel that already uses the cores.
-
-Sweep design (seeded, reproducible): ``runs`` draws of the spacing ``s`` uniform in
-``spacing`` (default ``0.2 / n`` to ``0.6 / n`` m/s: a total spread ``n s`` of 0.2-0.6 m/s,
-``k / m`` = 6.7-20 1/s on the carousel whatever ``n``) and of the start's position above the
-lowest contact, ``p = (V0 - v_min) / s`` uniform in ``start`` (spacings; default ``(0, 1)``:
-inside the spread, within its lowest spacing, at least 3 spacings from the equilibrium set
-for ``n >= 10``), each run moving up or down with equal chance (a start above the
-reference mirrors one below). The staircase is centred between the speed limits (``c = 0``):
-the ideal model depends on ``V - v_i`` only, so a start at ``V0 != 0`` is the paper's start
-from rest on a staircase shifted by ``-V0``. Starts below the lowest contact (``p < 0``,
-outside the spread, where the force saturates and the startup is not exponential at all)
-are fitted as a group of their own, never pooled with the starts inside.
-
-Each run: ``pre_roll`` seconds carried at ``V0`` (motors and estimator settle), then the
-staircase, for the predicted time to come to rest (:func:`~toolkit.predictions.theory.travel_time`,
-exact) plus ``tail`` seconds; the settled speed is the mean of the last ``tail_samples``.
-"""
+Each run commands a virtual viscosity on a moving body and reads the startup's time constant
+under each definition; ``1 / tau`` is fitted against ``k / m`` through the origin and compared
+with the ideal model's correction. One function per step (:func:`draw_design`,
+:func:`plan_runs`, the runs, :func:`measure_time_constants`, :func:`predict_time_constants`,
+:func:`fit_viscosity`); the sweep's design: docs/validation.md and docs/methods.md."""
 
 from __future__ import annotations
 
@@ -136,7 +98,7 @@ class ViscosityProblem:
     start : (float, float), optional
         Range of the start's position above the lowest contact, in spacings (negative: below
         the whole staircase, fitted apart). Default ``(0, 1)``, which needs at least
-        :data:`MIN_CONTACTS` contacts.
+        ``MIN_CONTACTS`` contacts.
     pre_roll, tail : float, s
         Carry time before the staircase (``>= 0``) and settled time after the predicted
         stop (``> 0``).
@@ -403,7 +365,7 @@ def _sweep(problem: ViscosityProblem, progress: bool, workers: int | None
            ) -> tuple[ViscosityDesign, dict[str, Any], dict[str, np.ndarray], list[str]]:
     """:func:`_sweep_rows` of every run: in the loop over ``workers`` processes (forked,
     :func:`toolkit._forked.fork_map`; default the idle cores, at most one per
-    :data:`RUNS_PER_PROCESS` runs), each an equal share of the
+    ``RUNS_PER_PROCESS`` runs), each an equal share of the
     runs; ideal in this process (its batch kernel already runs over the cores). Each run is
     computed whole by one process: the results do not depend on ``workers`` (tested)."""
     drawn = draw_design(problem)
@@ -502,7 +464,7 @@ class ViscosityFit:
     definition : str
         One of :data:`~toolkit.predictions._measure.TIME_CONSTANTS`.
     starts : str
-        ``"inside"`` or ``"outside"`` the spread (:data:`START_GROUPS`).
+        ``"inside"`` or ``"outside"`` the spread (``START_GROUPS``).
     n : int
         Contacts.
     mode : str
@@ -728,7 +690,7 @@ def viscosity_check(problem: ViscosityProblem | None = None, *, progress: bool =
         Show a progress bar (tqdm) on stderr.
     workers : int, optional
         Processes the in-loop runs are shared among (forked; ``>= 1``); default: the cores
-        the load average leaves idle, at most one per :data:`RUNS_PER_PROCESS` runs. The
+        the load average leaves idle, at most one per ``RUNS_PER_PROCESS`` runs. The
         results do not depend on it; ideal runs always run in one batch kernel over the cores.
 
     Returns

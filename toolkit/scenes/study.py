@@ -675,21 +675,21 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
         With :attr:`StudyResult.shortfalls`: every way the result misses the request, one
         :class:`Shortfall` kind per way of missing:
 
-        =============  ===================================================================  ======
-        stage          what                                                                 unit
-        =============  ===================================================================  ======
-        scene          speeds beyond the motor limits clipped (``[motors] clip = true``)   m/s
-        allocation     a target that is not realizable, projected (distance to it)          N
-        allocation     a target the contacts cannot reach (best achievable error)           N
-        allocation     no allocation (infeasible, time limit, solver error)                 N
-        schedule       a target beyond the speed limits (best achievable error)             m/s
-        schedule       an unverified schedule (exact run left the prediction bound)         m/s
-        schedule       a braking target not reached (final distance to it)                  m/s
-        simulation     a run stopped before ``t_end`` (budget, Zeno, failure; time left)    s
-        estimation     the recorded run stopped before its end (time not recorded)          s
-        control        the closed loop stopped before ``duration`` (budget; time left)     s
-        control        python-control's simulation of the loop differs from the toolkit's   m/s
-        =============  ===================================================================  ======
+        =============  =====================================================================  ======
+        stage          what                                                                   unit
+        =============  =====================================================================  ======
+        scene          speeds beyond the motor limits clipped (``[motors] clip = true``)      m/s
+        allocation     a target that is not realizable, projected (distance to it)            N
+        allocation     a target the contacts cannot reach (best achievable error)             N
+        allocation     no allocation (infeasible, time limit, solver error)                   N
+        schedule       a target beyond the speed limits (best achievable error)               m/s
+        schedule       an unverified schedule (exact run left the prediction bound)           m/s
+        schedule       a braking target not reached (final distance to it)                    m/s
+        simulation     a run stopped before ``t_end`` (budget, Zeno, failure; time left)      s
+        estimation     the recorded run stopped before its end (time not recorded)            s
+        control        the closed loop stopped before ``duration`` (budget; time left)        s
+        control        python-control's simulation of the loop differs from the toolkit's     m/s
+        =============  =====================================================================  ======
 
     Raises
     ------

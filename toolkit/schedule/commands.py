@@ -50,7 +50,7 @@ class _Motor:
         return unsaturated_response(start, u, s, self.tau, self.rate)
 
     def symbolic(self, ca: Any, start: Any, u: Any, s: Any) -> Any:
-        """:meth:`speeds` as a casadi expression (``ca`` the casadi module)."""
+        """``speeds`` as a casadi expression (``ca`` the casadi module)."""
         return unsaturated_response(start, u, s, self.tau, self.rate, xp=ca)
 
     def period_end(self, start: Any, u: Any, xp: Any = np) -> Any:

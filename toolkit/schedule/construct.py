@@ -1,30 +1,10 @@
-"""Constructive contact-speed schedules and their certificates (private to :mod:`toolkit.schedule`).
+"""Constructive contact-speed schedules and their certificates (private to
+:mod:`toolkit.schedule`).
 
-Physics (docs/physics.md section 4): with every contact commanded to the same speed path
-``p(t)`` the body, once on it, *sticks* to it (Filippov sliding mode) as long as
-``|m p' + c p - F_ext| <= F_tot``; away from it the body moves at the largest force the
-contacts on its side give. So a schedule is built period by period from a few closed-form
-candidates, each projected onto the motor model (speed limits, ``|u - v| <= r tau``):
-
-- *follow* ``P``: contact ``i`` is commanded ``u_i = (P - d v_i) / (1 - d)`` (``d =
-  exp(-period / tau)``; ``u_i = P`` without lag), so that every contact reaches ``P``
-  exactly at the end of the period (lag pre-compensation). ``P`` is the reference at the
-  period's end, shifted by fractions of the period's reference change: the shift
-  ``-kappa dR`` centres the exponential path on a steady ramp (minimax);
-- *push up* / *push down*: every contact at the upper / lower speed limit (the largest
-  force, bang-bang).
-
-Each candidate is evaluated over its period plus three look-ahead periods (the first with
-a choice of follow shifts, then the steady follow) with implicit (Moreau) time stepping of
-the exact set-valued Coulomb law, vectorized over the candidates; the best (tracking:
-smallest sup error, then smallest squared error; braking: smallest squared error) is kept.
-The look-ahead lets the schedule start moving before a reference step it cannot follow.
-
-:func:`tracking_lower_bound` certifies how good any schedule can be: the body's speed stays
-in the funnel of the extreme forces the motors allow (each contact at most as fast as its
-lag/rate response to the speed limit), so no schedule tracks the reference better than the
-smallest tube around it the funnel can stay in.
-"""
+Period by period the best of a few closed-form candidates (follow a lag-compensated path,
+push up, push down), evaluated by implicit steps of the exact Coulomb law with a short
+look-ahead; :func:`tracking_lower_bound` certifies how well any schedule can track
+(docs/physics.md section 4; the construction: docs/methods.md)."""
 
 from __future__ import annotations
 

@@ -1,29 +1,11 @@
 """Design of contact-speed schedules: :func:`design_schedule`.
 
-A schedule is a table of commanded contact speeds, constant over each controller period
-(50 Hz on the paper's hardware, docs/physics.md section 5), that firmware can play. The design
-works under the plant's motor model (first-order lag ``tau``, rate limit ``r``, speed
-limits; :mod:`~toolkit.schedule.commands`):
-
-1. *Construction* (:mod:`~toolkit.schedule.construct`): physics gives the schedule. Contacts
-   commanded along one lag-compensated path carry the body on it (Filippov sticking) while
-   ``|m p' + c p - F_ext| <= F_tot``; when the body must catch up, contacts push from the
-   right side of it (at or towards a speed limit). Period by period the best of these
-   closed-form candidates is chosen by implicit steps of the exact Coulomb law.
-2. *Refinement* (optional, ``refine=True``): casadi ``Opti`` + ipopt, direct multiple
-   shooting on the smoothed law ``f_i tanh((v_i - V) / epsilon)`` with stable RK4 substeps,
-   scaled, warm-started at the construction, bounded in iterations and time; kept only
-   when it verifies and lowers the objective.
-3. *Verification* (:mod:`~toolkit.schedule.verify`): a prediction on the smoothed law at
-   tight tolerance, a proven bound between it and every solution of the exact inclusion,
-   and the exact event-driven simulation as a second method.
-4. *Optimality*: tracking errors are compared with a lower bound over every schedule (the
-   funnel of the extreme forces the motors allow,
-   :func:`~toolkit.schedule.construct.tracking_lower_bound`); fast braking with the
-   closed-form minimum time (:func:`~toolkit.schedule.braking.braking_time`).
-   :class:`~toolkit.schedule.ScheduleStatus` reports OPTIMAL, VERIFIED or UNVERIFIED
-   accordingly.
-"""
+A schedule is a table of contact-speed commands, constant over each controller period, that
+firmware can play. Four steps: construction from physics
+(:mod:`~toolkit.schedule.construct`), optional refinement (casadi + ipopt, kept only when it
+verifies and improves), verification (:mod:`~toolkit.schedule.verify`) and optimality
+against a lower bound or the closed-form minimum braking time; the result's
+:class:`~toolkit.schedule.ScheduleStatus` says which held. Details: docs/methods.md."""
 
 from __future__ import annotations
 

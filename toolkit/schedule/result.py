@@ -20,7 +20,7 @@ class ScheduleStatus(enum.Enum):
     to users.
 
     The status describes the returned schedule, not the internals of any solver (those are
-    in :attr:`ScheduleResult.solver_status` and the message).
+    in ``ScheduleResult.solver_status`` and the message).
     """
 
     OPTIMAL = ("optimal: the exact model stays within 'prediction_bound' of the prediction "
@@ -46,7 +46,7 @@ class ScheduleResult:
     Attributes
     ----------
     times : ndarray of shape (K + 1,), s
-        ``k * period``: row ``k`` of :attr:`speeds` is commanded on ``[times[k], times[k+1])``
+        ``k * period``: row ``k`` of ``speeds`` is commanded on ``[times[k], times[k+1])``
         and the last row from ``times[K]`` on (it holds the final command).
     speeds : ndarray of shape (K + 1, n), m/s
         Commanded contact speeds, within the speed limits; with a lag or rate limit each
@@ -111,7 +111,7 @@ class ScheduleResult:
     lower_bound : float or None, m/s
         Tracking: a lower bound on the sup tracking error at the dense samples (hence
         also over the whole run) of *every* schedule within the motor limits
-        (:func:`~toolkit.schedule.construct.tracking_lower_bound` on every fourth sample,
+        (``tracking_lower_bound`` on every fourth sample,
         the forced first period on all); None for braking as fast as possible.
     gap : float or None, m/s
         ``exact_tracking_error - lower_bound``.

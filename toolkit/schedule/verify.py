@@ -1,22 +1,10 @@
 """Verification of a schedule, never trusting a solver.
 
-The commands are integrated on the smoothed law ``f_i tanh((v_i - V) / epsilon)`` at tight
-tolerance (CVODES): the *predicted* body speed (:func:`_predict`). A monotonicity argument
-bounds the distance between that prediction and every solution of the exact inclusion
-``m dV/dt in sum f_i Sign(v_i - V) + F_ext - c V`` (:func:`deviation_bound`): because the
-Coulomb force is non-increasing in ``V``, for any ``delta > 0``
-``|V_exact(t) - V_pred(t)| <= delta + (1/m) int_0^t d_delta``, where the defect ``d_delta``
-is how far the smoothed force lies outside the exact set-valued force of the speeds within
-``delta`` of the prediction. The integral is bounded, not estimated: on each interval
-between two dense samples (64 per period) the defect is bounded by its interval extension
-over enclosures of the contact speeds (monotone there) and of the prediction (bounded
-slope); the predictor's own integration error enters as an allowance derived from its
-tolerances. The smallest bound over a grid of ``delta`` is a proof, up to floating-point
-rounding and CVODES honouring its local error tolerance. The exact event-driven simulator
-(:func:`toolkit.simulation.simulate`, closed-form segments) then runs the schedule as a
-second method: its distance to the prediction at the dense samples must stay within that
-bound (:func:`_verifier`).
-"""
+The commands are integrated on the smoothed law at tight tolerance (the prediction);
+:func:`deviation_bound` proves how far every solution of the exact inclusion can be from it
+(a monotonicity argument, bounded on enclosures between dense samples), and the exact
+event-driven simulator runs the schedule as a second method that must stay within that
+bound. The argument: docs/methods.md."""
 
 from __future__ import annotations
 
@@ -67,7 +55,7 @@ def deviation_bound(times: Any, body_speed: Any, contact_speeds: Any, forces: An
     between ``min(V_a, V_b) - A h`` and ``max(V_a, V_b) + A h``), widened by
     ``allowance``; ``d_delta`` is bounded there by its interval extension (``tanh`` and the
     sign patterns are monotone) and multiplied by ``h``. ``A`` is
-    :func:`~toolkit.schedule.construct.speed_rate` of ``F_tot + |F_ext|`` from the larger
+    ``speed_rate`` of ``F_tot + |F_ext|`` from the larger
     end speed plus ``allowance`` (drag included). Floating-point rounding of the sums is not
     accounted for (relative 1e-15).
 

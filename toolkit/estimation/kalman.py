@@ -500,7 +500,7 @@ class RTSSmoother(Estimator):
     ``KalmanFilter.rts_smoother`` on the augmented state ``(X, V, 1)`` whose transitions carry
     the known input (exact for the affine model; docs/estimation.md). Where the monitor tripped, the model the smoother would run
     backwards is the one the data refuted: the smoother is refused and the result is the
-    filter's own (:attr:`refused` says when and why), so it is never worse than the filter.
+    filter's own (``refused`` says when and why), so it is never worse than the filter.
 
     Parameters
     ----------
@@ -527,7 +527,7 @@ class RTSSmoother(Estimator):
 
     @property
     def tripped(self) -> tuple[float, str] | None:
-        """As :attr:`refused` (the forward filter's monitor verdict, as the default reports it)."""
+        """As ``refused`` (the forward filter's monitor verdict, as the default reports it)."""
         return self.refused
 
     def reset(self, *, speed: float = 0.0, speed_std: float | None = None,

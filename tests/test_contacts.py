@@ -290,3 +290,70 @@ def test_with_speeds_equals_a_new_set_and_checks_the_speeds():
         base.with_speeds([0.1, 0.2])
     with pytest.raises(ParameterError, match="speeds"):
         base.with_speeds([0.1, np.nan, 0.2, 0.3])
+
+
+# -- the tie tolerance at several scales, and loads drawn per contact ---------------------------
+#: Powers of two scale every force, prefix sum and tolerance exactly: each identity below holds
+#: to the bit at every scale.
+SCALES = [2.0 ** -20, 1.0, 2.0 ** 20]
+_EPS = np.finfo(float).eps
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_tie_tolerance_is_its_formula_at_every_scale(scale):
+    """``4 (K + 1) eps F_tot`` with ``K`` the distinct speeds (five contacts, four speeds,
+    unequal forces summing to 7 scale exactly; mutants: the factor 4 to 5, ``K + 1`` to
+    ``K + 2``)."""
+    cs = ContactSet([0.0, 1.0, 1.0, 2.0, 3.0], np.array([1.0, 0.5, 2.5, 1.0, 2.0]) * scale)
+    assert cs.total_force == 7.0 * scale
+    assert cs.tie_tolerance == 4.0 * 5 * _EPS * 7.0 * scale
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("excess, expected", [(5, (0.0, 1.0)), (7, (1.0, 1.0))])
+def test_tie_tolerance_brackets_the_net_force_at_every_scale(scale, excess, expected):
+    """Two contacts at 0 and 1 m/s with forces 1 and ``1 + d``: between them the net force is
+    ``d`` exactly (Sterbenz), against the tolerance ``12 eps F_tot ~ 6 * 2**-50`` (times the
+    scale). ``d = 5 * 2**-50`` is a tie (the zero-force band (0, 1)); ``d = 7 * 2**-50`` is not
+    (the point 1). Mutants killed: the factor 4 to 5, ``K + 1`` to ``K + 2``, the ``F_tot``
+    factor dropped."""
+    d = excess * 2.0 ** -50
+    cs = ContactSet([0.0, 1.0], np.array([1.0, 1.0 + d]) * scale)
+    assert cs.equilibrium() == expected
+    assert float(cs.force(0.5)) == (0.0 if expected == (0.0, 1.0) else d * scale)
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_decimal_loads_that_cancel_give_a_band_at_every_scale(scale):
+    """0.1 + 0.2 != 0.3 in binary: the rounding (about 5.6e-17 scale) is a tie at every scale
+    because the tolerance scales with F_tot (at 2**20 a tolerance without F_tot moves the
+    equilibrium from the band (0.2, 0.3) to the point 0.2)."""
+    cs = ContactSet([0.1, 0.2, 0.3], np.array([0.1, 0.2, 0.3]) * scale)
+    assert cs.equilibrium() == (0.2, 0.3)
+    np.testing.assert_array_equal(cs.force([0.25]), 0.0)
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_unequal_loads_keep_each_contacts_own_mean_and_spread(scale):
+    """The lognormal of :func:`unequal_loads` integrated exactly by 60-point Gauss-Hermite
+    quadrature over the normals (one row of normals per node): each contact's mean is its own
+    ``mean_i`` and its relative variance ``spread^2`` (the quadrature is exact to rounding for
+    this smooth integrand: rtol 1e-12). Unequal means at several scales; mutants: the loads
+    drawn around the mean of all contacts (``mean.mean()``), ``sigma^2 = ln(1 + spread)``."""
+    from numpy.polynomial.hermite_e import hermegauss
+
+    from toolkit.model import unequal_loads
+
+    means = np.array([1.0, 3.0, 0.5, 8.0]) * scale
+    spread = 0.3
+    nodes, weights = hermegauss(60)
+    weights = weights / np.sqrt(2.0 * np.pi)
+    loads = unequal_loads(means, spread, means.size, normals=np.repeat(nodes[:, None], means.size, axis=1))
+    assert loads.shape == (60, means.size)
+    mean = weights @ loads
+    np.testing.assert_allclose(mean, means, rtol=1e-12, atol=0.0)
+    np.testing.assert_allclose(weights @ loads ** 2 - mean ** 2, (spread * means) ** 2, rtol=1e-11, atol=0.0)
+    # At z = 0 each load is its own mean times exp(-sigma^2 / 2) = mean / sqrt(1 + spread^2).
+    np.testing.assert_allclose(unequal_loads(means, spread, means.size, normals=np.zeros(means.size)),
+                               means / np.sqrt(1.0 + spread ** 2), rtol=4 * _EPS, atol=0.0)
+    np.testing.assert_array_equal(unequal_loads(means, 0.0, means.size), means)

@@ -213,3 +213,20 @@ def test_bad_requests_are_refused(rng):
         contacts.equilibrium(method="cvxpi")
     with pytest.raises(ParameterError, match="'tol'"):
         contacts.equilibrium(tol=0.0)
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -20, 1.0, 2.0 ** 20])
+def test_weiszfeld_started_on_a_weighted_data_point(scale):
+    """Four points around a fifth at the origin whose weighted mean (the start) is the origin.
+    The weighted unit vectors of the others sum to ``R = (-2, 0)`` at every scale. With the centre's weight 2.5 >= |R| the origin is the median: returned
+    exactly, in one iteration. With weight 1.5 < |R| Vardi and Zhang's first step is
+    ``(1 - 1.5/2) T`` with ``T = (-6/13, 0)`` the Weiszfeld point of the others: ``(-3/26, 0)``
+    to rounding (4 eps). Points at 2**-20, 1 and 2**20 (exact). Mutant killed: the points at
+    ``y`` counted (``eta = at.sum()``) instead of weighed: it steps away from the median."""
+    points = np.array([[0.0, 0.0], [3.0, 0.0], [-1.0, 0.0], [0.0, 2.0], [0.0, -2.0]]) * scale
+    others = np.array([1.0, 3.0, 1.0, 1.0])
+    median, iterations = weiszfeld(points, np.r_[2.5, others])
+    assert iterations == 1 and np.array_equal(median, [0.0, 0.0])
+    step, iterations = weiszfeld(points, np.r_[1.5, others], max_iter=1)
+    assert iterations == 1
+    np.testing.assert_allclose(step, np.array([-3.0 / 26.0, 0.0]) * scale, rtol=4 * np.finfo(float).eps, atol=0.0)

@@ -287,3 +287,65 @@ def test_compliant_breakpoints_are_the_force_law(speeds, k):
     # as a few rounding errors, at most 4 n eps (n / k), instead of exactly 0.
     assert slope[0] == slope[-1] == 0.0
     assert np.all(slope <= 4 * cs.n * np.finfo(float).eps * cs.n / k)
+
+
+# -- the laws at their defining points, at several scales, and on both back ends ---------------
+#: Force scales of the law tests (powers of two: exact), and unequal magnitudes.
+SCALES = [2.0 ** -20, 1.0, 2.0 ** 20]
+EPS = np.finfo(float).eps
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("epsilon", [2.0 ** -10, 0.05])
+def test_stribeck_law_at_its_defining_points(scale, epsilon):
+    """The Stribeck law over the tanh law is ``1 + (P - 1) exp(-(s / (S eps))^2)`` with
+    ``P = 1.5`` and ``S = 3`` (the documented constants): ``P`` as the slip tends to 0 (at
+    ``s = 1e-6 eps`` the hump is ``exp(-1e-12 / 9)``), ``1 + (P - 1)/e`` at ``s = S eps``, 1 far away;
+    rtol a few eps (one tanh, one exp; tanh cancels in the ratio). Unequal magnitudes at
+    several scales. Mutants killed: the peak ``P - 1`` to ``P`` or ``P + 1``, ``S eps`` to
+    ``S / eps`` or ``eps``, the square dropped, the hump's sign."""
+    from toolkit.model.friction import STRIBECK_SPEED, contact_forces
+
+    assert (STRIBECK_PEAK, STRIBECK_SPEED) == (1.5, 3.0)
+    f = np.array([1.0, 3.0, 0.5]) * scale
+    for slip, ratio in ((1e-6 * epsilon, 1.0 + 0.5 * np.exp(-1e-12 / 9)), (3.0 * epsilon, 1.0 + 0.5 / np.e),
+                        (-3.0 * epsilon, 1.0 + 0.5 / np.e), (40.0 * epsilon, 1.0)):
+        s = np.full(3, slip)
+        stribeck = contact_forces(s, f, law="stribeck", epsilon=epsilon)
+        tanh = contact_forces(s, f, law="tanh", epsilon=epsilon)
+        np.testing.assert_allclose(tanh, f * np.tanh(slip / epsilon), rtol=2 * EPS, atol=0.0)
+        np.testing.assert_allclose(stribeck / tanh, ratio, rtol=8 * EPS, atol=0.0)
+
+
+@pytest.mark.parametrize("law, options", [("sign", {}), ("tanh", {"epsilon": 0.01}),
+                                          ("stribeck", {"epsilon": 0.01}), ("sign", {"compliance": 0.25})])
+def test_contact_forces_are_one_law_on_numpy_and_casadi(law, options):
+    """The same law evaluated by numpy and built symbolically by casadi (then evaluated)
+    agree to rounding (a few eps of the forces) for slips on both sides of every kink, with
+    unequal magnitudes and a lifted contact. Mutants killed: any operation of
+    :class:`toolkit.model._xp.ArrayOps` swapped on one back end (built anew here, not the
+    cached instance)."""
+    import casadi
+
+    from toolkit.model._xp import ArrayOps
+    from toolkit.model.friction import contact_forces
+
+    f = np.array([1.0, 3.0, 0.5, 0.0, 2.0])
+    for slip in (np.array([-0.5, -0.01, 0.0, 0.2, 0.003]), np.array([0.6, 0.02, -0.004, -1.0, 0.5])):
+        numeric = contact_forces(slip, f, law=law, **options)
+        s = casadi.SX.sym("s", f.size)
+        built = contact_forces(s, f, law=law, xp=casadi, **options)
+        symbolic = np.array(casadi.Function("phi", [s], [built])(slip)).ravel()
+        np.testing.assert_allclose(symbolic, numeric, rtol=4 * EPS, atol=4 * EPS)
+    for module in (np, casadi):
+        o = ArrayOps(module)
+        assert o.module is module and o.symbolic is (module is casadi)
+        x, y = np.array([-2.0, 0.5, 3.0]), np.array([1.0, -1.0, 4.0])
+        for name, expected in (("tanh", np.tanh(x)), ("exp", np.exp(x)), ("sign", np.sign(x))):
+            np.testing.assert_allclose(np.array(casadi.DM(getattr(o, name)(o.const(x)))).ravel(), expected,
+                                       rtol=2 * EPS, atol=0.0)
+        for name, expected in (("fmin", np.minimum(x, y)), ("fmax", np.maximum(x, y))):
+            np.testing.assert_array_equal(np.array(casadi.DM(getattr(o, name)(o.const(x), o.const(y)))).ravel(),
+                                          expected)
+        assert float(o.sum(o.const(x))) == 1.5
+        np.testing.assert_array_equal(np.array(casadi.DM(o.concat(7.0, o.const(x)))).ravel(), [7.0, *x])

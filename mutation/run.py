@@ -1,0 +1,240 @@
+"""Mutation testing of the laws and the numerics: each module against its own test files.
+
+``make mutation`` runs this script. For every module that ``mutation/modules.toml`` lists it
+prepares a working copy under ``build/mutation/`` (the package, the tests and a mutmut
+configuration naming that module and its test files), runs mutmut there, and prints the
+kill rate per module and every surviving mutant with its diff. Mutants reviewed as
+equivalent (no test can tell them from the original) are listed with a reason in
+``mutation/equivalent.toml`` and left out of the rate.
+
+Working copies persist, so a second run tests only the functions whose source changed.
+
+Usage::
+
+    python mutation/run.py [--workers N] [--fail-under PERCENT] [MODULE_GLOB ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import fnmatch
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+CONFIG = ROOT / "mutation" / "modules.toml"
+EQUIVALENT = ROOT / "mutation" / "equivalent.toml"
+WORK = ROOT / "build" / "mutation"
+
+#: mutmut's verdicts that count as the mutant detected.
+DETECTED = {"killed", "timeout", "segfault", "caught by type check"}
+
+
+@dataclass(frozen=True)
+class Job:
+    """One module mutated and judged by its own test files."""
+
+    module: str                     # path of the source file, from the repository root
+    tests: tuple[str, ...]          # test files (or node ids) that judge it
+    env: tuple[tuple[str, str], ...] = ()   # extra environment (e.g. NUMBA_DISABLE_JIT=1)
+
+    @property
+    def slug(self) -> str:
+        return self.module.removesuffix(".py").replace("/", ".")
+
+    @property
+    def dotted(self) -> str:
+        return self.module.removesuffix(".py").replace("/", ".")
+
+
+@dataclass
+class Outcome:
+    job: Job
+    status: dict[str, str] = field(default_factory=dict)    # mutant name -> mutmut verdict
+    diffs: dict[str, str] = field(default_factory=dict)     # survivor -> its diff
+    seconds: float = 0.0
+    error: str = ""
+
+
+def load_jobs(patterns: list[str]) -> list[Job]:
+    """The modules of ``modules.toml`` (globs expanded) that match any of ``patterns``."""
+    table = tomllib.loads(CONFIG.read_text())["modules"]
+    jobs = []
+    for key, value in table.items():
+        if isinstance(value, list):
+            tests, env = value, {}
+        else:
+            tests, env = value["tests"], value.get("env", {})
+        for path in sorted(ROOT.glob(key)):
+            module = path.relative_to(ROOT).as_posix()
+            if path.name == "__init__.py" or (patterns and not any(fnmatch.fnmatch(module, p) for p in patterns)):
+                continue
+            jobs.append(Job(module, tuple(tests), tuple(sorted(env.items()))))
+    return jobs
+
+
+def load_equivalent() -> dict[str, str]:
+    """Mutant name -> the reviewed reason it is equivalent."""
+    return tomllib.loads(EQUIVALENT.read_text()).get("equivalent", {})
+
+
+def _pyproject(job: Job) -> str:
+    """The repository's pyproject.toml with a ``[tool.mutmut]`` table for ``job``."""
+    text = (ROOT / "pyproject.toml").read_text()
+    mutmut = {
+        "source_paths": ["toolkit"],
+        "only_mutate": [job.module],
+        "pytest_add_cli_args_test_selection": list(job.tests),
+        "pytest_add_cli_args": ["-p", "no:cacheprovider", "-m", "not slow"],
+        "use_git_change_detection": False,
+    }
+    lines = ["", "[tool.mutmut]"] + [f"{key} = {json.dumps(value)}" for key, value in mutmut.items()]
+    return text + "\n".join(lines) + "\n"
+
+
+def prepare(job: Job) -> Path:
+    """The working copy of ``job``: the package (with its compiled kernels' cache, mtimes
+    kept so numba's cache stays valid) and the tests, refreshed from the repository."""
+    work = WORK / job.slug
+    work.mkdir(parents=True, exist_ok=True)
+    for name in ("toolkit", "tests"):
+        shutil.copytree(ROOT / name, work / name, dirs_exist_ok=True, copy_function=shutil.copy2,
+                        ignore=shutil.ignore_patterns(".hypothesis", ".pytest_cache"))
+    (work / "pyproject.toml").write_text(_pyproject(job))
+    return work
+
+
+def run_job(job: Job) -> Outcome:
+    """Run mutmut on ``job`` in its working copy (one worker) and collect its verdicts."""
+    outcome = Outcome(job)
+    start = time.perf_counter()
+    work = prepare(job)
+    # CI: hypothesis draws the same examples every run. The forked test runs must not start
+    # GNU OpenMP's threads (not fork-safe: numba ends such a child with SIGTERM); numba's
+    # own workqueue layer is.
+    env = {**os.environ, "CI": "1", "NUMBA_THREADING_LAYER": "workqueue", **dict(job.env)}
+    env.pop("PYTHONPATH", None)
+    log = work / "mutmut.log"
+    with open(log, "w") as out:
+        proc = subprocess.run([sys.executable, __file__, "--in-copy", "run"], cwd=work, env=env,
+                              stdout=out, stderr=subprocess.STDOUT)
+    if proc.returncode != 0:
+        outcome.error = f"mutmut exited with {proc.returncode}; see {log.relative_to(ROOT)}"
+    report = subprocess.run([sys.executable, __file__, "--in-copy", "report"], cwd=work, env=env,
+                            capture_output=True, text=True)
+    if report.returncode == 0:
+        data = json.loads(report.stdout)
+        outcome.status, outcome.diffs = data["status"], data["diffs"]
+    else:
+        outcome.error += report.stderr[-2000:]
+    outcome.seconds = time.perf_counter() - start
+    return outcome
+
+
+def in_copy(command: str) -> None:
+    """Inside a working copy: run mutmut, or print its verdicts and the survivors' diffs."""
+    # mutmut copies the files it does not mutate with shutil.copy, which stamps them with a
+    # new mtime; numba keys its cache on the source's mtime, so every kernel would compile
+    # again in every copy. Copying with the mtime kept loads them from the cache.
+    shutil.copy = shutil.copy2
+    import mutmut.__main__ as mm
+
+    if command == "run":
+        mm.cli(["run", "--max-children", "1"], standalone_mode=True)
+        return
+    from mutmut.mutation.data import SourceFileMutationData
+    from mutmut.mutation.diff_apply import get_diff_for_mutant
+    from mutmut.stats import status_by_exit_code
+    from mutmut.utils.file_utils import walk_mutatable_files
+
+    status, diffs = {}, {}
+    for path in walk_mutatable_files():
+        data = SourceFileMutationData(path=path)
+        data.load()
+        for name, code in data.exit_code_by_key.items():
+            status[name] = status_by_exit_code[code]
+            if status[name] not in DETECTED:
+                diffs[name] = get_diff_for_mutant(name, path=path)
+    json.dump({"status": status, "diffs": diffs}, sys.stdout)
+
+
+def summarize(outcomes: list[Outcome], equivalent: dict[str, str], fail_under: float) -> int:
+    """Print the kill rate per module and the survivors; 1 if a module is below the bar."""
+    failed = 0
+    rows = []
+    print("\nSurviving mutants (not listed as equivalent):")
+    for o in sorted(outcomes, key=lambda o: o.job.module):
+        names = list(o.status)
+        eq = [n for n in names if n in equivalent]
+        judged = [n for n in names if n not in equivalent]
+        killed = [n for n in judged if o.status[n] in DETECTED]
+        survivors = [n for n in judged if o.status[n] not in DETECTED]
+        rate = 100.0 * len(killed) / len(judged) if judged else 100.0
+        rows.append((o.job.module, len(names), len(eq), len(killed), len(survivors), rate, o.seconds, o.error))
+        for name in survivors:
+            print(f"\n--- {name}: {o.status[name]}")
+            print(o.diffs.get(name, "").rstrip())
+        for name in eq:
+            if o.status[name] in DETECTED:
+                print(f"\nnote: {name} is listed as equivalent but was {o.status[name]}: remove it from the list")
+        if o.error or rate < fail_under:
+            failed = 1
+    stale = set(equivalent) - {n for o in outcomes for n in o.status}
+    ran = {o.job.dotted for o in outcomes}
+    for name in sorted(stale):
+        if name.rsplit(".", 1)[0] in ran:
+            print(f"\nnote: {name} is listed as equivalent but no longer exists: remove it from the list")
+    print(f"\n{'module':45s} {'mutants':>7s} {'equiv':>5s} {'killed':>6s} {'survived':>8s} {'kill rate':>9s} {'time':>7s}")
+    for module, total, eq, killed, survived, rate, seconds, error in rows:
+        print(f"{module:45s} {total:7d} {eq:5d} {killed:6d} {survived:8d} {rate:8.1f}% {seconds:6.0f}s"
+              + (f"  ERROR: {error}" if error else ""))
+    total_judged = sum(r[3] + r[4] for r in rows)
+    total_killed = sum(r[3] for r in rows)
+    if total_judged:
+        print(f"{'all':45s} {sum(r[1] for r in rows):7d} {sum(r[2] for r in rows):5d} {total_killed:6d} "
+              f"{total_judged - total_killed:8d} {100.0 * total_killed / total_judged:8.1f}%")
+    print(f"\nkill rate = killed / (mutants - equivalent); timeouts count as killed; bar {fail_under:g}%")
+    return failed
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("modules", nargs="*", help="globs of the modules to run (default: all listed)")
+    parser.add_argument("--workers", type=int, default=2, help="modules run at once (one core each)")
+    parser.add_argument("--fail-under", type=float, default=90.0, help="kill rate (%%) every module must reach")
+    parser.add_argument("--in-copy", choices=["run", "report"], help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.in_copy:
+        in_copy(args.in_copy)
+        return 0
+    jobs = load_jobs(args.modules)
+    if not jobs:
+        parser.error(f"no module of {CONFIG.relative_to(ROOT)} matches {args.modules}")
+    equivalent = load_equivalent()
+    start = time.perf_counter()
+    # The kernels compiled (or loaded) once here, into the cache every working copy copies.
+    subprocess.run([sys.executable, "-c", "from toolkit.simulation._warmup import warm_up; warm_up()"],
+                   cwd=ROOT, check=True, env={**os.environ, "ACTIVE_CONTACTS_COMPILE": "eager"})
+    # Largest first, so that the last module to start is a short one.
+    jobs.sort(key=lambda j: -(ROOT / j.module).stat().st_size)
+    outcomes = []
+    with concurrent.futures.ThreadPoolExecutor(max_workers=args.workers) as pool:
+        for future in concurrent.futures.as_completed([pool.submit(run_job, job) for job in jobs]):
+            outcome = future.result()
+            print(f"{outcome.job.module}: {len(outcome.status)} mutants in {outcome.seconds:.0f} s", flush=True)
+            outcomes.append(outcome)
+    failed = summarize(outcomes, equivalent, args.fail_under)
+    print(f"wall time {time.perf_counter() - start:.0f} s on {args.workers} workers")
+    return failed
+
+
+if __name__ == "__main__":
+    sys.exit(main())

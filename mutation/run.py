@@ -7,7 +7,8 @@ kill rate per module and every surviving mutant with its diff. Mutants reviewed 
 equivalent (no test can tell them from the original) are listed with a reason in
 ``mutation/equivalent.toml`` and left out of the rate.
 
-Working copies persist, so a second run tests only the functions whose source changed.
+Working copies persist: a run interrupted resumes where it stopped, a run with nothing
+changed reports at once, and a change to the package or the tests runs a module afresh.
 
 Usage::
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import concurrent.futures
 import fnmatch
+import hashlib
 import json
 import os
 import shutil
@@ -105,6 +107,14 @@ def prepare(job: Job) -> Path:
     kept so numba's cache stays valid) and the tests, refreshed from the repository."""
     work = WORK / job.slug
     work.mkdir(parents=True, exist_ok=True)
+    # mutmut re-tests the functions whose source changed, but keeps its verdicts when only the
+    # tests or the rest of the package changed: then start afresh.
+    stamp = hashlib.sha256(b"".join(path.read_bytes() for path in sorted((ROOT / "toolkit").rglob("*.py")))
+                           + b"".join(path.read_bytes() for path in sorted((ROOT / "tests").rglob("*.py")))
+                           + repr(job).encode()).hexdigest()
+    if (work / "stamp").exists() and (work / "stamp").read_text() != stamp:
+        shutil.rmtree(work / "mutants", ignore_errors=True)
+    (work / "stamp").write_text(stamp)
     for name in ("toolkit", "tests"):
         shutil.copytree(ROOT / name, work / name, dirs_exist_ok=True, copy_function=shutil.copy2,
                         ignore=shutil.ignore_patterns(".hypothesis", ".pytest_cache"))

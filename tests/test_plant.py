@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -34,16 +36,40 @@ def test_piecewise_constant_without_switches():
     assert u(-1e9) == 2.5 and u(1e9) == 2.5
 
 
-@pytest.mark.parametrize("times, values, error", [
-    ([1.0, 1.0], [0, 1, 2], ParameterError),            # not strictly increasing
-    ([1.0, np.inf], [0, 1, 2], ParameterError),         # not finite
-    ([1.0], [0, 1, 2], ParameterError),                 # wrong number of rows
-    ([1.0], [0, np.nan], ParameterError),
-    ([1.0], "ab", ParameterTypeError),
+@pytest.mark.parametrize("times, values, error, name, rule", [
+    ([1.0, 1.0], [0, 1, 2], ParameterError, "times", "be strictly increasing. Got [1.0, 1.0] instead."),
+    ([2.0, 1.0, 3.0], [0, 1, 2, 3], ParameterError, "times", "be strictly increasing. Got [2.0, 1.0, 3.0] instead."),
+    ([1.0, np.inf], [0, 1, 2], ParameterError, "times", "be finite (no NaN or inf). Got inf instead."),
+    ([1.0], [0, 1, 2], ParameterError, "values",
+     "have one more row than 'times' (2). Got 'an array of shape (3,)' instead."),
+    ([1.0], [[0, 1], [2, 3], [4, 5]], ParameterError, "values",
+     "have one more row than 'times' (2). Got 'an array of shape (3, 2)' instead."),
+    ([1.0], [[[0.0]], [[1.0]]], ParameterError, "values",
+     "be 2-dimensional. Got 'an array of shape (2, 1, 1)' instead."),
+    ([1.0], [0, np.nan], ParameterError, "values", "be finite (no NaN or inf). Got nan instead."),
+    ([1.0], "ab", ParameterTypeError, "values", "be an array of numbers. Got 'ab' instead."),
 ])
-def test_piecewise_refuses_bad_input(times, values, error):
-    with pytest.raises(error):
+def test_piecewise_refuses_bad_input(times, values, error, name, rule):
+    """Each refusal names the parameter, the owner, the rule and the value, whole (mutants:
+    any of the four changed or dropped, the row count ``k + 1`` off by one)."""
+    message = f"The '{name}' parameter of PiecewiseConstant must {rule}"
+    with pytest.raises(error, match="^" + re.escape(message) + "$"):
         PiecewiseConstant(times, values)
+
+
+def test_sample_count_and_times_on_a_rounded_duration():
+    """``floor(T f) + 1`` samples, a product within 1e-9 below a whole number counted as it:
+    0.29 s at 100 Hz (0.29 * 100 = 28.999999999999996) is 30 samples, 10 s at 50 Hz is 501,
+    0.2899999 s at 100 Hz (relative 3e-7 below) is 29; the instants are ``k / f`` exactly.
+    Mutants killed: ``+ 1`` off by one, ``1 + 1e-9`` to ``1 - 1e-9`` or ``2 + 1e-9``,
+    ``rate`` divided instead of multiplied, ``k / f`` to ``k f``."""
+    from toolkit.model import sample_count, sample_times
+
+    assert 0.29 * 100 < 29.0
+    assert (sample_count(0.29, 100.0), sample_count(10.0, 50.0), sample_count(0.2899999, 100.0)) == (30, 501, 29)
+    assert sample_count(0.0, 50.0) == 1
+    np.testing.assert_array_equal(sample_times(0.29, 100.0), np.arange(30) / 100.0)
+    np.testing.assert_array_equal(sample_times(0.1, 50.0), [0.0, 0.02, 0.04, 0.06, 0.08, 0.1])
 
 
 def test_piecewise_arrays_are_read_only():

@@ -54,7 +54,8 @@ test-min: $(MIN_STAMP)
 # Mutation testing of the laws and the numerics, each module against its own test files
 # (mutation/modules.toml); prints the kill rate per module and the surviving mutants.
 # Not part of make test: about half an hour of both cores. MUTATION_ARGS="toolkit/model/*"
-# runs some modules; working copies persist in build/mutation/ (an unchanged module reports at once).
+# runs some modules; working copies persist in build/mutation/ (a module whose source and
+# test files are unchanged reports at once).
 MUTATION_STAMP := $(VENV)/.installed-mutation
 $(MUTATION_STAMP): $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[test,mutation]"

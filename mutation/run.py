@@ -8,7 +8,7 @@ equivalent (no test can tell them from the original) are listed with a reason in
 ``mutation/equivalent.toml`` and left out of the rate.
 
 Working copies persist: a run interrupted resumes where it stopped, a run with nothing
-changed reports at once, and a change to the package or the tests runs a module afresh.
+changed reports at once, and a change to a module or to its test files runs it afresh.
 
 Usage::
 
@@ -97,6 +97,10 @@ def _pyproject(job: Job) -> str:
         "pytest_add_cli_args_test_selection": list(job.tests),
         "pytest_add_cli_args": ["-p", "no:cacheprovider", "-m", "not slow"],
         "use_git_change_detection": False,
+        # A mutant whose tests run 5 times longer than the unmutated ones (plus 5 s) is
+        # stopped and counted as detected (a loop that no longer ends).
+        "timeout_multiplier": 5.0,
+        "timeout_constant": 5.0,
     }
     lines = ["", "[tool.mutmut]"] + [f"{key} = {json.dumps(value)}" for key, value in mutmut.items()]
     return text + "\n".join(lines) + "\n"
@@ -107,11 +111,10 @@ def prepare(job: Job) -> Path:
     kept so numba's cache stays valid) and the tests, refreshed from the repository."""
     work = WORK / job.slug
     work.mkdir(parents=True, exist_ok=True)
-    # mutmut re-tests the functions whose source changed, but keeps its verdicts when only the
-    # tests or the rest of the package changed: then start afresh.
-    stamp = hashlib.sha256(b"".join(path.read_bytes() for path in sorted((ROOT / "toolkit").rglob("*.py")))
-                           + b"".join(path.read_bytes() for path in sorted((ROOT / "tests").rglob("*.py")))
-                           + repr(job).encode()).hexdigest()
+    # mutmut re-tests the functions whose source changed but keeps its verdicts when only the
+    # tests changed: a change to the module or to its test files runs it afresh.
+    judged = [ROOT / job.module, ROOT / "tests" / "conftest.py"] + [ROOT / t.split("::")[0] for t in job.tests]
+    stamp = hashlib.sha256(b"".join(path.read_bytes() for path in judged) + repr(job).encode()).hexdigest()
     if (work / "stamp").exists() and (work / "stamp").read_text() != stamp:
         shutil.rmtree(work / "mutants", ignore_errors=True)
     (work / "stamp").write_text(stamp)

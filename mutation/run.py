@@ -12,16 +12,18 @@ changed reports at once, and a change to a module or to its test files runs it a
 
 Usage::
 
-    python mutation/run.py [--workers N] [--fail-under PERCENT] [MODULE_GLOB ...]
+    python mutation/run.py [--workers N] [--sample FRACTION] [--fail-under PERCENT] [MODULE_GLOB ...]
 """
 
 from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import dataclasses
 import fnmatch
 import hashlib
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -47,6 +49,7 @@ class Job:
     module: str                     # path of the source file, from the repository root
     tests: tuple[str, ...]          # test files (or node ids) that judge it
     env: tuple[tuple[str, str], ...] = ()   # extra environment (e.g. NUMBA_DISABLE_JIT=1)
+    sample: float = 1.0             # fraction of the mutants run (a fixed draw by name)
 
     @property
     def slug(self) -> str:
@@ -72,14 +75,14 @@ def load_jobs(patterns: list[str]) -> list[Job]:
     jobs = []
     for key, value in table.items():
         if isinstance(value, list):
-            tests, env = value, {}
+            tests, env, sample = value, {}, 1.0
         else:
-            tests, env = value["tests"], value.get("env", {})
+            tests, env, sample = value["tests"], value.get("env", {}), float(value.get("sample", 1.0))
         for path in sorted(ROOT.glob(key)):
             module = path.relative_to(ROOT).as_posix()
             if path.name == "__init__.py" or (patterns and not any(fnmatch.fnmatch(module, p) for p in patterns)):
                 continue
-            jobs.append(Job(module, tuple(tests), tuple(sorted(env.items()))))
+            jobs.append(Job(module, tuple(tests), tuple(sorted(env.items())), sample))
     return jobs
 
 
@@ -115,7 +118,7 @@ def prepare(job: Job) -> Path:
     # tests changed: a change to the module or to its test files runs it afresh.
     judged = [ROOT / job.module, ROOT / "tests" / "conftest.py"] + [ROOT / t.split("::")[0] for t in job.tests]
     stamp = hashlib.sha256(b"".join(path.read_bytes() for path in judged) + repr(job).encode()).hexdigest()
-    if (work / "stamp").exists() and (work / "stamp").read_text() != stamp:
+    if not (work / "stamp").exists() or (work / "stamp").read_text() != stamp:
         shutil.rmtree(work / "mutants", ignore_errors=True)
     (work / "stamp").write_text(stamp)
     for name in ("toolkit", "tests"):
@@ -133,7 +136,8 @@ def run_job(job: Job) -> Outcome:
     # CI: hypothesis draws the same examples every run. The forked test runs must not start
     # GNU OpenMP's threads (not fork-safe: numba ends such a child with SIGTERM); numba's
     # own workqueue layer is.
-    env = {**os.environ, "CI": "1", "NUMBA_THREADING_LAYER": "workqueue", **dict(job.env)}
+    env = {**os.environ, "CI": "1", "NUMBA_THREADING_LAYER": "workqueue", **dict(job.env),
+           "MUTATION_SAMPLE": repr(job.sample)}
     env.pop("PYTHONPATH", None)
     log = work / "mutmut.log"
     with open(log, "w") as out:
@@ -152,6 +156,11 @@ def run_job(job: Job) -> Outcome:
     return outcome
 
 
+def drawn(name: str, fraction: float) -> bool:
+    """Whether mutant ``name`` is in the fixed draw of ``fraction`` of a module's mutants."""
+    return int(hashlib.sha256(name.encode()).hexdigest()[:8], 16) < fraction * 2 ** 32
+
+
 def in_copy(command: str) -> None:
     """Inside a working copy: run mutmut, or print its verdicts and the survivors' diffs."""
     # mutmut copies the files it does not mutate with shutil.copy, which stamps them with a
@@ -160,13 +169,31 @@ def in_copy(command: str) -> None:
     shutil.copy = shutil.copy2
     import mutmut.__main__ as mm
 
-    if command == "run":
-        mm.cli(["run", "--max-children", "1"], standalone_mode=True)
-        return
     from mutmut.mutation.data import SourceFileMutationData
+    from mutmut.utils.file_utils import walk_mutatable_files
+
+    if command == "run":
+        fraction = float(os.environ.get("MUTATION_SAMPLE", "1"))
+        names = []
+        if fraction < 1.0:
+            # Generate the mutants (as `mutmut run` does first), then run a fixed draw of them.
+            from mutmut.mutation.trampoline import set_mutant_under_test
+            from mutmut.utils import file_utils
+
+            set_mutant_under_test("mutant_generation")
+            os.makedirs("mutants", exist_ok=True)
+            file_utils.copy_src_dir()
+            file_utils.copy_also_copy_files()
+            mm.create_mutants(1)
+            for path in walk_mutatable_files():
+                data = SourceFileMutationData(path=path)
+                data.load()
+                names += [name for name in data.exit_code_by_key if drawn(name, fraction)]
+        mm.cli(["run", "--max-children", "1", *names], standalone_mode=True)
+        return
+
     from mutmut.mutation.diff_apply import get_diff_for_mutant
     from mutmut.stats import status_by_exit_code
-    from mutmut.utils.file_utils import walk_mutatable_files
 
     status, diffs = {}, {}
     for path in walk_mutatable_files():
@@ -174,24 +201,31 @@ def in_copy(command: str) -> None:
         data.load()
         for name, code in data.exit_code_by_key.items():
             status[name] = status_by_exit_code[code]
-            if status[name] not in DETECTED:
+            if status[name] not in DETECTED | {"not checked"}:
                 diffs[name] = get_diff_for_mutant(name, path=path)
     json.dump({"status": status, "diffs": diffs}, sys.stdout)
 
 
 def summarize(outcomes: list[Outcome], equivalent: dict[str, str], fail_under: float) -> int:
-    """Print the kill rate per module and the survivors; 1 if a module is below the bar."""
+    """Print the kill rate per module and the survivors; 1 if a module is below the bar.
+
+    Mutants not run (outside a module's sample, or a run cut short) are left out of its rate;
+    a rate over a sample is given with its binomial standard error."""
     failed = 0
     rows = []
     print("\nSurviving mutants (not listed as equivalent):")
     for o in sorted(outcomes, key=lambda o: o.job.module):
         names = list(o.status)
-        eq = [n for n in names if n in equivalent]
-        judged = [n for n in names if n not in equivalent]
+        checked = [n for n in names if o.status[n] != "not checked"]
+        eq = [n for n in checked if n in equivalent]
+        judged = [n for n in checked if n not in equivalent]
         killed = [n for n in judged if o.status[n] in DETECTED]
         survivors = [n for n in judged if o.status[n] not in DETECTED]
         rate = 100.0 * len(killed) / len(judged) if judged else 100.0
-        rows.append((o.job.module, len(names), len(eq), len(killed), len(survivors), rate, o.seconds, o.error))
+        sampled = judged and len(checked) < len(names)
+        error = 100.0 * math.sqrt(rate / 100 * (1 - rate / 100) / len(judged)) if sampled else 0.0
+        rows.append((o.job.module, len(names), len(checked), len(eq), len(killed), len(survivors), rate, error,
+                     o.seconds, o.error))
         for name in survivors:
             print(f"\n--- {name}: {o.status[name]}")
             print(o.diffs.get(name, "").rstrip())
@@ -205,16 +239,14 @@ def summarize(outcomes: list[Outcome], equivalent: dict[str, str], fail_under: f
     for name in sorted(stale):
         if name.rsplit(".", 1)[0] in ran:
             print(f"\nnote: {name} is listed as equivalent but no longer exists: remove it from the list")
-    print(f"\n{'module':45s} {'mutants':>7s} {'equiv':>5s} {'killed':>6s} {'survived':>8s} {'kill rate':>9s} {'time':>7s}")
-    for module, total, eq, killed, survived, rate, seconds, error in rows:
-        print(f"{module:45s} {total:7d} {eq:5d} {killed:6d} {survived:8d} {rate:8.1f}% {seconds:6.0f}s"
-              + (f"  ERROR: {error}" if error else ""))
-    total_judged = sum(r[3] + r[4] for r in rows)
-    total_killed = sum(r[3] for r in rows)
-    if total_judged:
-        print(f"{'all':45s} {sum(r[1] for r in rows):7d} {sum(r[2] for r in rows):5d} {total_killed:6d} "
-              f"{total_judged - total_killed:8d} {100.0 * total_killed / total_judged:8.1f}%")
-    print(f"\nkill rate = killed / (mutants - equivalent); timeouts count as killed; bar {fail_under:g}%")
+    print(f"\n{'module':36s} {'mutants':>7s} {'run':>5s} {'equiv':>5s} {'killed':>6s} {'survived':>8s} "
+          f"{'kill rate':>14s} {'time':>6s}")
+    for module, total, checked, eq, killed, survived, rate, error, seconds, failure in rows:
+        shown = f"{rate:.1f}%" + (f" +- {error:.1f}" if error else "")
+        print(f"{module:36s} {total:7d} {checked:5d} {eq:5d} {killed:6d} {survived:8d} {shown:>14s} {seconds:5.0f}s"
+              + (f"  ERROR: {failure}" if failure else ""))
+    print("\nkill rate = killed / (mutants run - equivalent); timeouts count as killed; '+-' is the binomial"
+          f"\nstandard error of a rate over a sample of the module's mutants; bar {fail_under:g}%")
     return failed
 
 
@@ -223,12 +255,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("modules", nargs="*", help="globs of the modules to run (default: all listed)")
     parser.add_argument("--workers", type=int, default=2, help="modules run at once (one core each)")
     parser.add_argument("--fail-under", type=float, default=90.0, help="kill rate (%%) every module must reach")
+    parser.add_argument("--sample", type=float, help="run this fraction of every module's mutants (a quick estimate)")
     parser.add_argument("--in-copy", choices=["run", "report"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.in_copy:
         in_copy(args.in_copy)
         return 0
     jobs = load_jobs(args.modules)
+    if args.sample is not None:
+        jobs = [dataclasses.replace(job, sample=args.sample) for job in jobs]
     if not jobs:
         parser.error(f"no module of {CONFIG.relative_to(ROOT)} matches {args.modules}")
     equivalent = load_equivalent()

@@ -375,3 +375,27 @@ def test_contact_forces_are_one_law_on_numpy_and_casadi(law, options):
                                           expected)
         assert float(o.sum(o.const(x))) == 1.5
         np.testing.assert_array_equal(np.array(casadi.DM(o.concat(7.0, o.const(x)))).ravel(), [7.0, *x])
+
+
+def test_motor_law_per_contact_with_some_saturated():
+    """The motor law acts per contact: with lag 0.5 s and rate limit 1.5 m/s^2, gaps
+    ``u - v`` of (1, -1, 0.25, -0.5, 0) m/s pull at (2, -2, 0.5, -1, 0) and are clipped to
+    (1.5, -1.5, 0.5, -1, 0) (dyadic: exact). ``unsaturated_response`` after ``s``: with a lag,
+    ``u + (v0 - u) exp(-s/tau)`` (``v0`` at 0, a share 1/e left at ``tau``); with only the rate
+    limit, ``v0 + clip(u - v0, -r s, r s)`` per contact; ideal, ``u``. Mutants killed: the
+    ramp's upper bound ``r s`` to ``r``, the lag's clip to ``min(pull, pull)``."""
+    from toolkit.model import motor_rate, unsaturated_response
+
+    u = np.array([1.0, -1.0, 0.25, -0.5, 0.125])
+    v = np.array([0.0, 0.0, 0.0, 0.0, 0.125])
+    np.testing.assert_array_equal(motor_rate(Motors(lag=0.5, rate_limit=1.5), u, v), [1.5, -1.5, 0.5, -1.0, 0.0])
+    np.testing.assert_array_equal(motor_rate(Motors(lag=0.25), u, v), [4.0, -4.0, 1.0, -2.0, 0.0])
+    np.testing.assert_array_equal(motor_rate(Motors(rate_limit=3.0), u, v), [3.0, -3.0, 3.0, -3.0, 0.0])
+    np.testing.assert_array_equal(motor_rate(None, u, v), np.zeros(5))
+    tau = 0.25
+    np.testing.assert_array_equal(unsaturated_response(v, u, 0.0, tau, np.inf), v)
+    np.testing.assert_allclose(unsaturated_response(v, u, tau, tau, np.inf), u + (v - u) / np.e,
+                               rtol=4 * np.finfo(float).eps, atol=1e-300)
+    # Rate limit 2 m/s^2 for 0.25 s: at most 0.5 m/s of travel each way.
+    np.testing.assert_array_equal(unsaturated_response(v, u, 0.25, 0.0, 2.0), [0.5, -0.5, 0.25, -0.5, 0.125])
+    np.testing.assert_array_equal(unsaturated_response(v, u, 0.25, 0.0, np.inf), u)

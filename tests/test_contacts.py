@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from scipy import stats
 
 from toolkit import ContactDistribution, ContactSet, ParameterError, ParameterTypeError
+from toolkit.model.contacts import unequal_loads, weighted_median
 
 SPEED = st.floats(-1.0, 1.0, allow_nan=False).map(lambda v: round(v, 3))
 MAGNITUDE = st.floats(0.01, 10.0, allow_nan=False)
@@ -342,8 +343,6 @@ def test_unequal_loads_keep_each_contacts_own_mean_and_spread(scale):
     drawn around the mean of all contacts (``mean.mean()``), ``sigma^2 = ln(1 + spread)``."""
     from numpy.polynomial.hermite_e import hermegauss
 
-    from toolkit.model import unequal_loads
-
     means = np.array([1.0, 3.0, 0.5, 8.0]) * scale
     spread = 0.3
     nodes, weights = hermegauss(60)
@@ -357,3 +356,68 @@ def test_unequal_loads_keep_each_contacts_own_mean_and_spread(scale):
     np.testing.assert_allclose(unequal_loads(means, spread, means.size, normals=np.zeros(means.size)),
                                means / np.sqrt(1.0 + spread ** 2), rtol=4 * _EPS, atol=0.0)
     np.testing.assert_array_equal(unequal_loads(means, 0.0, means.size), means)
+
+
+@pytest.mark.parametrize(("call", "error", "message"), [
+    (lambda: ContactSet([0.1, np.nan]), ParameterError,
+     "The 'speeds' parameter of ContactSet must be finite (no NaN or inf). Got nan instead."),
+    (lambda: ContactSet([0.1], [np.nan]), ParameterError,
+     "The 'forces' parameter of ContactSet must be finite (no NaN or inf). Got nan instead."),
+    (lambda: ContactSet([0.1, 0.2], [1.0, -0.2]), ParameterError,
+     "The 'forces' parameter of ContactSet must be >= 0. Got -0.2 instead."),
+    (lambda: ContactSet([]), ParameterError,
+     "The 'speeds' parameter of ContactSet must not be empty. Got [] instead."),
+    (lambda: ContactSet([0.1, 0.2], [1.0]), ParameterError,
+     "The 'forces' parameter of ContactSet must have the same length as 'speeds' (2). Got 'an array "
+     "of length 1' instead."),
+    (lambda: ContactSet([0.1, 0.2], [0.0, 0.0]), ParameterError,
+     "The 'forces' parameter of ContactSet must have a positive sum (some contact must touch). Got "
+     '[0.0, 0.0] instead.'),
+    (lambda: ContactSet([0.0, 1.0, 2.0], [1e308] * 3), ParameterError,
+     "The 'forces' parameter of ContactSet must have a finite sum (F_tot overflows). Got 'max 1e+308' instead."),
+    (lambda: ContactSet([0.0]).force(np.nan), ParameterError,
+     "The 'V' parameter of ContactSet.force must not contain NaN. Got nan instead."),
+    (lambda: ContactSet([0.0]).force('a'), ParameterTypeError,
+     "The 'V' parameter of ContactSet.force must be real numbers (m/s). Got 'a' instead."),
+    (lambda: ContactSet([0.0]).cdf([np.nan]), ParameterError,
+     "The 'V' parameter of ContactSet.cdf must not contain NaN. Got [nan] instead."),
+    (lambda: ContactSet.from_friction([0.1, 0.2], [0.5, 0.5, 0.5], 2.0), ParameterError,
+     "The 'mu' parameter of ContactSet.from_friction must be a scalar or have the length of 'speeds' "
+     "(2). Got 'an array of length 3' instead."),
+    (lambda: ContactSet.from_friction([0.1, 0.2], 0.5, [1.0, 2.0, 3.0]), ParameterError,
+     "The 'normal_loads' parameter of ContactSet.from_friction must be a scalar or have the length "
+     "of 'speeds' (2). Got 'an array of length 3' instead."),
+    (lambda: ContactSet([0.1, 0.2]).with_speeds([0.1]), ParameterError,
+     "The 'speeds' parameter of ContactSet.with_speeds must have one speed per contact (2). Got 'an "
+     "array of length 1' instead."),
+    (lambda: ContactDistribution('uniform', 1.0), ParameterTypeError,
+     "The 'distribution' parameter of ContactDistribution must be a frozen scipy.stats continuous "
+     "distribution. Got 'uniform' instead."),
+    (lambda: ContactDistribution.from_histogram([0, 1], [1, 2], 1.0), ParameterError,
+     "The 'edges' parameter of ContactDistribution.from_histogram must have one more entry than "
+     "'weights' (3). Got 'an array of length 2' instead."),
+    (lambda: ContactDistribution.from_histogram([0, 1, 0.5], [1, 2], 1.0), ParameterError,
+     "The 'edges' parameter of ContactDistribution.from_histogram must be strictly increasing. Got "
+     '[0.0, 1.0, 0.5] instead.'),
+    (lambda: ContactDistribution.from_histogram([0, 1, 2], [0, 0], 1.0), ParameterError,
+     "The 'weights' parameter of ContactDistribution.from_histogram must have a positive sum. Got "
+     '[0.0, 0.0] instead.'),
+    (lambda: weighted_median(0.5, [1.0]), ParameterError,
+     "The 'speeds' parameter of weighted_median must have at least one axis (..., n). Got 0.5 instead."),
+    (lambda: weighted_median([0.1, np.nan], [1.0, 1.0]), ParameterError,
+     "The 'speeds' parameter of weighted_median must hold no NaN. Got 'an array with NaN' instead."),
+    (lambda: weighted_median([0.1, 0.2], [1.0]), ParameterError,
+     "The 'forces' parameter of weighted_median must have one magnitude per contact (2). Got 'shape (1,)' instead."),
+    (lambda: weighted_median([[0.1, 0.2]] * 3, [1.0, 1.0], outside=[1.0, 2.0]), ParameterError,
+     "The 'outside' parameter of weighted_median must broadcast to the rows' shape (3,). Got (2,) instead."),
+    (lambda: weighted_median([0.1, 0.2], [1.0, 1.0], outside=np.inf), ParameterError,
+     "The 'outside' parameter of weighted_median must be finite. Got inf instead."),
+    (lambda: unequal_loads(1.0, -0.1, 3), ParameterError,
+     "The 'spread' parameter of unequal_loads must be >= 0. Got -0.1 instead."),
+])
+def test_every_refusal_of_the_contact_model_in_full(call, error, message):
+    """Each refusal matched whole: the parameter, the owner, the rule and the value (mutants:
+    any of the four changed, dropped or replaced by None, a length in a rule off by one)."""
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message

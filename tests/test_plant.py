@@ -399,3 +399,53 @@ def test_motor_law_per_contact_with_some_saturated():
     # Rate limit 2 m/s^2 for 0.25 s: at most 0.5 m/s of travel each way.
     np.testing.assert_array_equal(unsaturated_response(v, u, 0.25, 0.0, 2.0), [0.5, -0.5, 0.25, -0.5, 0.125])
     np.testing.assert_array_equal(unsaturated_response(v, u, 0.25, 0.0, np.inf), u)
+
+
+_CS = ContactSet([0.0, 1.0])
+
+
+@pytest.mark.parametrize(("call", "error", "message"), [
+    (lambda: Motors(lag=-0.1), ParameterError,
+     "The 'lag' parameter of Motors must be >= 0. Got -0.1 instead."),
+    (lambda: Motors(rate_limit=0.0), ParameterError,
+     "The 'rate_limit' parameter of Motors must be > 0. Got 0.0 instead."),
+    (lambda: Motors(compliance=-1.0), ParameterError,
+     "The 'compliance' parameter of Motors must be >= 0. Got -1.0 instead."),
+    (lambda: Motors(speed_limits=(1.0, -1.0)), ParameterError,
+     "The 'speed_limits' parameter of Motors must satisfy low <= high with low < inf and high > "
+     '-inf. Got (1.0, -1.0) instead.'),
+    (lambda: Motors(speed_limits=(np.inf, np.inf)), ParameterError,
+     "The 'speed_limits' parameter of Motors must satisfy low <= high with low < inf and high > "
+     '-inf. Got (inf, inf) instead.'),
+    (lambda: Motors(lag=np.nan), ParameterError,
+     "The 'lag' parameter of Motors must be finite. Got nan instead."),
+    (lambda: Motors(speed_limits=0.3), ParameterTypeError,
+     "The 'speed_limits' parameter of Motors must be a pair (low, high) of speeds. Got 0.3 instead."),
+    (lambda: Motors(lag='fast'), ParameterTypeError,
+     "The 'lag' parameter of Motors must be a real number. Got 'fast' instead."),
+    (lambda: Motors(backlash=-1.0), ParameterError,
+     "The 'backlash' parameter of Motors must be >= 0. Got -1.0 instead."),
+    (lambda: Plant('x', 1.0), ParameterTypeError,
+     "The 'contacts' parameter of Plant must be a ContactSet. Got 'x' instead."),
+    (lambda: Plant(_CS, 0.0), ParameterError,
+     "The 'mass' parameter of Plant must be > 0. Got 0.0 instead."),
+    (lambda: Plant(_CS, 1.0, damping=-1.0), ParameterError,
+     "The 'damping' parameter of Plant must be >= 0. Got -1.0 instead."),
+    (lambda: Plant(_CS, 1.0, motors='m'), ParameterTypeError,
+     "The 'motors' parameter of Plant must be a Motors instance or None. Got 'm' instead."),
+    (lambda: Plant(_CS, 1.0, commands=PiecewiseConstant([], [[0.0, 0.0, 0.0]])), ParameterError,
+     "The 'commands' parameter of Plant must have values of shape (k + 1, 2) (one column per "
+     "contact). Got 'values of shape (1, 3)' instead."),
+    (lambda: Plant(_CS, 1.0, commands=[0.0, 0.0]), ParameterTypeError,
+     "The 'commands' parameter of Plant must be a PiecewiseConstant or None. Got [0.0, 0.0] instead."),
+    (lambda: Plant(_CS, 1.0, external_force=PiecewiseConstant([], [[0.0, 0.0]])), ParameterError,
+     "The 'external_force' parameter of Plant must be a scalar signal (values of shape (k + 1,)). "
+     "Got 'values of shape (1, 2)' instead."),
+])
+def test_every_refusal_of_the_motors_and_the_plant_in_full(call, error, message):
+    """Each refusal matched whole: parameter, owner, rule and value (mutants: any of them changed,
+    dropped or replaced by None)."""
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+

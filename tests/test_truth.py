@@ -127,3 +127,59 @@ def test_the_friction_spread_is_drawn_around_each_wheels_own_force():
         group = forces[nominal == own]
         assert abs(group.mean() / own - 1.0) < 4 * 0.2 / math.sqrt(group.size)
         assert group.std() / group.mean() == pytest.approx(0.2, rel=0.06)
+
+
+_PLANT, _SENSORS = Plant(ContactSet([0.0, 0.1]), 1.0), CAROUSEL.sensors(2)
+
+
+@pytest.mark.parametrize(("call", "error", "message"), [
+    (lambda: WorldTruth(friction_spread=-0.1), ParameterError,
+     "The 'friction_spread' parameter of WorldTruth must be >= 0. Got -0.1 instead."),
+    (lambda: WorldTruth(drag=-1.0), ParameterError,
+     "The 'drag' parameter of WorldTruth must be >= 0. Got -1.0 instead."),
+    (lambda: WorldTruth(lag=-0.01), ParameterError,
+     "The 'lag' parameter of WorldTruth must be >= 0. Got -0.01 instead."),
+    (lambda: WorldTruth(contact_drift=float('nan')), ParameterError,
+     "The 'contact_drift' parameter of WorldTruth must be finite. Got nan instead."),
+    (lambda: WorldTruth(read_noise=-0.5), ParameterError,
+     "The 'read_noise' parameter of WorldTruth must be >= 0. Got -0.5 instead."),
+    (lambda: WorldTruth(missed_count_prob=1.5), ParameterError,
+     "The 'missed_count_prob' parameter of WorldTruth must be <= 1. Got 1.5 instead."),
+    (lambda: WorldTruth(jitter=float('inf')), ParameterError,
+     "The 'jitter' parameter of WorldTruth must be finite. Got inf instead."),
+    (lambda: WorldTruth().plant('x'), ParameterTypeError,
+     "The 'nominal' parameter of WorldTruth.plant must be a Plant. Got 'x' instead."),
+    (lambda: WorldTruth().sensors('x'), ParameterTypeError,
+     "The 'nominal' parameter of WorldTruth.sensors must be a Sensors. Got 'x' instead."),
+    (lambda: WorldTruth().plant(_PLANT, seed=-1), ParameterError,
+     "The 'seed' parameter of WorldTruth.plant must be >= 0. Got -1 instead."),
+    (lambda: WorldTruth(contact_drift=1e-3).wander(0, 2, 0.02), ParameterError,
+     "The 'samples' parameter of WorldTruth.wander must be >= 1. Got 0 instead."),
+    (lambda: WorldTruth(contact_drift=1e-3).wander(5, 0, 0.02), ParameterError,
+     "The 'n' parameter of WorldTruth.wander must be >= 1. Got 0 instead."),
+    (lambda: WorldTruth(contact_drift=1e-3).wander(5, 2, 0.0), ParameterError,
+     "The 'period' parameter of WorldTruth.wander must be > 0. Got 0.0 instead."),
+    (lambda: realize(_PLANT, _SENSORS, 'x'), ParameterTypeError,
+     "The 'truth' parameter of realize must be a WorldTruth or None. Got 'x' instead."),
+    (lambda: realize(_PLANT, 'x'), ParameterTypeError,
+     "The 'sensors' parameter of realize must be a Sensors. Got 'x' instead."),
+    (lambda: ModelPrior(drag_range=(2.0, 1.0)), ParameterError,
+     "The 'drag_range' parameter of ModelPrior must satisfy low <= high. Got (2.0, 1.0) instead."),
+    (lambda: ModelPrior(drag_range=3.0), ParameterTypeError,
+     "The 'drag_range' parameter of ModelPrior must be a pair (low, high) or None. Got 3.0 instead."),
+    (lambda: ModelPrior(lag_range=(0.0, 20.0)), ParameterError,
+     "The 'lag_range' parameter of ModelPrior must be <= 10. Got 20.0 instead."),
+    (lambda: ModelPrior(drag_range=(-1.0, 1.0)), ParameterError,
+     "The 'drag_range' parameter of ModelPrior must be >= 0. Got -1.0 instead."),
+    (lambda: ModelPrior(friction_spread=-0.1), ParameterError,
+     "The 'friction_spread' parameter of ModelPrior must be >= 0. Got -0.1 instead."),
+    (lambda: ModelPrior(missed_count_prob=2.0), ParameterError,
+     "The 'missed_count_prob' parameter of ModelPrior must be <= 0.5. Got 2.0 instead."),
+])
+def test_every_refusal_of_the_truth_and_the_prior_in_full(call, error, message):
+    """Each refusal matched whole: parameter, owner, rule and value (mutants: any of them changed,
+    dropped or replaced by None, a bound changed)."""
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+

@@ -449,3 +449,26 @@ def test_every_refusal_of_the_motors_and_the_plant_in_full(call, error, message)
         call()
     assert str(info.value) == message
 
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_compliant_zero_band_of_cancelling_loads_at_every_scale(scale):
+    """Compliant contacts at 0, 0.5 and 2 m/s with loads 0.1, 0.2 and 0.3 (times the scale)
+    and ``k = 0.5 / scale``: between the second's upper and the third's lower saturation limit
+    the force is ``-0.1 - 0.2 + 0.3``, zero but for rounding (about 5.6e-17 scale), which the
+    tolerance ``4 (K + 1) eps F_tot`` snaps: the zero set is that band, its ends ``v_i +- k
+    f_i`` exactly, at every scale (the products ``k f_i`` do not depend on it). Mutants killed:
+    the tolerance without ``F_tot`` (at 2**20; the unit-scale tests let it through), the slope
+    above every limit."""
+    from toolkit.model.friction import compliant_breakpoints, compliant_zero_set
+
+    speeds = np.array([0.0, 0.5, 2.0])
+    forces = np.array([0.1, 0.2, 0.3]) * scale
+    k = 0.5 / scale
+    assert compliant_zero_set(speeds, forces, k) == (0.5 + 0.5 * 0.2, 2.0 - 0.5 * 0.3)
+    x, at_x, first, slope, total = compliant_breakpoints(speeds, forces, k)
+    np.testing.assert_array_equal(x, [-0.05, 0.05, 0.5 - 0.1, 0.5 + 0.1, 2.0 - 0.15, 2.0 + 0.15])
+    np.testing.assert_array_equal(first, [0, 0, 1, 1, 2, 2])
+    np.testing.assert_array_equal(slope * k, [0.0, -1.0, 0.0, -1.0, 0.0, -1.0, 0.0])
+    assert total == pytest.approx(0.6 * scale, rel=2 * EPS, abs=0.0)
+    np.testing.assert_allclose(at_x, np.array([0.6, 0.4, 0.4, 0.0, 0.0, -0.6]) * scale, rtol=1e-15, atol=0.0)

@@ -13,6 +13,7 @@ changed reports at once, and a change to a module or to its test files runs it a
 Usage::
 
     python mutation/run.py [--workers N] [--sample FRACTION] [--fail-under PERCENT] [MODULE_GLOB ...]
+    python mutation/run.py --report [--markdown FILE]     # the last run of each module, nothing run
 """
 
 from __future__ import annotations
@@ -128,11 +129,12 @@ def prepare(job: Job) -> Path:
     return work
 
 
-def run_job(job: Job) -> Outcome:
-    """Run mutmut on ``job`` in its working copy (one worker) and collect its verdicts."""
+def run_job(job: Job, report_only: bool = False) -> Outcome:
+    """Run mutmut on ``job`` in its working copy (one worker) and collect its verdicts (only
+    collect them, from the last run, with ``report_only``)."""
     outcome = Outcome(job)
     start = time.perf_counter()
-    work = prepare(job)
+    work = WORK / job.slug if report_only else prepare(job)
     # CI: hypothesis draws the same examples every run. The forked test runs must not start
     # GNU OpenMP's threads (not fork-safe: numba ends such a child with SIGTERM); numba's
     # own workqueue layer is.
@@ -140,11 +142,15 @@ def run_job(job: Job) -> Outcome:
            "MUTATION_SAMPLE": repr(job.sample)}
     env.pop("PYTHONPATH", None)
     log = work / "mutmut.log"
-    with open(log, "w") as out:
-        proc = subprocess.run([sys.executable, __file__, "--in-copy", "run"], cwd=work, env=env,
-                              stdout=out, stderr=subprocess.STDOUT)
-    if proc.returncode != 0:
-        outcome.error = f"mutmut exited with {proc.returncode}; see {log.relative_to(ROOT)}"
+    if not report_only:
+        with open(log, "w") as out:
+            proc = subprocess.run([sys.executable, __file__, "--in-copy", "run"], cwd=work, env=env,
+                                  stdout=out, stderr=subprocess.STDOUT)
+        if proc.returncode != 0:
+            outcome.error = f"mutmut exited with {proc.returncode}; see {log.relative_to(ROOT)}"
+    elif not (work / "mutants").is_dir():
+        outcome.error = "not run yet"
+        return outcome
     report = subprocess.run([sys.executable, __file__, "--in-copy", "report"], cwd=work, env=env,
                             capture_output=True, text=True)
     if report.returncode == 0:
@@ -206,7 +212,8 @@ def in_copy(command: str) -> None:
     json.dump({"status": status, "diffs": diffs}, sys.stdout)
 
 
-def summarize(outcomes: list[Outcome], equivalent: dict[str, str], fail_under: float) -> int:
+def summarize(outcomes: list[Outcome], equivalent: dict[str, str], fail_under: float,
+              markdown: Path | None = None) -> int:
     """Print the kill rate per module and the survivors; 1 if a module is below the bar.
 
     Mutants not run (outside a module's sample, or a run cut short) are left out of its rate;
@@ -245,6 +252,13 @@ def summarize(outcomes: list[Outcome], equivalent: dict[str, str], fail_under: f
         shown = f"{rate:.1f}%" + (f" +- {error:.1f}" if error else "")
         print(f"{module:36s} {total:7d} {checked:5d} {eq:5d} {killed:6d} {survived:8d} {shown:>14s} {seconds:5.0f}s"
               + (f"  ERROR: {failure}" if failure else ""))
+    if markdown is not None:
+        table = ["| module | mutants | run | equivalent | killed | survived | kill rate |",
+                 "|---|---:|---:|---:|---:|---:|---:|"]
+        for module, total, checked, eq, killed, survived, rate, error, _, failure in rows:
+            shown = "not run" if not checked else f"{rate:.1f} %" + (f" ± {error:.1f}" if error else "")
+            table.append(f"| `{module}` | {total} | {checked} | {eq} | {killed} | {survived} | {shown} |")
+        markdown.write_text("\n".join(table) + "\n")
     print("\nkill rate = killed / (mutants run - equivalent); timeouts count as killed; '+-' is the binomial"
           f"\nstandard error of a rate over a sample of the module's mutants; bar {fail_under:g}%")
     return failed
@@ -256,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2, help="modules run at once (one core each)")
     parser.add_argument("--fail-under", type=float, default=90.0, help="kill rate (%%) every module must reach")
     parser.add_argument("--sample", type=float, help="run this fraction of every module's mutants (a quick estimate)")
+    parser.add_argument("--report", action="store_true", help="run nothing: report the last run of each module")
+    parser.add_argument("--markdown", type=Path, help="also write the table of kill rates to this file (markdown)")
     parser.add_argument("--in-copy", choices=["run", "report"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.in_copy:
@@ -267,6 +283,10 @@ def main(argv: list[str] | None = None) -> int:
     if not jobs:
         parser.error(f"no module of {CONFIG.relative_to(ROOT)} matches {args.modules}")
     equivalent = load_equivalent()
+    if args.report:
+        failed = summarize([run_job(job, report_only=True) for job in jobs], equivalent, args.fail_under,
+                           args.markdown)
+        return failed
     start = time.perf_counter()
     # The kernels compiled (or loaded) once here, into the cache every working copy copies.
     subprocess.run([sys.executable, "-c", "from toolkit.simulation._warmup import warm_up; warm_up()"],
@@ -279,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
             outcome = future.result()
             print(f"{outcome.job.module}: {len(outcome.status)} mutants in {outcome.seconds:.0f} s", flush=True)
             outcomes.append(outcome)
-    failed = summarize(outcomes, equivalent, args.fail_under)
+    failed = summarize(outcomes, equivalent, args.fail_under, args.markdown)
     print(f"wall time {time.perf_counter() - start:.0f} s on {args.workers} workers")
     return failed
 

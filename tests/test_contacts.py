@@ -421,3 +421,43 @@ def test_every_refusal_of_the_contact_model_in_full(call, error, message):
     with pytest.raises(error) as info:
         call()
     assert str(info.value) == message
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_weighted_median_weighs_each_contact_and_each_row(scale):
+    """Rows of speeds sharing unequal weights: each row's ``(lo, hi)`` is its ContactSet's
+    equilibrium (the second method), at every scale of the weights. Forces (1, 1, 1, 5) at
+    0.1..0.4 m/s put the median at the heavy contact, (0.4, 0.4); weights dropped it would be
+    the band (0.2, 0.3). An outside force is one more contact of magnitude ``|F|`` at
+    ``sign(F) inf`` (a contact far beyond the speeds in the second method), per row; beyond
+    ``F_tot`` the set is at ``+-inf``. Mutants killed: the weights dropped, the outside
+    force's sign."""
+    forces = np.array([1.0, 1.0, 1.0, 5.0]) * scale
+    rows = np.array([[0.1, 0.2, 0.3, 0.4], [0.4, 0.3, 0.2, 0.1], [0.0, -1.0, 2.0, 0.5], [0.3, 0.3, 0.1, -0.2]])
+    lo, hi = weighted_median(rows, forces)
+    assert lo.shape == hi.shape == (4,)
+    assert (lo[0], hi[0]) == (0.4, 0.4)
+    for row, a, b in zip(rows, lo, hi):
+        assert (a, b) == ContactSet(row, forces).equilibrium()
+    for push in (3.0, -3.0, 7.5, -7.5):
+        a, b = weighted_median(rows[0], forces, outside=push * scale)
+        beyond = ContactSet(np.append(rows[0], np.sign(push) * 1e6), np.append(forces, abs(push) * scale))
+        assert (float(a), float(b)) == beyond.equilibrium()
+    assert weighted_median(rows[0], forces, outside=9.0 * scale) == (np.inf, np.inf)
+    assert weighted_median(rows[0], forces, outside=-9.0 * scale) == (-np.inf, -np.inf)
+    lo, hi = weighted_median(rows, forces, outside=np.array([0.0, 0.0, 3.0, -3.0]) * scale)
+    for row, push, a, b in zip(rows, [0.0, 0.0, 3.0, -3.0], lo, hi):
+        expected = ContactSet(np.append(row, np.sign(push) * 1e6), np.append(forces, abs(push) * scale)).equilibrium()
+        assert (a, b) == expected
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_from_friction_multiplies_per_contact_at_every_scale(scale):
+    """``f_i = mu_i N_i`` per contact, with a scalar for either broadcast to every contact
+    (powers of two: exact; mutants: a factor dropped, the broadcast of the wrong one)."""
+    speeds = [0.0, 0.1, 0.2]
+    mu, loads = np.array([0.5, 0.25, 0.75]), np.array([2.0, 8.0, 4.0]) * scale
+    np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, loads).forces, mu * loads)
+    np.testing.assert_array_equal(ContactSet.from_friction(speeds, 0.5, loads).forces, 0.5 * loads)
+    np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, 4.0 * scale).forces, mu * 4.0 * scale)
+    np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, loads).speeds, speeds)

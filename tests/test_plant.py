@@ -472,3 +472,23 @@ def test_compliant_zero_band_of_cancelling_loads_at_every_scale(scale):
     np.testing.assert_array_equal(slope * k, [0.0, -1.0, 0.0, -1.0, 0.0, -1.0, 0.0])
     assert total == pytest.approx(0.6 * scale, rel=2 * EPS, abs=0.0)
     np.testing.assert_allclose(at_x, np.array([0.6, 0.4, 0.4, 0.0, 0.0, -0.6]) * scale, rtol=1e-15, atol=0.0)
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"law": "tanh", "epsilon": 0.0}, "The 'epsilon' parameter of contact_forces must be > 0. Got 0.0 instead."),
+    ({"law": "stribeck"}, "The 'epsilon' parameter of contact_forces must be > 0. Got 0.0 instead."),
+    ({"law": "stribeck", "epsilon": -1.0}, "The 'epsilon' parameter of contact_forces must be > 0. Got -1.0 instead."),
+    ({"law": "tahn", "epsilon": 0.1}, "The 'friction' parameter of contact_forces must be one of ['sign', 'tanh', "
+                                      "'stribeck']. Got 'tahn' instead. Did you mean 'tanh'?"),
+    ({"law": "tahn", "owner": "Plant.contact_forces"}, "The 'friction' parameter of Plant.contact_forces must be one "
+                                                       "of ['sign', 'tanh', 'stribeck']. Got 'tahn' instead. Did you "
+                                                       "mean 'tanh'?"),
+])
+def test_friction_law_refusals_in_full(options, message):
+    """The smoothing width and the law's name refused whole, under the caller's name
+    (mutants: the parameter, the owner, the bound 0 or its openness changed)."""
+    from toolkit.model.friction import contact_forces
+
+    with pytest.raises(ParameterError) as info:
+        contact_forces(np.array([0.1, -0.2]), np.array([1.0, 2.0]), **options)
+    assert str(info.value) == message

@@ -454,7 +454,8 @@ def test_weighted_median_weighs_each_contact_and_each_row(scale):
 @pytest.mark.parametrize("scale", SCALES)
 def test_from_friction_multiplies_per_contact_at_every_scale(scale):
     """``f_i = mu_i N_i`` per contact, with a scalar for either broadcast to every contact
-    (powers of two: exact; mutants: a factor dropped, the broadcast of the wrong one)."""
+    (powers of two: exact; mutant killed: ``mu N`` to ``mu + N``, which the other tests let
+    through)."""
     speeds = [0.0, 0.1, 0.2]
     mu, loads = np.array([0.5, 0.25, 0.75]), np.array([2.0, 8.0, 4.0]) * scale
     np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, loads).forces, mu * loads)

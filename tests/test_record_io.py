@@ -270,3 +270,21 @@ def test_the_first_rows_are_checked_and_named_like_any_other(scenario, tmp_path,
     with pytest.raises(ParameterError, match=rf"^The 'wheel_count_1' parameter of read_record_csv\(run.csv\) on line "
                        rf"{line}, column 3 must be an integer count. Got '1.5' instead.$"):
         read_record_csv(path)
+
+
+def test_a_valid_file_is_read_by_blocks_without_the_row_by_row_reader(scenario, tmp_path, monkeypatch):
+    """The block reader (NumPy's) takes every valid block whole; the row-by-row reader only
+    runs to name a bad value's line. A valid file read with the row-by-row reader disabled
+    gives the same record (mutants: any change that makes the block reader give up on valid
+    rows, e.g. its column ranges, its ``ndmin`` or its field count, which the row-by-row reader
+    would otherwise hide behind the same numbers)."""
+    import toolkit.model.record_io as record_io
+
+    path = write_record_csv(scenario.record, tmp_path / "run.csv")
+    expected = read_record_csv(path, scenario.sensors)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a valid block went to the row-by-row reader")
+
+    monkeypatch.setattr(record_io, "_slow_block", refuse)
+    _same(read_record_csv(path, scenario.sensors), expected)

@@ -54,10 +54,7 @@ class Job:
 
     @property
     def slug(self) -> str:
-        return self.module.removesuffix(".py").replace("/", ".")
-
-    @property
-    def dotted(self) -> str:
+        """The module's dotted name: its working copy's folder and its mutants' prefix."""
         return self.module.removesuffix(".py").replace("/", ".")
 
 
@@ -242,7 +239,7 @@ def summarize(outcomes: list[Outcome], equivalent: dict[str, str], fail_under: f
         if o.error or rate < fail_under:
             failed = 1
     stale = set(equivalent) - {n for o in outcomes for n in o.status}
-    ran = {o.job.dotted for o in outcomes}
+    ran = {o.job.slug for o in outcomes}
     for name in sorted(stale):
         if name.rsplit(".", 1)[0] in ran:
             print(f"\nnote: {name} is listed as equivalent but no longer exists: remove it from the list")

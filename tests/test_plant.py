@@ -492,3 +492,20 @@ def test_friction_law_refusals_in_full(options, message):
     with pytest.raises(ParameterError) as info:
         contact_forces(np.array([0.1, -0.2]), np.array([1.0, 2.0]), **options)
     assert str(info.value) == message
+
+
+def test_array_ops_are_made_once_per_back_end(monkeypatch):
+    """``ops`` returns the one numpy instance for numpy (or None) and makes one instance per
+    other module, kept (from an empty cache here: the suite's earlier calls would hide a
+    cache that never fills). numpy's ``sum`` adds along the last axis only. Mutants killed:
+    the numpy test inverted, the cache's key or its fill, the module passed on, ``axis=-1``
+    dropped."""
+    import casadi
+
+    from toolkit.model import _xp
+
+    monkeypatch.setattr(_xp, "_CACHE", {})
+    first, again = _xp.ops(casadi), _xp.ops(casadi)
+    assert first is again and first.module is casadi and first.symbolic
+    assert _xp.ops(np) is _xp.ops(None) is _xp.ops() and not _xp.ops(np).symbolic
+    np.testing.assert_array_equal(_xp.ArrayOps(np).sum(np.arange(6.0).reshape(2, 3)), [3.0, 12.0])

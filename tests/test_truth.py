@@ -11,10 +11,9 @@ import pytest
 from toolkit import ParameterError, ParameterTypeError
 from toolkit.analysis.scenarios import carousel_brake_scenario
 from toolkit.model.carousel import CAROUSEL
-from toolkit.estimation import ModelPrior
 from toolkit.model import ContactSet, Motors, Plant
 from toolkit.model.sensors import Sensors
-from toolkit.model.truth import WorldTruth, realize
+from toolkit.model.truth import ModelPrior, WorldTruth, realize
 
 
 def _nominal() -> tuple[Plant, Sensors]:
@@ -183,3 +182,32 @@ def test_every_refusal_of_the_truth_and_the_prior_in_full(call, error, message):
         call()
     assert str(info.value) == message
 
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"missed_count_mean": 0.0}, "The 'missed_count_mean' parameter of ModelPrior must be > 0. Got 0.0 instead."),
+    ({"missed_count_mean": 0.02}, "The 'missed_count_mean' parameter of ModelPrior must be <= 0.01. Got 0.02 instead."),
+    ({"friction_spread": 11.0}, "The 'friction_spread' parameter of ModelPrior must be <= 10. Got 11.0 instead."),
+    ({"contact_drift": -1e-3}, "The 'contact_drift' parameter of ModelPrior must be >= 0. Got -0.001 instead."),
+    ({"lag_range": (0.0, 11.0)}, "The 'lag_range' parameter of ModelPrior must be <= 10. Got 11.0 instead."),
+    ({"drag_range": (1.0, "a")}, "The 'drag_range' parameter of ModelPrior must be a real number. Got 'a' instead."),
+])
+def test_prior_bounds_refused_whole(kwargs, message):
+    """Each bound of the prior refused whole (mutants: a bound, its openness, the name)."""
+    with pytest.raises((ParameterError, ParameterTypeError)) as info:
+        ModelPrior(**kwargs)
+    assert str(info.value) == message
+
+
+def test_prior_keeps_what_it_is_told_as_floats():
+    """Every field kept as told, converted to float, at its bounds' ends (mutants: a field set
+    to None or under another name, a closed bound made open)."""
+    prior = ModelPrior(friction_spread=10, drag_range=(0, 2), lag_range=(0.01, 10), contact_drift=0,
+                       missed_count_prob=np.float64(0.5), missed_count_mean=np.float64(0.01))
+    assert (prior.friction_spread, prior.drag_range, prior.lag_range) == (10.0, (0.0, 2.0), (0.01, 10.0))
+    assert (prior.contact_drift, prior.missed_count_prob, prior.missed_count_mean) == (0.0, 0.5, 0.01)
+    assert all(type(v) is float for v in (prior.friction_spread, prior.contact_drift, prior.missed_count_prob,
+                                           prior.missed_count_mean, *prior.drag_range, *prior.lag_range))
+    default = ModelPrior()
+    assert (default.friction_spread, default.drag_range, default.lag_range) == (0.3, None, None)
+    assert (default.contact_drift, default.missed_count_prob, default.missed_count_mean) == (None, 0.0, None)

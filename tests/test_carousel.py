@@ -34,8 +34,8 @@ def test_motors_and_encoders_are_the_hardwares():
 @pytest.mark.parametrize("mass", [2.0 ** -20, 1.0, 5.0, 2.0 ** 20])
 def test_startup_plant_scales_its_forces_with_the_mass(mass):
     """Equal loads with ``F_tot / m = 2`` m/s^2 at every mass (n = 7 sums of equal terms: a
-    few eps), the same speeds for the same seed, uniform within the speed limits (mutants:
-    the mass dropped from the forces, ``/ n`` to ``* n``, the speed range)."""
+    few eps), the same speeds for the same seed, uniform within the speed limits; by default
+    seed 0, 11 contacts, 1 kg (mutants: the mass dropped from the forces, a default changed)."""
     plant = carousel_startup_plant(3, n=7, mass=mass)
     reference = carousel_startup_plant(3, n=7)
     f = plant.contacts.forces
@@ -47,7 +47,10 @@ def test_startup_plant_scales_its_forces_with_the_mass(mass):
     np.testing.assert_array_equal(plant.contacts.speeds,
                                   np.random.default_rng(3).uniform(-CAROUSEL_SPEED_LIMIT, CAROUSEL_SPEED_LIMIT, 7))
     assert not np.array_equal(plant.contacts.speeds, carousel_startup_plant(4, n=7).contacts.speeds)
-    assert carousel_startup_plant().contacts.n == 11
+    default = carousel_startup_plant()
+    assert default.contacts.n == 11 and default.mass == 1.0
+    np.testing.assert_array_equal(default.contacts.speeds,
+                                  np.random.default_rng(0).uniform(-CAROUSEL_SPEED_LIMIT, CAROUSEL_SPEED_LIMIT, 11))
 
 
 @pytest.mark.parametrize("kwargs, rule", [({"seed": -1}, "'seed' parameter of carousel_startup_plant must be >= 0. "

@@ -509,3 +509,29 @@ def test_array_ops_are_made_once_per_back_end(monkeypatch):
     assert first is again and first.module is casadi and first.symbolic
     assert _xp.ops(np) is _xp.ops(None) is _xp.ops() and not _xp.ops(np).symbolic
     np.testing.assert_array_equal(_xp.ArrayOps(np).sum(np.arange(6.0).reshape(2, 3)), [3.0, 12.0])
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("excess, band", [(9, True), (11, False)])
+def test_compliant_tie_tolerance_brackets_the_net_force(scale, excess, band):
+    """Compliant contacts at 0 and 1 m/s with loads 1 and ``1 + d`` (times the scale), ``k =
+    0.25 / scale``: between the saturation limits the force is ``d`` exactly (dyadic), against
+    the tolerance ``4 (K + 1) eps F_tot = 40 eps`` (``K = 4``), i.e. ``10 * 2**-50``. ``d = 9 *
+    2**-50`` is a tie (the zero band between the limits 0.25 and ``1 - k (1 + d)``), ``11 *
+    2**-50`` is not (a single point). A lifted contact (load 0) adds no limit. Mutants killed:
+    the factor 4 to 5, ``K + 1`` to ``K - 1`` or ``K + 2``, the lifted contact counted."""
+    from toolkit.model.friction import compliant_breakpoints, compliant_zero_set
+
+    d = excess * 2.0 ** -50
+    speeds = np.array([0.0, 1.0, 0.5])
+    forces = np.array([1.0, 1.0 + d, 0.0]) * scale
+    k = 0.25 / scale
+    lo, hi = compliant_zero_set(speeds, forces, k)
+    upper = 1.0 - 0.25 * (1.0 + d)
+    if band:
+        assert (lo, hi) == (0.25, upper)
+    else:
+        assert lo == hi and upper <= lo <= upper + 2 * 0.25 * (1.0 + d)
+    x, at_x, first, _, _ = compliant_breakpoints(speeds, forces, k)
+    assert x.size == 4 and list(first) == [0, 0, 1, 1]
+    assert at_x[1] == (0.0 if band else d * scale)

@@ -78,6 +78,9 @@ def test_proportional_fit_of_exact_and_scattered_data():
     b = 2 + np.dot(x, y - 2 * x) / np.dot(x, x)
     r2_def = 1 - np.sum((y - b * x) ** 2) / np.sum((y - y.mean()) ** 2)
     assert proportional_fit(x, y) == pytest.approx((b, r2_def), rel=1e-14)
+    # y without scatter about its mean: no R^2 to give (nan), the slope still the fit's.
+    slope, r2 = proportional_fit([1.0, 2.0, 4.0], [3.0, 3.0, 3.0])
+    assert slope == 1.0 and math.isnan(r2)          # 21 / 21 exactly
 
 
 def test_rig_friction_removes_the_inertia():

@@ -204,7 +204,7 @@ def in_copy(command: str) -> None:
         data.load()
         for name, code in data.exit_code_by_key.items():
             status[name] = status_by_exit_code[code]
-            if status[name] not in DETECTED | {"not checked"}:
+            if status[name] not in DETECTED | {"not checked"} and os.environ.get("MUTATION_DIFFS") != "0":
                 diffs[name] = get_diff_for_mutant(name, path=path)
     json.dump({"status": status, "diffs": diffs}, sys.stdout)
 
@@ -269,6 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sample", type=float, help="run this fraction of every module's mutants (a quick estimate)")
     parser.add_argument("--report", action="store_true", help="run nothing: report the last run of each module")
     parser.add_argument("--markdown", type=Path, help="also write the table of kill rates to this file (markdown)")
+    parser.add_argument("--no-diffs", action="store_true", help="list the survivors by name only (faster)")
     parser.add_argument("--in-copy", choices=["run", "report"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.in_copy:
@@ -280,6 +281,8 @@ def main(argv: list[str] | None = None) -> int:
     if not jobs:
         parser.error(f"no module of {CONFIG.relative_to(ROOT)} matches {args.modules}")
     equivalent = load_equivalent()
+    if args.no_diffs:
+        os.environ["MUTATION_DIFFS"] = "0"
     if args.report:
         failed = summarize([run_job(job, report_only=True) for job in jobs], equivalent, args.fail_under,
                            args.markdown)

@@ -396,3 +396,29 @@ def test_compliance_with_a_coulomb_method_is_refused():
         allocate(Viscosity(10.0, 0.0, 0.1), ContactSet(np.zeros(5)), method="quantile", compliance=0.1)
     with pytest.raises(ParameterError, match="'compliance' parameter of allocate must be >= 0"):
         allocate(Viscosity(10.0, 0.0, 0.1), ContactSet(np.zeros(5)), compliance=-1.0)
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -20, 1.0, 2.0 ** 20])
+@pytest.mark.parametrize("n", [3, 8])
+def test_quantile_allocation_scales_with_the_forces_exactly(scale: float, n: int) -> None:
+    """Forces and target at ``2**-20``, 1 and ``2**20`` of the unit: the quantile speeds are
+    the same to the bit (every level and share scales by a power of two), the error and the
+    bound scale exactly, and the speeds are the ``(i - 1/2)/n`` quantiles of the linear target,
+    ``V_max (2 (i - 1/2)/n - 1)`` (a few roundings of ``V_max``: rtol 8 eps). Mutants killed:
+    the quantile's ``- 1/2`` to ``+ 1/2``, the total force dropped from the levels."""
+    from toolkit.allocation._quantile import quantile_speeds
+
+    def run(s: float):
+        total = 2.0 * n * s
+        return allocate(Viscosity(slope=total / V_MAX, center=0.0, band=V_MAX),
+                        ContactSet(np.zeros(n), np.full(n, 2.0 * s)))
+
+    result, reference = run(scale), run(1.0)
+    assert result.method == "quantile"
+    np.testing.assert_array_equal(result.speeds, reference.speeds)
+    assert result.bound == reference.bound * scale and result.error_sup == reference.error_sup * scale
+    expected = V_MAX * (2.0 * (np.arange(1, n + 1) - 0.5) / n - 1.0)
+    np.testing.assert_allclose(np.sort(result.speeds), expected, rtol=0, atol=8 * np.finfo(float).eps * V_MAX)
+    curve = ForceCurve([-V_MAX, V_MAX], [2.0 * n * scale, -2.0 * n * scale])
+    np.testing.assert_allclose(quantile_speeds(curve, n, 2.0 * n * scale), expected, rtol=0,
+                               atol=8 * np.finfo(float).eps * V_MAX)

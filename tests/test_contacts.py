@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from scipy import stats
 
 from toolkit import ContactDistribution, ContactSet, ParameterError, ParameterTypeError
+from toolkit.model.contacts import unequal_loads, weighted_median
 
 SPEED = st.floats(-1.0, 1.0, allow_nan=False).map(lambda v: round(v, 3))
 MAGNITUDE = st.floats(0.01, 10.0, allow_nan=False)
@@ -290,3 +291,174 @@ def test_with_speeds_equals_a_new_set_and_checks_the_speeds():
         base.with_speeds([0.1, 0.2])
     with pytest.raises(ParameterError, match="speeds"):
         base.with_speeds([0.1, np.nan, 0.2, 0.3])
+
+
+# -- the tie tolerance at several scales, and loads drawn per contact ---------------------------
+#: Powers of two scale every force, prefix sum and tolerance exactly: each identity below holds
+#: to the bit at every scale.
+SCALES = [2.0 ** -20, 1.0, 2.0 ** 20]
+_EPS = np.finfo(float).eps
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_tie_tolerance_is_its_formula_at_every_scale(scale):
+    """``4 (K + 1) eps F_tot`` with ``K`` the distinct speeds (five contacts, four speeds,
+    unequal forces summing to 7 scale exactly; mutants: the factor 4 to 5, ``K + 1`` to
+    ``K + 2``)."""
+    cs = ContactSet([0.0, 1.0, 1.0, 2.0, 3.0], np.array([1.0, 0.5, 2.5, 1.0, 2.0]) * scale)
+    assert cs.total_force == 7.0 * scale
+    assert cs.tie_tolerance == 4.0 * 5 * _EPS * 7.0 * scale
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("excess, expected", [(5, (0.0, 1.0)), (7, (1.0, 1.0))])
+def test_tie_tolerance_brackets_the_net_force_at_every_scale(scale, excess, expected):
+    """Two contacts at 0 and 1 m/s with forces 1 and ``1 + d``: between them the net force is
+    ``d`` exactly (Sterbenz), against the tolerance ``12 eps F_tot ~ 6 * 2**-50`` (times the
+    scale). ``d = 5 * 2**-50`` is a tie (the zero-force band (0, 1)); ``d = 7 * 2**-50`` is not
+    (the point 1). Mutants killed: the factor 4 to 5, ``K + 1`` to ``K + 2``, the ``F_tot``
+    factor dropped."""
+    d = excess * 2.0 ** -50
+    cs = ContactSet([0.0, 1.0], np.array([1.0, 1.0 + d]) * scale)
+    assert cs.equilibrium() == expected
+    assert float(cs.force(0.5)) == (0.0 if expected == (0.0, 1.0) else d * scale)
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_decimal_loads_that_cancel_give_a_band_at_every_scale(scale):
+    """0.1 + 0.2 != 0.3 in binary: the rounding (about 5.6e-17 scale) is a tie at every scale
+    because the tolerance scales with F_tot (at 2**20 a tolerance without F_tot moves the
+    equilibrium from the band (0.2, 0.3) to the point 0.2)."""
+    cs = ContactSet([0.1, 0.2, 0.3], np.array([0.1, 0.2, 0.3]) * scale)
+    assert cs.equilibrium() == (0.2, 0.3)
+    np.testing.assert_array_equal(cs.force([0.25]), 0.0)
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_unequal_loads_keep_each_contacts_own_mean_and_spread(scale):
+    """The lognormal of :func:`unequal_loads` integrated exactly by 60-point Gauss-Hermite
+    quadrature over the normals (one row of normals per node): each contact's mean is its own
+    ``mean_i`` and its relative variance ``spread^2`` (the quadrature is exact to rounding for
+    this smooth integrand: rtol 1e-12). Unequal means at several scales; mutants: the loads
+    drawn around the mean of all contacts (``mean.mean()``), ``sigma^2 = ln(1 + spread)``."""
+    from numpy.polynomial.hermite_e import hermegauss
+
+    means = np.array([1.0, 3.0, 0.5, 8.0]) * scale
+    spread = 0.3
+    nodes, weights = hermegauss(60)
+    weights = weights / np.sqrt(2.0 * np.pi)
+    loads = unequal_loads(means, spread, means.size, normals=np.repeat(nodes[:, None], means.size, axis=1))
+    assert loads.shape == (60, means.size)
+    mean = weights @ loads
+    np.testing.assert_allclose(mean, means, rtol=1e-12, atol=0.0)
+    np.testing.assert_allclose(weights @ loads ** 2 - mean ** 2, (spread * means) ** 2, rtol=1e-11, atol=0.0)
+    # At z = 0 each load is its own mean times exp(-sigma^2 / 2) = mean / sqrt(1 + spread^2).
+    np.testing.assert_allclose(unequal_loads(means, spread, means.size, normals=np.zeros(means.size)),
+                               means / np.sqrt(1.0 + spread ** 2), rtol=4 * _EPS, atol=0.0)
+    np.testing.assert_array_equal(unequal_loads(means, 0.0, means.size), means)
+
+
+@pytest.mark.parametrize(("call", "error", "message"), [
+    (lambda: ContactSet([0.1, np.nan]), ParameterError,
+     "The 'speeds' parameter of ContactSet must be finite (no NaN or inf). Got nan instead."),
+    (lambda: ContactSet([0.1], [np.nan]), ParameterError,
+     "The 'forces' parameter of ContactSet must be finite (no NaN or inf). Got nan instead."),
+    (lambda: ContactSet([0.1, 0.2], [1.0, -0.2]), ParameterError,
+     "The 'forces' parameter of ContactSet must be >= 0. Got -0.2 instead."),
+    (lambda: ContactSet([]), ParameterError,
+     "The 'speeds' parameter of ContactSet must not be empty. Got [] instead."),
+    (lambda: ContactSet([0.1, 0.2], [1.0]), ParameterError,
+     "The 'forces' parameter of ContactSet must have the same length as 'speeds' (2). Got 'an array "
+     "of length 1' instead."),
+    (lambda: ContactSet([0.1, 0.2], [0.0, 0.0]), ParameterError,
+     "The 'forces' parameter of ContactSet must have a positive sum (some contact must touch). Got "
+     '[0.0, 0.0] instead.'),
+    (lambda: ContactSet([0.0, 1.0, 2.0], [1e308] * 3), ParameterError,
+     "The 'forces' parameter of ContactSet must have a finite sum (F_tot overflows). Got 'max 1e+308' instead."),
+    (lambda: ContactSet([0.0]).force(np.nan), ParameterError,
+     "The 'V' parameter of ContactSet.force must not contain NaN. Got nan instead."),
+    (lambda: ContactSet([0.0]).force('a'), ParameterTypeError,
+     "The 'V' parameter of ContactSet.force must be real numbers (m/s). Got 'a' instead."),
+    (lambda: ContactSet([0.0]).cdf([np.nan]), ParameterError,
+     "The 'V' parameter of ContactSet.cdf must not contain NaN. Got [nan] instead."),
+    (lambda: ContactSet.from_friction([0.1, 0.2], [0.5, 0.5, 0.5], 2.0), ParameterError,
+     "The 'mu' parameter of ContactSet.from_friction must be a scalar or have the length of 'speeds' "
+     "(2). Got 'an array of length 3' instead."),
+    (lambda: ContactSet.from_friction([0.1, 0.2], 0.5, [1.0, 2.0, 3.0]), ParameterError,
+     "The 'normal_loads' parameter of ContactSet.from_friction must be a scalar or have the length "
+     "of 'speeds' (2). Got 'an array of length 3' instead."),
+    (lambda: ContactSet([0.1, 0.2]).with_speeds([0.1]), ParameterError,
+     "The 'speeds' parameter of ContactSet.with_speeds must have one speed per contact (2). Got 'an "
+     "array of length 1' instead."),
+    (lambda: ContactDistribution('uniform', 1.0), ParameterTypeError,
+     "The 'distribution' parameter of ContactDistribution must be a frozen scipy.stats continuous "
+     "distribution. Got 'uniform' instead."),
+    (lambda: ContactDistribution.from_histogram([0, 1], [1, 2], 1.0), ParameterError,
+     "The 'edges' parameter of ContactDistribution.from_histogram must have one more entry than "
+     "'weights' (3). Got 'an array of length 2' instead."),
+    (lambda: ContactDistribution.from_histogram([0, 1, 0.5], [1, 2], 1.0), ParameterError,
+     "The 'edges' parameter of ContactDistribution.from_histogram must be strictly increasing. Got "
+     '[0.0, 1.0, 0.5] instead.'),
+    (lambda: ContactDistribution.from_histogram([0, 1, 2], [0, 0], 1.0), ParameterError,
+     "The 'weights' parameter of ContactDistribution.from_histogram must have a positive sum. Got "
+     '[0.0, 0.0] instead.'),
+    (lambda: weighted_median(0.5, [1.0]), ParameterError,
+     "The 'speeds' parameter of weighted_median must have at least one axis (..., n). Got 0.5 instead."),
+    (lambda: weighted_median([0.1, np.nan], [1.0, 1.0]), ParameterError,
+     "The 'speeds' parameter of weighted_median must hold no NaN. Got 'an array with NaN' instead."),
+    (lambda: weighted_median([0.1, 0.2], [1.0]), ParameterError,
+     "The 'forces' parameter of weighted_median must have one magnitude per contact (2). Got 'shape (1,)' instead."),
+    (lambda: weighted_median([[0.1, 0.2]] * 3, [1.0, 1.0], outside=[1.0, 2.0]), ParameterError,
+     "The 'outside' parameter of weighted_median must broadcast to the rows' shape (3,). Got (2,) instead."),
+    (lambda: weighted_median([0.1, 0.2], [1.0, 1.0], outside=np.inf), ParameterError,
+     "The 'outside' parameter of weighted_median must be finite. Got inf instead."),
+    (lambda: unequal_loads(1.0, -0.1, 3), ParameterError,
+     "The 'spread' parameter of unequal_loads must be >= 0. Got -0.1 instead."),
+])
+def test_every_refusal_of_the_contact_model_in_full(call, error, message):
+    """Each refusal matched whole: the parameter, the owner, the rule and the value (mutants:
+    any of the four changed, dropped or replaced by None, a length in a rule off by one)."""
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_weighted_median_weighs_each_contact_and_each_row(scale):
+    """Rows of speeds sharing unequal weights: each row's ``(lo, hi)`` is its ContactSet's
+    equilibrium (the second method), at every scale of the weights. Forces (1, 1, 1, 5) at
+    0.1..0.4 m/s put the median at the heavy contact, (0.4, 0.4); weights dropped it would be
+    the band (0.2, 0.3). An outside force is one more contact of magnitude ``|F|`` at
+    ``sign(F) inf`` (a contact far beyond the speeds in the second method), per row; beyond
+    ``F_tot`` the set is at ``+-inf``. Mutants killed: the weights dropped, the outside
+    force's sign."""
+    forces = np.array([1.0, 1.0, 1.0, 5.0]) * scale
+    rows = np.array([[0.1, 0.2, 0.3, 0.4], [0.4, 0.3, 0.2, 0.1], [0.0, -1.0, 2.0, 0.5], [0.3, 0.3, 0.1, -0.2]])
+    lo, hi = weighted_median(rows, forces)
+    assert lo.shape == hi.shape == (4,)
+    assert (lo[0], hi[0]) == (0.4, 0.4)
+    for row, a, b in zip(rows, lo, hi):
+        assert (a, b) == ContactSet(row, forces).equilibrium()
+    for push in (3.0, -3.0, 7.5, -7.5):
+        a, b = weighted_median(rows[0], forces, outside=push * scale)
+        beyond = ContactSet(np.append(rows[0], np.sign(push) * 1e6), np.append(forces, abs(push) * scale))
+        assert (float(a), float(b)) == beyond.equilibrium()
+    assert weighted_median(rows[0], forces, outside=9.0 * scale) == (np.inf, np.inf)
+    assert weighted_median(rows[0], forces, outside=-9.0 * scale) == (-np.inf, -np.inf)
+    lo, hi = weighted_median(rows, forces, outside=np.array([0.0, 0.0, 3.0, -3.0]) * scale)
+    for row, push, a, b in zip(rows, [0.0, 0.0, 3.0, -3.0], lo, hi):
+        expected = ContactSet(np.append(row, np.sign(push) * 1e6), np.append(forces, abs(push) * scale)).equilibrium()
+        assert (a, b) == expected
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_from_friction_multiplies_per_contact_at_every_scale(scale):
+    """``f_i = mu_i N_i`` per contact, with a scalar for either broadcast to every contact
+    (powers of two: exact; mutant killed: ``mu N`` to ``mu + N``, which the other tests let
+    through)."""
+    speeds = [0.0, 0.1, 0.2]
+    mu, loads = np.array([0.5, 0.25, 0.75]), np.array([2.0, 8.0, 4.0]) * scale
+    np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, loads).forces, mu * loads)
+    np.testing.assert_array_equal(ContactSet.from_friction(speeds, 0.5, loads).forces, 0.5 * loads)
+    np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, 4.0 * scale).forces, mu * 4.0 * scale)
+    np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, loads).speeds, speeds)

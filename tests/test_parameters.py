@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import toolkit as tk
+from toolkit.errors import ParameterError
 from toolkit.experiments import carousel_wheels
 from toolkit.model.carousel import CAROUSEL
 from toolkit.model.parameters import LABELS, PARAMETERS, Origin, Parameter, parameter
@@ -153,3 +154,45 @@ def test_notebooks_take_nonideality_values_from_the_table(path):
                     value = float(match.group(1))
                     assert any(math.isclose(value, a, rel_tol=1e-9) for a in allowed()) or value == 0, (
                         f"{path.name} cell {index}: '{match.group(0)}' is not a value of toolkit.PARAMETERS")
+
+
+_M = Origin.MEASURED
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: Parameter("x", math.nan, "s", _M, "src"),
+     "The 'value' parameter of Parameter must be finite. Got nan instead."),
+    (lambda: Parameter("x", 2.0, "s", _M, "src", bounds=(0.0, 1.0)),
+     "The 'bounds' parameter of Parameter must contain the value 2.0. Got (0.0, 1.0) instead."),
+    (lambda: Parameter("x", -1.0, "s", _M, "src", bounds=(0.0, 1.0)),
+     "The 'bounds' parameter of Parameter must contain the value -1.0. Got (0.0, 1.0) instead."),
+    (lambda: Parameter("x", 1.0, "s", Origin.FITTED, "src", fitted_to="a"),
+     "The 'fitted_to' parameter of Parameter must be given with 'predicts' exactly for a fitted value. "
+     "Got 'a' instead."),
+    (lambda: Parameter("x", 1.0, "s", _M, "src", fitted_to="a", predicts="b"),
+     "The 'fitted_to' parameter of Parameter must be given with 'predicts' exactly for a fitted value. "
+     "Got 'a' instead."),
+])
+def test_a_record_is_refused_with_the_whole_message(make, message):
+    """Each refusal matched whole (mutants: the parameter, owner, rule or value changed, the
+    bounds' test or the fitted-value test inverted)."""
+    with pytest.raises(ParameterError) as info:
+        make()
+    assert str(info.value) == message
+
+
+def test_bounds_hold_their_ends_and_labels_follow_the_origin():
+    """A value at either end of its bounds is inside them (mutant: ``<=`` to ``<``); a fitted
+    value is labelled fitted, one with bounds bounded, one without predicted; an unknown name
+    is refused naming the parameter, with a suggestion when it is a near miss."""
+    assert Parameter("x", 0.0, "s", _M, "src", bounds=(0.0, 1.0)).label == "bounded"
+    assert Parameter("x", 1.0, "s", Origin.ASSUMED, "src", bounds=(0.0, 1.0)).label == "bounded"
+    assert Parameter("x", 1.0, "s", _M, "src").label == "predicted"
+    assert Parameter("x", 1.0, "s", Origin.FITTED, "src", fitted_to="a", predicts="b").label == "fitted"
+    assert parameter("motor_lag") is PARAMETERS["motor_lag"]
+    with pytest.raises(ParameterError, match=r"^The 'name' parameter of parameter must be one of \['acceleration', "
+                       r".*\]\. Got 'motor_lgs' instead\. Did you mean 'motor_lag'\?$"):
+        parameter("motor_lgs")
+    with pytest.raises(ParameterError, match=r"^The 'name' parameter of parameter must be one of \[.*\]\. "
+                       r"Got 3 instead\.$"):
+        parameter(3)

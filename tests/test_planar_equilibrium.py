@@ -10,8 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import toolkit as tk
-from toolkit.errors import ParameterError
+from toolkit.errors import ParameterError, ParameterTypeError
 from toolkit.planar import EquilibriumStatus, PlanarContactSet, geometric_median, weiszfeld
+from toolkit.planar.equilibrium import solve_equilibrium
 
 EPS = float(np.finfo(float).eps)
 
@@ -213,3 +214,60 @@ def test_bad_requests_are_refused(rng):
         contacts.equilibrium(method="cvxpi")
     with pytest.raises(ParameterError, match="'tol'"):
         contacts.equilibrium(tol=0.0)
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -20, 1.0, 2.0 ** 20])
+def test_weiszfeld_started_on_a_weighted_data_point(scale):
+    """Four points around a fifth at the origin whose weighted mean (the start) is the origin.
+    The weighted unit vectors of the others sum to ``R = (-2, 0)`` at every scale. With the centre's weight 2.5 >= |R| the origin is the median: returned
+    exactly, in one iteration. With weight 1.5 < |R| Vardi and Zhang's first step is
+    ``(1 - 1.5/2) T`` with ``T = (-6/13, 0)`` the Weiszfeld point of the others: ``(-3/26, 0)``
+    to rounding (4 eps). Points at 2**-20, 1 and 2**20 (exact). Mutant killed: the points at
+    ``y`` counted (``eta = at.sum()``) instead of weighed: it steps away from the median."""
+    points = np.array([[0.0, 0.0], [3.0, 0.0], [-1.0, 0.0], [0.0, 2.0], [0.0, -2.0]]) * scale
+    others = np.array([1.0, 3.0, 1.0, 1.0])
+    median, iterations = weiszfeld(points, np.r_[2.5, others])
+    assert iterations == 1 and np.array_equal(median, [0.0, 0.0])
+    step, iterations = weiszfeld(points, np.r_[1.5, others], max_iter=1)
+    assert iterations == 1
+    np.testing.assert_allclose(step, np.array([-3.0 / 26.0, 0.0]) * scale, rtol=4 * np.finfo(float).eps, atol=0.0)
+
+
+_TRIO = ([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], [[0.1, 0.0], [0.0, 0.2], [-0.1, 0.1]])
+_C = PlanarContactSet(*_TRIO)
+_A = PlanarContactSet(*_TRIO, anisotropy=[[0.0, 0.5]] * 3)
+
+
+@pytest.mark.parametrize(("call", "error", "message"), [
+    (lambda: solve_equilibrium('x'), ParameterTypeError,
+     "The 'contacts' parameter of PlanarContactSet.equilibrium must be a PlanarContactSet. Got 'x' instead."),
+    (lambda: solve_equilibrium(_C, translation_only=1), ParameterTypeError,
+     "The 'translation_only' parameter of PlanarContactSet.equilibrium must be a bool. Got 1 instead."),
+    (lambda: solve_equilibrium(_C, method='newtn'), ParameterError,
+     "The 'method' parameter of PlanarContactSet.equilibrium must be one of ['auto', 'newton', "
+     "'cvxpy', 'weiszfeld']. Got 'newtn' instead. Did you mean 'newton'?"),
+    (lambda: solve_equilibrium(_C, tol=0.0), ParameterError,
+     "The 'tol' parameter of PlanarContactSet.equilibrium must be > 0. Got 0.0 instead."),
+    (lambda: solve_equilibrium(_C, method='weiszfeld'), ParameterError,
+     "The 'method' parameter of PlanarContactSet.equilibrium must be 'weiszfeld' only with "
+     "translation_only=True (the geometric median). Got 'weiszfeld' instead."),
+    (lambda: weiszfeld([[0.0, 0.0], [1.0, 1.0]], [1.0, 0.0]), ParameterError,
+     "The 'points' parameter of weiszfeld must have shape (n, 2) with n positive weights. Got "
+     "'shapes (2, 2) and (2,)' instead."),
+    (lambda: weiszfeld([0.0, 1.0]), ParameterError,
+     "The 'points' parameter of weiszfeld must have shape (n, 2) with n positive weights. Got "
+     "'shapes (2,) and (2,)' instead."),
+    (lambda: weiszfeld([[0.0, 0.0], [1.0, 1.0]], [1.0]), ParameterError,
+     "The 'points' parameter of weiszfeld must have shape (n, 2) with n positive weights. Got "
+     "'shapes (2, 2) and (1,)' instead."),
+    (lambda: solve_equilibrium(_A, translation_only=True, method='weiszfeld'), ParameterError,
+     "The 'method' parameter of PlanarContactSet.equilibrium must be 'weiszfeld' only for isotropic "
+     "contacts. Got 'weiszfeld' instead."),
+])
+def test_every_refusal_of_the_equilibrium_in_full(call, error, message):
+    """Each refusal matched whole: parameter, owner, rule and value (mutants: any of them changed,
+    dropped or replaced by None, the isotropy and translation checks)."""
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+

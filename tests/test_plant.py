@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -34,16 +36,40 @@ def test_piecewise_constant_without_switches():
     assert u(-1e9) == 2.5 and u(1e9) == 2.5
 
 
-@pytest.mark.parametrize("times, values, error", [
-    ([1.0, 1.0], [0, 1, 2], ParameterError),            # not strictly increasing
-    ([1.0, np.inf], [0, 1, 2], ParameterError),         # not finite
-    ([1.0], [0, 1, 2], ParameterError),                 # wrong number of rows
-    ([1.0], [0, np.nan], ParameterError),
-    ([1.0], "ab", ParameterTypeError),
+@pytest.mark.parametrize("times, values, error, name, rule", [
+    ([1.0, 1.0], [0, 1, 2], ParameterError, "times", "be strictly increasing. Got [1.0, 1.0] instead."),
+    ([2.0, 1.0, 3.0], [0, 1, 2, 3], ParameterError, "times", "be strictly increasing. Got [2.0, 1.0, 3.0] instead."),
+    ([1.0, np.inf], [0, 1, 2], ParameterError, "times", "be finite (no NaN or inf). Got inf instead."),
+    ([1.0], [0, 1, 2], ParameterError, "values",
+     "have one more row than 'times' (2). Got 'an array of shape (3,)' instead."),
+    ([1.0], [[0, 1], [2, 3], [4, 5]], ParameterError, "values",
+     "have one more row than 'times' (2). Got 'an array of shape (3, 2)' instead."),
+    ([1.0], [[[0.0]], [[1.0]]], ParameterError, "values",
+     "be 2-dimensional. Got 'an array of shape (2, 1, 1)' instead."),
+    ([1.0], [0, np.nan], ParameterError, "values", "be finite (no NaN or inf). Got nan instead."),
+    ([1.0], "ab", ParameterTypeError, "values", "be an array of numbers. Got 'ab' instead."),
 ])
-def test_piecewise_refuses_bad_input(times, values, error):
-    with pytest.raises(error):
+def test_piecewise_refuses_bad_input(times, values, error, name, rule):
+    """Each refusal names the parameter, the owner, the rule and the value, whole (mutants:
+    any of the four changed or dropped, the row count ``k + 1`` off by one)."""
+    message = f"The '{name}' parameter of PiecewiseConstant must {rule}"
+    with pytest.raises(error, match="^" + re.escape(message) + "$"):
         PiecewiseConstant(times, values)
+
+
+def test_sample_count_and_times_on_a_rounded_duration():
+    """``floor(T f) + 1`` samples, a product within 1e-9 below a whole number counted as it:
+    0.29 s at 100 Hz (0.29 * 100 = 28.999999999999996) is 30 samples, 10 s at 50 Hz is 501,
+    0.2899999 s at 100 Hz (relative 3e-7 below) is 29; the instants are ``k / f`` exactly.
+    Mutants killed: ``+ 1`` off by one, ``1 + 1e-9`` to ``1 - 1e-9`` or ``2 + 1e-9``,
+    ``rate`` divided instead of multiplied, ``k / f`` to ``k f``."""
+    from toolkit.model import sample_count, sample_times
+
+    assert 0.29 * 100 < 29.0
+    assert (sample_count(0.29, 100.0), sample_count(10.0, 50.0), sample_count(0.2899999, 100.0)) == (30, 501, 29)
+    assert sample_count(0.0, 50.0) == 1
+    np.testing.assert_array_equal(sample_times(0.29, 100.0), np.arange(30) / 100.0)
+    np.testing.assert_array_equal(sample_times(0.1, 50.0), [0.0, 0.02, 0.04, 0.06, 0.08, 0.1])
 
 
 def test_piecewise_arrays_are_read_only():
@@ -287,3 +313,225 @@ def test_compliant_breakpoints_are_the_force_law(speeds, k):
     # as a few rounding errors, at most 4 n eps (n / k), instead of exactly 0.
     assert slope[0] == slope[-1] == 0.0
     assert np.all(slope <= 4 * cs.n * np.finfo(float).eps * cs.n / k)
+
+
+# -- the laws at their defining points, at several scales, and on both back ends ---------------
+#: Force scales of the law tests (powers of two: exact), and unequal magnitudes.
+SCALES = [2.0 ** -20, 1.0, 2.0 ** 20]
+EPS = np.finfo(float).eps
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("epsilon", [2.0 ** -10, 0.05])
+def test_stribeck_law_at_its_defining_points(scale, epsilon):
+    """The Stribeck law over the tanh law is ``1 + (P - 1) exp(-(s / (S eps))^2)`` with
+    ``P = 1.5`` and ``S = 3`` (the documented constants): ``P`` as the slip tends to 0 (at
+    ``s = 1e-6 eps`` the hump is ``exp(-1e-12 / 9)``), ``1 + (P - 1)/e`` at ``s = S eps``, 1 far away;
+    rtol a few eps (one tanh, one exp; tanh cancels in the ratio). Unequal magnitudes at
+    several scales. Mutants killed: the peak ``P - 1`` to ``P`` or ``P + 1``, ``S eps`` to
+    ``S / eps`` or ``eps``, the square dropped, the hump's sign."""
+    from toolkit.model.friction import STRIBECK_SPEED, contact_forces
+
+    assert (STRIBECK_PEAK, STRIBECK_SPEED) == (1.5, 3.0)
+    f = np.array([1.0, 3.0, 0.5]) * scale
+    for slip, ratio in ((1e-6 * epsilon, 1.0 + 0.5 * np.exp(-1e-12 / 9)), (3.0 * epsilon, 1.0 + 0.5 / np.e),
+                        (-3.0 * epsilon, 1.0 + 0.5 / np.e), (40.0 * epsilon, 1.0)):
+        s = np.full(3, slip)
+        stribeck = contact_forces(s, f, law="stribeck", epsilon=epsilon)
+        tanh = contact_forces(s, f, law="tanh", epsilon=epsilon)
+        np.testing.assert_allclose(tanh, f * np.tanh(slip / epsilon), rtol=2 * EPS, atol=0.0)
+        np.testing.assert_allclose(stribeck / tanh, ratio, rtol=8 * EPS, atol=0.0)
+
+
+@pytest.mark.parametrize("law, options", [("sign", {}), ("tanh", {"epsilon": 0.01}),
+                                          ("stribeck", {"epsilon": 0.01}), ("sign", {"compliance": 0.25})])
+def test_contact_forces_are_one_law_on_numpy_and_casadi(law, options):
+    """The same law evaluated by numpy and built symbolically by casadi (then evaluated)
+    agree to rounding (a few eps of the forces) for slips on both sides of every kink, with
+    unequal magnitudes and a lifted contact. Mutants killed: any operation of
+    :class:`toolkit.model._xp.ArrayOps` swapped on one back end (built anew here, not the
+    cached instance)."""
+    import casadi
+
+    from toolkit.model._xp import ArrayOps
+    from toolkit.model.friction import contact_forces
+
+    f = np.array([1.0, 3.0, 0.5, 0.0, 2.0])
+    for slip in (np.array([-0.5, -0.01, 0.0, 0.2, 0.003]), np.array([0.6, 0.02, -0.004, -1.0, 0.5])):
+        numeric = contact_forces(slip, f, law=law, **options)
+        s = casadi.SX.sym("s", f.size)
+        built = contact_forces(s, f, law=law, xp=casadi, **options)
+        symbolic = np.array(casadi.Function("phi", [s], [built])(slip)).ravel()
+        np.testing.assert_allclose(symbolic, numeric, rtol=4 * EPS, atol=4 * EPS)
+    for module in (np, casadi):
+        o = ArrayOps(module)
+        assert o.module is module and o.symbolic is (module is casadi)
+        x, y = np.array([-2.0, 0.5, 3.0]), np.array([1.0, -1.0, 4.0])
+        for name, expected in (("tanh", np.tanh(x)), ("exp", np.exp(x)), ("sign", np.sign(x))):
+            np.testing.assert_allclose(np.array(casadi.DM(getattr(o, name)(o.const(x)))).ravel(), expected,
+                                       rtol=2 * EPS, atol=0.0)
+        for name, expected in (("fmin", np.minimum(x, y)), ("fmax", np.maximum(x, y))):
+            np.testing.assert_array_equal(np.array(casadi.DM(getattr(o, name)(o.const(x), o.const(y)))).ravel(),
+                                          expected)
+        assert float(o.sum(o.const(x))) == 1.5
+        np.testing.assert_array_equal(np.array(casadi.DM(o.concat(7.0, o.const(x)))).ravel(), [7.0, *x])
+
+
+def test_motor_law_per_contact_with_some_saturated():
+    """The motor law acts per contact: with lag 0.5 s and rate limit 1.5 m/s^2, gaps
+    ``u - v`` of (1, -1, 0.25, -0.5, 0) m/s pull at (2, -2, 0.5, -1, 0) and are clipped to
+    (1.5, -1.5, 0.5, -1, 0) (dyadic: exact). ``unsaturated_response`` after ``s``: with a lag,
+    ``u + (v0 - u) exp(-s/tau)`` (``v0`` at 0, a share 1/e left at ``tau``); with only the rate
+    limit, ``v0 + clip(u - v0, -r s, r s)`` per contact; ideal, ``u``. Mutants killed: the
+    ramp's upper bound ``r s`` to ``r``, the lag's clip to ``min(pull, pull)``."""
+    from toolkit.model import motor_rate, unsaturated_response
+
+    u = np.array([1.0, -1.0, 0.25, -0.5, 0.125])
+    v = np.array([0.0, 0.0, 0.0, 0.0, 0.125])
+    np.testing.assert_array_equal(motor_rate(Motors(lag=0.5, rate_limit=1.5), u, v), [1.5, -1.5, 0.5, -1.0, 0.0])
+    np.testing.assert_array_equal(motor_rate(Motors(lag=0.25), u, v), [4.0, -4.0, 1.0, -2.0, 0.0])
+    np.testing.assert_array_equal(motor_rate(Motors(rate_limit=3.0), u, v), [3.0, -3.0, 3.0, -3.0, 0.0])
+    np.testing.assert_array_equal(motor_rate(None, u, v), np.zeros(5))
+    tau = 0.25
+    np.testing.assert_array_equal(unsaturated_response(v, u, 0.0, tau, np.inf), v)
+    np.testing.assert_allclose(unsaturated_response(v, u, tau, tau, np.inf), u + (v - u) / np.e,
+                               rtol=4 * np.finfo(float).eps, atol=1e-300)
+    # Rate limit 2 m/s^2 for 0.25 s: at most 0.5 m/s of travel each way.
+    np.testing.assert_array_equal(unsaturated_response(v, u, 0.25, 0.0, 2.0), [0.5, -0.5, 0.25, -0.5, 0.125])
+    np.testing.assert_array_equal(unsaturated_response(v, u, 0.25, 0.0, np.inf), u)
+
+
+_CS = ContactSet([0.0, 1.0])
+
+
+@pytest.mark.parametrize(("call", "error", "message"), [
+    (lambda: Motors(lag=-0.1), ParameterError,
+     "The 'lag' parameter of Motors must be >= 0. Got -0.1 instead."),
+    (lambda: Motors(rate_limit=0.0), ParameterError,
+     "The 'rate_limit' parameter of Motors must be > 0. Got 0.0 instead."),
+    (lambda: Motors(compliance=-1.0), ParameterError,
+     "The 'compliance' parameter of Motors must be >= 0. Got -1.0 instead."),
+    (lambda: Motors(speed_limits=(1.0, -1.0)), ParameterError,
+     "The 'speed_limits' parameter of Motors must satisfy low <= high with low < inf and high > "
+     '-inf. Got (1.0, -1.0) instead.'),
+    (lambda: Motors(speed_limits=(np.inf, np.inf)), ParameterError,
+     "The 'speed_limits' parameter of Motors must satisfy low <= high with low < inf and high > "
+     '-inf. Got (inf, inf) instead.'),
+    (lambda: Motors(lag=np.nan), ParameterError,
+     "The 'lag' parameter of Motors must be finite. Got nan instead."),
+    (lambda: Motors(speed_limits=0.3), ParameterTypeError,
+     "The 'speed_limits' parameter of Motors must be a pair (low, high) of speeds. Got 0.3 instead."),
+    (lambda: Motors(lag='fast'), ParameterTypeError,
+     "The 'lag' parameter of Motors must be a real number. Got 'fast' instead."),
+    (lambda: Motors(backlash=-1.0), ParameterError,
+     "The 'backlash' parameter of Motors must be >= 0. Got -1.0 instead."),
+    (lambda: Plant('x', 1.0), ParameterTypeError,
+     "The 'contacts' parameter of Plant must be a ContactSet. Got 'x' instead."),
+    (lambda: Plant(_CS, 0.0), ParameterError,
+     "The 'mass' parameter of Plant must be > 0. Got 0.0 instead."),
+    (lambda: Plant(_CS, 1.0, damping=-1.0), ParameterError,
+     "The 'damping' parameter of Plant must be >= 0. Got -1.0 instead."),
+    (lambda: Plant(_CS, 1.0, motors='m'), ParameterTypeError,
+     "The 'motors' parameter of Plant must be a Motors instance or None. Got 'm' instead."),
+    (lambda: Plant(_CS, 1.0, commands=PiecewiseConstant([], [[0.0, 0.0, 0.0]])), ParameterError,
+     "The 'commands' parameter of Plant must have values of shape (k + 1, 2) (one column per "
+     "contact). Got 'values of shape (1, 3)' instead."),
+    (lambda: Plant(_CS, 1.0, commands=[0.0, 0.0]), ParameterTypeError,
+     "The 'commands' parameter of Plant must be a PiecewiseConstant or None. Got [0.0, 0.0] instead."),
+    (lambda: Plant(_CS, 1.0, external_force=PiecewiseConstant([], [[0.0, 0.0]])), ParameterError,
+     "The 'external_force' parameter of Plant must be a scalar signal (values of shape (k + 1,)). "
+     "Got 'values of shape (1, 2)' instead."),
+])
+def test_every_refusal_of_the_motors_and_the_plant_in_full(call, error, message):
+    """Each refusal matched whole: parameter, owner, rule and value (mutants: any of them changed,
+    dropped or replaced by None)."""
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_compliant_zero_band_of_cancelling_loads_at_every_scale(scale):
+    """Compliant contacts at 0, 0.5 and 2 m/s with loads 0.1, 0.2 and 0.3 (times the scale)
+    and ``k = 0.5 / scale``: between the second's upper and the third's lower saturation limit
+    the force is ``-0.1 - 0.2 + 0.3``, zero but for rounding (about 5.6e-17 scale), which the
+    tolerance ``4 (K + 1) eps F_tot`` snaps: the zero set is that band, its ends ``v_i +- k
+    f_i`` exactly, at every scale (the products ``k f_i`` do not depend on it). Mutants killed:
+    the tolerance without ``F_tot`` (at 2**20; the unit-scale tests let it through), the slope
+    above every limit."""
+    from toolkit.model.friction import compliant_breakpoints, compliant_zero_set
+
+    speeds = np.array([0.0, 0.5, 2.0])
+    forces = np.array([0.1, 0.2, 0.3]) * scale
+    k = 0.5 / scale
+    assert compliant_zero_set(speeds, forces, k) == (0.5 + 0.5 * 0.2, 2.0 - 0.5 * 0.3)
+    x, at_x, first, slope, total = compliant_breakpoints(speeds, forces, k)
+    np.testing.assert_array_equal(x, [-0.05, 0.05, 0.5 - 0.1, 0.5 + 0.1, 2.0 - 0.15, 2.0 + 0.15])
+    np.testing.assert_array_equal(first, [0, 0, 1, 1, 2, 2])
+    np.testing.assert_array_equal(slope * k, [0.0, -1.0, 0.0, -1.0, 0.0, -1.0, 0.0])
+    assert total == pytest.approx(0.6 * scale, rel=2 * EPS, abs=0.0)
+    np.testing.assert_allclose(at_x, np.array([0.6, 0.4, 0.4, 0.0, 0.0, -0.6]) * scale, rtol=1e-15, atol=0.0)
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"law": "tanh", "epsilon": 0.0}, "The 'epsilon' parameter of contact_forces must be > 0. Got 0.0 instead."),
+    ({"law": "stribeck"}, "The 'epsilon' parameter of contact_forces must be > 0. Got 0.0 instead."),
+    ({"law": "stribeck", "epsilon": -1.0}, "The 'epsilon' parameter of contact_forces must be > 0. Got -1.0 instead."),
+    ({"law": "tahn", "epsilon": 0.1}, "The 'friction' parameter of contact_forces must be one of ['sign', 'tanh', "
+                                      "'stribeck']. Got 'tahn' instead. Did you mean 'tanh'?"),
+    ({"law": "tahn", "owner": "Plant.contact_forces"}, "The 'friction' parameter of Plant.contact_forces must be one "
+                                                       "of ['sign', 'tanh', 'stribeck']. Got 'tahn' instead. Did you "
+                                                       "mean 'tanh'?"),
+])
+def test_friction_law_refusals_in_full(options, message):
+    """The smoothing width and the law's name refused whole, under the caller's name
+    (mutants: the parameter, the owner, the bound 0 or its openness changed)."""
+    from toolkit.model.friction import contact_forces
+
+    with pytest.raises(ParameterError) as info:
+        contact_forces(np.array([0.1, -0.2]), np.array([1.0, 2.0]), **options)
+    assert str(info.value) == message
+
+
+def test_array_ops_are_made_once_per_back_end(monkeypatch):
+    """``ops`` returns the one numpy instance for numpy (or None) and makes one instance per
+    other module, kept (from an empty cache here: the suite's earlier calls would hide a
+    cache that never fills). numpy's ``sum`` adds along the last axis only. Mutants killed:
+    the numpy test inverted, the cache's key or its fill, the module passed on, ``axis=-1``
+    dropped."""
+    import casadi
+
+    from toolkit.model import _xp
+
+    monkeypatch.setattr(_xp, "_CACHE", {})
+    first, again = _xp.ops(casadi), _xp.ops(casadi)
+    assert first is again and first.module is casadi and first.symbolic
+    assert _xp.ops(np) is _xp.ops(None) is _xp.ops() and not _xp.ops(np).symbolic
+    np.testing.assert_array_equal(_xp.ArrayOps(np).sum(np.arange(6.0).reshape(2, 3)), [3.0, 12.0])
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("excess, band", [(9, True), (11, False)])
+def test_compliant_tie_tolerance_brackets_the_net_force(scale, excess, band):
+    """Compliant contacts at 0 and 1 m/s with loads 1 and ``1 + d`` (times the scale), ``k =
+    0.25 / scale``: between the saturation limits the force is ``d`` exactly (dyadic), against
+    the tolerance ``4 (K + 1) eps F_tot = 40 eps`` (``K = 4``), i.e. ``10 * 2**-50``. ``d = 9 *
+    2**-50`` is a tie (the zero band between the limits 0.25 and ``1 - k (1 + d)``), ``11 *
+    2**-50`` is not (a single point). A lifted contact (load 0) adds no limit. Mutants killed:
+    the factor 4 to 5, ``K + 1`` to ``K - 1`` or ``K + 2``, the lifted contact counted."""
+    from toolkit.model.friction import compliant_breakpoints, compliant_zero_set
+
+    d = excess * 2.0 ** -50
+    speeds = np.array([0.0, 1.0, 0.5])
+    forces = np.array([1.0, 1.0 + d, 0.0]) * scale
+    k = 0.25 / scale
+    lo, hi = compliant_zero_set(speeds, forces, k)
+    upper = 1.0 - 0.25 * (1.0 + d)
+    if band:
+        assert (lo, hi) == (0.25, upper)
+    else:
+        assert lo == hi and upper <= lo <= upper + 2 * 0.25 * (1.0 + d)
+    x, at_x, first, _, _ = compliant_breakpoints(speeds, forces, k)
+    assert x.size == 4 and list(first) == [0, 0, 1, 1]
+    assert at_x[1] == (0.0 if band else d * scale)

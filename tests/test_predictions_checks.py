@@ -78,6 +78,9 @@ def test_proportional_fit_of_exact_and_scattered_data():
     b = 2 + np.dot(x, y - 2 * x) / np.dot(x, x)
     r2_def = 1 - np.sum((y - b * x) ** 2) / np.sum((y - y.mean()) ** 2)
     assert proportional_fit(x, y) == pytest.approx((b, r2_def), rel=1e-14)
+    # y without scatter about its mean: no R^2 to give (nan), the slope still the fit's.
+    slope, r2 = proportional_fit([1.0, 2.0, 4.0], [3.0, 3.0, 3.0])
+    assert slope == 1.0 and math.isnan(r2)          # 21 / 21 exactly
 
 
 def test_rig_friction_removes_the_inertia():
@@ -88,6 +91,80 @@ def test_rig_friction_removes_the_inertia():
     t = np.arange(v.size) * h
     # Exact up to rounding of a few sums: abs 1e-13 N.
     assert rig_friction(t, v, np.append(rig, 0.0), m, 1, 5) == pytest.approx(Fc, rel=0, abs=1e-13)
+
+
+#: Uneven sample periods (h and 2h alternating, a jittered logger) and scales of mass and
+#: force (powers of two: exact) for the readings below.
+UNEVEN = np.cumsum([0.0, 0.25, 0.5, 0.25, 0.5, 0.25, 0.5, 0.25])
+SCALES = [2.0 ** -20, 1.0, 2.0 ** 20]
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_crossing_time_interpolates_between_its_own_samples(scale):
+    """On samples at uneven times the crossing is interpolated between the two samples
+    around it, each with its own time step: dyadic times and values make it exact. Falling
+    through -0.25 scale between t = 1.5 and 1.75 (values 0.5 and -1.5 scale): t = 1.59375.
+    Rising through 0.75 scale between t = 0.25 and 0.75 (0 and 2 scale): t = 0.4375.
+    A sample exactly at the level is the crossing; a first sample already past it is
+    ``times[0]``. Mutants killed: the first period for the sample's own, ``>=`` to ``>``."""
+    t = UNEVEN
+    down = np.array([3.0, 2.5, 2.0, 1.0, 0.5, -1.5, -2.0, -3.0]) * scale
+    assert crossing_time(t, down, -0.25 * scale, -1.0) == 1.59375
+    assert crossing_time(t, down, 1.0 * scale, -1.0) == t[3]
+    assert crossing_time(t, down, 5.0 * scale, -1.0) == t[0]
+    assert crossing_time(t, down, 5.0 * scale, 1.0) != crossing_time(t, down, 5.0 * scale, 1.0)  # nan
+    up = np.array([-1.0, 0.0, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5]) * scale
+    assert crossing_time(t, up, 0.75 * scale, 1.0) == 0.4375
+    assert crossing_time(t, up, 2.0 * scale, 1.0) == t[2]
+    # Two samples at the level: the first of them.
+    assert crossing_time(t, np.array([3.0, 1.0, 1.0, 0.0]) * scale, 1.0 * scale, -1.0) == t[1]
+    # crossing_duration: the swing from 3 to -2.5 (scale) read at 2.5 and -2.0 (margin 0.5),
+    # samples at t = 0.25 and 2.25 exactly, scaled to the full swing by 5.5 / 4.5.
+    assert crossing_duration(t, down, 3.0 * scale, -2.5 * scale, 0.5 * scale) == (2.25 - 0.25) * 5.5 / 4.5
+
+
+@pytest.mark.parametrize("mass", SCALES + [3.0])
+def test_rig_friction_at_uneven_periods_and_several_masses(mass):
+    """``m dV/dt = F_c + F_rig`` with the rig force held over each of uneven periods: the
+    speeds are the exact sums, and the contacts' mean force over samples 1..6 is ``F_c`` (the
+    sums round at a few eps of the largest term: rtol 1e-12). Forces scale with the mass.
+    Mutants killed: the mass dropped from the inertia term, the rig force averaged over
+    samples instead of over time."""
+    Fc = -0.8 * mass
+    rig = np.array([0.1, 0.5, 0.9, 0.2, 0.7, 0.4, 0.3]) * mass
+    h = np.diff(UNEVEN)
+    v = np.concatenate(([0.3], 0.3 + np.cumsum((Fc + rig) * h / mass)))
+    assert rig_friction(UNEVEN, v, np.append(rig, 0.0), mass, 1, 6) == pytest.approx(Fc, rel=1e-12, abs=0.0)
+    assert rig_friction(UNEVEN, v, np.append(rig, 0.0), mass, 0, 7) == pytest.approx(Fc, rel=1e-12, abs=0.0)
+
+
+def test_crossing_time_constant_of_a_piecewise_linear_startup():
+    """From 0 to a settled 1 (last two samples): the level ``1 - 1/e = 0.632...`` is crossed
+    on the segment from (0.5, 0.5) to (1.0, 0.75), at ``0.5 + (0.632.. - 0.5) * 2`` s,
+    measured from ``times[0] = 0.25``; the startup falling from 0 to -1 mirrors it. Mutant
+    killed: the clock not shifted to the first sample."""
+    t = 0.25 + np.array([0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0])
+    v = np.array([0.0, 0.25, 0.5, 0.75, 0.9, 1.0, 1.0])
+    level = 1.0 - math.exp(-1.0)
+    expected = 0.5 + (level - 0.5) * (0.5 / 0.25)
+    tau, settled = crossing_time_constant(t, v, 2)
+    assert settled == 1.0
+    assert tau == pytest.approx(expected, rel=4 * np.finfo(float).eps, abs=0.0)
+    assert crossing_time_constant(t, -v, 2) == (tau, -1.0)
+    assert crossing_time_constant(t, v, 3)[1] == pytest.approx(2.9 / 3, rel=1e-15)
+    assert math.isnan(crossing_time_constant(t, np.full(7, 0.4), 2)[0])
+
+
+def test_a_startup_within_rounding_of_its_start_is_unmoved():
+    """``|settled - V0| <= 8 eps max|V|`` reads as no startup (nan): from 1 to ``1 - 8 eps``
+    is exactly at the bound (max 1), from 1 to ``1 + 9 eps`` is above it (mutants: the factor
+    8 to 9, ``<=`` to ``<``)."""
+    eps = np.finfo(float).eps
+    t = np.arange(4.0)
+    at_bound = np.array([1.0, 1.0, 1.0, 1.0 - 8 * eps])
+    assert math.isnan(crossing_time_constant(t, at_bound, 1)[0])
+    assert math.isnan(exponential_time_constant(t, at_bound, 1)[0])
+    assert not math.isnan(crossing_time_constant(t, np.array([1.0, 1.0, 1.0, 1.0 + 9 * eps]), 1)[0])
 
 
 # -- the protocol controller -------------------------------------------------------------------

@@ -4,6 +4,7 @@ without metadata, and malformed files refused with the line number."""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -238,3 +239,52 @@ def test_times_follow_the_encoders_period_when_the_scene_gives_it(scenario, tmp_
         else:
             assert read_record_csv(path, scenario.sensors).times[40] == 0.809
         assert read_record_csv(path).times[40] == float(value)
+
+
+@pytest.mark.parametrize("row", [0, 1, 2])
+def test_the_first_rows_are_checked_and_named_like_any_other(scenario, tmp_path, row):
+    """The first, second and third data rows (lines 7, 8, 9) are held to the same rules and
+    refused with their own line: a time that does not increase (the second and third rows: a
+    copy of the previous time), a time off the encoders' period (the scene's sensors), a
+    count that is not an integer. Mutant killed: the block reader's order check from the
+    third row on (``steps[2:] > 0``), which lets the second row through."""
+    path, lines = _lines(scenario, tmp_path)
+    line = 7 + row
+    fields = lines[6 + row].split(",")
+    edited = list(lines)
+    if row:
+        previous = lines[5 + row].split(",")[0]
+        edited[6 + row] = ",".join([previous] + fields[1:])
+        path.write_text("\n".join(edited) + "\n")
+        with pytest.raises(ParameterError, match=rf"^The 'time_s' parameter of read_record_csv\(run.csv\) on line "
+                           rf"{line}, column 1 must increase strictly \(previous row {re.escape(previous)}\)"):
+            read_record_csv(path)
+        edited[6 + row] = ",".join([repr(float(previous) + 0.031)] + fields[1:])
+        path.write_text("\n".join(edited) + "\n")
+        with pytest.raises(ParameterError, match=rf"^The 'time_s' parameter of read_record_csv\(run.csv\) on line "
+                           rf"{line}, column 1 must follow the previous row"):
+            read_record_csv(path, scenario.sensors)
+    edited = list(lines)
+    edited[6 + row] = ",".join(fields[:2] + ["1.5"] + fields[3:])
+    path.write_text("\n".join(edited) + "\n")
+    with pytest.raises(ParameterError, match=rf"^The 'wheel_count_1' parameter of read_record_csv\(run.csv\) on line "
+                       rf"{line}, column 3 must be an integer count. Got '1.5' instead.$"):
+        read_record_csv(path)
+
+
+def test_a_valid_file_is_read_by_blocks_without_the_row_by_row_reader(scenario, tmp_path, monkeypatch):
+    """The block reader (NumPy's) takes every valid block whole; the row-by-row reader only
+    runs to name a bad value's line. A valid file read with the row-by-row reader disabled
+    gives the same record (mutants: any change that makes the block reader give up on valid
+    rows, e.g. its column ranges, its ``ndmin`` or its field count, which the row-by-row reader
+    would otherwise hide behind the same numbers)."""
+    import toolkit.model.record_io as record_io
+
+    path = write_record_csv(scenario.record, tmp_path / "run.csv")
+    expected = read_record_csv(path, scenario.sensors)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a valid block went to the row-by-row reader")
+
+    monkeypatch.setattr(record_io, "_slow_block", refuse)
+    _same(read_record_csv(path, scenario.sensors), expected)

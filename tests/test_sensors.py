@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import re
+
 import numpy as np
 import pytest
 
@@ -258,3 +260,51 @@ def test_record_starts_anywhere_on_the_count_grids():
         record_simulation(result, plant, sensors, central_position=1e30)
     with pytest.raises(ParameterError, match="central_position"):
         record_simulation(result, plant, sensors, central_position=np.nan)
+
+
+def _two_contacts():
+    plant = Plant(ContactSet([0.0, 0.1]), 1.0)
+    return plant, simulate(plant, 1.0), CAROUSEL.sensors(2)
+
+
+@pytest.mark.parametrize("change, error, message", [
+    ({"sensors": "x"}, ParameterTypeError, "'sensors' parameter of record_simulation must be a Sensors. Got 'x' instead."),
+    ({"result": "x"}, ParameterTypeError, "'result' parameter of record_simulation must be an exact SimulationResult "
+                                          "with a dense output. Got 'x' instead."),
+    ({"sensors": CAROUSEL.sensors(3)}, ParameterError,
+     "'sensors' parameter of record_simulation must have n_wheels = plant.n = 2. Got 3 instead."),
+    ({"t_end": -0.5}, ParameterError, "'t_end' parameter of record_simulation must be >= 0. Got -0.5 instead."),
+    ({"t_end": 2.0}, ParameterError, "'t_end' parameter of record_simulation must be <= 1. Got 2.0 instead."),
+    ({"sensors": CAROUSEL.sensors(2, jitter=1e-3)}, ParameterTypeError,
+     "'rng' parameter of record_simulation must be a numpy.random.Generator when the sensors jitter. "
+     "Got None instead."),
+    ({"central_position": 1e30}, ParameterError, "'central_position' parameter of record_simulation must be within "
+                                                 "2^52 counts of the grid's origin. Got 1e+30 instead."),
+    ({"contact_positions": [0.0, 0.0, 0.0]}, ParameterError,
+     "'contact_positions' parameter of record_simulation must have shape (2,). Got 'an array of shape (3,)' instead."),
+])
+def test_record_simulation_refuses_with_the_whole_message(change, error, message):
+    """Each refusal matched whole: parameter, owner, rule and value (mutants: any of them
+    changed or dropped, the jitter test's threshold)."""
+    plant, result, sensors = _two_contacts()
+    args = {"result": result, "plant": plant, "sensors": sensors, **change}
+    with pytest.raises(error, match="^The " + re.escape(message) + "$"):
+        record_simulation(args.pop("result"), args.pop("plant"), args.pop("sensors"), **args)
+
+
+def test_record_simulation_bounds_the_start_and_the_horizon_exactly():
+    """The central start must lie strictly within 2^52 counts: ``2^52 q`` is refused and
+    ``(1 - 2^-10) 2^52 q`` read (mutants: ``<`` to ``<=``, 2^52 to 2^53 or 3^52 or 2 * 52,
+    ``* q`` to ``/ q``). ``t_end`` bounds the stamps, ``k / rate`` up to it (0 gives the one
+    sample at 0; mutant: the lower bound 0 to 1)."""
+    plant, result, sensors = _two_contacts()
+    q = sensors.central.distance_per_count
+    with pytest.raises(ParameterError, match="'central_position' parameter of record_simulation must be within 2"):
+        record_simulation(result, plant, sensors, central_position=2.0 ** 52 * q)
+    with pytest.raises(ParameterError, match="'central_position' parameter of record_simulation must be within 2"):
+        record_simulation(result, plant, sensors, central_position=-(2.0 ** 52) * q)
+    far = record_simulation(result, plant, sensors, central_position=(1 - 2.0 ** -10) * 2.0 ** 52 * q)
+    assert far.central_counts[0] == np.floor((1 - 2.0 ** -10) * 2.0 ** 52)
+    np.testing.assert_array_equal(record_simulation(result, plant, sensors, t_end=0.5).times, np.arange(26) / 50.0)
+    np.testing.assert_array_equal(record_simulation(result, plant, sensors, t_end=0.0).times, [0.0])
+    np.testing.assert_array_equal(record_simulation(result, plant, sensors).times, np.arange(51) / 50.0)

@@ -11,10 +11,9 @@ import pytest
 from toolkit import ParameterError, ParameterTypeError
 from toolkit.analysis.scenarios import carousel_brake_scenario
 from toolkit.model.carousel import CAROUSEL
-from toolkit.estimation import ModelPrior
 from toolkit.model import ContactSet, Motors, Plant
 from toolkit.model.sensors import Sensors
-from toolkit.model.truth import WorldTruth, realize
+from toolkit.model.truth import ModelPrior, WorldTruth, realize
 
 
 def _nominal() -> tuple[Plant, Sensors]:
@@ -113,3 +112,102 @@ def test_the_scenario_model_is_the_nominal_scene_not_the_truth():
 def test_bad_priors_name_the_parameter(kwargs, name):
     with pytest.raises(ParameterError, match=f"^The '{name}' parameter of ModelPrior must"):
         ModelPrior(**kwargs)
+
+
+def test_the_friction_spread_is_drawn_around_each_wheels_own_force():
+    """Two groups of 2000 wheels, nominal 1 N and 4 N (unequal, interleaved): each group's
+    sample mean is within 4 standard errors (0.2 / sqrt(2000) = 0.45 %) of its own nominal and
+    its relative std within 6 % of 0.2 (standard error about 1.6 %). Mutant killed: the spread
+    drawn around the mean of all wheels (2.5 N), which keeps the overall mean."""
+    nominal = np.tile([1.0, 4.0], 2000)
+    plant = Plant(ContactSet(np.zeros(nominal.size), nominal), 1.0)
+    forces = WorldTruth(friction_spread=0.2).plant(plant, seed=5).contacts.forces
+    for own in (1.0, 4.0):
+        group = forces[nominal == own]
+        assert abs(group.mean() / own - 1.0) < 4 * 0.2 / math.sqrt(group.size)
+        assert group.std() / group.mean() == pytest.approx(0.2, rel=0.06)
+
+
+_PLANT, _SENSORS = Plant(ContactSet([0.0, 0.1]), 1.0), CAROUSEL.sensors(2)
+
+
+@pytest.mark.parametrize(("call", "error", "message"), [
+    (lambda: WorldTruth(friction_spread=-0.1), ParameterError,
+     "The 'friction_spread' parameter of WorldTruth must be >= 0. Got -0.1 instead."),
+    (lambda: WorldTruth(drag=-1.0), ParameterError,
+     "The 'drag' parameter of WorldTruth must be >= 0. Got -1.0 instead."),
+    (lambda: WorldTruth(lag=-0.01), ParameterError,
+     "The 'lag' parameter of WorldTruth must be >= 0. Got -0.01 instead."),
+    (lambda: WorldTruth(contact_drift=float('nan')), ParameterError,
+     "The 'contact_drift' parameter of WorldTruth must be finite. Got nan instead."),
+    (lambda: WorldTruth(read_noise=-0.5), ParameterError,
+     "The 'read_noise' parameter of WorldTruth must be >= 0. Got -0.5 instead."),
+    (lambda: WorldTruth(missed_count_prob=1.5), ParameterError,
+     "The 'missed_count_prob' parameter of WorldTruth must be <= 1. Got 1.5 instead."),
+    (lambda: WorldTruth(jitter=float('inf')), ParameterError,
+     "The 'jitter' parameter of WorldTruth must be finite. Got inf instead."),
+    (lambda: WorldTruth().plant('x'), ParameterTypeError,
+     "The 'nominal' parameter of WorldTruth.plant must be a Plant. Got 'x' instead."),
+    (lambda: WorldTruth().sensors('x'), ParameterTypeError,
+     "The 'nominal' parameter of WorldTruth.sensors must be a Sensors. Got 'x' instead."),
+    (lambda: WorldTruth().plant(_PLANT, seed=-1), ParameterError,
+     "The 'seed' parameter of WorldTruth.plant must be >= 0. Got -1 instead."),
+    (lambda: WorldTruth(contact_drift=1e-3).wander(0, 2, 0.02), ParameterError,
+     "The 'samples' parameter of WorldTruth.wander must be >= 1. Got 0 instead."),
+    (lambda: WorldTruth(contact_drift=1e-3).wander(5, 0, 0.02), ParameterError,
+     "The 'n' parameter of WorldTruth.wander must be >= 1. Got 0 instead."),
+    (lambda: WorldTruth(contact_drift=1e-3).wander(5, 2, 0.0), ParameterError,
+     "The 'period' parameter of WorldTruth.wander must be > 0. Got 0.0 instead."),
+    (lambda: realize(_PLANT, _SENSORS, 'x'), ParameterTypeError,
+     "The 'truth' parameter of realize must be a WorldTruth or None. Got 'x' instead."),
+    (lambda: realize(_PLANT, 'x'), ParameterTypeError,
+     "The 'sensors' parameter of realize must be a Sensors. Got 'x' instead."),
+    (lambda: ModelPrior(drag_range=(2.0, 1.0)), ParameterError,
+     "The 'drag_range' parameter of ModelPrior must satisfy low <= high. Got (2.0, 1.0) instead."),
+    (lambda: ModelPrior(drag_range=3.0), ParameterTypeError,
+     "The 'drag_range' parameter of ModelPrior must be a pair (low, high) or None. Got 3.0 instead."),
+    (lambda: ModelPrior(lag_range=(0.0, 20.0)), ParameterError,
+     "The 'lag_range' parameter of ModelPrior must be <= 10. Got 20.0 instead."),
+    (lambda: ModelPrior(drag_range=(-1.0, 1.0)), ParameterError,
+     "The 'drag_range' parameter of ModelPrior must be >= 0. Got -1.0 instead."),
+    (lambda: ModelPrior(friction_spread=-0.1), ParameterError,
+     "The 'friction_spread' parameter of ModelPrior must be >= 0. Got -0.1 instead."),
+    (lambda: ModelPrior(missed_count_prob=2.0), ParameterError,
+     "The 'missed_count_prob' parameter of ModelPrior must be <= 0.5. Got 2.0 instead."),
+])
+def test_every_refusal_of_the_truth_and_the_prior_in_full(call, error, message):
+    """Each refusal matched whole: parameter, owner, rule and value (mutants: any of them changed,
+    dropped or replaced by None, a bound changed)."""
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"missed_count_mean": 0.0}, "The 'missed_count_mean' parameter of ModelPrior must be > 0. Got 0.0 instead."),
+    ({"missed_count_mean": 0.02}, "The 'missed_count_mean' parameter of ModelPrior must be <= 0.01. Got 0.02 instead."),
+    ({"friction_spread": 11.0}, "The 'friction_spread' parameter of ModelPrior must be <= 10. Got 11.0 instead."),
+    ({"contact_drift": -1e-3}, "The 'contact_drift' parameter of ModelPrior must be >= 0. Got -0.001 instead."),
+    ({"lag_range": (0.0, 11.0)}, "The 'lag_range' parameter of ModelPrior must be <= 10. Got 11.0 instead."),
+    ({"drag_range": (1.0, "a")}, "The 'drag_range' parameter of ModelPrior must be a real number. Got 'a' instead."),
+])
+def test_prior_bounds_refused_whole(kwargs, message):
+    """Each bound of the prior refused whole (mutants: a bound, its openness, the name)."""
+    with pytest.raises((ParameterError, ParameterTypeError)) as info:
+        ModelPrior(**kwargs)
+    assert str(info.value) == message
+
+
+def test_prior_keeps_what_it_is_told_as_floats():
+    """Every field kept as told, converted to float, at its bounds' ends (mutants: a field set
+    to None or under another name, a closed bound made open)."""
+    prior = ModelPrior(friction_spread=10, drag_range=(0, 2), lag_range=(0.01, 10), contact_drift=0,
+                       missed_count_prob=np.float64(0.5), missed_count_mean=np.float64(0.01))
+    assert (prior.friction_spread, prior.drag_range, prior.lag_range) == (10.0, (0.0, 2.0), (0.01, 10.0))
+    assert (prior.contact_drift, prior.missed_count_prob, prior.missed_count_mean) == (0.0, 0.5, 0.01)
+    assert all(type(v) is float for v in (prior.friction_spread, prior.contact_drift, prior.missed_count_prob,
+                                           prior.missed_count_mean, *prior.drag_range, *prior.lag_range))
+    default = ModelPrior()
+    assert (default.friction_spread, default.drag_range, default.lag_range) == (0.3, None, None)
+    assert (default.contact_drift, default.missed_count_prob, default.missed_count_mean) == (None, 0.0, None)

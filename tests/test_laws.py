@@ -1,4 +1,4 @@
-"""The formulas of :mod:`toolkit.model.laws`: values at their defining points, exact where
+"""The formulas of :mod:`toolkit.laws`: values at their defining points, exact where
 the arithmetic is exact (powers of two), and one method against another elsewhere."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from toolkit.model.laws import EPS, cell_centre, lag_response, quantization_variance, tie_tolerance
+from toolkit.laws import EPS, cell_centre, lag_response, quantization_variance, tie_tolerance
 
 #: Force and mass scales of every law test: a power of two scales the floating-point
 #: arithmetic exactly, so identities hold to the bit at each scale.

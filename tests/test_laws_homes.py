@@ -1,4 +1,4 @@
-"""Each law of :mod:`toolkit.model.laws` is written there only: no copy of its formula in the
+"""Each law of :mod:`toolkit.laws` is written there only: no copy of its formula in the
 code of the toolkit (strings and comments aside), and the implicit (Moreau) step against a
 second method."""
 
@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from toolkit.model import laws
+from toolkit import laws
 
-ROOT = Path(laws.__file__).resolve().parents[1]
+ROOT = Path(laws.__file__).resolve().parent
 HOME = Path(laws.__file__).resolve()
 
 #: A copy of each formula as code would write it (on code with strings and comments removed).
@@ -56,7 +56,7 @@ def test_each_formula_is_written_in_its_home_only(name):
     pattern = re.compile(FORMULAS[name], re.IGNORECASE)
     copies = [f"{path.relative_to(ROOT.parent)}:{number}: {line.strip()}"
               for path in _sources() for number, line in _code(path) if pattern.search(line)]
-    assert not copies, f"{name} written outside toolkit/model/laws.py:\n" + "\n".join(copies)
+    assert not copies, f"{name} written outside toolkit/laws.py:\n" + "\n".join(copies)
     home = [line for _, line in _code(HOME) if pattern.search(line)]
     assert home, f"the pattern of {name} no longer matches its home: the test would pass vacuously"
 

@@ -2,7 +2,7 @@
 
 The kernel modules (:mod:`.core` and the engines it gathers, :mod:`.lines`, :mod:`.planar`,
 :mod:`.imm`, :mod:`.window`) are plain Python functions over arrays and scalars that import
-nothing of the toolkit but :mod:`toolkit.model.laws`. :func:`load` returns one compiled: each
+nothing of the toolkit but :mod:`toolkit.laws`. :func:`load` returns one compiled: each
 function a module lists in ``KERNELS`` replaced by ``numba.njit(cache=True, **options)`` of
 itself, and the kernels it imports from the other kernel modules bound to theirs. Under ``NUMBA_DISABLE_JIT=1`` the same source runs
 as Python. :func:`kernels` runs them as Python until a process has done enough work in them
@@ -322,7 +322,7 @@ def _one_specialization(dispatcher: Any) -> None:
 
 _CACHE: dict[str, str | None] = {}       # kernel module -> the folder numba caches it in
 #: Each kernel function compiled once per process, whichever modules list it (a kernel that
-#: several modules import, such as a law of :mod:`toolkit.model.laws`, is one dispatcher).
+#: several modules import, such as a law of :mod:`toolkit.laws`, is one dispatcher).
 _DISPATCHERS: dict[Callable[..., Any], Any] = {}
 
 

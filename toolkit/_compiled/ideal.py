@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..model.laws import tie_tolerance
+from ..laws import tie_tolerance
 from .segments import (CROSS, DONE, F_RATE, F_T, F_TERR, F_TSUM, F_V, INF, I_AT, I_CHUNK, I_J,
                        I_MAXSTEPS, I_NEV, I_NEVAL, I_NSEG, I_ROUNDS, I_STARTED, I_STUCK, I_WINDOW,
                        N_FSTATE, N_ISTATE, PAUSE, RELEASE, SATURATION, STICK, budget_code,

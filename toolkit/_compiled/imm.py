@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ..model.laws import cell_centre, quantization_variance
+from ..laws import cell_centre, quantization_variance
 
 KERNELS = {"cell_centre": {"error_model": "numpy"}, "quantization_variance": {"error_model": "numpy"}, "mix": {}, "predict_rows": {}, "update_first": {}, "combine": {}, "bank_step": {}, "cycle": {}, "measure_cycle": {}, "predict_held": {}, "held_noise": {}, "predict_walk": {},
            "bank_moments": {}, "bank_push": {}, "play_loaded": {}, "sign_of": {},

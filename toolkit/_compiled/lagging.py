@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..model.laws import lag_response, lag_travel, tie_tolerance
+from ..laws import lag_response, lag_travel, tie_tolerance
 from .segments import (COMMAND, CROSS, DONE, EPS, F_OFF, F_RATE, F_REL, F_T, F_V, INF, I_CHUNK,
                        I_HINT, I_MAXSTEPS, I_NEV, I_NEVAL, I_NSEG, I_PIECE, I_ROUNDS, I_STARTED,
                        I_STUCK, I_WINDOW, PAUSE, RELEASE, SATURATION, STICK, budget_code,

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from ..model.laws import lag_decay
+from ..laws import lag_decay
 from .segments import (CROSS, INF, RELEASE, STICK, expm1_ratio, expm1_ratio_integral, pairwise_sum,
                        sign)
 from .tables import median_row

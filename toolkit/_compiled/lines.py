@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from ..model.laws import quantization_variance
+from ..laws import quantization_variance
 
 _INLINE = {"inline": "always"}
 

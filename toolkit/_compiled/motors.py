@@ -1,7 +1,7 @@
 """Kernels of the motor law's closed form over one piece of constant command.
 
 The compiled form of :class:`toolkit.model.motors.MotorPiece`: a ramp at the rate limit while
-the gap exceeds ``rate tau``, then the first-order lag of :mod:`toolkit.model.laws`. A piece is
+the gap exceeds ``rate tau``, then the first-order lag of :mod:`toolkit.laws`. A piece is
 a table (5, n) with rows ``start``, ``u``, ``ramp`` (m/s^2), ``ramp_end`` (s) and ``after`` (m/s).
 """
 
@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from ..model.laws import lag_response, lag_travel
+from ..laws import lag_response, lag_travel
 from .segments import INF, sign
 
 M_START, M_U, M_RAMP, M_END, M_AFTER = 0, 1, 2, 3, 4      # the rows of a piece's table

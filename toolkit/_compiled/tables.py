@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from ..model.laws import tie_tolerance
+from ..laws import tie_tolerance
 from .segments import INF, pairwise_sum
 
 #: Contacts up to which the lowest index at a level is found by a scan (else one sort).

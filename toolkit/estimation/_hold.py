@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.laws import cell_centre, quantization_variance
+from ..laws import cell_centre, quantization_variance
 from .._compiled import kernels
 from ..model.motors import lag_settling_time
 from ._input import EstimatorModel

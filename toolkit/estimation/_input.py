@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..model.laws import quantization_variance
+from ..laws import quantization_variance
 from ..errors import as_float, as_float_array, as_int, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from .._compiled import core as _core

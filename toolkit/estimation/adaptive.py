@@ -27,7 +27,7 @@ from .._compiled import kernels
 from ..errors import as_float
 from ..errors import ParameterTypeError, parameter_message
 from ..model.friction import contact_forces
-from ..model.laws import cell_centre, lag_response, quantization_variance
+from ..laws import cell_centre, lag_response, quantization_variance
 from ..model.motors import MotorPiece, unsaturated_response
 from ..model.sensors import EncoderRecord, EncoderSample, play
 from ._base import EstimationResult, Estimator, score
@@ -96,7 +96,7 @@ def command_timing_variance(before: np.ndarray, after: np.ndarray, period: float
     taken it anywhere in the period before (a command between samples, serial latency).
     Over that unseen time, uniform on ``[0, h]``, the body's speed departs from the old
     command's flow by at most the contacts' change, ``max_i |u_i - u_i'| (1 - exp(-h /
-    tau))`` (the motor law over a period, :func:`~toolkit.model.laws.lag_response`; the
+    tau))`` (the motor law over a period, :func:`~toolkit.laws.lag_response`; the
     whole step for ideal motors), and by at most
     what the largest force gives over the period, ``a_max h``: the smaller, ``e``, as the
     largest of a departure that grows with the unseen time, uniform on ``[0, e]``, whose

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.laws import cell_centre
+from ..laws import cell_centre
 from .._compiled import budget_clock
 from ..errors import as_float
 from ..errors import ParameterTypeError, parameter_message

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.laws import quantization_variance
+from ..laws import quantization_variance
 from ..model.contacts import ContactSet
 from ..model.sensors import EncoderSample, Sensors
 from ..errors import ParameterTypeError, parameter_message

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.laws import cell_centre, quantization_variance
+from ..laws import cell_centre, quantization_variance
 from .._compiled import kernels
 from ..errors import as_float
 from ..model.motors import MotorPiece

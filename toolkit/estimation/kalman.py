@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.laws import cell_centre, quantization_variance
+from ..laws import cell_centre, quantization_variance
 from .._compiled import budget_clock
 from .._compiled import kernels
 from ..errors import as_float, as_float_array, as_int

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.laws import quantization_variance
+from ..laws import quantization_variance
 from .kalman import NominalKalman
 
 __all__ = ["UnscentedEstimator"]

@@ -17,7 +17,7 @@ import numpy as np
 from .._compiled import compiled, kernels
 from ..errors import as_float, as_float_array, check_nonnegative
 from ..errors import ParameterError, ParameterTypeError, parameter_message
-from .laws import tie_tolerance
+from ..laws import tie_tolerance
 
 __all__ = ["ContactModel", "ContactSet", "ContactDistribution", "Staircase", "unequal_loads",
            "weighted_median"]

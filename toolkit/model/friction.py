@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import as_float, check_option
 from ._xp import ops
-from .laws import tie_tolerance
+from ..laws import tie_tolerance
 
 __all__ = ["FRICTION_LAWS", "STRIBECK_PEAK", "STRIBECK_SPEED", "contact_forces",
            "compliant_breakpoints", "compliant_zero_set"]

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import as_float
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ._xp import ops
-from .laws import lag_decay, lag_response, lag_travel
+from ..laws import lag_decay, lag_response, lag_travel
 
 __all__ = ["Motors", "motor_rate", "MotorPiece", "unsaturated_response", "lag_memory",
            "lag_settling_time", "implicit_step", "reach"]

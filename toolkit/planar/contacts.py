@@ -21,7 +21,7 @@ from .._compiled import kernels
 from ..errors import (ParameterError, ParameterTypeError, as_float, as_float_array, check_nonnegative,
                       parameter_message)
 from ..model import ContactSet
-from ..model.laws import tie_tolerance
+from ..laws import tie_tolerance
 from .equilibrium import PlanarEquilibrium, _canonical, solve_equilibrium
 
 __all__ = ["PlanarContactSet", "WrenchSet", "LineReduction", "limit_factors", "wrench_batch", "geometric_median"]

@@ -14,7 +14,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..model import laws
+from .. import laws
 from ..model.motors import lag_memory, reach, unsaturated_response
 
 #: Shifts of the follow target, in units of the period's reference change (plus -kappa).
@@ -54,7 +54,7 @@ class Construction:
 def implicit_step(V: np.ndarray, v: np.ndarray, forces: np.ndarray, mass: float, damping: float,
                   external: float, h: float) -> np.ndarray:
     """One implicit (Moreau) step of ``m V' in sum f_i Sign(v_i - V) + F_ext - c V`` per row:
-    :func:`toolkit.model.laws.implicit_step` on each row's staircase (its contacts sorted).
+    :func:`toolkit.laws.implicit_step` on each row's staircase (its contacts sorted).
 
     Parameters
     ----------

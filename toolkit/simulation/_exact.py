@@ -23,7 +23,7 @@ from .. import _compiled
 from .._compiled import budget_clock
 from .._compiled import core as _core     # the kernels' source module (imports no numba)
 from ..model import ContactSet, MotorPiece, PiecewiseConstant, Plant, compliant_breakpoints
-from ..model.laws import tie_tolerance
+from ..laws import tie_tolerance
 from ._result import Budget, Event, SimulationResult, SimulationStatus, status_message
 
 __all__ = ["simulate_exact"]

@@ -1,7 +1,7 @@
 """Reference method: Moreau-Jean time stepping (implicit Euler with the set-valued force).
 
 ``simulate(plant, t_end, method="moreau", step=1e-3)``. Each step solves ``m (W - V) / h in
-F(W) + F_ext - c W`` exactly on the staircase (:func:`toolkit.model.laws.implicit_step`), or
+F(W) + F_ext - c W`` exactly on the staircase (:func:`toolkit.laws.implicit_step`), or
 by a search over the kinks of compliant contacts; dynamic motors are advanced first by the
 motor law's implicit step; drive backlash adds a play per contact whose engaged drives enter
 the staircase as half steps. Steps land on every switch; only the requested samples are kept.
@@ -19,7 +19,7 @@ from ..errors import as_float
 from ..errors import ParameterError, parameter_message
 from ..model import Plant
 from ..model import implicit_step as motor_implicit_step
-from ..model.laws import implicit_step, tie_tolerance
+from ..laws import implicit_step, tie_tolerance
 from ._reference import BudgetExceeded, Meter, StepRecord, build_result, format_setting, segment_edges
 from ._result import Budget, SimulationResult, SimulationStatus
 
@@ -27,7 +27,7 @@ __all__ = ["simulate_moreau", "moreau_step_staircase"]
 
 
 #: One Moreau-Jean step on a Coulomb staircase: ``(W, stuck)`` from ``(levels, plateaus, a, b)``
-#: (the model's law, :func:`toolkit.model.laws.implicit_step`).
+#: (the model's law, :func:`toolkit.laws.implicit_step`).
 moreau_step_staircase = implicit_step
 
 

@@ -1,6 +1,6 @@
 """The speed variance an exact line gains from a missed count it absorbed (docs/physics.md
 section 10): the closed form, the bias it stands for on constructed lines, the transitions a
-wheel's window counts as unseen, and the missed-count case of issue 18 over 20 seeds."""
+wheel's window counts as unseen, and the missed-count case over 20 seeds."""
 
 from __future__ import annotations
 
@@ -123,7 +123,7 @@ def test_unseen_transitions_of_a_window() -> None:
 
 @pytest.mark.slow
 def test_missed_counts_nees_in_band_over_20_seeds() -> None:
-    # Issue 18's lines for untold missed counts (1e-3) over 20 seeds: NEES in band 0.790
+    # The lines for untold missed counts (1e-3) over 20 seeds: NEES in band 0.790
     # before the absorbed variance, 0.952 with it (target 0.8); the RMS lines still met.
     from toolkit.analysis.robustness import robustness_table
     table = robustness_table(["missed 1e-3"], seeds=20)

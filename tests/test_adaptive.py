@@ -29,7 +29,7 @@ def spread():
 def test_in_the_nominal_world_the_default_is_the_nominal_filter():
     # The monitor passes on every sample of the acceptance record and of five random grid
     # phases: the result is the nominal filter's, bit for bit, and on the shipped scene's
-    # record (grid on the count edges) its RMS holds (<= 0.03 mm/s, issue 18; measured
+    # record (grid on the count edges) its RMS holds (<= 0.03 mm/s; measured
     # 0.0220; over random grid phases the nominal filter's RMS spreads over 0.019-0.039).
     for phase in (None, 1, 2, 3, 4, 5):
         sc = carousel_brake_scenario(seed=0, grid_phase=phase)
@@ -183,7 +183,7 @@ def test_identification_recovers_the_lag(lag, nominal):
 
 
 def test_robustness_on_unequal_wheels(spread):
-    # Issue 18's lines on one record (seed 0; the benchmark takes medians over ten): overall
+    # The lines on one record (seed 0; the benchmark takes medians over ten): overall
     # RMS at most a fifth of the best baseline's (measured 0.51 vs 3.33 mm/s, FOAW end-fit),
     # cruise and braked at most 1.5 x FOAW's (measured 0.0019 / 0.0024 vs 0.026 / 0.014),
     # NEES in its band on at least 80 % of the samples (measured 0.98).
@@ -366,7 +366,7 @@ def test_the_untold_missed_count_rate_makes_the_position_consistent(monkeypatch)
     # Missed counts 1e-3 (the robustness case), seeds 0-9, the rate not told: the default
     # identifies it (each record's posterior mean within 4 of its own std of the truth) and
     # reports the position with the count offset it implies; its NEES in band is >= 0.8
-    # (issue 18's line; measured median 0.827, told 0.824). Without the offset the same
+    # (the line; measured median 0.827, told 0.824). Without the offset the same
     # filter's is far below (measured median 0.14 over these ten seeds).
     import dataclasses
 

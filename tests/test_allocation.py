@@ -153,7 +153,7 @@ def test_quantile_is_optimal_on_random_curves_against_the_milp(seed: int, n: int
     assert milp.bound <= quant.error_sup + tol
     assert quant.bound <= milp.error_sup + tol
     assert quant.error_sup == pytest.approx(milp.error_sup, rel=0, abs=tol)
-    assert quant.gap <= 1e-12 * n + _rounding_allowance(curve)     # issue 4: gap < 1e-12
+    assert quant.gap <= 1e-12 * n + _rounding_allowance(curve)  # gap < 1e-12
 
 
 def test_motor_limits_clip_the_quantile_range_and_the_bound() -> None:

@@ -242,7 +242,7 @@ def test_random_unequal_instances_have_a_tiny_certified_gap(n: int) -> None:
         sampled, allowance = _dense_sup(result.curve, result.contacts)
         assert sampled <= result.error_sup + 1e-12               # rounding of force()
         assert result.error_sup <= sampled + allowance + 1e-12
-        assert result.gap <= 1e-6                                # issue 4
+        assert result.gap <= 1e-6
         assert result.status is AllocationStatus.OPTIMAL
 
 

@@ -202,7 +202,7 @@ def test_precision_plot_with_motors_where_exact_is_the_reference(tmp_path):
     assert (tmp_path / "precision.png").read_bytes()[:4] == b"\x89PNG"
 
 
-# -- exit codes that tell the truth (issue 10) --------------------------------------------------
+# -- exit codes that tell the truth --------------------------------------------------
 
 TEN_AT_REST = "[contacts]\nspeeds = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]\nforces = 1.0\n"
 FRACTION_17 = (TEN_AT_REST + "[motors]\nspeed_limit = 0.35\n"

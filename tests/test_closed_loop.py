@@ -85,7 +85,7 @@ def test_sensors_and_filter_in_the_loop():
 
 
 def test_filter_in_the_loop_is_ten_times_better_than_differencing():
-    # Issue 9: in the loop from rest (the motors start at 0 and the first command starts a
+    # in the loop from rest (the motors start at 0 and the first command starts a
     # transient, recorded as the record's initial_commands) the stepped filter's RMS error
     # is at most a tenth of the central finite difference's on the same record (measured
     # 0.245 vs 4.77 mm/s, 19.5x; 0.375, 12.7x before the input was the exact flow).

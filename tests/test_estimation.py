@@ -1,7 +1,7 @@
 """Estimators: closed forms, identities, one method against another, and the acceptance numbers.
 
 Tolerances say where they come from. The acceptance scenario is the carousel's 10 s
-startup-then-brake run (issue 9), simulated exactly and recorded through the sensor law.
+startup-then-brake run, simulated exactly and recorded through the sensor law.
 """
 
 from __future__ import annotations
@@ -152,7 +152,7 @@ def test_acceptance_kalman_beats_finite_differences_tenfold(scenario):
 
 
 def test_acceptance_kalman_near_the_smoother(scenario):
-    # Issue 9: the filter's RMS within 1.5x of the RTS smoother's on the same record.
+    # the filter's RMS within 1.5x of the RTS smoother's on the same record.
     # Measured 0.0220 vs 0.0151 mm/s (1.46x) with the exact holds (0.0226 vs 0.0160, 1.41x,
     # with the white model throughout; 0.049 vs 0.030, 1.66x, before the wheel windows'
     # least-squares lines).
@@ -162,7 +162,7 @@ def test_acceptance_kalman_near_the_smoother(scenario):
     assert kf.rms_error <= 1.5 * rts.rms_error
 
 
-@pytest.mark.xfail(strict=True, reason="short (issue 9): measured KF NEES mean 1.77 below its band "
+@pytest.mark.xfail(strict=True, reason="short: measured KF NEES mean 1.77 below its band "
                    "[1.83, 2.18] on the acceptance record (1.64 in the first second, 2.44 cruising, "
                    "1.56 around the brake, 1.22 braked). The band is that of 500 independent "
                    "errors; a hold's errors are one line's, the same for hundreds of samples, so "

@@ -1,4 +1,4 @@
-"""Hostile inputs a newcomer tried (issue 19): each is refused with exit 2 and one line, no
+"""Hostile inputs a newcomer tried: each is refused with exit 2 and one line, no
 traceback, nothing written; none is silently clipped or replaced."""
 
 from __future__ import annotations
@@ -195,7 +195,7 @@ def test_float_arrays_and_other_values_are_checked_alike(value, error, match):
             errors.as_float(bad, "x", "Y")
 
 
-# -- inputs a new user tried (issue 31): each a one-line refusal naming the file, line, column
+# -- inputs a new user tried: each a one-line refusal naming the file, line, column
 #    or key (exit 2), or the documented success --------------------------------------------
 
 ESTIMATE = str(ROOT / "designs" / "estimate.toml")

@@ -1,4 +1,4 @@
-"""Memory and time bounded by the budget in every simulation method (issue 10, row 1).
+"""Memory and time bounded by the budget in every simulation method.
 
 Every method is run at ``t_end = 1e9`` s in a child process whose address space is capped at
 1 GiB with ``resource.setrlimit(RLIMIT_AS)``. RLIMIT_AS rather than RLIMIT_DATA: it counts

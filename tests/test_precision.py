@@ -80,7 +80,7 @@ def test_rational_trajectory_crossing_times_are_exact_fractions() -> None:
 def test_exact_row_is_exact_and_references_are_measured(quick_report: PrecisionReport) -> None:
     exact = quick_report.row("exact")
     assert exact.status is SimulationStatus.SUCCESS
-    assert exact.max_error <= 1e-12                       # issue 3 criterion
+    assert exact.max_error <= 1e-12
     radau = quick_report.row("radau")
     # tanh with eps = 1e-4: the smoothed solution lags the Coulomb one by about eps near each
     # contact speed; the error is between 0.1 eps and 10 eps.

@@ -400,7 +400,7 @@ def test_ideal_friction_fraction_is_exact():
 
 def test_in_loop_friction_fraction_meets_the_targets():
     # Encoders, motor lag; the Kalman filter in the rig's loop (told the rig's force) and in
-    # the braking loop: issue 9's targets (0.02 on mu/mu0, 5 % on dT). Measured: |mu/mu0 -
+    # the braking loop: the targets (0.02 on mu/mu0, 5 % on dT). Measured: |mu/mu0 -
     # j/5| <= 7e-6, |dT / dT_predicted - 1| <= 0.10 %.
     check = friction_fraction_check(FrictionFractionProblem(CAROUSEL, "loop"))
     assert check.problem.rig_estimator == "kalman"

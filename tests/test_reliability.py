@@ -1,8 +1,8 @@
-"""Issue 10 (reliability and honest results): the public names, and the shortfalls of the
+"""Reliability and honest results: the public names, and the shortfalls of the
 work-precision report.
 
-The other rows of issue 10 are tested where their code lives (see the list in
-``test_issue_10_rows_have_tests`` below).
+The other guarantees are tested where their code lives (see the list in
+``test_every_reliability_guarantee_has_a_test`` below).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # -- exports ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", ["Shortfall", "Clip", "OutputError", "MAX_SCENE_BYTES", "CurveStep",
                                   "Budget", "SimulationStatus", "StudyResult"])
-def test_issue_10_names_are_public(name: str) -> None:
+def test_reliability_names_are_public(name: str) -> None:
     assert name in tk.__all__ and getattr(tk, name) is not None
 
 
@@ -47,7 +47,7 @@ def test_exported_objects_are_the_ones_the_toolkit_uses(tmp_path: Path) -> None:
     afile.write_text("x")
     with pytest.raises(tk.OutputError, match="exists and is not a folder"):
         _io.check_output_dir(afile)
-    # Budget carries the memory cap of issue 10, validated like the other limits
+    # Budget carries the memory cap, validated like the other limits
     assert tk.Budget().max_samples == 2**18
     with pytest.raises(tk.ParameterError, match="'max_samples' parameter of Budget"):
         tk.Budget(max_samples=1)
@@ -135,9 +135,9 @@ def test_precision_command_exits_3_on_a_shortfall(monkeypatch: pytest.MonkeyPatc
     assert err.count("\n") == 1 and "shortfall: precision: no reference method reached" in err
 
 
-# -- every row of issue 10's "Done when" has a test --------------------------------------------
-#: Row of issue 10 -> tests that check it (each failed before the change that made it pass).
-ISSUE_10_TESTS = {
+# -- every reliability guarantee has a test ----------------------------------------------------
+#: Guarantee -> tests that check it (each failed before the change that made it pass).
+RELIABILITY_TESTS = {
     "1 memory and time bounded in every method at t_end = 1e9": [
         "tests/test_memory_bounds.py::test_method_at_1e9_returns_a_budget_status_under_1_gib",
         "tests/test_memory_bounds.py::test_decimated_record_is_the_full_record_thinned",
@@ -181,9 +181,9 @@ ISSUE_10_TESTS = {
 }
 
 
-def test_issue_10_rows_have_tests() -> None:
+def test_every_reliability_guarantee_has_a_test() -> None:
     # Each listed test exists (a renamed or deleted test fails here, not silently).
-    for row, tests in ISSUE_10_TESTS.items():
+    for row, tests in RELIABILITY_TESTS.items():
         assert tests, row
         for node in tests:
             path, name = node.split("::")

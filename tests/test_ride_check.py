@@ -123,9 +123,9 @@ def test_without_read_noise_the_check_does_not_read():
 
 
 def test_the_all_at_once_world_is_consistent_whatever_the_rate_prior(monkeypatch):
-    # Issue 18's "all at once" world (the rate 1e-3, not told), seeds 0-5, the rate's prior
+    # The "all at once" world (the rate 1e-3, not told), seeds 0-5, the rate's prior
     # mean at 1e-4 and at 1e-2 (ten times off either way): the NEES in band's median is at
-    # least 0.8 (issue 18's line; measured 0.83 and 0.97 here, 0.92 and 0.96 over ten seeds)
+    # least 0.8 (the line; measured 0.83 and 0.97 here, 0.92 and 0.96 over ten seeds)
     # and the rates the default identified have a median within a factor 2 of the truth
     # (measured 0.92e-3 and 1.42e-3). Without the check the prior decides: 0.40 at 1e-4.
     case = ROBUSTNESS_CASES["all at once"]

@@ -257,7 +257,7 @@ def test_loading_builds_nothing_and_each_build_is_fresh():
     assert load_scene(path) == scene            # the built objects are not part of equality
 
 
-# -- speed limits (issue 10) -------------------------------------------------------------------
+# -- speed limits -------------------------------------------------------------------
 
 LIMITED = "[motors]\nspeed_limit = 0.35\n"
 
@@ -312,7 +312,7 @@ def test_simulation_budget_table_becomes_a_budget():
         build_scene(loads_scene(MINIMAL + "[body]\nmass = 1.0\n[simulation]\nt_end = 1.0\noptions = { budget = { wall = 1 } }\n"))
 
 
-# -- scene file edge cases (issue 10): one line, exit 2, no traceback ---------------------------
+# -- scene file edge cases: one line, exit 2, no traceback ---------------------------
 
 def _cli_error(path: Path) -> str:
     done = subprocess.run([sys.executable, "-m", "toolkit.cli", "curve", str(path)], capture_output=True,

@@ -348,7 +348,7 @@ def test_shipped_designs_declare_the_new_stages():
     assert load_scene(ROOT / "designs" / "closed_loop.toml").control.cross_check is True
 
 
-# -- issue 18: truth and belief apart, recorded logs ---------------------------------------------
+# -- truth and belief apart, recorded logs ---------------------------------------------
 
 TRUTH = "\n[estimation.truth]\nfriction_spread = 0.2\ndrag = 0.5\n\n[estimation.model]\ndrag_range = [0.0, 2.0]\n"
 

@@ -506,6 +506,7 @@ class AdaptiveKalman(Estimator):
         self._anchor = (math.nan, 0)
         self._pending: tuple | None = None
         self._observed: tuple | None = None
+        self._stepped_at: float | None = None            # the last stepped sample's time, s
         self._count_prev: int | None = None
         self._repeats = 0
         self._central_offset = 0
@@ -678,7 +679,9 @@ class AdaptiveKalman(Estimator):
         self._count_prev = c
         R0 = quantization_variance(q) * (1 + self._repeats)
         z = cell_centre(c, q)
-        self._modes(z, R0, track, var, steady, force)
+        elapsed = self.h if self._stepped_at is None else t - self._stepped_at
+        self._stepped_at = t
+        self._modes(z, R0, track, var, steady, force, elapsed)
         self.holding = out is not None and not out.failed
         if self.holding:
             self.last_nis = out.nis
@@ -717,7 +720,8 @@ class AdaptiveKalman(Estimator):
         mode counts where its flow left the body on a contact)."""
         return (mu[1] + (mu[0] if self._stuck_on is not None else 0.0)) / max(mu[0] + mu[1], 1e-300)
 
-    def _modes(self, z: float, R0: float, track: np.ndarray, var: np.ndarray, steady: bool, force: float) -> None:
+    def _modes(self, z: float, R0: float, track: np.ndarray, var: np.ndarray, steady: bool, force: float,
+               elapsed: float) -> None:
         """The IMM cycle: mix, each mode's prediction, the measurement noise, update, combine."""
         K = kernels("imm", 40 * self.d * self.d)
         xs0, Ps0, cbar = self._xs0, self._Ps0, self._cbar
@@ -743,9 +747,11 @@ class AdaptiveKalman(Estimator):
         x_pred, predicted, speed = K.predicted_first(cbar, means, rows0, Ps0, noises)
         wheel = q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed
         R = R0 + max(self._noise.extra(speed), wheel)
+        # (The unknown force is read off a one-period prediction: a sample after a gap, one
+        # or more lost on the way, is left to the layers that account for the lost time.)
         gross = unknown_force_noise(z - x_pred, predicted + R, q, self.h,
                                     self._largest_accel + abs(force) / self.model.mass)
-        if gross is not None:
+        if gross is not None and abs(elapsed - self.h) <= 0.5 * self.h:
             noises += gross                  # (every mode's, before the update)
         if self._timing > 0.0:
             h = self.h

@@ -161,8 +161,7 @@ class WheelSpeedBank:
         self.h = model.sensors.period
         self.q = model.sensors.wheel.distance_per_count
         self.play = model.sensors.backlash
-        h = self.h
-        self._Q = np.array([[d * d * h ** 3 / 3.0, d * d * h * h / 2.0, d * d * h] for d in self.DRIFTS])
+        self._substeps, self._h_all, self._Q = self._over(self.h)
         self._drifts = np.array(self.DRIFTS)
         self._log_weights = np.zeros(len(self.DRIFTS))
         self._drift = float(np.mean(self._drifts))
@@ -170,10 +169,13 @@ class WheelSpeedBank:
         self._P = np.zeros((len(self.DRIFTS), self.n, 3))
         self._nominal = np.zeros(self.n)          # the law's speeds, m/s
         self._y = np.zeros(self.n)                # the encoders' side of the play, m
-        self._h_all = np.full(self.n, h)
         self._loaded = np.zeros(self.n)
-        #: Sub-steps of a period at which the contact's path meets the play operator.
-        self._substeps = h * np.arange(1, 9) / 8.0
+
+    def _over(self, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Over a time ``h`` (s): the sub-steps at which the contact's path meets the play
+        operator, ``h`` per wheel, and each hypothesis's process noise of ``(x, o)``."""
+        Q = np.array([[d * d * h ** 3 / 3.0, d * d * h * h / 2.0, d * d * h] for d in self.DRIFTS])
+        return h * np.arange(1, 9) / 8.0, np.full(self.n, h), Q
 
     @property
     def weights(self) -> np.ndarray:
@@ -213,15 +215,16 @@ class WheelSpeedBank:
         self._P[:, which, 1] = 0.0
         self._P[:, which, 2] = np.broadcast_to(variance, (self.n,))[which]
 
-    def push(self, wheels: np.ndarray, command: np.ndarray, lag: float, noise: np.ndarray
+    def push(self, wheels: np.ndarray, command: np.ndarray, lag: float, noise: np.ndarray, periods: int = 1
              ) -> tuple[np.ndarray, np.ndarray]:
-        """The readings at the end of a period over which ``command`` (m/s, clipped) was held,
-        with the motors' ``lag`` (s) and each reading's noise variance (m^2); the contacts'
-        speeds (m/s) and their variances ((m/s)^2) at the readings."""
-        h = self.h
+        """The readings at the end of ``periods`` periods (the samples between were lost)
+        over which ``command`` (m/s, clipped) was held, with the motors' ``lag`` (s) and each
+        reading's noise variance (m^2); the contacts' speeds (m/s) and their variances
+        ((m/s)^2) at the readings."""
+        h = periods * self.h
+        s, h_all, Q = (self._substeps, self._h_all, self._Q) if periods == 1 else self._over(h)
         u = np.asarray(command, dtype=float)
         start = self._nominal
-        s = self._substeps
         if lag > 0.0 and start.tolist() != u.tolist():            # (lists: cheaper on a few contacts)
             piece = MotorPiece.build(0.0, start, u, lag, math.inf)
             moved = piece.displacement(s[:, None])                     # (substeps, n)
@@ -240,11 +243,11 @@ class WheelSpeedBank:
         # Engaged behind a contact that keeps moving the same way over the whole period: the
         # play stays loaded (the operator's fixed point); where every wheel's does, one kernel
         # call; else only the others walk its path.
-        K = kernels("imm", 20 * self._Q.shape[0] * self.n)
+        K = kernels("imm", 20 * Q.shape[0] * self.n)
         noise = np.asarray(noise, dtype=float)
         wheels = np.asarray(wheels)
         shift, loaded, speeds, var = np.empty(self.n), self._loaded, np.empty(self.n), np.empty(self.n)
-        drift = K.bank_push(self._x, self._P, self._Q, start, end, cx, self._h_all, self.LAW_ERROR, self._y,
+        drift = K.bank_push(self._x, self._P, Q, start, end, cx, h_all, self.LAW_ERROR, self._y,
                             wheels, self.q, noise, self._log_weights, self.FORGET, 0.5 * self.play, self._drifts,
                             shift, loaded, speeds, var)
         if drift >= 0.0:
@@ -263,7 +266,7 @@ class WheelSpeedBank:
         shift[walk] = y - path[-1]
         seen[walk] = np.abs(np.abs(shift[walk]) - half) <= 1e-9 * max(half, 1e-12)
         law_error = (self.LAW_ERROR * (end - start)) ** 2
-        K.bank_step(self._x, self._P, self._Q, cx, self._h_all, law_error, shift, seen, z, noise,
+        K.bank_step(self._x, self._P, Q, cx, h_all, law_error, shift, seen, z, noise,
                     self._log_weights, self.FORGET)
         self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift,
                            np.where(loaded > 0.0, self._y, x + moved[-1] + h * ob + shift))
@@ -507,6 +510,7 @@ class AdaptiveKalman(Estimator):
         self._pending: tuple | None = None
         self._observed: tuple | None = None
         self._stepped_at: float | None = None            # the last stepped sample's time, s
+        self._wheels_at: float | None = None             # the last wheel readings' time, s
         self._count_prev: int | None = None
         self._repeats = 0
         self._central_offset = 0
@@ -720,13 +724,12 @@ class AdaptiveKalman(Estimator):
         mode counts where its flow left the body on a contact)."""
         return (mu[1] + (mu[0] if self._stuck_on is not None else 0.0)) / max(mu[0] + mu[1], 1e-300)
 
-    def _modes(self, z: float, R0: float, track: np.ndarray, var: np.ndarray, steady: bool, force: float,
-               elapsed: float) -> None:
-        """The IMM cycle: mix, each mode's prediction, the measurement noise, update, combine."""
+    def _predict_modes(self, track: np.ndarray, var: np.ndarray, steady: bool, force: float) -> Any:
+        """The IMM's mixing and each mode's prediction over a period (into :attr:`_means`,
+        :attr:`_rows0`, :attr:`_rows1`, :attr:`_noises`); returns the kernels."""
         K = kernels("imm", 40 * self.d * self.d)
-        xs0, Ps0, cbar = self._xs0, self._Ps0, self._cbar
-        K.mix(self.mu, self.M, self.xs, self.Ps, xs0, Ps0, cbar)
-        means, rows0, rows1, noises = self._means, self._rows0, self._rows1, self._noises
+        K.mix(self.mu, self.M, self.xs, self.Ps, self._xs0, self._Ps0, self._cbar)
+        xs0, Ps0 = self._xs0, self._Ps0
         large = not steady and float(np.abs(track[1] - track[0]).max()) > self.LARGE_STEP
         for j in range(3):
             if j == self.FREE or (j == self.FREEFORM and large):
@@ -738,6 +741,49 @@ class AdaptiveKalman(Estimator):
                 self._predict_stuck(j, xs0[j], track, var)
             else:
                 self._predict_freeform(j, xs0[j], steady)
+        return K
+
+    def _timing_noise(self) -> None:
+        """A command change's timing within its period (:func:`command_timing_variance`),
+        added to every mode's process noise once."""
+        if self._timing > 0.0:
+            h = self.h
+            self._noises += self._timing * np.array([[h * h, h], [h, 1.0]])
+            self._timing = 0.0
+
+    def _coast(self, t: float, track: np.ndarray, var: np.ndarray, steady: bool, force: float
+               ) -> tuple[np.ndarray, np.ndarray, bool, float]:
+        """A period whose sample was lost (ending at ``t``, s): the IMM's prediction with no
+        update (the modes' probabilities the mixing's ``cbar``), the last command held;
+        returns the next period's ``(track, var, steady, force)``: the contacts where the
+        motor law takes them, their variance grown by the motors' wander."""
+        K = self._predict_modes(track, var, steady, force)
+        self._timing_noise()
+        if self.reference:
+            self._modes_reference(math.nan, math.inf, self._means, list(zip(self._rows0.copy(), self._rows1.copy())),
+                                  self._noises.copy(), update=False)
+        else:
+            xs, Ps, forget = np.empty_like(self.xs), np.empty_like(self.Ps), self.forgetting * self.h
+            for j in range(3):
+                K.predict_rows(self._Ps0[j], self._rows0[j], self._rows1[j], self._noises[j], forget, Ps[j])
+                xs[j] = self._means[j]
+            self.xs, self.Ps, self.mu = xs, Ps, self._cbar.copy()
+            self.x, self.P = np.empty(self.d), np.empty((self.d, self.d))
+            K.combine(self.mu, self.xs, self.Ps, self.x, self.P)
+        self._stepped_at = t
+        self._mu_prev = self.mu
+        if not steady:
+            lag = self.lag
+            start = lag_response(track[1], track[0], self.h, lag) if lag > 0.0 else track[1].copy()
+            track = np.array((start, track[1]))
+        return track, var + self._bank.drift ** 2 * self.h, steady, force
+
+    def _modes(self, z: float, R0: float, track: np.ndarray, var: np.ndarray, steady: bool, force: float,
+               elapsed: float) -> None:
+        """The IMM cycle: mix, each mode's prediction, the measurement noise, update, combine."""
+        K = self._predict_modes(track, var, steady, force)
+        Ps0, cbar = self._Ps0, self._cbar
+        means, rows0, rows1, noises = self._means, self._rows0, self._rows1, self._noises
         # The measurement noise: the quantization's plus what covariance matching finds in
         # the innovations against the modes' combined prediction, or in the wheels' residuals
         # (read noise, jitter: the same electronics read all encoders at the same instants).
@@ -747,16 +793,13 @@ class AdaptiveKalman(Estimator):
         x_pred, predicted, speed = K.predicted_first(cbar, means, rows0, Ps0, noises)
         wheel = q * q * self._wheel_noise[0] + self._wheel_noise[1] * speed * speed
         R = R0 + max(self._noise.extra(speed), wheel)
-        # (The unknown force is read off a one-period prediction: a sample after a gap, one
-        # or more lost on the way, is left to the layers that account for the lost time.)
+        # (The unknown force is read off a one-period prediction: after lost samples the
+        # periods between are coasted; a sample off the grid is left to the other layers.)
         gross = unknown_force_noise(z - x_pred, predicted + R, q, self.h,
                                     self._largest_accel + abs(force) / self.model.mass)
         if gross is not None and abs(elapsed - self.h) <= 0.5 * self.h:
             noises += gross                  # (every mode's, before the update)
-        if self._timing > 0.0:
-            h = self.h
-            noises += self._timing * np.array([[h * h, h], [h, 1.0]])
-            self._timing = 0.0
+        self._timing_noise()
         if self.reference:
             self._modes_reference(z, R, means, list(zip(rows0.copy(), rows1.copy())), noises.copy())
         else:
@@ -775,10 +818,12 @@ class AdaptiveKalman(Estimator):
         if not nis <= self.NIS_EDGE:
             self._nis_over += 1
 
-    def _modes_reference(self, z: float, R: float, means: list, rows: list, noises: list) -> None:
+    def _modes_reference(self, z: float, R: float, means: list, rows: list, noises: list,
+                         update: bool = True) -> None:
         """The same cycle on filterpy's IMMEstimator: each filter's transition ``F`` (the
         identity but for the rows of ``(X, V)``), ``Q``, and the input that makes ``F x0 +
-        B u`` the mode's prediction from the mixed state ``x0``."""
+        B u`` the mode's prediction from the mixed state ``x0``. Without ``update`` (a lost
+        sample) the prediction alone, the modes' probabilities the mixing's ``cbar``."""
         imm = self.imm
         xs0 = self._xs0
         for j, kf in enumerate(imm.filters):
@@ -791,12 +836,20 @@ class AdaptiveKalman(Estimator):
             kf.B = (means[j] - F @ xs0[j])[:, None]
             kf.R = np.array([[R]])
         imm.predict(u=np.array([1.0]))
-        imm.update(np.array([z]))
+        if update:
+            imm.update(np.array([z]))
+        else:
+            # (filterpy's update(None) keeps each filter's last likelihood: no update is the
+            # predicted probabilities, and the mixing that follows from them.)
+            imm.mu = imm.cbar.copy()
+            imm._compute_mixing_probabilities()
+            imm._compute_state_estimate()
         self.xs = np.array([kf.x.ravel() for kf in imm.filters])
         self.Ps = np.array([kf.P for kf in imm.filters])
         self.mu = imm.mu.copy()
         self.x, self.P = imm.x.ravel().copy(), imm.P.copy()
-        self.last_nis = float(self.mu @ np.array([(kf.y.item() ** 2) / kf.S.item() for kf in imm.filters]))
+        if update:
+            self.last_nis = float(self.mu @ np.array([(kf.y.item() ** 2) / kf.S.item() for kf in imm.filters]))
 
     def _ideal(self, told_apart: bool = False) -> bool:
         """The encoders look ideal (they only quantize, and may miss a count): over the last
@@ -886,6 +939,13 @@ class AdaptiveKalman(Estimator):
             self._anchor = (sample.time, c)
         else:
             anchor, self._anchor = self._anchor, (sample.time, c)
+            missing = self._lost(sample.time, anchor[0])
+            if missing:
+                # Lost samples: their periods are predicted without an update, the command
+                # held (the ride check counts one period between its readings: it restarts).
+                self._ride.stop()
+                for j in range(1, missing + 1):
+                    pending = self._coast(anchor[0] + j * self.h, *pending)
             self._step(c, sample.time, anchor, *pending)
             if lined or self._layer.exposure:
                 # The lines or a hold count this sample's evidence.
@@ -902,8 +962,16 @@ class AdaptiveKalman(Estimator):
         self._act()
         return float(self.out_x[1]), float(self.out_P[1, 1])
 
+    def _lost(self, t: float, before: float) -> int:
+        """The samples lost between a sample at ``before`` and one at ``t`` (s): the whole
+        periods between them less one (0 on the grid, and for a stamp off it by less than
+        half a period)."""
+        return max(int(round((t - before) / self.h)) - 1, 0)
+
     def commanded(self, command: Any, force: float = 0.0) -> None:
         (t, wheels), force = self._take_observed(force)
+        periods = 1 if self._wheels_at is None else self._lost(t, self._wheels_at) + 1
+        self._wheels_at = t
         self._last_command, self._last_force = command, force
         tracker = self._tracker
         speeds, _, steady, track = tracker.push(t, wheels, command)
@@ -923,7 +991,7 @@ class AdaptiveKalman(Estimator):
             self._large = np.zeros(self.n, dtype=bool)
             speeds = initial
         else:
-            banked, var_b = self._bank.push(wheels, self._held, self.lag, tracker.reading_variance)
+            banked, var_b = self._bank.push(wheels, self._held, self.lag, tracker.reading_variance, periods)
             # A large transient (a reversal, or a step beyond LARGE_STEP) under a lag not yet
             # identified: the law's path is not trusted there; the window estimates (the motor
             # law from the change, then the settled lines) stand in until the windows hold

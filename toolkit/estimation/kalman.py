@@ -606,6 +606,16 @@ def steady_state_gain(model: EstimatorModel, accel_std: float, *, tol: float = 1
     return kf.K.copy(), prior
 
 
+#: Why the default leaves the nominal filter at a sample after lost ones: the nominal filter
+#: predicts one period per sample, the adaptive one coasts over the lost periods.
+_LOST = "{} sample(s) lost before this one"
+
+
+def _lost(t: float, before: float, period: float) -> int:
+    """The samples lost between samples at ``before`` and ``t`` (s) on a grid of ``period``."""
+    return max(int(round((t - before) / period)) - 1, 0)
+
+
 def _failure(hold_failed: bool, cell: float) -> str:
     """The nominal filter's hard failures at one sample, as the monitor's reason."""
     if hold_failed:
@@ -673,6 +683,7 @@ class KalmanEstimator(Estimator):
         self._last_force = 0.0
         self.verdicts: list[int] = []
         self.tripped: tuple[float, str] | None = None
+        self._before: float | None = None          # the last sample's time, s
 
     def warm_up(self, record: Any = None) -> float:
         """Compile (or load from numba's cache) every kernel the nominal and the adaptive
@@ -718,6 +729,11 @@ class KalmanEstimator(Estimator):
             out = self.adaptive.observe(sample)
             self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
             return out
+        before, self._before = self._before, sample.time
+        if before is not None and (lost := _lost(sample.time, before, self.model.sensors.period)):
+            out = self._switch(sample, _LOST.format(lost))
+            self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
+            return out
         out = self.nominal.observe(sample)
         verdict = self.monitor.push(self.nominal.last_nis,
                                     _failure(self.nominal.hold_failed, self.nominal.last_cell))
@@ -753,12 +769,17 @@ class KalmanEstimator(Estimator):
         cells = nominal.cell_probabilities.tolist()
         K = record.n_samples
         trip = None
-        for k in range(K):
+        lost = np.rint(np.diff(record.times) / self.model.sensors.period) - 1.0
+        gaps = np.flatnonzero(lost >= 1.0) + 1
+        for k in range(K if gaps.size == 0 else int(gaps[0])):
             verdict = self.monitor.push(nis[k], _failure(failures[k], cells[k]))
             if not verdict.passes:
                 trip = k
                 self.tripped = (float(record.times[k]), verdict.reason)
                 break
+        if trip is None and gaps.size:
+            trip = int(gaps[0])
+            self.tripped = (float(record.times[trip]), _LOST.format(int(lost[trip - 1])))
         verdicts = np.full(K, NOMINAL, dtype=np.int64)
         if trip is not None:
             adaptive = self.adaptive = self._adaptive()

@@ -19,7 +19,8 @@ import pytest
 
 from toolkit import build_scene, load_scene
 from toolkit.errors import DeviceError
-from toolkit.live import Device, DeviceFaults, DeviceWorld, Hello, LinkCounts, LiveStatus, SimulatedDevice, run_live
+from toolkit.live import (Device, DeviceFaults, DeviceWorld, Hello, LinkCounts, LiveStatus, SerialDevice,
+                          SimulatedDevice, run_live)
 from toolkit.live import protocol
 from toolkit.live.runner import MISSED_RUN
 from toolkit.live.scene import scene_device, scene_loop, warm_loop
@@ -320,3 +321,23 @@ def test_ctrl_c_while_waiting_ends_the_run_and_closes_the_device():
     assert result.status is LiveStatus.INTERRUPTED and result.sequence.tolist() == list(range(7))
     assert device.closed == 1 and [seq for seq, _ in device.sent] == list(range(7))
     np.testing.assert_array_equal(result.record.commands, np.array([u for _, u in device.sent]))
+
+
+def test_a_sample_waiting_past_the_deadline_is_read_not_silence():
+    # The host was busy past its deadline while the device kept sending: the sample waiting
+    # on the port is read (a poll), and silence is only a port with nothing on it.
+    import time
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        device = SerialDevice(f"serial://{os.ttyname(slave)}")
+        os.write(master, protocol.sample_line(0, 20000, 12, np.array([5, 9])))
+        time.sleep(0.05)                          # the line is on the port before the read
+        sample = device.read_sample(time.perf_counter() - 1.0)
+        assert sample is not None and (sample.seq, sample.central, sample.wheels.tolist()) == (0, 12, [5, 9])
+        assert device.read_sample(time.perf_counter() - 1.0) is None
+        device._port.close()
+    finally:
+        os.close(master)
+        os.close(slave)

@@ -162,9 +162,9 @@ class SerialDevice(Device):
             if len(buffer) > protocol.MAX_LINE:       # garbage without a newline: drop it
                 self.counts.corrupt += 1
                 buffer.clear()
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0:
-                return None
+            # Past the deadline what has arrived is still read (a poll): a host that was slow
+            # is not a device that fell silent.
+            remaining = max(deadline - time.perf_counter(), 0.0)
             if not select.select([self._fd], [], [], remaining)[0]:
                 return None
             try:

@@ -22,7 +22,8 @@ from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher
 from .alpha_beta import AlphaBetaTracker, kalata_gains
 from .finite_difference import CentralDifference, WheelDifference
-from .kalman import FilterPass, KalmanEstimator, NominalKalman, RTSSmoother, steady_state_gain
+from .kalman import FilterPass, KalmanEstimator, NominalKalman, steady_state_gain
+from .smoother import RTSSmoother
 
 from .unscented import UnscentedEstimator
 from .window import AdaptiveWindow

@@ -98,6 +98,13 @@ def phase_masks(record: EncoderRecord, settle: float = SETTLE_TIME) -> dict[str,
     return {name: (mask if mask is not None and mask.any() else None) for name, mask in masks.items()}
 
 
+def lost_samples(t: float, before: float, period: float) -> int:
+    """The samples lost between samples read at ``before`` and ``t`` (s) on a grid of
+    ``period`` (s): the whole periods between them less one (0 on the grid, and for a stamp
+    off it by less than half a period)."""
+    return max(int(round((t - before) / period)) - 1, 0)
+
+
 def check_covariance(value: Any, name: str, owner: str, dim: int) -> np.ndarray:
     """A ``dim x dim`` symmetric positive definite matrix, or the template error naming it."""
     array = as_float_array(value, name, owner, ndim=2)

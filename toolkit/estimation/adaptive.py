@@ -30,7 +30,7 @@ from ..model.friction import contact_forces
 from ..laws import cell_centre, lag_response, quantization_variance
 from ..model.motors import MotorPiece, unsaturated_response
 from ..model.sensors import EncoderRecord, EncoderSample, play
-from ._base import EstimationResult, Estimator, score
+from ._base import EstimationResult, Estimator, lost_samples, score
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel
 from ..model.truth import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
@@ -939,7 +939,7 @@ class AdaptiveKalman(Estimator):
             self._anchor = (sample.time, c)
         else:
             anchor, self._anchor = self._anchor, (sample.time, c)
-            missing = self._lost(sample.time, anchor[0])
+            missing = lost_samples(sample.time, anchor[0], self.h)
             if missing:
                 # Lost samples: their periods are predicted without an update, the command
                 # held (the ride check counts one period between its readings: it restarts).
@@ -962,15 +962,9 @@ class AdaptiveKalman(Estimator):
         self._act()
         return float(self.out_x[1]), float(self.out_P[1, 1])
 
-    def _lost(self, t: float, before: float) -> int:
-        """The samples lost between a sample at ``before`` and one at ``t`` (s): the whole
-        periods between them less one (0 on the grid, and for a stamp off it by less than
-        half a period)."""
-        return max(int(round((t - before) / self.h)) - 1, 0)
-
     def commanded(self, command: Any, force: float = 0.0) -> None:
         (t, wheels), force = self._take_observed(force)
-        periods = 1 if self._wheels_at is None else self._lost(t, self._wheels_at) + 1
+        periods = 1 if self._wheels_at is None else lost_samples(t, self._wheels_at, self.h) + 1
         self._wheels_at = t
         self._last_command, self._last_force = command, force
         tracker = self._tracker

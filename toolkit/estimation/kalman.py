@@ -1,4 +1,4 @@
-"""The default estimator ``kalman``, the nominal Kalman filter and the RTS smoother.
+"""The default estimator ``kalman`` and the nominal Kalman filter.
 
 :class:`KalmanEstimator` (``kalman``) is the nominal filter while a consistency monitor
 finds the data in agreement with the scene, and from the first sample where they are not
@@ -10,9 +10,7 @@ does not know of that input), and ``update`` with the central count's cell centr
 (``H = [1, 0]``, ``R`` the quantization's variance, growing while the count repeats, plus the
 declared read noise and jitter). Where the body rides a settled contact and the encoders are
 ideal, the exact posterior of the counts replaces the white update
-(:mod:`toolkit.estimation._hold`). :class:`RTSSmoother` smooths the default filter's pass
-while its monitor passes and is refused (the filter's result) where it tripped.
-Derivations: docs/estimation.md. filterpy is imported where a filter is built.
+(:mod:`toolkit.estimation._hold`). Derivations: docs/estimation.md. filterpy is imported where a filter is built.
 """
 
 from __future__ import annotations
@@ -30,7 +28,7 @@ from .._compiled import kernels
 from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
-from ._base import EstimationResult, Estimator, check_covariance, score, warm_record
+from ._base import EstimationResult, Estimator, check_covariance, lost_samples, score, warm_record
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 from ..model.truth import ModelPrior
@@ -38,7 +36,7 @@ from .adaptive import (ADAPTING, CELL_ALARM, FALLBACK, NOMINAL, AdaptiveKalman, 
                        told_missed_rate)
 from .monitor import ConsistencyMonitor
 
-__all__ = ["KalmanEstimator", "FilterPass", "NominalKalman", "RTSSmoother", "steady_state_gain",
+__all__ = ["KalmanEstimator", "FilterPass", "NominalKalman", "steady_state_gain",
            "measurement_variance"]
 
 
@@ -491,86 +489,6 @@ class NominalKalman(Estimator):
                      covariance=P, nis=run.nis[1:])
 
 
-class RTSSmoother(Estimator):
-    """Rauch-Tung-Striebel smoother over the default filter's pass (offline only).
-
-    The forward pass is the default ``kalman``'s
-    (:class:`KalmanEstimator`). While its monitor passes, the
-    forward pass is the nominal filter's, and the backward pass is filterpy's
-    ``KalmanFilter.rts_smoother`` on the augmented state ``(X, V, 1)`` whose transitions carry
-    the known input (exact for the affine model; docs/estimation.md). Where the monitor tripped, the model the smoother would run
-    backwards is the one the data refuted: the smoother is refused and the result is the
-    filter's own (``refused`` says when and why), so it is never worse than the filter.
-
-    Parameters
-    ----------
-    model : EstimatorModel
-    prior : ModelPrior, optional
-        The default filter's prior (default ``ModelPrior()``).
-    initial_covariance : array_like of shape (2, 2), optional
-        As :class:`NominalKalman`'s.
-
-    Attributes
-    ----------
-    refused : tuple of (float, str) or None
-        After :meth:`run`: when (s) and why the forward filter's monitor tripped, so that
-        the result is the filter's; ``None`` when the result is smoothed.
-    """
-
-    name = "rts"
-    KERNELS = ("core", "lines", "window", "imm")
-
-    def __init__(self, model: EstimatorModel, *, prior: Any = None, initial_covariance: Any = None) -> None:
-        self.forward = KalmanEstimator(model, prior, initial_covariance=initial_covariance)
-        self.model = model
-        self.refused: tuple[float, str] | None = None
-
-    @property
-    def tripped(self) -> tuple[float, str] | None:
-        """As ``refused`` (the forward filter's monitor verdict, as the default reports it)."""
-        return self.refused
-
-    def reset(self, *, speed: float = 0.0, speed_std: float | None = None,
-              contact_speeds: Any = None) -> None:
-        self.forward.reset(speed=speed, speed_std=speed_std, contact_speeds=contact_speeds)
-
-    def observe(self, sample: EncoderSample) -> tuple[float, float]:
-        """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
-        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
-
-    def commanded(self, command: Any, force: float = 0.0) -> None:
-        """A smoother needs the future: it cannot be stepped. Use :meth:`run`."""
-        raise NotImplementedError("The RTS smoother is offline: call run(record); step the KalmanEstimator.")
-
-    def run(self, record: EncoderRecord, *, speed: float = 0.0,
-            speed_std: float | None = None) -> EstimationResult:
-        # filterpy is imported here, not at module level: toolkit imports must not load it.
-        from dataclasses import replace
-
-        from filterpy.kalman import KalmanFilter
-
-        filtered = self.forward.run(record, speed=speed, speed_std=speed_std)
-        self.refused = self.forward.tripped
-        if self.refused is not None:
-            return replace(filtered, method=self.name)
-        forward = self.forward.nominal_pass
-        X, P = forward.states, forward.covariances
-        started = budget_clock()
-        K = X.shape[0]
-        Xa = np.concatenate((X, np.ones((K, 1))), axis=1)
-        Pa = np.zeros((K, 3, 3))
-        Pa[:, :2, :2] = P
-        Fa = np.broadcast_to(np.eye(3), (K, 3, 3)).copy()
-        Fa[:, :2, :2] = forward.transitions
-        Fa[:, :2, 2] = forward.inputs
-        Qa = np.zeros((K, 3, 3))
-        Qa[:, :2, :2] = forward.process_noises
-        xs, ps, _, _ = KalmanFilter(dim_x=3, dim_z=1).rts_smoother(Xa, Pa, Fa, Qa, inv=np.linalg.pinv)
-        wall = filtered.wall_time + budget_clock() - started
-        return score(record, self.name, xs[:, 1], ps[:, 1, 1], wall, position=xs[:, 0],
-                     covariance=ps[:, :2, :2])
-
-
 def steady_state_gain(model: EstimatorModel, accel_std: float, *, tol: float = 1e-15,
                       max_steps: int = 100_000) -> tuple[np.ndarray, np.ndarray]:
     """Steady-state gain of the filter with constant noise, by iterating filterpy.
@@ -609,11 +527,6 @@ def steady_state_gain(model: EstimatorModel, accel_std: float, *, tol: float = 1
 #: Why the default leaves the nominal filter at a sample after lost ones: the nominal filter
 #: predicts one period per sample, the adaptive one coasts over the lost periods.
 _LOST = "{} sample(s) lost before this one"
-
-
-def _lost(t: float, before: float, period: float) -> int:
-    """The samples lost between samples at ``before`` and ``t`` (s) on a grid of ``period``."""
-    return max(int(round((t - before) / period)) - 1, 0)
 
 
 def _failure(hold_failed: bool, cell: float) -> str:
@@ -730,7 +643,7 @@ class KalmanEstimator(Estimator):
             self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
             return out
         before, self._before = self._before, sample.time
-        if before is not None and (lost := _lost(sample.time, before, self.model.sensors.period)):
+        if before is not None and (lost := lost_samples(sample.time, before, self.model.sensors.period)):
             out = self._switch(sample, _LOST.format(lost))
             self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
             return out

@@ -309,9 +309,36 @@ def test_missed_deadlines_in_a_row_stop_the_run():
     slow = dataclasses.replace(loop, estimator=_Slow(loop.estimator, 1.5 * 0.02))    # 1.5 periods each
     device = _Bench()
     result = run_live(slow, device)
-    assert result.status is LiveStatus.MISSED and result.sequence.size == MISSED_RUN
-    assert result.missed == MISSED_RUN and device.closed == 1
+    # Each step 1.5 periods or more (a loaded machine stretches the sleep): a step of m
+    # periods counts m, so the run stops after 3 samples at most, every one of them late.
+    assert result.status is LiveStatus.MISSED and 2 <= result.sequence.size <= MISSED_RUN
+    assert result.missed == result.sequence.size and device.closed == 1
     assert "deadlines missed in a row" in result.message and "zero commands sent" in result.message
+
+
+class _Stall(_Slow):
+    """An estimator that stalls ``delay`` seconds once, on the sample read at ``at`` s."""
+
+    def __init__(self, estimator, delay, at):
+        super().__init__(estimator, delay)
+        self.at = at
+
+    def observe(self, sample):
+        if sample.time == self.at:
+            time.sleep(self.delay)
+        return self.estimator.observe(sample)
+
+
+def test_one_step_of_several_periods_stops_the_run():
+    # A host that stalls 5 periods on one sample (the samples that came meanwhile would be
+    # answered after their successors) misses 5 deadlines in a row: the run stops there.
+    loop = scene_loop(slow_design(50.0), 5.0)
+    warm_loop(loop)                      # (no first-use cost in the steps before the stall)
+    stalled = dataclasses.replace(loop, estimator=_Stall(loop.estimator, 5 * 0.02, at=0.08))
+    device = _Bench()
+    result = run_live(stalled, device)
+    assert result.status is LiveStatus.MISSED and result.record.times[-1] == 0.08
+    assert result.latency[-1] >= 5 * 0.02 and device.closed == 1
 
 
 def test_ctrl_c_while_waiting_ends_the_run_and_closes_the_device():

@@ -98,11 +98,25 @@ def phase_masks(record: EncoderRecord, settle: float = SETTLE_TIME) -> dict[str,
     return {name: (mask if mask is not None and mask.any() else None) for name, mask in masks.items()}
 
 
-def lost_samples(t: float, before: float, period: float) -> int:
-    """The samples lost between samples read at ``before`` and ``t`` (s) on a grid of
-    ``period`` (s): the whole periods between them less one (0 on the grid, and for a stamp
-    off it by less than half a period)."""
-    return max(int(round((t - before) / period)) - 1, 0)
+def lost_samples(times: Any, period: float) -> np.ndarray:
+    """The samples lost between consecutive sample ``times`` (s) on a grid of ``period``
+    (s): the whole periods between two less one (0 on the grid, and for a stamp off it by
+    less than half a period), shape ``(len(times) - 1,)``."""
+    return np.maximum(np.rint(np.diff(times) / period) - 1.0, 0.0).astype(np.int64)
+
+
+def refuse_gaps(times: np.ndarray, period: float, owner: str, first: int = 0) -> None:
+    """Refuse samples that are not one ``period`` (s) apart at ``times`` (s), for a filter
+    that predicts one period per sample: the error names the first sample after lost ones
+    (its index counted from ``first``) and the filter that predicts over them."""
+    lost = lost_samples(times, period)
+    gaps = np.flatnonzero(lost)
+    if gaps.size:
+        k = int(gaps[0]) + 1
+        raise ParameterError(parameter_message(
+            "record", owner, "have its samples one period apart (this filter predicts one period per sample; "
+            "'kalman' predicts over lost samples)",
+            f"sample {first + k} at t = {times[k]:g} s after {int(lost[k - 1])} lost"))
 
 
 def check_covariance(value: Any, name: str, owner: str, dim: int) -> np.ndarray:

@@ -939,7 +939,7 @@ class AdaptiveKalman(Estimator):
             self._anchor = (sample.time, c)
         else:
             anchor, self._anchor = self._anchor, (sample.time, c)
-            missing = lost_samples(sample.time, anchor[0], self.h)
+            missing = int(lost_samples((anchor[0], sample.time), self.h)[0])
             if missing:
                 # Lost samples: their periods are predicted without an update, the command
                 # held (the ride check counts one period between its readings: it restarts).
@@ -964,7 +964,7 @@ class AdaptiveKalman(Estimator):
 
     def commanded(self, command: Any, force: float = 0.0) -> None:
         (t, wheels), force = self._take_observed(force)
-        periods = 1 if self._wheels_at is None else lost_samples(t, self._wheels_at, self.h) + 1
+        periods = 1 if self._wheels_at is None else int(lost_samples((self._wheels_at, t), self.h)[0]) + 1
         self._wheels_at = t
         self._last_command, self._last_force = command, force
         tracker = self._tracker

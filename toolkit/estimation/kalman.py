@@ -28,7 +28,7 @@ from .._compiled import kernels
 from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
-from ._base import EstimationResult, Estimator, check_covariance, lost_samples, score, warm_record
+from ._base import EstimationResult, Estimator, check_covariance, lost_samples, refuse_gaps, score, warm_record
 from ._hold import HoldLayer
 from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
 from ..model.truth import ModelPrior
@@ -397,6 +397,8 @@ class NominalKalman(Estimator):
         """
         if self._observed is not None:
             self.commanded(self._last_command, self._last_force)
+        if self._count_prev is not None:
+            refuse_gaps(np.array((self._t_prev, sample.time)), self._h, f"{type(self).__name__}.observe")
         count = sample.central_count
         t = sample.time
         q = self._q
@@ -483,6 +485,8 @@ class NominalKalman(Estimator):
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
+        self._check_record(record)
+        refuse_gaps(record.times, self._h, f"{type(self).__name__}.run")
         run = self.filter(record, speed=speed, speed_std=speed_std)
         X, P = run.states, run.covariances
         return score(record, self.name, X[:, 1], P[:, 1, 1], run.wall_time, position=X[:, 0],
@@ -643,7 +647,7 @@ class KalmanEstimator(Estimator):
             self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
             return out
         before, self._before = self._before, sample.time
-        if before is not None and (lost := lost_samples(sample.time, before, self.model.sensors.period)):
+        if before is not None and (lost := int(lost_samples((before, sample.time), self.model.sensors.period)[0])):
             out = self._switch(sample, _LOST.format(lost))
             self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
             return out
@@ -682,8 +686,8 @@ class KalmanEstimator(Estimator):
         cells = nominal.cell_probabilities.tolist()
         K = record.n_samples
         trip = None
-        lost = np.rint(np.diff(record.times) / self.model.sensors.period) - 1.0
-        gaps = np.flatnonzero(lost >= 1.0) + 1
+        lost = lost_samples(record.times, self.model.sensors.period)
+        gaps = np.flatnonzero(lost) + 1
         for k in range(K if gaps.size == 0 else int(gaps[0])):
             verdict = self.monitor.push(nis[k], _failure(failures[k], cells[k]))
             if not verdict.passes:

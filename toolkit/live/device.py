@@ -153,6 +153,7 @@ class SerialDevice(Device):
     def _line(self, deadline: float) -> bytes | None:
         """The next whole line (without its newline), or None at ``deadline``."""
         buffer = self._buffer
+        polled = False
         while True:
             end = buffer.find(b"\n")
             if end >= 0:
@@ -162,10 +163,14 @@ class SerialDevice(Device):
             if len(buffer) > protocol.MAX_LINE:       # garbage without a newline: drop it
                 self.counts.corrupt += 1
                 buffer.clear()
-            # Past the deadline what has arrived is still read (a poll): a host that was slow
-            # is not a device that fell silent.
-            remaining = max(deadline - time.perf_counter(), 0.0)
-            if not select.select([self._fd], [], [], remaining)[0]:
+            # Past the deadline what has arrived is still read, by one poll: a host that was
+            # slow is not a device that fell silent (and a flood cannot hold the verdict off).
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0.0:
+                if polled:
+                    return None
+                polled = True
+            if not select.select([self._fd], [], [], max(remaining, 0.0))[0]:
                 return None
             try:
                 chunk = os.read(self._fd, 4096)

@@ -245,7 +245,9 @@ def run_live(loop: LiveLoop, device: Device, *, status: Callable[[dict[str, floa
             k += 1
             if sample.seq == samples - 1:            # the duration's last sample (device time)
                 break
-            run = run + 1 if done - got > period else 0
+            # A step of m periods misses m deadlines in a row (the samples that came meanwhile
+            # are answered after their successors): a host stalled 3 periods stops the run.
+            run = run + max(int((done - got) / period), 1) if done - got > period else 0
             if run >= MISSED_RUN:
                 end = LiveStatus.MISSED
                 break

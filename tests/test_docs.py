@@ -261,3 +261,24 @@ def test_no_load_figures_or_issue_numbers() -> None:
                     found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()[:80]}")
     assert found == []
     assert HISTORY.search("the load average 2.8 on 2 cores") and HISTORY.search("issue 32, row 6")
+
+
+#: A token that could name a commit: 7 to 40 hexadecimal digits, a letter and a digit among them.
+HEXLIKE = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+
+
+def test_no_commit_is_cited() -> None:
+    # Every token of the package, the README and the docs that names a commit of this
+    # repository (git resolves it) is history in the wrong place.
+    tokens = {}
+    for path in _tracked("toolkit", "docs") + [ROOT / "README.md"]:
+        if path.suffix in (".py", ".md", ".toml", ".rst", ".txt"):
+            for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                for token in HEXLIKE.findall(line):
+                    tokens.setdefault(token, f"{path.relative_to(ROOT)}:{number}")
+    check = subprocess.run(["git", "-C", str(ROOT), "cat-file", "--batch-check"], input="".join(
+        f"{token}^{{commit}}\n" for token in tokens), capture_output=True, text=True, check=True)
+    named = [where for where, answer in zip(tokens.values(), check.stdout.splitlines())
+             if not answer.endswith("missing") and " commit " in answer]
+    assert named == []
+    assert HEXLIKE.findall("base 8ca862c, colour 1f77b4, a facade, abc1234") == ["8ca862c", "abc1234"]

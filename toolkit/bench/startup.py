@@ -53,11 +53,20 @@ def _cli_run(tree: Path, env: dict[str, str], out: Path, design: Path) -> float:
     return time.perf_counter() - start
 
 
+def _before_compiled_core(repo: Path) -> str:
+    """The commit before the one that added the compiled kernels' package (the baseline of
+    this benchmark), from the repository's history."""
+    added = subprocess.run(["git", "-C", str(repo), "log", "--diff-filter=A", "--format=%H", "--",
+                            "toolkit/_compiled/__init__.py"], check=True, capture_output=True, text=True)
+    return added.stdout.split()[-1] + "^"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m toolkit.bench startup", description=__doc__)
     parser.add_argument("--runs", type=int, default=7, help="fresh processes per figure")
     parser.add_argument("--baseline", type=Path, help="a toolkit checkout before the change")
-    parser.add_argument("--base-commit", default="8ca862c", help="made a worktree if no --baseline")
+    parser.add_argument("--base-commit", help="made a worktree if no --baseline (default: the "
+                        "commit before the compiled kernels' package came in)")
     args = parser.parse_args(argv)
 
     here = Path(__file__).resolve().parents[2]
@@ -90,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
         worktree = None
         if baseline is None:
             worktree = tmp_path / "baseline"
+            if args.base_commit is None:
+                args.base_commit = _before_compiled_core(here)
             subprocess.run(["git", "-C", str(here), "worktree", "add", "--detach",
                             str(worktree), args.base_commit], check=True, capture_output=True)
             baseline = worktree

@@ -104,11 +104,11 @@ def _as_twists(V: Any, omega: Any, owner: str) -> tuple[np.ndarray, np.ndarray]:
     """Broadcast body velocities (..., 2) and angular velocities (...) to one batch shape."""
     arrays = []
     for name, value, unit in (("V", V, "m/s"), ("omega", omega, "rad/s")):
-        if value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value):
-            raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value))
         try:
+            if value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value):
+                raise TypeError(value)
             arrays.append(np.asarray(value, dtype=float))
-        except (TypeError, ValueError):
+        except (TypeError, ValueError):           # (a ragged list: numpy's ValueError)
             raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value)) from None
         if not np.all(np.isfinite(arrays[-1])):
             raise ParameterError(parameter_message(name, owner, "be finite", "a NaN or inf entry"))
@@ -399,12 +399,12 @@ class PlanarContactSet:
 
     def with_forces(self, forces: Any) -> PlanarContactSet:
         """The same contacts with new magnitudes (N, shape (n,), >= 0, positive sum)."""
-        anisotropy = None if self.limits is None else self.limits
-        return PlanarContactSet(self.positions, self.velocities, forces, anisotropy)
+        return PlanarContactSet(self.positions, self.velocities, forces, self.limits)
 
     def subset(self, index: Any) -> PlanarContactSet:
         """The contacts selected by ``index`` (a boolean mask or indices)."""
-        idx = np.arange(self.n)[np.asarray(index)]
+        index = np.asarray(index)
+        idx = np.arange(self.n)[index if index.size else index.astype(int)]   # ([] is float)
         if idx.size == 0 or not np.sum(self.forces[idx]) > 0:
             raise ParameterError(parameter_message(
                 "index", "PlanarContactSet.subset", "select contacts with a positive total force",
@@ -434,7 +434,7 @@ class PlanarContactSet:
         rot = np.array([[c, -s], [s, c]])
         pos = (self.positions - p) @ rot.T
         vel = self.velocities @ rot.T
-        dmat = rot @ self._dmat if self._dmat.shape[0] else self._dmat
+        dmat = rot @ self._dmat                                  # ((0, 2, 2) stays empty)
         limits = None if self.limits is None else dmat @ np.swapaxes(dmat, 1, 2)
         for array in (pos, vel, dmat) + (() if limits is None else (limits,)):
             array.setflags(write=False)
@@ -537,7 +537,8 @@ class PlanarContactSet:
             semi-definite. ``inf`` everywhere at a twist where some contact has zero slip
             (the map is not differentiable there: stiction resists any change).
         """
-        s = self.slips(V, omega)
+        vel, rate = _as_twists(V, omega, "PlanarContactSet.resistance")
+        s = self.slips(vel, rate)
         r = self.positions
         # A_i maps the twist to the body velocity at r_i: [[1, 0, -r_y], [0, 1, r_x]].
         A = np.zeros((self.n, 2, 3))
@@ -552,17 +553,15 @@ class PlanarContactSet:
         rho = np.hypot(z[..., 0], z[..., 1])
         active = self.forces > 0
         # A slip at the rounding of the velocities it is computed from is a stick.
-        vel, rate = _as_twists(V, omega, "PlanarContactSet.resistance")
         size = (np.abs(self.velocities).max(axis=1) + np.abs(vel).max(axis=-1)[..., None]
                 + np.abs(rate)[..., None] * np.abs(self.positions).max(axis=1))
         stuck = np.any((rho <= 64 * _EPS * size) & active, axis=-1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = z / rho[..., None]
-            scale = np.where(active, self.forces / rho, 0.0)
+        # Only sliding contacts (f_i > 0, s_i != 0) resist: f_i / rho_i (I - u_i u_i^T).
+        slide = active & (rho > 0)
+        rho = np.where(slide, rho, 1.0)
+        u = z / rho[..., None]
+        scale = np.where(slide, self.forces / rho, 0.0)
         proj = np.eye(2) - u[..., :, None] * u[..., None, :]        # (..., n, 2, 2)
-        proj = np.where(active[:, None, None], proj, 0.0)
-        proj = np.nan_to_num(proj)
-        scale = np.nan_to_num(scale, posinf=0.0)
         out = np.einsum("...n,nai,...nab,nbj->...ij", scale, BA, proj, BA)
         out[stuck] = np.inf
         return out
@@ -576,8 +575,8 @@ class PlanarContactSet:
         toolkit (docs/planar.md section 5). Contacts all at one point are on every line: the
         line is then the one of the velocities (if they are parallel).
         """
-        scale_r = max(self.arm, float(np.max(np.abs(self.positions)))) or 1.0
-        scale_v = float(np.max(np.abs(self.velocities))) or 1.0
+        scale_r = max(self.arm, float(np.max(np.abs(self.positions))))   # (0: every test below is 0 > 0)
+        scale_v = float(np.max(np.abs(self.velocities)))
         tol_r = 16 * _EPS * scale_r
         tol_v = 16 * _EPS * scale_v
         centre = self.positions[0]
@@ -635,7 +634,7 @@ def geometric_median(points: Any, weights: Any = None, *, method: str = "auto",
     :class:`PlanarContactSet` with ``weights`` (n,) its magnitudes: the result's
     ``velocity`` is the median, ``gap`` its certificate (see :func:`solve_equilibrium`).
     """
-    P = np.asarray(points, dtype=float)
+    P = _as_points(points, "points", "geometric_median")
     contacts = PlanarContactSet(np.zeros_like(P), P, weights)
     return solve_equilibrium(contacts, translation_only=True, method=method, tol=tol)
 
@@ -658,15 +657,15 @@ def wrench_batch(positions: Any, velocities: Any, forces: Any, V: Any, omega: An
     torque : ndarray of shape (S, ...), N m
         Set ``k`` at its twists, exactly as ``PlanarContactSet(...[k]).wrench(V[k], omega[k])``.
     """
-    pos = np.asarray(positions, dtype=float)
-    vel = np.asarray(velocities, dtype=float)
-    mag = np.asarray(forces, dtype=float)
+    pos = np.asarray(positions)           # (each set's arrays are checked by PlanarContactSet)
+    vel = np.asarray(velocities)
+    mag = np.asarray(forces)
     if pos.ndim != 3:
         raise ParameterError(parameter_message(
             "positions", "wrench_batch", "have shape (S, n, 2)", f"an array of shape {pos.shape}"))
     S = pos.shape[0]
-    Vs = np.asarray(V, dtype=float)
-    ws = np.asarray(omega, dtype=float)
+    Vs = np.asarray(V)                    # (and each set's twists by its wrench)
+    ws = np.asarray(omega)
     if Vs.shape[:1] != (S,) or ws.shape[:1] != (S,):
         raise ParameterError(parameter_message(
             "V", "wrench_batch", f"have a first axis of length S = {S} (as 'omega')",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -268,6 +270,18 @@ _BAD_SHAPE = "The 'V' parameter of wrench_batch must have a first axis of length
     (lambda: PlanarContactSet([[0, 0]], [[0, 0]], [1.0], [[[1.0, 0.0], [0.0, 0.0]]]), ParameterError,
      "The 'anisotropy' parameter of PlanarContactSet must hold positive definite 2 x 2 matrices. "
      "Got 'a matrix with an eigenvalue <= 0' instead."),
+    (lambda: PlanarContactSet([[0, 0]], [[0, 0]], [1.0], [[0.0, 0.0]]), ParameterError,
+     "The 'anisotropy' parameter of PlanarContactSet must have a positive ratio (second column) for every "
+     "contact. Got 0.0 instead."),
+    (lambda: PlanarContactSet([[0, 0]], [[0, 0]], [1.0], [["axis", "ratio"]]), ParameterTypeError,
+     "The 'anisotropy' parameter of PlanarContactSet must be None or an array of numbers. "
+     "Got [['axis', 'ratio']] instead."),
+    # Asymmetric by 1e-9 (relative and absolute): above the 1e-12 allowed.
+    (lambda: PlanarContactSet([[0, 0]], [[0, 0]], [1.0], [[[4.0, 2.0], [2.0 + 2e-9, 2.0]]]), ParameterError,
+     "The 'anisotropy' parameter of PlanarContactSet must hold symmetric 2 x 2 matrices. "
+     "Got 'a non-symmetric matrix' instead."),
+    (lambda: PlanarContactSet([[0, 0]], [[0, 0]], "heavy"), ParameterTypeError,
+     "The 'forces' parameter of PlanarContactSet must be an array of numbers. Got 'heavy' instead."),
     (lambda: PlanarContactSet([[0, 0], [1, 0]], _Z2, None, [[0.0, 1.0, 2.0]]), ParameterError,
      "The 'anisotropy' parameter of PlanarContactSet must have shape (2, 2) (angle, ratio) or (2, 2, 2) "
      "(matrices). Got 'an array of shape (1, 3)' instead."),
@@ -291,6 +305,11 @@ _BAD_SHAPE = "The 'V' parameter of wrench_batch must have a first axis of length
      "The 'V' parameter of PlanarContactSet.wrench must be real numbers (m/s). Got b'fast' instead."),
     (lambda: _C3.wrench([1j, 0.0]), ParameterTypeError,
      "The 'V' parameter of PlanarContactSet.wrench must be real numbers (m/s). Got [1j, 0.0] instead."),
+    (lambda: _C3.wrench(np.array([1j, 0.0])), ParameterTypeError,
+     "The 'V' parameter of PlanarContactSet.wrench must be real numbers (m/s). Got array([0.+1.j, 0.+0.j]) instead."),
+    (lambda: _C3.wrench(np.zeros((3, 4, 2)), np.zeros(5)), ParameterError,
+     "The 'omega' parameter of PlanarContactSet.wrench must broadcast against V's batch shape (3, 4). "
+     "Got 'an array of shape (5,)' instead."),
     (lambda: _C3.wrench([[0.0, 1.0], [2.0]]), ParameterTypeError,
      "The 'V' parameter of PlanarContactSet.wrench must be real numbers (m/s). Got [[0.0, 1.0], [2.0]] instead."),
     (lambda: _C3.slips([0.0, 1.0], [[0.0], [1.0, 2.0]]), ParameterTypeError,
@@ -524,6 +543,9 @@ def test_variants_keep_what_they_do_not_change(rng):
         got, whole = getattr(sub, name), getattr(c, name)
         assert np.array_equal(got, whole[[3, 1]]) and not got.flags.writeable, name
     assert sub.total_force == c.forces[3] + c.forces[1]
+    # One contact, and a total force below 1 N: both are subsets.
+    small = c.with_forces([0.25, 0.5, 1.0, 2.0, 3.0])
+    assert small.subset([1]).total_force == 0.5 and small.subset([0, 1]).total_force == 0.75
     mask = np.array([True, False, True, False, False])
     assert np.array_equal(c.subset(mask).positions, c.positions[mask])
     iso = _random_set(rng, 4).subset([0, 2])
@@ -746,3 +768,42 @@ def test_the_kernels_are_charged_the_work_of_each_call(monkeypatch):
     c.wrench(np.zeros((7, 2)), np.zeros(7))
     c.dissipation(np.zeros((5, 2)), np.zeros(5))
     assert calls == [("planar", 21), ("planar", 15)]
+
+
+def test_numbers_of_other_types_are_read_as_floats():
+    """Integers and fractions (anything ``float`` reads) give the same results as floats:
+    twists, support directions and (angle, ratio) limits. Default magnitudes (1 N) are
+    read-only. A sum of forces that overflows is refused without a numpy warning."""
+    from fractions import Fraction
+
+    c = PlanarContactSet([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0]], [[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]], None,
+                         [[0, 2], [0, 1], [0, 3]])
+    ref = PlanarContactSet(c.positions, c.velocities, None, [[0.0, 2.0], [0.0, 1.0], [0.0, 3.0]])
+    assert np.array_equal(c.limits, ref.limits) and np.array_equal(c.forces, [1.0, 1.0, 1.0])
+    assert not c.forces.flags.writeable
+    for p, q in zip(c.wrench([Fraction(1, 2), Fraction(1, 4)], Fraction(1, 8)), c.wrench([0.5, 0.25], 0.125)):
+        assert np.array_equal(p, q)
+    ws = c.wrench_set([0.0, 0.0], 0.0)
+    d = [Fraction(1, 2), Fraction(-1, 4), Fraction(1, 8)]
+    assert ws.support(d) == ws.support([0.5, -0.25, 0.125])
+    assert ws.bounds(d) == ws.bounds([0.5, -0.25, 0.125])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ParameterError, match="must have a finite sum"):
+            PlanarContactSet([[0, 0], [1, 0]], _Z2, [1e308, 1e308])
+
+
+def test_support_of_a_set_with_a_centre_and_a_turned_ellipse():
+    """The support adds the sliding contacts' wrench ``d . (F, tau)`` to the stuck ones'
+    ellipses; in a turned frame the factors ``D`` are full matrices (not triangular), so each
+    entry counts. Second formula through ``M`` (rtol 1e-14)."""
+    M = np.array([[[4.0, 2.0], [2.0, 2.0]], [[1.0, -0.5], [-0.5, 9.0]]])
+    c = PlanarContactSet([[1.0, 2.0], [-1.5, 0.5]], [[0.0, 0.0], [1.0, -2.0]], [1.5, 0.5], M).transformed(angle=0.7)
+    ws = c.wrench_set([0.0, 0.0], 0.0)
+    force, torque = c.wrench([0.0, 0.0], 0.0)
+    assert list(ws.stuck) == [0] and force[0] != 0 and force[1] != 0 and torque != 0
+    r = c.positions[0]
+    for d in ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.3, -0.7, 1.1]):
+        a = np.array(d[:2]) + d[2] * np.array([-r[1], r[0]])
+        expect = d[0] * force[0] + d[1] * force[1] + d[2] * torque + 1.5 * np.sqrt(a @ c.limits[0] @ a)
+        np.testing.assert_allclose(ws.support(d), expect, rtol=1e-14)

@@ -64,8 +64,11 @@ def limit_factors(anisotropy: Any, n: int, owner: str) -> tuple[np.ndarray, np.n
     """
     if anisotropy is None:
         return _NO_LIMITS, None
-    array = np.asarray(anisotropy, dtype=float) if not isinstance(anisotropy, (str, bytes)) else None
-    if array is None or array.dtype.kind != "f":
+    try:
+        array = None if isinstance(anisotropy, (str, bytes)) else np.asarray(anisotropy, dtype=float)
+    except (TypeError, ValueError):             # (not numbers, or a ragged list)
+        array = None
+    if array is None:
         raise ParameterTypeError(parameter_message(
             "anisotropy", owner, "be None or an array of numbers", anisotropy))
     if not np.all(np.isfinite(array)):
@@ -77,8 +80,8 @@ def limit_factors(anisotropy: Any, n: int, owner: str) -> tuple[np.ndarray, np.n
                 "anisotropy", owner, "have a positive ratio (second column) for every contact",
                 float(ratio[ratio <= 0][0])))
         cos, sin = np.cos(angle), np.sin(angle)
-        rot = np.stack((np.stack((cos, -sin), -1), np.stack((sin, cos), -1)), 1)   # R (n,2,2)
-        dmat = rot * np.stack((np.ones(n), ratio), -1)[:, None, :]              # R diag(1, k)
+        rot = np.stack((np.column_stack((cos, -sin)), np.column_stack((sin, cos))), 1)   # R (n,2,2)
+        dmat = rot * np.column_stack((np.ones(n), ratio))[:, None, :]                # R diag(1, k)
     elif array.shape == (n, 2, 2):
         if not np.allclose(array, np.swapaxes(array, 1, 2), rtol=1e-12, atol=0.0):
             raise ParameterError(parameter_message(
@@ -105,11 +108,13 @@ def _as_twists(V: Any, omega: Any, owner: str) -> tuple[np.ndarray, np.ndarray]:
     arrays = []
     for name, value, unit in (("V", V, "m/s"), ("omega", omega, "rad/s")):
         try:
-            if value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value):
-                raise TypeError(value)
-            arrays.append(np.asarray(value, dtype=float))
+            real = not (value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value))
+            array = np.asarray(value, dtype=float) if real else None
         except (TypeError, ValueError):           # (a ragged list: numpy's ValueError)
-            raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value)) from None
+            array = None
+        if array is None:
+            raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value))
+        arrays.append(array)
         if not np.all(np.isfinite(arrays[-1])):
             raise ParameterError(parameter_message(name, owner, "be finite", "a NaN or inf entry"))
     vel, rate = arrays
@@ -206,8 +211,7 @@ class WrenchSet:
         With ``d = (1, 0, 0)`` and every contact on the x axis this is
         :meth:`toolkit.ContactSet.force_bounds` of the 1-D set.
         """
-        d = np.asarray(direction, dtype=float)
-        return float(-self.support(-d)), float(self.support(d))
+        return float(-self.support(np.negative(direction))), float(self.support(direction))
 
 
 @dataclass(frozen=True, eq=False)
@@ -485,8 +489,8 @@ class PlanarContactSet:
         """
         vel, rate = _as_twists(V, omega, "PlanarContactSet.wrench")
         shape = rate.shape
-        flat_v = np.ascontiguousarray(vel.reshape(-1, 2))
-        flat_w = np.ascontiguousarray(rate.reshape(-1))
+        flat_v = np.ascontiguousarray(vel.reshape(rate.size, 2))
+        flat_w = np.ascontiguousarray(rate.ravel())
         force = np.empty((flat_w.size, 2))
         torque = np.empty(flat_w.size)
         kernels("planar", self.n * flat_w.size).wrench(
@@ -505,7 +509,7 @@ class PlanarContactSet:
         out = np.empty(rate.size)
         kernels("planar", self.n * rate.size).dissipation(
             self.positions, self.velocities, self.forces, self._dmat,
-            np.ascontiguousarray(vel.reshape(-1, 2)), np.ascontiguousarray(rate.reshape(-1)), out)
+            np.ascontiguousarray(vel.reshape(rate.size, 2)), np.ascontiguousarray(rate.ravel()), out)
         return out.reshape(shape)
 
     def stuck(self, V: Any, omega: Any = 0.0) -> np.ndarray:

@@ -355,6 +355,7 @@ def test_the_result_reports_in_physical_units(rng, fscale):
         np.testing.assert_allclose(eq.dissipation, ref.dissipation * fscale, rtol=1e-12)
         assert eq.residual_force <= 1e-12 * c.total_force and eq.residual_torque <= 1e-12 * c.total_force
         assert eq.wall_time > 0 and eq.iterations > 0 and not eq.translation_only and eq.segment is None
+        assert eq.message == ""
         for array in (eq.velocity, eq.contact_forces, eq.stuck):
             assert not array.flags.writeable
 
@@ -562,7 +563,9 @@ def test_result_converts_a_scaled_solution_to_physical_units(fscale):
     for gap, status in ((tol, EquilibriumStatus.OPTIMAL), (tol * (1 + 2 * EPS), EquilibriumStatus.INACCURATE)):
         sol = Solution(np.array([0.5, -0.25, 2.0]), g, gap, np.array([3.0, 4.0, -2.0]), np.array([False, False]), 7,
                        "fake")
-        eq = _eqmod._result(c, False, prob, active, sol, centre, S, L, tol, 0.0, "note", shift=shift)
+        started = time.perf_counter() - 1.0
+        eq = _eqmod._result(c, False, prob, active, sol, centre, S, L, tol, started, "note", shift=shift)
+        assert 1.0 <= eq.wall_time <= time.perf_counter() - started
         assert eq.omega == 1.0 and np.array_equal(eq.velocity, [4.0, -0.5]) and eq.status is status
         assert eq.gap == gap * F * S and eq.tolerance == tol * F * S
         assert eq.residual_force == 5.0 * F and eq.residual_torque == 2.0 * F * L
@@ -570,10 +573,10 @@ def test_result_converts_a_scaled_solution_to_physical_units(fscale):
         assert np.array_equal(eq.contact_forces, [D[0] @ g[0] * F, [0.0, 0.0], D[2] @ g[1] * F])
         assert eq.stuck.tolist() == [False, False, False] and eq.iterations == 7 and eq.method == "fake"
         assert eq.message == "note" and eq.total_force == F and eq.speed_scale == S and eq.segment is None
-        assert not eq.translation_only and eq.wall_time > 0
+        assert not eq.translation_only and eq.stuck.dtype == bool
     prob, active = twist_problem(c, True, centre, S, L, shift)
     sol = Solution(np.array([0.5, -0.25]), g, 0.0, np.array([3.0, 4.0]), np.array([False, True]), 1, "fake")
-    eq = _eqmod._result(c, True, prob, active, sol, centre, S, L, tol, 0.0, "")
+    eq = _eqmod._result(c, True, prob, active, sol, centre, S, L, tol, 0.0, "", shift=shift)
     assert np.array_equal(eq.velocity, [7.0, 7.0]) and eq.omega == 0.0 and eq.residual_torque == 0.0
     assert eq.stuck.tolist() == [False, False, True] and eq.translation_only
 
@@ -644,7 +647,31 @@ def test_full_twist_reduction_edges():
     assert eq.method == "median-1d" and np.array_equal(eq.twist, [0.5, 0.0, 0.0])
     eq = c.with_forces([1.0, 2.0, 0.5]).equilibrium()
     assert eq.method == "median-1d" and np.array_equal(eq.twist, [-0.25, 0.0, 0.0])
+    assert not np.signbit(eq.velocity[1])          # -0.25 * 0.0 is -0.0: made +0.0
     one = PlanarContactSet([[0.0, 0.0], [1.0, 0.0]], [[0.5, 0.0], [0.5, 0.0]], [1.0, 0.0]).equilibrium()
     assert one.method == "newton" and one.certified and one.unique is False
     # The contact is at the reference point: V is its velocity (rounding of the solve: 1e-15).
     np.testing.assert_allclose(one.velocity, [0.5, 0.0], rtol=0, atol=1e-15)
+
+
+def test_default_tolerance_and_method():
+    """Called directly, the solver certifies to ``1e-10 F_tot S`` and picks its method itself
+    (here the 1-D reduction does not apply: Newton), as PlanarContactSet.equilibrium does."""
+    c = PlanarContactSet([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0]], [[0.5, 0.0], [4.0, 1.0], [1.0, -3.0]], [3.0, 1.0, 2.0])
+    eq = solve_equilibrium(c)
+    assert eq.tolerance == 1e-10 * c.total_force * eq.speed_scale and eq.method == "newton"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")          # (Clarabel at its tightest: "inaccurate")
+        assert solve_equilibrium(c, method="cvxpy").method == "cvxpy"
+    assert not eq.translation_only and np.array_equal(eq.twist, c.equilibrium().twist)
+
+
+def test_uniqueness_threshold_on_a_nearly_collinear_set():
+    """The median at the data point (1, 0) of weight 2, the two sliding contacts at (0, 0) and
+    (3, d): their Hessian's eigenvalues are in the ratio of about ``d^2 / 10``. For ``d = 1e-6``
+    (ratio ~1e-13) it is singular to the solver's ``1e-9``: uniqueness is not established
+    (None); for ``d = 1e-3`` (ratio ~1e-7) it is (True)."""
+    for d, unique in ((1e-6, None), (1e-3, True)):
+        eq = geometric_median(np.array([[0.0, 0.0], [1.0, 0.0], [3.0, d]]), [1.0, 2.0, 1.5], method="newton")
+        assert np.array_equal(eq.velocity, [1.0, 0.0]) and eq.stuck.tolist() == [False, True, False]
+        assert eq.unique is unique

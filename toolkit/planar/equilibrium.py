@@ -254,7 +254,7 @@ def solve_equilibrium(contacts: Any, translation_only: bool = False, *,
     message = ""
     try:
         if method == "weiszfeld":
-            sol = _weiszfeld_solution(prob, scaled_tol)
+            sol = _weiszfeld_solution(prob)
         elif method == "cvxpy":
             sol = solve_cvxpy(prob, scaled_tol)
         else:
@@ -277,14 +277,14 @@ def _result(contacts: Any, translation_only: bool, prob: NormSum, active: np.nda
     x = sol.x
     if velocity is None:
         omega = 0.0 if translation_only else float(x[2] * S / L)
-        Vc = x[:2] * S + (0.0 if shift is None else shift)
+        Vc = x[:2] * S + shift                       # (given whenever velocity is not)
         # Velocity at the reference point: V = Vc - omega J centre.
         velocity = np.array([Vc[0] + omega * centre[1], Vc[1] - omega * centre[0]])
     else:
         omega = 0.0
     if translation_only and np.any(sol.stuck):
         # A contact that does not slip fixes the velocity: its own, exactly (a data point).
-        velocity = np.array(contacts.velocities[active[np.flatnonzero(sol.stuck)[0]]], dtype=float)
+        velocity = np.array(contacts.velocities[active[np.flatnonzero(sol.stuck)[0]]])
     forces = np.zeros((contacts.n, 2))
     dmat = contacts.limit_factors
     g = sol.g * F
@@ -300,7 +300,7 @@ def _result(contacts: Any, translation_only: bool, prob: NormSum, active: np.nda
         unique = _unique(prob, sol)
     status = (EquilibriumStatus.SEGMENT if segment is not None else
               EquilibriumStatus.OPTIMAL if gap <= tolerance else EquilibriumStatus.INACCURATE)
-    velocity = np.asarray(velocity, dtype=float)
+    velocity = np.array(velocity)                   # (a copy, made read-only below)
     velocity.setflags(write=False)
     forces.setflags(write=False)
     stuck.setflags(write=False)
@@ -450,7 +450,7 @@ def weiszfeld(points: Any, weights: Any = None, *, tol: float = 1e-13,
     return y, max_iter
 
 
-def _weiszfeld_solution(prob: NormSum, tol: float) -> Solution:
+def _weiszfeld_solution(prob: NormSum) -> Solution:
     y, iterations = weiszfeld(prob.c, prob.f, tol=1e-15)
     gap, g, residual, stuck = certify(prob, y)
     return Solution(y, g, gap, residual, stuck, iterations, "weiszfeld")

@@ -552,6 +552,8 @@ from toolkit.predictions.viscosity import (ViscosityDesign, draw_design, fit_vis
      "The 'spacing' parameter of ViscosityProblem must have low <= high. Got (0.05, 0.02) instead."),
     ({"spacing": (0.0, 0.02)}, ParameterError,
      "The 'spacing' parameter of ViscosityProblem must be > 0. Got 0.0 instead."),
+    ({"spacing": (0.02, 0.0)}, ParameterError,
+     "The 'spacing' parameter of ViscosityProblem must be > 0. Got 0.0 instead."),
     ({"spacing": (0.02, 0.09)}, ParameterError,
      "The 'spacing' parameter of ViscosityProblem must keep the 10 contacts within +-0.35 m/s (at most "
      "0.0777778 m/s). Got (0.02, 0.09) instead."),
@@ -622,6 +624,13 @@ def test_viscosity_problem_defaults_and_edges():
     assert ViscosityProblem(Apparatus.carousel(n=5)).definitions == ("least_squares", "crossing_63")
     assert ViscosityProblem(CAROUSEL, definitions=["crossing_63"]).definitions == ("crossing_63",)
     assert ViscosityProblem(CAROUSEL, targets=(1.0, 0.0)).targets == (1.0, 0.0)
+    # Numbers of other types are stored as the type the fields declare.
+    p = ViscosityProblem(CAROUSEL, runs=np.int64(12), pre_roll=0, tail=1, seed=np.int64(3))
+    assert type(p.runs) is int and type(p.pre_roll) is float and type(p.tail) is float and type(p.seed) is int
+    with pytest.raises(TypeError) as info:
+        viscosity_check("problem")
+    assert str(info.value) == ("The 'problem' parameter of viscosity_check must be a ViscosityProblem. "
+                               "Got 'problem' instead.")
 
 
 @pytest.mark.parametrize("mass", SCALES)
@@ -662,11 +671,11 @@ def test_predicted_corrections_are_per_unit_mass(mass):
 
 
 def _synthetic_check(monkeypatch, mass, tau_factor=(1.0, 1.0), window_off=None, bad_tau=None, inside=None,
-                     failures=()):
+                     failures=(), off_by=0.02, targets=(0.98, 0.05)):
     """viscosity_check on a sweep replaced by numbers: 6 runs of slopes 1..6 (times the
     mass), corrections 0.5 (least squares) and 0.8 (crossing), each run's tau ``tau_factor``
     times ``C m / k``, windows as planned."""
-    problem = ViscosityProblem(Apparatus.carousel(mass=mass), "ideal", runs=6)
+    problem = ViscosityProblem(Apparatus.carousel(mass=mass), "ideal", runs=6, targets=targets)
     slope = np.arange(1.0, 7.0) * mass
     runs = 6
     inside = np.array([True] * 4 + [False] * 2) if inside is None else inside
@@ -677,7 +686,7 @@ def _synthetic_check(monkeypatch, mass, tau_factor=(1.0, 1.0), window_off=None, 
     tau = {d: f * correction[d] * mass / slope for d, f in zip(("least_squares", "crossing_63"), tau_factor)}
     measured_window = window.copy()
     if window_off is not None:
-        measured_window[window_off] += 0.02
+        measured_window[window_off] += off_by
     if bad_tau is not None:
         tau["crossing_63"][bad_tau] = -1.0
     measured = {"tau": tau, "tau_true": {d: t.copy() for d, t in tau.items()}, "settled": np.full(runs, 0.3),
@@ -716,6 +725,9 @@ def test_viscosity_check_assembles_its_fits_per_group(monkeypatch, mass):
     assert data["targets"] == {"r2_min": 0.98, "k_rel_max": 0.05} and data["runs"] == 6
     assert [f["starts"] for f in data["fits"]] == ["inside", "outside"] * 2
     fit_dict = data["fits"][0]
+    assert set(fit_dict) == {"definition", "starts", "n", "mode", "runs", "k_fit", "k_predicted", "ratio", "r2",
+                             "r2_corrected", "true_speed", "met"}
+    assert fit_dict["r2_corrected"] == inside.r2_corrected and fit_dict["k_predicted"] == inside.k_predicted
     assert fit_dict["ratio"] == inside.ratio and fit_dict["true_speed"] == {"k_fit": inside.k_fit_true,
                                                                             "r2": inside.r2_true}
     with pytest.raises(ParameterError, match="'starts' parameter of ViscosityCheck.fit"):
@@ -750,7 +762,15 @@ def test_viscosity_check_judges_each_target(monkeypatch):
     assert check.fit().runs == 3
     check = _synthetic_check(monkeypatch, 1.0, bad_tau=4)
     assert check.status is CheckStatus.FAILED and not check.ok[4]
+    # The summary's ranges are over the runs measured (the failed run's tau = -1 left out).
+    assert check.to_dict()["tau_ratio_range"]["crossing_63"] == [1.0, 1.0]
     assert check.message == "1 of 6 runs failed (run 4: no startup to measure under crossing_63 (tau = -1.0))"
+    # A record within 1e-6 of a period (0.02 s) of the plan is the planned window; 1e-7 s off is not.
+    assert _synthetic_check(monkeypatch, 1.0, window_off=2, off_by=1e-9).ok.all()
+    assert not _synthetic_check(monkeypatch, 1.0, window_off=2, off_by=1e-7).ok[2]
+    # R^2 exactly at its target meets it.
+    r2 = _synthetic_check(monkeypatch, 1.0, tau_factor=(1.0, 1.0)).fit().r2
+    assert _synthetic_check(monkeypatch, 1.0, targets=(r2, 0.05)).fit().met is True
     check = _synthetic_check(monkeypatch, 1.0, failures=["run 0: a plant step stopped", "run 5: x"])
     assert check.message == "2 of 6 runs failed (run 0: a plant step stopped)"
 
@@ -850,3 +870,42 @@ def test_measure_time_constants_reads_each_record():
             true = tau if mode == "ideal" else startup_time_constant(d, t, speed, 2)[0]
             assert out["tau_true"][d][1] == true
         assert out["tau_true"]["crossing_63"][1] != out["tau"]["crossing_63"][1] or mode == "ideal"
+
+
+def test_a_run_that_stops_is_a_failure_named_by_its_number(monkeypatch):
+    """A closed loop (in the loop) or a batch run (ideal) that does not finish is recorded as
+    None and named in the failures with the simulator's message or the batch's code; the
+    others are measured. A share of one run (two runs over two processes) is swept too."""
+    from types import SimpleNamespace
+
+    from toolkit.simulation import SimulationStatus
+
+    real_loop, real_batch = _visc.simulate_closed_loop, _visc.sampled_batch
+
+    def loop(*args, **kwargs):
+        run = real_loop(*args, **kwargs)
+        if kwargs["v0"] == stop_at:
+            return SimpleNamespace(times=run.times, estimate=run.estimate, speed=run.speed,
+                                   status=SimulationStatus.MAX_STEPS, message="stopped: step budget exhausted")
+        return run
+
+    def batch(*args, **kwargs):
+        out = dict(real_batch(*args, **kwargs))
+        out["codes"] = np.array(out["codes"]).copy()
+        out["codes"][1] = 3
+        return out
+
+    problem = ViscosityProblem(CAROUSEL, "loop", runs=2, seed=4)
+    design = plan_runs(problem)
+    stop_at = float(design.v0[1])
+    monkeypatch.setattr(_visc, "simulate_closed_loop", loop)
+    records, failures = _visc._simulate_startups(problem, design)
+    assert records[0] is not None and records[1] is None
+    assert failures == ["run 1: stopped: step budget exhausted"]
+    monkeypatch.setattr(_visc, "sampled_batch", batch)
+    ideal = ViscosityProblem(CAROUSEL, "ideal", runs=3, seed=4)
+    records, failures = _visc._simulate_startups(ideal, plan_runs(ideal))
+    assert records[1] is None and records[0] is not None and records[2] is not None
+    assert failures == ["run 1: a plant step stopped (code 3)"]
+    monkeypatch.undo()
+    assert viscosity_check(problem, workers=2).ok.all()

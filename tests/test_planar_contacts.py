@@ -257,6 +257,9 @@ _BAD_SHAPE = "The 'V' parameter of wrench_batch must have a first axis of length
      "Got 'an array of shape (1, 2)' instead."),
     (lambda: PlanarContactSet([[0, 0]], [[0, 0]], [1.0], "round"), ParameterTypeError,
      "The 'anisotropy' parameter of PlanarContactSet must be None or an array of numbers. Got 'round' instead."),
+    # A string is refused as such, even one that numpy would read as a number.
+    (lambda: PlanarContactSet([[0, 0]], [[0, 0]], [1.0], "2.0"), ParameterTypeError,
+     "The 'anisotropy' parameter of PlanarContactSet must be None or an array of numbers. Got '2.0' instead."),
     (lambda: PlanarContactSet([[0, 0]], [[0, 0]], [1.0], [[0.0, np.nan]]), ParameterError,
      "The 'anisotropy' parameter of PlanarContactSet must be finite. Got [[0.0, nan]] instead."),
     # The first non-positive ratio is named (0.0, not the -2.0 after it).

@@ -625,8 +625,9 @@ def test_viscosity_problem_defaults_and_edges():
     assert ViscosityProblem(CAROUSEL, definitions=["crossing_63"]).definitions == ("crossing_63",)
     assert ViscosityProblem(CAROUSEL, targets=(1.0, 0.0)).targets == (1.0, 0.0)
     # Numbers of other types are stored as the type the fields declare.
-    p = ViscosityProblem(CAROUSEL, runs=np.int64(12), pre_roll=0, tail=1, seed=np.int64(3))
+    p = ViscosityProblem(CAROUSEL, runs=np.int64(12), pre_roll=0, tail=1, seed=np.int64(3), tail_samples=np.int64(4))
     assert type(p.runs) is int and type(p.pre_roll) is float and type(p.tail) is float and type(p.seed) is int
+    assert type(p.tail_samples) is int
     with pytest.raises(TypeError) as info:
         viscosity_check("problem")
     assert str(info.value) == ("The 'problem' parameter of viscosity_check must be a ViscosityProblem. "

@@ -534,3 +534,379 @@ def test_cli_predict_with_contacts(capsys):
     assert "--contacts: must be an integer <= 10000, got 20000" in capsys.readouterr().err
     with pytest.raises(ParameterError, match="'n' parameter of Apparatus.with_contacts must be an integer in"):
         Apparatus.carousel().with_contacts(20000)
+
+
+# -- the viscosity sweep's pieces, fast and exact ----------------------------------------------
+from toolkit.predictions import viscosity as _visc                      # noqa: E402
+from toolkit.predictions.theory import least_squares_correction        # noqa: E402
+from toolkit.predictions.viscosity import (ViscosityDesign, draw_design, fit_viscosity,  # noqa: E402
+                                           predict_time_constants)
+
+
+@pytest.mark.parametrize(("kwargs", "error", "message"), [
+    ({"apparatus": "carousel"}, TypeError,
+     "The 'apparatus' parameter of ViscosityProblem must be an Apparatus. Got 'carousel' instead."),
+    ({"spacing": 0.02}, TypeError,
+     "The 'spacing' parameter of ViscosityProblem must be a pair (low, high). Got 0.02 instead."),
+    ({"spacing": (0.05, 0.02)}, ParameterError,
+     "The 'spacing' parameter of ViscosityProblem must have low <= high. Got (0.05, 0.02) instead."),
+    ({"spacing": (0.0, 0.02)}, ParameterError,
+     "The 'spacing' parameter of ViscosityProblem must be > 0. Got 0.0 instead."),
+    ({"spacing": (0.02, 0.0)}, ParameterError,
+     "The 'spacing' parameter of ViscosityProblem must be > 0. Got 0.0 instead."),
+    ({"spacing": (0.02, 0.09)}, ParameterError,
+     "The 'spacing' parameter of ViscosityProblem must keep the 10 contacts within +-0.35 m/s (at most "
+     "0.0777778 m/s). Got (0.02, 0.09) instead."),
+    ({"start": (1.0,)}, TypeError,
+     "The 'start' parameter of ViscosityProblem must be a pair (low, high). Got (1.0,) instead."),
+    ({"spacing": (0.02, 0.06), "start": (-3.0, 1.0)}, ParameterError,
+     "The 'start' parameter of ViscosityProblem must put every start within +-0.35 m/s (the lowest start with "
+     "the widest spacing lies 0.45 m/s from the reference). Got (-3.0, 1.0) instead."),
+    # Even n: the band's near edge is 1/2 spacing from the centre, 4 spacings from the lowest
+    # contact of 10; a start at 4 is inside it (3.75 is not: accepted below).
+    ({"start": (-1.0, 4.0)}, ParameterError,
+     "The 'start' parameter of ViscosityProblem must leave the start outside the equilibrium set (below 4 "
+     "spacings from the lowest contact). Got (-1.0, 4.0) instead."),
+    ({"apparatus": Apparatus.carousel(n=9), "start": (-1.0, 4.0)}, ParameterError,
+     "The 'start' parameter of ViscosityProblem must leave the start outside the equilibrium set (below 4 "
+     "spacings from the lowest contact). Got (-1.0, 4.0) instead."),
+    ({"apparatus": Apparatus.carousel(n=4)}, ParameterError,
+     "The 'apparatus' parameter of ViscosityProblem must have at least 5 contacts for the default starts (0 to "
+     "1 spacing above the lowest contact) to lie below the equilibrium set, or be given starts (start). Got "
+     "'4 contacts' instead."),
+    ({"tail": 0.1, "tail_samples": 6}, ParameterError,
+     "The 'tail_samples' parameter of ViscosityProblem must fit in the tail (0.1 s at 50 Hz). Got 6 instead."),
+    ({"definitions": "least_squares"}, TypeError,
+     "The 'definitions' parameter of ViscosityProblem must be a sequence of ['least_squares', 'crossing_63']. "
+     "Got 'least_squares' instead."),
+    ({"definitions": 3}, TypeError,
+     "The 'definitions' parameter of ViscosityProblem must be a sequence of ['least_squares', 'crossing_63']. "
+     "Got 3 instead."),
+    ({"definitions": ("least_squares", "least_squares")}, ParameterError,
+     "The 'definitions' parameter of ViscosityProblem must name each definition once, at least one. Got "
+     "('least_squares', 'least_squares') instead."),
+    ({"definitions": ()}, ParameterError,
+     "The 'definitions' parameter of ViscosityProblem must name each definition once, at least one. Got () "
+     "instead."),
+    ({"targets": (1.5, 0.05)}, ParameterError,
+     "The 'targets' parameter of ViscosityProblem must be <= 1. Got 1.5 instead."),
+    ({"targets": (0.9, -0.05)}, ParameterError,
+     "The 'targets' parameter of ViscosityProblem must be >= 0. Got -0.05 instead."),
+    ({"runs": 1}, ParameterError, "The 'runs' parameter of ViscosityProblem must be >= 2. Got 1 instead."),
+    ({"pre_roll": -0.1}, ParameterError,
+     "The 'pre_roll' parameter of ViscosityProblem must be >= 0. Got -0.1 instead."),
+    ({"tail": 0.0}, ParameterError, "The 'tail' parameter of ViscosityProblem must be > 0. Got 0.0 instead."),
+    ({"tail_samples": 0}, ParameterError,
+     "The 'tail_samples' parameter of ViscosityProblem must be >= 1. Got 0 instead."),
+    ({"seed": -1}, ParameterError, "The 'seed' parameter of ViscosityProblem must be >= 0. Got -1 instead."),
+])
+def test_every_refusal_of_the_viscosity_problem_in_full(kwargs, error, message):
+    """Each refusal matched whole: parameter, owner, rule and value (mutants: any of them
+    changed, dropped or replaced by None, a bound moved)."""
+    kwargs = {"apparatus": CAROUSEL, **kwargs}
+    with pytest.raises(error) as info:
+        ViscosityProblem(**kwargs)
+    assert str(info.value) == message
+
+
+def test_viscosity_problem_defaults_and_edges():
+    """The defaults (spacing 0.2/n to 0.6/n, starts 0 to 1), the sample rate of the sensors
+    (50 Hz, and 50 Hz without them), the resting position (1/2 for even n, 0 for odd), and the
+    edges just inside the refusals above: a start at 3.75 spacings, a tail of 0.1 s holding 5
+    samples, ``tail_samples`` 1, ``pre_roll`` 0."""
+    p = ViscosityProblem(CAROUSEL)
+    assert p.spacing == (0.02, 0.06) and p.start == (0.0, 1.0) and p.mode == "loop" and p.runs == 490
+    assert p.rate == 50.0 and ViscosityProblem(Apparatus(CAROUSEL.plant), "ideal").rate == 50.0
+    assert p.resting_position == 0.5 and ViscosityProblem(Apparatus.carousel(n=9)).resting_position == 0.0
+    assert ViscosityProblem(CAROUSEL, start=(-1.0, 3.75)).start == (-1.0, 3.75)
+    assert ViscosityProblem(CAROUSEL, tail=0.1, tail_samples=5).tail_samples == 5
+    assert ViscosityProblem(CAROUSEL, tail_samples=1, pre_roll=0.0).pre_roll == 0.0
+    assert ViscosityProblem(Apparatus.carousel(n=5)).definitions == ("least_squares", "crossing_63")
+    assert ViscosityProblem(CAROUSEL, definitions=["crossing_63"]).definitions == ("crossing_63",)
+    assert ViscosityProblem(CAROUSEL, targets=(1.0, 0.0)).targets == (1.0, 0.0)
+    # Numbers of other types are stored as the type the fields declare.
+    p = ViscosityProblem(CAROUSEL, runs=np.int64(12), pre_roll=0, tail=1, seed=np.int64(3), tail_samples=np.int64(4))
+    assert type(p.runs) is int and type(p.pre_roll) is float and type(p.tail) is float and type(p.seed) is int
+    assert type(p.tail_samples) is int
+    with pytest.raises(TypeError) as info:
+        viscosity_check("problem")
+    assert str(info.value) == ("The 'problem' parameter of viscosity_check must be a ViscosityProblem. "
+                               "Got 'problem' instead.")
+
+
+@pytest.mark.parametrize("mass", SCALES)
+def test_draw_design_identities(mass):
+    """Per run: ``x0 = -+(half - position)`` (up: below the centre), ``v0 = x0 s`` and the
+    slope ``2 f / s`` (f scales with the mass: ``k / m`` does not), ``inside`` exactly where
+    ``position >= 0``; the draw depends on the seed only (the same at every mass)."""
+    problem = ViscosityProblem(Apparatus.carousel(mass=mass), "ideal", runs=64, seed=5, start=(-1.0, 1.0))
+    d = draw_design(problem)
+    half = 4.5
+    assert np.array_equal(np.abs(d["start"]), half - d["position"])
+    assert np.array_equal(d["v0"], d["start"] * d["spacing"])
+    assert np.array_equal(d["slope"], 2.0 * problem.apparatus.force / d["spacing"])
+    assert np.array_equal(d["inside"], d["position"] >= 0.0) and 0 < d["inside"].sum() < 64
+    assert 0 < np.sum(d["start"] < 0) < 64 and len(d["seeds"]) == 64
+    ref = draw_design(ViscosityProblem(Apparatus.carousel(), "ideal", runs=64, seed=5, start=(-1.0, 1.0)))
+    assert np.array_equal(d["start"], ref["start"]) and np.array_equal(d["slope"] / mass, ref["slope"])
+    assert np.all((d["spacing"] >= 0.02) & (d["spacing"] <= 0.06)) and np.all(np.abs(d["position"]) <= 1.0)
+
+
+@pytest.mark.parametrize("mass", SCALES)
+def test_predicted_corrections_are_per_unit_mass(mass):
+    """The least-squares correction of a run is ``least_squares_correction(n, x0, window k /
+    m)``: with slopes ``(1, 2, 4) m / 8`` and windows ``8 W / (1, 2, 4)`` (dyadic: exact)
+    it is that of ``W = 2, 3, 5`` at every mass, bit for bit. The crossing correction of the
+    allocated staircase is the closed form ``staircase_correction(n, x0)`` (rounding of the
+    allocation's speeds: rtol 1e-9). Mutant killed: the mass dropped from ``window k / m``
+    (or from the crossing's ``C``): invisible at mass 1."""
+    problem = ViscosityProblem(Apparatus.carousel(mass=mass), "ideal", runs=3, seed=1)
+    design = plan_runs(problem)
+    W = np.array([2.0, 3.0, 5.0])
+    k = np.array([1.0, 2.0, 4.0]) * mass / 8
+    dyadic = replace(design, slope=k, window=W * mass / k)
+    least = predict_time_constants(replace(problem, definitions=("least_squares",)), dyadic)
+    assert np.array_equal(least["least_squares"], least_squares_correction(10, design.start, W))
+    C = predict_time_constants(replace(problem, definitions=("crossing_63",)), design)
+    np.testing.assert_allclose(C["crossing_63"], staircase_correction(10, design.start), rtol=1e-9)
+
+
+def _synthetic_check(monkeypatch, mass, tau_factor=(1.0, 1.0), window_off=None, bad_tau=None, inside=None,
+                     failures=(), off_by=0.02, targets=(0.98, 0.05)):
+    """viscosity_check on a sweep replaced by numbers: 6 runs of slopes 1..6 (times the
+    mass), corrections 0.5 (least squares) and 0.8 (crossing), each run's tau ``tau_factor``
+    times ``C m / k``, windows as planned."""
+    problem = ViscosityProblem(Apparatus.carousel(mass=mass), "ideal", runs=6, targets=targets)
+    slope = np.arange(1.0, 7.0) * mass
+    runs = 6
+    inside = np.array([True] * 4 + [False] * 2) if inside is None else inside
+    window = np.full(runs, 0.5)
+    design = ViscosityDesign(slope, np.full(runs, 0.04), np.full(runs, 0.1), np.zeros(runs), np.full(runs, -4.5),
+                             inside, [None] * runs, np.zeros(runs), np.ones(runs), window, np.zeros((runs, 10)))
+    correction = {"least_squares": np.full(runs, 0.5), "crossing_63": np.full(runs, 0.8)}
+    tau = {d: f * correction[d] * mass / slope for d, f in zip(("least_squares", "crossing_63"), tau_factor)}
+    measured_window = window.copy()
+    if window_off is not None:
+        measured_window[window_off] += off_by
+    if bad_tau is not None:
+        tau["crossing_63"][bad_tau] = -1.0
+    measured = {"tau": tau, "tau_true": {d: t.copy() for d, t in tau.items()}, "settled": np.full(runs, 0.3),
+                "window": measured_window}
+    monkeypatch.setattr(_visc, "_sweep", lambda p, progress, workers: (design, measured, correction, list(failures)))
+    return _visc.viscosity_check(problem)
+
+
+@pytest.mark.parametrize("mass", SCALES)
+def test_viscosity_check_assembles_its_fits_per_group(monkeypatch, mass):
+    """Runs whose tau is exactly ``C m / k``: ``tau_predicted`` is that (mass scales exact),
+    each group of starts is fitted on its own runs (4 inside, 2 outside), ``k_fit = 1 / C =
+    k_predicted`` (rounding of two sums: rtol 4 eps), ``R^2 = 1`` to rounding, the targets met."""
+    check = _synthetic_check(monkeypatch, mass)
+    assert check.status is CheckStatus.MET and check.met and check.ok.all()
+    assert np.array_equal(check.tau_predicted["least_squares"], 0.5 * mass / check.slope)
+    inside, outside = check.fit(), check.fit("least_squares", "outside")
+    assert check.fit() is check.fit("least_squares", "inside") and inside.starts == "inside"
+    assert (inside.runs, outside.runs, outside.met, inside.met) == (4, 2, None, True)
+    assert inside.definition == "least_squares" and inside.n == 10 and inside.mode == "ideal"
+    for fit, C in ((inside, 0.5), (check.fit("crossing_63"), 0.8)):
+        np.testing.assert_allclose([fit.k_fit, fit.k_predicted, fit.k_fit_true], 1 / C, rtol=4 * EPS_)
+        np.testing.assert_allclose([fit.r2, fit.r2_corrected, fit.r2_true], 1.0, rtol=0, atol=4 * EPS_)
+        np.testing.assert_allclose(fit.ratio, 1.0, rtol=4 * EPS_)
+    assert check.k_fit == inside.k_fit and check.k_predicted == inside.k_predicted and check.r2 == inside.r2
+    assert check.ratio == check.k_fit / check.k_predicted
+    assert check.message == (f"least_squares: R^2 {inside.r2:.4f}, k_fit / k_predicted = {inside.ratio:.4f}; "
+                             f"crossing_63: R^2 {check.fit('crossing_63').r2:.4f}, k_fit / k_predicted = "
+                             f"{check.fit('crossing_63').ratio:.4f}")
+    assert np.array_equal(check.v0, np.full(6, 0.1)) and np.array_equal(check.start, np.full(6, -4.5))
+    assert np.array_equal(check.inside, [True] * 4 + [False] * 2) and check.runs == 6
+    data = check.to_dict()
+    assert data["runs_outside"] == 2 and data["status"] == "MET" and data["n"] == 10 and data["mode"] == "ideal"
+    assert data["correction_range"] == {"least_squares": [0.5, 0.5], "crossing_63": [0.8, 0.8]}
+    assert data["tau_ratio_range"] == {"least_squares": [1.0, 1.0], "crossing_63": [1.0, 1.0]}
+    assert data["targets"] == {"r2_min": 0.98, "k_rel_max": 0.05} and data["runs"] == 6
+    assert [f["starts"] for f in data["fits"]] == ["inside", "outside"] * 2
+    fit_dict = data["fits"][0]
+    assert set(fit_dict) == {"definition", "starts", "n", "mode", "runs", "k_fit", "k_predicted", "ratio", "r2",
+                             "r2_corrected", "true_speed", "met"}
+    assert fit_dict["r2_corrected"] == inside.r2_corrected and fit_dict["k_predicted"] == inside.k_predicted
+    assert fit_dict["ratio"] == inside.ratio and fit_dict["true_speed"] == {"k_fit": inside.k_fit_true,
+                                                                            "r2": inside.r2_true}
+    with pytest.raises(ParameterError, match="'starts' parameter of ViscosityCheck.fit"):
+        check.fit("least_squares", "below")
+    with pytest.raises(ParameterError, match="'definition' parameter of ViscosityCheck.fit"):
+        check.fit("crossing")
+
+
+EPS_ = float(np.finfo(float).eps)
+
+
+def test_viscosity_check_judges_each_target(monkeypatch):
+    """A fit 9.1 % slower than predicted (tau 1.1 times C m / k) misses the 5 % target; one
+    group with fewer than two runs gives no fit; a window other than planned (by a period)
+    or a tau <= 0 fails its run, named with its number and values."""
+    check = _synthetic_check(monkeypatch, 1.0, tau_factor=(1.1, 1.0))
+    assert check.status is CheckStatus.SHORT and not check.met
+    assert check.message == "least_squares: k_fit / k_predicted = 0.9091, off by 9.1% > 5%"
+    assert check.fit().met is False and check.fit("crossing_63").met is True
+    # Every start inside but one: the outside group is not fitted.
+    one_out = np.array([True] * 5 + [False])
+    check = _synthetic_check(monkeypatch, 1.0, inside=one_out)
+    assert check.fit("least_squares", "outside") is None and len(check.fits) == 2
+    # Every start outside: nothing to judge.
+    check = _synthetic_check(monkeypatch, 1.0, inside=np.zeros(6, bool))
+    assert check.status is CheckStatus.SHORT
+    assert check.message == "fewer than two runs started inside the spread: nothing to judge"
+    assert np.isnan(check.k_fit) and np.isnan(check.r2)
+    check = _synthetic_check(monkeypatch, 1.0, window_off=2)
+    assert check.status is CheckStatus.FAILED and check.ok.tolist() == [True, True, False, True, True, True]
+    assert check.message == "1 of 6 runs failed (run 2: recorded 0.52 s after the switch, planned 0.5 s)"
+    assert check.fit().runs == 3
+    check = _synthetic_check(monkeypatch, 1.0, bad_tau=4)
+    assert check.status is CheckStatus.FAILED and not check.ok[4]
+    # The summary's ranges are over the runs measured (the failed run's tau = -1 left out).
+    assert check.to_dict()["tau_ratio_range"]["crossing_63"] == [1.0, 1.0]
+    assert check.message == "1 of 6 runs failed (run 4: no startup to measure under crossing_63 (tau = -1.0))"
+    # A record within 1e-6 of a period (0.02 s) of the plan is the planned window; 1e-7 s off is not.
+    assert _synthetic_check(monkeypatch, 1.0, window_off=2, off_by=1e-9).ok.all()
+    assert not _synthetic_check(monkeypatch, 1.0, window_off=2, off_by=1e-7).ok[2]
+    # R^2 exactly at its target meets it.
+    r2 = _synthetic_check(monkeypatch, 1.0, tau_factor=(1.0, 1.0)).fit().r2
+    assert _synthetic_check(monkeypatch, 1.0, targets=(r2, 0.05)).fit().met is True
+    check = _synthetic_check(monkeypatch, 1.0, failures=["run 0: a plant step stopped", "run 5: x"])
+    assert check.message == "2 of 6 runs failed (run 0: a plant step stopped)"
+
+
+def test_verdict_reads_r2_below_its_target(monkeypatch):
+    """Scatter in tau (alternately 0.5 and 2 times C m / k) brings R^2 below 0.98: named."""
+    problem = ViscosityProblem(CAROUSEL, "ideal", runs=6)
+    slope = np.arange(1.0, 7.0)
+    design = ViscosityDesign(slope, np.full(6, 0.04), np.full(6, 0.1), np.zeros(6), np.full(6, -4.5),
+                             np.ones(6, bool), [None] * 6, np.zeros(6), np.ones(6), np.full(6, 0.5),
+                             np.zeros((6, 10)))
+    corr = {"least_squares": np.full(6, 0.5)}
+    tau = {"least_squares": 0.5 / slope * np.array([0.5, 2.0] * 3)}
+    fits = fit_viscosity(replace(problem, definitions=("least_squares",)), design, tau, tau, corr, np.ones(6, bool))
+    fit = fits[0]
+    x = slope / CAROUSEL.mass
+    assert (fit.k_fit, fit.r2) == proportional_fit(x, 1 / tau["least_squares"])
+    assert fit.r2 < 0.98 and fit.met is False
+    monkeypatch.setattr(_visc, "_sweep", lambda p, progress, workers: (
+        design, {"tau": tau, "tau_true": tau, "settled": np.zeros(6), "window": np.full(6, 0.5)}, corr, []))
+    check = _visc.viscosity_check(replace(problem, definitions=("least_squares",)))
+    assert check.message.startswith(f"least_squares: R^2 {fit.r2:.4f} < 0.98")
+
+
+@pytest.mark.parametrize(("mode", "runs", "workers", "idle", "shares"), [
+    ("loop", 17, None, 8, 2),        # default: the idle cores, at most one per 8 runs
+    ("loop", 17, None, 1, 1),        # one idle core: no fork
+    ("loop", 40, None, 3, 3),
+    ("loop", 5, 3, 8, 3),            # as many as asked
+    ("loop", 2, 5, 8, 2),            # but never more than the runs
+    ("ideal", 40, None, 8, 1),       # ideal: one batch, never forked
+])
+def test_sweep_shares_the_runs_and_joins_them_in_order(monkeypatch, mode, runs, workers, idle, shares):
+    """The runs are split into ``shares`` contiguous parts (``fork_map`` replaced by a plain
+    map that records the split; each part's work replaced by numbers naming its rows), and the
+    parts' designs, dicts of arrays and lists are joined back in the runs' order: the sweep
+    of every run, as one process would compute it."""
+    seen = []
+
+    def fake_rows(problem, drawn, rows, bar=None):
+        r = rows.astype(float)
+        design = ViscosityDesign(r, r + 1, r + 2, r + 3, r + 4, rows % 2 == 0, [int(x) for x in rows], r + 5, r + 6,
+                                 r + 7, np.c_[r, r])
+        return design, {"tau": {"least_squares": r * 10}, "window": r * 2}, {"crossing_63": r * 3}, [f"run {rows[0]}"]
+
+    def plain_map(fn, items):
+        seen.append([list(item) for item in items])
+        return [fn(item) for item in items]
+
+    monkeypatch.setattr(_visc, "_sweep_rows", fake_rows)
+    monkeypatch.setattr(_visc, "fork_map", plain_map)
+    monkeypatch.setattr(_visc, "idle_cores", lambda: idle)
+    monkeypatch.setattr(_visc, "ensure_compiled", lambda *names: None)
+    problem = ViscosityProblem(CAROUSEL, mode, runs=runs)
+    design, measured, correction, failures = _visc._sweep(problem, False, workers)
+    whole = np.arange(runs, dtype=float)
+    if shares == 1:
+        assert seen == [] and failures == ["run 0"]
+    else:
+        assert seen == [[list(part) for part in np.array_split(np.arange(runs), shares)]]
+        assert failures == [f"run {part[0]}" for part in np.array_split(np.arange(runs), shares)]
+    assert np.array_equal(design.slope, whole) and np.array_equal(design.commanded, np.c_[whole, whole])
+    assert np.array_equal(design.window, whole + 7) and design.seeds == list(range(runs))
+    assert np.array_equal(design.inside, np.arange(runs) % 2 == 0)
+    assert np.array_equal(measured["tau"]["least_squares"], whole * 10) and np.array_equal(measured["window"], whole * 2)
+    assert np.array_equal(correction["crossing_63"], whole * 3)
+
+
+def test_progress_bar_on_stderr_only_when_asked(capsys):
+    """``progress=True`` draws the sweep's bar (named by its mode) on stderr and clears it
+    when done (its last character a carriage return, not a new line); without it nothing is
+    written."""
+    problem = ViscosityProblem(CAROUSEL, "ideal", runs=2, seed=3)
+    viscosity_check(problem)
+    assert capsys.readouterr().err == ""
+    viscosity_check(problem, progress=True)
+    captured = capsys.readouterr()
+    assert captured.err.startswith("\rviscosity (ideal):") and captured.err.endswith("\r") and captured.out == ""
+
+
+def test_measure_time_constants_reads_each_record():
+    """Per record and definition: tau and the settled speed off the estimate, tau_true off the
+    true speed in the loop (the same as tau in the ideal mode), the window the record's last
+    time; a failed run (None) is NaN throughout. Second method: startup_time_constant on each
+    array directly (bitwise)."""
+    t = np.array([0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0])
+    estimate = np.array([0.0, 0.25, 0.5, 0.75, 0.9, 1.0, 1.0])
+    speed = np.array([0.0, 0.5, 0.75, 0.875, 0.95, 1.0, 1.0])
+    for mode in ("loop", "ideal"):
+        problem = ViscosityProblem(CAROUSEL, mode, runs=2, tail_samples=2)
+        out = _visc.measure_time_constants(problem, [None, (t, estimate, speed)])
+        assert np.isnan(out["window"][0]) and out["window"][1] == 3.0 and np.isnan(out["settled"][0])
+        for d in problem.definitions:
+            tau, settled = startup_time_constant(d, t, estimate, 2)
+            assert np.isnan(out["tau"][d][0]) and np.isnan(out["tau_true"][d][0])
+            assert out["tau"][d][1] == tau and out["settled"][1] == settled == 1.0
+            true = tau if mode == "ideal" else startup_time_constant(d, t, speed, 2)[0]
+            assert out["tau_true"][d][1] == true
+        assert out["tau_true"]["crossing_63"][1] != out["tau"]["crossing_63"][1] or mode == "ideal"
+
+
+def test_a_run_that_stops_is_a_failure_named_by_its_number(monkeypatch):
+    """A closed loop (in the loop) or a batch run (ideal) that does not finish is recorded as
+    None and named in the failures with the simulator's message or the batch's code; the
+    others are measured. A share of one run (two runs over two processes) is swept too."""
+    from types import SimpleNamespace
+
+    from toolkit.simulation import SimulationStatus
+
+    real_loop, real_batch = _visc.simulate_closed_loop, _visc.sampled_batch
+
+    def loop(*args, **kwargs):
+        run = real_loop(*args, **kwargs)
+        if kwargs["v0"] == stop_at:
+            return SimpleNamespace(times=run.times, estimate=run.estimate, speed=run.speed,
+                                   status=SimulationStatus.MAX_STEPS, message="stopped: step budget exhausted")
+        return run
+
+    def batch(*args, **kwargs):
+        out = dict(real_batch(*args, **kwargs))
+        out["codes"] = np.array(out["codes"]).copy()
+        out["codes"][1] = 3
+        return out
+
+    problem = ViscosityProblem(CAROUSEL, "loop", runs=2, seed=4)
+    design = plan_runs(problem)
+    stop_at = float(design.v0[1])
+    monkeypatch.setattr(_visc, "simulate_closed_loop", loop)
+    records, failures = _visc._simulate_startups(problem, design)
+    assert records[0] is not None and records[1] is None
+    assert failures == ["run 1: stopped: step budget exhausted"]
+    monkeypatch.setattr(_visc, "sampled_batch", batch)
+    ideal = ViscosityProblem(CAROUSEL, "ideal", runs=3, seed=4)
+    records, failures = _visc._simulate_startups(ideal, plan_runs(ideal))
+    assert records[1] is None and records[0] is not None and records[2] is not None
+    assert failures == ["run 1: a plant step stopped (code 3)"]
+    monkeypatch.undo()
+    assert viscosity_check(problem, workers=2).ok.all()

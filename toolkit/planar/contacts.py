@@ -64,8 +64,11 @@ def limit_factors(anisotropy: Any, n: int, owner: str) -> tuple[np.ndarray, np.n
     """
     if anisotropy is None:
         return _NO_LIMITS, None
-    array = np.asarray(anisotropy, dtype=float) if not isinstance(anisotropy, (str, bytes)) else None
-    if array is None or array.dtype.kind != "f":
+    try:
+        array = None if isinstance(anisotropy, (str, bytes)) else np.asarray(anisotropy, dtype=float)
+    except (TypeError, ValueError):             # (not numbers, or a ragged list)
+        array = None
+    if array is None:
         raise ParameterTypeError(parameter_message(
             "anisotropy", owner, "be None or an array of numbers", anisotropy))
     if not np.all(np.isfinite(array)):
@@ -77,8 +80,8 @@ def limit_factors(anisotropy: Any, n: int, owner: str) -> tuple[np.ndarray, np.n
                 "anisotropy", owner, "have a positive ratio (second column) for every contact",
                 float(ratio[ratio <= 0][0])))
         cos, sin = np.cos(angle), np.sin(angle)
-        rot = np.stack((np.stack((cos, -sin), -1), np.stack((sin, cos), -1)), 1)   # R (n,2,2)
-        dmat = rot * np.stack((np.ones(n), ratio), -1)[:, None, :]              # R diag(1, k)
+        rot = np.stack((np.column_stack((cos, -sin)), np.column_stack((sin, cos))), 1)   # R (n,2,2)
+        dmat = rot * np.column_stack((np.ones(n), ratio))[:, None, :]                # R diag(1, k)
     elif array.shape == (n, 2, 2):
         if not np.allclose(array, np.swapaxes(array, 1, 2), rtol=1e-12, atol=0.0):
             raise ParameterError(parameter_message(
@@ -104,12 +107,14 @@ def _as_twists(V: Any, omega: Any, owner: str) -> tuple[np.ndarray, np.ndarray]:
     """Broadcast body velocities (..., 2) and angular velocities (...) to one batch shape."""
     arrays = []
     for name, value, unit in (("V", V, "m/s"), ("omega", omega, "rad/s")):
-        if value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value):
-            raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value))
         try:
-            arrays.append(np.asarray(value, dtype=float))
-        except (TypeError, ValueError):
-            raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value)) from None
+            real = not (value is None or isinstance(value, (str, bytes)) or np.iscomplexobj(value))
+            array = np.asarray(value, dtype=float) if real else None
+        except (TypeError, ValueError):           # (a ragged list: numpy's ValueError)
+            array = None
+        if array is None:
+            raise ParameterTypeError(parameter_message(name, owner, f"be real numbers ({unit})", value))
+        arrays.append(array)
         if not np.all(np.isfinite(arrays[-1])):
             raise ParameterError(parameter_message(name, owner, "be finite", "a NaN or inf entry"))
     vel, rate = arrays
@@ -206,8 +211,7 @@ class WrenchSet:
         With ``d = (1, 0, 0)`` and every contact on the x axis this is
         :meth:`toolkit.ContactSet.force_bounds` of the 1-D set.
         """
-        d = np.asarray(direction, dtype=float)
-        return float(-self.support(-d)), float(self.support(d))
+        return float(-self.support(np.negative(direction))), float(self.support(direction))
 
 
 @dataclass(frozen=True, eq=False)
@@ -399,12 +403,12 @@ class PlanarContactSet:
 
     def with_forces(self, forces: Any) -> PlanarContactSet:
         """The same contacts with new magnitudes (N, shape (n,), >= 0, positive sum)."""
-        anisotropy = None if self.limits is None else self.limits
-        return PlanarContactSet(self.positions, self.velocities, forces, anisotropy)
+        return PlanarContactSet(self.positions, self.velocities, forces, self.limits)
 
     def subset(self, index: Any) -> PlanarContactSet:
         """The contacts selected by ``index`` (a boolean mask or indices)."""
-        idx = np.arange(self.n)[np.asarray(index)]
+        index = np.asarray(index)
+        idx = np.arange(self.n)[index if index.size else index.astype(int)]   # ([] is float)
         if idx.size == 0 or not np.sum(self.forces[idx]) > 0:
             raise ParameterError(parameter_message(
                 "index", "PlanarContactSet.subset", "select contacts with a positive total force",
@@ -434,7 +438,7 @@ class PlanarContactSet:
         rot = np.array([[c, -s], [s, c]])
         pos = (self.positions - p) @ rot.T
         vel = self.velocities @ rot.T
-        dmat = rot @ self._dmat if self._dmat.shape[0] else self._dmat
+        dmat = rot @ self._dmat                                  # ((0, 2, 2) stays empty)
         limits = None if self.limits is None else dmat @ np.swapaxes(dmat, 1, 2)
         for array in (pos, vel, dmat) + (() if limits is None else (limits,)):
             array.setflags(write=False)
@@ -485,8 +489,8 @@ class PlanarContactSet:
         """
         vel, rate = _as_twists(V, omega, "PlanarContactSet.wrench")
         shape = rate.shape
-        flat_v = np.ascontiguousarray(vel.reshape(-1, 2))
-        flat_w = np.ascontiguousarray(rate.reshape(-1))
+        flat_v = np.ascontiguousarray(vel.reshape(rate.size, 2))
+        flat_w = np.ascontiguousarray(rate.ravel())
         force = np.empty((flat_w.size, 2))
         torque = np.empty(flat_w.size)
         kernels("planar", self.n * flat_w.size).wrench(
@@ -505,7 +509,7 @@ class PlanarContactSet:
         out = np.empty(rate.size)
         kernels("planar", self.n * rate.size).dissipation(
             self.positions, self.velocities, self.forces, self._dmat,
-            np.ascontiguousarray(vel.reshape(-1, 2)), np.ascontiguousarray(rate.reshape(-1)), out)
+            np.ascontiguousarray(vel.reshape(rate.size, 2)), np.ascontiguousarray(rate.ravel()), out)
         return out.reshape(shape)
 
     def stuck(self, V: Any, omega: Any = 0.0) -> np.ndarray:
@@ -537,7 +541,8 @@ class PlanarContactSet:
             semi-definite. ``inf`` everywhere at a twist where some contact has zero slip
             (the map is not differentiable there: stiction resists any change).
         """
-        s = self.slips(V, omega)
+        vel, rate = _as_twists(V, omega, "PlanarContactSet.resistance")
+        s = self.slips(vel, rate)
         r = self.positions
         # A_i maps the twist to the body velocity at r_i: [[1, 0, -r_y], [0, 1, r_x]].
         A = np.zeros((self.n, 2, 3))
@@ -552,17 +557,15 @@ class PlanarContactSet:
         rho = np.hypot(z[..., 0], z[..., 1])
         active = self.forces > 0
         # A slip at the rounding of the velocities it is computed from is a stick.
-        vel, rate = _as_twists(V, omega, "PlanarContactSet.resistance")
         size = (np.abs(self.velocities).max(axis=1) + np.abs(vel).max(axis=-1)[..., None]
                 + np.abs(rate)[..., None] * np.abs(self.positions).max(axis=1))
         stuck = np.any((rho <= 64 * _EPS * size) & active, axis=-1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = z / rho[..., None]
-            scale = np.where(active, self.forces / rho, 0.0)
+        # Only sliding contacts (f_i > 0, s_i != 0) resist: f_i / rho_i (I - u_i u_i^T).
+        slide = active & (rho > 0)
+        rho = np.where(slide, rho, 1.0)
+        u = z / rho[..., None]
+        scale = np.where(slide, self.forces / rho, 0.0)
         proj = np.eye(2) - u[..., :, None] * u[..., None, :]        # (..., n, 2, 2)
-        proj = np.where(active[:, None, None], proj, 0.0)
-        proj = np.nan_to_num(proj)
-        scale = np.nan_to_num(scale, posinf=0.0)
         out = np.einsum("...n,nai,...nab,nbj->...ij", scale, BA, proj, BA)
         out[stuck] = np.inf
         return out
@@ -576,8 +579,8 @@ class PlanarContactSet:
         toolkit (docs/planar.md section 5). Contacts all at one point are on every line: the
         line is then the one of the velocities (if they are parallel).
         """
-        scale_r = max(self.arm, float(np.max(np.abs(self.positions)))) or 1.0
-        scale_v = float(np.max(np.abs(self.velocities))) or 1.0
+        scale_r = max(self.arm, float(np.max(np.abs(self.positions))))   # (0: every test below is 0 > 0)
+        scale_v = float(np.max(np.abs(self.velocities)))
         tol_r = 16 * _EPS * scale_r
         tol_v = 16 * _EPS * scale_v
         centre = self.positions[0]
@@ -635,7 +638,7 @@ def geometric_median(points: Any, weights: Any = None, *, method: str = "auto",
     :class:`PlanarContactSet` with ``weights`` (n,) its magnitudes: the result's
     ``velocity`` is the median, ``gap`` its certificate (see :func:`solve_equilibrium`).
     """
-    P = np.asarray(points, dtype=float)
+    P = _as_points(points, "points", "geometric_median")
     contacts = PlanarContactSet(np.zeros_like(P), P, weights)
     return solve_equilibrium(contacts, translation_only=True, method=method, tol=tol)
 
@@ -658,15 +661,15 @@ def wrench_batch(positions: Any, velocities: Any, forces: Any, V: Any, omega: An
     torque : ndarray of shape (S, ...), N m
         Set ``k`` at its twists, exactly as ``PlanarContactSet(...[k]).wrench(V[k], omega[k])``.
     """
-    pos = np.asarray(positions, dtype=float)
-    vel = np.asarray(velocities, dtype=float)
-    mag = np.asarray(forces, dtype=float)
+    pos = np.asarray(positions)           # (each set's arrays are checked by PlanarContactSet)
+    vel = np.asarray(velocities)
+    mag = np.asarray(forces)
     if pos.ndim != 3:
         raise ParameterError(parameter_message(
             "positions", "wrench_batch", "have shape (S, n, 2)", f"an array of shape {pos.shape}"))
     S = pos.shape[0]
-    Vs = np.asarray(V, dtype=float)
-    ws = np.asarray(omega, dtype=float)
+    Vs = np.asarray(V)                    # (and each set's twists by its wrench)
+    ws = np.asarray(omega)
     if Vs.shape[:1] != (S,) or ws.shape[:1] != (S,):
         raise ParameterError(parameter_message(
             "V", "wrench_batch", f"have a first axis of length S = {S} (as 'omega')",

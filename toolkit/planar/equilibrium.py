@@ -13,6 +13,7 @@ may be a segment.
 from __future__ import annotations
 
 import enum
+import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -137,10 +138,9 @@ def _canonical(e: np.ndarray) -> np.ndarray:
     """A unit direction with round-off components snapped to 0 and its first non-zero
     component positive (so the x axis is exactly (1, 0))."""
     e = np.where(np.abs(e) <= 4 * _EPS, 0.0, e)
-    e = e / np.hypot(e[0], e[1])
     if e[0] < 0 or (e[0] == 0 and e[1] < 0):
         e = -e
-    return e + 0.0
+    return e / np.hypot(e[0], e[1]) + 0.0
 
 
 def speed_scale(contacts: Any) -> float:
@@ -186,19 +186,19 @@ def twist_problem(contacts: Any, translation_only: bool, centre: np.ndarray,
     return NormSum(np.ascontiguousarray(c), np.ascontiguousarray(B), f, None, np.zeros(d)), active
 
 
-def _collinear(points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(point, unit direction)`` of a line through every point, or None; all points equal
-    gives direction (1, 0)."""
-    scale = float(np.max(np.abs(points))) or 1.0
+def _collinear(points: np.ndarray) -> np.ndarray | None:
+    """The unit direction of a line through every point, or None; all points equal (within
+    ``16 eps`` of the largest coordinate) gives (1, 0)."""
+    scale = float(np.max(np.abs(points)))
     rel = points - points[0]
     spread = np.hypot(rel[:, 0], rel[:, 1])
     far = float(np.max(spread))
     if far <= 16 * _EPS * scale:
-        return points[0], np.array([1.0, 0.0])
+        return np.array([1.0, 0.0])
     e = _canonical(rel[int(np.argmax(spread))] / far)
     if np.max(np.abs(rel[:, 0] * e[1] - rel[:, 1] * e[0])) > 16 * _EPS * scale:
         return None
-    return points[0], e
+    return e
 
 
 def solve_equilibrium(contacts: Any, translation_only: bool = False, *,
@@ -254,7 +254,7 @@ def solve_equilibrium(contacts: Any, translation_only: bool = False, *,
     message = ""
     try:
         if method == "weiszfeld":
-            sol = _weiszfeld_solution(prob, scaled_tol)
+            sol = _weiszfeld_solution(prob)
         elif method == "cvxpy":
             sol = solve_cvxpy(prob, scaled_tol)
         else:
@@ -277,14 +277,14 @@ def _result(contacts: Any, translation_only: bool, prob: NormSum, active: np.nda
     x = sol.x
     if velocity is None:
         omega = 0.0 if translation_only else float(x[2] * S / L)
-        Vc = x[:2] * S + (0.0 if shift is None else shift)
+        Vc = x[:2] * S + shift                       # (given whenever velocity is not)
         # Velocity at the reference point: V = Vc - omega J centre.
         velocity = np.array([Vc[0] + omega * centre[1], Vc[1] - omega * centre[0]])
     else:
         omega = 0.0
     if translation_only and np.any(sol.stuck):
         # A contact that does not slip fixes the velocity: its own, exactly (a data point).
-        velocity = np.array(contacts.velocities[active[np.flatnonzero(sol.stuck)[0]]], dtype=float)
+        velocity = np.array(contacts.velocities[active[np.flatnonzero(sol.stuck)[0]]])
     forces = np.zeros((contacts.n, 2))
     dmat = contacts.limit_factors
     g = sol.g * F
@@ -300,7 +300,7 @@ def _result(contacts: Any, translation_only: bool, prob: NormSum, active: np.nda
         unique = _unique(prob, sol)
     status = (EquilibriumStatus.SEGMENT if segment is not None else
               EquilibriumStatus.OPTIMAL if gap <= tolerance else EquilibriumStatus.INACCURATE)
-    velocity = np.asarray(velocity, dtype=float)
+    velocity = np.array(velocity)                   # (a copy, made read-only below)
     velocity.setflags(write=False)
     forces.setflags(write=False)
     stuck.setflags(write=False)
@@ -338,11 +338,11 @@ def _failed(contacts: Any, translation_only: bool, S: float, tol: float,
             method: str, started: float, message: str) -> PlanarEquilibrium:
     nan2 = np.full(2, np.nan)
     return PlanarEquilibrium(
-        velocity=nan2, omega=float("nan"), status=EquilibriumStatus.SOLVER_ERROR,
-        gap=float("inf"), tolerance=tol * contacts.total_force * S,
+        velocity=nan2, omega=math.nan, status=EquilibriumStatus.SOLVER_ERROR,
+        gap=math.inf, tolerance=tol * contacts.total_force * S,
         total_force=contacts.total_force, speed_scale=S,
-        dissipation=float("nan"), contact_forces=np.full((contacts.n, 2), np.nan),
-        residual_force=float("nan"), residual_torque=float("nan"),
+        dissipation=math.nan, contact_forces=np.full((contacts.n, 2), np.nan),
+        residual_force=math.nan, residual_torque=math.nan,
         stuck=np.zeros(contacts.n, bool), segment=None, unique=None,
         translation_only=bool(translation_only), method=method, iterations=0,
         wall_time=time.perf_counter() - started, message=message)
@@ -362,10 +362,9 @@ def _reduce_1d(contacts: Any, translation_only: bool, S: float, tol: float,
 
     active = np.flatnonzero(contacts.forces > 0)
     if translation_only:
-        line = _collinear(contacts.velocities[active])
-        if line is None:
+        e = _collinear(contacts.velocities[active])
+        if e is None:
             return None
-        p, e = line
         weights = contacts.line_weights(e)
         if weights is None:
             return None
@@ -385,7 +384,7 @@ def _reduce_1d(contacts: Any, translation_only: bool, S: float, tol: float,
     ends = []
     for value in (lo, hi):
         k = int(np.flatnonzero((speeds == value) & (contacts.forces > 0))[0])
-        ends.append(np.array(contacts.velocities[k], dtype=float) if translation_only
+        ends.append(np.array(contacts.velocities[k]) if translation_only
                     else value * e + 0.0)
     segment = np.array(ends) if hi > lo else None
     velocity = ends[0] if hi == lo else 0.5 * (ends[0] + ends[1])
@@ -424,36 +423,34 @@ def weiszfeld(points: Any, weights: Any = None, *, tol: float = 1e-13,
         The iteration converges linearly (sublinearly towards a data point that is not the
         median): a baseline and a second method, not the fast path.
     """
-    P = np.asarray(points, dtype=float)
-    w = np.ones(len(P)) if weights is None else np.asarray(weights, dtype=float)
+    P = np.asarray(points)                  # (integers as well: every step below is in floats)
+    w = np.ones(len(P)) if weights is None else np.asarray(weights)
     if P.ndim != 2 or P.shape[1] != 2 or w.shape != (P.shape[0],) or np.any(w <= 0):
         raise ParameterError(parameter_message(
             "points", "weiszfeld", "have shape (n, 2) with n positive weights",
             f"shapes {P.shape} and {w.shape}"))
-    spread = float(np.max(np.ptp(P, axis=0))) or 1.0
+    spread = float(np.max(np.ptp(P, axis=0)))            # (0: every point is y, returned at once)
     y = w @ P / w.sum()
     for it in range(1, max_iter + 1):
         diff = P - y
         dist = np.hypot(diff[:, 0], diff[:, 1])
         at = dist == 0.0
         eta = float(w[at].sum())
-        inv = np.where(at, 0.0, w / np.where(at, 1.0, dist))
-        T = inv @ P / inv.sum()
+        with np.errstate(divide="ignore"):
+            inv = np.where(at, 0.0, w / dist)
         R = inv @ diff                                  # sum_{p_i != y} w_i (p_i - y)/|p_i - y|
         r = float(np.hypot(R[0], R[1]))
-        if eta > 0:
-            if r <= eta:
-                return y, it                             # y (a data point) is the median
-            new = (1 - eta / r) * T + (eta / r) * y
-        else:
-            new = T
+        if r <= eta:
+            return y, it                                 # y is the median (a data point, or R = 0)
+        T = inv @ P / inv.sum()                          # (some point is away from y here)
+        new = (1 - eta / r) * T + (eta / r) * y          # (Weiszfeld's T when y is no data point)
         if np.max(np.abs(new - y)) <= tol * spread:
             return new, it
         y = new
     return y, max_iter
 
 
-def _weiszfeld_solution(prob: NormSum, tol: float) -> Solution:
+def _weiszfeld_solution(prob: NormSum) -> Solution:
     y, iterations = weiszfeld(prob.c, prob.f, tol=1e-15)
     gap, g, residual, stuck = certify(prob, y)
     return Solution(y, g, gap, residual, stuck, iterations, "weiszfeld")

@@ -262,7 +262,8 @@ def line_moments(pc: np.ndarray, nc: int, pw: np.ndarray, nw: int, out: np.ndarr
                 else:
                     dv = v - mv
                     dx = xm - mx
-                    vxx += rho * (dx * dx + quantization_variance(wc))
+                    # (the second size given, as imm's kernels give it: one compiled version)
+                    vxx += rho * (dx * dx + quantization_variance(wc, 0.0))
                     vxv += rho * dx * dv
                     vvv += rho * dv * dv
         if sweep == 0 and not total > 0.0:

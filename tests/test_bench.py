@@ -34,3 +34,12 @@ def test_scaling_rows_cost_what_their_problems_compute(capsys):
     assert scaling.main(["--quick"]) == 0
     out = capsys.readouterr().out
     assert out.count("us/") == 2 * len(scaling.ROWS)
+
+
+def test_compile_bench_names_the_kernels_compiled_more_than_once():
+    # The summary line of the compile bench: totals and the kernels of more than one
+    # version, most first (an identity of its input).
+    from toolkit.bench.compile import _versions
+
+    assert _versions({"a": 1, "b": 3, "c": 2}) == "6 compiled versions of 3 kernels; more than one: b 3, c 2"
+    assert _versions({"a": 1}) == "1 compiled versions of 1 kernels; more than one: none"

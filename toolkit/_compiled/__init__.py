@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["COMPILE_AFTER", "MODULES", "budget_clock", "charge", "compile_seconds", "compiled",
-           "cache_note", "ensure_compiled", "kernels", "load", "loaded", "on_compile", "parallel", "threads", "warm"]
+           "cache_note", "ensure_compiled", "kernels", "load", "loaded", "on_compile", "parallel", "threads", "versions", "warm"]
 
 _LOADED: dict[str, Any] = {}          # name -> the compiled module (or its _Interpreted)
 
@@ -187,6 +187,13 @@ def compiled(name: str) -> ModuleType | None:
     a NumPy way of their own that only pays to switch to a kernel once it is machine code."""
     module = _LOADED.get(name)
     return module if isinstance(module, ModuleType) else None
+
+
+def versions() -> dict[str, int]:
+    """The number of compiled versions (numba's specializations, one per argument types) of
+    each kernel this process has compiled or loaded from the cache, by kernel name."""
+    return {function.__name__: len(dispatcher.signatures)
+            for function, dispatcher in _DISPATCHERS.items() if dispatcher.signatures}
 
 
 def loaded() -> tuple[str, ...]:

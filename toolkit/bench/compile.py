@@ -5,8 +5,8 @@ process on an empty numba cache (an empty ``NUMBA_CACHE_DIR``), in this run:
 
 - ``active-contacts warm`` (every shipped design run once): the compile seconds per kernel
   module (numba's compile events, nested compiles counted in the module of the outermost
-  kernel), the number of compiled specializations per module, and the whole command's wall
-  and CPU time;
+  kernel), the number of compiled specializations per module and per kernel (those with
+  more than one named), and the whole command's wall and CPU time;
 - each design named with ``--designs`` (default: carousel, estimate, closed_loop): its first
   ``active-contacts run`` on an empty cache, against its run once that cache is warm (the
   ratio is what the one-time compile costs a first run).
@@ -56,7 +56,7 @@ def chained(listener, own=_compiled.on_compile):
 _compiled.on_compile = chained
 _compiled.on_compile(None)
 code = main(sys.argv[1:])
-print(json.dumps({"code": code, "seconds": seconds, "count": count}))
+print(json.dumps({"code": code, "seconds": seconds, "count": count, "versions": _compiled.versions()}))
 """
 
 
@@ -76,6 +76,13 @@ def _run(args: list[str], cache: Path, out: Path) -> dict:
     return data
 
 
+def _versions(versions: dict[str, int]) -> str:
+    """One line: the compiled versions of the kernels, and the kernels compiled more than once."""
+    more = sorted((name for name, count in versions.items() if count > 1), key=lambda n: -versions[n])
+    return (f"{sum(versions.values())} compiled versions of {len(versions)} kernels; more than one: "
+            + (", ".join(f"{name} {versions[name]}" for name in more) or "none"))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m toolkit.bench compile", description=__doc__.split("\n")[0])
     parser.add_argument("--designs", nargs="*", default=["carousel", "estimate", "closed_loop"])
@@ -91,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in sorted(warm["seconds"], key=warm["seconds"].get, reverse=True):
             print(f"  {name:8} {warm['seconds'][name]:7.1f} s compiling, {warm['count'][name]:3d} kernels "
                   "(top-level compiles)")
+        print(_versions(warm["versions"]))
         for name in args.designs:
             scene = root / f"{name}.toml"
             scene.write_text(design_text(name), encoding="utf-8")
@@ -101,6 +109,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:12} first run on an empty cache {cold['wall']:6.1f} s wall ({cold['cpu']:6.1f} s CPU, "
                   f"{sum(cold['seconds'].values()):6.1f} s compiling); warm {hot['wall']:5.1f} s wall "
                   f"({hot['cpu']:5.1f} s CPU); ratio {cold['wall'] / hot['wall']:.1f}x")
+            print(f"  {_versions(cold['versions'])}")
     print(f"load average {os.getloadavg()[0]:.2f}")
     return 0
 

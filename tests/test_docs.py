@@ -232,7 +232,7 @@ def test_module_docstrings_say_what_the_module_holds_in_15_lines() -> None:
 MAX_MODULE_LINES = 800
 #: Modules allowed over MAX_MODULE_LINES while they are being reworked, and only while they
 #: are over: one that comes under must leave this set (so the allowance cannot go stale).
-OVER_WHILE_REWORKED = {"toolkit/estimation/adaptive.py", "toolkit/estimation/_input.py"}
+OVER_WHILE_REWORKED = {"toolkit/estimation/adaptive.py"}
 
 
 def _lines(path: Path) -> int:

@@ -15,7 +15,8 @@ and the default told the true world (``truth_told``). Derivations: docs/estimati
 from __future__ import annotations
 
 from ._base import EstimationResult, Estimator, chi2_band
-from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
+from ._input import EstimatorModel
+from .contact_speeds import ContactSpeedTracker, contact_speed_estimates
 from ..model.truth import ModelPrior
 from .adaptive import ADAPTING, FALLBACK, NOMINAL, AdaptiveKalman, WheelSpeedBank
 from .identification import LagIdentifier, MissedCountRate, RideCheck

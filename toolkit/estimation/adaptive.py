@@ -32,7 +32,8 @@ from ..model.motors import MotorPiece, unsaturated_response
 from ..model.sensors import EncoderRecord, EncoderSample, play
 from ._base import EstimationResult, Estimator, lost_samples, score
 from ._hold import HoldLayer
-from ._input import ContactSpeedTracker, EstimatorModel
+from ._input import EstimatorModel
+from .contact_speeds import ContactSpeedTracker
 from ..model.truth import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
 from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise

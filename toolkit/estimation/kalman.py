@@ -30,7 +30,8 @@ from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, check_covariance, lost_samples, refuse_gaps, score, warm_record
 from ._hold import HoldLayer
-from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
+from ._input import EstimatorModel
+from .contact_speeds import ContactSpeedTracker, contact_speed_estimates
 from ..model.truth import ModelPrior
 from .adaptive import (ADAPTING, CELL_ALARM, FALLBACK, NOMINAL, AdaptiveKalman, _checked, count_offset,
                        told_missed_rate)

@@ -12,7 +12,7 @@ import pytest
 from toolkit._compiled import kernels
 from toolkit.estimation._hold import REPAIR_AFTER, WheelLines
 from toolkit.estimation._input import EstimatorModel
-from toolkit.estimation.adaptive import NO_LOSS, absorbed_variance
+from toolkit.estimation.missed_counts import NO_LOSS, absorbed_variance
 from toolkit.model.carousel import CAROUSEL
 
 

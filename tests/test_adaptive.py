@@ -90,7 +90,7 @@ def test_the_count_cell_test_is_quiet_in_a_matched_world_and_quick_in_a_wrong_on
     # reading stays far above CELL_ALARM (measured 0.04). A 40 % friction spread: the
     # default leaves the nominal filter within the first 0.16 s on every seed (measured
     # 2-7 samples; the windowed NIS alone took up to 10).
-    from toolkit.estimation.adaptive import CELL_ALARM
+    from toolkit.estimation.kalman import CELL_ALARM
 
     for seed in range(10):
         sc = carousel_brake_scenario(seed=seed, grid_phase=seed)
@@ -252,7 +252,7 @@ def test_count_offset_moments_against_the_sensor_law():
     # truth's z-score against count_offset's position and variance has mean 0 and variance
     # 1 (tolerances: 4 standard errors, 4 / sqrt(400) = 0.2 on the mean, 4 sqrt(2 / 400) =
     # 0.28 on the variance); without the correction the mean z is about -3.
-    from toolkit.estimation.adaptive import count_offset
+    from toolkit.estimation.missed_counts import count_offset
 
     p = 0.03
     sensors = CAROUSEL.sensors(missed_count_prob=p)
@@ -281,7 +281,7 @@ def test_a_rate_known_only_as_a_posterior_adds_the_spread_of_its_mean():
     # std 0.0067) and count_offset is given that law's mean and variance: by the law of total
     # variance the z-scores have mean 0 and variance 1 (same tolerances: 4 standard errors);
     # given the mean alone (variance 0) the variance of z is about 1.4, outside them.
-    from toolkit.estimation.adaptive import count_offset
+    from toolkit.estimation.missed_counts import count_offset
 
     a, mean = 20.0, 0.03
     b = a / mean
@@ -316,7 +316,7 @@ def test_count_offset_leaves_an_offset_that_is_almost_surely_zero(n, shifted):
     # 0.932 for 700 (shifted by n p / (1 - p) counts, variance n p / (1 - p)^2 counts^2; to
     # rounding, rtol 1e-9). A Gamma posterior of the same mean and variance 1e-8 has
     # P(no loss) = (b / (b + n))^a, a = 1, b = 1e4: 0.971 and 0.935, the same verdicts.
-    from toolkit.estimation.adaptive import NO_LOSS, count_offset
+    from toolkit.estimation.missed_counts import NO_LOSS, count_offset
 
     p, q, h = 1e-4, 1e-3, 0.02
     times = np.arange(101) * h
@@ -553,7 +553,7 @@ def test_the_unknown_force_noise_is_the_discrete_white_noise_of_the_excess(scale
     # explained by an acceleration a = 2 excess / h^2 held over the period (at most the
     # largest, F_tot / m: forces and mass at unequal scales), whose noise is a^2 g g^T with g
     # = (h^2 / 2, h). rtol 1e-12: a few roundings of the products.
-    from toolkit.estimation.adaptive import GROSS_NIS, unknown_force_noise
+    from toolkit.estimation.input_noise import GROSS_NIS, unknown_force_noise
 
     q, h, S = 2e-4, 0.05, 1e-9
     forces, mass = np.array([0.6, 1.4, 1.0]) * scale, 2.0 * scale**0.5
@@ -577,7 +577,7 @@ def test_a_commands_timing_is_the_smaller_reach_over_three(scale):
     # ideal motors) and at most a_max h; the variance of a departure uniform on [0, e] about
     # its end is e^2 / 3. Unequal steps; forces and mass at unequal scales move a_max only.
     # rtol 1e-12: a few roundings (exp, products).
-    from toolkit.estimation.adaptive import command_timing_variance
+    from toolkit.estimation.input_noise import command_timing_variance
 
     h, tau = 0.02, 0.0075
     before, after = np.array([0.15, 0.19, 0.25]), np.array([-0.05, -0.1, -0.2])

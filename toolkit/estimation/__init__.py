@@ -15,9 +15,11 @@ and the default told the true world (``truth_told``). Derivations: docs/estimati
 from __future__ import annotations
 
 from ._base import EstimationResult, Estimator, chi2_band
-from ._input import ContactSpeedTracker, EstimatorModel, contact_speed_estimates
+from ._input import EstimatorModel
+from .contact_speeds import ContactSpeedTracker, contact_speed_estimates
 from ..model.truth import ModelPrior
-from .adaptive import ADAPTING, FALLBACK, NOMINAL, AdaptiveKalman, WheelSpeedBank
+from .adaptive import ADAPTING, FALLBACK, NOMINAL, AdaptiveKalman
+from .wheel_bank import WheelSpeedBank
 from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher
 from .alpha_beta import AlphaBetaTracker, kalata_gains

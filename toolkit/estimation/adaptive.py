@@ -10,7 +10,8 @@ motor lag, the missed-count rate and the reading noise identified from the wheel
 ranges and a command's timing within its period as noise of the known input, and a monitor
 that acts: gross innovations widen the filter, a failing window falls back towards the
 window estimate.
-:class:`WheelSpeedBank` gives each contact's speed from its wheel. Derivations:
+Its parts: :mod:`~toolkit.estimation.wheel_bank`, :mod:`~toolkit.estimation.input_noise`,
+:mod:`~toolkit.estimation.missed_counts`, :mod:`~toolkit.estimation.model_cache`. Derivations:
 docs/estimation.md.
 """
 
@@ -28,94 +29,27 @@ from ..errors import as_float
 from ..errors import ParameterTypeError, parameter_message
 from ..model.friction import contact_forces
 from ..laws import cell_centre, lag_response, quantization_variance
-from ..model.motors import MotorPiece, unsaturated_response
-from ..model.sensors import EncoderRecord, EncoderSample, play
+from ..model.motors import MotorPiece
+from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, lost_samples, score
 from ._hold import HoldLayer
-from ._input import ContactSpeedTracker, EstimatorModel
+from ._input import EstimatorModel
+from .contact_speeds import ContactSpeedTracker
+from .input_noise import command_timing_variance, unknown_force_noise
+from .missed_counts import absorbed_variance, told_missed_rate
+from .model_cache import ModelCache
+from .wheel_bank import WheelSpeedBank
 from ..model.truth import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
 from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
 from .window import AdaptiveWindow
 
-__all__ = ["AdaptiveKalman", "WheelSpeedBank", "NOMINAL", "ADAPTING", "FALLBACK"]
+__all__ = ["AdaptiveKalman", "NOMINAL", "ADAPTING", "FALLBACK"]
 
 #: Verdicts of :attr:`KalmanEstimator.verdicts` (per sample): the nominal filter's model
 #: holds; the adaptive filter runs; the adaptive filter's own monitor fails and it falls back
 #: towards the window estimate.
 NOMINAL, ADAPTING, FALLBACK = 0, 1, 2
-#: chi-square(1)'s quantile at 1 - 1e-6: one innovation beyond it is gross, and widens the filter.
-GROSS_NIS = 23.93
-
-
-def unknown_force_noise(innovation: float, variance: float, count: float, period: float,
-                        largest: float) -> np.ndarray | None:
-    """The process noise of ``(X, V)`` that a gross innovation implies, or None.
-
-    The part of the innovation ``y`` beyond one count (a count lost) and the gate
-    ``sqrt(GROSS_NIS S)`` of its predicted spread is what no measurement hypothesis explains:
-    a force the model does not know (a command that reached the motors between two samples,
-    a knock). The acceleration that explains it held over the period, ``a = 2 |y|_excess /
-    h^2``, at most ``largest``, enters as filterpy's discrete white-noise acceleration,
-    ``a^2 [[h^4 / 4, h^3 / 2], [h^3 / 2, h^2]]``.
-
-    Parameters
-    ----------
-    innovation : float, m
-        ``y = z - X-``.
-    variance : float, m^2
-        Its predicted variance ``S`` (prediction and reading).
-    count : float, m
-        The central encoder's count.
-    period : float, s
-        The sample period ``h``.
-    largest : float, m/s^2
-        The largest acceleration the forces can give (friction's all one way, and the
-        outside force's).
-
-    Returns
-    -------
-    ndarray of shape (2, 2) or None
-        None where the innovation is within the gate.
-    """
-    from filterpy.common import Q_discrete_white_noise
-
-    excess = abs(innovation) - count - math.sqrt(GROSS_NIS * variance)
-    if not excess > 0.0:
-        return None
-    accel = min(2.0 * excess / (period * period), largest)
-    return Q_discrete_white_noise(2, dt=period, var=accel * accel)
-
-
-def command_timing_variance(before: np.ndarray, after: np.ndarray, period: float, lag: float,
-                            largest: float) -> float:
-    """The body's speed variance from a command that reached the motors at an unknown time
-    within the period before the sample that records it, (m/s)^2.
-
-    A record carries the command from the first sample after it was sent; the motors may have
-    taken it anywhere in the period before (a command between samples, serial latency).
-    Over that unseen time, uniform on ``[0, h]``, the body's speed departs from the old
-    command's flow by at most the contacts' change, ``max_i |u_i - u_i'| (1 - exp(-h /
-    tau))`` (the motor law over a period, :func:`~toolkit.laws.lag_response`; the
-    whole step for ideal motors), and by at most
-    what the largest force gives over the period, ``a_max h``: the smaller, ``e``, as the
-    largest of a departure that grows with the unseen time, uniform on ``[0, e]``, whose
-    second moment is ``e^2 / 3``.
-
-    Parameters
-    ----------
-    before, after : ndarray of shape (n,), m/s
-        The commands before and after the change.
-    period : float, s
-    lag : float, s
-        The motors' lag (0: ideal motors).
-    largest : float, m/s^2
-        The largest acceleration the forces can give.
-    """
-    before, after = np.asarray(before, dtype=float), np.asarray(after, dtype=float)
-    moved = lag_response(after, before, period, lag) if lag > 0.0 else after
-    reach = min(float(np.max(np.abs(moved - before), initial=0.0)), largest * period)
-    return reach * reach / 3.0
 
 
 def _checked(model: Any, prior: Any, owner: str) -> tuple[EstimatorModel, ModelPrior]:
@@ -127,152 +61,6 @@ def _checked(model: Any, prior: Any, owner: str) -> tuple[EstimatorModel, ModelP
     if not isinstance(prior, ModelPrior):
         raise ParameterTypeError(parameter_message("prior", owner, "be a ModelPrior or None", prior))
     return model, prior
-
-
-class WheelSpeedBank:
-    """Each contact's speed from its wheel's counts, through command changes and reversals.
-
-    The motor law (:class:`~toolkit.model.motors.MotorPiece` at the identified lag) carries
-    each contact's *nominal* speed ``n_i`` under the commands sent; the contact runs at ``n_i +
-    o_i``, its offset ``o_i`` the motor's wander about its command (a random walk) and the
-    error of the start. Per wheel and per hypothesis of the wander's intensity
-    (:data:`DRIFTS`) a Kalman filter of ``(x_i, o_i)`` (the encoder's position and the
-    offset): over a period the encoder moves by the law's displacement plus ``h o_i``, except
-    while the gearbox play is being taken up (after a reversal, or a start from rest: the
-    encoder stands still until the contact has travelled the play, the sensor law's play
-    operator). The hypotheses are weighted by the likelihood of all wheels' readings (the
-    wander is the motors', shared), with a fading memory :data:`FORGET`; each reading's noise
-    is what its wheel's window residuals show (:attr:`ContactSpeedTracker.reading_variance`);
-    the law's own error adds :data:`LAW_ERROR` of each speed change it predicts. The
-    arithmetic is compiled: :func:`toolkit._compiled.imm.bank_push` (one call per sample
-    while every play stays loaded), else :func:`~toolkit._compiled.imm.bank_step` after the
-    play operator.
-    """
-
-    #: Hypotheses of the wander's intensity, m/s per sqrt(s).
-    DRIFTS = (0.0, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3)
-    #: Fading memory of the hypotheses' log-likelihoods per sample (about 100 samples).
-    FORGET = 0.99
-    #: Relative error of the speed change the motor law predicts over a period (its std).
-    LAW_ERROR = 0.3
-
-    def __init__(self, model: EstimatorModel) -> None:
-        self.n = model.n
-        self.h = model.sensors.period
-        self.q = model.sensors.wheel.distance_per_count
-        self.play = model.sensors.backlash
-        self._substeps, self._h_all, self._Q = self._over(self.h)
-        self._drifts = np.array(self.DRIFTS)
-        self._log_weights = np.zeros(len(self.DRIFTS))
-        self._drift = float(np.mean(self._drifts))
-        self._x: np.ndarray | None = None
-        self._P = np.zeros((len(self.DRIFTS), self.n, 3))
-        self._nominal = np.zeros(self.n)          # the law's speeds, m/s
-        self._y = np.zeros(self.n)                # the encoders' side of the play, m
-        self._loaded = np.zeros(self.n)
-
-    def _over(self, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Over a time ``h`` (s): the sub-steps at which the contact's path meets the play
-        operator, ``h`` per wheel, and each hypothesis's process noise of ``(x, o)``."""
-        Q = np.array([[d * d * h ** 3 / 3.0, d * d * h * h / 2.0, d * d * h] for d in self.DRIFTS])
-        return h * np.arange(1, 9) / 8.0, np.full(self.n, h), Q
-
-    @property
-    def weights(self) -> np.ndarray:
-        """The hypotheses' posterior weights."""
-        w = np.exp(self._log_weights - self._log_weights.max())
-        return w / w.sum()
-
-    @property
-    def drift(self) -> float:
-        """The weighted mean of the wander's intensity, m/s per sqrt(s)."""
-        return self._drift
-
-    def start(self, wheels: np.ndarray, speeds: np.ndarray, variance: np.ndarray) -> None:
-        """The first readings and the contacts' speeds then (m/s) with their variances; the
-        play as the sensor law starts it (loaded behind a moving contact, centred at rest)."""
-        q, H = self.q, len(self.DRIFTS)
-        self._nominal = np.array(speeds, dtype=float)
-        self._y = cell_centre(np.asarray(wheels, dtype=float), q)          # the encoder side, m
-        self._x = np.zeros((H, self.n, 2))
-        self._x[:, :, 0] = self._y + np.sign(self._nominal) * 0.5 * self.play
-        self._P[:] = 0.0
-        self._P[:, :, 0] = quantization_variance(q)
-        self._P[:, :, 2] = variance
-
-    def restart(self, which: np.ndarray, wheels: np.ndarray, speeds: np.ndarray, variance: np.ndarray) -> None:
-        """Restart the filters of the wheels ``which`` (bool, (n,)) from their readings and
-        window estimates (a large transient has ended: see :class:`AdaptiveKalman`)."""
-        if not which.any():
-            return
-        q = self.q
-        y = cell_centre(np.asarray(wheels, dtype=float), q)
-        self._nominal = np.where(which, speeds, self._nominal)
-        self._y = np.where(which, y, self._y)
-        self._x[:, which, 0] = (y + np.sign(speeds) * 0.5 * self.play)[which]
-        self._x[:, which, 1] = 0.0
-        self._P[:, which, 0] = quantization_variance(q)
-        self._P[:, which, 1] = 0.0
-        self._P[:, which, 2] = np.broadcast_to(variance, (self.n,))[which]
-
-    def push(self, wheels: np.ndarray, command: np.ndarray, lag: float, noise: np.ndarray, periods: int = 1
-             ) -> tuple[np.ndarray, np.ndarray]:
-        """The readings at the end of ``periods`` periods (the samples between were lost)
-        over which ``command`` (m/s, clipped) was held, with the motors' ``lag`` (s) and each
-        reading's noise variance (m^2); the contacts' speeds (m/s) and their variances
-        ((m/s)^2) at the readings."""
-        h = periods * self.h
-        s, h_all, Q = (self._substeps, self._h_all, self._Q) if periods == 1 else self._over(h)
-        u = np.asarray(command, dtype=float)
-        start = self._nominal
-        if lag > 0.0 and start.tolist() != u.tolist():            # (lists: cheaper on a few contacts)
-            piece = MotorPiece.build(0.0, start, u, lag, math.inf)
-            moved = piece.displacement(s[:, None])                     # (substeps, n)
-            end = piece.speeds_at(h)
-            cx = moved[-1]
-        else:
-            # Settled motors hold the command; ideal ones take it at once (the motor law
-            # without a lag).
-            end = unsaturated_response(start, u, h, 0.0, math.inf)
-            moved = None                                               # (s[:, None] * end)
-            cx = h * end                                               # (s[-1] = h exactly)
-        self._nominal = end
-        # The encoder sees the contact through the play (the sensor law's play operator) along
-        # the most likely path over the period: where it ends engaged it reads the contact
-        # shifted by the play's half width; where it stands in the play it reads nothing new.
-        # Engaged behind a contact that keeps moving the same way over the whole period: the
-        # play stays loaded (the operator's fixed point); where every wheel's does, one kernel
-        # call; else only the others walk its path.
-        K = kernels("imm", 20 * Q.shape[0] * self.n)
-        noise = np.asarray(noise, dtype=float)
-        wheels = np.asarray(wheels)
-        shift, loaded, speeds, var = np.empty(self.n), self._loaded, np.empty(self.n), np.empty(self.n)
-        drift = K.bank_push(self._x, self._P, Q, start, end, cx, h_all, self.LAW_ERROR, self._y,
-                            wheels, self.q, noise, self._log_weights, self.FORGET, 0.5 * self.play, self._drifts,
-                            shift, loaded, speeds, var)
-        if drift >= 0.0:
-            self._drift = drift
-            return speeds, var
-        z = cell_centre(np.asarray(wheels, dtype=float), self.q)
-        if moved is None:
-            moved = s[:, None] * end
-        best = int(np.argmax(self._log_weights))
-        x, ob = self._x[best, :, 0], self._x[best, :, 1]          # (views: updated below)
-        half = 0.5 * self.play
-        seen = loaded.copy()
-        walk = loaded == 0.0
-        path = x[walk] + moved[:, walk] + s[:, None] * ob[walk]
-        y = play(path, self.play, self._y[walk])[-1]
-        shift[walk] = y - path[-1]
-        seen[walk] = np.abs(np.abs(shift[walk]) - half) <= 1e-9 * max(half, 1e-12)
-        law_error = (self.LAW_ERROR * (end - start)) ** 2
-        K.bank_step(self._x, self._P, Q, cx, h_all, law_error, shift, seen, z, noise,
-                    self._log_weights, self.FORGET)
-        self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift,
-                           np.where(loaded > 0.0, self._y, x + moved[-1] + h * ob + shift))
-        o = np.empty(self.n)
-        self._drift = K.bank_moments(self._x, self._P, self._log_weights, self._drifts, o, var)
-        return end + o, var
 
 
 class AdaptiveKalman(Estimator):
@@ -316,11 +104,6 @@ class AdaptiveKalman(Estimator):
     #: A command step (m/s) beyond which, with the lag not yet identified, the contact's
     #: transient is taken from the windows rather than the motor law (:meth:`commanded`).
     LARGE_STEP = 0.02
-    #: Relative move of an estimated friction magnitude that rebuilds the flow's model (below
-    #: it the sensitivities carry the change, linearly).
-    REBUILD = 1e-2
-    #: Models at estimated magnitudes kept for reuse (:meth:`_model_at`).
-    MODELS = 4
 
     def __init__(self, model: EstimatorModel, prior: ModelPrior | None = None, *,
                  forgetting: float = 1e-4, switching: float = 0.02, reference: bool = False) -> None:
@@ -369,40 +152,9 @@ class AdaptiveKalman(Estimator):
 
     def _model_at(self, theta: np.ndarray) -> EstimatorModel:
         """The model at the estimated magnitudes ``f (1 + e)``, the identified lag and the
-        motors' wander: the nearest of the last :attr:`MODELS` built ones whose magnitudes lie
-        within :attr:`REBUILD` relative (the rest is the linear correction), brought to this
-        lag and wander where they differ (by more than a factor 1.5 for the wander); else one
-        rebuilt here, in place of the oldest. Its magnitudes' errors are :attr:`_built` (the
-        free mode's mixed estimates may cycle among a few values: a quantized reading's
-        pattern repeats)."""
-        e = theta[:self.n]
-        drift = max(self._bank.drift, self.model.contact_drift)
-        lag = self.lag
-        gap = np.abs(self._built_e - e).max(axis=1)
-        i = int(gap.argmin())
-        if not gap[i] <= self.REBUILD:                 # (NaN: built, and refused by name)
-            i = self._oldest
-            self._oldest = (i + 1) % self.MODELS
-            m = self.model
-            forces = m.forces * np.maximum(1.0 + e, 1e-3)
-            last = self._models[self._newest]
-            if last is None:
-                hat = EstimatorModel(forces, m.mass, m.sensors, motor_lag=lag, damping=m.damping,
-                                     max_window=m.max_window, speed_limits=m.speed_limits, contact_drift=drift)
-            else:
-                hat = last.adjusted(forces, lag, drift)
-            self._built_e[i] = e
-        elif lag != self._built_lag[i] or not self._built_drift[i] / 1.5 <= drift <= 1.5 * self._built_drift[i]:
-            hat = self._models[i].adjusted(self._models[i].forces, lag, drift)
-        else:
-            self._built = self._built_e[i]
-            return self._models[i]
-        self._models[i] = hat
-        self._newest = i
-        self._built_drift[i] = max(drift, 1e-12)
-        self._built_lag[i] = lag
-        self._built = self._built_e[i]
-        return hat
+        motors' wander (:class:`~toolkit.estimation.model_cache.ModelCache`); its magnitudes'
+        errors are ``self._cache.built``."""
+        return self._cache.at(theta[:self.n], self.lag, max(self._bank.drift, self.model.contact_drift))
 
     @property
     def lag(self) -> float:
@@ -471,14 +223,7 @@ class AdaptiveKalman(Estimator):
         self._means, self._rows0, self._rows1 = np.empty((3, d)), np.empty((3, d)), np.empty((3, d))
         self._noises, self._nis = np.empty((3, 2, 2)), np.empty(3)
         self._noise_models = np.empty(4)
-        # The models built at estimated magnitudes (_model_at): their magnitudes' errors (inf:
-        # none yet), wander, lag; the next to replace and the last built.
-        self._models: list[EstimatorModel | None] = [None] * self.MODELS
-        self._built_e = np.full((self.MODELS, n), np.inf)
-        self._built_drift = [1e-12] * self.MODELS
-        self._built_lag = [self.model.motor_lag] * self.MODELS
-        self._built = self._built_e[0]
-        self._oldest = self._newest = 0
+        self._cache = ModelCache(self.model)       # the models built at estimated magnitudes
         self._gains = np.zeros((2, n + 1))
         self._stuck_on: int | None = None
         self._mu_prev = self.mu
@@ -556,7 +301,7 @@ class AdaptiveKalman(Estimator):
             return
         hat = self._model_at(theta)
         delta = theta.copy()
-        delta[:n] -= self._built                       # what the built model does not hold yet
+        delta[:n] -= self._cache.built                 # what the built model does not hold yet
         gains = self._gains
         var_v = float(var[int(np.abs(track[0] - V).argmin())])
         dx, dV, Q, slopes, _, on_set = hat.increment(V, track, math.sqrt(var_v), math.sqrt(max(P[1, 1], 0.0)),
@@ -1033,130 +778,3 @@ class AdaptiveKalman(Estimator):
         self.fallbacks = fallback
         wall = budget_clock() - started
         return score(record, self.name, X[:, 1], P[:, 1, 1], wall, position=X[:, 0], covariance=P)
-
-
-#: The nominal filter fails a sample whose count cell has less than this probability under
-#: its prediction (the quantized likelihood; over 40 ideal records its smallest value was
-#: 0.04, under a 20 % friction spread it falls below 1e-6 from the third sample on).
-CELL_ALARM = 1e-6
-
-
-#: :func:`count_offset` reports the counts' position unchanged where no count was lost with
-#: at least this probability (the level of the NEES band, :func:`~toolkit.estimation._base.nees_band`).
-NO_LOSS = 0.95
-_LOG_NO_LOSS = math.log(NO_LOSS)
-
-
-def told_missed_rate(model: EstimatorModel, prior: ModelPrior) -> float:
-    """The missed-count rate the estimator is told (per transition): the prior's or the
-    scene's declared sensors', the larger; 0 when neither tells one."""
-    return max(prior.missed_count_prob, model.sensors.missed_count_prob)
-
-
-def log_no_loss(missed_count_prob: float, missed_count_var: float, transitions: float) -> float:
-    """The log-probability that none of ``transitions`` count transitions was lost (docs/physics.md
-    section 10): ``n log(1 - p)`` for a known rate ``p``; the Gamma-Poisson predictive
-    ``a log(b / (b + n))`` for a posterior of mean ``p`` and variance ``s^2 > 0`` (``a = p^2 /
-    s^2``, ``b = p / s^2``). 0 for ``p <= 0`` or ``n <= 0``."""
-    p, var, n = missed_count_prob, missed_count_var, transitions
-    if not (p > 0.0 and n > 0.0):
-        return 0.0
-    return -(p * p / var) * math.log1p(n * var / p) if var > 0.0 else n * math.log1p(-p)
-
-
-def absorbed_variance(missed_count_prob: float, missed_count_var: float, unseen: float,
-                      distance_per_count: float, span: float) -> float:
-    """The speed variance an exact line gains from a missed count it absorbed (docs/physics.md
-    section 10): a loss among the ``unseen`` transitions its window read where a lost one would
-    not have been repaired leaves the line's later readings one count low, a speed bias of one
-    count over the line's ``span``, ``q / T``. It happened with probability ``1 - (1 - p)^n``
-    (a known rate; the Gamma-Poisson predictive ``1 - (b / (b + n))^a`` for a posterior of mean
-    ``p`` and variance ``s^2``, ``a = p^2 / s^2``, ``b = p / s^2``), so the line's speed is
-    off by ``q / T`` with that probability: its variance about the line gains that
-    probability times ``(q / T)^2``. 0 where no loss happened with probability at least
-    :data:`NO_LOSS` (as in :func:`count_offset`: a bias that is almost surely 0), or where
-    ``T <= 0`` or ``p <= 0``.
-
-    Parameters
-    ----------
-    missed_count_prob : float
-        The rate ``p`` (per transition).
-    missed_count_var : float
-        Its variance (0: known).
-    unseen : float
-        Transitions read where a loss would have been absorbed (counts).
-    distance_per_count : float, m
-    span : float, s
-        The line's time span.
-
-    Returns
-    -------
-    float, (m/s)^2
-    """
-    p, var = missed_count_prob, missed_count_var
-    if not (p > 0.0 and span > 0.0 and unseen > 0.0):
-        return 0.0
-    log_none = log_no_loss(p, var, unseen)
-    if log_none >= _LOG_NO_LOSS:
-        return 0.0
-    bias = distance_per_count / span
-    return -math.expm1(log_none) * bias * bias
-
-
-def count_offset(times: np.ndarray, position: np.ndarray, covariance: np.ndarray, speed: np.ndarray,
-                 missed_count_prob: Any, distance_per_count: float, missed_count_var: Any = 0.0,
-                 seen: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The body's position from the counts' position under missed counts (docs/physics.md
-    section 10): each count transition is lost with probability ``p``, shifting the count
-    against the motion for good, so the counts' position is off the truth by an offset ``b``
-    no central reading can see. Given ``n`` counts read while moving, the transitions lost
-    number negative-binomially, mean ``n p / (1 - p)``, variance ``n p / (1 - p)^2``; ``n``
-    is taken from the estimated speed (distance / ``q``, not the counts, which read noise
-    would inflate). ``b`` is unobservable and independent of the filter's errors, so the
-    position is shifted by its mean and its variance added to ``P[0, 0]``. A rate known only
-    as a posterior (mean ``p``, variance ``s^2``: :class:`~toolkit.estimation.MissedCountRate`)
-    adds the spread of the offset's mean, ``(N_signed q)^2 s^2 / (1 - p)^4`` (the law of total
-    variance, the mean's slope in ``p`` being ``1 / (1 - p)^2``). Counts crossed into a
-    sample where a lost one would have been seen and repaired (an exact hold's: ``seen``) add
-    nothing. ``b`` is a whole number of counts: where it is 0 with probability at least
-    :data:`NO_LOSS` (its credible set at the NEES band's level is {0}) the position is the
-    counts' (a Gaussian of variance ``n p`` would misstate an error that is almost surely 0).
-
-    Parameters
-    ----------
-    times : ndarray of shape (k,), s
-    position : ndarray of shape (k,), m
-        The filter's position (what the counts tell).
-    covariance : ndarray of shape (k, 2, 2)
-        Of ``(X, V)``.
-    speed : ndarray of shape (k,), m/s
-    missed_count_prob : float or ndarray of shape (k,)
-        The rate (per sample: what was known of it then).
-    distance_per_count : float, m
-    missed_count_var : float or ndarray of shape (k,)
-        The rate's variance (0: known).
-    seen : ndarray of shape (k,) of bool, optional
-        Samples whose losses were repaired (default: none).
-
-    Returns
-    -------
-    position : ndarray of shape (k,), m
-    covariance : ndarray of shape (k, 2, 2)
-    """
-    p, q = missed_count_prob, distance_per_count
-    steps = 0.5 * (speed[1:] + speed[:-1]) * np.diff(times) / q          # counts crossed (signed)
-    if seen is not None:
-        steps = np.where(seen[1:], 0.0, steps)
-    signed = np.concatenate(([0.0], np.cumsum(steps)))
-    crossed = np.concatenate(([0.0], np.cumsum(np.abs(steps))))
-    var = missed_count_var
-    # The chance that no count was lost by each sample (log_no_loss, per sample's rate).
-    p_arr, var_arr, n_arr = np.broadcast_arrays(np.asarray(p, dtype=float), np.asarray(var, dtype=float), crossed)
-    log_none = np.fromiter(map(log_no_loss, p_arr.tolist(), var_arr.tolist(), n_arr.tolist()),
-                           dtype=float, count=n_arr.size)
-    lost = log_none < _LOG_NO_LOSS
-    P = np.array(covariance, dtype=float)
-    P[:, 0, 0] += np.where(lost, crossed * p / (1.0 - p) ** 2 * q * q, 0.0)
-    if np.any(var_arr > 0.0):
-        P[:, 0, 0] += np.where(lost, (signed * q) ** 2 * var / (1.0 - p) ** 4, 0.0)
-    return position + np.where(lost, signed * p / (1.0 - p) * q, 0.0), P

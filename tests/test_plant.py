@@ -48,6 +48,13 @@ def test_piecewise_constant_without_switches():
      "be 2-dimensional. Got 'an array of shape (2, 1, 1)' instead."),
     ([1.0], [0, np.nan], ParameterError, "values", "be finite (no NaN or inf). Got nan instead."),
     ([1.0], "ab", ParameterTypeError, "values", "be an array of numbers. Got 'ab' instead."),
+    # Ragged rows: refused by the toolkit's template, not by numpy's conversion error.
+    ([1.0], [[0, 1], [2]], ParameterError, "values",
+     "be a rectangular array (nested sequences of equal lengths). Got [[0, 1], [2]] instead."),
+    ([1.0], [0.5, [1, 2]], ParameterError, "values",
+     "be a rectangular array (nested sequences of equal lengths). Got [0.5, [1, 2]] instead."),
+    ([[1.0], 2.0], [0, 1, 2], ParameterError, "times",
+     "be a rectangular array (nested sequences of equal lengths). Got [[1.0], 2.0] instead."),
 ])
 def test_piecewise_refuses_bad_input(times, values, error, name, rule):
     """Each refusal names the parameter, the owner, the rule and the value, whole (mutants:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 
 import numpy as np
@@ -542,3 +543,267 @@ def test_compliant_tie_tolerance_brackets_the_net_force(scale, excess, band):
     x, at_x, first, _, _ = compliant_breakpoints(speeds, forces, k)
     assert x.size == 4 and list(first) == [0, 0, 1, 1]
     assert at_x[1] == (0.0 if band else d * scale)
+
+
+# -- the motor law solved: MotorPiece, reach, implicit_step, clip on casadi -----------------
+def _lag_ode(motors, start, command, s_end):
+    """Second method: motor_rate integrated by an adaptive Runge-Kutta (rtol 1e-12)."""
+    from scipy.integrate import solve_ivp
+
+    from toolkit.model import motor_rate
+
+    sol = solve_ivp(lambda t, v: motor_rate(motors, command, v), (0.0, s_end), start, method="DOP853",
+                    rtol=1e-12, atol=1e-14, dense_output=True, max_step=motors.lag / 8 if motors.lag else np.inf)
+    return sol.sol
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -20, 1.0, 2.0 ** 20])
+def test_motor_piece_ramps_then_settles_per_contact(scale):
+    """Lag 1/4 s and rate limit 2 m/s^2 (r tau = 1/2 m/s), unequal gaps u - v0 of (1.5, -1,
+    1/4, 1/2) m/s (times ``scale``, with the rate: every number scales by a power of two,
+    exactly): the first two ramp for (|gap| - r tau) / r = 1/2 and 1/4 s and end at u -+ r tau;
+    the third is inside the lag's reach; the fourth sits exactly on it (no ramp: ``>``, not
+    ``>=``). Exact at the ramp's end (dyadic), the lag's closed form after it (4 eps), and
+    the law integrated by Runge-Kutta (1e-9: its tolerance) in between; the displacement is
+    the quadrature of the speeds (1e-12 relative: Gauss-Kronrod on smooth pieces)."""
+    from scipy.integrate import quad
+
+    from toolkit.model import MotorPiece
+
+    tau, r = 0.25, 2.0 * scale
+    v0 = np.array([0.0, 0.5, -0.25, 0.125]) * scale
+    u = v0 + np.array([1.5, -1.0, 0.25, 0.5]) * scale
+    piece = MotorPiece.build(0.5, v0, u, tau, r)
+    np.testing.assert_array_equal(piece.ramp, np.array([2.0, -2.0, 0.0, 0.0]) * scale)
+    np.testing.assert_array_equal(piece.ramp_end, [0.5, 0.25, 0.0, 0.0])
+    np.testing.assert_array_equal(piece.after, np.array([1.0, 0.0, -0.25, 0.125]) * scale)
+    assert piece.a == 0.5
+    ramps = piece.speeds(np.array([0.125, 0.25, 0.5]))
+    np.testing.assert_array_equal(ramps[:, 0], np.array([0.25, 0.5, 1.0]) * scale)
+    np.testing.assert_array_equal(ramps[:2, 1], np.array([0.25, 0.0]) * scale)
+    s = np.array([0.0, 0.0625, 0.3, 0.5, 0.75, 1.5])
+    expect = np.where(s[:, None] < piece.ramp_end, v0 + piece.ramp * s[:, None],
+                      u + (piece.after - u) * np.exp(-(s[:, None] - piece.ramp_end) / tau))
+    np.testing.assert_allclose(piece.speeds(s), expect, rtol=4 * np.finfo(float).eps, atol=0)
+    ode = _lag_ode(Motors(lag=tau, rate_limit=r), v0, u, 1.5)
+    np.testing.assert_allclose(piece.speeds(s), ode(s).T, rtol=0, atol=1e-9 * scale)
+    for t in s:
+        np.testing.assert_array_equal(piece.speeds_at(float(t)), piece.speeds(np.array([t]))[0])
+        for i in range(4):
+            area = quad(lambda x: piece.speeds(np.array([x]))[0, i], 0.0, t, points=[0.25, 0.5], epsabs=0,
+                        epsrel=1e-13)[0] if t > 0 else 0.0
+            assert piece.displacement(float(t))[i] == pytest.approx(area, rel=1e-12, abs=1e-15 * scale)
+    # Coefficients: v(s + x) = v0 + q x + e ..., the next phase change the first ramp end ahead.
+    v, q, e, nxt = piece.coefficients(0.125)
+    np.testing.assert_array_equal(q, [2.0 * scale, -2.0 * scale, 0.0, 0.0])
+    np.testing.assert_array_equal(e, [0.0, 0.0, *((u - v)[2:] / tau)])
+    assert nxt == 0.25
+    v, q, e, nxt = piece.coefficients(0.375)
+    np.testing.assert_array_equal(q, [2.0 * scale, 0.0, 0.0, 0.0])
+    assert nxt == 0.5 and e[0] == 0.0 and e[1] == (u[1] - v[1]) / tau
+    v, q, e, nxt = piece.coefficients(0.75)
+    np.testing.assert_array_equal(q, np.zeros(4))
+    np.testing.assert_array_equal(e, (u - v) / tau)
+    assert nxt == math.inf
+
+
+def test_motor_piece_without_lag_ramps_and_holds_and_without_rate_limit_decays():
+    from toolkit.model import MotorPiece
+
+    v0, u = np.array([0.0, 0.5]), np.array([1.0, -0.25])
+    ramp = MotorPiece.build(0.0, v0, u, 0.0, 4.0)      # ramps of 1/4 and 3/16 s at 4 m/s^2
+    np.testing.assert_array_equal(ramp.ramp_end, [0.25, 0.1875])
+    np.testing.assert_array_equal(ramp.after, u)
+    np.testing.assert_array_equal(ramp.speeds(np.array([0.125, 0.1875, 1.0])), [[0.5, 0.0], [0.75, -0.25], u])
+    np.testing.assert_array_equal(ramp.speeds_at(1.0), u)
+    # Displacement: v0 x + 4 x^2 / 2 on the ramp, then u times the rest (dyadic: exact).
+    np.testing.assert_array_equal(ramp.displacement(1.0), [0.125 + 0.75, 0.5 * 0.1875 - 2 * 0.1875 ** 2 - 0.25 * 0.8125])
+    v, q, e, nxt = ramp.coefficients(0.5)
+    np.testing.assert_array_equal(e, [0.0, 0.0])
+    assert nxt == math.inf and not q.any()
+    v, q, e, nxt = ramp.coefficients(0.0)
+    np.testing.assert_array_equal(q, [4.0, -4.0])
+    np.testing.assert_array_equal(e, [0.0, 0.0])
+    assert nxt == 0.1875
+    tau = 0.125
+    lag = MotorPiece.build(0.0, v0, u, tau, math.inf)
+    assert not lag.ramp.any() and not lag.ramp_end.any()
+    np.testing.assert_array_equal(lag.after, v0)
+    np.testing.assert_allclose(lag.speeds(np.array([tau])), [u + (v0 - u) / np.e], rtol=4 * np.finfo(float).eps)
+    # u s + (v0 - u) tau (1 - e^-s/tau) at s = tau (4 eps of the terms).
+    np.testing.assert_allclose(lag.displacement(tau), u * tau + (v0 - u) * tau * (1 - 1 / np.e),
+                               rtol=8 * np.finfo(float).eps)
+
+
+@pytest.mark.parametrize("tau, rate", [(0.0, math.inf), (0.0, 2.0), (0.25, math.inf), (0.25, 2.0)])
+def test_reach_bounds_every_command_and_is_met_by_the_limit(tau, rate):
+    """``reach`` is the motor law driven at the limit: equal to the law's own solution with the
+    limit as the command (MotorPiece: 4 eps; Runge-Kutta: its 1e-9) from unequal starts below
+    it, and no other command between the limits gets farther (checked on two)."""
+    from toolkit.model import MotorPiece
+    from toolkit.model.motors import reach
+
+    v = np.array([-0.5, 0.0, 0.25, 0.625])
+    limit = 0.75
+    s = np.array([0.0, 0.0625, 0.125, 0.3, 0.5, 1.0])
+    got = reach(tau, rate, v, limit, s)
+    def law(command):                                  # ideal motors jump to the command
+        if tau == 0 and rate == math.inf:
+            return np.full((s.size, 4), command)
+        return MotorPiece.build(0.0, v, np.full(4, command), tau, rate).speeds(s)
+
+    np.testing.assert_allclose(got, law(limit), rtol=4 * np.finfo(float).eps, atol=1e-16)
+    if tau > 0:
+        ode = _lag_ode(Motors(lag=tau, rate_limit=rate), v, np.full(4, limit), 1.0)
+        np.testing.assert_allclose(got, ode(s).T, rtol=0, atol=1e-9)
+    for other in (0.5, -0.75):
+        slower = law(other)
+        assert np.all(got >= slower - 1e-15)
+    if tau == 0 and rate == 2.0:
+        np.testing.assert_array_equal(got[2], [-0.25, 0.25, 0.5, 0.75])     # 2 x 1/8 = 1/4 up, to the limit
+
+
+def test_implicit_step_solves_the_backward_euler_equation():
+    """``v+ = v + h clip((u - v+) / tau, -r, r)``: the step's result put back in the defining
+    equation (2 eps: one division and one product), per contact with unequal gaps, some on the
+    rate limit; without a lag, a ramp of at most ``r h`` to the command (dyadic: exact)."""
+    from toolkit.model.motors import implicit_step
+
+    v = np.array([0.0, 0.5, -0.25, 0.125])
+    u = np.array([1.0, -0.5, -0.125, 0.125])
+    h = 0.125
+    for motors in (Motors(lag=0.375, rate_limit=2.0), Motors(lag=0.375), Motors(lag=0.125, rate_limit=1.0)):
+        nxt = implicit_step(motors, v, u, h)
+        pull = (u - nxt) / motors.lag
+        np.testing.assert_allclose(nxt, v + h * np.clip(pull, -motors.rate_limit, motors.rate_limit),
+                                   rtol=2 * np.finfo(float).eps, atol=1e-17)
+    # Lag 1/8 = h: w = (v + u) / 2; rate 2: at most 1/4 per step (dyadic: exact).
+    np.testing.assert_array_equal(implicit_step(Motors(lag=0.125, rate_limit=2.0), v, u, h),
+                                  [0.25, 0.25, -0.1875, 0.125])
+    np.testing.assert_array_equal(implicit_step(Motors(rate_limit=2.0), v, u, h), [0.25, 0.25, -0.125, 0.125])
+    np.testing.assert_array_equal(implicit_step(Motors(), v, u, h), u)
+
+
+def test_motor_clip_on_casadi_is_numpys_clip():
+    import casadi
+
+    x = np.array([-1.0, -0.25, 0.0, 0.5, 2.0])
+    for limits in ((-0.5, 0.75), (-math.inf, 0.75), (-0.5, math.inf), (-math.inf, math.inf)):
+        motors = Motors(speed_limits=limits)
+        s = casadi.SX.sym("s", x.size)
+        built = casadi.Function("f", [s], [motors.clip(s, casadi)])
+        np.testing.assert_array_equal(np.array(built(x)).ravel(), np.clip(x, *limits))
+        np.testing.assert_array_equal(motors.clip(x, None), np.clip(x, *limits))
+
+
+def test_motor_rate_on_casadi_is_numpys():
+    import casadi
+
+    from toolkit.model import motor_rate
+
+    u, v = np.array([1.0, -1.0, 0.25, 0.0]), np.array([0.0, 0.0, 0.0, 0.5])
+    s = casadi.SX.sym("v", 4)
+    for motors in (None, Motors(), Motors(lag=0.5), Motors(lag=0.5, rate_limit=1.5), Motors(rate_limit=3.0)):
+        built = casadi.Function("f", [s], [casadi.vertcat(motor_rate(motors, u, s, casadi))])
+        np.testing.assert_array_equal(np.array(built(v)).ravel(), motor_rate(motors, u, v))
+    assert Motors(lag=0.5, speed_limits=(-1.0, 1.0)).speed_limits == (-1.0, 1.0)
+
+
+def test_lag_settling_time_is_bracketed_at_the_travel():
+    from toolkit.model import lag_settling_time
+
+    # remaining gap tau = 0.5 x 0.25 = 1/8 m: equal to the travel is already settled (0), twice
+    # the travel takes tau ln 2 (the remaining travel halves after tau ln 2).
+    assert lag_settling_time(0.5, 0.25, 0.125) == 0.0
+    assert lag_settling_time(0.5, 0.25, 0.0625) == pytest.approx(0.25 * math.log(2.0), rel=2 * np.finfo(float).eps)
+    assert lag_settling_time(0.5, 0.25, 0.125 * (1 - 2 ** -40)) > 0.0
+
+
+def test_motors_keep_floats_and_bracket_the_lag_and_limits():
+    """Integers given are kept as Python floats (speed limits as a tuple of floats); the lag's
+    rate 1 / lag must be finite: 1e-308 (rate 1e308) is taken, 5e-324 refused in full; equal
+    speed limits are a valid (fixed) speed; each limit is named when it is not a number."""
+    motors = Motors(lag=1, rate_limit=2, speed_limits=[-1, np.float32(1)], compliance=1, backlash=1)
+    for name in ("lag", "rate_limit", "compliance", "backlash"):
+        assert type(getattr(motors, name)) is float, name
+    assert motors.speed_limits == (-1.0, 1.0) and type(motors.speed_limits) is tuple
+    assert all(type(v) is float for v in motors.speed_limits)
+    assert Motors(lag=1e-308).lag == 1e-308
+    assert Motors(speed_limits=(0.5, 0.5)).speed_limits == (0.5, 0.5)
+    for call, error, message in (
+            (lambda: Motors(lag=5e-324), ParameterError,
+             "The 'lag' parameter of Motors must be 0 or have a finite rate 1 / lag. Got 5e-324 instead."),
+            (lambda: Motors(speed_limits=("a", 1.0)), ParameterTypeError,
+             "The 'speed_limits' parameter of Motors must be a real number. Got 'a' instead."),
+            (lambda: Motors(speed_limits=(-1.0, np.nan)), ParameterError,
+             "The 'speed_limits' parameter of Motors must be finite. Got nan instead.")):
+        with pytest.raises(error) as info:
+            call()
+        assert str(info.value) == message
+
+
+def test_ideal_motor_rates_are_float_zeros_of_the_speeds_shape():
+    """Ideal motors: zero rates, one per contact, as floats whatever the speeds were given as
+    (a list, integers, NaN from a failed estimate: still no motion); the ideal response is the
+    command from the first instant (s = 0 included)."""
+    from toolkit.model import motor_rate, unsaturated_response
+
+    for speeds in ([0.1, 0.2, 0.3], np.array([1, 2, 3]), np.array([np.nan, 0.0, 1.0])):
+        for motors in (None, Motors(compliance=0.5)):
+            rate = motor_rate(motors, np.zeros(3), speeds)
+            assert rate.shape == (3,) and rate.dtype == np.float64
+            np.testing.assert_array_equal(rate, np.zeros(3))
+    u, v = np.array([0.5, -0.25]), np.array([0.0, 0.125])
+    np.testing.assert_array_equal(unsaturated_response(v, u, 0.0, 0.0, math.inf), u)
+    np.testing.assert_array_equal(unsaturated_response(v, u, np.array([[0.0], [0.5]]), 0.0, math.inf), [u, u])
+
+
+def test_lag_memory_is_python_floats():
+    from toolkit.model import lag_memory
+
+    share, area = lag_memory(0.25, 0.25)
+    assert type(share) is float and type(area) is float
+    assert share == pytest.approx(math.exp(-1.0), rel=2 * EPS) and area == pytest.approx(0.25 * (1 - math.exp(-1)),
+                                                                                         rel=4 * EPS)
+
+
+def test_motor_piece_is_its_fields_at_their_defining_points():
+    """A piece keeps its start time ``a`` whatever its motors; at the end of a ramp its speed is
+    ``after`` exactly (the field's definition), also where ``start + ramp * ramp_end`` rounds
+    elsewhere (starts and commands drawn until it does: found, asserted); with no ramp the
+    coefficients are float zeros of the contacts' shape."""
+    from toolkit.model import MotorPiece
+
+    assert MotorPiece.build(0.75, np.zeros(2), np.ones(2), 0.25, math.inf).a == 0.75
+    assert MotorPiece.build(0.75, np.zeros(2), np.ones(2), 0.0, 2.0).a == 0.75
+    start, u = np.array([0.09587318112501803, 0.0]), np.array([-0.16114930036529077, 0.3])
+    for tau in (0.0075, 0.0):
+        piece = MotorPiece.build(0.0, start, u, tau, 5.0)
+        end = piece.ramp_end[0]
+        assert end > 0 and (start + piece.ramp * end)[0] != piece.after[0] or tau == 0.0
+        assert piece.speeds(np.array([end]))[0, 0] == piece.after[0]
+        assert piece.speeds_at(float(end))[0] == piece.after[0]
+    v, q, e, nxt = MotorPiece.build(0.0, start, u, 0.25, math.inf).coefficients(0.5)
+    assert q.shape == (2,) and q.dtype == np.float64 and not q.any() and nxt == math.inf
+
+
+def test_motor_piece_overflow_on_the_ramp_is_masked_silently():
+    """With a tiny lag (1e-20 s) the settling branch evaluated on the ramp overflows (exp of
+    5e19) and gives 0 * inf where ``after`` rounds onto the command; that branch is masked, and
+    it raises nothing even where floating-point errors are made to raise."""
+    from toolkit.model import MotorPiece
+
+    piece = MotorPiece.build(0.0, np.array([0.0, 0.0]), np.array([1.0, -0.5]), 1e-20, 1.0)
+    assert piece.after[0] == 1.0 and piece.ramp_end[0] > 0.5
+    with np.errstate(all="raise"):
+        np.testing.assert_array_equal(piece.speeds(np.array([0.25]))[0], [0.25, -0.25])
+        np.testing.assert_array_equal(piece.speeds_at(0.25), [0.25, -0.25])
+
+
+def test_reach_towards_a_limit_on_the_other_side_of_zero():
+    """Towards a negative limit from positive and zero speeds (limit + v and limit - v differ in
+    sign): every contact moves down, by r s on a pure ramp (dyadic: exact)."""
+    from toolkit.model.motors import reach
+
+    got = reach(0.0, 2.0, np.array([0.5, 0.0]), -0.25, np.array([0.125]))
+    np.testing.assert_array_equal(got, [[0.25, -0.25]])

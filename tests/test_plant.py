@@ -807,3 +807,156 @@ def test_reach_towards_a_limit_on_the_other_side_of_zero():
 
     got = reach(0.0, 2.0, np.array([0.5, 0.0]), -0.25, np.array([0.125]))
     np.testing.assert_array_equal(got, [[0.25, -0.25]])
+
+
+# -- the plant: its scale checks bracketed and refused in full, its right-hand side ---------
+def test_plant_scale_refusals_in_full():
+    """The overflow and rounding checks name the parameter, the rule with the numbers that
+    broke it, and the value."""
+    def message(call):
+        with pytest.raises(ParameterError) as info:
+            call()
+        return str(info.value)
+
+    assert message(lambda: Plant(ContactSet([0.1, 0.2], [1.0, 2.0]), mass=1e-300, external_force=1e300)) == (
+        "The 'mass' parameter of Plant must keep the largest acceleration (F_tot + max|F_ext|) / m finite "
+        "(F_tot = 3 N, max|F_ext| = 1e+300 N). Got 1e-300 instead.")
+    assert message(lambda: Plant(ContactSet([0.1]), mass=1e-300, damping=1e10,
+                                 external_force=PiecewiseConstant([1.0], [0.5, -2.0]))) == (
+        "The 'damping' parameter of Plant must keep the drag rate c / m finite (m = 1e-300 kg). Got 10000000000.0 "
+        "instead.")
+    assert message(lambda: Plant(ContactSet([0.3, 0.7, 0.1], [1.0, 0.5, 0.0]), 1.0,
+                                 motors=Motors(compliance=1e-17))) == (
+        "The 'motors' parameter of Plant must have a compliance k with k f_i above the speeds' rounding "
+        "4 eps max|v| = 6.22e-16 m/s and 1 / (k f_i) finite for every contact (smallest f_i = 0.5 N); use "
+        "compliance=0 for a stiff motor. Got 1e-17 instead.")
+    commands = PiecewiseConstant([1.0], [[0.5, -1.0], [0.25, 0.0]])
+    assert message(lambda: Plant(ContactSet([0.5, -1.0]), 1.0, motors=Motors(compliance=2.0 ** -40,
+                                                                             lag=2.0 ** -978),
+                                 commands=commands)) == (
+        "The 'motors' parameter of Plant must have a lag tau with 16 n 2 max|v| / (tau k) finite (n = 2, "
+        "max|v| = 1 m/s, k = 9.09495e-13 (m/s)/N); use lag=0 for instantaneous motors. Got "
+        f"{2.0 ** -978!r} instead.")
+
+
+def test_plant_scale_checks_are_bracketed_at_their_edges():
+    """Each bound from both sides, on powers of two (exact): the compliance floor ``4 eps
+    max|v|`` with the speeds clipped to the limits (max|v| = 1/2 from commands of 1 and -3),
+    ``k f`` at the floor refused and one ulp above taken, the smallest loaded contact's ``f``
+    (the lifted one skipped); the lag's pull ``16 n 2 max|v| / (tau k)`` at 2^1024 refused
+    and at 2^1023 taken; the acceleration and drag rates at the largest double taken."""
+    eps = np.finfo(float).eps
+    limits = (-0.5, 0.5)
+    cs = ContactSet([1.0, -3.0, 0.0], [2.0, 0.5, 0.0])
+    floor = 4 * eps * 0.5
+    with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a compliance"):
+        Plant(cs, 1.0, motors=Motors(compliance=floor / 0.5, speed_limits=limits))
+    taken = Plant(cs, 1.0, motors=Motors(compliance=np.nextafter(floor / 0.5, 1.0), speed_limits=limits))
+    assert taken.compliance == np.nextafter(floor / 0.5, 1.0)
+    # Commands set the scale: max |clip(commands)| = 1/4 halves the floor.
+    commands = PiecewiseConstant([1.0], [[0.25, 0.0, 0.0], [0.125, -0.25, 0.0]])
+    Plant(cs, 1.0, motors=Motors(compliance=np.nextafter(floor / 1.0, 1.0), speed_limits=limits), commands=commands)
+    with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a compliance"):
+        Plant(cs, 1.0, motors=Motors(compliance=floor / 1.0, speed_limits=limits), commands=commands)
+    two = ContactSet([0.5, -1.0])
+    commands = PiecewiseConstant([1.0], [[0.5, -1.0], [0.25, 0.0]])
+    # 16 * 2 * (2 * 1 / 2^-977) / 2^-40 = 2^1023: finite; 2^-978 gives 2^1024 = inf.
+    plant = Plant(two, 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -977), commands=commands)
+    assert plant.motors.lag == 2.0 ** -977
+    with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a lag"):
+        Plant(two, 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -978), commands=commands)
+    # Without commands (or without a lag) the pull is not checked.
+    Plant(two, 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -978))
+    big = np.finfo(float).max
+    assert Plant(ContactSet([0.0], [big / 2]), 1.0, external_force=big / 2).mass == 1.0
+    with pytest.raises(ParameterError, match="'mass' parameter of Plant"):
+        Plant(ContactSet([0.0], [big / 2]), 1.0, external_force=PiecewiseConstant([1.0], [0.0, -big]))
+    assert Plant(ContactSet([0.0]), 0.5, damping=big / 2).damping == big / 2
+    with pytest.raises(ParameterError, match="'damping' parameter of Plant"):
+        Plant(ContactSet([0.0]), 0.5, damping=big)
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -20, 1.0, 2.0 ** 20])
+def test_plant_rhs_is_the_law_on_both_back_ends(scale):
+    """``m dV/dt = sum f_i sign(v_i - V) + F_ext - c V`` and the motor law, on unequal loads and
+    masses at three scales of force and mass (their ratio, the acceleration, unchanged: every
+    value below is exact), with the plant's own command and outside force or those given; the
+    same on casadi."""
+    import casadi
+
+    cs = ContactSet([0.5, -0.25, 0.125], np.array([1.0, 2.0, 0.5]) * scale)
+    commands = PiecewiseConstant([1.0], [[0.5, -0.25, 0.125], [1.0, 0.75, -2.0]])
+    lagging = Plant(cs, 2.0 * scale, damping=0.5 * scale, external_force=PiecewiseConstant([0.5], [0.0, 0.25 * scale]),
+                    motors=Motors(lag=0.25, speed_limits=(-1.0, 0.5)), commands=commands)
+    x = np.array([0.0, 0.5, 0.0, 0.125])
+    # t = 0.75: F_ext = 0.25, forces (1, 0, 0.5) (the second ties: 0), drag 0 -> dV = 1.75 / 2;
+    # commands (0.5, -0.25, 0.125) until 1 s: motor rates (0, -1, 0); after it, clipped to
+    # (0.5, 0.5, -1): (0, 2, -4.5).
+    np.testing.assert_array_equal(lagging.rhs(0.75, x), [0.875, 0.0, -1.0, 0.0])
+    np.testing.assert_array_equal(lagging.motor_rate(1.5, x[1:]), [0.0, 2.0, -4.5])
+    np.testing.assert_array_equal(lagging.motor_rate(0.5, x[1:]), [0.0, -1.0, 0.0])
+    # Given command (clipped by the motors) and force: u = (1, 1, 1) -> (0.5, 0.5, 0.5).
+    np.testing.assert_array_equal(lagging.rhs(0.75, x, [1.0, 1.0, 1.0], external=-1.5 * scale),
+                                  [(1.5 - 1.5) / 2, 0.0, 2.0, 1.5])
+    V = 0.25
+    drag = lagging.rhs(0.25, np.array([V, 0.5, -0.25, 0.125]))
+    np.testing.assert_array_equal(drag, [(1.0 - 2.0 - 0.5 - 0.5 * V) / 2, 0.0, 0.0, 0.0])
+    assert lagging.net_force(0.25, V, [0.5, -0.25, 0.125]) == (1.0 - 2.0 - 0.5 - 0.5 * V) * scale
+    # The smoothed law's width reaches the law: tanh(s / eps) at s = V - v of 1/2 and 1/4.
+    eps = 0.5
+    tanh = lagging.net_force(0.0, 0.0, [0.5, -0.25, 0.125], friction="tanh", epsilon=eps)
+    assert tanh == pytest.approx(scale * (np.tanh(1.0) - 2 * np.tanh(0.5) + 0.5 * np.tanh(0.25)), rel=4 * EPS)
+    assert lagging.rhs(0.0, [0.0, 0.5, -0.25, 0.125], friction="tanh", epsilon=eps)[0] == pytest.approx(
+        tanh / (2.0 * scale), rel=4 * EPS)
+    s = casadi.SX.sym("x", 4)
+    built = casadi.Function("f", [s], [lagging.rhs(0.75, s, xp=casadi)])
+    np.testing.assert_array_equal(np.array(built(x)).ravel(), [0.875, 0.0, -1.0, 0.0])
+    ideal = Plant(cs, 2.0 * scale, commands=commands)
+    np.testing.assert_array_equal(ideal.rhs(0.75, [0.0]), [-0.25])      # (1 - 2 + 0.5) / 2 at u(0.75)
+    np.testing.assert_array_equal(ideal.rhs(1.5, [0.0]), [(1.0 + 2.0 - 0.5) / 2])
+    np.testing.assert_array_equal(ideal.rhs(1.5, [0.0], [1.0, 1.0, 1.0]), [(1.0 + 2.0 + 0.5) / 2])
+    np.testing.assert_array_equal(ideal.motor_rate(0.0, [0.1, 0.2, 0.3]), np.zeros(3))
+    v = casadi.SX.sym("V", 1)
+    built = casadi.Function("g", [v], [ideal.rhs(1.5, v, xp=casadi)])
+    assert float(built(0.0)) == (1.0 + 2.0 - 0.5) / 2
+    with pytest.raises(ParameterError, match=re.escape(
+            "The 'epsilon' parameter of Plant.rhs must be > 0. Got 0.0 instead.")):
+        ideal.rhs(0.0, [0.0], friction="tanh")
+    with pytest.raises(ParameterError, match=re.escape(
+            "The 'epsilon' parameter of Plant.contact_forces must be > 0. Got -1 instead.")):
+        ideal.net_force(0.0, 0.0, [0, 1, 2], friction="tanh", epsilon=-1)
+
+
+def test_plant_keeps_floats_and_reports_its_motors():
+    """Integers given for the mass, the drag and a constant outside force are kept as Python
+    floats; the plant reports its motors' compliance, play and dynamics (0, 0, none for ideal
+    motors) and its number of contacts; commands are clipped to the motors' limits only."""
+    plant = Plant(ContactSet([0.5, -0.75, 0.25]), 2, damping=1, external_force=3)
+    for name in ("mass", "damping", "external_force"):
+        assert type(getattr(plant, name)) is float, name
+    assert (plant.n, plant.compliance, plant.backlash, plant.dynamic_motors) == (3, 0.0, 0.0, False)
+    np.testing.assert_array_equal(plant.command(0.0), [0.5, -0.75, 0.25])
+    np.testing.assert_array_equal(plant.final_command(), [0.5, -0.75, 0.25])
+    assert plant.external(7.0) == 3.0 and type(plant.external(7.0)) is float
+    driven = Plant(ContactSet([0.5, -0.75, 0.25]), 2.0, motors=Motors(compliance=0.5, backlash=0.001, lag=0.25,
+                                                                      speed_limits=(-0.5, 0.375)))
+    assert (driven.compliance, driven.backlash, driven.dynamic_motors) == (0.5, 0.001, True)
+    np.testing.assert_array_equal(driven.command(0.0), [0.375, -0.5, 0.25])
+    np.testing.assert_array_equal(driven.final_command(), [0.375, -0.5, 0.25])
+    np.testing.assert_array_equal(driven.initial_speeds(), [0.375, -0.5, 0.25])
+    ramp = Plant(ContactSet([0.5]), 1.0, motors=Motors(rate_limit=3.0))
+    assert ramp.dynamic_motors and not Plant(ContactSet([0.5]), 1.0, motors=Motors(compliance=1.0)).dynamic_motors
+    # A compliant plant's equilibrium is the zero of the saturated lines, at the final command:
+    # contacts at 0 and 1 with f = (1, 3), k = 1 meet at 1/2 (closed form, test above).
+    commands = PiecewiseConstant([1.0], [[5.0, 6.0], [0.0, 1.0]])
+    lo, hi = Plant(ContactSet([0, 1], [1, 3]), 1.0, motors=Motors(compliance=1.0), commands=commands).equilibrium()
+    assert lo == hi == pytest.approx(0.5, rel=1e-15, abs=0)
+
+
+def test_plant_rhs_with_compliant_motors_is_the_saturated_linear_law():
+    # k = 1/4, f = (1, 2): slips 0.125 and -1 give 1 x clip(0.125 / 0.25) = 0.5 and -2
+    # (saturated); m = 2: dV/dt = -0.75; the same through net_force (dyadic: exact).
+    plant = Plant(ContactSet([0.125, -1.0], [1.0, 2.0]), 2.0, motors=Motors(compliance=0.25))
+    np.testing.assert_array_equal(plant.rhs(0.0, [0.0]), [-0.75])
+    assert plant.net_force(0.0, 0.0, [0.125, -1.0]) == -1.5
+    np.testing.assert_array_equal(plant.contact_forces(0.0, [0.125, -1.0]), [0.5, -2.0])

@@ -132,13 +132,14 @@ def test_record_positions_match_the_constant_acceleration_closed_form():
                                   np.floor(motor / sensors.wheel.distance_per_count) * np.ones((1, 10)))
 
 
-def _stepped_record(motors, switch):
+def _stepped_record(motors, switch, contact_positions=None):
     """Three contacts commanded 0.1 -> -0.2 m/s at ``switch`` (s) through ``motors``, recorded
     by encoders without backlash; and the wheels' count distance (m)."""
     plant = Plant(ContactSet([0.1] * 3), 5.0, motors=motors,
                   commands=PiecewiseConstant([switch], [[0.1] * 3, [-0.2] * 3]))
     sensors = Sensors(Encoder(8192, 0.266), Encoder(3591.84, 0.045), 3)
-    return record_simulation(simulate(plant, 1.0), plant, sensors), sensors.wheel.distance_per_count
+    record = record_simulation(simulate(plant, 1.0), plant, sensors, contact_positions=contact_positions)
+    return record, sensors.wheel.distance_per_count
 
 
 def test_record_contact_positions_match_the_motor_lag_closed_form():
@@ -718,6 +719,10 @@ def test_read_noise_is_added_per_channel_with_its_own_draws(s):
         assert central[k] == 10 + c
         np.testing.assert_array_equal(wheel[k], np.array([3, -8, 100]) + w)
     assert np.any(central != 10) and np.any(wheel[:, 0] != wheel[0, 0])
+    from toolkit.model.sensors import SensorReader
+
+    _, noisy = SensorReader(suite, start, np.random.default_rng(2)).read(float(X[0]), x[0])
+    assert noisy.dtype == np.int64
 
 
 # -- record_simulation: jitter, starts on the grid, the horizon, and what it records ------------
@@ -888,10 +893,16 @@ def test_record_contact_positions_match_the_motor_ramp_closed_form():
     between the kinks it is given (switch and ramp end); a kink left out costs about 1e-4 m,
     more than a count (79 um)."""
     u, v0, r, rate = -0.2, 0.1, 0.075, 4.0
-    record, q = _stepped_record(Motors(rate_limit=rate), 0.31)
+    # The first wheel starts 1e-9 m above a count edge at 0.4 s, the first stamp after the
+    # ramp's end: a ramp end missing from the kinks (8-node Gauss across it errs by -1.8e-6 m
+    # over [0.38, 0.4]) shows in its counts.
+    q = Encoder(3591.84, 0.045).distance_per_count
+    at = 0.031 + v0 * r - 0.5 * rate * r ** 2 + u * (0.09 - r)
+    c0 = np.array([(np.ceil(at / q) + 1) * q - at + 1e-9, 0.0, 0.0])
+    record, q = _stepped_record(Motors(rate_limit=rate), 0.31, c0)
     t = record.times
     s = np.maximum(t - 0.31, 0.0)
     ramp = np.minimum(s, r)
-    x = np.where(t < 0.31, v0 * t, 0.031 + v0 * ramp - 0.5 * rate * ramp ** 2 + u * (s - ramp))
+    x = c0 + np.where(t < 0.31, v0 * t, 0.031 + v0 * ramp - 0.5 * rate * ramp ** 2 + u * (s - ramp))[:, None]
     assert np.min(np.abs(x[1:] / q - np.rint(x[1:] / q))) * q > 1e-12
-    np.testing.assert_array_equal(record.wheel_counts[:, 0], np.floor(x / q))
+    np.testing.assert_array_equal(record.wheel_counts, np.floor(x / q))

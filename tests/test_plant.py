@@ -960,3 +960,53 @@ def test_plant_rhs_with_compliant_motors_is_the_saturated_linear_law():
     np.testing.assert_array_equal(plant.rhs(0.0, [0.0]), [-0.75])
     assert plant.net_force(0.0, 0.0, [0.125, -1.0]) == -1.5
     np.testing.assert_array_equal(plant.contact_forces(0.0, [0.125, -1.0]), [0.5, -2.0])
+
+
+def test_plant_scale_checks_at_the_largest_doubles():
+    """The lag's pull ``16 n 2 max|v| / (tau k)`` at 1.9 x 2^1023 (n = 2, max|v| = 1/2, k =
+    2^-40) is finite and taken: 17/16 of it, or 3 for 2, or max|v| divided, overflow. ``1 /
+    (k f)`` is finite for k f = 0.75 x 2^-1023 (taken; twice it is not) and for k = 2^-1020
+    with f = 2^10 (k / f would not be). ``k f`` above the floor with f = 4 and k 1.5 floor /
+    4 (k / f is below it). Under floating-point errors that raise, the checks still refuse
+    with their own error (their overflows and divisions are expected)."""
+    eps = np.finfo(float).eps
+    commands = PiecewiseConstant([1.0], [[0.5, -0.5], [0.25, 0.0]])
+    plant = Plant(ContactSet([0.5, -0.5]), 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -978 / 1.9),
+                  commands=commands)
+    assert plant.motors.lag == 2.0 ** -978 / 1.9
+    assert Plant(ContactSet([0.0]), 1.0, motors=Motors(compliance=0.75 * 2.0 ** -1023)).compliance > 0
+    assert Plant(ContactSet([0.0], [1024.0]), 1.0, motors=Motors(compliance=2.0 ** -1020)).compliance > 0
+    floor = 4 * eps * 0.5
+    assert Plant(ContactSet([0.5], [4.0]), 1.0, motors=Motors(compliance=1.5 * floor / 4)).compliance > 0
+    with np.errstate(all="raise"):
+        with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a compliance"):
+            Plant(ContactSet([0.0]), 1.0, motors=Motors(compliance=1e-320))
+        with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a lag"):
+            Plant(ContactSet([0.5, -0.5]), 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -980),
+                  commands=commands)
+
+
+def test_plant_signals_defaults_and_shapes():
+    """No commands and no outside signal: no switching times at all; the final command is the
+    last row of three; ideal motor rates are float zeros of the speeds' shape; the smoothed
+    laws need their width (no default); the ideal right-hand side is one-element."""
+    cs = ContactSet([0.0, 1.0])
+    assert Plant(cs, 1.0).switching_times().size == 0
+    commands = PiecewiseConstant([1.0, 2.0], [[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]])
+    np.testing.assert_array_equal(Plant(cs, 1.0, commands=commands).final_command(), [4.0, 5.0])
+    rate = Plant(cs, 1.0).motor_rate(0.0, [1, 2])
+    assert rate.shape == (2,) and rate.dtype == np.float64 and not rate.any()
+    plant = Plant(cs, 2.0)
+    for call, owner in ((lambda: plant.contact_forces(0.5, [0.0, 1.0], friction="tanh"), "Plant.contact_forces"),
+                        (lambda: plant.net_force(0.0, 0.5, [0.0, 1.0], friction="stribeck"), "Plant.contact_forces")):
+        with pytest.raises(ParameterError) as info:
+            call()
+        assert str(info.value) == f"The 'epsilon' parameter of {owner} must be > 0. Got 0.0 instead."
+    dV = plant.rhs(0.0, [0.5])
+    assert dV.shape == (1,) and dV[0] == 0.0
+    with pytest.raises(ParameterTypeError) as info:
+        Plant(cs, 1.0, external_force="a")
+    assert str(info.value) == "The 'external_force' parameter of Plant must be a real number. Got 'a' instead."
+    with pytest.raises(ParameterError) as info:
+        Plant(cs, 1.0, external_force=np.inf)
+    assert str(info.value) == "The 'external_force' parameter of Plant must be finite. Got inf instead."

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -598,3 +599,93 @@ def test_int64_ends_magic_spaces_and_a_missing_resolution(tmp_path):
     text = "# active-contacts encoder record 1\n# central_resolution = 0.5\n" + _HEAD + "\n0.0,1,2,0.5\n"
     _refused(tmp_path, text, _at("sensors", 3, 1) + "be given (the scene's [sensors]) when no '# wheel_resolution "
              "= ...' line precedes the header. Got None instead.")
+
+
+def test_valid_rows_at_every_edge_are_read_by_the_block_reader(tmp_path, monkeypatch):
+    """Commands at both motor limits and a step of exactly 1.5 periods are within the rules, so
+    the block reader (NumPy's) takes them without the row-by-row reader (disabled here)."""
+    import toolkit.model.record_io as record_io
+    from toolkit.model.motors import Motors
+
+    h = 2.0 ** -6
+    meta = ("# active-contacts encoder record 1\n# central_resolution = 0.0001\n# wheel_resolution = 2e-05\n"
+            "# wheel_backlash = 0.001\n" + _HEAD + "\n")
+    path = tmp_path / "r.csv"
+    path.write_text(meta + f"0.0,0,0,-0.25\n{1.5 * h!r},1,1,0.5\n{2.5 * h!r},2,2,0.0\n")
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a valid block went to the row-by-row reader")
+
+    monkeypatch.setattr(record_io, "_slow_block", refuse)
+    record = read_record_csv(path, _sensors(n=1), motors=Motors(speed_limits=(-0.25, 0.5)))
+    np.testing.assert_array_equal(record.commands[:, 0], [-0.25, 0.5, 0.0])
+
+
+def test_rows_the_block_reader_gives_up_on_are_read_whole_by_the_row_reader(tmp_path):
+    """Python's int() reads a count written with a digit separator (``1_0``), NumPy's reader
+    does not: that block is read row by row, each count exactly (2^63 - 1 included, which a
+    float would round), and only the commands are held to the motors' limits (not the force)."""
+    from toolkit.model.motors import Motors
+
+    head = "time_s,central_count,wheel_count_1,command_1_m_s,force_N"
+    top = 2 ** 63 - 1
+    path = tmp_path / "r.csv"
+    path.write_text(_META1 + head + f"\n0.0,1_0,{top},0.5,7.5\n0.5,-3,4,-0.25,-9.0\n")
+    record = read_record_csv(path, motors=Motors(speed_limits=(-0.25, 0.5)))
+    np.testing.assert_array_equal(record.central_counts, [10, -3])
+    assert record.wheel_counts[0, 0] == top and record.wheel_counts.dtype == np.int64
+    np.testing.assert_array_equal(record.force, [7.5, -9.0])
+
+
+def test_a_byte_order_mark_only_opens_the_file_and_a_trailing_letter_is_a_bad_value(tmp_path):
+    """A byte-order mark anywhere but at the file's start is not dropped (it is text: the
+    comment line it opens no longer starts with '#', so it is taken for a bad header); a
+    value that ends in a letter is refused as written."""
+    _refused(tmp_path, ("# active-contacts encoder record 1\n\ufeff# central_resolution = 0.5\n"
+                        "# wheel_resolution = 0.25\n" + _HEAD + "\n0.0,1,2,0.5\n").encode(),
+             _at("header", 2, 3) + "name at least one 'wheel_count_1' column. Got '\\ufeff# central_resolution = 0.5' "
+             "instead.")
+    _refused(tmp_path, _META1 + _HEAD + "\n0.0,1,2,0.5X\n", _at("command_1_m_s", 5, 4)
+             + "be a number. Got '0.5X' instead.")
+
+
+def test_a_file_over_a_megabyte_is_counted_across_blocks(tmp_path):
+    """The line count adds up every 1 MiB block (the arrays are sized by it): 60000 rows,
+    about 1.6 MiB, read whole."""
+    path = tmp_path / "r.csv"
+    rows = "".join(f"{k / 64!r},{k},{-k},0.125\n" for k in range(60000))
+    path.write_text(_META1 + _HEAD + "\n" + rows)
+    assert path.stat().st_size > 1.5 * 2 ** 20
+    record = read_record_csv(path)
+    assert record.n_samples == 60000 and record.central_counts[-1] == 59999 and record.times[-1] == 59999 / 64
+
+
+def test_the_line_count_refuses_a_file_that_grew_past_the_cap(monkeypatch):
+    import io
+
+    import toolkit.model.record_io as record_io
+
+    monkeypatch.setattr(record_io, "MAX_RECORD_BYTES", 10)
+    with pytest.raises(ParameterError) as info:
+        record_io._line_count(io.BytesIO(b"0123456789\n"), record_io._Reader(Path("grown.csv")))
+    assert str(info.value) == ("The record file 'grown.csv' is 11 bytes; record files are limited to 10 bytes "
+                               "(9.53674e-06 MiB): split a longer log into several records.")
+
+
+def test_the_progress_bar_counts_bytes_and_clears_itself(tmp_path, monkeypatch, capsys):
+    """A file larger than the threshold (strictly) shows a bar in bytes with SI prefixes
+    (a few kB here) on stderr, cleared when done (not left on its own line); at the
+    threshold, none."""
+    import toolkit.model.record_io as record_io
+
+    path = tmp_path / "r.csv"
+    path.write_text(_META1 + _HEAD + "\n" + "".join(f"{k!r}.0,{k},{k},0.5\n" for k in range(400)))
+    size = path.stat().st_size
+    assert 4000 < size < 999000
+    monkeypatch.setattr(record_io, "_PROGRESS_BYTES", size)
+    read_record_csv(path, progress=True)
+    assert capsys.readouterr().err == ""
+    monkeypatch.setattr(record_io, "_PROGRESS_BYTES", size - 1)
+    read_record_csv(path, progress=True)
+    err = capsys.readouterr().err
+    assert re.search(r"r\.csv: .*/\d+\.\d+k \[.*B/s\]", err) and not err.endswith("\n")

@@ -656,3 +656,41 @@ def test_default_magnitudes_are_one_newton_each_and_read_only():
     moved = cs.with_speeds([1.0, 2.0, 3.0])
     assert moved.forces is cs.forces and moved.equilibrium() == (2.0, 2.0)
     np.testing.assert_array_equal(cs.speeds, [0.3, -0.1, 0.2])
+
+
+def test_both_builders_give_the_kernels_the_same_table(monkeypatch):
+    """The staircase table the exact simulator's kernel reads (levels padded with +inf, the
+    magnitude below and at-or-above each level) is the same array, bit for bit, from the
+    compiled builder and from NumPy's (unequal magnitudes, ties, a lifted contact)."""
+    import toolkit.model.contacts as contacts
+
+    speeds, forces = [0.3, -0.1, 0.3, 0.2, -0.4, 0.2], [0.5, 2.0, 0.25, 1.0, 0.0, 0.75]
+    compiled = ContactSet(speeds, forces)._table
+    monkeypatch.setattr(contacts, "_SMALL", 0)
+    numpy_built = ContactSet(speeds, forces)._table
+    np.testing.assert_array_equal(numpy_built, compiled)
+    assert numpy_built[0, -1] == np.inf and numpy_built.shape == (3, 4)
+
+
+def test_the_patch_and_the_loads_keep_their_rules_and_types():
+    """A histogram patch's median tie is bracketed at its tolerance ``4 (K + 1) eps`` (K = 2
+    bins: 12 eps): a cumulative share 1/2 + 12 eps at the middle edge is a tie (the band ends
+    there), 1/2 + 16 eps is not (the median falls just inside the first bin, 1 / (1 + 2^-47));
+    a repeated edge is refused; integers are kept as floats."""
+    eps = np.finfo(float).eps
+    tie = ContactDistribution.from_histogram([0.0, 1.0, 2.0], [0.5 + 12 * eps, 0.5 - 12 * eps], 1.0)
+    assert tie.equilibrium() == (1.0, 1.0)
+    near = ContactDistribution.from_histogram([0.0, 1.0, 2.0], [0.5 + 16 * eps, 0.5 - 16 * eps], 1.0)
+    lo, hi = near.equilibrium()
+    assert lo == hi == 0.5 / (0.5 + 16 * eps) and lo < 1.0
+    with pytest.raises(ParameterError) as info:
+        ContactDistribution.from_histogram([0.0, 1.0, 1.0, 2.0], [1.0, 1.0, 1.0], 1.0)
+    assert str(info.value) == ("The 'edges' parameter of ContactDistribution.from_histogram must be strictly "
+                               "increasing. Got [0.0, 1.0, 1.0, 2.0] instead.")
+    assert type(ContactDistribution(stats.uniform(0, 1), 2).total_force) is float
+    loads = unequal_loads(2, 0.0, 3)
+    assert loads.dtype == np.float64 and loads.tolist() == [2.0, 2.0, 2.0]
+    with pytest.raises(ParameterError) as info:
+        ContactSet(np.arange(8.0), np.zeros(8))
+    assert str(info.value) == ("The 'forces' parameter of ContactSet must have a positive sum (some contact must "
+                               "touch). Got [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] instead.")

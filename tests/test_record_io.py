@@ -670,6 +670,10 @@ def test_the_line_count_refuses_a_file_that_grew_past_the_cap(monkeypatch):
         record_io._line_count(io.BytesIO(b"0123456789\n"), record_io._Reader(Path("grown.csv")))
     assert str(info.value) == ("The record file 'grown.csv' is 11 bytes; record files are limited to 10 bytes "
                                "(9.53674e-06 MiB): split a longer log into several records.")
+    # Read in blocks of 1 MiB: the size is the sum of the blocks (1.5 MiB > a 1.25 MiB cap).
+    monkeypatch.setattr(record_io, "MAX_RECORD_BYTES", 5 << 18)
+    with pytest.raises(ParameterError, match=f"is {3 << 19} bytes; record files are limited to {5 << 18} bytes"):
+        record_io._line_count(io.BytesIO(b"\n" * (3 << 19)), record_io._Reader(Path("grown.csv")))
 
 
 def test_the_progress_bar_counts_bytes_and_clears_itself(tmp_path, monkeypatch, capsys):

@@ -694,3 +694,27 @@ def test_the_patch_and_the_loads_keep_their_rules_and_types():
         ContactSet(np.arange(8.0), np.zeros(8))
     assert str(info.value) == ("The 'forces' parameter of ContactSet must have a positive sum (some contact must "
                                "touch). Got [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] instead.")
+
+
+def test_weighted_median_of_a_grid_of_sets_with_bands():
+    """Rows on a (2, 2) grid of sets of four equal magnitudes (even: a band between the 2nd
+    and 3rd speeds), each with its own outside force: each cell is its ContactSet's
+    equilibrium with the force as one more contact far beyond (the second method)."""
+    speeds = np.array([[[0.1, 0.2, 0.3, 0.4], [0.4, -0.1, 0.0, 0.2]], [[1.0, 2.0, 3.0, 4.0], [0.5, 0.5, -0.5, 1.5]]])
+    forces = np.ones(4)
+    push = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    lo, hi = weighted_median(speeds, forces, outside=push)
+    assert lo.shape == hi.shape == (2, 2)
+    assert (lo[0, 0], hi[0, 0]) == (0.2, 0.3) and (lo[1, 1], hi[1, 1]) == (0.5, 0.5)
+    for i in range(2):
+        for j in range(2):
+            p = push[i, j]
+            expected = ContactSet(np.append(speeds[i, j], np.sign(p) * 1e6), np.append(forces, abs(p))).equilibrium() \
+                if p else ContactSet(speeds[i, j], forces).equilibrium()
+            assert (lo[i, j], hi[i, j]) == expected
+
+
+def test_an_overflowing_total_is_refused_even_where_overflows_raise():
+    with np.errstate(all="raise"):
+        with pytest.raises(ParameterError, match="must have a finite sum"):
+            ContactSet([0.1, 0.2], [1e308, 1e308])

@@ -7,6 +7,8 @@ order 1-100 N and N <= 60) is several orders above that and far below any physic
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -462,3 +464,262 @@ def test_from_friction_multiplies_per_contact_at_every_scale(scale):
     np.testing.assert_array_equal(ContactSet.from_friction(speeds, 0.5, loads).forces, 0.5 * loads)
     np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, 4.0 * scale).forces, mu * 4.0 * scale)
     np.testing.assert_array_equal(ContactSet.from_friction(speeds, mu, loads).speeds, speeds)
+
+
+# -- the staircase from both builders, the refusals left, the patch and the loads ---------------
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("small", [64, 0])
+def test_staircase_is_its_closed_form_from_either_builder(monkeypatch, scale, small):
+    """Speeds (0.5, -0.25, 0.5, 1, 2) with unequal magnitudes (1, 2, 0.5, 0.25, 0) x scale (the
+    last lifted): levels (-0.25, 0.5, 1), steps (2, 1.5, 0.25), plateaus F_tot = 3.75 then
+    -0.25, -3.25, -3.75, all x scale, exact (dyadic). The same from the compiled builder (sets
+    up to 64 contacts) and from NumPy's (larger sets; forced here by a limit of 0)."""
+    import toolkit.model.contacts as contacts
+
+    monkeypatch.setattr(contacts, "_SMALL", small)
+    cs = ContactSet([0.5, -0.25, 0.5, 1.0, 2.0], np.array([1.0, 2.0, 0.5, 0.25, 0.0]) * scale)
+    stairs = cs.staircase()
+    np.testing.assert_array_equal(stairs.levels, [-0.25, 0.5, 1.0])
+    np.testing.assert_array_equal(stairs.steps, np.array([2.0, 1.5, 0.25]) * scale)
+    np.testing.assert_array_equal(stairs.plateaus, np.array([3.75, -0.25, -3.25, -3.75]) * scale)
+    assert cs.total_force == 3.75 * scale and (cs.n, len(cs)) == (5, 5)
+    assert cs.tie_tolerance == 4 * 4 * np.finfo(float).eps * 3.75 * scale
+    np.testing.assert_array_equal(cs.cdf([-1.0, -0.25, 0.0, 0.5, 1.0, np.inf]),
+                                  [0.0, 2.0 / 3.75, 2.0 / 3.75, 3.5 / 3.75, 1.0, 1.0])
+    np.testing.assert_array_equal(cs.force([-np.inf, -0.25, 0.0, 0.5, 0.75, 1.0, np.inf]),
+                                  np.array([3.75, 1.75, -0.25, -1.75, -3.25, -3.5, -3.75]) * scale)
+    lower, upper = cs.force_bounds([-0.25, 0.5, 2.0])
+    np.testing.assert_array_equal(lower, np.array([-0.25, -3.25, -3.75]) * scale)
+    np.testing.assert_array_equal(upper, np.array([3.75, -0.25, -3.75]) * scale)
+    # The heavy contact at -0.25 (2 of 3.75) holds the median: 0 in [-0.25, 3.75] there.
+    assert cs.equilibrium() == (-0.25, -0.25) and cs.zero_force_band() is None
+    halves = ContactSet([0.0, 1.0, 3.0], np.array([1.0, 0.5, 0.5]) * scale)
+    assert halves.equilibrium() == (0.0, 1.0) and halves.zero_force_band() == (0.0, 1.0)
+    assert repr(cs) == f"ContactSet(n=5, total_force={3.75 * scale:.6g} N, speeds in [-0.25, 2] m/s)"
+
+
+def test_the_numpy_builder_refuses_like_the_compiled_one(monkeypatch):
+    import toolkit.model.contacts as contacts
+
+    for small in (64, 0):
+        monkeypatch.setattr(contacts, "_SMALL", small)
+        with pytest.raises(ParameterError) as info:
+            ContactSet([0.1, 0.2, 0.3], [0.0, 0.0, 0.0])
+        assert str(info.value) == ("The 'forces' parameter of ContactSet must have a positive sum (some contact must "
+                                   "touch). Got [0.0, 0.0, 0.0] instead.")
+        with pytest.raises(ParameterError) as info:
+            ContactSet(np.arange(9.0), np.zeros(9))
+        assert str(info.value) == ("The 'forces' parameter of ContactSet must have a positive sum (some contact must "
+                                   "touch). Got 'all zeros' instead.")
+    with pytest.raises(ParameterError) as info:
+        ContactSet([0.1, 0.2], [1e308, 1e308])
+    assert str(info.value) == ("The 'forces' parameter of ContactSet must have a finite sum (F_tot overflows). "
+                               "Got 'max 1e+308' instead.")
+    assert ContactSet([0.1, 0.2], [1e308, 7e307]).total_force == 1.7e308
+
+
+def test_a_large_set_has_the_staircase_of_its_levels():
+    """A hundred contacts on 7 levels (NumPy's builder), unequal dyadic magnitudes: the steps
+    are the magnitudes summed per level, the plateaus F_tot minus twice the prefix sums (exact),
+    and the force the brute-force sum at every level and between them."""
+    rng = np.random.default_rng(5)
+    speeds = rng.choice([-0.5, -0.25, 0.0, 0.125, 0.25, 0.5, 1.0], 100)
+    forces = rng.choice([0.0, 0.25, 0.5, 1.0, 2.0], 100)
+    cs = ContactSet(speeds, forces)
+    levels = np.unique(speeds[forces > 0])
+    steps = np.array([forces[speeds == v].sum() for v in levels])
+    stairs = cs.staircase()
+    np.testing.assert_array_equal(stairs.levels, levels)
+    np.testing.assert_array_equal(stairs.steps, steps)
+    total = forces.sum()
+    np.testing.assert_array_equal(stairs.plateaus, total - 2 * np.concatenate(([0.0], np.cumsum(steps))))
+    V = probes(cs)
+    np.testing.assert_array_equal(cs.force(V), brute_force(cs, V))
+    assert cs.tie_tolerance == 4 * (levels.size + 1) * np.finfo(float).eps * total
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_a_histogram_patch_is_its_closed_form(scale):
+    """Bins [0, 1), [1, 2), [2, 4) with weights 1, 0, 3 (normalized 1/4, 0, 3/4) and F_tot =
+    2 x scale: CDF 1/4 on the empty bin, so F = F_tot (1 - 2 CDF) = F_tot / 2 there; the
+    median inside the last bin at 2 + (1/2 - 1/4) / (3/4) x 2 = 8/3 (a few ulp: one
+    division); the density 1/4 per unit speed in the first bin, 3/8 in the last."""
+    patch = ContactDistribution.from_histogram([0.0, 1.0, 2.0, 4.0], [1.0, 0.0, 3.0], 2.0 * scale)
+    np.testing.assert_allclose(patch.cdf([0.0, 0.5, 1.5, 3.0, 5.0]), [0.0, 0.125, 0.25, 0.625, 1.0],
+                               rtol=4 * np.finfo(float).eps, atol=1e-300)
+    np.testing.assert_allclose(patch.force([1.5, 3.0]), np.array([1.0, -0.5]) * scale, rtol=8 * np.finfo(float).eps)
+    lower, upper = patch.force_bounds([1.5, 3.0])
+    np.testing.assert_array_equal(lower, upper)
+    assert lower is not upper
+    np.testing.assert_allclose(patch.density([0.5, 1.5, 3.0]), [0.25, 0.0, 0.375], rtol=4 * np.finfo(float).eps)
+    lo, hi = patch.equilibrium()
+    assert lo == hi == pytest.approx(8.0 / 3.0, rel=4 * np.finfo(float).eps)
+    # Weights (1, 0, 1): the median is the empty bin [1, 2], exactly.
+    assert ContactDistribution.from_histogram([0.0, 1.0, 2.0, 4.0], [1.0, 0.0, 1.0], scale).equilibrium() == (1.0, 2.0)
+    assert ContactDistribution(stats.uniform(-0.5, 2.0), scale).equilibrium() == (0.5, 0.5)
+    with pytest.raises(ParameterError) as info:
+        ContactDistribution(stats.uniform(0, 1), 0.0)
+    assert str(info.value) == "The 'total_force' parameter of ContactDistribution must be > 0. Got 0.0 instead."
+    with pytest.raises(ParameterError) as info:
+        ContactDistribution.from_histogram([0.0, 1.0], [-1.0], 1.0)
+    assert str(info.value) == ("The 'weights' parameter of ContactDistribution.from_histogram must be >= 0. "
+                               "Got -1.0 instead.")
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_unequal_loads_from_given_normals_are_the_lognormal_formula(scale):
+    """``f_i = mean_i exp(sigma z_i - sigma^2 / 2)``, ``sigma^2 = ln(1 + spread^2)``, with
+    ``z`` given (rows of carousels) and each contact's own mean: 4 eps (one exp, one log);
+    z = sigma / 2 gives each mean exactly (the exponent is 0); spread 0 is the mean,
+    unchanged, a fresh array, and draws nothing."""
+    means = np.array([1.0, 2.0, 0.5]) * scale
+    spread = 0.75
+    sigma = np.sqrt(np.log(1 + spread ** 2))
+    z = np.array([[0.0, 1.0, -2.0], [0.5 * sigma, 0.5 * sigma, 0.5 * sigma]])
+    loads = unequal_loads(means, spread, 3, normals=z)
+    np.testing.assert_allclose(loads[0], means * np.exp(sigma * z[0] - sigma ** 2 / 2), rtol=4 * np.finfo(float).eps)
+    np.testing.assert_array_equal(loads[1], means)
+    rng = np.random.default_rng(3)
+    same = unequal_loads(means, 0.0, 3, rng)
+    np.testing.assert_array_equal(same, means)
+    same[0] = -1.0
+    assert rng.random() == np.random.default_rng(3).random()
+    np.testing.assert_array_equal(unequal_loads(2.0 * scale, 0.0, 2), [2.0 * scale, 2.0 * scale])
+
+
+def test_weighted_median_of_a_row_without_weight_is_its_slowest_speed():
+    lo, hi = weighted_median([[0.3, -0.2, 0.1], [0.3, -0.2, 0.1]], [0.0, 0.0, 0.0], outside=[0.0, 0.0])
+    np.testing.assert_array_equal(lo, [-0.2, -0.2])
+    np.testing.assert_array_equal(hi, [-0.2, -0.2])
+
+
+@pytest.mark.parametrize("call, error, message", [
+    (lambda: ContactSet([0.0]).force(None), ParameterTypeError,
+     "The 'V' parameter of ContactSet.force must be real numbers (m/s). Got None instead."),
+    (lambda: ContactSet([0.0]).force([1 + 2j]), ParameterTypeError,
+     "The 'V' parameter of ContactSet.force must be real numbers (m/s). Got [(1+2j)] instead."),
+    (lambda: ContactSet([0.0]).force_bounds(b"x"), ParameterTypeError,
+     "The 'V' parameter of ContactSet.force_bounds must be real numbers (m/s). Got b'x' instead."),
+    (lambda: ContactSet([0.0]).force_bounds([[0.1], [0.2, 0.3]]), ParameterTypeError,
+     "The 'V' parameter of ContactSet.force_bounds must be real numbers (m/s). Got [[0.1], [0.2, 0.3]] instead."),
+    (lambda: ContactSet([0.0]).force(np.array([0.1, np.nan])), ParameterError,
+     "The 'V' parameter of ContactSet.force must not contain NaN. Got array([0.1, nan]) instead."),
+    (lambda: ContactSet([0.0]).cdf({"a": 1}), ParameterTypeError,
+     "The 'V' parameter of ContactSet.cdf must be real numbers (m/s). Got {'a': 1} instead."),
+    (lambda: ContactDistribution(stats.norm(0, 1), 1.0).cdf(np.nan), ParameterError,
+     "The 'V' parameter of ContactDistribution.cdf must not contain NaN. Got nan instead."),
+    (lambda: ContactDistribution(stats.norm(0, 1), 1.0).density("v"), ParameterTypeError,
+     "The 'V' parameter of ContactDistribution.density must be real numbers (m/s). Got 'v' instead."),
+    (lambda: ContactSet.from_friction([0.1, 0.2], [0.5, -0.5], 2.0), ParameterError,
+     "The 'mu' parameter of ContactSet.from_friction must be >= 0. Got -0.5 instead."),
+    (lambda: ContactSet.from_friction([0.1, 0.2], 0.5, [1.0, -2.0]), ParameterError,
+     "The 'normal_loads' parameter of ContactSet.from_friction must be >= 0. Got -2.0 instead."),
+    (lambda: ContactSet.from_friction([0.1, np.nan], 0.5, 1.0), ParameterError,
+     "The 'speeds' parameter of ContactSet.from_friction must be finite (no NaN or inf). Got nan instead."),
+    (lambda: ContactSet.from_friction([0.1], "a", 1.0), ParameterTypeError,
+     "The 'mu' parameter of ContactSet.from_friction must be an array of numbers. Got 'a' instead."),
+    (lambda: ContactSet.from_friction([0.1], 1.0, None), ParameterTypeError,
+     "The 'normal_loads' parameter of ContactSet.from_friction must be an array of numbers. Got None instead."),
+    (lambda: ContactSet([0.1, 0.2]).with_speeds([0.1, np.inf]), ParameterError,
+     "The 'speeds' parameter of ContactSet.with_speeds must be finite (no NaN or inf). Got inf instead."),
+    (lambda: ContactSet([0.1, 0.2], [1.0, np.inf]), ParameterError,
+     "The 'forces' parameter of ContactSet must be finite (no NaN or inf). Got inf instead."),
+    (lambda: ContactSet([0.1, 0.2], [1.0, -1.0]), ParameterError,
+     "The 'forces' parameter of ContactSet must be >= 0. Got -1.0 instead."),
+    (lambda: ContactSet([0.1, 0.2], [1.0, 1.0, 1.0]), ParameterError,
+     "The 'forces' parameter of ContactSet must have the same length as 'speeds' (2). Got 'an array of length 3' "
+     "instead."),
+    (lambda: ContactSet(np.ones((2, 2))), ParameterError,
+     "The 'speeds' parameter of ContactSet must be 1-dimensional. Got 'an array of shape (2, 2)' instead."),
+    (lambda: ContactDistribution.from_histogram([0, np.nan], [1.0], 1.0), ParameterError,
+     "The 'edges' parameter of ContactDistribution.from_histogram must be finite (no NaN or inf). Got nan instead."),
+    (lambda: ContactDistribution.from_histogram([0, 1], [np.inf], 1.0), ParameterError,
+     "The 'weights' parameter of ContactDistribution.from_histogram must be finite (no NaN or inf). Got inf "
+     "instead."),
+    (lambda: ContactDistribution.from_histogram([0, 1], [1.0], -1.0), ParameterError,
+     "The 'total_force' parameter of ContactDistribution must be > 0. Got -1.0 instead."),
+    (lambda: weighted_median([0.1, 0.2], [1.0, -1.0]), ParameterError,
+     "The 'forces' parameter of weighted_median must be >= 0. Got -1.0 instead."),
+    (lambda: weighted_median([0.1, 0.2], [1.0, np.nan]), ParameterError,
+     "The 'forces' parameter of weighted_median must be finite (no NaN or inf). Got nan instead."),
+    (lambda: unequal_loads(1.0, "wide", 3), ParameterTypeError,
+     "The 'spread' parameter of unequal_loads must be a real number. Got 'wide' instead."),
+])
+def test_each_remaining_refusal_names_its_owner_in_full(call, error, message):
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+
+
+def test_default_magnitudes_are_one_newton_each_and_read_only():
+    cs = ContactSet([0.3, -0.1, 0.2])
+    np.testing.assert_array_equal(cs.forces, [1.0, 1.0, 1.0])
+    assert not cs.forces.flags.writeable and not cs.speeds.flags.writeable and cs.total_force == 3.0
+    moved = cs.with_speeds([1.0, 2.0, 3.0])
+    assert moved.forces is cs.forces and moved.equilibrium() == (2.0, 2.0)
+    np.testing.assert_array_equal(cs.speeds, [0.3, -0.1, 0.2])
+
+
+def test_both_builders_give_the_kernels_the_same_table(monkeypatch):
+    """The staircase table the exact simulator's kernel reads (levels padded with +inf, the
+    magnitude below and at-or-above each level) is the same array, bit for bit, from the
+    compiled builder and from NumPy's (unequal magnitudes, ties, a lifted contact)."""
+    import toolkit.model.contacts as contacts
+    from toolkit import _compiled
+
+    _compiled.load("core")                   # the compiled builder runs once the kernels are loaded
+    assert contacts.compiled("core") is not None or os.environ.get("NUMBA_DISABLE_JIT") == "1"
+    speeds, forces = [0.3, -0.1, 0.3, 0.2, -0.4, 0.2], [0.5, 2.0, 0.25, 1.0, 0.0, 0.75]
+    compiled = ContactSet(speeds, forces)._table
+    monkeypatch.setattr(contacts, "_SMALL", 0)
+    numpy_built = ContactSet(speeds, forces)._table
+    np.testing.assert_array_equal(numpy_built, compiled)
+    assert numpy_built[0, -1] == np.inf and numpy_built.shape == (3, 4)
+
+
+def test_the_patch_and_the_loads_keep_their_rules_and_types():
+    """A histogram patch's median tie is bracketed at its tolerance ``4 (K + 1) eps`` (K = 2
+    bins: 12 eps): a cumulative share 1/2 + 12 eps at the middle edge is a tie (the band ends
+    there), 1/2 + 16 eps is not (the median falls just inside the first bin, 1 / (1 + 2^-47));
+    a repeated edge is refused; integers are kept as floats."""
+    eps = np.finfo(float).eps
+    tie = ContactDistribution.from_histogram([0.0, 1.0, 2.0], [0.5 + 12 * eps, 0.5 - 12 * eps], 1.0)
+    assert tie.equilibrium() == (1.0, 1.0)
+    near = ContactDistribution.from_histogram([0.0, 1.0, 2.0], [0.5 + 16 * eps, 0.5 - 16 * eps], 1.0)
+    lo, hi = near.equilibrium()
+    assert lo == hi == 0.5 / (0.5 + 16 * eps) and lo < 1.0
+    with pytest.raises(ParameterError) as info:
+        ContactDistribution.from_histogram([0.0, 1.0, 1.0, 2.0], [1.0, 1.0, 1.0], 1.0)
+    assert str(info.value) == ("The 'edges' parameter of ContactDistribution.from_histogram must be strictly "
+                               "increasing. Got [0.0, 1.0, 1.0, 2.0] instead.")
+    assert type(ContactDistribution(stats.uniform(0, 1), 2).total_force) is float
+    loads = unequal_loads(2, 0.0, 3)
+    assert loads.dtype == np.float64 and loads.tolist() == [2.0, 2.0, 2.0]
+    with pytest.raises(ParameterError) as info:
+        ContactSet(np.arange(8.0), np.zeros(8))
+    assert str(info.value) == ("The 'forces' parameter of ContactSet must have a positive sum (some contact must "
+                               "touch). Got [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] instead.")
+
+
+def test_weighted_median_of_a_grid_of_sets_with_bands():
+    """Rows on a (2, 2) grid of sets of four equal magnitudes (even: a band between the 2nd
+    and 3rd speeds), each with its own outside force: each cell is its ContactSet's
+    equilibrium with the force as one more contact far beyond (the second method)."""
+    speeds = np.array([[[0.1, 0.2, 0.3, 0.4], [0.4, -0.1, 0.0, 0.2]], [[1.0, 2.0, 3.0, 4.0], [0.5, 0.5, -0.5, 1.5]]])
+    forces = np.ones(4)
+    push = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    lo, hi = weighted_median(speeds, forces, outside=push)
+    assert lo.shape == hi.shape == (2, 2)
+    assert (lo[0, 0], hi[0, 0]) == (0.2, 0.3) and (lo[1, 1], hi[1, 1]) == (0.5, 0.5)
+    for i in range(2):
+        for j in range(2):
+            p = push[i, j]
+            expected = ContactSet(np.append(speeds[i, j], np.sign(p) * 1e6), np.append(forces, abs(p))).equilibrium() \
+                if p else ContactSet(speeds[i, j], forces).equilibrium()
+            assert (lo[i, j], hi[i, j]) == expected
+
+
+def test_an_overflowing_total_is_refused_even_where_overflows_raise():
+    with np.errstate(all="raise"):
+        with pytest.raises(ParameterError, match="must have a finite sum"):
+            ContactSet([0.1, 0.2], [1e308, 1e308])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 
 import numpy as np
@@ -48,6 +49,13 @@ def test_piecewise_constant_without_switches():
      "be 2-dimensional. Got 'an array of shape (2, 1, 1)' instead."),
     ([1.0], [0, np.nan], ParameterError, "values", "be finite (no NaN or inf). Got nan instead."),
     ([1.0], "ab", ParameterTypeError, "values", "be an array of numbers. Got 'ab' instead."),
+    # Ragged rows: refused by the toolkit's template, not by numpy's conversion error.
+    ([1.0], [[0, 1], [2]], ParameterError, "values",
+     "be a rectangular array (nested sequences of equal lengths). Got [[0, 1], [2]] instead."),
+    ([1.0], [0.5, [1, 2]], ParameterError, "values",
+     "be a rectangular array (nested sequences of equal lengths). Got [0.5, [1, 2]] instead."),
+    ([[1.0], 2.0], [0, 1, 2], ParameterError, "times",
+     "be a rectangular array (nested sequences of equal lengths). Got [[1.0], 2.0] instead."),
 ])
 def test_piecewise_refuses_bad_input(times, values, error, name, rule):
     """Each refusal names the parameter, the owner, the rule and the value, whole (mutants:
@@ -535,3 +543,470 @@ def test_compliant_tie_tolerance_brackets_the_net_force(scale, excess, band):
     x, at_x, first, _, _ = compliant_breakpoints(speeds, forces, k)
     assert x.size == 4 and list(first) == [0, 0, 1, 1]
     assert at_x[1] == (0.0 if band else d * scale)
+
+
+# -- the motor law solved: MotorPiece, reach, implicit_step, clip on casadi -----------------
+def _lag_ode(motors, start, command, s_end):
+    """Second method: motor_rate integrated by an adaptive Runge-Kutta (rtol 1e-12)."""
+    from scipy.integrate import solve_ivp
+
+    from toolkit.model import motor_rate
+
+    sol = solve_ivp(lambda t, v: motor_rate(motors, command, v), (0.0, s_end), start, method="DOP853",
+                    rtol=1e-12, atol=1e-14, dense_output=True, max_step=motors.lag / 8 if motors.lag else np.inf)
+    return sol.sol
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -20, 1.0, 2.0 ** 20])
+def test_motor_piece_ramps_then_settles_per_contact(scale):
+    """Lag 1/4 s and rate limit 2 m/s^2 (r tau = 1/2 m/s), unequal gaps u - v0 of (1.5, -1,
+    1/4, 1/2) m/s (times ``scale``, with the rate: every number scales by a power of two,
+    exactly): the first two ramp for (|gap| - r tau) / r = 1/2 and 1/4 s and end at u -+ r tau;
+    the third is inside the lag's reach; the fourth sits exactly on it (no ramp: ``>``, not
+    ``>=``). Exact at the ramp's end (dyadic), the lag's closed form after it (4 eps), and
+    the law integrated by Runge-Kutta (1e-9: its tolerance) in between; the displacement is
+    the quadrature of the speeds (1e-12 relative: Gauss-Kronrod on smooth pieces)."""
+    from scipy.integrate import quad
+
+    from toolkit.model import MotorPiece
+
+    tau, r = 0.25, 2.0 * scale
+    v0 = np.array([0.0, 0.5, -0.25, 0.125]) * scale
+    u = v0 + np.array([1.5, -1.0, 0.25, 0.5]) * scale
+    piece = MotorPiece.build(0.5, v0, u, tau, r)
+    np.testing.assert_array_equal(piece.ramp, np.array([2.0, -2.0, 0.0, 0.0]) * scale)
+    np.testing.assert_array_equal(piece.ramp_end, [0.5, 0.25, 0.0, 0.0])
+    np.testing.assert_array_equal(piece.after, np.array([1.0, 0.0, -0.25, 0.125]) * scale)
+    assert piece.a == 0.5
+    ramps = piece.speeds(np.array([0.125, 0.25, 0.5]))
+    np.testing.assert_array_equal(ramps[:, 0], np.array([0.25, 0.5, 1.0]) * scale)
+    np.testing.assert_array_equal(ramps[:2, 1], np.array([0.25, 0.0]) * scale)
+    s = np.array([0.0, 0.0625, 0.3, 0.5, 0.75, 1.5])
+    expect = np.where(s[:, None] < piece.ramp_end, v0 + piece.ramp * s[:, None],
+                      u + (piece.after - u) * np.exp(-(s[:, None] - piece.ramp_end) / tau))
+    np.testing.assert_allclose(piece.speeds(s), expect, rtol=4 * np.finfo(float).eps, atol=0)
+    ode = _lag_ode(Motors(lag=tau, rate_limit=r), v0, u, 1.5)
+    np.testing.assert_allclose(piece.speeds(s), ode(s).T, rtol=0, atol=1e-9 * scale)
+    for t in s:
+        np.testing.assert_array_equal(piece.speeds_at(float(t)), piece.speeds(np.array([t]))[0])
+        for i in range(4):
+            area = quad(lambda x: piece.speeds(np.array([x]))[0, i], 0.0, t, points=[0.25, 0.5], epsabs=0,
+                        epsrel=1e-13)[0] if t > 0 else 0.0
+            assert piece.displacement(float(t))[i] == pytest.approx(area, rel=1e-12, abs=1e-15 * scale)
+    # Coefficients: v(s + x) = v0 + q x + e ..., the next phase change the first ramp end ahead.
+    v, q, e, nxt = piece.coefficients(0.125)
+    np.testing.assert_array_equal(q, [2.0 * scale, -2.0 * scale, 0.0, 0.0])
+    np.testing.assert_array_equal(e, [0.0, 0.0, *((u - v)[2:] / tau)])
+    assert nxt == 0.25
+    v, q, e, nxt = piece.coefficients(0.375)
+    np.testing.assert_array_equal(q, [2.0 * scale, 0.0, 0.0, 0.0])
+    assert nxt == 0.5 and e[0] == 0.0 and e[1] == (u[1] - v[1]) / tau
+    v, q, e, nxt = piece.coefficients(0.75)
+    np.testing.assert_array_equal(q, np.zeros(4))
+    np.testing.assert_array_equal(e, (u - v) / tau)
+    assert nxt == math.inf
+
+
+def test_motor_piece_without_lag_ramps_and_holds_and_without_rate_limit_decays():
+    from toolkit.model import MotorPiece
+
+    v0, u = np.array([0.0, 0.5]), np.array([1.0, -0.25])
+    ramp = MotorPiece.build(0.0, v0, u, 0.0, 4.0)      # ramps of 1/4 and 3/16 s at 4 m/s^2
+    np.testing.assert_array_equal(ramp.ramp_end, [0.25, 0.1875])
+    np.testing.assert_array_equal(ramp.after, u)
+    np.testing.assert_array_equal(ramp.speeds(np.array([0.125, 0.1875, 1.0])), [[0.5, 0.0], [0.75, -0.25], u])
+    np.testing.assert_array_equal(ramp.speeds_at(1.0), u)
+    # Displacement: v0 x + 4 x^2 / 2 on the ramp, then u times the rest (dyadic: exact).
+    np.testing.assert_array_equal(ramp.displacement(1.0), [0.125 + 0.75, 0.5 * 0.1875 - 2 * 0.1875 ** 2 - 0.25 * 0.8125])
+    v, q, e, nxt = ramp.coefficients(0.5)
+    np.testing.assert_array_equal(e, [0.0, 0.0])
+    assert nxt == math.inf and not q.any()
+    v, q, e, nxt = ramp.coefficients(0.0)
+    np.testing.assert_array_equal(q, [4.0, -4.0])
+    np.testing.assert_array_equal(e, [0.0, 0.0])
+    assert nxt == 0.1875
+    tau = 0.125
+    lag = MotorPiece.build(0.0, v0, u, tau, math.inf)
+    assert not lag.ramp.any() and not lag.ramp_end.any()
+    np.testing.assert_array_equal(lag.after, v0)
+    np.testing.assert_allclose(lag.speeds(np.array([tau])), [u + (v0 - u) / np.e], rtol=4 * np.finfo(float).eps)
+    # u s + (v0 - u) tau (1 - e^-s/tau) at s = tau (4 eps of the terms).
+    np.testing.assert_allclose(lag.displacement(tau), u * tau + (v0 - u) * tau * (1 - 1 / np.e),
+                               rtol=8 * np.finfo(float).eps)
+
+
+@pytest.mark.parametrize("tau, rate", [(0.0, math.inf), (0.0, 2.0), (0.25, math.inf), (0.25, 2.0)])
+def test_reach_bounds_every_command_and_is_met_by_the_limit(tau, rate):
+    """``reach`` is the motor law driven at the limit: equal to the law's own solution with the
+    limit as the command (MotorPiece: 4 eps; Runge-Kutta: its 1e-9) from unequal starts below
+    it, and no other command between the limits gets farther (checked on two)."""
+    from toolkit.model import MotorPiece
+    from toolkit.model.motors import reach
+
+    v = np.array([-0.5, 0.0, 0.25, 0.625])
+    limit = 0.75
+    s = np.array([0.0, 0.0625, 0.125, 0.3, 0.5, 1.0])
+    got = reach(tau, rate, v, limit, s)
+    def law(command):                                  # ideal motors jump to the command
+        if tau == 0 and rate == math.inf:
+            return np.full((s.size, 4), command)
+        return MotorPiece.build(0.0, v, np.full(4, command), tau, rate).speeds(s)
+
+    np.testing.assert_allclose(got, law(limit), rtol=4 * np.finfo(float).eps, atol=1e-16)
+    if tau > 0:
+        ode = _lag_ode(Motors(lag=tau, rate_limit=rate), v, np.full(4, limit), 1.0)
+        np.testing.assert_allclose(got, ode(s).T, rtol=0, atol=1e-9)
+    for other in (0.5, -0.75):
+        slower = law(other)
+        assert np.all(got >= slower - 1e-15)
+    if tau == 0 and rate == 2.0:
+        np.testing.assert_array_equal(got[2], [-0.25, 0.25, 0.5, 0.75])     # 2 x 1/8 = 1/4 up, to the limit
+
+
+def test_implicit_step_solves_the_backward_euler_equation():
+    """``v+ = v + h clip((u - v+) / tau, -r, r)``: the step's result put back in the defining
+    equation (2 eps: one division and one product), per contact with unequal gaps, some on the
+    rate limit; without a lag, a ramp of at most ``r h`` to the command (dyadic: exact)."""
+    from toolkit.model.motors import implicit_step
+
+    v = np.array([0.0, 0.5, -0.25, 0.125])
+    u = np.array([1.0, -0.5, -0.125, 0.125])
+    h = 0.125
+    for motors in (Motors(lag=0.375, rate_limit=2.0), Motors(lag=0.375), Motors(lag=0.125, rate_limit=1.0)):
+        nxt = implicit_step(motors, v, u, h)
+        pull = (u - nxt) / motors.lag
+        np.testing.assert_allclose(nxt, v + h * np.clip(pull, -motors.rate_limit, motors.rate_limit),
+                                   rtol=2 * np.finfo(float).eps, atol=1e-17)
+    # Lag 1/8 = h: w = (v + u) / 2; rate 2: at most 1/4 per step (dyadic: exact).
+    np.testing.assert_array_equal(implicit_step(Motors(lag=0.125, rate_limit=2.0), v, u, h),
+                                  [0.25, 0.25, -0.1875, 0.125])
+    np.testing.assert_array_equal(implicit_step(Motors(rate_limit=2.0), v, u, h), [0.25, 0.25, -0.125, 0.125])
+    np.testing.assert_array_equal(implicit_step(Motors(), v, u, h), u)
+
+
+def test_motor_clip_on_casadi_is_numpys_clip():
+    import casadi
+
+    x = np.array([-1.0, -0.25, 0.0, 0.5, 2.0])
+    for limits in ((-0.5, 0.75), (-math.inf, 0.75), (-0.5, math.inf), (-math.inf, math.inf)):
+        motors = Motors(speed_limits=limits)
+        s = casadi.SX.sym("s", x.size)
+        built = casadi.Function("f", [s], [motors.clip(s, casadi)])
+        np.testing.assert_array_equal(np.array(built(x)).ravel(), np.clip(x, *limits))
+        np.testing.assert_array_equal(motors.clip(x, None), np.clip(x, *limits))
+
+
+def test_motor_rate_on_casadi_is_numpys():
+    import casadi
+
+    from toolkit.model import motor_rate
+
+    u, v = np.array([1.0, -1.0, 0.25, 0.0]), np.array([0.0, 0.0, 0.0, 0.5])
+    s = casadi.SX.sym("v", 4)
+    for motors in (None, Motors(), Motors(lag=0.5), Motors(lag=0.5, rate_limit=1.5), Motors(rate_limit=3.0)):
+        built = casadi.Function("f", [s], [casadi.vertcat(motor_rate(motors, u, s, casadi))])
+        np.testing.assert_array_equal(np.array(built(v)).ravel(), motor_rate(motors, u, v))
+    assert Motors(lag=0.5, speed_limits=(-1.0, 1.0)).speed_limits == (-1.0, 1.0)
+
+
+def test_lag_settling_time_is_bracketed_at_the_travel():
+    from toolkit.model import lag_settling_time
+
+    # remaining gap tau = 0.5 x 0.25 = 1/8 m: equal to the travel is already settled (0), twice
+    # the travel takes tau ln 2 (the remaining travel halves after tau ln 2).
+    assert lag_settling_time(0.5, 0.25, 0.125) == 0.0
+    assert lag_settling_time(0.5, 0.25, 0.0625) == pytest.approx(0.25 * math.log(2.0), rel=2 * np.finfo(float).eps)
+    assert lag_settling_time(0.5, 0.25, 0.125 * (1 - 2 ** -40)) > 0.0
+
+
+def test_motors_keep_floats_and_bracket_the_lag_and_limits():
+    """Integers given are kept as Python floats (speed limits as a tuple of floats); the lag's
+    rate 1 / lag must be finite: 1e-308 (rate 1e308) is taken, 5e-324 refused in full; equal
+    speed limits are a valid (fixed) speed; each limit is named when it is not a number."""
+    motors = Motors(lag=1, rate_limit=2, speed_limits=[-1, np.float32(1)], compliance=1, backlash=1)
+    for name in ("lag", "rate_limit", "compliance", "backlash"):
+        assert type(getattr(motors, name)) is float, name
+    assert motors.speed_limits == (-1.0, 1.0) and type(motors.speed_limits) is tuple
+    assert all(type(v) is float for v in motors.speed_limits)
+    assert Motors(lag=1e-308).lag == 1e-308
+    assert Motors(speed_limits=(0.5, 0.5)).speed_limits == (0.5, 0.5)
+    for call, error, message in (
+            (lambda: Motors(lag=5e-324), ParameterError,
+             "The 'lag' parameter of Motors must be 0 or have a finite rate 1 / lag. Got 5e-324 instead."),
+            (lambda: Motors(speed_limits=("a", 1.0)), ParameterTypeError,
+             "The 'speed_limits' parameter of Motors must be a real number. Got 'a' instead."),
+            (lambda: Motors(speed_limits=(-1.0, np.nan)), ParameterError,
+             "The 'speed_limits' parameter of Motors must be finite. Got nan instead.")):
+        with pytest.raises(error) as info:
+            call()
+        assert str(info.value) == message
+
+
+def test_ideal_motor_rates_are_float_zeros_of_the_speeds_shape():
+    """Ideal motors: zero rates, one per contact, as floats whatever the speeds were given as
+    (a list, integers, NaN from a failed estimate: still no motion); the ideal response is the
+    command from the first instant (s = 0 included)."""
+    from toolkit.model import motor_rate, unsaturated_response
+
+    for speeds in ([0.1, 0.2, 0.3], np.array([1, 2, 3]), np.array([np.nan, 0.0, 1.0])):
+        for motors in (None, Motors(compliance=0.5)):
+            rate = motor_rate(motors, np.zeros(3), speeds)
+            assert rate.shape == (3,) and rate.dtype == np.float64
+            np.testing.assert_array_equal(rate, np.zeros(3))
+    u, v = np.array([0.5, -0.25]), np.array([0.0, 0.125])
+    np.testing.assert_array_equal(unsaturated_response(v, u, 0.0, 0.0, math.inf), u)
+    np.testing.assert_array_equal(unsaturated_response(v, u, np.array([[0.0], [0.5]]), 0.0, math.inf), [u, u])
+
+
+def test_lag_memory_is_python_floats():
+    from toolkit.model import lag_memory
+
+    share, area = lag_memory(0.25, 0.25)
+    assert type(share) is float and type(area) is float
+    assert share == pytest.approx(math.exp(-1.0), rel=2 * EPS) and area == pytest.approx(0.25 * (1 - math.exp(-1)),
+                                                                                         rel=4 * EPS)
+
+
+def test_motor_piece_is_its_fields_at_their_defining_points():
+    """A piece keeps its start time ``a`` whatever its motors; at the end of a ramp its speed is
+    ``after`` exactly (the field's definition), also where ``start + ramp * ramp_end`` rounds
+    elsewhere (starts and commands drawn until it does: found, asserted); with no ramp the
+    coefficients are float zeros of the contacts' shape."""
+    from toolkit.model import MotorPiece
+
+    assert MotorPiece.build(0.75, np.zeros(2), np.ones(2), 0.25, math.inf).a == 0.75
+    assert MotorPiece.build(0.75, np.zeros(2), np.ones(2), 0.0, 2.0).a == 0.75
+    start, u = np.array([0.09587318112501803, 0.0]), np.array([-0.16114930036529077, 0.3])
+    for tau in (0.0075, 0.0):
+        piece = MotorPiece.build(0.0, start, u, tau, 5.0)
+        end = piece.ramp_end[0]
+        assert end > 0 and (start + piece.ramp * end)[0] != piece.after[0] or tau == 0.0
+        assert piece.speeds(np.array([end]))[0, 0] == piece.after[0]
+        assert piece.speeds_at(float(end))[0] == piece.after[0]
+    v, q, e, nxt = MotorPiece.build(0.0, start, u, 0.25, math.inf).coefficients(0.5)
+    assert q.shape == (2,) and q.dtype == np.float64 and not q.any() and nxt == math.inf
+
+
+def test_motor_piece_overflow_on_the_ramp_is_masked_silently():
+    """With a tiny lag (1e-20 s) the settling branch evaluated on the ramp overflows (exp of
+    5e19) and gives 0 * inf where ``after`` rounds onto the command; that branch is masked, and
+    it raises nothing even where floating-point errors are made to raise."""
+    from toolkit.model import MotorPiece
+
+    piece = MotorPiece.build(0.0, np.array([0.0, 0.0]), np.array([1.0, -0.5]), 1e-20, 1.0)
+    assert piece.after[0] == 1.0 and piece.ramp_end[0] > 0.5
+    with np.errstate(all="raise"):
+        np.testing.assert_array_equal(piece.speeds(np.array([0.25]))[0], [0.25, -0.25])
+        np.testing.assert_array_equal(piece.speeds_at(0.25), [0.25, -0.25])
+
+
+def test_reach_towards_a_limit_on_the_other_side_of_zero():
+    """Towards a negative limit from positive and zero speeds (limit + v and limit - v differ in
+    sign): every contact moves down, by r s on a pure ramp (dyadic: exact)."""
+    from toolkit.model.motors import reach
+
+    got = reach(0.0, 2.0, np.array([0.5, 0.0]), -0.25, np.array([0.125]))
+    np.testing.assert_array_equal(got, [[0.25, -0.25]])
+
+
+# -- the plant: its scale checks bracketed and refused in full, its right-hand side ---------
+def test_plant_scale_refusals_in_full():
+    """The overflow and rounding checks name the parameter, the rule with the numbers that
+    broke it, and the value."""
+    def message(call):
+        with pytest.raises(ParameterError) as info:
+            call()
+        return str(info.value)
+
+    assert message(lambda: Plant(ContactSet([0.1, 0.2], [1.0, 2.0]), mass=1e-300, external_force=1e300)) == (
+        "The 'mass' parameter of Plant must keep the largest acceleration (F_tot + max|F_ext|) / m finite "
+        "(F_tot = 3 N, max|F_ext| = 1e+300 N). Got 1e-300 instead.")
+    assert message(lambda: Plant(ContactSet([0.1]), mass=1e-300, damping=1e10,
+                                 external_force=PiecewiseConstant([1.0], [0.5, -2.0]))) == (
+        "The 'damping' parameter of Plant must keep the drag rate c / m finite (m = 1e-300 kg). Got 10000000000.0 "
+        "instead.")
+    assert message(lambda: Plant(ContactSet([0.3, 0.7, 0.1], [1.0, 0.5, 0.0]), 1.0,
+                                 motors=Motors(compliance=1e-17))) == (
+        "The 'motors' parameter of Plant must have a compliance k with k f_i above the speeds' rounding "
+        "4 eps max|v| = 6.22e-16 m/s and 1 / (k f_i) finite for every contact (smallest f_i = 0.5 N); use "
+        "compliance=0 for a stiff motor. Got 1e-17 instead.")
+    commands = PiecewiseConstant([1.0], [[0.5, -1.0], [0.25, 0.0]])
+    assert message(lambda: Plant(ContactSet([0.5, -1.0]), 1.0, motors=Motors(compliance=2.0 ** -40,
+                                                                             lag=2.0 ** -978),
+                                 commands=commands)) == (
+        "The 'motors' parameter of Plant must have a lag tau with 16 n 2 max|v| / (tau k) finite (n = 2, "
+        "max|v| = 1 m/s, k = 9.09495e-13 (m/s)/N); use lag=0 for instantaneous motors. Got "
+        f"{2.0 ** -978!r} instead.")
+
+
+def test_plant_scale_checks_are_bracketed_at_their_edges():
+    """Each bound from both sides, on powers of two (exact): the compliance floor ``4 eps
+    max|v|`` with the speeds clipped to the limits (max|v| = 1/2 from commands of 1 and -3),
+    ``k f`` at the floor refused and one ulp above taken, the smallest loaded contact's ``f``
+    (the lifted one skipped); the lag's pull ``16 n 2 max|v| / (tau k)`` at 2^1024 refused
+    and at 2^1023 taken; the acceleration and drag rates at the largest double taken."""
+    eps = np.finfo(float).eps
+    limits = (-0.5, 0.5)
+    cs = ContactSet([1.0, -3.0, 0.0], [2.0, 0.5, 0.0])
+    floor = 4 * eps * 0.5
+    with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a compliance"):
+        Plant(cs, 1.0, motors=Motors(compliance=floor / 0.5, speed_limits=limits))
+    taken = Plant(cs, 1.0, motors=Motors(compliance=np.nextafter(floor / 0.5, 1.0), speed_limits=limits))
+    assert taken.compliance == np.nextafter(floor / 0.5, 1.0)
+    # Commands set the scale: max |clip(commands)| = 1/4 halves the floor.
+    commands = PiecewiseConstant([1.0], [[0.25, 0.0, 0.0], [0.125, -0.25, 0.0]])
+    Plant(cs, 1.0, motors=Motors(compliance=np.nextafter(floor / 1.0, 1.0), speed_limits=limits), commands=commands)
+    with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a compliance"):
+        Plant(cs, 1.0, motors=Motors(compliance=floor / 1.0, speed_limits=limits), commands=commands)
+    two = ContactSet([0.5, -1.0])
+    commands = PiecewiseConstant([1.0], [[0.5, -1.0], [0.25, 0.0]])
+    # 16 * 2 * (2 * 1 / 2^-977) / 2^-40 = 2^1023: finite; 2^-978 gives 2^1024 = inf.
+    plant = Plant(two, 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -977), commands=commands)
+    assert plant.motors.lag == 2.0 ** -977
+    with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a lag"):
+        Plant(two, 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -978), commands=commands)
+    # Without commands (or without a lag) the pull is not checked.
+    Plant(two, 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -978))
+    big = np.finfo(float).max
+    assert Plant(ContactSet([0.0], [big / 2]), 1.0, external_force=big / 2).mass == 1.0
+    with pytest.raises(ParameterError, match="'mass' parameter of Plant"):
+        Plant(ContactSet([0.0], [big / 2]), 1.0, external_force=PiecewiseConstant([1.0], [0.0, -big]))
+    assert Plant(ContactSet([0.0]), 0.5, damping=big / 2).damping == big / 2
+    with pytest.raises(ParameterError, match="'damping' parameter of Plant"):
+        Plant(ContactSet([0.0]), 0.5, damping=big)
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -20, 1.0, 2.0 ** 20])
+def test_plant_rhs_is_the_law_on_both_back_ends(scale):
+    """``m dV/dt = sum f_i sign(v_i - V) + F_ext - c V`` and the motor law, on unequal loads and
+    masses at three scales of force and mass (their ratio, the acceleration, unchanged: every
+    value below is exact), with the plant's own command and outside force or those given; the
+    same on casadi."""
+    import casadi
+
+    cs = ContactSet([0.5, -0.25, 0.125], np.array([1.0, 2.0, 0.5]) * scale)
+    commands = PiecewiseConstant([1.0], [[0.5, -0.25, 0.125], [1.0, 0.75, -2.0]])
+    lagging = Plant(cs, 2.0 * scale, damping=0.5 * scale, external_force=PiecewiseConstant([0.5], [0.0, 0.25 * scale]),
+                    motors=Motors(lag=0.25, speed_limits=(-1.0, 0.5)), commands=commands)
+    x = np.array([0.0, 0.5, 0.0, 0.125])
+    # t = 0.75: F_ext = 0.25, forces (1, 0, 0.5) (the second ties: 0), drag 0 -> dV = 1.75 / 2;
+    # commands (0.5, -0.25, 0.125) until 1 s: motor rates (0, -1, 0); after it, clipped to
+    # (0.5, 0.5, -1): (0, 2, -4.5).
+    np.testing.assert_array_equal(lagging.rhs(0.75, x), [0.875, 0.0, -1.0, 0.0])
+    np.testing.assert_array_equal(lagging.motor_rate(1.5, x[1:]), [0.0, 2.0, -4.5])
+    np.testing.assert_array_equal(lagging.motor_rate(0.5, x[1:]), [0.0, -1.0, 0.0])
+    # Given command (clipped by the motors) and force: u = (1, 1, 1) -> (0.5, 0.5, 0.5).
+    np.testing.assert_array_equal(lagging.rhs(0.75, x, [1.0, 1.0, 1.0], external=-1.5 * scale),
+                                  [(1.5 - 1.5) / 2, 0.0, 2.0, 1.5])
+    V = 0.25
+    drag = lagging.rhs(0.25, np.array([V, 0.5, -0.25, 0.125]))
+    np.testing.assert_array_equal(drag, [(1.0 - 2.0 - 0.5 - 0.5 * V) / 2, 0.0, 0.0, 0.0])
+    assert lagging.net_force(0.25, V, [0.5, -0.25, 0.125]) == (1.0 - 2.0 - 0.5 - 0.5 * V) * scale
+    # The smoothed law's width reaches the law: tanh(s / eps) at s = V - v of 1/2 and 1/4.
+    eps = 0.5
+    tanh = lagging.net_force(0.0, 0.0, [0.5, -0.25, 0.125], friction="tanh", epsilon=eps)
+    assert tanh == pytest.approx(scale * (np.tanh(1.0) - 2 * np.tanh(0.5) + 0.5 * np.tanh(0.25)), rel=4 * EPS)
+    assert lagging.rhs(0.0, [0.0, 0.5, -0.25, 0.125], friction="tanh", epsilon=eps)[0] == pytest.approx(
+        tanh / (2.0 * scale), rel=4 * EPS)
+    s = casadi.SX.sym("x", 4)
+    built = casadi.Function("f", [s], [lagging.rhs(0.75, s, xp=casadi)])
+    np.testing.assert_array_equal(np.array(built(x)).ravel(), [0.875, 0.0, -1.0, 0.0])
+    ideal = Plant(cs, 2.0 * scale, commands=commands)
+    np.testing.assert_array_equal(ideal.rhs(0.75, [0.0]), [-0.25])      # (1 - 2 + 0.5) / 2 at u(0.75)
+    np.testing.assert_array_equal(ideal.rhs(1.5, [0.0]), [(1.0 + 2.0 - 0.5) / 2])
+    np.testing.assert_array_equal(ideal.rhs(1.5, [0.0], [1.0, 1.0, 1.0]), [(1.0 + 2.0 + 0.5) / 2])
+    np.testing.assert_array_equal(ideal.motor_rate(0.0, [0.1, 0.2, 0.3]), np.zeros(3))
+    v = casadi.SX.sym("V", 1)
+    built = casadi.Function("g", [v], [ideal.rhs(1.5, v, xp=casadi)])
+    assert float(built(0.0)) == (1.0 + 2.0 - 0.5) / 2
+    with pytest.raises(ParameterError, match=re.escape(
+            "The 'epsilon' parameter of Plant.rhs must be > 0. Got 0.0 instead.")):
+        ideal.rhs(0.0, [0.0], friction="tanh")
+    with pytest.raises(ParameterError, match=re.escape(
+            "The 'epsilon' parameter of Plant.contact_forces must be > 0. Got -1 instead.")):
+        ideal.net_force(0.0, 0.0, [0, 1, 2], friction="tanh", epsilon=-1)
+
+
+def test_plant_keeps_floats_and_reports_its_motors():
+    """Integers given for the mass, the drag and a constant outside force are kept as Python
+    floats; the plant reports its motors' compliance, play and dynamics (0, 0, none for ideal
+    motors) and its number of contacts; commands are clipped to the motors' limits only."""
+    plant = Plant(ContactSet([0.5, -0.75, 0.25]), 2, damping=1, external_force=3)
+    for name in ("mass", "damping", "external_force"):
+        assert type(getattr(plant, name)) is float, name
+    assert (plant.n, plant.compliance, plant.backlash, plant.dynamic_motors) == (3, 0.0, 0.0, False)
+    np.testing.assert_array_equal(plant.command(0.0), [0.5, -0.75, 0.25])
+    np.testing.assert_array_equal(plant.final_command(), [0.5, -0.75, 0.25])
+    assert plant.external(7.0) == 3.0 and type(plant.external(7.0)) is float
+    driven = Plant(ContactSet([0.5, -0.75, 0.25]), 2.0, motors=Motors(compliance=0.5, backlash=0.001, lag=0.25,
+                                                                      speed_limits=(-0.5, 0.375)))
+    assert (driven.compliance, driven.backlash, driven.dynamic_motors) == (0.5, 0.001, True)
+    np.testing.assert_array_equal(driven.command(0.0), [0.375, -0.5, 0.25])
+    np.testing.assert_array_equal(driven.final_command(), [0.375, -0.5, 0.25])
+    np.testing.assert_array_equal(driven.initial_speeds(), [0.375, -0.5, 0.25])
+    ramp = Plant(ContactSet([0.5]), 1.0, motors=Motors(rate_limit=3.0))
+    assert ramp.dynamic_motors and not Plant(ContactSet([0.5]), 1.0, motors=Motors(compliance=1.0)).dynamic_motors
+    # A compliant plant's equilibrium is the zero of the saturated lines, at the final command:
+    # contacts at 0 and 1 with f = (1, 3), k = 1 meet at 1/2 (closed form, test above).
+    commands = PiecewiseConstant([1.0], [[5.0, 6.0], [0.0, 1.0]])
+    lo, hi = Plant(ContactSet([0, 1], [1, 3]), 1.0, motors=Motors(compliance=1.0), commands=commands).equilibrium()
+    assert lo == hi == pytest.approx(0.5, rel=1e-15, abs=0)
+
+
+def test_plant_rhs_with_compliant_motors_is_the_saturated_linear_law():
+    # k = 1/4, f = (1, 2): slips 0.125 and -1 give 1 x clip(0.125 / 0.25) = 0.5 and -2
+    # (saturated); m = 2: dV/dt = -0.75; the same through net_force (dyadic: exact).
+    plant = Plant(ContactSet([0.125, -1.0], [1.0, 2.0]), 2.0, motors=Motors(compliance=0.25))
+    np.testing.assert_array_equal(plant.rhs(0.0, [0.0]), [-0.75])
+    assert plant.net_force(0.0, 0.0, [0.125, -1.0]) == -1.5
+    np.testing.assert_array_equal(plant.contact_forces(0.0, [0.125, -1.0]), [0.5, -2.0])
+
+
+def test_plant_scale_checks_at_the_largest_doubles():
+    """The lag's pull ``16 n 2 max|v| / (tau k)`` at 1.9 x 2^1023 (n = 2, max|v| = 1/2, k =
+    2^-40) is finite and taken: 17/16 of it, or 3 for 2, or max|v| divided, overflow. ``1 /
+    (k f)`` is finite for k f = 0.75 x 2^-1023 (taken; twice it is not) and for k = 2^-1020
+    with f = 2^10 (k / f would not be). ``k f`` above the floor with f = 4 and k 1.5 floor /
+    4 (k / f is below it). Under floating-point errors that raise, the checks still refuse
+    with their own error (their overflows and divisions are expected)."""
+    eps = np.finfo(float).eps
+    commands = PiecewiseConstant([1.0], [[0.5, -0.5], [0.25, 0.0]])
+    plant = Plant(ContactSet([0.5, -0.5]), 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -978 / 1.9),
+                  commands=commands)
+    assert plant.motors.lag == 2.0 ** -978 / 1.9
+    assert Plant(ContactSet([0.0]), 1.0, motors=Motors(compliance=0.75 * 2.0 ** -1023)).compliance > 0
+    assert Plant(ContactSet([0.0], [1024.0]), 1.0, motors=Motors(compliance=2.0 ** -1020)).compliance > 0
+    floor = 4 * eps * 0.5
+    assert Plant(ContactSet([0.5], [4.0]), 1.0, motors=Motors(compliance=1.5 * floor / 4)).compliance > 0
+    with np.errstate(all="raise"):
+        with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a compliance"):
+            Plant(ContactSet([0.0]), 1.0, motors=Motors(compliance=1e-320))
+        with pytest.raises(ParameterError, match="'motors' parameter of Plant must have a lag"):
+            Plant(ContactSet([0.5, -0.5]), 1.0, motors=Motors(compliance=2.0 ** -40, lag=2.0 ** -980),
+                  commands=commands)
+
+
+def test_plant_signals_defaults_and_shapes():
+    """No commands and no outside signal: no switching times at all; the final command is the
+    last row of three; ideal motor rates are float zeros of the speeds' shape; the smoothed
+    laws need their width (no default); the ideal right-hand side is one-element."""
+    cs = ContactSet([0.0, 1.0])
+    assert Plant(cs, 1.0).switching_times().size == 0
+    commands = PiecewiseConstant([1.0, 2.0], [[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]])
+    np.testing.assert_array_equal(Plant(cs, 1.0, commands=commands).final_command(), [4.0, 5.0])
+    rate = Plant(cs, 1.0).motor_rate(0.0, [1, 2])
+    assert rate.shape == (2,) and rate.dtype == np.float64 and not rate.any()
+    plant = Plant(cs, 2.0)
+    for call, owner in ((lambda: plant.contact_forces(0.5, [0.0, 1.0], friction="tanh"), "Plant.contact_forces"),
+                        (lambda: plant.net_force(0.0, 0.5, [0.0, 1.0], friction="stribeck"), "Plant.contact_forces")):
+        with pytest.raises(ParameterError) as info:
+            call()
+        assert str(info.value) == f"The 'epsilon' parameter of {owner} must be > 0. Got 0.0 instead."
+    dV = plant.rhs(0.0, [0.5])
+    assert dV.shape == (1,) and dV[0] == 0.0
+    with pytest.raises(ParameterTypeError) as info:
+        Plant(cs, 1.0, external_force="a")
+    assert str(info.value) == "The 'external_force' parameter of Plant must be a real number. Got 'a' instead."
+    with pytest.raises(ParameterError) as info:
+        Plant(cs, 1.0, external_force=np.inf)
+    assert str(info.value) == "The 'external_force' parameter of Plant must be finite. Got inf instead."

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -288,3 +289,407 @@ def test_a_valid_file_is_read_by_blocks_without_the_row_by_row_reader(scenario, 
 
     monkeypatch.setattr(record_io, "_slow_block", refuse)
     _same(read_record_csv(path, scenario.sensors), expected)
+
+
+# -- small records written by hand: the format line by line, each refusal in full -------------
+from toolkit import ParameterTypeError  # noqa: E402
+from toolkit.model.record_io import LiveColumns, read_live_record, record_csv_text  # noqa: E402
+from toolkit.model.sensors import Encoder, Sensors  # noqa: E402
+
+_TEXT = """# active-contacts encoder record 1
+# central_resolution = 0.0001
+# wheel_resolution = 2e-05
+# wheel_backlash = 0.001
+# initial_commands = 0.05 -0.05
+time_s,central_count,wheel_count_1,wheel_count_2,command_1_m_s,command_2_m_s,force_N,truth_speed_m_s,\
+truth_position_m,truth_contact_speed_1_m_s,truth_contact_speed_2_m_s,sequence,received_s,answered_s,estimate_m_s,\
+estimate_variance_m2_s2
+0.0,0,0,0,0.1,-0.1,0.5,0.0,0.0,0.1,-0.1,7,0.0,0.25,0.0,0.0001
+0.015625,1,1,-1,0.1,-0.1,-0.25,0.1,0.001,0.1,-0.1,8,0.5,0.75,0.1,0.0002
+0.03125,3,2,-3,0.2,-0.2,0.0,0.2,0.002,0.1,-0.1,9,1.0,1.25,0.2,0.0003
+"""
+
+
+def _small():
+    record = EncoderRecord([0.0, 0.015625, 0.03125], [0, 1, 3], [[0, 0], [1, -1], [2, -3]],
+                           [[0.1, -0.1], [0.1, -0.1], [0.2, -0.2]], 1e-4, 2e-5, wheel_backlash=0.001,
+                           initial_commands=[0.05, -0.05], force=[0.5, -0.25, 0.0], truth_speed=[0.0, 0.1, 0.2],
+                           truth_position=[0.0, 1e-3, 2e-3], truth_contact_speeds=[[0.1, -0.1]] * 3)
+    live = LiveColumns(np.array([7, 8, 9]), np.array([0.0, 0.5, 1.0]), np.array([0.25, 0.75, 1.25]),
+                       np.array([0.0, 0.1, 0.2]), np.array([1e-4, 2e-4, 3e-4]))
+    return record, live
+
+
+def _sensors(rate=64.0, n=2):
+    # q_c = 2 pi 0.1 / 6283.185307179586 = 1e-4 to 1e-12 (within the reader's rel_tol).
+    return Sensors(Encoder(2 * np.pi * 0.1 / 1e-4, 0.1, rate=rate), Encoder(2 * np.pi * 0.1 / 2e-5, 0.1, rate=rate,
+                                                                          backlash=0.001), n)
+
+
+def test_the_format_line_by_line_with_every_column(tmp_path):
+    """A record with every optional part (initial commands, force, truth, a live run's
+    columns) written as the format says, character for character, and read back bit for bit."""
+    record, live = _small()
+    assert record_csv_text(record, live=live) == _TEXT
+    path = write_record_csv(record, tmp_path / "small.csv", live)
+    assert path == tmp_path / "small.csv" and path.read_text() == _TEXT
+    back, columns = read_live_record(path)
+    _same(record, back)
+    for name in ("sequence", "received", "answered", "estimate", "variance"):
+        np.testing.assert_array_equal(getattr(columns, name), getattr(live, name), err_msg=name)
+    assert columns.sequence.dtype == np.int64
+    _same(record, read_record_csv(path))
+    assert read_live_record(write_record_csv(record, tmp_path / "plain.csv"))[1] is None
+    # Without the truth's third part, no truth is written; without force, no force column.
+    partial = dataclasses.replace(record, truth_contact_speeds=None, force=None, initial_commands=None)
+    lines = record_csv_text(partial).splitlines()
+    assert lines[4] == "time_s,central_count,wheel_count_1,wheel_count_2,command_1_m_s,command_2_m_s"
+    assert lines[5] == "0.0,0,0,0,0.1,-0.1" and len(lines) == 8
+
+
+def test_writing_refuses_what_is_not_a_record_or_its_live_columns():
+    record, live = _small()
+    with pytest.raises(ParameterTypeError, match="^" + re.escape(
+            "The 'record' parameter of write_record_csv must be an EncoderRecord. Got 3 instead.") + "$"):
+        write_record_csv(3, "unused.csv")
+    with pytest.raises(ParameterTypeError, match="^" + re.escape(
+            "The 'record' parameter of record_csv_text must be an EncoderRecord. Got 'r' instead.") + "$"):
+        record_csv_text("r")
+    short = dataclasses.replace(live, sequence=np.array([7, 8]))
+    for bad in (short, "live"):
+        with pytest.raises(ParameterError, match="^" + re.escape(
+                "The 'live' parameter of record_csv_text must be LiveColumns of 3 samples. Got ") + ".* instead.$"):
+            record_csv_text(record, live=bad)
+
+
+def _refused(tmp_path, text, message, sensors=None, motors=None, name="r.csv"):
+    path = tmp_path / name
+    path.write_bytes(text.encode() if isinstance(text, str) else text)
+    with pytest.raises(ParameterError) as info:
+        read_record_csv(path, sensors, motors=motors)
+    assert str(info.value) == message
+    return info.value
+
+
+_HEAD = "time_s,central_count,wheel_count_1,command_1_m_s"
+_META1 = "# active-contacts encoder record 1\n# central_resolution = 0.5\n# wheel_resolution = 0.25\n"
+
+
+def _at(parameter, line, column):
+    """The start of a refusal of ``r.csv``: the parameter, the line and the column it names."""
+    return f"The '{parameter}' parameter of read_record_csv(r.csv) on line {line}, column {column} must "
+
+
+_KEYS = "['central_resolution', 'wheel_resolution', 'wheel_backlash', 'initial_commands']"
+_INT64_RULE = "be an integer count within int64 [-9223372036854775808, 9223372036854775807]"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("# other format\n", _at("first line", 1, 1) + f"be {RECORD_MAGIC!r}. Got '# other format' instead."),
+    ("", _at("first line", 1, 1) + f"be {RECORD_MAGIC!r}. Got '' instead."),
+    (_META1 + "# colour = blue\n",
+     _at("comment", 4, 1) + f"be 'key = value' with a key in {_KEYS}. Got 'colour = blue' instead."),
+    (_META1 + "# wheel_backlash 0.1\n",
+     _at("comment", 4, 1) + f"be 'key = value' with a key in {_KEYS}. Got 'wheel_backlash 0.1' instead."),
+    (_META1 + "# wheel_backlash = -0.25\n", _at("wheel_backlash", 4, 1) + "be >= 0. Got '-0.25' instead."),
+    (_META1 + "# central_resolution = 0\n", _at("central_resolution", 4, 1) + "be > 0. Got '0' instead."),
+    (_META1 + "# wheel_resolution = inf\n", _at("wheel_resolution", 4, 1) + "be finite. Got 'inf' instead."),
+    (_META1 + "# initial_commands = 0.5 x\n", _at("initial_commands", 4, 2) + "be a number. Got 'x' instead."),
+    (_META1 + "#\n", _at("header", 5, 1) + "follow the comment lines. Got 'end of file' instead."),
+    (_META1 + "time_s,central_count,command_1_m_s\n", _at("header", 4, 3)
+     + "name at least one 'wheel_count_1' column. Got 'time_s,central_count,command_1_m_s' instead."),
+    (_META1 + "time_s,central_count,wheel_count_1,command_2_m_s\n", _at("header", 4, 4)
+     + f"be {_HEAD!r}. Got 'time_s,central_count,wheel_count_1,command_2_m_s' instead."),
+    (_META1 + _HEAD + ",force_N,extra\n", _at("header", 4, 6)
+     + f"be '{_HEAD},force_N'. Got '{_HEAD},force_N,extra' instead."),
+    (_META1 + _HEAD + "\n\n\n", _at("data", 5, 1) + "hold at least one sample row. Got 'end of file' instead."),
+    (_META1 + _HEAD + "\n0.0,1,2,0.5,7\n", _at("row", 5, 5) + "have 4 comma-separated fields. Got 5 instead."),
+    (_META1 + _HEAD + "\n0.0,1,2\n", _at("row", 5, 4) + "have 4 comma-separated fields. Got 3 instead."),
+    (_META1 + _HEAD + "\n0.0,1,2,0.5\n0.5,1,2,nan\n", _at("command_1_m_s", 6, 4) + "be finite. Got 'nan' instead."),
+    (_META1 + _HEAD + "\n0.0,1,2,0.5\n-inf,1,2,0.5\n", _at("time_s", 6, 1) + "be finite. Got '-inf' instead."),
+    (_META1 + _HEAD + "\n0.5,1,2,0.5\n0.25,1,2,0.5\n",
+     _at("time_s", 6, 1) + "increase strictly (previous row 0.5). Got '0.25' instead."),
+    (_META1 + _HEAD + "\n0.0,1," + "1" * 41 + ",0.5\n",
+     _at("wheel_count_1", 5, 3) + _INT64_RULE + ". Got '" + "1" * 41 + "' instead."),
+    (_META1 + "# initial_commands = 0.5 0.25\n" + _HEAD + "\n0.0,1,2,0.5\n",
+     _at("initial_commands", 4, 1) + "hold 1 speeds. Got 2 instead."),
+])
+def test_malformed_small_files_are_refused_in_full(tmp_path, text, message):
+    _refused(tmp_path, text, message)
+
+
+def test_counts_of_forty_digits_are_read_and_refused_by_value(tmp_path):
+    """Forty digits is the longest count read (a longer one is refused unread): forty zeros
+    and a one is the count 1, and a forty-digit count beyond int64 is refused by its value."""
+    path = tmp_path / "r.csv"
+    path.write_text(_META1 + _HEAD + "\n0.0,1," + "0" * 39 + "7,0.5\n")
+    assert read_record_csv(path).wheel_counts[0, 0] == 7
+    _refused(tmp_path, _META1 + _HEAD + "\n0.0,1," + "9" * 40 + ",0.5\n",
+             _at("wheel_count_1", 5, 3) + _INT64_RULE + ". Got '" + "9" * 40 + "' instead.")
+
+
+def test_the_scene_encoders_period_is_bracketed_at_half_a_period(tmp_path):
+    """At 64 Hz (period 2^-6 s) a step of 1.5 periods is the edge, taken; the next double above
+    it is refused, on the fast block reader and on the row-by-row one alike (a bad count later
+    in the same block sends the block to it); below, 0.5 period taken and just below it (the nearest double whose difference to the period is beyond it)."""
+    sensors = _sensors(n=1)
+    meta = ("# active-contacts encoder record 1\n# central_resolution = 0.0001\n# wheel_resolution = 2e-05\n"
+            "# wheel_backlash = 0.001\n" + _HEAD + "\n")
+    h = 2.0 ** -6
+    for step in (1.5 * h, 0.5 * h):
+        path = tmp_path / "ok.csv"
+        path.write_text(meta + f"0.0,0,0,0.1\n{step!r},1,1,0.1\n")
+        assert read_record_csv(path, sensors).times[1] == step
+    # (Below, 0.5 h - 2^-59, two doubles down: one double down rounds back onto the edge in
+    # step - h.)
+    for step in (float(np.nextafter(1.5 * h, 1.0)), 0.5 * h * (1 - 2.0 ** -52)):
+        for tail in ("", f"{step + h!r},1,x,0.1\n"):
+            _refused(tmp_path, meta + f"0.0,0,0,0.1\n{step!r},1,1,0.1\n" + tail,
+                     f"The 'time_s' parameter of read_record_csv(r.csv) on line 7, column 1 must follow the previous "
+                     f"row (0.0 s) by one period of the scene's encoders (0.015625 s) within half a period. "
+                     f"Got '{step!r}' instead.", sensors)
+
+
+def test_the_scene_encoders_are_checked_against_the_file(tmp_path):
+    record, _ = _small()
+    path = write_record_csv(record, tmp_path / "r.csv")
+    _same(record, read_record_csv(path, _sensors()))
+    other = dataclasses.replace(_sensors(), wheel=Encoder(2 * np.pi * 0.1 / 2e-5, 0.1, rate=64.0, backlash=0.002))
+    _refused(tmp_path, path.read_bytes(), "The 'wheel_backlash' parameter of read_record_csv(r.csv) on line 4, "
+             "column 1 must equal the scene's encoders' 0.002. Got 0.001 instead.", other)
+    coarse = dataclasses.replace(_sensors(), central=Encoder(2 * np.pi * 0.1 / 1e-4 * (1 + 1e-9), 0.1, rate=64.0))
+    error = _refused(tmp_path, path.read_bytes(), "The 'central_resolution' parameter of read_record_csv(r.csv) on "
+                     f"line 2, column 1 must equal the scene's encoders' {coarse.central.distance_per_count!r}. "
+                     "Got 0.0001 instead.", coarse)
+    assert error.parameter == "central_resolution"
+    # Within 1e-12 relative the file's value is kept.
+    near = dataclasses.replace(_sensors(), central=Encoder(2 * np.pi * 0.1 / 1e-4 * (1 + 1e-13), 0.1, rate=64.0))
+    assert read_record_csv(path, near).central_resolution == 1e-4
+    with pytest.raises(ParameterTypeError, match="^" + re.escape(
+            "The 'sensors' parameter of read_record_csv must be a Sensors or None. Got 'enc' instead.") + "$"):
+        read_record_csv(path, "enc")
+    with pytest.raises(ParameterTypeError, match="^" + re.escape(
+            "The 'motors' parameter of read_record_csv must be a Motors or None. Got 2 instead.") + "$"):
+        read_record_csv(path, motors=2)
+
+
+def test_a_file_without_backlash_or_final_newline_and_with_crlf_lines(tmp_path):
+    """No ``wheel_backlash`` line and no scene: no play (0); Windows line ends and a last row
+    without a newline are read the same; a blank comment line is skipped."""
+    path = tmp_path / "r.csv"
+    path.write_bytes((_META1 + "#\n" + _HEAD + "\n0.0,1,2,0.5\n\n0.5,-3,4,-0.25").replace("\n", "\r\n").encode())
+    record = read_record_csv(path)
+    assert record.wheel_backlash == 0.0 and record.central_resolution == 0.5 and record.wheel_resolution == 0.25
+    np.testing.assert_array_equal(record.times, [0.0, 0.5])
+    np.testing.assert_array_equal(record.central_counts, [1, -3])
+    np.testing.assert_array_equal(record.wheel_counts, [[2], [4]])
+    np.testing.assert_array_equal(record.commands, [[0.5], [-0.25]])
+    assert record.times.flags.owndata or record.times.base is None or record.times.base.size == 2
+
+
+def test_folders_missing_and_oversized_files_are_named_in_full(tmp_path, monkeypatch):
+    import toolkit.model.record_io as record_io
+
+    with pytest.raises(SceneFileNotFoundError) as info:
+        read_record_csv(tmp_path)
+    assert str(info.value) == f"The record file {str(tmp_path)!r} is a folder, not a CSV file."
+    with pytest.raises(SceneFileNotFoundError) as info:
+        read_record_csv(tmp_path / "none.csv")
+    assert str(info.value) == f"The record file {str(tmp_path / 'none.csv')!r} does not exist."
+    path = tmp_path / "r.csv"
+    path.write_text(_META1 + _HEAD + "\n0.0,1,2,0.5\n")
+    size = path.stat().st_size
+    assert read_record_csv(path).n_samples == 1
+    monkeypatch.setattr(record_io, "MAX_RECORD_BYTES", 2 ** 20)
+    body = _META1 + _HEAD + "\n0.0,1,2,0.5\n"
+    path.write_text(body + " " * (2 ** 20 - len(body)))
+    assert read_record_csv(path).n_samples == 1                  # at the cap: read
+    _refused(tmp_path, body + " " * (2 ** 20 + 1 - len(body)), f"The record file {str(path)!r} is {2 ** 20 + 1} "
+             f"bytes; record files are limited to {2 ** 20} bytes (1 MiB): split a longer log into several records.")
+
+
+def test_commands_at_the_motors_limits_are_read_on_both_readers(tmp_path):
+    """A command equal to a speed limit is within it (``<=``), on the block reader and on the
+    row-by-row one (sent there by a bad count further down the same block, which is then the
+    refusal)."""
+    from toolkit.model.motors import Motors
+
+    motors = Motors(speed_limits=(-0.25, 0.5))
+    rows = _META1 + _HEAD + "\n0.0,1,2,0.5\n0.5,1,2,-0.25\n"
+    path = tmp_path / "r.csv"
+    path.write_text(rows)
+    np.testing.assert_array_equal(read_record_csv(path, motors=motors).commands[:, 0], [0.5, -0.25])
+    _refused(tmp_path, rows + "1.0,1,x,0.0\n", _at("wheel_count_1", 7, 3) + "be an integer count. Got 'x' instead.",
+             motors=motors)
+    _refused(tmp_path, rows.replace("-0.25", "-0.2500000000000001"), _at("command_1_m_s", 6, 4)
+             + "lie within the motors' speed limits [-0.25, 0.5] m/s. Got '-0.2500000000000001' instead.",
+             motors=motors)
+
+
+def test_a_trailing_comma_is_a_field_too_many(tmp_path):
+    _refused(tmp_path, _META1 + _HEAD + "\n0.0,1,2,0.5,\n", _at("row", 5, 5)
+             + "have 4 comma-separated fields. Got 5 instead.")
+
+
+def test_the_period_is_checked_across_blocks(tmp_path, monkeypatch):
+    """Blocks of two rows: a step off the encoders' period between the last row of one block
+    and the first of the next is refused on that row's line; the first row of the file has
+    no previous row to follow."""
+    import toolkit.model.record_io as record_io
+
+    monkeypatch.setattr(record_io, "_BLOCK_ROWS", 2)
+    sensors = _sensors(n=1)
+    h = 2.0 ** -6
+    meta = ("# active-contacts encoder record 1\n# central_resolution = 0.0001\n# wheel_resolution = 2e-05\n"
+            "# wheel_backlash = 0.001\n" + _HEAD + "\n")
+    good = [k * h for k in range(5)]
+    path = tmp_path / "r.csv"
+    path.write_text(meta + "".join(f"{t!r},0,0,0.1\n" for t in [100.0 + t for t in good]))
+    assert read_record_csv(path, sensors).n_samples == 5
+    bad = good[:2] + [good[2] + 0.75 * h] + [t + 0.75 * h for t in good[3:]]
+    _refused(tmp_path, meta + "".join(f"{t!r},0,0,0.1\n" for t in bad), _at("time_s", 8, 1)
+             + f"follow the previous row ({good[1]!r} s) by one period of the scene's encoders (0.015625 s) within "
+             f"half a period. Got '{bad[2]!r}' instead.", sensors)
+
+
+def test_a_line_of_exactly_the_longest_length_is_read(tmp_path, monkeypatch):
+    """The line cap counts bytes before the newline: a line of exactly ``MAX_LINE_BYTES`` is
+    read, one byte longer is refused at the column just past the cap."""
+    import toolkit.model.record_io as record_io
+
+    path = tmp_path / "r.csv"
+    text = _META1 + _HEAD + "\n0.0,1,2,0.5\n"
+    path.write_text(text)
+    longest = max(len(line) for line in text.splitlines())
+    monkeypatch.setattr(record_io, "MAX_LINE_BYTES", longest)
+    assert read_record_csv(path).n_samples == 1
+    monkeypatch.setattr(record_io, "MAX_LINE_BYTES", longest - 1)
+    with pytest.raises(ParameterError, match="^" + re.escape(_at("line", 4, longest)
+                                                             + f"be at most {longest - 1} bytes (1 MiB)")):
+        read_record_csv(path)
+
+
+def test_the_scene_encoders_agree_within_1e_12_relative_and_1e_15_absolute(tmp_path):
+    """``math.isclose`` with rel_tol 1e-12 and abs_tol 1e-15, bracketed: a central resolution
+    of 0.5 m 0.5e-12 off (relative) is the file's, 2e-12 off is refused; a play of 0.9e-15 m in
+    the scene agrees with the file's none, 1.1e-15 m does not."""
+    path = tmp_path / "r.csv"
+    path.write_text(_META1 + "# wheel_backlash = 0\n" + _HEAD + "\n0.0,1,2,0.5\n")
+
+    def encoders(central=0.5, play=0.0):
+        return Sensors(Encoder(2 * np.pi / central, 1.0, rate=64.0), Encoder(2 * np.pi / 0.25, 1.0, rate=64.0,
+                                                                            backlash=play), 1)
+
+    assert read_record_csv(path, encoders(0.5 * (1 + 0.5e-12))).central_resolution == 0.5
+    with pytest.raises(ParameterError, match=re.escape(_at("central_resolution", 2, 1))):
+        read_record_csv(path, encoders(0.5 * (1 + 2e-12)))
+    assert read_record_csv(path, encoders(play=0.9e-15)).wheel_backlash == 0.0
+    with pytest.raises(ParameterError, match=re.escape(_at("wheel_backlash", 4, 1))):
+        read_record_csv(path, encoders(play=1.1e-15))
+
+
+def test_int64_ends_magic_spaces_and_a_missing_resolution(tmp_path):
+    """The least int64 count is read exactly; the magic line may carry spaces around it; a file
+    that gives the central resolution but not the wheels' needs the scene's encoders, and
+    says which line is missing, on the header's line."""
+    path = tmp_path / "r.csv"
+    low = -2 ** 63
+    path.write_text("  " + _META1.replace("\n", "  \n", 1) + _HEAD + f"\n0.0,{low},2,0.5\n")
+    assert read_record_csv(path).central_counts[0] == low
+    text = "# active-contacts encoder record 1\n# central_resolution = 0.5\n" + _HEAD + "\n0.0,1,2,0.5\n"
+    _refused(tmp_path, text, _at("sensors", 3, 1) + "be given (the scene's [sensors]) when no '# wheel_resolution "
+             "= ...' line precedes the header. Got None instead.")
+
+
+def test_valid_rows_at_every_edge_are_read_by_the_block_reader(tmp_path, monkeypatch):
+    """Commands at both motor limits and a step of exactly 1.5 periods are within the rules, so
+    the block reader (NumPy's) takes them without the row-by-row reader (disabled here)."""
+    import toolkit.model.record_io as record_io
+    from toolkit.model.motors import Motors
+
+    h = 2.0 ** -6
+    meta = ("# active-contacts encoder record 1\n# central_resolution = 0.0001\n# wheel_resolution = 2e-05\n"
+            "# wheel_backlash = 0.001\n" + _HEAD + "\n")
+    path = tmp_path / "r.csv"
+    path.write_text(meta + f"0.0,0,0,-0.25\n{1.5 * h!r},1,1,0.5\n{2.5 * h!r},2,2,0.0\n")
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a valid block went to the row-by-row reader")
+
+    monkeypatch.setattr(record_io, "_slow_block", refuse)
+    record = read_record_csv(path, _sensors(n=1), motors=Motors(speed_limits=(-0.25, 0.5)))
+    np.testing.assert_array_equal(record.commands[:, 0], [-0.25, 0.5, 0.0])
+
+
+def test_rows_the_block_reader_gives_up_on_are_read_whole_by_the_row_reader(tmp_path):
+    """Python's int() reads a count written with a digit separator (``1_0``), NumPy's reader
+    does not: that block is read row by row, each count exactly (2^63 - 1 included, which a
+    float would round), and only the commands are held to the motors' limits (not the force)."""
+    from toolkit.model.motors import Motors
+
+    head = "time_s,central_count,wheel_count_1,command_1_m_s,force_N"
+    top = 2 ** 63 - 1
+    path = tmp_path / "r.csv"
+    path.write_text(_META1 + head + f"\n0.0,1_0,{top},0.5,7.5\n0.5,-3,4,-0.25,-9.0\n")
+    record = read_record_csv(path, motors=Motors(speed_limits=(-0.25, 0.5)))
+    np.testing.assert_array_equal(record.central_counts, [10, -3])
+    assert record.wheel_counts[0, 0] == top and record.wheel_counts.dtype == np.int64
+    np.testing.assert_array_equal(record.force, [7.5, -9.0])
+
+
+def test_a_byte_order_mark_only_opens_the_file_and_a_trailing_letter_is_a_bad_value(tmp_path):
+    """A byte-order mark anywhere but at the file's start is not dropped (it is text: the
+    comment line it opens no longer starts with '#', so it is taken for a bad header); a
+    value that ends in a letter is refused as written."""
+    _refused(tmp_path, ("# active-contacts encoder record 1\n\ufeff# central_resolution = 0.5\n"
+                        "# wheel_resolution = 0.25\n" + _HEAD + "\n0.0,1,2,0.5\n").encode(),
+             _at("header", 2, 3) + "name at least one 'wheel_count_1' column. Got '\\ufeff# central_resolution = 0.5' "
+             "instead.")
+    _refused(tmp_path, _META1 + _HEAD + "\n0.0,1,2,0.5X\n", _at("command_1_m_s", 5, 4)
+             + "be a number. Got '0.5X' instead.")
+
+
+def test_a_file_over_a_megabyte_is_counted_across_blocks(tmp_path):
+    """The line count adds up every 1 MiB block (the arrays are sized by it): 60000 rows,
+    about 1.6 MiB, read whole."""
+    path = tmp_path / "r.csv"
+    rows = "".join(f"{k / 64!r},{k},{-k},0.125\n" for k in range(60000))
+    path.write_text(_META1 + _HEAD + "\n" + rows)
+    assert path.stat().st_size > 1.5 * 2 ** 20
+    record = read_record_csv(path)
+    assert record.n_samples == 60000 and record.central_counts[-1] == 59999 and record.times[-1] == 59999 / 64
+
+
+def test_the_line_count_refuses_a_file_that_grew_past_the_cap(monkeypatch):
+    import io
+
+    import toolkit.model.record_io as record_io
+
+    monkeypatch.setattr(record_io, "MAX_RECORD_BYTES", 10)
+    with pytest.raises(ParameterError) as info:
+        record_io._line_count(io.BytesIO(b"0123456789\n"), record_io._Reader(Path("grown.csv")))
+    assert str(info.value) == ("The record file 'grown.csv' is 11 bytes; record files are limited to 10 bytes "
+                               "(9.53674e-06 MiB): split a longer log into several records.")
+    # Read in blocks of 1 MiB: the size is the sum of the blocks (1.5 MiB > a 1.25 MiB cap).
+    monkeypatch.setattr(record_io, "MAX_RECORD_BYTES", 5 << 18)
+    with pytest.raises(ParameterError, match=f"is {3 << 19} bytes; record files are limited to {5 << 18} bytes"):
+        record_io._line_count(io.BytesIO(b"\n" * (3 << 19)), record_io._Reader(Path("grown.csv")))
+
+
+def test_the_progress_bar_counts_bytes_and_clears_itself(tmp_path, monkeypatch, capsys):
+    """A file larger than the threshold (strictly) shows a bar in bytes with SI prefixes
+    (a few kB here) on stderr, cleared when done (not left on its own line); at the
+    threshold, none."""
+    import toolkit.model.record_io as record_io
+
+    path = tmp_path / "r.csv"
+    path.write_text(_META1 + _HEAD + "\n" + "".join(f"{k!r}.0,{k},{k},0.5\n" for k in range(400)))
+    size = path.stat().st_size
+    assert 4000 < size < 999000
+    monkeypatch.setattr(record_io, "_PROGRESS_BYTES", size)
+    read_record_csv(path, progress=True)
+    assert capsys.readouterr().err == ""
+    monkeypatch.setattr(record_io, "_PROGRESS_BYTES", size - 1)
+    read_record_csv(path, progress=True)
+    err = capsys.readouterr().err
+    assert re.search(r"r\.csv: .*/\d+\.\d+k \[.*B/s\]", err) and not err.endswith("\n")

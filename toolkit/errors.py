@@ -156,7 +156,12 @@ def as_float_array(value: Any, name: str, owner: str, *, ndim: int = 1,
             raise ParameterTypeError(parameter_message(name, owner, "be an array of numbers", value))
         if ndim == 1 and isinstance(value, numbers.Real) and not isinstance(value, bool):
             value = [value]
-        if np.asarray(value).dtype == bool or np.iscomplexobj(value):
+        try:
+            probe = np.asarray(value)
+        except ValueError:                  # nested sequences of unequal lengths
+            raise ParameterError(parameter_message(
+                name, owner, "be a rectangular array (nested sequences of equal lengths)", value)) from None
+        if probe.dtype == bool or np.iscomplexobj(probe):
             raise ParameterTypeError(parameter_message(name, owner, "be an array of real numbers", value))
         try:
             array = np.array(value, dtype=float)

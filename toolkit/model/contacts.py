@@ -70,9 +70,9 @@ class Staircase:
 
 def _as_query(V: Any, owner: str) -> np.ndarray:
     """Body speeds as a float array of any shape; +-inf allowed, NaN and non-numbers refused."""
-    if V is None or isinstance(V, (str, bytes)) or np.iscomplexobj(V):
-        raise ParameterTypeError(parameter_message("V", owner, "be real numbers (m/s)", V))
-    try:
+    try:                                   # (a ragged nested list fails in iscomplexobj)
+        if V is None or isinstance(V, (str, bytes)) or np.iscomplexobj(V):
+            raise TypeError
         array = np.asarray(V, dtype=float)
     except (TypeError, ValueError):
         raise ParameterTypeError(parameter_message("V", owner, "be real numbers (m/s)", V)) from None

@@ -269,6 +269,9 @@ class Plant:
         ndarray of shape (d,) (or a casadi column), ``[dV/dt, dv_1/dt ..]`` in m/s^2
         """
         o = ops(xp)
+        if not o.symbolic:                  # array_like state and command: lists too
+            x = np.asarray(x, dtype=float)
+            u = None if u is None else np.asarray(u, dtype=float)
         if u is None:
             command = self.command(t)
         else:

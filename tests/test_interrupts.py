@@ -216,14 +216,6 @@ def test_an_interrupted_forked_sweep_leaves_no_process(sig, whole_group):
     # work: Ctrl-C (the whole group) or a kill of the parent alone (no clean-up of its own:
     # the child is ended by the kernel's parent-death signal). Then no process of the group
     # is left (waited for up to 30 s: a guard, not a timing).
-    # Every kernel the script runs is cached first (the same sweep on 2 runs, here), whichever
-    # tests ran before this one (under pytest-xdist, maybe none): the signal then finds both
-    # processes sweeping, not compiling (both fork before their first call, so both would
-    # compile, and a compile returns to Python only when it ends: on a loaded machine, later
-    # than the guard below).
-    from toolkit.predictions import Apparatus, ViscosityProblem, viscosity_check
-
-    viscosity_check(ViscosityProblem(Apparatus.carousel(), "loop", 2), workers=1)
     process = subprocess.Popen([sys.executable, "-c", _FORKED_SWEEP], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, start_new_session=True,
                                env={**os.environ, "PYTHONPATH": str(ROOT)})

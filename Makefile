@@ -40,19 +40,21 @@ KERNEL_TESTS := tests/test_compiled.py tests/test_lines.py tests/test_planar_ker
 
 # The suite runs in WORKERS processes (pytest-xdist): the kernels are compiled once before
 # they start (tests/conftest.py); --dist loadgroup sends the tests one by one, but those that
-# share a module-scoped fixture to one worker, and those that run against the wall clock (the
-# live loop, Ctrl-C, the memory-bound runs, process pools and Dask clusters: xdist_group
-# "wall_clock") to one worker, one at a time. --durations lists the slowest tests.
-# docs/testing.md says more.
+# share a module-scoped fixture to one worker. The tests marked wall_clock (the live loop,
+# Ctrl-C, the memory-bound runs, process pools and Dask clusters) then run in one process:
+# no busy sibling, and no worker's threads in the processes they fork. --durations lists the
+# slowest tests. docs/testing.md says more.
 WORKERS ?= 2
 PYTEST  := -m pytest -q -n $(WORKERS) --dist loadgroup
 test: $(STAMP)
-	$(BIN)/python $(PYTEST) --durations=20
+	$(BIN)/python $(PYTEST) -m "not wall_clock" --durations=20
+	$(BIN)/python -m pytest -q -m wall_clock --durations=5
 	NUMBA_DISABLE_JIT=1 $(BIN)/python $(PYTEST) $(KERNEL_TESTS)
 
 # While developing: every test but those marked slow (notebooks, subprocess sweeps, the wheel).
 test-quick: $(STAMP)
-	$(BIN)/python $(PYTEST) -m "not slow"
+	$(BIN)/python $(PYTEST) -m "not slow and not wall_clock"
+	$(BIN)/python -m pytest -q -m "wall_clock and not slow"
 
 $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 	test -x $(MIN_BIN)/python || $(PYTHON) -m venv $(MIN_VENV)
@@ -61,7 +63,8 @@ $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 	touch $(MIN_STAMP)
 
 test-min: $(MIN_STAMP)
-	$(MIN_BIN)/python $(PYTEST) --durations=20
+	$(MIN_BIN)/python $(PYTEST) -m "not wall_clock" --durations=20
+	$(MIN_BIN)/python -m pytest -q -m wall_clock
 	NUMBA_DISABLE_JIT=1 $(MIN_BIN)/python $(PYTEST) $(KERNEL_TESTS)
 
 # Mutation testing of the laws and the numerics, each module against its own test files

@@ -34,7 +34,7 @@ DESIGN = ROOT / "designs" / "speed_hold_live.toml"
 # The live loop runs against the wall clock (a device over a pseudo-terminal, deadlines per
 # period): under pytest-xdist these tests run on one worker, one at a time, with the other
 # tests that do (Makefile, --dist loadgroup).
-pytestmark = pytest.mark.xdist_group("wall_clock")
+pytestmark = pytest.mark.wall_clock
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:

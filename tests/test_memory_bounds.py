@@ -39,7 +39,7 @@ WALL_BOUND = WALL + 5.0
 
 # Each child run is bounded in wall time (WALL_BOUND): under pytest-xdist these tests run on
 # one worker, one at a time, with the other tests that run against the wall clock.
-pytestmark = pytest.mark.xdist_group("wall_clock")
+pytestmark = pytest.mark.wall_clock
 
 _METHODS = (
     [("exact", {}), ("moreau", {"step": 1e-3})]

@@ -1,6 +1,6 @@
 # Two commands set everything up on a fresh machine with python3 and make:
 #   make demo   creates .venv, installs the toolkit, compiles its kernels, runs designs/carousel.toml
-#   make test   creates or updates .venv, runs the whole test suite
+#   make test   creates or updates .venv, runs the whole test suite on both cores
 #   make test-min  creates or updates .venv-min with the tested minimum versions
 #                  (constraints/minimum.txt = the lower bounds in pyproject.toml), runs the suite
 #   make docs      adds the docs group to .venv, builds the site into docs/_build/html
@@ -37,13 +37,24 @@ demo: $(STAMP)
 KERNEL_TESTS := tests/test_compiled.py tests/test_lines.py tests/test_planar_kernels.py \
 	tests/test_simulation_exact.py tests/test_simulation_stepper.py \
 	tests/test_baselines.py tests/test_imm.py tests/test_linearize_kernel.py
+
+# The suite runs in WORKERS processes (pytest-xdist): the kernels are compiled once before
+# they start (tests/conftest.py); --dist loadgroup sends the tests one by one, but those that
+# share a module-scoped fixture to one worker. The tests marked wall_clock (the live loop,
+# Ctrl-C, the memory-bound runs, process pools and Dask clusters) then run in one process:
+# no busy sibling, and no worker's threads in the processes they fork. --durations lists the
+# slowest tests. docs/testing.md says more.
+WORKERS ?= 2
+PYTEST  := -m pytest -q -n $(WORKERS) --dist loadgroup
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
-	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q $(KERNEL_TESTS)
+	$(BIN)/python $(PYTEST) -m "not wall_clock" --durations=20
+	$(BIN)/python -m pytest -q -m wall_clock --durations=5
+	NUMBA_DISABLE_JIT=1 $(BIN)/python $(PYTEST) $(KERNEL_TESTS)
 
 # While developing: every test but those marked slow (notebooks, subprocess sweeps, the wheel).
 test-quick: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python $(PYTEST) -m "not slow and not wall_clock"
+	$(BIN)/python -m pytest -q -m "wall_clock and not slow"
 
 $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 	test -x $(MIN_BIN)/python || $(PYTHON) -m venv $(MIN_VENV)
@@ -52,8 +63,9 @@ $(MIN_STAMP): pyproject.toml constraints/minimum.txt
 	touch $(MIN_STAMP)
 
 test-min: $(MIN_STAMP)
-	$(MIN_BIN)/python -m pytest -q
-	NUMBA_DISABLE_JIT=1 $(MIN_BIN)/python -m pytest -q $(KERNEL_TESTS)
+	$(MIN_BIN)/python $(PYTEST) -m "not wall_clock" --durations=20
+	$(MIN_BIN)/python -m pytest -q -m wall_clock
+	NUMBA_DISABLE_JIT=1 $(MIN_BIN)/python $(PYTEST) $(KERNEL_TESTS)
 
 # Mutation testing of the laws and the numerics, each module against its own test files
 # (mutation/modules.toml); prints the kill rate per module and the surviving mutants.

@@ -343,6 +343,7 @@ def test_sweep_json_and_results_csv(tmp_path, capsys):
     np.testing.assert_array_equal(table["speed"], expected.table["speed"])    # %.17g round trip
 
 
+@pytest.mark.wall_clock
 def test_sweep_on_a_process_pool_matches_local(capsys):
     assert main(["sweep", str(ROOT / "designs" / "median_law.toml"), "--runs", "40", "--json"]) == 0
     local = json.loads(capsys.readouterr().out)

@@ -30,7 +30,8 @@ ROOT = Path(toolkit.__file__).resolve().parents[1]
 SCENE, RUNS = ROOT / "designs" / "outliers.toml", "100000"
 MEDIAN_LAW, MEDIAN_RUNS = ROOT / "designs" / "median_law.toml", "3000000"
 
-pytestmark = [pytest.mark.slow,
+# (make test runs them after the others, in one process: no busy sibling, no worker threads)
+pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")]
 
 

@@ -32,6 +32,11 @@ from toolkit.scenes.study import control_world, estimate_record
 ROOT = Path(__file__).resolve().parents[1]
 DESIGN = ROOT / "designs" / "speed_hold_live.toml"
 
+# The live loop runs against the wall clock (a device over a pseudo-terminal, deadlines per
+# period): under pytest-xdist these tests run on one worker, one at a time, with the other
+# tests that do (Makefile, --dist loadgroup).
+pytestmark = pytest.mark.wall_clock
+
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "toolkit.cli", *args], capture_output=True, text=True, cwd=ROOT,

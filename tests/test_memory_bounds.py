@@ -37,6 +37,10 @@ SAMPLES = 2_000
 #: clock check, plus assembling the result (generous: the machine is shared and loaded).
 WALL_BOUND = WALL + 5.0
 
+# Each child run is bounded in wall time (WALL_BOUND): under pytest-xdist these tests run on
+# one worker, one at a time, with the other tests that run against the wall clock.
+pytestmark = pytest.mark.wall_clock
+
 _METHODS = (
     [("exact", {}), ("moreau", {"step": 1e-3})]
     + [(solver, {"friction": law}) for solver in ("rk45", "lsoda", "radau", "bdf")

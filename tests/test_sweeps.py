@@ -77,6 +77,7 @@ def test_every_experiment_with_nonidealities_does_not_depend_on_chunking(experim
 
 
 @pytest.mark.slow
+@pytest.mark.wall_clock      # a Dask cluster starts within timeouts: one at a time
 def test_process_pool_and_dask_give_identical_tables_for_every_experiment():
     # The chunks are the same wherever they run: local, a process pool (fresh interpreters) and
     # a Dask LocalCluster give identical tables, bit for bit, for every experiment with its
@@ -238,6 +239,7 @@ def test_unequal_friction_moves_the_stop_to_the_weighted_median():
     assert abs(mean.mean() - 1.0) < 0.02       # lognormal keeps the mean load (sd 0.2/sqrt(1000))
 
 
+@pytest.mark.wall_clock
 def test_process_pool_gives_identical_tables():
     local = sweep(MedianLaw(), 64, seed=8, chunk_size=16)
     pooled = sweep(MedianLaw(), 64, seed=8, chunk_size=16, scheduler="processes", workers=2)
@@ -246,6 +248,7 @@ def test_process_pool_gives_identical_tables():
     assert pooled.summary == local.summary
 
 
+@pytest.mark.wall_clock
 def test_dask_local_cluster_gives_identical_tables():
     distributed = pytest.importorskip("distributed")
     local = sweep(MedianLaw(), 96, seed=12, chunk_size=16)

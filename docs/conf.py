@@ -41,7 +41,7 @@ source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-n
 root_doc = "index"
 templates_path = ["_templates"]
 
-# -- cross-references: nitpicky (make docs passes -n); what cannot resolve offline is listed
+# -- cross-references: nitpicky (make docs passes -n); what cannot resolve offline is listed here
 nitpicky = True
 nitpick_ignore_regex = [
     # third-party types named in signatures and docstrings (no intersphinx: the build is offline)
@@ -49,21 +49,6 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(collections\.abc|typing|pathlib|os|io|argparse|enum|dataclasses|concurrent|threading)\..*"),
     # private modules and names, which the docstrings may cite but the reference does not document
     (r"py:.*", r"(.*\.)?_[a-z]\w*(\..*)?"),
-]
-#: References, in docstrings of modules other work is rewriting now (toolkit/estimation,
-#: toolkit/simulation, toolkit/scenes), to names the reference does not document: to be made
-#: literals or documented there, and this list emptied.
-nitpick_ignore = [
-    ("py:func", "nees_band"), ("py:data", "GROSS_NEES"), ("py:func", "warm_record"),
-    ("py:mod", "toolkit.model.motors"), ("py:class", "Period"), ("py:attr", "contact_variance"),
-    ("py:data", "toolkit.model.truth.DEFAULT_MISSED"), ("py:attr", "loglik"),
-    ("py:data", "toolkit.model.truth.MAX_MISSED_MEAN"), ("py:attr", "ContactSpeedTracker.reading_variance"),
-    ("py:meth", "warm_up"),
-    ("py:func", "loads_scene"), ("py:func", "request_shortfalls"), ("py:attr", "StudyResult.shortfalls"),
-    ("py:class", "EstimationObjects"), ("py:class", "ControlObjects"),
-    ("py:func", "toolkit.scenes.reference.render"),
-    ("py:data", "METHODS"), ("py:attr", "central"), ("py:attr", "wheel"), ("py:attr", "status"),
-    ("py:attr", "message"), ("py:attr", "last"),
 ]
 
 # -- API reference: autosummary pages of the public names; numpydoc renders the docstrings

@@ -166,9 +166,9 @@ class EstimationResult:
         lacks); ``None`` without the truth.
     nees_in_band : float or None
         Fraction of the samples whose NEES lies in the two-sided 95 % interval of one
-        chi-square(2) (:func:`nees_band`); ``None`` without a covariance or the truth.
+        chi-square(2) (``nees_band``); ``None`` without a covariance or the truth.
     nees_over_100 : float or None
-        Fraction of the samples whose NEES exceeds :data:`GROSS_NEES` (100): gross
+        Fraction of the samples whose NEES exceeds ``GROSS_NEES`` (100): gross
         overconfidence, which the in-band share hides; ``None`` as ``nees_in_band``.
     nees_max : float or None
         The largest NEES of the record; ``None`` as ``nees_in_band``.
@@ -267,7 +267,7 @@ class Estimator(abc.ABC):
 
     #: Short name used in results and benchmarks.
     name: str = "estimator"
-    #: The compiled kernel modules (:mod:`toolkit._compiled`) it runs, loaded by :meth:`warm_up`
+    #: The compiled kernel modules (:mod:`toolkit._compiled`) it runs, loaded by ``warm_up``
     #: (the exact flow's ``core`` for those that predict with the plant).
     KERNELS: tuple[str, ...] = ()
 
@@ -312,7 +312,7 @@ class Estimator(abc.ABC):
         timed :meth:`run` that follows pays no one-time cost (the policy of
         :mod:`toolkit._compiled`): :attr:`KERNELS` loaded, then the estimator run once,
         untimed, over ``record`` (default: a short record of its own model,
-        :func:`warm_record`), and reset. Whoever times an estimator calls it first; returns
+        ``warm_record``), and reset. Whoever times an estimator calls it first; returns
         the time it took (s)."""
         from .._compiled import load
 

@@ -77,7 +77,7 @@ class EstimatorModel:
     contact_drift : float, m/s per sqrt(s)
         Random-walk intensity of a settled contact's speed (motor speed wander the wheel
         windows do not resolve), ``>= 0``; default 0: a settled motor holds its speed, as the
-        motor law (:mod:`toolkit.model.motors`) says. A body stuck on a contact follows it:
+        motor law (``toolkit.model.motors``) says. A body stuck on a contact follows it:
         its speed then wanders as much.
     speed_limits : tuple of 2 floats, m/s
         The motors' speed limits (``Motors.speed_limits``): commands beyond them are clipped
@@ -448,7 +448,7 @@ class EstimatorModel:
         return step
 
     def period(self, V: float, track: np.ndarray, force: float = 0.0) -> Period:
-        """:meth:`flow` as the linearization reads it (a :class:`Period`). Held contacts run the
+        """:meth:`flow` as the linearization reads it (a ``Period``). Held contacts run the
         exact engine directly at this model's magnitudes, no plant built
         (:func:`toolkit._compiled.core.batch_scene`: the staircase, then the very loop of
         :func:`~toolkit.simulation.advance`, the same doubles); moving ones take :meth:`flow`."""

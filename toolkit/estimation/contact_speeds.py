@@ -140,7 +140,7 @@ class ContactSpeedTracker:
         As in :func:`contact_speed_estimates`.
     residuals : bool
         Also estimate each contact's variance from its window's residuals
-        (:attr:`contact_variance`: covariance matching, for encoders noisier than their
+        (``contact_variance``: covariance matching, for encoders noisier than their
         quantization); default False.
 
     Attributes

@@ -140,11 +140,11 @@ class MissedCountRate:
 
     A Gamma posterior (shape ``a``, rate ``b``, 1 / transition) on ``p``: the prior
     ``Gamma(shape, shape / mean)`` (default: Jeffreys' shape 1/2, the rate's prior mean
-    :data:`~toolkit.model.truth.DEFAULT_MISSED`, its std ``sqrt(2)`` times that), then per
+    ``toolkit.model.truth.DEFAULT_MISSED``, its std ``sqrt(2)`` times that), then per
     sample ``a += repairs``, ``b += exposure``. Its mean and variance are ``a / b`` and ``a /
     b^2``; with no repair over ``E`` transitions the mean falls as ``1 / (2 E)``. Once the
     ridden wheel's check has read a sample (:class:`RideCheck`), its log-likelihood
-    :attr:`loglik` on :attr:`GRID` multiplies that density, and the moments are sums over the
+    ``loglik`` on :attr:`GRID` multiplies that density, and the moments are sums over the
     grid (:func:`toolkit._compiled.imm.rate_moments`).
 
     Parameters
@@ -167,7 +167,7 @@ class MissedCountRate:
     """
 
     #: The rates the check weighs, per transition: 20 a decade from 1e-10 to
-    #: :data:`~toolkit.model.truth.MAX_MISSED_MEAN` (1e-2, far above what an encoder that works
+    #: ``toolkit.model.truth.MAX_MISSED_MEAN`` (1e-2, far above what an encoder that works
     #: misses); a posterior whose mass lies above it is the Gamma alone.
     GRID = np.geomspace(1e-10, MAX_MISSED_MEAN, 161)
     LOG_GRID = np.log(GRID)
@@ -194,7 +194,7 @@ class MissedCountRate:
             self._stale = True
 
     def checked_sample(self) -> None:
-        """The check added one sample's log-likelihood to :attr:`loglik`."""
+        """The check added one sample's log-likelihood to ``loglik``."""
         self.checked += 1
         self._stale = True
 

@@ -33,7 +33,7 @@ class WheelSpeedBank:
     encoder stands still until the contact has travelled the play, the sensor law's play
     operator). The hypotheses are weighted by the likelihood of all wheels' readings (the
     wander is the motors', shared), with a fading memory :data:`FORGET`; each reading's noise
-    is what its wheel's window residuals show (:attr:`ContactSpeedTracker.reading_variance`);
+    is what its wheel's window residuals show (``ContactSpeedTracker.reading_variance``);
     the law's own error adds :data:`LAW_ERROR` of each speed change it predicts. The
     arithmetic is compiled: :func:`toolkit._compiled.imm.bank_push` (one call per sample
     while every play stays loaded), else :func:`~toolkit._compiled.imm.bank_step` after the

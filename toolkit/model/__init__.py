@@ -2,7 +2,7 @@
 
 :mod:`~toolkit.model.contacts` (contact sets and patches, the net force and its
 equilibrium), :mod:`~toolkit.model.friction` (the friction law of one contact),
-:mod:`~toolkit.model.motors` (the motor law and its closed forms),
+``toolkit.model.motors`` (the motor law and its closed forms),
 :mod:`~toolkit.model.signals` (piecewise-constant signals, sample instants),
 :mod:`~toolkit.model.plant` (the body on its contacts), :mod:`~toolkit.model.sensors` (the
 encoders' law) and :mod:`~toolkit.model.parameters` (the non-ideal carousel's parameters

@@ -1,4 +1,4 @@
-"""Compile the planar kernels ahead of timing: :func:`warm_up` (benchmarks call it)."""
+"""Compile the planar kernels ahead of timing: ``warm_up`` (benchmarks call it)."""
 
 from __future__ import annotations
 

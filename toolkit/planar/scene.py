@@ -117,7 +117,7 @@ class PlanarStudyResult:
         Requests missed (stage ``"planar"``: a run stopped by its budget, a ratio off the
         published value by more than its rounding).
     compile_time : float, s
-        The planar kernels compiled (or loaded) before the timed run (:func:`warm_up`).
+        The planar kernels compiled (or loaded) before the timed run (``warm_up``).
     """
 
     objects: PlanarSceneObjects

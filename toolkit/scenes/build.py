@@ -82,8 +82,8 @@ def build_scene(scene: Scene) -> SceneObjects:
                                     :class:`~toolkit.SpeedTrajectory`)
         ``simulation.options``      the options of :func:`toolkit.simulate`; a ``budget`` table
                                     becomes a :class:`~toolkit.simulation.Budget`
-        ``[estimation]``            :class:`EstimationObjects`
-        ``[control]``               :class:`ControlObjects`
+        ``[estimation]``            ``EstimationObjects``
+        ``[control]``               ``ControlObjects``
         ``[sweep]``                 the experiment (:mod:`toolkit.experiments`)
         ==========================  ===============================================================
 

@@ -2,7 +2,7 @@
 
 Each section is a frozen dataclass whose fields declare its keys once (:func:`~toolkit.scenes.keys.key`:
 type, default, SI unit, bound, meaning); parsing, the messages, the command line's shared
-bounds and the scene reference page (:func:`toolkit.scenes.reference.render`) derive from
+bounds and the scene reference page (``toolkit.scenes.reference.render``) derive from
 them. :func:`load_scene` checks the form only (known sections and keys, types, required and
 exclusive keys) and builds nothing; bounds and rules between sections are checked by
 :func:`~toolkit.scenes.build.build_scene`. :func:`dumps_scene` writes a scene back
@@ -645,7 +645,7 @@ def load_scene(path: str | Path) -> Scene:
     ----------
     path : str or Path
         A TOML scene file (its sections and keys: the scene reference page,
-        :func:`toolkit.scenes.reference.render`; SI units).
+        ``toolkit.scenes.reference.render``; SI units).
 
     Returns
     -------
@@ -706,7 +706,7 @@ def _read_scene_text(file: Path) -> str:
 
 
 def dumps_scene(scene: Scene) -> str:
-    """Write a scene as TOML text that :func:`loads_scene` reads back to an equal scene."""
+    """Write a scene as TOML text that ``loads_scene`` reads back to an equal scene."""
     data: dict[str, Any] = {"scene": {"name": scene.name}}
     if scene.description:
         data["scene"]["description"] = scene.description

@@ -1,6 +1,6 @@
 """The design stages of a study, each on a scene or on the objects built from it: the
 force-speed curve, allocation, the schedule and the simulation, with the shortfalls each can
-report (those known before any work are :func:`request_shortfalls`).
+report (those known before any work are ``request_shortfalls``).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ simulation, schedule, estimation, closed loop) on the objects
 and the packages only it needs are not imported. With a target and a simulation, the
 simulation runs on the allocated speeds; a schedule is designed, then simulated exactly. Each
 way a finished study misses its request is a :class:`Shortfall` (listed on :func:`run_study`);
-those known before any work are :func:`request_shortfalls`, refused with ``strict=True``.
+those known before any work are ``request_shortfalls``, refused with ``strict=True``.
 The stages live in :mod:`~toolkit.scenes.stages` (curve, allocation, schedule, simulation),
 :mod:`~toolkit.scenes.estimate` and :mod:`~toolkit.scenes.control`; this module runs them,
 and runs the one stage of a planar or a sweep scene. Every name they export is also here.
@@ -82,12 +82,12 @@ def run_study(scene: Scene | SceneObjects, *, strict: bool = False) -> StudyResu
         From :func:`toolkit.load_scene` (built here), or already built.
     strict : bool
         Refuse, before any work, a request that is known to fall short
-        (:func:`request_shortfalls`) instead of running it and reporting the shortfall.
+        (``request_shortfalls``) instead of running it and reporting the shortfall.
 
     Returns
     -------
     StudyResult
-        With :attr:`StudyResult.shortfalls`: every way the result misses the request, one
+        With ``StudyResult.shortfalls``: every way the result misses the request, one
         :class:`Shortfall` kind per way of missing:
 
         =============  =====================================================================  ======

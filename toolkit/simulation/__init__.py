@@ -92,7 +92,7 @@ def simulate(plant: Plant, t_end: float, *, v0: float = 0.0, method: str = "exac
     v0 : float, m/s
         Initial body speed.
     method : str
-        One of :data:`METHODS`; see the module docstring.
+        One of ``METHODS``; see the module docstring.
     t_eval : array_like of shape (T,), s, optional
         Non-decreasing times in ``[0, t_end]`` at which to report ``V``. ``None``: the exact
         method reports its event times (plus 0 and ``t_end``), the others their own steps

@@ -175,7 +175,7 @@ class SampledRun:
     v0 : float, m/s
     sensors : Sensors, optional
         Noiseless encoders (:func:`sampled_supported`), read at every sample into
-        :attr:`central` and :attr:`wheel`.
+        ``central`` and ``wheel``.
     law : SampledLaw, optional
         The law in the kernel; ``None``: the caller writes ``commands[k]`` and ``force[k]``.
     estimator : bool
@@ -253,7 +253,7 @@ class SampledRun:
 
     def run_to(self, k_stop: int) -> bool:
         """Run samples ``k .. k_stop - 1``; False when a plant step failed (then
-        :attr:`status`, :attr:`message` and :attr:`last` say how)."""
+        ``status``, ``message`` and ``last`` say how)."""
         k_stop = min(int(k_stop), self.last)
         if self.k >= k_stop:
             return self.status is SimulationStatus.SUCCESS

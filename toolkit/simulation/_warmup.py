@@ -1,4 +1,4 @@
-"""Compile the kernels ahead of timing: :func:`warm_up` (benchmarks and the tests call it; the
+"""Compile the kernels ahead of timing: ``warm_up`` (benchmarks and the tests call it; the
 policy is :mod:`toolkit._compiled`'s).
 
 It lives with the simulation, not in :mod:`toolkit._compiled`, because it exercises the

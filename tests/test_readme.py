@@ -46,7 +46,7 @@ def test_readme_is_a_front_page() -> None:
     lines = README.splitlines()
     assert len(lines) <= 200, len(lines)
     assert "$ make demo" in README and "$ make test" in README
-    assert re.search(r"3 min 22 s", README) and re.search(r"about \d+ min", README)
+    assert re.search(r"\*\*\d+ min \d+ s\*\*", README) and re.search(r"about \d+ min", README)
     tour = README.split("## A tour of the library", 1)[1].split("\n## ", 1)[0]
     assert 12 <= tour.count(">>> ") <= 20
     for page in ("docs/getting_started.md", "docs/validation.md", "docs/performance.md", "docs/architecture.md"):

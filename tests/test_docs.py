@@ -243,6 +243,23 @@ def test_no_module_is_over_800_lines() -> None:
     assert over == {}, over
 
 
+#: The longest function a kernel module may hold, lines (a kernel reads as one screen or two).
+MAX_KERNEL_LINES = 120
+
+
+def test_no_kernel_is_over_120_lines() -> None:
+    import ast
+
+    lengths = {}
+    for path in _tracked("toolkit/_compiled"):
+        if path.suffix == ".py":
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.FunctionDef):
+                    lengths[f"{path.name}:{node.name}"] = node.end_lineno - node.lineno + 1
+    assert len(lengths) > 100
+    assert {name: n for name, n in lengths.items() if n > MAX_KERNEL_LINES} == {}
+
+
 #: History lives in git: no load figure and no issue number in the package, the README, the
 #: docs or the notebooks.
 HISTORY = re.compile(r"load (average )?(of |about )?[0-9]|issues? [0-9]+", re.I)

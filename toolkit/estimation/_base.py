@@ -98,11 +98,17 @@ def phase_masks(record: EncoderRecord, settle: float = SETTLE_TIME) -> dict[str,
     return {name: (mask if mask is not None and mask.any() else None) for name, mask in masks.items()}
 
 
+def lost_between(elapsed: Any, period: float) -> Any:
+    """The samples lost in ``elapsed`` seconds between two samples on a grid of ``period``
+    (s): the whole periods less one (0 on the grid, and for a stamp off it by less than half
+    a period); a float for a float (one sample's check, no array built), else an array."""
+    return np.maximum(np.rint(elapsed / period) - 1.0, 0.0)
+
+
 def lost_samples(times: Any, period: float) -> np.ndarray:
-    """The samples lost between consecutive sample ``times`` (s) on a grid of ``period``
-    (s): the whole periods between two less one (0 on the grid, and for a stamp off it by
-    less than half a period), shape ``(len(times) - 1,)``."""
-    return np.maximum(np.rint(np.diff(times) / period) - 1.0, 0.0).astype(np.int64)
+    """:func:`lost_between` each pair of consecutive sample ``times`` (s), shape
+    ``(len(times) - 1,)``."""
+    return lost_between(np.diff(times), period).astype(np.int64)
 
 
 def refuse_gaps(times: np.ndarray, period: float, owner: str, first: int = 0) -> None:

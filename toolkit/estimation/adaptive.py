@@ -31,7 +31,7 @@ from ..model.friction import contact_forces
 from ..laws import cell_centre, lag_response, quantization_variance
 from ..model.motors import MotorPiece
 from ..model.sensors import EncoderRecord, EncoderSample
-from ._base import EstimationResult, Estimator, lost_samples, score
+from ._base import EstimationResult, Estimator, lost_between, score
 from ._hold import HoldLayer
 from ._input import EstimatorModel
 from .contact_speeds import ContactSpeedTracker
@@ -684,7 +684,7 @@ class AdaptiveKalman(Estimator):
             self._anchor = (sample.time, c)
         else:
             anchor, self._anchor = self._anchor, (sample.time, c)
-            missing = int(lost_samples((anchor[0], sample.time), self.h)[0])
+            missing = int(lost_between(sample.time - anchor[0], self.h))
             if missing:
                 # Lost samples: their periods are predicted without an update, the command
                 # held (the ride check counts one period between its readings: it restarts).
@@ -709,7 +709,7 @@ class AdaptiveKalman(Estimator):
 
     def commanded(self, command: Any, force: float = 0.0) -> None:
         (t, wheels), force = self._take_observed(force)
-        periods = 1 if self._wheels_at is None else int(lost_samples((self._wheels_at, t), self.h)[0]) + 1
+        periods = 1 if self._wheels_at is None else int(lost_between(t - self._wheels_at, self.h)) + 1
         self._wheels_at = t
         self._last_command, self._last_force = command, force
         tracker = self._tracker

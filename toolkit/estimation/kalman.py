@@ -28,7 +28,8 @@ from .._compiled import kernels
 from ..errors import as_float, as_float_array, as_int
 from ..errors import ParameterError, ParameterTypeError, parameter_message
 from ..model.sensors import EncoderRecord, EncoderSample
-from ._base import EstimationResult, Estimator, check_covariance, lost_samples, refuse_gaps, score, warm_record
+from ._base import (EstimationResult, Estimator, check_covariance, lost_between, lost_samples, refuse_gaps,
+                    score, warm_record)
 from ._hold import HoldLayer
 from ._input import EstimatorModel
 from .contact_speeds import ContactSpeedTracker, contact_speed_estimates
@@ -398,7 +399,7 @@ class NominalKalman(Estimator):
         """
         if self._observed is not None:
             self.commanded(self._last_command, self._last_force)
-        if self._count_prev is not None:
+        if self._count_prev is not None and lost_between(sample.time - self._t_prev, self._h):
             refuse_gaps(np.array((self._t_prev, sample.time)), self._h, f"{type(self).__name__}.observe")
         count = sample.central_count
         t = sample.time
@@ -654,7 +655,7 @@ class KalmanEstimator(Estimator):
             self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
             return out
         before, self._before = self._before, sample.time
-        if before is not None and (lost := int(lost_samples((before, sample.time), self.model.sensors.period)[0])):
+        if before is not None and (lost := int(lost_between(sample.time - before, self.model.sensors.period))):
             out = self._switch(sample, _LOST.format(lost))
             self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
             return out

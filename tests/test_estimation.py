@@ -237,6 +237,9 @@ def test_exact_holds_only_with_ideal_encoders_and_steady_motors(scenario):
         assert not NominalKalman(dataclasses.replace(model, sensors=sensors)).exact_holds
     with pytest.raises(ParameterTypeError, match="exact_holds"):
         NominalKalman(model, exact_holds=1)
+    with pytest.raises(ParameterTypeError, match=r"'consider' parameter of NominalKalman must be a ModelPrior "
+                       r"or None.*Got 0\.3"):
+        NominalKalman(model, consider=0.3)
 
 
 def test_a_reading_off_the_line_ends_the_hold(scenario):

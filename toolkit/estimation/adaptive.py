@@ -44,12 +44,29 @@ from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
 from .window import AdaptiveWindow
 
-__all__ = ["AdaptiveKalman", "NOMINAL", "ADAPTING", "FALLBACK"]
+__all__ = ["AdaptiveKalman", "NOMINAL", "ADAPTING", "FALLBACK", "prior_moments"]
 
 #: Verdicts of :attr:`KalmanEstimator.verdicts` (per sample): the nominal filter's model
 #: holds; the adaptive filter runs; the adaptive filter's own monitor fails and it falls back
 #: towards the window estimate.
 NOMINAL, ADAPTING, FALLBACK = 0, 1, 2
+
+
+def prior_moments(model: EstimatorModel, prior: ModelPrior) -> tuple[np.ndarray, np.ndarray]:
+    """The prior's mean and variance of the force errors ``(e_1 .. e_n, dc)`` about
+    ``model``: each magnitude's relative error the spread's; the drag's error (N s/m) its
+    range as a Gaussian of its midpoint and half-width (the default: the nominal drag, std
+    ``DEFAULT_DRAG``)."""
+    n = model.n
+    mean = np.zeros(n + 1)
+    var = np.full(n + 1, prior.friction_spread ** 2)
+    if prior.drag_range is None:
+        var[n] = DEFAULT_DRAG ** 2
+    else:
+        lo, hi = prior.drag_range
+        mean[n] = 0.5 * (lo + hi) - model.damping
+        var[n] = max(0.5 * (hi - lo), 1e-9) ** 2
+    return mean, var
 
 
 def _checked(model: Any, prior: Any, owner: str) -> tuple[EstimatorModel, ModelPrior]:
@@ -136,20 +153,6 @@ class AdaptiveKalman(Estimator):
         self.reset()
 
     # -- parameters ----------------------------------------------------------------------------
-    def _prior_moments(self) -> tuple[np.ndarray, np.ndarray]:
-        """Mean and variance of ``(e_1 .. e_n, dc)``: the spread's; the drag's range as a
-        Gaussian of its midpoint and half-width (the default: the nominal drag, 2 N s/m)."""
-        n = self.n
-        mean = np.zeros(n + 1)
-        var = np.full(n + 1, self.prior.friction_spread ** 2)
-        if self.prior.drag_range is None:
-            var[n] = DEFAULT_DRAG ** 2
-        else:
-            lo, hi = self.prior.drag_range
-            mean[n] = 0.5 * (lo + hi) - self.model.damping
-            var[n] = max(0.5 * (hi - lo), 1e-9) ** 2
-        return mean, var
-
     def _model_at(self, theta: np.ndarray) -> EstimatorModel:
         """The model at the estimated magnitudes ``f (1 + e)``, the identified lag and the
         motors' wander (:class:`~toolkit.estimation.model_cache.ModelCache`); its magnitudes'
@@ -200,7 +203,7 @@ class AdaptiveKalman(Estimator):
         speed = as_float(speed, "speed", owner)
         std = 0.05 if speed_std is None else as_float(speed_std, "speed_std", owner, low=0.0, low_open=True)
         d, n = self.d, self.n
-        mean, var = self._prior_moments()
+        mean, var = prior_moments(self.model, self.prior)
         x = np.zeros(d)
         x[1] = speed
         x[2:] = mean

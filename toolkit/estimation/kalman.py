@@ -32,9 +32,10 @@ from ._base import (EstimationResult, Estimator, check_covariance, lost_between,
                     score, warm_record)
 from ._hold import HoldLayer
 from ._input import EstimatorModel
+from .consider import Consider
 from .contact_speeds import ContactSpeedTracker, contact_speed_estimates
 from ..model.truth import ModelPrior
-from .adaptive import ADAPTING, FALLBACK, NOMINAL, AdaptiveKalman, _checked
+from .adaptive import ADAPTING, FALLBACK, NOMINAL, AdaptiveKalman, _checked, prior_moments
 from .missed_counts import count_offset, told_missed_rate
 from .monitor import ConsistencyMonitor
 
@@ -119,6 +120,8 @@ class FilterPass:
     cell_probabilities : ndarray of shape (k,)
         The probability of the reading's count cell under the prediction.
     wall_time : float, s
+    considered : ndarray of shape (k, 2, 2)
+        What the considered force errors add to ``covariances`` (zero without them).
     """
 
     states: np.ndarray
@@ -130,6 +133,7 @@ class FilterPass:
     hold_failures: np.ndarray
     cell_probabilities: np.ndarray
     wall_time: float
+    considered: np.ndarray
 
 
 class NominalKalman(Estimator):
@@ -145,21 +149,34 @@ class NominalKalman(Estimator):
         While the body rides a settled contact, take the exact posterior of the counts
         (:mod:`toolkit.estimation._hold`) instead of the white-noise update (default; used
         only with ideal encoders, ``contact_drift = 0``, no drag and no friction spread).
+    consider : ModelPrior, optional
+        Force errors the filter does not estimate but reports (a consider analysis,
+        docs/estimation.md): the prior's friction magnitudes and drag, as second moments
+        ``m2`` about the model (``prior_moments``), carried through the filter's own steps.
+        The estimates and the filter's own covariance are unchanged. Default: none.
 
     Attributes
     ----------
     exact_holds : bool
         Whether the exact holds are in effect: asked for, and the model allows them.
+    considered : ndarray of shape (2, 2)
+        At the last sample, what the considered force errors add to the covariance of
+        ``(X, V)``: ``S diag(m2) S^T``, with the sensitivity ``S`` of the filter's error
+        to them stepped as ``S+ = (I - K H)(F S + G)`` (``G`` the flow's response to each
+        over the period, the model's ``increment`` gains); zero without ``consider``.
     """
 
     name = "kalman_nominal"
     KERNELS = ("core", "lines")
 
     def __init__(self, model: EstimatorModel, *, initial_covariance: Any = None,
-                 exact_holds: bool = True) -> None:
+                 exact_holds: bool = True, consider: ModelPrior | None = None) -> None:
         if not isinstance(model, EstimatorModel):
             raise ParameterTypeError(parameter_message("model", type(self).__name__,
                                                        "be an EstimatorModel", model))
+        if consider is not None and not isinstance(consider, ModelPrior):
+            raise ParameterTypeError(parameter_message("consider", type(self).__name__,
+                                                       "be a ModelPrior or None", consider))
         if not isinstance(exact_holds, bool):
             raise ParameterTypeError(parameter_message("exact_holds", type(self).__name__,
                                                        "be a bool", exact_holds))
@@ -182,6 +199,11 @@ class NominalKalman(Estimator):
         self._Q0 = np.zeros((2, 2))
         self._F_reset = np.zeros((2, 2))
         self._H_speed = np.array([[0.0, 1.0]])
+        self._consider = None                 # (the considered force errors (e_1 .. e_n, dc))
+        if consider is not None:
+            mean, var = prior_moments(model, consider)
+            if (m2 := var + mean * mean).any():
+                self._consider = Consider(m2)
         self.reset()
 
     def _build(self) -> Any:
@@ -225,6 +247,8 @@ class NominalKalman(Estimator):
         self.last_Q = np.zeros((2, 2))
         self.last_nis = np.nan
         self.last_cell = 1.0                   # probability of the last reading's count cell
+        self._gains = None if self._consider is None else np.zeros((2, self.model.n + 1))
+        self._restart_consider()
 
     def _start(self, z: float) -> None:
         kf = self.kf
@@ -248,6 +272,7 @@ class NominalKalman(Estimator):
         if track is None:
             self._start(z)
             self.last_nis = np.nan
+            self._restart_consider()
             return
         if force != self._hold_force:
             # A new outside force: the body may creep or slide off; the flow decides until
@@ -257,6 +282,7 @@ class NominalKalman(Estimator):
             self._layer.stop()
         if (lines is not None and steady and lines.active
                 and self._held(t, count, anchor, track[0], var_v)):
+            self._restart_consider()      # (the exact posterior of the counts: no model in it)
             return
         self.holding = False
         self._layer.stop()
@@ -272,9 +298,11 @@ class NominalKalman(Estimator):
             # Keep it (V+ = V, the settled contacts' noise); the contact estimate of the edge
             # is fused as a measurement of V below (once, then its information increments).
             dx, dV, Q, slopes, arrival, on_set = 0.0, 0.0, model._held_noise, None, None, True
+            gains = None                  # (held: the stiction absorbs a force error)
         else:
+            gains = self._gains
             dx, dV, Q, slopes, arrival, on_set = self._increment(V, track, math.sqrt(var_v), math.sqrt(kf.P.item(3)),
-                                                             steady, bounds, force)
+                                                             steady, bounds, force, gains)
         self._on_set = on_set
         # Stuck on a settled contact: the body reached the set once the wheels' lines were
         # exact (the motors' transient below the lines' resolution: it then sticks on the
@@ -313,6 +341,12 @@ class NominalKalman(Estimator):
             self.last_input = (dx, dV)
             self.last_F = self._F
             x_out, P_out, prior = np.empty((2, 1)), np.empty((2, 2)), np.empty(3)
+            if self._consider is not None:
+                # The gain of the step below: K = P- H^T / (H P- H^T + R), P- = F P F^T + Q.
+                P, h = kf.P, self._h
+                p00 = P.item(0) + 2.0 * h * P.item(1) + h * h * P.item(3) + Q.item(0)
+                p10 = P.item(2) + h * P.item(3) + Q.item(2)
+                gain = (p00 / (p00 + R), p10 / (p00 + R))
             nis = kernels("core", 40).kalman_step(x, kf.P, self._F, Q, R, z, x_out, P_out, prior)
             kf.x, kf.P = x_out, P_out
             self.last_cell = self._cell_probability(count, prior.item(0), prior.item(2), prior.item(1))
@@ -330,10 +364,24 @@ class NominalKalman(Estimator):
             # of a float is free (of an array it is not).
             kf.update(z, H=self._H)
             nis = kf.y.item() ** 2 * kf.SI.item()
+            gain = (kf.K.item(0), kf.K.item(1))
         self.last_Q = Q
         self.last_nis = nis
+        consider = self._consider
+        if consider is not None:
+            consider.step(self.last_F, None if gains is None or not gains.any() else gains, gain)
         if inc is not None:
             kf.update(inc[0], R=inc[1], H=self._H_speed)
+            if consider is not None:
+                consider.measured_speed(kf.K[:, 0])
+        if consider is not None:
+            self.considered = consider.covariance
+
+    def _restart_consider(self) -> None:
+        """The state owes nothing to the model: the considered errors' sensitivity restarts."""
+        if self._consider is not None:
+            self._consider.reset()
+        self.considered = np.zeros((2, 2))
 
     def _cell_probability(self, count: int, mean: float, variance: float, speed: float) -> float:
         """The probability of the reading's count cell ``[c q, (c + 1) q)`` under the predicted
@@ -468,6 +516,7 @@ class NominalKalman(Estimator):
         nis = [math.nan]
         failed = [False]
         cells = [1.0]
+        considered = [self.considered]
         for k in range(1, K):
             advance(z_l[k], R_l[k], track[k - 1], var_l[k - 1], steady_l[k - 1], bounds[k - 1], force_l[k - 1],
                     counts_l[k], times_l[k], wheels[k])
@@ -480,10 +529,11 @@ class NominalKalman(Estimator):
             Fs.append(self.last_F)
             Qs.append(self.last_Q)
             nis.append(self.last_nis)
+            considered.append(self.considered)
         self._pending = (track[-1], float(var_v[-1]), bool(steady[-1]), bounds[-1], force_l[-1])
         return FilterPass(np.array(xs), np.array(Ps), np.array(inputs, dtype=float), np.array(Fs),
                           np.array(Qs), np.array(nis), np.array(failed), np.array(cells),
-                          budget_clock() - started)
+                          budget_clock() - started, np.array(considered))
 
     def run(self, record: EncoderRecord, *, speed: float = 0.0,
             speed_std: float | None = None) -> EstimationResult:
@@ -559,7 +609,9 @@ class KalmanEstimator(Estimator):
     model : EstimatorModel
         The nominal scene.
     prior : ModelPrior, optional
-        The adaptive filter's prior (default ``ModelPrior()``).
+        What is known beyond the scene (default ``ModelPrior()``): the adaptive filter's
+        prior, and the unknown forces the nominal filter's estimates are reported with
+        (:class:`NominalKalman`'s ``consider``).
     initial_covariance : array_like of shape (2, 2), optional
         The nominal filter's prior covariance of ``(X, V)`` (:class:`NominalKalman`).
     exact_holds : bool
@@ -592,7 +644,8 @@ class KalmanEstimator(Estimator):
         self.model, self.prior = _checked(model, prior, owner)
         if initial_covariance is not None:
             initial_covariance = check_covariance(initial_covariance, "initial_covariance", owner, 2)
-        self.nominal = NominalKalman(model, initial_covariance=initial_covariance, exact_holds=exact_holds)
+        self.nominal = NominalKalman(model, initial_covariance=initial_covariance, exact_holds=exact_holds,
+                                     consider=self.prior)
         self.monitor = ConsistencyMonitor(as_int(window, "window", owner, low=1), false_alarm)
         self.reset()
 
@@ -664,7 +717,7 @@ class KalmanEstimator(Estimator):
                                     _failure(self.nominal.hold_failed, self.nominal.last_cell))
         if verdict.passes:
             self.verdicts.append(NOMINAL)
-            return out
+            return out[0], out[1] + self.nominal.considered.item(3)
         out = self._switch(sample, verdict.reason)
         self.verdicts.append(FALLBACK if self.adaptive.fallback else ADAPTING)
         return out
@@ -689,7 +742,8 @@ class KalmanEstimator(Estimator):
         started = budget_clock()
         self.reset(speed=speed, speed_std=speed_std, contact_speeds=record.initial_commands)
         nominal = self.nominal_pass = self.nominal.filter(record, speed=speed, speed_std=speed_std)
-        X, P, nis = nominal.states, nominal.covariances, nominal.nis
+        # (Reported with what the prior's unknown forces add: NominalKalman's consider.)
+        X, P, nis = nominal.states, nominal.covariances + nominal.considered, nominal.nis
         failures = nominal.hold_failures.tolist()
         cells = nominal.cell_probabilities.tolist()
         K = record.n_samples

@@ -18,7 +18,7 @@ from toolkit.estimation import (ADAPTING, NOMINAL, AdaptiveKalman, AdaptiveWindo
                                 ModelPrior, NominalKalman, UnscentedEstimator)
 from toolkit.model import ContactSet, Motors, PiecewiseConstant, Plant
 from toolkit.model.sensors import Sensors, measure, record_simulation
-from toolkit.model.truth import ModelPrior, WorldTruth
+from toolkit.model.truth import WorldTruth
 from toolkit.simulation import simulate
 
 
@@ -77,22 +77,23 @@ def test_the_considered_covariance_is_the_nominal_filters_error_over_the_prior(s
     assert np.all(second >= 10.0 * np.mean(own, axis=0)[sliding]), second / np.mean(own, axis=0)[sliding]
 
 
-def test_before_the_monitor_trips_the_default_is_not_overconfident():
-    # Unequal wheels the scene does not know (20-40 %): the nominal filter runs until its
-    # monitor trips (0.06-0.14 s), and predicts the startup with the told magnitudes. Its
+@pytest.mark.parametrize("spread", [0.1, 0.2, 0.4])
+def test_before_the_monitor_trips_the_default_is_not_overconfident(spread):
+    # Unequal wheels the scene does not know: the nominal filter runs until its monitor trips
+    # (0.06-0.22 s; 5.1 s on two records at 10 %) and predicts with the told magnitudes. Its
     # own std (0.1 mm/s) is what the counts allow; the prior's unknown forces move the speed
-    # by up to 12 mm/s over those periods. Reported with them (the consider analysis), NEES
-    # stays below 100 before the trip (measured at most 10; the filter's own P gives
-    # 583-18606). Not covered: a body that sticks on the near edge of a tie the true
-    # magnitudes break (seeds 0 and 3 at 10-20 %: the equilibrium moves to the next contact,
-    # which no linear effect of a force error represents).
-    for seed, spread in ((1, 0.2), (2, 0.2), (4, 0.2), (5, 0.2), (0, 0.4), (2, 0.4), (5, 0.4)):
-        sc = carousel_brake_scenario(seed=seed, grid_phase=seed, t_end=1.0, brake_time=0.6,
-                                     truth=WorldTruth(friction_spread=spread))
+    # by up to 12 mm/s over the startup, and where the true magnitudes break the nominal
+    # equilibrium the body slides on past the contact the filter has it stuck on (by a
+    # contact spacing, 11 mm/s). Reported with both (the consider analysis and the other
+    # contact), NEES stays below 100 before the trip on seeds 0-5 (measured at most 10; the
+    # filter's own P gives 583 to 6e6, the consider analysis alone up to 33 405 where the
+    # body slides on past a tie).
+    for seed in range(6):
+        sc = carousel_brake_scenario(seed=seed, grid_phase=seed, truth=WorldTruth(friction_spread=spread))
         est = KalmanEstimator(sc.model)
         result = est.run(sc.record, speed_std=1e-4)
         trip = int(np.searchsorted(sc.record.times, est.tripped[0]))
-        assert 2 <= trip <= 10
+        assert trip >= 2
         assert result.nees[:trip].max() <= 100.0, (seed, spread, result.nees[:trip])
 
 

@@ -944,7 +944,7 @@ def test_compiled_kalman_step_equals_the_filterpy_reference(monkeypatch):
     # m/s and the variances to 1e-12 relative (measured: speeds identical, variances 2e-15).
     from filterpy.kalman import KalmanFilter
 
-    import toolkit.estimation.kalman as kalman_module
+    import toolkit.estimation.nominal as kalman_module
     from toolkit import _compiled
     from toolkit.controllers import SpeedHold
     from toolkit.estimation import KalmanEstimator

@@ -4,10 +4,11 @@ Each estimator can ``run(record) -> EstimationResult`` offline and be stepped sa
 sample (``reset``, ``observe``, ``commanded``) in a closed loop. The baselines:
 :mod:`~toolkit.estimation.finite_difference`, :mod:`~toolkit.estimation.window` (FOAW) and
 :mod:`~toolkit.estimation.alpha_beta`. The model-based filters:
-:mod:`~toolkit.estimation.kalman` (the nominal Kalman filter and the RTS smoother),
-:mod:`~toolkit.estimation.adaptive` (the default ``kalman``: nominal while the data agree
-with the scene, adaptive after; its parts :mod:`~toolkit.estimation.monitor`,
-:mod:`~toolkit.estimation.identification`, :mod:`~toolkit.estimation._hold`) and
+:mod:`~toolkit.estimation.kalman` (the default ``kalman``: the nominal filter of
+:mod:`~toolkit.estimation.nominal` while the data agree with the scene, the adaptive one of
+:mod:`~toolkit.estimation.adaptive` after; its parts :mod:`~toolkit.estimation.consider`,
+:mod:`~toolkit.estimation.monitor`, :mod:`~toolkit.estimation.identification`,
+:mod:`~toolkit.estimation._hold`), :mod:`~toolkit.estimation.smoother` (RTS) and
 :mod:`~toolkit.estimation.unscented`. :mod:`~toolkit.estimation.registry` builds them by name,
 and the default told the true world (``truth_told``). Derivations: docs/estimation.md.
 """
@@ -24,7 +25,8 @@ from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher
 from .alpha_beta import AlphaBetaTracker, kalata_gains
 from .finite_difference import CentralDifference, WheelDifference
-from .kalman import FilterPass, KalmanEstimator, NominalKalman, steady_state_gain
+from .kalman import KalmanEstimator
+from .nominal import FilterPass, NominalKalman, steady_state_gain
 from .smoother import RTSSmoother
 
 from .unscented import UnscentedEstimator

@@ -34,39 +34,23 @@ from ..model.sensors import EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, lost_between, score
 from ._hold import HoldLayer
 from ._input import EstimatorModel
+from .consider import prior_moments
 from .contact_speeds import ContactSpeedTracker
 from .input_noise import command_timing_variance, unknown_force_noise
 from .missed_counts import absorbed_variance, told_missed_rate
 from .model_cache import ModelCache
 from .wheel_bank import WheelSpeedBank
-from ..model.truth import DEFAULT_DRAG, DEFAULT_LAG, ModelPrior
+from ..model.truth import DEFAULT_LAG, ModelPrior
 from .identification import LagIdentifier, MissedCountRate, RideCheck
 from .monitor import ConsistencyMonitor, NoiseMatcher, fit_noise
 from .window import AdaptiveWindow
 
-__all__ = ["AdaptiveKalman", "NOMINAL", "ADAPTING", "FALLBACK", "prior_moments"]
+__all__ = ["AdaptiveKalman", "NOMINAL", "ADAPTING", "FALLBACK"]
 
 #: Verdicts of :attr:`KalmanEstimator.verdicts` (per sample): the nominal filter's model
 #: holds; the adaptive filter runs; the adaptive filter's own monitor fails and it falls back
 #: towards the window estimate.
 NOMINAL, ADAPTING, FALLBACK = 0, 1, 2
-
-
-def prior_moments(model: EstimatorModel, prior: ModelPrior) -> tuple[np.ndarray, np.ndarray]:
-    """The prior's mean and variance of the force errors ``(e_1 .. e_n, dc)`` about
-    ``model``: each magnitude's relative error the spread's; the drag's error (N s/m) its
-    range as a Gaussian of its midpoint and half-width (the default: the nominal drag, std
-    ``DEFAULT_DRAG``)."""
-    n = model.n
-    mean = np.zeros(n + 1)
-    var = np.full(n + 1, prior.friction_spread ** 2)
-    if prior.drag_range is None:
-        var[n] = DEFAULT_DRAG ** 2
-    else:
-        lo, hi = prior.drag_range
-        mean[n] = 0.5 * (lo + hi) - model.damping
-        var[n] = max(0.5 * (hi - lo), 1e-9) ** 2
-    return mean, var
 
 
 def _checked(model: Any, prior: Any, owner: str) -> tuple[EstimatorModel, ModelPrior]:

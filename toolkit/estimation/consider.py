@@ -1,15 +1,40 @@
-"""The consider analysis: what parameters a filter does not estimate add to its covariance.
+"""What a filter takes as known adds to its covariance (the consider analysis).
 
 :class:`Consider` steps the sensitivity ``S`` of a linear filter's error to parameters it
 takes as known (Schmidt's consider parameters) along the filter's own steps, and gives the
-covariance their second moments add. Derivation: docs/estimation.md.
+covariance their second moments add. :class:`OtherContact` weighs, from the same parameters
+and the counts, the chance that a body the filter has stuck on one contact rides its
+neighbour. Derivation: docs/estimation.md.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["Consider"]
+from ..model.friction import contact_forces
+from ..model.truth import DEFAULT_DRAG, ModelPrior
+from ._input import EstimatorModel
+
+__all__ = ["Consider", "OtherContact", "prior_moments"]
+
+
+def prior_moments(model: EstimatorModel, prior: ModelPrior) -> tuple[np.ndarray, np.ndarray]:
+    """The prior's mean and variance of the force errors ``(e_1 .. e_n, dc)`` about
+    ``model``: each magnitude's relative error the spread's; the drag's error (N s/m) its
+    range as a Gaussian of its midpoint and half-width (the default: the nominal drag, std
+    ``DEFAULT_DRAG``)."""
+    n = model.n
+    mean = np.zeros(n + 1)
+    var = np.full(n + 1, prior.friction_spread ** 2)
+    if prior.drag_range is None:
+        var[n] = DEFAULT_DRAG ** 2
+    else:
+        lo, hi = prior.drag_range
+        mean[n] = 0.5 * (lo + hi) - model.damping
+        var[n] = max(0.5 * (hi - lo), 1e-9) ** 2
+    return mean, var
 
 
 class Consider:
@@ -52,3 +77,111 @@ class Consider:
         """An update with a measurement of the speed and gain ``K``: ``S+ = (I - K [0, 1]) S``."""
         self.S = self.S - np.outer(gain, self.S[1])
         self.covariance = (self.S * self.m2) @ self.S.T
+
+
+class OtherContact:
+    """The chance that the body has slid on from the contact a filter has it stuck on, and
+    what that adds to the filter's covariance.
+
+    The friction law holds the body on contact ``k`` while the others' net force ``G`` (with
+    the outside force and the drag) lies within ``f_k``: the margin ``M = f_k - |G|``. Under
+    force errors of second moments ``m2`` (the magnitudes' relative errors, then the drag's)
+    the excess force ``Y = |G| - f_k`` is ``N(-M, sigma^2)``, ``sigma^2 = sum_i f_i^2 m2_i +
+    v_k^2 m2_drag``: the body slides on with the prior probability ``Phi(-M / sigma)``,
+    pushed by ``Y`` given ``Y > 0`` (a truncated normal: mean ``-M + sigma lambda``, variance
+    ``sigma^2 (1 + alpha lambda - lambda^2)``, ``alpha = M / sigma``, ``lambda = phi(alpha) /
+    Phi(-alpha)``) towards the next contact speed in the direction of ``G`` (``d`` away),
+    where it sticks. That alternative's ``(X, V)`` from where the filter had the body stick
+    is Gaussian (the acceleration's uncertainty through the motion's slopes), and each count
+    weighs it against the filter's prediction by their likelihoods. With posterior
+    probability ``p`` the body is ``u = (X_alt, V_alt) - (X, V)`` away from the estimate,
+    within the alternative's covariance ``C``: ``p (u u^T + C)`` is added.
+
+    Parameters
+    ----------
+    forces : ndarray of shape (n,), N
+    mass : float, kg
+    damping : float, N s/m
+    m2 : ndarray of shape (n + 1,)
+        Second moments of ``(e_1 .. e_n, dc)``.
+    """
+
+    #: A prior probability below this is no alternative.
+    NEGLIGIBLE = 1e-9
+
+    def __init__(self, forces: np.ndarray, mass: float, damping: float, m2: np.ndarray) -> None:
+        self.forces = np.asarray(forces, dtype=float)
+        self.mass = float(mass)
+        self.damping = float(damping)
+        self.m2 = np.asarray(m2, dtype=float)
+        self._force_var = float(np.sum(self.forces ** 2 * self.m2[:-1]))
+        self.reset()
+
+    def reset(self) -> None:
+        """No contact held: no alternative."""
+        self.k: int | None = None
+        self._logit = -math.inf
+        self._motion = (0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0)   # (t0, X0, v_k, sign, d, a, var_a)
+        self.covariance = np.zeros((2, 2))
+
+    def start(self, t: float, X: float, speeds: np.ndarray, k: int, force: float) -> float:
+        """A body stuck at ``t`` (s, at position ``X``, m) on contact ``k`` of ``speeds``
+        (m/s) under the outside force ``force`` (N): the alternative's motion, and its prior
+        probability (returned)."""
+        v = float(speeds[k])
+        G = float(contact_forces(speeds - v, self.forces).sum()) + force - self.damping * v
+        sign = 1.0 if G >= 0.0 else -1.0
+        ahead = (speeds - v) * sign
+        ahead[k] = math.inf
+        beyond = ahead > 0.0
+        sigma = math.sqrt(self._force_var + v * v * float(self.m2[-1]))
+        if not beyond.any() or sigma <= 0.0:
+            return 0.0
+        alpha = (float(self.forces[k]) - abs(G)) / sigma
+        p = 0.5 * math.erfc(alpha / math.sqrt(2.0))
+        if p < self.NEGLIGIBLE:
+            return p
+        lam = math.exp(-0.5 * alpha * alpha) / math.sqrt(2.0 * math.pi) / p
+        a = sigma * (lam - alpha) / self.mass
+        var_a = max(sigma * sigma * (1.0 + alpha * lam - lam * lam), 0.0) / self.mass ** 2
+        self._motion = (t, X, v, sign, float(ahead[beyond].min()), a, var_a)
+        return p
+
+    def _alternative(self, t: float) -> tuple[float, float, np.ndarray]:
+        """The alternative's mean ``(X, V)`` at ``t`` and its covariance."""
+        t0, X0, v, sign, d, a, var_a = self._motion
+        tau = t - t0
+        if a * tau < d:                       # still accelerating towards the next contact
+            dv, dx, gv, gx = a * tau, 0.5 * a * tau * tau, tau, 0.5 * tau * tau
+        else:                                 # stuck on it since d / a
+            dv, dx, gv, gx = d, d * tau - d * d / (2.0 * a), 0.0, d * d / (2.0 * a * a)
+        g = np.array([gx, gv])
+        return X0 + v * tau + sign * dx, v + sign * dv, var_a * np.outer(g, g)
+
+    def step(self, t: float, h: float, k: int | None, speeds: np.ndarray, force: float, X: float, V: float,
+             z: float, x_pred: float, S: float) -> None:
+        """One sample at ``t`` (s), ``h`` (s) after the last: the filter has the body on contact
+        ``k`` of the settled ``speeds`` (None: not on one) at posterior ``(X, V)``; the reading
+        ``z`` (m) against the filter's prediction ``x_pred`` (m) of innovation variance ``S``
+        (m^2). A body first found on a contact may have stuck on it, or slid on, from the
+        last sample on."""
+        if k is None:
+            if self.k is not None:
+                self.reset()
+            return
+        if k != self.k:
+            self.k = k
+            p = self.start(t - h, X - float(speeds[k]) * h, speeds, k, force)
+            self._logit = -math.inf if p < self.NEGLIGIBLE else (
+                math.log(p) - math.log1p(-p) if p < 1.0 else math.inf)
+            X_alt, V_alt, C = self._alternative(t)
+        elif self._logit > -math.inf:
+            X_alt, V_alt, C = self._alternative(t)
+            S_alt = S + C[0, 0]
+            self._logit += 0.5 * ((z - x_pred) ** 2 / S - (z - X_alt) ** 2 / S_alt + math.log(S / S_alt))
+        if self._logit < -700.0:
+            self.covariance = np.zeros((2, 2))
+            return
+        p = 1.0 / (1.0 + math.exp(-self._logit)) if self._logit < 700.0 else 1.0
+        u = np.array([X_alt - X, V_alt - V])
+        self.covariance = p * (np.outer(u, u) + C)

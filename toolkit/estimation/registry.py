@@ -50,7 +50,7 @@ def build_estimator(name: str, model: EstimatorModel, *, prior: ModelPrior | Non
     from .alpha_beta import AlphaBetaTracker
     from .kalman import KalmanEstimator
     from .finite_difference import CentralDifference, WheelDifference
-    from .kalman import NominalKalman
+    from .nominal import NominalKalman
     from .smoother import RTSSmoother
     from .unscented import UnscentedEstimator
     from .window import AdaptiveWindow

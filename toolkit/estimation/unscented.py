@@ -1,7 +1,7 @@
 """Unscented Kalman filter whose process model is the exact simulator over one sample.
 
 Same state ``(X, V)``, measurement, noise and known inputs as
-:class:`~toolkit.estimation.kalman.NominalKalman` (whose per-sample loop it reuses), but
+:class:`~toolkit.estimation.nominal.NominalKalman` (whose per-sample loop it reuses), but
 each sigma point is propagated through the plant's exact flow over the period
 (:meth:`~toolkit.estimation.EstimatorModel.flow`), so the sign nonlinearity near sticking is
 sampled, not linearized; sigma points that end stuck add the contact estimate's variance to
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..laws import quantization_variance
-from .kalman import NominalKalman
+from .nominal import NominalKalman
 
 __all__ = ["UnscentedEstimator"]
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.special import erfcx, expit, logit
 
 from ..model.friction import contact_forces
 from ..model.truth import DEFAULT_DRAG, ModelPrior
@@ -53,7 +54,7 @@ class Consider:
     """
 
     def __init__(self, m2: np.ndarray) -> None:
-        self.m2 = np.asarray(m2, dtype=float)
+        self.m2 = m2
         self.reset()
 
     def reset(self) -> None:
@@ -106,46 +107,38 @@ class OtherContact:
         Second moments of ``(e_1 .. e_n, dc)``.
     """
 
-    #: A prior probability below this is no alternative.
-    NEGLIGIBLE = 1e-9
-
     def __init__(self, forces: np.ndarray, mass: float, damping: float, m2: np.ndarray) -> None:
-        self.forces = np.asarray(forces, dtype=float)
-        self.mass = float(mass)
-        self.damping = float(damping)
-        self.m2 = np.asarray(m2, dtype=float)
-        self._force_var = float(np.sum(self.forces ** 2 * self.m2[:-1]))
+        self.forces, self.mass, self.damping, self.m2 = forces, mass, damping, m2
+        self._force_var = float(np.sum(forces ** 2 * m2[:-1]))
         self.reset()
 
     def reset(self) -> None:
-        """No contact held: no alternative."""
+        """No contact held: no alternative (its log-odds and motion are set when one is)."""
         self.k: int | None = None
-        self._logit = -math.inf
-        self._motion = (0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0)   # (t0, X0, v_k, sign, d, a, var_a)
         self.covariance = np.zeros((2, 2))
 
     def start(self, t: float, X: float, speeds: np.ndarray, k: int, force: float) -> float:
         """A body stuck at ``t`` (s, at position ``X``, m) on contact ``k`` of ``speeds``
         (m/s) under the outside force ``force`` (N): the alternative's motion, and its prior
-        probability (returned)."""
+        probability (returned; 0 where nothing is uncertain). With no contact speed beyond, the
+        alternative slides on without end (``d`` infinite)."""
         v = float(speeds[k])
         G = float(contact_forces(speeds - v, self.forces).sum()) + force - self.damping * v
         sign = 1.0 if G >= 0.0 else -1.0
         ahead = (speeds - v) * sign
-        ahead[k] = math.inf
-        beyond = ahead > 0.0
+        beyond = ahead[ahead > 0.0]
         sigma = math.sqrt(self._force_var + v * v * float(self.m2[-1]))
-        if not beyond.any() or sigma <= 0.0:
+        self._motion: tuple[float, ...] | None = None      # (t0, X0, v_k, sign, d, a, var_a)
+        if sigma <= 0.0:
             return 0.0
         alpha = (float(self.forces[k]) - abs(G)) / sigma
-        p = 0.5 * math.erfc(alpha / math.sqrt(2.0))
-        if p < self.NEGLIGIBLE:
-            return p
-        lam = math.exp(-0.5 * alpha * alpha) / math.sqrt(2.0 * math.pi) / p
+        # lambda = phi(alpha) / Phi(-alpha), without cancellation: Phi(-alpha) = erfc(alpha /
+        # sqrt(2)) / 2 = exp(-alpha^2 / 2) erfcx(alpha / sqrt(2)) / 2.
+        lam = math.sqrt(2.0 / math.pi) / float(erfcx(alpha / math.sqrt(2.0)))
         a = sigma * (lam - alpha) / self.mass
         var_a = max(sigma * sigma * (1.0 + alpha * lam - lam * lam), 0.0) / self.mass ** 2
-        self._motion = (t, X, v, sign, float(ahead[beyond].min()), a, var_a)
-        return p
+        self._motion = (t, X, v, sign, float(beyond.min()) if beyond.size else math.inf, a, var_a)
+        return 0.5 * math.erfc(alpha / math.sqrt(2.0))
 
     def _alternative(self, t: float) -> tuple[float, float, np.ndarray]:
         """The alternative's mean ``(X, V)`` at ``t`` and its covariance."""
@@ -171,17 +164,16 @@ class OtherContact:
             return
         if k != self.k:
             self.k = k
-            p = self.start(t - h, X - float(speeds[k]) * h, speeds, k, force)
-            self._logit = -math.inf if p < self.NEGLIGIBLE else (
-                math.log(p) - math.log1p(-p) if p < 1.0 else math.inf)
+            self._logit = float(logit(self.start(t - h, X - float(speeds[k]) * h, speeds, k, force)))
+            if self._logit == -math.inf:
+                self.covariance = np.zeros((2, 2))
+                return
             X_alt, V_alt, C = self._alternative(t)
-        elif self._logit > -math.inf:
+        elif self._logit == -math.inf:
+            return
+        else:
             X_alt, V_alt, C = self._alternative(t)
             S_alt = S + C[0, 0]
             self._logit += 0.5 * ((z - x_pred) ** 2 / S - (z - X_alt) ** 2 / S_alt + math.log(S / S_alt))
-        if self._logit < -700.0:
-            self.covariance = np.zeros((2, 2))
-            return
-        p = 1.0 / (1.0 + math.exp(-self._logit)) if self._logit < 700.0 else 1.0
         u = np.array([X_alt - X, V_alt - V])
-        self.covariance = p * (np.outer(u, u) + C)
+        self.covariance = float(expit(self._logit)) * (np.outer(u, u) + C)

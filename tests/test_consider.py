@@ -56,9 +56,10 @@ def test_the_chance_of_sliding_on_is_the_friction_laws_over_the_force_errors(sca
 
 def test_the_counts_decide_between_the_contact_and_the_next():
     # A body stuck on contact 1 whose margin is nil (a tie: p = 1/2). Readings that follow the
-    # contact drive the alternative's probability to 0 and the added covariance with it; readings
-    # that follow the alternative's motion drive it to 1, and the covariance added is then the
-    # alternative's offset from the estimate (u u^T + C with p = 1).
+    # contact drive the alternative's probability to 0 (below floating point: the alternative
+    # is dropped while the body stays, and nothing is added however the readings go on);
+    # readings that follow the alternative's motion drive it to 1, and the covariance added is
+    # then the alternative's offset from the estimate (u u^T + C with p = 1).
     speeds = np.array([0.0, 0.1, 0.2, 0.3])
     forces = np.ones(4)
     m2 = np.array([0.09, 0.09, 0.09, 0.09, 0.0])
@@ -66,7 +67,7 @@ def test_the_counts_decide_between_the_contact_and_the_next():
     for follows_alternative in (False, True):
         other = OtherContact(forces, 1.0, 0.0, m2)
         X = 0.0
-        for j in range(40):
+        for j in range(80):
             t = j * h
             if j == 0:
                 z = x_pred = X
@@ -77,12 +78,17 @@ def test_the_counts_decide_between_the_contact_and_the_next():
             other.step(t, h, 1, speeds, 0.0, x_pred, 0.1, z, x_pred, S)
         p = 1.0 / (1.0 + math.exp(-other._logit)) if other._logit < 700 else 1.0
         if follows_alternative:
-            assert p > 1.0 - 1e-9
+            assert p > 1.0 - 1e-9 and other.weighed is True
             X_alt, V_alt, C = other._alternative(t)
             u = np.array([X_alt - x_pred, V_alt - 0.1])
             np.testing.assert_allclose(other.covariance, np.outer(u, u) + C, rtol=1e-12)
         else:
-            assert p < 1e-9 and np.all(np.abs(other.covariance) <= 1e-9 * 0.1 ** 2)
+            assert other._logit == -math.inf and other.weighed is False
+            np.testing.assert_array_equal(other.covariance, np.zeros((2, 2)))
+            X_alt = other._motion_at(0.9)[0]                 # (readings on the alternative now)
+            other.step(0.9, h, 1, speeds, 0.0, 0.09, 0.1, X_alt, 0.09, S)
+            assert other._logit == -math.inf and other.weighed is False
+            np.testing.assert_array_equal(other.covariance, np.zeros((2, 2)))
 
 
 def test_the_sensitivity_steps_as_the_linear_filters_error():
@@ -189,8 +195,9 @@ def test_each_count_weighs_the_two_hypotheses_by_bayes_rule():
         other.step(t, h, 1, speeds, outside, X, V, z, x_pred, S)
         u = np.array([X_alt - X, V_alt - V])
         np.testing.assert_allclose(other.covariance, p * (np.outer(u, u) + C), rtol=1e-9)
+    assert other.weighed is True
     other.step(3 * h, h, None, speeds, outside, X, V, z, x_pred, S)     # (off the contact: none)
-    assert other.k is None
+    assert other.k is None and other.weighed is False
     np.testing.assert_array_equal(other.covariance, np.zeros((2, 2)))
 
 
@@ -206,6 +213,7 @@ def test_certain_forces_add_nothing_and_a_certain_slide_adds_all():
     for t in (0.0, 0.01):                           # (found on the contact, then held there)
         certain.step(t, 0.01, 1, speeds, 0.0, 0.1 * t, 0.1, 0.1 * t, 0.1 * t, 1e-10)
         np.testing.assert_array_equal(certain.covariance, np.zeros((2, 2)))
+        assert certain.weighed is False
     m2 = np.array([0.01, 0.01, 0.01, 0.0])
     sigma = math.sqrt(0.03)
     other = OtherContact(forces, 1.0, 0.0, m2)

@@ -116,6 +116,8 @@ class OtherContact:
         """No contact held: no alternative (its log-odds and motion are set when one is)."""
         self.k: int | None = None
         self.covariance = np.zeros((2, 2))
+        #: Whether an alternative is weighed (:attr:`covariance` then holds what it adds).
+        self.weighed = False
 
     def start(self, t: float, X: float, speeds: np.ndarray, k: int, force: float) -> float:
         """A body stuck at ``t`` (s, at position ``X``, m) on contact ``k`` of ``speeds``
@@ -140,16 +142,21 @@ class OtherContact:
         self._motion = (t, X, v, sign, float(beyond.min()) if beyond.size else math.inf, a, var_a)
         return 0.5 * math.erfc(alpha / math.sqrt(2.0))
 
-    def _alternative(self, t: float) -> tuple[float, float, np.ndarray]:
-        """The alternative's mean ``(X, V)`` at ``t`` and its covariance."""
+    def _motion_at(self, t: float) -> tuple[float, float, float, float]:
+        """The alternative's mean ``(X, V)`` at ``t`` and their slopes in the acceleration."""
         t0, X0, v, sign, d, a, var_a = self._motion
         tau = t - t0
         if a * tau < d:                       # still accelerating towards the next contact
             dv, dx, gv, gx = a * tau, 0.5 * a * tau * tau, tau, 0.5 * tau * tau
         else:                                 # stuck on it since d / a
             dv, dx, gv, gx = d, d * tau - d * d / (2.0 * a), 0.0, d * d / (2.0 * a * a)
+        return X0 + v * tau + sign * dx, v + sign * dv, gx, gv
+
+    def _alternative(self, t: float) -> tuple[float, float, np.ndarray]:
+        """The alternative's mean ``(X, V)`` at ``t`` and its covariance ``var_a g g^T``."""
+        X, V, gx, gv = self._motion_at(t)
         g = np.array([gx, gv])
-        return X0 + v * tau + sign * dx, v + sign * dv, var_a * np.outer(g, g)
+        return X, V, self._motion[6] * np.outer(g, g)
 
     def step(self, t: float, h: float, k: int | None, speeds: np.ndarray, force: float, X: float, V: float,
              z: float, x_pred: float, S: float) -> None:
@@ -167,13 +174,25 @@ class OtherContact:
             self._logit = float(logit(self.start(t - h, X - float(speeds[k]) * h, speeds, k, force)))
             if self._logit == -math.inf:
                 self.covariance = np.zeros((2, 2))
+                self.weighed = False
                 return
-            X_alt, V_alt, C = self._alternative(t)
+            X_alt, V_alt, gx, gv = self._motion_at(t)
         elif self._logit == -math.inf:
             return
         else:
-            X_alt, V_alt, C = self._alternative(t)
-            S_alt = S + C[0, 0]
+            X_alt, V_alt, gx, gv = self._motion_at(t)
+            S_alt = S + self._motion[6] * gx * gx
             self._logit += 0.5 * ((z - x_pred) ** 2 / S - (z - X_alt) ** 2 / S_alt + math.log(S / S_alt))
-        u = np.array([X_alt - X, V_alt - V])
-        self.covariance = float(expit(self._logit)) * (np.outer(u, u) + C)
+        # p (u u^T + var_a g g^T), written out (per sample, while the body is held). An
+        # alternative the counts have rejected beyond floating point (p = 0) is dropped while
+        # the body stays on this contact.
+        p = float(expit(self._logit))
+        if p == 0.0:
+            self._logit = -math.inf
+            self.covariance = np.zeros((2, 2))
+            self.weighed = False
+            return
+        self.weighed = True
+        u0, u1, var_a = X_alt - X, V_alt - V, self._motion[6]
+        cross = p * (u0 * u1 + var_a * gx * gv)
+        self.covariance = np.array([[p * (u0 * u0 + var_a * gx * gx), cross], [cross, p * (u1 * u1 + var_a * gv * gv)]])

@@ -34,6 +34,10 @@ from .contact_speeds import ContactSpeedTracker, contact_speed_estimates
 
 __all__ = ["FilterPass", "NominalKalman", "steady_state_gain", "measurement_variance"]
 
+#: What nothing considered adds (shared, read-only).
+_NOTHING = np.zeros((2, 2))
+_NOTHING.setflags(write=False)
+
 
 def _side(speed: float, bounds: Any) -> int | None:
     """Which edge of the equilibrium set (``bounds[2]`` or ``[3]``) ``speed`` is, if either
@@ -244,6 +248,7 @@ class NominalKalman(Estimator):
         self.last_nis = np.nan
         self.last_cell = 1.0                   # probability of the last reading's count cell
         self._gains = None if self._consider is None else np.zeros((2, self.model.n + 1))
+        self.considered = None                 # (what the considered errors add: set below)
         self._restart_consider()
 
     def _start(self, z: float) -> None:
@@ -278,11 +283,13 @@ class NominalKalman(Estimator):
             self._hold_force = force
             self.holding = self._stuck_settled = False
             self._layer.stop()
-        x0, P0 = kf.x, kf.P
+        x0, P0, was_holding = kf.x, kf.P, self.holding
         if (lines is not None and steady and lines.active
                 and self._held(t, count, anchor, track[0], var_v)):
             self._restart_consider()      # (the exact posterior of the counts: no model in it)
-            if self._other is not None:
+            # (A hold that goes on rides the same contact: an alternative the counts rejected
+            # there stays rejected.)
+            if self._other is not None and not (was_holding and self.holding and not self._other.weighed):
                 h = self._h
                 self._weigh(t, z, x0.item(0) + h * x0.item(1),
                             P0.item(0) + 2.0 * h * P0.item(1) + h * h * P0.item(3) + R, track, var_v, steady, force)
@@ -385,9 +392,9 @@ class NominalKalman(Estimator):
 
     def _restart_consider(self) -> None:
         """The state owes nothing to the model: the considered errors' sensitivity restarts."""
-        if self._consider is not None:
+        if self._consider is not None and self.considered is not _NOTHING:
             self._consider.reset()
-        self.considered = np.zeros((2, 2))
+        self.considered = _NOTHING
 
     def _weigh(self, t: float, z: float, x_pred: float, S: float, track: np.ndarray, var_v: float,
                steady: bool, force: float) -> None:
@@ -404,7 +411,7 @@ class NominalKalman(Estimator):
                 k = j
         other = self._other
         other.step(t, self._h, k, track[0], force, x.item(0), V, z, x_pred, S)
-        if k is not None:
+        if k is not None and other.weighed:
             self.considered = self.considered + other.covariance
 
     def _cell_probability(self, count: int, mean: float, variance: float, speed: float) -> float:

@@ -351,15 +351,10 @@ class NominalKalman(Estimator):
             self.last_input = (dx, dV)
             self.last_F = self._F
             x_out, P_out, prior = np.empty((2, 1)), np.empty((2, 2)), np.empty(3)
-            if self._consider is not None:
-                # The gain of the step below: K = P- H^T / (H P- H^T + R), P- = F P F^T + Q.
-                P, h = kf.P, self._h
-                p00 = P.item(0) + 2.0 * h * P.item(1) + h * h * P.item(3) + Q.item(0)
-                p10 = P.item(2) + h * P.item(3) + Q.item(2)
-                gain = (p00 / (p00 + R), p10 / (p00 + R))
             nis = kernels("core", 40).kalman_step(x, kf.P, self._F, Q, R, z, x_out, P_out, prior)
             kf.x, kf.P = x_out, P_out
             x_pred, S = prior.item(0), prior.item(2) + R
+            gain = (P_out.item(0) / R, P_out.item(2) / R)     # (K = P+ H^T R^-1)
             self.last_cell = self._cell_probability(count, prior.item(0), prior.item(2), prior.item(1))
         else:
             # The flow linearized at V (events in the period, or drag): x+ = F x + u with
@@ -381,7 +376,7 @@ class NominalKalman(Estimator):
         self.last_nis = nis
         consider = self._consider
         if consider is not None:
-            consider.step(self.last_F, None if gains is None or not gains.any() else gains, gain)
+            consider.step(self.last_F, gains, gain)
         if inc is not None:
             kf.update(inc[0], R=inc[1], H=self._H_speed)
             if consider is not None:

@@ -7,8 +7,8 @@ never passes or fails on a lucky draw.
 
 The kernels are compiled (or loaded from numba's cache) before the first test. Under
 pytest-xdist (``make test`` runs ``pytest -n 2``) the controller compiles them before its
-workers start, never one kernel in two processes at once, and each worker loads them from the
-cache; the summary says what each step cost. docs/testing.md tells the rules.
+workers start (groups of warm-ups in two processes at once), and each worker loads them from
+the cache; the summary says what each step cost. docs/testing.md tells the rules.
 """
 
 from __future__ import annotations
@@ -29,24 +29,13 @@ import pytest  # noqa: E402
 # both ways). Subprocess tests inherit this unless they set it themselves.
 os.environ.setdefault("ACTIVE_CONTACTS_COMPILE", "eager")
 
-#: The warm-ups of the kernels every test process loads first, one per group of kernel
-#: modules with no kernel in common (the planar kernels call none of the exact method's):
-#: run in parallel, they never compile one kernel twice into the same cache.
-WARM_UPS = ("toolkit.simulation._warmup", "toolkit.planar._warmup")
+#: The warm-ups of the kernels every test process loads first, in the groups that compile at
+#: once (few kernels in common; the kernels' cache saves are locked).
+from toolkit._warmups import GROUPS, run_group  # noqa: E402
 
 _KERNELS: dict[str, float] = {}              # this process: the warm-ups' wall time, compiling
 _AHEAD: dict[str, float] = {}                # the xdist controller: each step's wall time
 _WORKERS: dict[str, dict[str, float]] = {}   # the xdist controller: what each worker reported
-
-
-def _warm_up(module: str) -> tuple[float, float]:
-    """Run ``module``'s ``warm_up`` (compile, or load from numba's cache): its wall time and
-    the time this process has spent compiling, s."""
-    import importlib
-
-    from toolkit import _compiled
-
-    return importlib.import_module(module).warm_up(), _compiled.compile_seconds()
 
 
 def _distributed(config: pytest.Config) -> bool:
@@ -56,7 +45,7 @@ def _distributed(config: pytest.Config) -> bool:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    # Under xdist, before the workers start: the WARM_UPS in parallel, then, if they compiled
+    # Under xdist, before the workers start: the GROUPS in parallel, then, if they compiled
     # anything (a fresh clone, a changed kernel), `active-contacts warm`: every kernel the
     # shipped designs run (the estimators' and controllers'), on the kernels cached by then.
     # Without numba's compiler there is nothing to compile.
@@ -70,8 +59,9 @@ def pytest_configure(config: pytest.Config) -> None:
     from concurrent.futures import ProcessPoolExecutor
 
     started = time.perf_counter()
-    with ProcessPoolExecutor(len(WARM_UPS), mp_context=multiprocessing.get_context("spawn")) as pool:
-        runs = {module.split(".")[1]: pool.submit(_warm_up, module) for module in WARM_UPS}
+    with ProcessPoolExecutor(len(GROUPS), mp_context=multiprocessing.get_context("spawn")) as pool:
+        runs = {" and ".join(module.split(".")[1] for module in group): pool.submit(run_group, group)
+                for group in GROUPS}
         done = {name: run.result() for name, run in runs.items()}
     _AHEAD.update((name, wall) for name, (wall, _) in done.items())
     _AHEAD["total"] = time.perf_counter() - started
@@ -102,7 +92,7 @@ def _compiled_kernels():
     suite's summary says what that cost (:func:`pytest_terminal_summary`)."""
     from toolkit import _compiled
 
-    _KERNELS["wall"] = sum(_warm_up(module)[0] for module in WARM_UPS)
+    _KERNELS["wall"] = sum(run_group(group)[0] for group in GROUPS)
     _KERNELS["compiling"] = _compiled.compile_seconds()
 
 
@@ -126,9 +116,10 @@ def pytest_terminal_summary(terminalreporter):
     if _AHEAD:
         designs = (f", then every shipped design once (active-contacts warm, {_AHEAD['warm']:.1f} s)"
                    if "warm" in _AHEAD else "")
+        groups = " and ".join(f"{name} ({wall:.1f} s)" for name, wall in _AHEAD.items()
+                              if name not in ("total", "warm"))
         write(f"kernels: compiled or loaded from numba's cache before the workers started, in "
-              f"{_AHEAD['total']:.1f} s: the warm-ups of the exact method ({_AHEAD['simulation']:.1f} s) "
-              f"and of the planar kernels ({_AHEAD['planar']:.1f} s) in parallel{designs}")
+              f"{_AHEAD['total']:.1f} s: the warm-ups of {groups} in parallel{designs}")
     for name, kernels in sorted(_WORKERS.items()):
         write(f"kernels: {name} loaded them in {kernels['wall']:.1f} s ({kernels['compiling']:.1f} s "
               f"compiling), and compiled {kernels['total'] - kernels['compiling']:.1f} s more in its tests")

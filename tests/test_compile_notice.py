@@ -50,6 +50,9 @@ def test_warm_compiles_what_every_design_runs(tmp_path):
     assert warm.returncode == 0, warm.stderr
     data = json.loads(warm.stdout)
     assert data["compile_time"] >= 0 and "carousel" in data["designs"]
+    # One notice, whatever it compiles and in how many processes (none from the workers).
+    assert warm.stderr.startswith("active-contacts: warm: compiling the kernels of every shipped design in ")
+    assert warm.stderr.count("\n") == 1, warm.stderr
     for design in ("carousel", "closed_loop", "estimate"):
         run = _run(None, "run", f"designs/{design}.toml", "--out", str(tmp_path / design), "--json")
         assert run.returncode in (0, 3), run.stderr

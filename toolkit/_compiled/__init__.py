@@ -307,6 +307,7 @@ def _compile(module: ModuleType) -> None:
                 compiled = numba.njit(cache=False, **options)(function)
                 _CACHE.setdefault(module.__name__, None)
             _one_specialization(compiled)
+            _saves_locked(compiled)
             _DISPATCHERS[function] = compiled
         setattr(module, fname, compiled)
 
@@ -325,6 +326,37 @@ def _one_specialization(dispatcher: Any) -> None:
                         {k: types.unliteral(v) for k, v in kws.items()})
 
     dispatcher.get_call_template = get_call_template
+
+
+def _saves_locked(dispatcher: Any) -> None:
+    """Make ``dispatcher``'s cache saves hold a lock file beside its index, so that processes
+    compiling at once (``active-contacts warm``, the test workers) cannot mix their versions.
+
+    numba caches a kernel as one index (argument types -> data file) and a data file per
+    version, and saves a version by reading the index, naming a data file the index does not
+    list, writing the index, then the data: two processes saving two versions of one kernel
+    at once can both take the same name, and the index then points one version at the other's
+    machine code. Under the lock each save reads the index the previous one wrote."""
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if cache_file is not None and hasattr(cache_file, "_index_path"):
+        cache_file.__class__ = _locked(type(cache_file))
+
+
+_LOCKED: dict[type, type] = {}
+
+
+def _locked(kind: type) -> type:
+    """``kind`` (numba's cache file class) with :meth:`save` under a lock file."""
+    locked = _LOCKED.get(kind)
+    if locked is None:
+        from filelock import FileLock
+
+        def save(self: Any, key: Any, data: Any) -> None:
+            with FileLock(self._index_path + ".lock"):
+                kind.save(self, key, data)
+
+        locked = _LOCKED[kind] = type(f"Locked{kind.__name__}", (kind,), {"save": save})
+    return locked
 
 
 _CACHE: dict[str, str | None] = {}       # kernel module -> the folder numba caches it in

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import multiprocessing
+import os
 import sys
 from pathlib import Path
 
@@ -39,8 +41,10 @@ def _cmd_designs(args: argparse.Namespace) -> int:
 
 
 def _cmd_warm(args: argparse.Namespace) -> int:
-    """Run every shipped design once, outputs discarded, so that every kernel they use is
-    compiled and cached: after this, every design's first run starts warm."""
+    """Compile and cache every kernel the shipped designs use: the kernels' warm-ups in
+    parallel processes where this process may run on two cores or more and fork
+    (:func:`toolkit._warmups.warm_groups`), then every shipped design run once, outputs
+    discarded (whatever the warm-ups left). After this, every design's first run starts warm."""
     import io
     import tempfile
     import time
@@ -48,26 +52,38 @@ def _cmd_warm(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from .. import _compiled
+    from .._warmups import warm_groups
     from ..scenes.designs import design_names, design_text
 
     names = design_names()
-    started, compiled_before = time.perf_counter(), _compiled.compile_seconds()
-    with tempfile.TemporaryDirectory(prefix="active-contacts-warm-") as folder:
-        for name in tqdm(names, desc="warming", unit=" designs", file=sys.stderr, leave=False,
-                         disable=args.json or not sys.stderr.isatty()):
-            scene = Path(folder) / f"{name}.toml"
-            scene.write_text(design_text(name), encoding="utf-8")
-            run = argparse.Namespace(command="run", scene=str(scene), out=str(Path(folder) / "out" / name),
-                                     json=False, strict=False)
-            with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-                _cmd_run(run)            # (a design's own shortfalls do not matter here)
+    started = time.perf_counter()
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    processes = 2 if cores >= 2 and "fork" in multiprocessing.get_all_start_methods() else 1
+    print(f"active-contacts: warm: compiling the kernels of every shipped design in {processes} "
+          f"process{'es' if processes > 1 else ''} (loaded from the cache where it has them)",
+          file=sys.stderr, flush=True)
+    quiet = _compiled.on_compile(None)          # (this command says what it compiles, once)
+    try:
+        compiled_before = -sum(compiling for _, compiling in warm_groups()) if processes > 1 else 0.0
+        compiled_before += _compiled.compile_seconds()
+        with tempfile.TemporaryDirectory(prefix="active-contacts-warm-") as folder:
+            for name in tqdm(names, desc="warming", unit=" designs", file=sys.stderr, leave=False,
+                             disable=args.json or not sys.stderr.isatty()):
+                scene = Path(folder) / f"{name}.toml"
+                scene.write_text(design_text(name), encoding="utf-8")
+                run = argparse.Namespace(command="run", scene=str(scene), out=str(Path(folder) / "out" / name),
+                                         json=False, strict=False)
+                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+                    _cmd_run(run)            # (a design's own shortfalls do not matter here)
+    finally:
+        _compiled.on_compile(quiet)
     compile_time = _compiled.compile_seconds() - compiled_before
     wall = time.perf_counter() - started
     if args.json:
         _print_json({"designs": list(names), "compile_time": compile_time, "wall_time": wall})
     else:
-        print(f"{len(names)} shipped designs run once in {wall:.1f} s, {compile_time:.1f} s of it compiling "
-              "kernels: they are cached, and every design's first run starts warm")
+        print(f"{len(names)} shipped designs run once in {wall:.1f} s ({compile_time:.1f} s compiling kernels, "
+              "summed over the processes): they are cached, and every design's first run starts warm")
     return EXIT_OK
 
 

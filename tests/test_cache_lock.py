@@ -69,6 +69,18 @@ def test_numbas_own_saves_lose_a_version_in_that_window(tmp_path):
     assert len(index) == 1 and list(index.values()) == ["kernel.1.nbc"], index
 
 
+def test_where_files_cannot_be_locked_the_save_is_numbas_own(tmp_path, monkeypatch):
+    import filelock
+
+    def refuse(self, *args, **kwargs):
+        raise NotImplementedError("FileSystem does not appear to support flock")
+
+    monkeypatch.setattr(filelock.FileLock, "acquire", refuse)
+    cache = _locked(numba_caching.IndexDataCacheFile)(str(tmp_path), "kernel", "stamp")
+    cache.save("a", "machine code a")
+    assert cache.load("a") == "machine code a"
+
+
 def test_the_toolkits_kernels_save_under_the_lock():
     from toolkit import _compiled
 

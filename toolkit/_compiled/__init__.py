@@ -352,8 +352,16 @@ def _locked(kind: type) -> type:
         from filelock import FileLock
 
         def save(self: Any, key: Any, data: Any) -> None:
-            with FileLock(self._index_path + ".lock"):
+            lock = FileLock(self._index_path + ".lock")
+            try:
+                lock.acquire()
+            except (OSError, NotImplementedError):   # (a file system without locks: numba's save)
                 kind.save(self, key, data)
+                return
+            try:
+                kind.save(self, key, data)
+            finally:
+                lock.release()
 
         locked = _LOCKED[kind] = type(f"Locked{kind.__name__}", (kind,), {"save": save})
     return locked

@@ -89,6 +89,7 @@ def test_version_and_help():
         (["curve", "designs/nope.toml", "--json"], "does not exist"),
         (["curve", "designs/carousel.toml", "--points", "1"], "--points"),
         (["fly"], "invalid choice"),
+        (["warm", "--processes", "3"], "argument --processes: invalid choice: 3 (choose from 1, 2)"),
     ],
 )
 def test_user_errors_exit_2_with_one_line_and_no_traceback(args, fragment):

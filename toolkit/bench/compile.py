@@ -3,10 +3,13 @@
 Run ``python -m toolkit.bench compile [--designs NAME ...]``. Each figure comes from a fresh
 process on an empty numba cache (an empty ``NUMBA_CACHE_DIR``), in this run:
 
-- ``active-contacts warm`` (every shipped design run once): the compile seconds per kernel
-  module (numba's compile events, nested compiles counted in the module of the outermost
-  kernel), the number of compiled specializations per module and per kernel (those with
-  more than one named), and the whole command's wall and CPU time;
+- ``active-contacts warm --processes 1`` (every kernel compiled in one process, then every
+  shipped design run once): the compile seconds per kernel module (numba's compile events,
+  nested compiles counted in the module of the outermost kernel), the number of compiled
+  specializations per module and per kernel (those with more than one named), and the whole
+  command's wall and CPU time;
+- ``active-contacts warm`` as it runs by default (its warm-ups in two processes at once where
+  two cores allow): its wall and CPU time, and the one-process run's wall time over it;
 - each design named with ``--designs`` (default: carousel, estimate, closed_loop): its first
   ``active-contacts run`` on an empty cache, against its run once that cache is warm (the
   ratio is what the one-time compile costs a first run).
@@ -92,13 +95,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     with tempfile.TemporaryDirectory(prefix="bench-compile-") as folder:
         root = Path(folder)
-        warm = _run(["warm", "--json"], root / "cache-warm", root)
-        print(f"warm on an empty cache: {warm['wall']:.1f} s wall, {warm['cpu']:.1f} s CPU, "
+        warm = _run(["warm", "--processes", "1", "--json"], root / "cache-warm", root)
+        print(f"warm --processes 1 on an empty cache: {warm['wall']:.1f} s wall, {warm['cpu']:.1f} s CPU, "
               f"{sum(warm['seconds'].values()):.1f} s compiling")
         for name in sorted(warm["seconds"], key=warm["seconds"].get, reverse=True):
             print(f"  {name:8} {warm['seconds'][name]:7.1f} s compiling, {warm['count'][name]:3d} kernels "
                   "(top-level compiles)")
         print(_versions(warm["versions"]))
+        parallel = _run(["warm", "--json"], root / "cache-warm-parallel", root)
+        print(f"warm (default) on an empty cache: {parallel['wall']:.1f} s wall, {parallel['cpu']:.1f} s CPU; "
+              f"one process / default: {warm['wall'] / parallel['wall']:.2f}x")
         for name in args.designs:
             scene = root / f"{name}.toml"
             scene.write_text(design_text(name), encoding="utf-8")

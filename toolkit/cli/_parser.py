@@ -135,9 +135,12 @@ def parser() -> argparse.ArgumentParser:
                       "--copy DIR writes them into DIR for editing", scene=False)
     designs.add_argument("--copy", metavar="DIR", help="write every shipped design into this folder "
                          "(created if needed; refused if a file of the same name is there)")
-    command("warm", _cmd_warm, "compile and cache every kernel the shipped designs use (the kernels' "
-            "warm-ups in two processes at once, then each design run once, outputs discarded), so that "
-            "no later run waits for a compile", scene=False)
+    warm = command("warm", _cmd_warm, "compile and cache every kernel the shipped designs use (the kernels' "
+                   "warm-ups in two processes at once, then each design run once, outputs discarded), so "
+                   "that no later run waits for a compile", scene=False)
+    warm.add_argument("--processes", type=int, choices=(1, 2), default=None,
+                      help="processes that compile at once (default: 2 where this process may run on two "
+                           "cores or more and fork, else 1)")
     stability = command("stability", _cmd_stability,
                         "stability suite over stiff and extreme cases (exit 1 if a case fails)", scene=False)
     stability.add_argument("--quick", action="store_true", help="the smaller, faster set of cases")

@@ -41,10 +41,11 @@ def _cmd_designs(args: argparse.Namespace) -> int:
 
 
 def _cmd_warm(args: argparse.Namespace) -> int:
-    """Compile and cache every kernel the shipped designs use: the kernels' warm-ups in
-    parallel processes where this process may run on two cores or more and fork
-    (:func:`toolkit._warmups.warm_groups`), then every shipped design run once, outputs
-    discarded (whatever the warm-ups left). After this, every design's first run starts warm."""
+    """Compile and cache every kernel the shipped designs use: with ``--processes 2`` (the
+    default where this process may run on two cores or more and fork) the kernels' warm-ups
+    in parallel processes (:func:`toolkit._warmups.warm_groups`), then every shipped design
+    run once, outputs discarded (whatever the warm-ups left). After this, every design's
+    first run starts warm."""
     import io
     import tempfile
     import time
@@ -57,8 +58,10 @@ def _cmd_warm(args: argparse.Namespace) -> int:
 
     names = design_names()
     started = time.perf_counter()
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    processes = 2 if cores >= 2 and "fork" in multiprocessing.get_all_start_methods() else 1
+    processes = args.processes
+    if processes is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        processes = 2 if cores >= 2 and "fork" in multiprocessing.get_all_start_methods() else 1
     print(f"active-contacts: warm: compiling the kernels of every shipped design in {processes} "
           f"process{'es' if processes > 1 else ''} (loaded from the cache where it has them)",
           file=sys.stderr, flush=True)

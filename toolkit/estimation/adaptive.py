@@ -30,7 +30,7 @@ from ..errors import ParameterTypeError, parameter_message
 from ..model.friction import contact_forces
 from ..laws import cell_centre, lag_response, quantization_variance
 from ..model.motors import MotorPiece
-from ..model.sensors import EncoderRecord, EncoderSample
+from ..model.sensors import MAX_JITTER_PERIODS, EncoderRecord, EncoderSample
 from ._base import EstimationResult, Estimator, lost_between, score
 from ._hold import HoldLayer
 from ._input import EstimatorModel
@@ -134,6 +134,8 @@ class AdaptiveKalman(Estimator):
                            [switching, 1.0 - switching - e, e],
                            [0.5 * switching, 0.5 * switching, 1.0 - switching]])
         self._primed: tuple[float, float] | None = None
+        #: The largest jitter the sensor law allows (s): the noise fits' bound on it.
+        self._jitter_max = MAX_JITTER_PERIODS * self.h
         self.reset()
 
     # -- parameters ----------------------------------------------------------------------------
@@ -176,7 +178,8 @@ class AdaptiveKalman(Estimator):
         for sample, command in zip(samples, commands):
             speeds, _, steady, _ = tracker.push(sample.time, sample.wheel_counts, command)
             if steady and tracker.window_length >= 5:
-                a, b = fit_noise(tracker.reading_variance - quantization_variance(q_w), speeds * speeds)
+                a, b = fit_noise(tracker.reading_variance - quantization_variance(q_w), speeds * speeds,
+                                 self._jitter_max ** 2)
                 noise = (a / (q_w * q_w), b)
         self._primed = noise
 
@@ -222,7 +225,7 @@ class AdaptiveKalman(Estimator):
         self._bank = WheelSpeedBank(self.model)
         self._initial = None if contact_speeds is None else np.array(contact_speeds, dtype=float)
         self._held: np.ndarray | None = None
-        self._noise = NoiseMatcher(100)
+        self._noise = NoiseMatcher(100, self._jitter_max)
         self._wheel_noise = self._primed or (0.0, 0.0)
         self._layer = HoldLayer(self.model, tell_missed=True)
         self._lines = self._layer.lines
@@ -706,7 +709,8 @@ class AdaptiveKalman(Estimator):
             # Read noise (counts) and jitter (s) from the wheels' residuals against their
             # speeds (windows of 15 readings: clear of the transient).
             q_w = self.model.sensors.wheel.distance_per_count
-            a, b = fit_noise(tracker.reading_variance - quantization_variance(q_w), speeds * speeds)
+            a, b = fit_noise(tracker.reading_variance - quantization_variance(q_w), speeds * speeds,
+                             self._jitter_max ** 2)
             self._wheel_noise = (a / (q_w * q_w), b)
         u = tracker.command                                 # (clipped to the speed limits)
         if self._held is None:

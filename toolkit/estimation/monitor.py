@@ -121,9 +121,10 @@ def matched_variance(innovations: np.ndarray, predicted: np.ndarray, floor: floa
     return max(floor, float(np.mean(innovations * innovations) - np.mean(predicted)))
 
 
-def fit_noise(excess: np.ndarray, speed2: np.ndarray) -> tuple[float, float]:
-    """Least squares of ``excess ~ a + b speed2`` with ``a, b >= 0`` (the best fit with one of
-    them at zero when the free fit has a negative one)."""
+def fit_noise(excess: np.ndarray, speed2: np.ndarray, b_max: float = math.inf) -> tuple[float, float]:
+    """Least squares of ``excess ~ a + b speed2`` with ``a >= 0`` and ``0 <= b <= b_max`` (the
+    best fit on the boundary when the free fit lies outside: ``a = 0``, ``b = 0`` or
+    ``b = b_max``, each with the other coefficient fitted and clipped)."""
     e, x = np.asarray(excess, dtype=float), np.asarray(speed2, dtype=float)
     n = e.size
     if n == 0:
@@ -134,11 +135,13 @@ def fit_noise(excess: np.ndarray, speed2: np.ndarray) -> tuple[float, float]:
     if det > 1e-12 * max(n * sxx, 1e-300):
         a = (sxx * se - sx * sxe) / det
         b = (n * sxe - sx * se) / det
-    if a < 0.0 or b < 0.0:
+    if a < 0.0 or b < 0.0 or b > b_max:
         fits = [(max(se / n, 0.0), 0.0)]
         if sxx > 0.0:
-            fits.append((0.0, max(sxe / sxx, 0.0)))
-        a, b = fits[0] if len(fits) == 1 else min(fits, key=lambda ab: float(np.sum((e - ab[0] - ab[1] * x) ** 2)))
+            fits.append((0.0, min(max(sxe / sxx, 0.0), b_max)))
+        if math.isfinite(b_max):
+            fits.append((max((se - b_max * sx) / n, 0.0), b_max))
+        a, b = min(fits, key=lambda ab: float(np.sum((e - ab[0] - ab[1] * x) ** 2)))
     return float(a), float(b)
 
 
@@ -150,17 +153,23 @@ class NoiseMatcher:
     off, ``b = sigma_t^2``). Each Gaussian update pushes its innovation ``y``, predicted
     variance ``H P H^T``, ``R0`` and speed ``V``; ``e = y^2 - H P H^T - R0`` then has mean
     ``a + b V^2`` (Mehra's covariance matching), fitted by least squares over the last
-    ``window`` samples with ``a, b >= 0``, the largest 5 % of the excesses left out (rare
-    outliers such as a missed count are not the noise of every reading).
+    ``window`` samples with ``a >= 0`` and ``0 <= b <= jitter_max^2``, the largest 5 % of the
+    excesses left out (rare outliers such as a missed count are not the noise of every
+    reading). The bound keeps an excess seen at one speed (``a`` and ``b V^2`` are then one
+    number) from being read as a jitter no encoder may have.
 
     Parameters
     ----------
     window : int
         Samples in the fit (``>= 2``).
+    jitter_max : float, s
+        The largest jitter the sensors may have (``>= 0``; the sensor law's
+        ``MAX_JITTER_PERIODS`` of a period); default: unbounded.
     """
 
-    def __init__(self, window: int = 100) -> None:
+    def __init__(self, window: int = 100, jitter_max: float = math.inf) -> None:
         self.window = as_int(window, "window", "NoiseMatcher", low=2)
+        self.jitter_max = as_float(jitter_max, "jitter_max", "NoiseMatcher", low=0.0, finite=False)
         self.reset()
 
     #: Updates between refits (the window moves little in between).
@@ -192,7 +201,7 @@ class NoiseMatcher:
             # missed count, are not noise of every reading).
             keep = np.argsort(rows[:, 0])[:rows.shape[0] - rows.shape[0] // 20]
             rows = rows[keep]
-        self.a, self.b = fit_noise(rows[:, 0], rows[:, 1])
+        self.a, self.b = fit_noise(rows[:, 0], rows[:, 1], self.jitter_max ** 2)
 
     def extra(self, speed: float) -> float:
         """The matched extra variance at ``speed``, ``a + b V^2`` (m^2)."""

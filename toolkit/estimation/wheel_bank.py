@@ -159,8 +159,11 @@ class WheelSpeedBank:
         law_error = (self.LAW_ERROR * (end - start)) ** 2
         K.bank_step(self._x, self._P, Q, cx, h_all, law_error, shift, seen, z, noise,
                     self._log_weights, self.FORGET)
-        self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift,
-                           np.where(loaded > 0.0, self._y, x + moved[-1] + h * ob + shift))
+        # The encoder side: the reading's contact shifted by the play where it is engaged
+        # (the update above moved the contact), else where the play operator left it.
+        walked = self._y.copy()
+        walked[walk] = y
+        self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift, walked)
         o = np.empty(self.n)
         self._drift = K.bank_moments(self._x, self._P, self._log_weights, self._drifts, o, var)
         return end + o, var

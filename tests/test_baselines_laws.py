@@ -1,0 +1,145 @@
+"""The baselines' laws, one by one: the alpha-beta tracker's recursion, tuning and refusals
+(toolkit.estimation.alpha_beta), the finite differences (toolkit.estimation.finite_difference)
+and the FOAW estimator's variances (toolkit.estimation.window). Each estimate is checked
+against the recursion written again from its definition, on unevenly spaced samples, and
+each refusal is matched whole."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from toolkit import ParameterError, ParameterTypeError
+from toolkit.estimation import AlphaBetaTracker, kalata_gains
+from toolkit.model.carousel import CAROUSEL
+from toolkit.model.sensors import EncoderRecord
+
+SENSORS = CAROUSEL.sensors()
+Q_C = SENSORS.central.distance_per_count
+Q_W = SENSORS.wheel.distance_per_count
+H = SENSORS.period
+SCALES = [2.0 ** -20, 1.0, 2.0 ** 20]
+
+
+def _uneven_record(seed: int, n: int = 60, truth: bool = False) -> EncoderRecord:
+    """A record of a body that speeds up and slows down, read at unevenly spaced times (each
+    period drawn in [0.5 h, 1.5 h]), its counts the floor of the position over q."""
+    rng = np.random.default_rng(seed)
+    times = np.concatenate(([0.0], np.cumsum(rng.uniform(0.5 * H, 1.5 * H, n - 1))))
+    speed = 0.2 * np.sin(2.0 * times) + 0.05
+    position = 0.013 + (1.0 - np.cos(2.0 * times)) * 0.1 + 0.05 * times
+    counts = np.floor(position / Q_C).astype(np.int64)
+    wheels = np.floor(np.outer(position, [1.0, 1.1, 0.9]) / Q_W).astype(np.int64)
+    extra = dict(truth_speed=speed, truth_position=position) if truth else {}
+    return EncoderRecord(times, counts, wheels, np.zeros((n, 3)), Q_C, Q_W, **extra)
+
+
+def _alpha_beta_again(times, counts, alpha, beta, speed0):
+    """The alpha-beta recursion from its definition: X- = X + h V, r = z - X-, X = X- +
+    alpha r, V = V + (beta / h) r, z the count's cell centre, h each sample's own period."""
+    X, V = (counts[0] + 0.5) * Q_C, speed0
+    out = [(X, V)]
+    for k in range(1, times.size):
+        h = times[k] - times[k - 1]
+        predicted = X + h * V
+        r = (counts[k] + 0.5) * Q_C - predicted
+        X, V = predicted + alpha * r, V + beta / h * r
+        out.append((X, V))
+    return np.array(out)
+
+
+def test_the_tracker_runs_the_alpha_beta_recursion_over_each_samples_own_period():
+    # Unevenly spaced samples: the recursion with each sample's own h (a nominal period in its
+    # place errs by tens of percent of h). Same arithmetic as the reference: 1e-12 relative.
+    record = _uneven_record(3, truth=True)
+    tracker = AlphaBetaTracker(SENSORS, 0.7)
+    before = time.perf_counter()
+    result = tracker.run(record, speed=0.04)
+    after = time.perf_counter()
+    want = _alpha_beta_again(record.times, record.central_counts, tracker.alpha, tracker.beta, 0.04)
+    np.testing.assert_allclose(result.speed, want[:, 1], rtol=1e-12)
+    np.testing.assert_allclose(result.position, want[:, 0], rtol=1e-12)
+    assert result.method == "alpha_beta"
+    # The steady covariance is reported at every sample, and its speed entry as the variance.
+    K = record.n_samples
+    assert result.covariance.shape == (K, 2, 2)
+    assert (result.covariance == tracker.covariance).all()
+    assert (result.variance == tracker.covariance[1, 1]).all()
+    # The NEES of each sample is e^T P^-1 e of the errors of (X, V) against the truth
+    # (solved again here; 1e-9 relative for the two inverses' rounding).
+    e = np.stack((want[:, 0] - record.truth_position, want[:, 1] - record.truth_speed), axis=1)
+    nees = np.array([row @ np.linalg.solve(tracker.covariance, row) for row in e])
+    np.testing.assert_allclose(result.nees, nees, rtol=1e-9)
+    # The wall time is the run's: between 0 and the time the call took.
+    assert 0.0 <= result.wall_time <= after - before
+
+
+def test_the_tracker_starts_at_the_first_cell_centre_and_the_speed_it_is_given():
+    # Stepped by hand: the first sample sets X to its cell centre and V to reset's speed
+    # (0 when none is given, in run and in reset alike).
+    record = _uneven_record(4)
+    tracker = AlphaBetaTracker(SENSORS, 0.7)
+    assert tracker.run(record).speed[0] == 0.0
+    tracker.reset()
+    assert tracker.observe(record.sample(0)) == (0.0, float(tracker.covariance[1, 1]))
+    tracker.reset(speed=-0.25)
+    assert tracker.observe(record.sample(0))[0] == -0.25
+    want = _alpha_beta_again(record.times, record.central_counts, tracker.alpha, tracker.beta, -0.25)
+    for k in range(1, 5):
+        assert tracker.observe(record.sample(k))[0] == pytest.approx(want[k, 1], rel=1e-12)
+
+
+def test_the_trackers_gains_and_steady_covariance_are_kalatas_and_read_only():
+    # The tracking index is sigma_a h^2 / sigma_z with sigma_z = q / sqrt(12) (1e-15 relative:
+    # the same products); the steady covariance is sigma_z^2 [[a, b / h], [b / h,
+    # b (2 a - b) / (2 (1 - a) h^2)]] (Kalata's; 1e-12 relative), and it cannot be written.
+    tracker = AlphaBetaTracker(SENSORS, 0.7)
+    assert tracker.sensors is SENSORS
+    sigma_z = Q_C / math.sqrt(12.0)
+    assert tracker.index == pytest.approx(0.7 * H * H / sigma_z, rel=1e-15)
+    a, b = kalata_gains(tracker.index)
+    assert (tracker.alpha, tracker.beta) == (a, b)
+    want = sigma_z ** 2 * np.array([[a, b / H], [b / H, b * (2 * a - b) / (2 * (1 - a) * H * H)]])
+    np.testing.assert_allclose(tracker.covariance, want, rtol=1e-12)
+    assert not tracker.covariance.flags.writeable
+    with pytest.raises(ValueError):
+        tracker.covariance[0, 0] = 1.0
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_the_tuned_tracker_takes_half_the_total_force_over_the_mass(scale):
+    # sigma_a = F_tot / (2 m): unequal force and mass scaled together by a power of two give
+    # the same acceleration to the bit, and the same gains as the constructor given it.
+    tuned = AlphaBetaTracker.tuned(SENSORS, 3.0 * scale, 5.0 * scale)
+    assert tuned.accel_std == 0.3
+    direct = AlphaBetaTracker(SENSORS, 0.3)
+    assert (tuned.alpha, tuned.beta) == (direct.alpha, direct.beta)
+    assert tuned.sensors is SENSORS
+
+
+@pytest.mark.parametrize("call, error, message", [
+    (lambda: AlphaBetaTracker("carousel", 1.0), ParameterTypeError,
+     "The 'sensors' parameter of AlphaBetaTracker must be a Sensors. Got 'carousel' instead."),
+    (lambda: AlphaBetaTracker(SENSORS, 0.0), ParameterError,
+     "The 'accel_std' parameter of AlphaBetaTracker must be > 0. Got 0.0 instead."),
+    (lambda: AlphaBetaTracker(SENSORS, -1.0), ParameterError,
+     "The 'accel_std' parameter of AlphaBetaTracker must be > 0. Got -1.0 instead."),
+    (lambda: AlphaBetaTracker.tuned(SENSORS, 0.0, 1.0), ParameterError,
+     "The 'total_force' parameter of AlphaBetaTracker.tuned must be > 0. Got 0.0 instead."),
+    (lambda: AlphaBetaTracker.tuned(SENSORS, 1.0, 0.0), ParameterError,
+     "The 'mass' parameter of AlphaBetaTracker.tuned must be > 0. Got 0.0 instead."),
+    (lambda: AlphaBetaTracker.tuned(SENSORS, "1", 1.0), ParameterTypeError,
+     "The 'total_force' parameter of AlphaBetaTracker.tuned must be a real number. Got '1' instead."),
+    (lambda: AlphaBetaTracker.tuned(SENSORS, 1.0, "1"), ParameterTypeError,
+     "The 'mass' parameter of AlphaBetaTracker.tuned must be a real number. Got '1' instead."),
+    (lambda: AlphaBetaTracker(SENSORS, 1.0).reset(speed=math.nan), ParameterError,
+     "The 'speed' parameter of AlphaBetaTracker.reset must be finite. Got nan instead."),
+])
+def test_every_refusal_of_the_tracker_in_full(call, error, message):
+    # Parameter, owner, rule and value, matched whole; the bounds are open (0 is refused).
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message

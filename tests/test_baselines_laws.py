@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from toolkit import ParameterError, ParameterTypeError
-from toolkit.estimation import AlphaBetaTracker, kalata_gains
+from toolkit.estimation import AlphaBetaTracker, CentralDifference, WheelDifference, kalata_gains
 from toolkit.model.carousel import CAROUSEL
-from toolkit.model.sensors import EncoderRecord
+from toolkit.model.sensors import EncoderRecord, EncoderSample
 
 SENSORS = CAROUSEL.sensors()
 Q_C = SENSORS.central.distance_per_count
@@ -140,6 +140,88 @@ def test_the_tuned_tracker_takes_half_the_total_force_over_the_mass(scale):
 ])
 def test_every_refusal_of_the_tracker_in_full(call, error, message):
     # Parameter, owner, rule and value, matched whole; the bounds are open (0 is refused).
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+
+
+def _sample(t: float, central: int, wheels=(0, 0, 0)) -> EncoderSample:
+    return EncoderSample(t, central, np.array(wheels, dtype=np.int64), np.zeros(len(wheels)))
+
+
+def test_the_central_difference_is_the_count_change_over_each_samples_own_period():
+    # V_k = (c_k - c_{k-1}) q / (t_k - t_{k-1}), with the variance of the difference of two
+    # independent uniform errors, 2 (q^2 / 12) / h_k^2; before a second reading, the speed
+    # given to reset with the nominal period's. Exact arithmetic of the same products
+    # (1e-15 relative).
+    estimator = CentralDifference(SENSORS)
+    assert estimator.sensors is SENSORS
+    estimator.reset(speed=0.125)
+    first = estimator.observe(_sample(0.0, 40))
+    assert first == (0.125, pytest.approx(2.0 * (Q_C * SENSORS.rate) ** 2 / 12.0, rel=1e-15))
+    t, c = 0.0, 40
+    for h, step in [(0.7 * H, 3), (1.3 * H, -5), (0.55 * H, 0)]:
+        t, c = t + h, c + step
+        speed, variance = estimator.observe(_sample(t, c))
+        assert speed == pytest.approx(step * Q_C / h, rel=1e-15, abs=1e-300)
+        assert variance == pytest.approx(2.0 * (Q_C / h) ** 2 / 12.0, rel=1e-12)
+    estimator.reset()
+    assert estimator.observe(_sample(1.0, 7))[0] == 0.0
+
+
+@pytest.mark.parametrize("scale", SCALES)
+@pytest.mark.parametrize("forces, middle", [((2.0, 3.0, 1.0), 6.5), ((3.0, 1.5, 1.0), 4.0)])
+def test_the_wheel_difference_is_the_weighted_median_of_the_wheels_differences(scale, forces, middle):
+    # Wheels that moved 4, 9 and -2 counts over 0.7 periods: contact speeds (4, 9, -2) q / h.
+    # Weights (2, 3, 1) leave the half total (3) on either side of the band [4, 9] q / h (the
+    # body's speed its midpoint, 6.5 q / h); weights (3, 1.5, 1) put the median on the first
+    # wheel's 4 q / h. Unequal weights at three scales (powers of two: the same median).
+    sensors = CAROUSEL.sensors(3)
+    estimator = WheelDifference(sensors, np.array(forces) * scale)
+    assert estimator.sensors is sensors
+    estimator.reset(speed=-0.5)
+    q_rate = Q_W * sensors.rate
+    assert estimator.observe(_sample(0.0, 0, (5, -3, 12))) == (-0.5, pytest.approx(q_rate ** 2 / 6.0, rel=1e-15))
+    h = 0.7 * H
+    speed, variance = estimator.observe(_sample(h, 0, (9, 6, 10)))
+    np.testing.assert_allclose(estimator.contact_speeds, np.array([4.0, 9.0, -2.0]) * Q_W / h, rtol=1e-15)
+    assert speed == pytest.approx(middle * Q_W / h, rel=1e-12)
+    assert variance == pytest.approx(2.0 * (Q_W / h) ** 2 / 12.0, rel=1e-12)
+    # The next period is 1.3 h long: its own (1, -1, 6) counts over it.
+    speed, _ = estimator.observe(_sample(h + 1.3 * H, 0, (10, 5, 16)))
+    np.testing.assert_allclose(estimator.contact_speeds, np.array([1.0, -1.0, 6.0]) * Q_W / (1.3 * H), rtol=1e-12)
+
+
+def test_the_wheel_difference_takes_the_command_as_contact_speeds_only_before_a_difference():
+    # After reset the contact speeds are 0 and a command leaves them; after the first reading
+    # (no difference yet) the command is the best guess; after a difference it is not read.
+    estimator = WheelDifference(CAROUSEL.sensors(3), [1.0, 2.0, 1.5])
+    estimator.commanded([0.1, 0.2, 0.3])
+    assert (estimator.contact_speeds == 0.0).all()
+    assert estimator.observe(_sample(0.0, 0, (1, 2, 3)))[0] == 0.0
+    estimator.commanded([0.1, 0.2, 0.3])
+    assert estimator.contact_speeds.tolist() == [0.1, 0.2, 0.3]
+    # Whole speeds given as integers are float speeds all the same.
+    estimator.commanded([1, 0, -2])
+    assert estimator.contact_speeds.dtype == np.float64 and estimator.contact_speeds.tolist() == [1.0, 0.0, -2.0]
+    estimator.observe(_sample(H, 0, (1, 2, 3)))
+    estimator.commanded([0.1, 0.2, 0.3])
+    assert estimator.contact_speeds.tolist() == [0.0, 0.0, 0.0]
+    estimator.reset()
+    assert estimator.contact_speeds.tolist() == [0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("call, error, message", [
+    (lambda: CentralDifference("carousel"), ParameterTypeError,
+     "The 'sensors' parameter of CentralDifference must be a Sensors. Got 'carousel' instead."),
+    (lambda: WheelDifference("carousel", [1.0]), ParameterTypeError,
+     "The 'sensors' parameter of WheelDifference must be a Sensors. Got 'carousel' instead."),
+    (lambda: CentralDifference(SENSORS).reset(speed=math.inf), ParameterError,
+     "The 'speed' parameter of CentralDifference.reset must be finite. Got inf instead."),
+    (lambda: WheelDifference(CAROUSEL.sensors(1), [1.0]).reset(speed=math.inf), ParameterError,
+     "The 'speed' parameter of WheelDifference.reset must be finite. Got inf instead."),
+])
+def test_every_refusal_of_the_finite_differences_in_full(call, error, message):
     with pytest.raises(error) as info:
         call()
     assert str(info.value) == message

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from toolkit import ParameterError, ParameterTypeError
-from toolkit.estimation import AlphaBetaTracker, CentralDifference, WheelDifference, kalata_gains
+from toolkit.estimation import (AdaptiveWindow, AlphaBetaTracker, CentralDifference, WheelDifference,
+                                kalata_gains)
 from toolkit.model.carousel import CAROUSEL
 from toolkit.model.sensors import EncoderRecord, EncoderSample
 
@@ -222,6 +223,119 @@ def test_the_wheel_difference_takes_the_command_as_contact_speeds_only_before_a_
      "The 'speed' parameter of WheelDifference.reset must be finite. Got inf instead."),
 ])
 def test_every_refusal_of_the_finite_differences_in_full(call, error, message):
+    with pytest.raises(error) as info:
+        call()
+    assert str(info.value) == message
+
+
+WHITE = Q_C * Q_C / 12.0        # one reading's quantization variance
+
+
+def _window_again(t: np.ndarray, y: np.ndarray, best: bool) -> tuple[float, float, float]:
+    """Slope, variance and matched variance of the line over the readings ``t, y`` (the whole
+    window, n + 1 readings), from the definitions: end-fit through the ends, variance 2 (q^2 /
+    12) / T^2 over its span T; best-fit by numpy.polyfit, variance (q^2 / 12) / S with S the
+    sum of the squared time deviations, matched on the residuals' variance r.r / (n - 1) (at
+    least q^2 / 12) from three periods on."""
+    n = t.size - 1
+    if not best:
+        span = t[-1] - t[0]
+        return (y[-1] - y[0]) / span, 2.0 * WHITE / span ** 2, 2.0 * WHITE / span ** 2
+    slope, intercept = np.polyfit(t - t[-1], y, 1)
+    S = float(np.sum((t - t.mean()) ** 2))
+    r = y - (intercept + slope * (t - t[-1]))
+    matched = max(WHITE, float(r @ r) / (n - 1)) / S if n >= 3 else WHITE / S
+    return slope, WHITE / S, matched
+
+
+@pytest.mark.parametrize("fit", ["end", "best"])
+def test_the_window_estimate_and_its_variances_over_uneven_periods(fit):
+    # Readings of a body at 0.1 m/s with whole-count read noise of up to 3 counts, on
+    # unevenly spaced samples, a band of 1 m (every window fits: the window is the longest,
+    # min(n_max, readings - 1)), n_max = 3, over 40 readings: the buffer (4 (n_max + 1)
+    # readings) is compacted twice. Slope and variances against the line fitted again over
+    # the same readings (1e-9 relative: polyfit's rounding against the kernel's sums).
+    rng = np.random.default_rng(11)
+    t = np.concatenate(([0.0], np.cumsum(rng.uniform(0.5 * H, 1.5 * H, 39))))
+    counts = np.floor(0.1 * t / Q_C).astype(np.int64) + rng.integers(-3, 4, t.size)
+    y = (counts + 0.5) * Q_C
+    estimator = AdaptiveWindow(SENSORS, fit=fit, max_window=3, band=1.0)
+    assert estimator.name == f"foaw_{fit}" and estimator.band == 1.0
+    residual_counted = 0
+    for k in range(t.size):
+        speed, variance = estimator.observe(_sample(t[k], int(counts[k])))
+        n = min(3, k)
+        assert estimator.window == n
+        if n == 0:
+            assert (speed, variance) == (0.0, 2.0 * WHITE * SENSORS.rate ** 2)
+            assert estimator.matched_variance == variance
+            continue
+        slope, var, matched = _window_again(t[k - n:k + 1], y[k - n:k + 1], fit == "best")
+        assert speed == pytest.approx(slope, rel=1e-9)
+        assert variance == pytest.approx(var, rel=1e-9)
+        assert estimator.matched_variance == pytest.approx(matched, rel=1e-9)
+        residual_counted += matched > var * (1.0 + 1e-6)
+    # The read noise (4 counts^2 per reading) is far above the quantization's (1/12): the
+    # matched variance follows the residuals in most of the best fit's 37 windows of three
+    # periods (so the comparison with the reference reads that branch), never in the end fit.
+    assert residual_counted >= 30 if fit == "best" else residual_counted == 0
+
+
+def test_the_best_fit_matched_variance_is_at_least_the_quantizations():
+    # Readings exactly on a line over uneven periods (counts 0, 2, 3, 7, 8, 11 at 4 ms a
+    # count): the residuals vanish, so the matched variance is the quantization's (q^2 / 12)
+    # / S, as the variance (1e-12 relative: S summed in another order), and the slope is the
+    # line's.
+    counts = np.array([0, 2, 3, 7, 8, 11])
+    t = counts * 0.004
+    estimator = AdaptiveWindow(SENSORS, fit="best", max_window=5)
+    for time_k, count in zip(t, counts):
+        speed, variance = estimator.observe_count(time_k, int(count))
+    S = float(np.sum((t - t.mean()) ** 2))
+    assert estimator.window == 5
+    assert speed == pytest.approx(Q_C / 0.004, rel=1e-12)
+    assert variance == pytest.approx(WHITE / S, rel=1e-12)
+    assert estimator.matched_variance == pytest.approx(WHITE / S, rel=1e-12)
+
+
+def test_the_window_starts_empty_at_the_speed_it_is_given():
+    # Before two readings there is no window (0): the estimate is reset's speed (0 by default)
+    # with the variance of a difference over one nominal period, 2 (q^2 / 12) rate^2.
+    estimator = AdaptiveWindow(SENSORS)
+    assert estimator.window == 0 and estimator.band == 0.5 * Q_C and estimator.name == "foaw_end"
+    estimator.observe_count(0.0, 5)
+    estimator.observe_count(H, 9)
+    assert estimator.window == 1
+    estimator.reset()
+    assert estimator.window == 0
+    assert estimator.observe_count(1.0, 100) == (0.0, 2.0 * WHITE * SENSORS.rate ** 2)
+    assert estimator.window == 0
+    estimator.reset(speed=0.3)
+    assert estimator.observe_count(1.0, 100)[0] == 0.3
+
+
+def test_the_window_takes_one_period_and_no_band_of_zero():
+    # The bounds from both sides: a window of one period and any positive band are taken.
+    assert AdaptiveWindow(SENSORS, max_window=1).max_window == 1
+    assert AdaptiveWindow(SENSORS, band=2.0 ** -40).band == 2.0 ** -40
+
+
+@pytest.mark.parametrize("call, error, message", [
+    (lambda: AdaptiveWindow("carousel"), ParameterTypeError,
+     "The 'sensors' parameter of AdaptiveWindow must be a Sensors. Got 'carousel' instead."),
+    (lambda: AdaptiveWindow(SENSORS, max_window=0), ParameterError,
+     "The 'max_window' parameter of AdaptiveWindow must be >= 1. Got 0 instead."),
+    (lambda: AdaptiveWindow(SENSORS, band=0.0), ParameterError,
+     "The 'band' parameter of AdaptiveWindow must be > 0. Got 0.0 instead."),
+    (lambda: AdaptiveWindow(SENSORS, band=-1.0), ParameterError,
+     "The 'band' parameter of AdaptiveWindow must be > 0. Got -1.0 instead."),
+    (lambda: AdaptiveWindow(SENSORS, fit="ends"), ParameterError,
+     "The 'fit' parameter of AdaptiveWindow must be one of ['end', 'best']. Got 'ends' instead. "
+     "Did you mean 'end'?"),
+    (lambda: AdaptiveWindow(SENSORS).reset(speed=math.nan), ParameterError,
+     "The 'speed' parameter of AdaptiveWindow.reset must be finite. Got nan instead."),
+])
+def test_every_refusal_of_the_window_in_full(call, error, message):
     with pytest.raises(error) as info:
         call()
     assert str(info.value) == message

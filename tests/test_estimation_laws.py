@@ -7,15 +7,20 @@ both sides."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 from scipy.integrate import cumulative_trapezoid
+from scipy.optimize import nnls
+from scipy.stats import chi2
 
+from toolkit import ParameterError
 from toolkit.estimation import EstimatorModel
 from toolkit.estimation.input_noise import GROSS_NIS, command_timing_variance, unknown_force_noise
 from toolkit.estimation.missed_counts import (NO_LOSS, absorbed_variance, count_offset, log_no_loss,
                                               told_missed_rate)
+from toolkit.estimation.monitor import ConsistencyMonitor, MonitorVerdict, NoiseMatcher, fit_noise, matched_variance
 from toolkit.model.carousel import CAROUSEL
 from toolkit.model.truth import ModelPrior
 
@@ -161,3 +166,147 @@ def test_no_contacts_no_timing_variance():
     # Without contacts (empty commands) nothing departs: the reach and its variance are 0.
     assert command_timing_variance(np.zeros(0), np.zeros(0), 0.02, 0.0075, 5.0) == 0.0
     assert command_timing_variance([], [], 0.02, 0.0, 5.0) == 0.0
+
+
+# -- the consistency monitor ---------------------------------------------------------------------
+
+def test_the_monitors_threshold_is_the_chi_square_quantile_of_its_window():
+    # The default window (10) and level (1e-4), and others: the 1 - level quantile of
+    # chi-square(W), scipy's upper-tail inverse (1e-9 relative: ppf against isf).
+    assert ConsistencyMonitor().window == 10 and ConsistencyMonitor().false_alarm == 1e-4
+    for window, level in [(10, 1e-4), (1, 0.3), (25, 1e-6), (3, 1.0)]:
+        monitor = ConsistencyMonitor(window, level)
+        assert monitor.threshold == pytest.approx(chi2.isf(level, window), rel=1e-9, abs=1e-300)
+
+
+def test_the_monitor_sums_the_last_window_of_finite_nis():
+    # A window of 3: the statistic is the sum of the last three values pushed, NaN and inf
+    # counted as 0 (no update that sample); the mean over the values held (NaN before any).
+    # Dyadic values: the running sum is exact.
+    monitor = ConsistencyMonitor(3, 1e-3)
+    assert math.isnan(monitor.mean)
+    pushed = [0.0, 0.5, 2.0, 0.25, math.nan, 4.0, math.inf, 1.5, 0.0, 0.0, 0.0]
+    held = []
+    for value in pushed:
+        verdict = monitor.push(value)
+        held = (held + [value if math.isfinite(value) else 0.0])[-3:]
+        assert verdict.statistic == sum(held)
+        assert monitor.mean == sum(held) / len(held)
+    assert verdict.statistic == 0.0
+    monitor.reset()
+    assert math.isnan(monitor.mean) and monitor.push(0.125).statistic == 0.125
+
+
+def test_the_monitor_fails_only_above_its_threshold_and_says_so():
+    # A window of 1: the statistic is the value pushed. At the threshold exactly it passes;
+    # one float above, it fails, naming the window, the sum and the threshold; a failure
+    # elsewhere fails the sample with its own reason, whatever the sum.
+    monitor = ConsistencyMonitor(1, 0.01)
+    T = monitor.threshold
+    assert monitor.push(T) == MonitorVerdict(True, T, T, "")
+    above = float(np.nextafter(T, math.inf))
+    assert monitor.push(above) == MonitorVerdict(False, above, T, f"NIS over the last 1 samples {above:.3g} > {T:.3g}")
+    assert monitor.push(0.5, "a hold failed") == MonitorVerdict(False, 0.5, T, "a hold failed")
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: ConsistencyMonitor(window=0), "The 'window' parameter of ConsistencyMonitor must be >= 1. Got 0 instead."),
+    (lambda: ConsistencyMonitor(false_alarm=0.0),
+     "The 'false_alarm' parameter of ConsistencyMonitor must be > 0. Got 0.0 instead."),
+    (lambda: ConsistencyMonitor(false_alarm=1.5),
+     "The 'false_alarm' parameter of ConsistencyMonitor must be <= 1. Got 1.5 instead."),
+    (lambda: NoiseMatcher(window=1), "The 'window' parameter of NoiseMatcher must be >= 2. Got 1 instead."),
+])
+def test_every_refusal_of_the_monitor_and_the_matcher_in_full(call, message):
+    with pytest.raises(ParameterError) as info:
+        call()
+    assert str(info.value) == message
+
+
+def test_covariance_matching_is_the_innovations_excess_at_least_the_floor():
+    # mean(y^2) - mean(H P H^T) = 14/3 - 2 (1e-6 m^2); a floor below it leaves it, a floor
+    # above it is the result (1e-12 relative: two means).
+    y, predicted = np.array([1e-3, -2e-3, 3e-3]), np.array([1e-6, 2e-6, 3e-6])
+    assert matched_variance(y, predicted, 1e-6) == pytest.approx(8e-6 / 3.0, rel=1e-12)
+    assert matched_variance(y, predicted, 5e-6) == 5e-6
+
+
+def _nnls_fit(e, x):
+    """The nonnegative least squares of e ~ a + b x (scipy's NNLS: a second method)."""
+    (a, b), _ = nnls(np.column_stack((np.ones_like(x), x)), e)
+    return a, b
+
+
+@pytest.mark.parametrize("a, b", [(2e-10, 9e-8), (-1e-10, 9e-8), (3e-10, -5e-9), (-2e-10, -4e-9)])
+def test_the_noise_fit_is_the_nonnegative_least_squares(a, b):
+    # Excess a + b V^2 plus noise (std 2e-11 m^2) at 40 speeds of 0.05-0.3 m/s: fit_noise
+    # equals scipy's NNLS (both coefficients free; a at 0; b at 0; both at 0), to 1e-7 of
+    # the larger term (NNLS's own tolerance against the normal equations).
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0.05, 0.3, 40) ** 2
+    e = a + b * x + rng.normal(0.0, 2e-11, x.size)
+    got, want = fit_noise(e, x), _nnls_fit(e, x)
+    assert got[0] == pytest.approx(want[0], rel=1e-7, abs=1e-7 * abs(a))
+    assert got[1] == pytest.approx(want[1], rel=1e-7, abs=1e-7 * abs(b))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_noise_fit_is_the_nonnegative_least_squares_on_drawn_data(seed):
+    # Coefficients of either sign and noise of 0.1-10 times the signal, drawn: the same NNLS
+    # (1e-7 of the data's scale).
+    rng = np.random.default_rng(100 + seed)
+    x = rng.uniform(0.0, 0.1, rng.integers(3, 30))
+    e = rng.normal(0.0, 1e-10) + rng.normal(0.0, 1e-8) * x + rng.normal(0.0, 10.0 ** rng.uniform(-11, -9), x.size)
+    got, want = fit_noise(e, x), _nnls_fit(e, x)
+    scale = float(np.max(np.abs(e)))
+    assert got[0] == pytest.approx(want[0], abs=1e-7 * scale)
+    assert got[1] == pytest.approx(want[1], abs=1e-7 * scale / float(np.max(x)))
+
+
+@pytest.mark.parametrize("scale", [2.0 ** -20, 1.0, 2.0 ** 20])
+def test_the_noise_fit_scales_with_the_speeds(scale):
+    # Speeds scaled by a power of two scale V^2 by its square and b by the inverse, to the
+    # bit: the test of a degenerate fit is relative to the speeds' own size.
+    rng = np.random.default_rng(8)
+    x = rng.uniform(0.05, 0.3, 30) ** 2
+    e = 2e-10 + 9e-8 * x + rng.normal(0.0, 2e-11, x.size)
+    a, b = fit_noise(e, x)
+    assert a > 0.0 and b > 0.0
+    assert fit_noise(e, x * scale ** 2) == (a, b / scale ** 2)
+
+
+def test_the_noise_fit_of_one_speed_or_none():
+    # No rows: nothing. One row, or every row at one speed (no slope to fit): the constant,
+    # the excess's mean (1e-15 relative), clipped at 0. All speeds 0: the same, without a
+    # division by their zero sum of squares.
+    assert fit_noise(np.zeros(0), np.zeros(0)) == (0.0, 0.0)
+    assert fit_noise(np.array([3e-10]), np.array([0.04])) == (3e-10, 0.0)
+    a, b = fit_noise(np.array([1e-10, 3e-10, 2e-10, 6e-10]), np.full(4, 0.09))
+    assert a == pytest.approx(3e-10, rel=1e-15) and b == 0.0
+    assert fit_noise(np.array([-1e-10, -3e-10]), np.full(2, 0.09)) == (0.0, 0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        a, b = fit_noise(np.array([1e-10, 3e-10, 2e-10, 6e-10]), np.zeros(4))
+    assert a == pytest.approx(3e-10, rel=1e-15) and b == 0.0
+
+
+def test_the_noise_matcher_starts_at_nothing_and_refits_every_few_updates_once_full():
+    # Fresh (default window 100): a = b = 0, no extra variance. With a window of 20 rows (the
+    # trimmed fit's least) the fit follows every update until the window is full, then only
+    # every REFIT updates; the extra variance is a + b V^2 (1e-15 relative).
+    assert NoiseMatcher().window == 100
+    matcher = NoiseMatcher(20)
+    assert (matcher.a, matcher.b, matcher.extra(0.3)) == (0.0, 0.0, 0.0)
+    rng = np.random.default_rng(3)
+    last = None
+    for k in range(1, 41):
+        speed = rng.uniform(0.05, 0.3)
+        matcher.push(rng.normal() * math.sqrt(3e-10 + 9e-8 * speed * speed), 1e-10, 1e-10, speed)
+        fit = (matcher.a, matcher.b)
+        if k > 20 and k % NoiseMatcher.REFIT:
+            assert fit == last, k
+        elif k > 1:
+            assert fit != last, k
+        last = fit
+    assert matcher.b > 0.0
+    assert matcher.extra(0.2) == pytest.approx(matcher.a + matcher.b * 0.04, rel=1e-15)

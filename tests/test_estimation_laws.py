@@ -7,6 +7,7 @@ both sides."""
 from __future__ import annotations
 
 import math
+import time
 import warnings
 
 import numpy as np
@@ -16,7 +17,8 @@ from scipy.optimize import nnls
 from scipy.stats import chi2
 
 from toolkit import ParameterError
-from toolkit.estimation import EstimatorModel
+from toolkit.analysis.scenarios import carousel_brake_scenario
+from toolkit.estimation import EstimatorModel, KalmanEstimator, RTSSmoother
 from toolkit.estimation.input_noise import GROSS_NIS, command_timing_variance, unknown_force_noise
 from toolkit.estimation.missed_counts import (NO_LOSS, absorbed_variance, count_offset, log_no_loss,
                                               told_missed_rate)
@@ -310,3 +312,91 @@ def test_the_noise_matcher_starts_at_nothing_and_refits_every_few_updates_once_f
         last = fit
     assert matcher.b > 0.0
     assert matcher.extra(0.2) == pytest.approx(matcher.a + matcher.b * 0.04, rel=1e-15)
+
+
+# -- the smoother --------------------------------------------------------------------------------
+
+def _rts_again(X, P, F, u, Q):
+    """The Rauch-Tung-Striebel backward pass of the filter's states X and covariances P, with
+    the step into sample k+1 x_{k+1} = F_{k+1} x_k + u_{k+1} + noise of covariance Q_{k+1}
+    (written from the recursion, solved with numpy; filterpy's is the smoother's)."""
+    xs, ps = X.copy(), P.copy()
+    for k in range(X.shape[0] - 2, -1, -1):
+        predicted = F[k + 1] @ P[k] @ F[k + 1].T + Q[k + 1]
+        gain = np.linalg.solve(predicted, F[k + 1] @ P[k]).T
+        xs[k] = X[k] + gain @ (xs[k + 1] - F[k + 1] @ X[k] - u[k + 1])
+        ps[k] = P[k] + gain @ (ps[k + 1] - predicted) @ gain.T
+    return xs, ps
+
+
+def test_the_smoother_is_the_rts_recursion_over_the_filters_own_steps():
+    # A short brake record where the nominal model holds (the monitor does not trip): the
+    # smoothed speeds, positions and covariances are the RTS recursion over the forward
+    # filter's states, covariances, transitions, known inputs and process noises (1e-8
+    # relative: pinv against solve, on covariances of 1e-9 to 1e-7). The last sample is the
+    # filter's own. Its wall time adds the backward pass to the filter's.
+    sc = carousel_brake_scenario(seed=0, t_end=2.0, brake_time=1.0)
+    rts = RTSSmoother(sc.model)
+    before = time.perf_counter()
+    result = rts.run(sc.record, speed=0.01, speed_std=0.02)
+    after = time.perf_counter()
+    assert rts.refused is None and rts.tripped is None and result.method == "rts"
+    f = rts.forward.nominal_pass
+    assert f.states[0, 1] == 0.01                         # (the speed it was given)
+    assert np.ptp(f.inputs[1:, 1]) > 0.0                  # (inputs that change: the brake)
+    xs, ps = _rts_again(f.states, f.covariances, f.transitions, f.inputs, f.process_noises)
+    assert xs[-1].tolist() == f.states[-1].tolist()
+    scale = float(np.max(np.abs(ps)))
+    np.testing.assert_allclose(result.speed, xs[:, 1], rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(result.position, xs[:, 0], rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(result.covariance, ps, rtol=1e-8, atol=1e-8 * scale)
+    np.testing.assert_array_equal(result.variance, result.covariance[:, 1, 1])
+    assert result.nees is not None and result.times is sc.record.times
+    assert f.wall_time <= result.wall_time <= after - before
+
+
+def test_the_smoother_passes_its_prior_start_and_initial_covariance_to_the_filter():
+    # The forward filter is the default's with the smoother's prior and initial covariance,
+    # and reset starts it at the speed given: its first estimate is that speed with the
+    # initial covariance's speed variance (what it was given, exactly).
+    sc = carousel_brake_scenario(seed=0, t_end=0.5, brake_time=1.0)
+    prior, C = ModelPrior(friction_spread=0.1), np.array([[4e-8, 1e-7], [1e-7, 9e-4]])
+    rts = RTSSmoother(sc.model, prior=prior, initial_covariance=C)
+    assert rts.forward.prior is prior and rts.model is sc.model
+    rts.reset(speed=0.1)
+    assert rts.forward.step(sc.record.sample(0)) == (0.1, 9e-4)
+    rts.reset(speed=-0.05, speed_std=0.02)
+    assert rts.forward.step(sc.record.sample(0)) == (-0.05, 9e-4)
+    # Without an initial covariance, the speed's std given to reset (0 m/s by default).
+    plain = RTSSmoother(sc.model)
+    assert plain.refused is None and plain.tripped is None          # (before any run)
+    plain.reset(speed_std=0.02)
+    assert plain.forward.step(sc.record.sample(0)) == (0.0, pytest.approx(4e-4, rel=1e-15))
+
+
+def test_the_smoother_resets_its_filter_as_the_default_is_reset():
+    # The contacts' speeds before the first sample (the motors had settled there) reach the
+    # forward filter: stepped, it gives the default filter's estimates reset alike, to the
+    # bit, and other estimates than without them (the motors' lag moves the contacts from
+    # there).
+    sc = carousel_brake_scenario(seed=0, t_end=0.5, brake_time=1.0)
+    settled = np.linspace(-0.1, 0.1, 10)
+    rts, default = RTSSmoother(sc.model), KalmanEstimator(sc.model)
+    runs = []
+    for contact_speeds in (settled, None):
+        rts.reset(speed=0.02, speed_std=0.03, contact_speeds=contact_speeds)
+        default.reset(speed=0.02, speed_std=0.03, contact_speeds=contact_speeds)
+        ours = [rts.forward.step(sc.record.sample(k)) for k in range(8)]
+        assert ours == [default.step(sc.record.sample(k)) for k in range(8)]
+        runs.append(ours)
+    assert runs[0] != runs[1]
+
+
+def test_the_smoother_cannot_be_stepped():
+    sc = carousel_brake_scenario(seed=0, t_end=0.5, brake_time=1.0)
+    rts = RTSSmoother(sc.model)
+    message = "The RTS smoother is offline: call run(record); step the KalmanEstimator."
+    for call in (lambda: rts.observe(sc.record.sample(0)), lambda: rts.commanded(np.zeros(10))):
+        with pytest.raises(NotImplementedError) as info:
+            call()
+        assert str(info.value) == message

@@ -6,6 +6,7 @@ both sides."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -13,18 +14,21 @@ import warnings
 import numpy as np
 import pytest
 from scipy.integrate import cumulative_trapezoid
+from scipy.linalg import cholesky
 from scipy.optimize import nnls
 from scipy.stats import chi2
 
 from toolkit import ParameterError
 from toolkit.analysis.scenarios import carousel_brake_scenario
-from toolkit.estimation import EstimatorModel, KalmanEstimator, RTSSmoother
+from toolkit.estimation import EstimatorModel, KalmanEstimator, RTSSmoother, UnscentedEstimator
 from toolkit.estimation.input_noise import GROSS_NIS, command_timing_variance, unknown_force_noise
 from toolkit.estimation.missed_counts import (NO_LOSS, absorbed_variance, count_offset, log_no_loss,
                                               told_missed_rate)
 from toolkit.estimation.monitor import ConsistencyMonitor, MonitorVerdict, NoiseMatcher, fit_noise, matched_variance
 from toolkit.model.carousel import CAROUSEL
 from toolkit.model.truth import ModelPrior
+
+Q_C_UKF = CAROUSEL.sensors().central.distance_per_count
 
 #: The rate whose chance of no loss over one transition is NO_LOSS to the last bit:
 #: log1p(-P_EDGE) == log(NO_LOSS) in floating point (checked where it is used).
@@ -400,3 +404,84 @@ def test_the_smoother_cannot_be_stepped():
         with pytest.raises(NotImplementedError) as info:
             call()
         assert str(info.value) == message
+
+
+# -- the unscented filter -----------------------------------------------------------------------
+
+class _Logged(UnscentedEstimator):
+    """The UKF with each step's inputs, the state before it and the state after it logged."""
+
+    def _advance(self, z, R, track, var_v, steady, bounds=None, force=0.0, count=0, t=0.0, wheels=None):
+        before = None if track is None else (self.kf.ukf.x.copy(), self.kf.ukf.P.copy())
+        super()._advance(z, R, track, var_v, steady, bounds, force, count, t, wheels)
+        self.log.append((before, (z, R, track, var_v, steady, bounds, force),
+                         self.kf.ukf.x.copy(), self.kf.ukf.P.copy(), self.last_nis))
+
+
+def _ukf_step_again(model, x, P, z, R, track, var_v, steady, bounds, force):
+    """One UKF step written from its definition: Julier's sigma points (kappa = 1, n = 2:
+    weights 1/3 and 1/6 each, the points x +- the rows of the upper Cholesky factor of 3 P, as
+    filterpy draws them) moved by the exact flow over the period; the process noise the model's
+    linearized input noise, plus the contact estimate's variance on V where a point ends stuck
+    and the mean's own flow arrives nowhere, plus the floor 1e-12 on each diagonal; then the
+    update of the position (a linear reading: the points drawn again about the prediction give
+    the Kalman update of its mean and covariance). Returns x, P, the NIS y^2 / S and whether
+    the contact's variance was added."""
+    root = cholesky(3.0 * P)
+    sigmas = np.vstack((x, x + root, x - root))
+    weights = np.array([1.0, 0.5, 0.5, 0.5, 0.5]) / 3.0
+    moved, stuck = [], False
+    for X0, V0 in sigmas:
+        step = model.flow(float(V0), track, force)
+        moved.append((X0 + step.body_displacement, step.state.V))
+        stuck = stuck or step.state.stuck is not None
+    moved = np.array(moved)
+    _, _, Q, _, arrival, _ = model.increment(float(x[1]), track, math.sqrt(var_v), math.sqrt(P[1, 1]), steady,
+                                             bounds, force)
+    Q = Q + np.diag([1e-12, 1e-12 + (var_v if stuck and arrival is None else 0.0)])
+    mean = weights @ moved
+    d = moved - mean
+    P_pred = d.T @ (weights[:, None] * d) + Q
+    S = P_pred[0, 0] + R
+    gain = P_pred[:, 0] / S
+    y = z - mean[0]
+    return mean + gain * y, P_pred - np.outer(gain, gain) * S, y * y / S, stuck and arrival is None
+
+
+@pytest.mark.parametrize("force", [0.0, 0.3])
+def test_each_unscented_step_is_the_unscented_transform_through_the_exact_flow(force):
+    # The brake record, with or without an outside force of 0.3 N held throughout (known to
+    # the filter): every step's posterior and NIS against the step written again from the
+    # definitions on the same inputs (1e-9 relative; 1e-9 of the covariance's scale where an
+    # entry cancels). Without the force, some steps' sigma points end stuck with nowhere to
+    # arrive (the contact's variance added); with it, none do.
+    sc = carousel_brake_scenario(seed=0, t_end=1.0, brake_time=0.5)
+    record = dataclasses.replace(sc.record, force=np.full(sc.record.n_samples, force))
+    ukf = _Logged(sc.model)
+    ukf.log = []
+    ukf.filter(record, speed=0.0, speed_std=0.02)
+    (start, _, x0, P0, nis0), steps = ukf.log[0], ukf.log[1:]
+    assert start is None and math.isnan(nis0) and x0[1] == 0.0
+    assert P0.tolist() == np.diag([Q_C_UKF ** 2 / 12.0, 0.02 ** 2]).tolist()
+    added = 0
+    for (x, P), (z, R, *inputs), x_after, P_after, nis in steps:
+        want_x, want_P, want_nis, stuck = _ukf_step_again(sc.model, x, P, z, R, *inputs)
+        added += stuck
+        np.testing.assert_allclose(x_after, want_x, rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(P_after, want_P, rtol=1e-9, atol=1e-9 * np.abs(want_P).max())
+        assert nis == pytest.approx(want_nis, rel=1e-9)
+    assert (added > 0) == (force == 0.0) and added < len(steps)
+
+
+def test_the_unscented_filter_starts_from_its_initial_covariance_and_holds_nothing_exactly():
+    # Given an initial covariance, the first sample's is that one; its speed the one given,
+    # its position the count's cell centre; no NIS (no update yet). The sigma points are the
+    # UKF's way with sticking: no exact holds.
+    sc = carousel_brake_scenario(seed=0, t_end=0.5, brake_time=1.0)
+    C = np.array([[4e-8, 1e-7], [1e-7, 9e-4]])
+    ukf = UnscentedEstimator(sc.model, initial_covariance=C)
+    assert not ukf.exact_holds
+    ukf.reset(speed=0.07)
+    assert ukf.observe(sc.record.sample(0)) == (0.07, 9e-4)
+    assert ukf.kf.P.tolist() == C.tolist() and math.isnan(ukf.last_nis)
+    assert ukf.kf.x[0, 0] == (sc.record.central_counts[0] + 0.5) * Q_C_UKF

@@ -1,6 +1,7 @@
 """The baselines' laws, one by one: the alpha-beta tracker's recursion, tuning and refusals
-(toolkit.estimation.alpha_beta), the finite differences (toolkit.estimation.finite_difference)
-and the FOAW estimator's variances (toolkit.estimation.window). Each estimate is checked
+(toolkit.estimation.alpha_beta), the finite differences (toolkit.estimation.finite_difference),
+the FOAW estimator's variances (toolkit.estimation.window) and its kernel's band and origin
+(toolkit._compiled.window). Each estimate is checked
 against the recursion written again from its definition, on unevenly spaced samples, and
 each refusal is matched whole."""
 
@@ -12,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from toolkit import ParameterError, ParameterTypeError
+from toolkit import ParameterError, ParameterTypeError, _compiled
 from toolkit.estimation import (AdaptiveWindow, AlphaBetaTracker, CentralDifference, WheelDifference,
                                 kalata_gains)
 from toolkit.model.carousel import CAROUSEL
@@ -339,3 +340,33 @@ def test_every_refusal_of_the_window_in_full(call, error, message):
     with pytest.raises(error) as info:
         call()
     assert str(info.value) == message
+
+
+# -- the FOAW kernel (toolkit._compiled.window) ---------------------------------------------------
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_a_reading_exactly_on_the_band_is_inside_it(side):
+    # Dyadic readings (exact arithmetic): the end-fit line through (0, 0) and (2, 1) misses
+    # the middle reading 0.5 +- 0.25 by exactly 0.25 m, on either side. A band of 0.25 m takes
+    # the two-period window; one float narrower, only the last period.
+    W = _compiled.load("window")
+    t = np.array([0.0, 1.0, 2.0])
+    y = np.array([0.0, 0.5 + side * 0.25, 1.0])
+    assert W.foaw(t, y, 3, 0.25, False) == (0.5, 2)
+    assert W.foaw(t, y, 3, float(np.nextafter(0.25, 0.0)), False) == (1.0 - y[1], 1)
+
+
+@pytest.mark.parametrize("best", [False, True])
+def test_the_window_does_not_move_with_the_positions_origin(best):
+    # Readings on a dyadic grid (whole counts of 2**-12 m, 0.02 s apart, with read noise):
+    # shifted by 2**20 m they stay exact, and the kernel works on positions relative to the
+    # last reading: the same windows and slopes, to the bit.
+    W = _compiled.load("window")
+    rng = np.random.default_rng(4)
+    t = np.arange(40) * 0.02
+    y = (np.floor(0.2 * t * 4096) + rng.integers(-2, 3, t.size)) / 4096
+    for k in range(2, t.size):
+        a = max(0, k - 15)
+        here = W.foaw(t[a:k + 1], y[a:k + 1], k + 1 - a, 2.5 / 4096, best)
+        far = W.foaw(t[a:k + 1], y[a:k + 1] + 2.0 ** 20, k + 1 - a, 2.5 / 4096, best)
+        assert here == far, k

@@ -29,9 +29,9 @@ class _BankAgain:
     """The bank written again without play: per hypothesis d and wheel, a Kalman filter of
     (x, o) with F = [[1, h], [0, 1]] plus the motor law's displacement, process noise d^2
     [[h^3 / 3, h^2 / 2], [h^2 / 2, h]] plus (0.3 x the law's speed change)^2 on o, the reading
-    (count + 1/2) q of x (through the encoders' side: see push); each hypothesis weighted by its readings' Gaussian likelihood
-    with the memory 0.99 per sample; the contacts' speeds the law's end speeds plus the
-    weighted mean offset, their variance the mixture's."""
+    (count + 1/2) q of x (through the encoders' side: see push); each hypothesis weighted by
+    its readings' Gaussian likelihood with the memory 0.99 per sample; the contacts' speeds
+    the law's end speeds plus the weighted mean offset, their variance the mixture's."""
 
     def __init__(self, model, wheels, speeds, variance):
         self.h, self.q, self.tau = model.sensors.period, model.sensors.wheel.distance_per_count, model.motor_lag
@@ -229,12 +229,12 @@ def _step_again(bank, wheels, command, lag, noise, periods):
 def test_the_bank_reads_each_wheel_through_the_gearbox_play(lag):
     # Play of 0.8 mm. Three contacts: one reverses at period 5 and back at 15, one reverses
     # at period 8 from 0.2 to -0.3 m/s (with the lag it turns 3.8 ms into the period: between
-    # the first two of the path's 8 sub-steps), then stops at 18, one keeps going; samples lost before periods 10 and 20 (a push over two
-    # periods). Readings of contacts 0.5 mm/s off their commands seen through the play
-    # operator (whole-count read noise). Each push against the push written again from the
-    # bank's state before it: the speeds, variances, weights and drift (1e-9 relative), the
-    # filters' states and covariances, the encoders' side of the wheels read; the walks
-    # through the play (wheels not read: each case occurs).
+    # the first two of the path's 8 sub-steps) and stops at 18, one keeps going; samples lost
+    # before periods 10 and 20 (a push over two periods). Readings of contacts 0.5 mm/s off
+    # their commands seen through the play operator (whole-count read noise). Each push
+    # against the push written again from the bank's state before it: the speeds, variances,
+    # weights and drift (1e-9 relative), the filters' states and covariances, the encoders'
+    # side of the wheels read; walks through the play and wheels not read both occur.
     model = _model(lag, backlash=8e-4)
     q, h = model.sensors.wheel.distance_per_count, model.sensors.period
     rng = np.random.default_rng(12)

@@ -67,6 +67,24 @@ def test_no_jitter_allowed_leaves_the_mean_excess_as_read_noise():
     assert (matcher.a, matcher.b) == (pytest.approx(np.mean(e), rel=1e-12), 0.0)
 
 
+def test_the_matcher_bounds_its_jitter_by_the_square_of_jitter_max():
+    # Excesses that grow as (1 ms)^2 V^2 against a bound of 0.3 ms: every refit puts b at
+    # the bound, 0.3 ms squared (9e-8 s^2, neither 2 x 0.3 ms nor its cube), a the rest of
+    # the fit (fit_noise with that bound on the same rows, to the bit).
+    rng = np.random.default_rng(5)
+    matcher = NoiseMatcher(20, jitter_max=3e-4)
+    rows = []
+    for k in range(40):
+        speed = rng.uniform(0.05, 0.3)
+        innovation = math.sqrt(2e-9 + 1e-6 * speed * speed)
+        matcher.push(innovation, 1e-9, 1e-9, speed)
+        rows.append((innovation * innovation - 2e-9, speed * speed))
+    table = np.array(rows[-20:])
+    table = table[np.argsort(table[:, 0])[:19]]
+    assert matcher.b == 3e-4 ** 2
+    assert (matcher.a, matcher.b) == fit_noise(table[:, 0], table[:, 1], 3e-4 ** 2)
+
+
 def test_the_matcher_refuses_a_negative_bound():
     with pytest.raises(ValueError, match=r"'jitter_max' parameter of NoiseMatcher must be >= 0"):
         NoiseMatcher(20, jitter_max=-1e-3)

@@ -79,7 +79,6 @@ class AlphaBetaTracker(Estimator):
               contact_speeds: object = None) -> None:
         self._speed0 = as_float(speed, "speed", f"{type(self).__name__}.reset")
         self._x: tuple[float, float] | None = None
-        self._t = 0.0
 
     def observe(self, sample: EncoderSample) -> tuple[float, float]:
         z = cell_centre(sample.central_count, self._q)

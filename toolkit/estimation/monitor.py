@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import as_float, as_int
+from ..errors import ParameterError, as_float, as_int, parameter_message
 
 __all__ = ["ConsistencyMonitor", "MonitorVerdict", "matched_variance"]
 
@@ -72,6 +72,8 @@ class ConsistencyMonitor:
         owner = "ConsistencyMonitor"
         self.window = as_int(window, "window", owner, low=1)
         self.false_alarm = as_float(false_alarm, "false_alarm", owner, low=0.0, high=1.0, low_open=True)
+        if self.false_alarm == 1.0:                  # (a threshold of 0: every window would fail)
+            raise ParameterError(parameter_message("false_alarm", owner, "be < 1", false_alarm))
         self.threshold = _chi2_quantile(1.0 - self.false_alarm, self.window)
         self.reset()
 

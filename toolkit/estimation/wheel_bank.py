@@ -148,7 +148,7 @@ class WheelSpeedBank:
         if moved is None:
             moved = s[:, None] * end
         best = int(np.argmax(self._log_weights))
-        x, ob = self._x[best, :, 0], self._x[best, :, 1]          # (views: updated below)
+        x, ob = self._x[best, :, 0], self._x[best, :, 1]          # (views: read before the step)
         half = 0.5 * self.play
         seen = loaded.copy()
         walk = loaded == 0.0
@@ -159,11 +159,9 @@ class WheelSpeedBank:
         law_error = (self.LAW_ERROR * (end - start)) ** 2
         K.bank_step(self._x, self._P, Q, cx, h_all, law_error, shift, seen, z, noise,
                     self._log_weights, self.FORGET)
-        # The encoder side: the reading's contact shifted by the play where it is engaged
-        # (the update above moved the contact), else where the play operator left it.
-        walked = self._y.copy()
-        walked[walk] = y
-        self._y = np.where(seen > 0.0, self._x[best, :, 0] + shift, walked)
+        # The encoder side: the contact after the step (updated where the play is engaged)
+        # shifted by the play as the operator leaves it.
+        self._y = self._x[best, :, 0] + shift
         o = np.empty(self.n)
         self._drift = K.bank_moments(self._x, self._P, self._log_weights, self._drifts, o, var)
         return end + o, var

@@ -3,19 +3,15 @@
 Run ``python -m toolkit.bench compile [--designs NAME ...]``. Each figure comes from a fresh
 process on an empty numba cache (an empty ``NUMBA_CACHE_DIR``), in this run:
 
-- ``active-contacts warm --processes 1`` (every kernel compiled in one process, then every
-  shipped design run once): the compile seconds per kernel module (numba's compile events,
-  nested compiles counted in the module of the outermost kernel), the number of compiled
-  specializations per module and per kernel (those with more than one named), and the whole
-  command's wall and CPU time;
-- ``active-contacts warm`` as it runs by default (its warm-ups in two processes at once where
-  two cores allow): its wall and CPU time, and the one-process run's wall time over it;
+- ``active-contacts warm --processes 1``: the compile seconds per kernel module (nested
+  compiles counted in the outermost kernel's module), the compiled specializations per module
+  and per kernel, and the command's wall and CPU time;
+- ``active-contacts warm`` as it runs by default (warm-ups in two processes at once where two
+  cores allow): its wall and CPU time, and the one-process run's wall time over it;
 - each design named with ``--designs`` (default: carousel, estimate, closed_loop): its first
-  ``active-contacts run`` on an empty cache, against its run once that cache is warm (the
-  ratio is what the one-time compile costs a first run).
+  ``active-contacts run`` on an empty cache against its run on the warm cache.
 
-The load average is printed beside the figures: on a shared machine the CPU times are the
-figures to compare.
+The load average is printed beside the figures: on a shared machine compare the CPU times.
 """
 
 from __future__ import annotations

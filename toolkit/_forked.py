@@ -17,7 +17,12 @@ import signal
 from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["fork_map", "idle_cores", "stop"]
+__all__ = ["allowed_cores", "fork_map", "idle_cores", "stop"]
+
+
+def allowed_cores() -> int:
+    """The cores this process may run on (its affinity where the platform has one)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 def idle_cores() -> int:
@@ -25,8 +30,7 @@ def idle_cores() -> int:
     load average leaves idle (:func:`toolkit._compiled.threads`' rule), at least 1."""
     from ._compiled import PARALLEL_AFTER, threads
 
-    allowed = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(1, min(allowed, threads(PARALLEL_AFTER)))
+    return max(1, min(allowed_cores(), threads(PARALLEL_AFTER)))
 
 
 def _die_with(parent: int) -> None:

@@ -9,7 +9,6 @@ import argparse
 import contextlib
 import math
 import multiprocessing
-import os
 import sys
 from pathlib import Path
 
@@ -53,6 +52,7 @@ def _cmd_warm(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from .. import _compiled
+    from .._forked import allowed_cores
     from .._warmups import warm_groups
     from ..scenes.designs import design_names, design_text
 
@@ -60,8 +60,7 @@ def _cmd_warm(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     processes = args.processes
     if processes is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-        processes = 2 if cores >= 2 and "fork" in multiprocessing.get_all_start_methods() else 1
+        processes = 2 if allowed_cores() >= 2 and "fork" in multiprocessing.get_all_start_methods() else 1
     print(f"active-contacts: warm: compiling the kernels of every shipped design in {processes} "
           f"process{'es' if processes > 1 else ''} (loaded from the cache where it has them)",
           file=sys.stderr, flush=True)
